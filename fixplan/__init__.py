@@ -1,0 +1,44 @@
+"""fixplan: plan how a workpiece is loaded into a fixture without jamming.
+
+The public API is small and imported lazily, so ``import fixplan`` stays fast and does not
+pull in cvxpy, CasADi or numba until they are needed.
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import Any
+
+__version__ = "0.1.0"
+
+_LAZY = {
+    "load": ("fixplan.fixture", "load"),
+    "loads": ("fixplan.fixture", "loads"),
+    "Fixture": ("fixplan.fixture", "Fixture"),
+    "default_fixture_path": ("fixplan.fixture", "default_fixture_path"),
+    "classify": ("fixplan.jamming", "classify"),
+    "search_wrench": ("fixplan.jamming", "search_wrench"),
+    "contact_set": ("fixplan.kinematics", "contact_set"),
+    "FixplanError": ("fixplan.errors", "FixplanError"),
+    "FixtureError": ("fixplan.errors", "FixtureError"),
+    "InputError": ("fixplan.errors", "InputError"),
+    "InfeasibleError": ("fixplan.errors", "InfeasibleError"),
+    "SolverError": ("fixplan.errors", "SolverError"),
+    "Tolerances": ("fixplan.tolerances", "Tolerances"),
+}
+
+__all__ = sorted([*_LAZY, "__version__"])
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module_name, attr = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module 'fixplan' has no attribute {name!r}") from None
+    value = getattr(import_module(module_name), attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return __all__

@@ -1,0 +1,63 @@
+"""Exceptions owned by fixplan.
+
+Every failure a caller can act on is a :class:`FixplanError`. Third-party failures are
+re-raised as one of these with ``raise ... from exc`` so callers never see a backend's
+exception types.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+class FixplanError(Exception):
+    """Base class of every error fixplan raises on purpose."""
+
+
+@dataclass(frozen=True)
+class Issue:
+    """One problem found in a fixture file.
+
+    Attributes
+    ----------
+    key : str
+        Dotted key path, e.g. ``locator.P1.position``.
+    message : str
+        What is wrong and what was expected.
+    """
+
+    key: str
+    message: str
+
+    def format(self, source: str) -> str:
+        """The one-line form ``FILE: key: message`` used by every command."""
+        return f"{source}: {self.key}: {self.message}"
+
+
+class FixtureError(FixplanError):
+    """A fixture file is malformed or physically impossible.
+
+    Carries every :class:`Issue` found, not only the first, so that ``fixplan validate``
+    can list them all.
+    """
+
+    def __init__(self, source: str, issues: list[Issue]):
+        self.source = source
+        self.issues = list(issues)
+        super().__init__("\n".join(issue.format(source) for issue in self.issues))
+
+
+class InputError(FixplanError):
+    """A command-line or API argument is malformed (a wrench, a contact name, a range)."""
+
+
+class InfeasibleError(FixplanError):
+    """The question has no answer: no goal pose, no non-jamming wrench, no plan."""
+
+
+class SolverError(FixplanError):
+    """A numerical solver failed in a way the caller should know about."""
+
+    def __init__(self, message: str, *, extras: dict | None = None):
+        super().__init__(message)
+        self.extras = dict(extras or {})

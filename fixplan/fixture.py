@@ -1,0 +1,515 @@
+"""Fixture files (TOML, ``../shared/spec/FIXTURE_FORMAT.md``) → a validated :class:`Fixture`.
+
+Every problem in a file is reported, each as ``FILE: dotted.key.path: what is wrong (what was
+expected)``, by raising one :class:`~fixplan.errors.FixtureError` that carries them all.
+Locators and contacts are addressed by name in key paths (``locator.P1.position``) when the
+name is valid, else by index (``locator[2].position``).
+
+Keys added to the spec (documented in the README): none yet besides what the spec lists.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fixplan.errors import FixtureError, InfeasibleError, Issue
+from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
+from fixplan.pose import Pose
+from fixplan.schema import Reader
+from fixplan.tolerances import DEFAULT, Tolerances
+
+FloatArray = NDArray[np.float64]
+
+SHAPES_3D = ("box", "cylinder", "sphere", "mesh")
+SHAPES_2D = ("rectangle", "disk", "polygon")
+FACES = {
+    "box": ("+x", "-x", "+y", "-y", "+z", "-z"),
+    "rectangle": ("+x", "-x", "+y", "-y"),
+    "cylinder": ("+z", "-z", "side"),
+}
+_DATA = Path(__file__).resolve().parent / "data"
+
+
+def default_fixture_path() -> Path:
+    """The bundled default fixture (a 3-2-1 box), used when a command is given no file."""
+    return _DATA / "default.toml"
+
+
+@dataclass(frozen=True)
+class Locator:
+    """A fixed locator: a spherical tip (radius 0: a point) at ``p_world``."""
+
+    name: str
+    p_world: FloatArray
+    radius_m: float
+    friction: float
+    torsion_m: float = 0.0
+    face: str | None = None
+
+
+@dataclass(frozen=True)
+class ExplicitContact:
+    """A geometry-free contact given at the start pose."""
+
+    name: str
+    point_world: FloatArray
+    normal_world: FloatArray  # unit, the direction in which the fixture pushes the workpiece
+    friction: float
+    torsion_m: float = 0.0
+
+
+@dataclass(frozen=True)
+class Manipulator:
+    """What the hand or robot can exert on the workpiece."""
+
+    max_force_N: float = float("inf")
+    max_torque_Nm: float = float("inf")
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """Defaults for the simulator, overridable on the command line."""
+
+    timestep_s: float = 1e-3
+    restitution: float = 0.0
+    tolerance: float = 1e-8
+
+
+@dataclass(frozen=True)
+class Workpiece:
+    """The rigid part: its shape, mass and inertia about the centre of mass (body axes)."""
+
+    shape: Shape
+    mass_kg: float
+    inertia_body: FloatArray  # (3,3) in 3D, (1,1) in 2D
+    com_body: FloatArray
+
+
+@dataclass(frozen=True)
+class Fixture:
+    """A validated fixture file."""
+
+    source: str
+    name: str
+    dimension: int
+    gravity: FloatArray  # [m/s²], world frame
+    workpiece: Workpiece
+    locators: tuple[Locator, ...]
+    contacts: tuple[ExplicitContact, ...]
+    manipulator: Manipulator
+    simulation: SimulationSettings
+    start: Pose
+    goal_given: Pose | None = None
+    tolerances: Tolerances = field(default=DEFAULT)
+
+    @property
+    def ndof(self) -> int:
+        return 6 if self.dimension == 3 else 3
+
+    @property
+    def is_full(self) -> bool:
+        """Six locators in 3D, three in 2D: enough to locate the part."""
+        return len(self.locators) >= (6 if self.dimension == 3 else 3)
+
+    @property
+    def names(self) -> list[str]:
+        return [loc.name for loc in self.locators] + [c.name for c in self.contacts]
+
+    @cached_property
+    def goal(self) -> Pose:
+        """The located pose (every locator touching); only defined for a full fixture."""
+        from fixplan.locating import require_full, solve_goal
+
+        require_full(self, "the goal pose")
+        if self.goal_given is not None:
+            return self.goal_given
+        result = solve_goal(self.workpiece, self.locators, self.start)
+        if not result.converged:
+            raise InfeasibleError(
+                f"{self.source}: no pose touches all locators (largest gap {result.max_gap_m:.3g} m)"
+            )
+        return result.pose
+
+    def gravity_wrench(self) -> FloatArray:
+        """Gravity as a wrench about the centre of mass, world axes."""
+        g = self.workpiece.mass_kg * self.gravity
+        return np.concatenate([g, np.zeros(3)]) if self.dimension == 3 else np.array([g[0], g[1], 0.0])
+
+    def locator(self, name: str) -> Locator:
+        for loc in self.locators:
+            if loc.name == name:
+                return loc
+        raise KeyError(name)
+
+
+def load(path: str | Path, tolerances: Tolerances = DEFAULT) -> Fixture:
+    """Read and validate a fixture file; raise :class:`FixtureError` listing every problem."""
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise FixtureError(source, [Issue("<file>", "cannot read: no such file")]) from None
+    except IsADirectoryError:
+        raise FixtureError(source, [Issue("<file>", "cannot read: is a directory (expected a .toml file)")]) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FixtureError(source, [Issue("<file>", f"cannot read: {exc}")]) from None
+    return loads(text, source=source, base_dir=path.parent, tolerances=tolerances)
+
+
+def loads(text: str, source: str = "<string>", base_dir: Path | None = None, tolerances: Tolerances = DEFAULT) -> Fixture:
+    """Validate fixture TOML text (see :func:`load`)."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise FixtureError(source, [Issue("<toml>", f"invalid TOML: {exc}")]) from None
+    return _Builder(data, source, base_dir or Path("."), tolerances).build()
+
+
+class _Builder:
+    """Reads one parsed TOML document into a Fixture, collecting every issue."""
+
+    def __init__(self, data: dict[str, Any], source: str, base_dir: Path, tol: Tolerances):
+        self.data = data
+        self.source = source
+        self.base_dir = base_dir
+        self.tol = tol
+        self.r = Reader()
+
+    def fail_if_issues(self) -> None:
+        if self.r.issues:
+            raise FixtureError(self.source, self.r.issues)
+
+    def build(self) -> Fixture:
+        r, data = self.r, self.data
+        r.unknown_keys(data, ("format", "scene", "workpiece", "locator", "contact", "manipulator", "simulation"), "")
+        fmt = r.integer(data, "format", "format", required=True, allowed=(1,))
+        del fmt
+        scene = r.table(data, "scene", "scene", required=True) or {}
+        r.unknown_keys(scene, ("name", "dimension", "gravity"), "scene")
+        name = r.string(scene, "name", "scene.name", required=True) or "?"
+        dim = r.integer(scene, "dimension", "scene.dimension", required=False, allowed=(2, 3)) if "dimension" in scene else 3
+        if dim is None:
+            # Without a valid dimension nothing else can be checked meaningfully.
+            raise FixtureError(self.source, r.issues)
+        default_g = [0.0, 0.0, -9.81] if dim == 3 else [0.0, -9.81]
+        gravity = r.vector(scene, "gravity", "scene.gravity", dim, default=default_g, dimension_hint=dim)
+
+        wp_table = r.table(data, "workpiece", "workpiece", required=True) or {}
+        workpiece, start, goal = self.workpiece(wp_table, dim)
+        locators = self.locators(dim, workpiece)
+        contacts = self.explicit_contacts(dim)
+        manipulator = self.manipulator()
+        simulation = self.simulation()
+        names = [loc.name for loc in locators] + [c.name for c in contacts]
+        if not names and not r.issues:
+            r.error("locator", "no [[locator]] or [[contact]] entries (expected at least one)")
+        self.fail_if_issues()
+        if workpiece is None or start is None or gravity is None:  # pragma: no cover - issues were recorded
+            raise FixtureError(self.source, [Issue("workpiece", "could not be read")])
+        fixture = Fixture(
+            source=self.source,
+            name=name,
+            dimension=dim,
+            gravity=np.array(gravity),
+            workpiece=workpiece,
+            locators=tuple(locators),
+            contacts=tuple(contacts),
+            manipulator=manipulator,
+            simulation=simulation,
+            start=start,
+            goal_given=goal,
+            tolerances=self.tol,
+        )
+        self.check_geometry(fixture)
+        self.fail_if_issues()
+        return fixture
+
+    # -- workpiece ---------------------------------------------------------------------------
+    def workpiece(self, t: dict, dim: int) -> tuple[Workpiece | None, Pose | None, Pose | None]:
+        r = self.r
+        shapes = SHAPES_3D if dim == 3 else SHAPES_2D
+        allowed = ("shape", "size", "radius", "length", "vertices", "file", "mass", "inertia", "start", "goal")
+        r.unknown_keys(t, allowed, "workpiece")
+        if not t and "workpiece" not in self.data:
+            return None, None, None
+        kind = t.get("shape")
+        other = SHAPES_2D if dim == 3 else SHAPES_3D
+        if isinstance(kind, str) and kind in other:
+            r.error("workpiece.shape", f"got {kind!r}, a {5 - dim}D shape (expected one of: {', '.join(shapes)} for a {dim}D scene)")
+            kind = None
+        else:
+            kind = r.string(t, "shape", "workpiece.shape", required=True, choices=shapes)
+        shape: Shape | None = None
+        used = {"shape", "mass", "inertia", "start", "goal"}
+        if kind == "box":
+            size = r.vector(t, "size", "workpiece.size", 3, required=True, dimension_hint=3)
+            used.add("size")
+            if size is not None and self.positive_all(size, "workpiece.size", "edge lengths > 0"):
+                shape = Box(tuple(size))  # type: ignore[arg-type]
+        elif kind == "rectangle":
+            size = r.vector(t, "size", "workpiece.size", 2, required=True, dimension_hint=2)
+            used.add("size")
+            if size is not None and self.positive_all(size, "workpiece.size", "side lengths > 0"):
+                shape = Rectangle(tuple(size))  # type: ignore[arg-type]
+        elif kind in ("sphere", "disk"):
+            radius = r.number(t, "radius", "workpiece.radius", required=True, exclusive_minimum=0.0, what="a radius")
+            used.add("radius")
+            if radius is not None:
+                shape = Sphere(radius) if kind == "sphere" else Disk(radius)
+        elif kind == "cylinder":
+            radius = r.number(t, "radius", "workpiece.radius", required=True, exclusive_minimum=0.0, what="a radius")
+            length = r.number(t, "length", "workpiece.length", required=True, exclusive_minimum=0.0, what="a length")
+            used |= {"radius", "length"}
+            if radius is not None and length is not None:
+                shape = Cylinder(radius, length)
+        elif kind == "polygon":
+            used.add("vertices")
+            shape = self.polygon(t)
+        elif kind == "mesh":
+            used.add("file")
+            r.error("workpiece.shape", "mesh workpieces are not supported yet (expected box, cylinder or sphere)")
+        if kind is not None:
+            for key in t:
+                if key not in used and key in allowed:
+                    r.error(f"workpiece.{key}", f"not used by shape {kind!r} (remove it)")
+        mass = r.number(t, "mass", "workpiece.mass", required=True, exclusive_minimum=0.0, what="a mass [kg]")
+        inertia = self.inertia(t, dim)
+        start = self.pose(t, "start", dim, required=False) or Pose.identity(dim)
+        goal = self.pose(t, "goal", dim, required=False)
+        if shape is None or mass is None:
+            return None, start, goal
+        I_b = inertia if inertia is not None else shape.inertia_body(mass)
+        return Workpiece(shape, mass, I_b, shape.com_body), start, goal
+
+    def positive_all(self, values: list[float], path: str, what: str) -> bool:
+        bad = [i for i, v in enumerate(values) if v <= 0]
+        for i in bad:
+            self.r.error(f"{path}[{i}]", f"got {values[i]:g} (expected {what})")
+        return not bad
+
+    def polygon(self, t: dict) -> Polygon | None:
+        r = self.r
+        if "vertices" not in t:
+            r.error("workpiece.vertices", "missing (expected a list of [x, y] vertices, counter-clockwise)")
+            return None
+        raw = t["vertices"]
+        if not isinstance(raw, list) or len(raw) < 3:
+            r.error("workpiece.vertices", "expected at least 3 [x, y] vertices, counter-clockwise")
+            return None
+        verts = []
+        for i, _ in enumerate(raw):
+            v = r.vector({"v": raw[i]}, "v", f"workpiece.vertices[{i}]", 2, required=True, dimension_hint=2)
+            if v is None:
+                return None
+            verts.append(v)
+        V = np.array(verts)
+        E = np.roll(V, -1, axis=0) - V
+        if np.any(np.linalg.norm(E, axis=1) <= 1e-12):
+            r.error("workpiece.vertices", "two consecutive vertices coincide (expected distinct vertices)")
+            return None
+        cross = E[:, 0] * np.roll(E, -1, axis=0)[:, 1] - E[:, 1] * np.roll(E, -1, axis=0)[:, 0]
+        if np.all(cross < 0):
+            r.error("workpiece.vertices", "vertices are clockwise (expected counter-clockwise)")
+            return None
+        if not np.all(cross > 0):
+            r.error("workpiece.vertices", "polygon is not strictly convex (expected a convex polygon, counter-clockwise)")
+            return None
+        return Polygon(tuple(tuple(v) for v in verts))
+
+    def inertia(self, t: dict, dim: int) -> FloatArray | None:
+        r = self.r
+        if "inertia" not in t:
+            return None
+        if dim == 2:
+            izz = r.number(t, "inertia", "workpiece.inertia", exclusive_minimum=0.0, what="Izz [kg·m²]")
+            return None if izz is None else np.array([[izz]])
+        vals = r.vector(t, "inertia", "workpiece.inertia", 3, what="principal moments [Ixx, Iyy, Izz]", dimension_hint=3)
+        if vals is None:
+            return None
+        a, b, c = vals
+        if min(vals) <= 0.0:
+            r.error("workpiece.inertia", f"got {vals} (expected a positive-definite inertia: every moment > 0)")
+            return None
+        if a + b < c or a + c < b or b + c < a:
+            r.error("workpiece.inertia", f"got {vals} (expected moments satisfying the triangle inequality, as any rigid body does)")
+            return None
+        return np.diag(vals)
+
+    def pose(self, t: dict, key: str, dim: int, *, required: bool) -> Pose | None:
+        r = self.r
+        path = f"workpiece.{key}"
+        tab = r.table(t, key, path, required=required)
+        if tab is None:
+            return None
+        if dim == 3:
+            r.unknown_keys(tab, ("position", "rpy_deg"), path)
+            pos = r.vector(tab, "position", f"{path}.position", 3, required=True, dimension_hint=3)
+            rpy = r.vector(tab, "rpy_deg", f"{path}.rpy_deg", 3, default=[0.0, 0.0, 0.0], dimension_hint=3)
+            if pos is None or rpy is None:
+                return None
+            return Pose.from_rpy_deg(pos, rpy)
+        r.unknown_keys(tab, ("position", "angle_deg"), path)
+        pos = r.vector(tab, "position", f"{path}.position", 2, required=True, dimension_hint=2)
+        ang = r.number(tab, "angle_deg", f"{path}.angle_deg", default=0.0, what="an angle [deg]")
+        if pos is None or ang is None:
+            return None
+        return Pose.from_angle_deg(pos, ang)
+
+    # -- locators and contacts ------------------------------------------------------------------
+    def _entry_path(self, kind: str, entry: dict, index: int, seen: set[str]) -> tuple[str, str | None]:
+        name = entry.get("name")
+        if isinstance(name, str) and name.strip() and name not in seen:
+            return f"{kind}.{name}", name
+        return f"{kind}[{index}]", None
+
+    def locators(self, dim: int, workpiece: Workpiece | None) -> list[Locator]:
+        r = self.r
+        out: list[Locator] = []
+        seen: set[str] = set()
+        for i, entry in enumerate(r.tables(self.data, "locator", "locator")):
+            path, _ = self._entry_path("locator", entry, i, seen)
+            r.unknown_keys(entry, ("name", "position", "radius", "friction", "torsion", "face"), path)
+            name = self._name(entry, path, seen)
+            pos = r.vector(entry, "position", f"{path}.position", dim, required=True, dimension_hint=dim)
+            radius = r.number(entry, "radius", f"{path}.radius", default=0.0, minimum=0.0, what="a tip radius [m]")
+            mu = r.number(entry, "friction", f"{path}.friction", required=True, minimum=0.0, what="a friction coefficient")
+            torsion = self._torsion(entry, path, dim)
+            face = None
+            if "face" in entry:
+                kind = workpiece.shape.name if workpiece is not None else None
+                faces = FACES.get(kind or "", ())
+                if kind is not None and not faces:
+                    r.error(f"{path}.face", f"shape {kind!r} has no named faces (expected no face hint)")
+                elif kind is not None:
+                    face = r.string(entry, "face", f"{path}.face", choices=faces)
+            if None in (name, pos, radius, mu, torsion):
+                continue
+            out.append(Locator(name, np.array(pos), radius, mu, torsion, face))  # type: ignore[arg-type]
+        return out
+
+    def _name(self, entry: dict, path: str, seen: set[str]) -> str | None:
+        name = entry.get("name")
+        if name is None:
+            self.r.error(f"{path}.name", "missing (expected a unique name)")
+            return None
+        if not isinstance(name, str) or not name.strip():
+            self.r.error(f"{path}.name", "expected a non-empty string")
+            return None
+        if "," in name or name != name.strip():
+            self.r.error(f"{path}.name", f"got {name!r} (expected a name without commas or surrounding spaces)")
+            return None
+        if name in seen:
+            self.r.error(f"{path}.name", f"{name!r} is used twice (expected unique names)")
+            return None
+        seen.add(name)
+        self.all_names.add(name)
+        return name
+
+    @cached_property
+    def all_names(self) -> set[str]:
+        return set()
+
+    def _torsion(self, entry: dict, path: str, dim: int) -> float | None:
+        if "torsion" not in entry:
+            return 0.0
+        if dim == 2:
+            self.r.error(f"{path}.torsion", "torsional friction is 3D only (remove it in a 2D scene)")
+            return None
+        return self.r.number(entry, "torsion", f"{path}.torsion", minimum=0.0, what="a torsional radius [m]")
+
+    def explicit_contacts(self, dim: int) -> list[ExplicitContact]:
+        r = self.r
+        out: list[ExplicitContact] = []
+        seen = set(self.all_names)
+        for i, entry in enumerate(r.tables(self.data, "contact", "contact")):
+            path, _ = self._entry_path("contact", entry, i, seen)
+            r.unknown_keys(entry, ("name", "point", "normal", "friction", "torsion"), path)
+            name = self._name(entry, path, seen)
+            point = r.vector(entry, "point", f"{path}.point", dim, required=True, dimension_hint=dim)
+            normal = r.vector(entry, "normal", f"{path}.normal", dim, required=True, dimension_hint=dim)
+            if normal is not None and np.linalg.norm(normal) <= 1e-12:
+                r.error(f"{path}.normal", "got a zero vector (expected a direction)")
+                normal = None
+            mu = r.number(entry, "friction", f"{path}.friction", required=True, minimum=0.0, what="a friction coefficient")
+            torsion = self._torsion(entry, path, dim)
+            if None in (name, point, normal, mu, torsion):
+                continue
+            n = np.array(normal) / np.linalg.norm(normal)
+            out.append(ExplicitContact(name, np.array(point), n, mu, torsion))  # type: ignore[arg-type]
+        return out
+
+    def manipulator(self) -> Manipulator:
+        r = self.r
+        t = r.table(self.data, "manipulator", "manipulator", required=False)
+        if t is None:
+            return Manipulator()
+        r.unknown_keys(t, ("max_force", "max_torque"), "manipulator")
+        f = r.number(t, "max_force", "manipulator.max_force", default=float("inf"), exclusive_minimum=0.0, what="a force [N]")
+        m = r.number(t, "max_torque", "manipulator.max_torque", default=float("inf"), exclusive_minimum=0.0, what="a torque [N·m]")
+        return Manipulator(f if f is not None else float("inf"), m if m is not None else float("inf"))
+
+    def simulation(self) -> SimulationSettings:
+        r = self.r
+        t = r.table(self.data, "simulation", "simulation", required=False)
+        if t is None:
+            return SimulationSettings()
+        r.unknown_keys(t, ("timestep", "restitution", "tolerance"), "simulation")
+        h = r.number(t, "timestep", "simulation.timestep", default=1e-3, exclusive_minimum=0.0, maximum=1.0, what="a time step [s]")
+        e = r.number(t, "restitution", "simulation.restitution", default=0.0, minimum=0.0, maximum=1.0, what="a restitution coefficient")
+        tol = r.number(t, "tolerance", "simulation.tolerance", default=1e-8, exclusive_minimum=0.0, maximum=1.0, what="a solver tolerance")
+        return SimulationSettings(h or 1e-3, e or 0.0, tol or 1e-8)
+
+    # -- checks that need the whole model -------------------------------------------------------------
+    def check_geometry(self, fixture: Fixture) -> None:
+        from fixplan.locating import locator_contact, solve_goal
+
+        r, tol = self.r, self.tol
+        locs = fixture.locators
+        for i, a in enumerate(locs):
+            for b in locs[i + 1 :]:
+                dist = float(np.linalg.norm(a.p_world - b.p_world))
+                if dist < max(1e-9, a.radius_m + b.radius_m):
+                    r.error(
+                        f"locator.{b.name}.position",
+                        f"{b.name} and {a.name} are at one place (tips {dist:.3g} m apart; expected ≥ {a.radius_m + b.radius_m:g} m)",
+                    )
+        wp = fixture.workpiece
+        for loc in locs:
+            gap = locator_contact(wp, fixture.start, loc).gap_m
+            if gap < -tol.penetration_m:
+                r.error(
+                    f"locator.{loc.name}.position",
+                    f"tip is inside the workpiece by {-gap:.3g} m at the start pose (expected gap ≥ -{tol.penetration_m:g} m)",
+                )
+        if r.issues or not fixture.is_full:
+            if fixture.goal_given is not None and not fixture.is_full and not r.issues:
+                r.error("workpiece.goal", f"a goal needs a full fixture ({6 if fixture.dimension == 3 else 3} locators); this one has {len(locs)}")
+            return
+        if fixture.goal_given is not None:
+            goal = fixture.goal_given
+            for loc in locs:
+                gap = locator_contact(wp, goal, loc).gap_m
+                if abs(gap) > tol.goal_gap_m:
+                    r.error("workpiece.goal", f"locator {loc.name} does not touch at the given goal (gap {gap:.3g} m; expected |gap| ≤ {tol.goal_gap_m:g} m)")
+        else:
+            result = solve_goal(wp, locs, fixture.start)
+            if not result.converged:
+                r.error("locator", f"no pose touches all {len(locs)} locators (largest gap {result.max_gap_m:.3g} m after {result.iterations} iterations)")
+                return
+            goal = result.pose
+            object.__setattr__(fixture, "goal", goal)  # cache the computed goal
+        for loc in locs:
+            if loc.face is None:
+                continue
+            p_body = goal.point_body_from_world(loc.p_world)
+            face = wp.shape.face_of(wp.shape.project(p_body).point_body)
+            if face != loc.face:
+                r.error(f"locator.{loc.name}.face", f"touches face {face!r} at the goal (expected {loc.face!r})")

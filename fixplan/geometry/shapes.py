@@ -1,0 +1,296 @@
+"""Convex workpiece shapes with closed-form point queries in the body frame.
+
+Every shape answers one question, :meth:`Shape.project`: for a point ``p_body``, the signed
+distance to the surface (negative inside), the closest surface point and the outward unit
+normal there. A spherical locator tip of radius ρ centred at ``p`` then has the gap
+``distance − ρ``, touches at the closest point, and pushes along the *inward* normal
+(MATH.md's ``n``, from the locator into the workpiece).
+
+On the surface itself the outward normal is taken from the face the point lies on (not from a
+0/0 difference), so point locators resting exactly on a face get an exact normal.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Projection:
+    """Result of projecting a body-frame point onto a shape's surface."""
+
+    distance: float  # signed: > 0 outside, < 0 inside [m]
+    point_body: FloatArray  # closest surface point [m]
+    normal_body: FloatArray  # outward unit normal at that point
+
+
+class Shape(ABC):
+    """A convex rigid shape, described in its body frame."""
+
+    dimension: int
+    name: str
+
+    @abstractmethod
+    def project(self, p_body: FloatArray) -> Projection:
+        """Closest surface point, signed distance and outward normal for ``p_body``."""
+
+    @abstractmethod
+    def inertia_body(self, mass_kg: float) -> FloatArray:
+        """Uniform-density inertia about the centre of mass, body axes: (3,3) in 3D, (1,1) in 2D."""
+
+    @property
+    def com_body(self) -> FloatArray:
+        """Centre of mass in the body frame (uniform density)."""
+        return np.zeros(self.dimension)
+
+    @property
+    @abstractmethod
+    def bounding_radius(self) -> float:
+        """Radius of a ball about the body origin that contains the shape [m]."""
+
+    def face_of(self, p_body: FloatArray) -> str | None:
+        """Name of the face (``"+x"``, ``"-z"``, ...) nearest to a surface point, if faces exist."""
+        return None
+
+
+def _box_project(p: FloatArray, half: FloatArray) -> Projection:
+    """Closest point on an axis-aligned box of half extents ``half`` (any dimension)."""
+    q = np.abs(p) - half
+    sign = np.where(p >= 0.0, 1.0, -1.0)
+    outside = np.maximum(q, 0.0)
+    n_out = float(np.linalg.norm(outside))
+    scale = float(half.max())
+    if n_out > 1e-12 * scale:
+        # Outside: a face, edge or corner region; the normal is exact in each.
+        closest = np.clip(p, -half, half)
+        normal = sign * outside / n_out
+        return Projection(n_out, closest, normal)
+    # Inside or on the surface: the nearest face.
+    k = int(np.argmax(q))
+    closest = p.copy()
+    closest[k] = sign[k] * half[k]
+    normal = np.zeros_like(p)
+    normal[k] = sign[k]
+    return Projection(float(q[k]), closest, normal)
+
+
+def _face_name(axis: int, sign: float) -> str:
+    return ("+" if sign > 0 else "-") + "xyz"[axis]
+
+
+@dataclass(frozen=True)
+class Box(Shape):
+    """A box with full edge lengths ``size`` along body x, y, z, centred on the body origin."""
+
+    size: tuple[float, float, float]
+    dimension = 3
+    name = "box"
+
+    @property
+    def half(self) -> FloatArray:
+        return np.asarray(self.size, dtype=float) / 2.0
+
+    def project(self, p_body: FloatArray) -> Projection:
+        return _box_project(np.asarray(p_body, dtype=float), self.half)
+
+    def inertia_body(self, mass_kg: float) -> FloatArray:
+        a, b, c = self.size
+        return mass_kg / 12.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
+
+    @property
+    def bounding_radius(self) -> float:
+        return float(np.linalg.norm(self.half))
+
+    def face_of(self, p_body: FloatArray) -> str | None:
+        q = np.abs(p_body) - self.half
+        k = int(np.argmax(q))
+        return _face_name(k, float(np.sign(p_body[k]) or 1.0))
+
+
+@dataclass(frozen=True)
+class Rectangle(Shape):
+    """A rectangle with full side lengths ``size = (w, h)``, centred on the body origin (2D)."""
+
+    size: tuple[float, float]
+    dimension = 2
+    name = "rectangle"
+
+    @property
+    def half(self) -> FloatArray:
+        return np.asarray(self.size, dtype=float) / 2.0
+
+    def project(self, p_body: FloatArray) -> Projection:
+        return _box_project(np.asarray(p_body, dtype=float), self.half)
+
+    def inertia_body(self, mass_kg: float) -> FloatArray:
+        w, h = self.size
+        return np.array([[mass_kg * (w * w + h * h) / 12.0]])
+
+    @property
+    def bounding_radius(self) -> float:
+        return float(np.linalg.norm(self.half))
+
+    def face_of(self, p_body: FloatArray) -> str | None:
+        q = np.abs(p_body) - self.half
+        k = int(np.argmax(q))
+        return _face_name(k, float(np.sign(p_body[k]) or 1.0))
+
+
+@dataclass(frozen=True)
+class Sphere(Shape):
+    """A ball of radius ``radius`` centred on the body origin."""
+
+    radius: float
+    dimension = 3
+    name = "sphere"
+
+    def project(self, p_body: FloatArray) -> Projection:
+        p = np.asarray(p_body, dtype=float)
+        rho = float(np.linalg.norm(p))
+        normal = p / rho if rho > 1e-15 else np.array([0.0, 0.0, 1.0])
+        return Projection(rho - self.radius, self.radius * normal, normal)
+
+    def inertia_body(self, mass_kg: float) -> FloatArray:
+        return np.eye(3) * 0.4 * mass_kg * self.radius**2
+
+    @property
+    def bounding_radius(self) -> float:
+        return self.radius
+
+
+@dataclass(frozen=True)
+class Disk(Shape):
+    """A disk of radius ``radius`` centred on the body origin (2D)."""
+
+    radius: float
+    dimension = 2
+    name = "disk"
+
+    def project(self, p_body: FloatArray) -> Projection:
+        p = np.asarray(p_body, dtype=float)
+        rho = float(np.linalg.norm(p))
+        normal = p / rho if rho > 1e-15 else np.array([0.0, 1.0])
+        return Projection(rho - self.radius, self.radius * normal, normal)
+
+    def inertia_body(self, mass_kg: float) -> FloatArray:
+        return np.array([[0.5 * mass_kg * self.radius**2]])
+
+    @property
+    def bounding_radius(self) -> float:
+        return self.radius
+
+
+@dataclass(frozen=True)
+class Cylinder(Shape):
+    """A solid cylinder, axis along body z, centred on the body origin."""
+
+    radius: float
+    length: float
+    dimension = 3
+    name = "cylinder"
+
+    def project(self, p_body: FloatArray) -> Projection:
+        p = np.asarray(p_body, dtype=float)
+        rho = float(np.hypot(p[0], p[1]))
+        radial = p[:2] / rho if rho > 1e-15 else np.array([1.0, 0.0])
+        # The cylinder is a rectangle in the (ρ, z) half-plane.
+        proj = _box_project(np.array([rho, p[2]]), np.array([self.radius, self.length / 2.0]))
+        rho_c, z_c = proj.point_body
+        n_rho, n_z = proj.normal_body
+        point = np.array([rho_c * radial[0], rho_c * radial[1], z_c])
+        normal = np.array([n_rho * radial[0], n_rho * radial[1], n_z])
+        return Projection(proj.distance, point, normal / np.linalg.norm(normal))
+
+    def inertia_body(self, mass_kg: float) -> FloatArray:
+        r, L = self.radius, self.length
+        i_perp = mass_kg * (3 * r * r + L * L) / 12.0
+        return np.diag([i_perp, i_perp, 0.5 * mass_kg * r * r])
+
+    @property
+    def bounding_radius(self) -> float:
+        return float(np.hypot(self.radius, self.length / 2.0))
+
+    def face_of(self, p_body: FloatArray) -> str | None:
+        rho = float(np.hypot(p_body[0], p_body[1]))
+        if abs(p_body[2]) - self.length / 2.0 > rho - self.radius:
+            return "+z" if p_body[2] > 0 else "-z"
+        return "side"
+
+
+@dataclass(frozen=True)
+class Polygon(Shape):
+    """A convex polygon with counter-clockwise vertices in the body frame (2D).
+
+    The body frame is the file's own frame; the centre of mass is the area centroid
+    (:attr:`com_body`), which need not be the origin.
+    """
+
+    vertices: tuple[tuple[float, float], ...]
+    dimension = 2
+    name = "polygon"
+
+    @property
+    def array(self) -> FloatArray:
+        return np.asarray(self.vertices, dtype=float)
+
+    def _edges(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        V = self.array
+        E = np.roll(V, -1, axis=0) - V
+        lengths = np.linalg.norm(E, axis=1)
+        normals = np.stack([E[:, 1], -E[:, 0]], axis=1) / lengths[:, None]  # outward for CCW
+        return V, E, normals
+
+    def project(self, p_body: FloatArray) -> Projection:
+        p = np.asarray(p_body, dtype=float)
+        V, E, N = self._edges()
+        plane = np.einsum("ij,ij->i", p - V, N)  # signed distance to each edge's line
+        if plane.max() <= 0.0:
+            k = int(np.argmax(plane))
+            return Projection(float(plane[k]), p - plane[k] * N[k], N[k].copy())
+        # Outside: nearest point over the edge segments.
+        t = np.clip(np.einsum("ij,ij->i", p - V, E) / np.einsum("ij,ij->i", E, E), 0.0, 1.0)
+        C = V + t[:, None] * E
+        d = np.linalg.norm(p - C, axis=1)
+        k = int(np.argmin(d))
+        if d[k] > 1e-12 * self.bounding_radius and 0.0 < t[k] < 1.0:
+            normal = N[k].copy()
+        elif d[k] > 1e-12 * self.bounding_radius:
+            normal = (p - C[k]) / d[k]
+        else:
+            normal = N[int(np.argmax(plane))].copy()
+        return Projection(float(d[k]), C[k], normal)
+
+    def _area_terms(self) -> tuple[float, FloatArray, float]:
+        V = self.array
+        x, y = V[:, 0], V[:, 1]
+        xn, yn = np.roll(x, -1), np.roll(y, -1)
+        cr = x * yn - xn * y
+        area = cr.sum() / 2.0
+        cx = ((x + xn) * cr).sum() / (6.0 * area)
+        cy = ((y + yn) * cr).sum() / (6.0 * area)
+        # Second moment about the origin, then shifted to the centroid.
+        j_origin = ((x * x + x * xn + xn * xn + y * y + y * yn + yn * yn) * cr).sum() / 12.0
+        return float(area), np.array([cx, cy]), float(j_origin)
+
+    @property
+    def area(self) -> float:
+        return self._area_terms()[0]
+
+    @property
+    def com_body(self) -> FloatArray:
+        return self._area_terms()[1]
+
+    def inertia_body(self, mass_kg: float) -> FloatArray:
+        area, c, j_origin = self._area_terms()
+        j_centroid = j_origin / area - float(c @ c)  # per unit mass
+        return np.array([[mass_kg * j_centroid]])
+
+    @property
+    def bounding_radius(self) -> float:
+        return float(np.linalg.norm(self.array, axis=1).max())

@@ -1,0 +1,201 @@
+"""Contact frames, contact Jacobians and the mass matrix of a contact configuration.
+
+Conventions (MATH.md):
+
+- twist ``ν = (v, ω)`` of the centre of mass ``c`` in world axes (3D: 6 numbers; 2D:
+  ``(vx, vy, ω)``);
+- contact ``i`` at the workpiece's material point ``p_i`` (world), lever ``r_i = p_i − c``,
+  unit normal ``n_i`` **from the locator into the workpiece**, tangents so that
+  ``(n, t1, t2)`` is right-handed (2D: ``t = (−n_y, n_x)``);
+- ``u_i = J_i ν`` with rows ``[nᵀ, (r×n)ᵀ]``, ``[t1ᵀ, (r×t1)ᵀ]``, ``[t2ᵀ, (r×t2)ᵀ]`` and, for a
+  soft-finger contact (``torsion_m > 0``), the spin row ``[0, nᵀ]``;
+- ``J_iᵀ λ_i`` is the wrench about ``c`` of the contact force ``λ_i = (λ_n, λ_t1, λ_t2[, λ_s])``.
+
+The paper's ``G`` [11] is the stack of normal rows, ``H_x``/``H_y`` the tangent rows
+(the paper's normal is ``−n``, so its ``G`` is ours negated).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fixplan.errors import InputError
+from fixplan.pose import Pose, cross2
+
+FloatArray = NDArray[np.float64]
+
+
+def tangent_basis(normal: ArrayLike) -> FloatArray:
+    """Unit tangents completing ``normal`` to a right-handed frame: (1, 2) in 2D, (2, 3) in 3D."""
+    n = np.asarray(normal, dtype=float)
+    if n.shape[0] == 2:
+        return np.array([[-n[1], n[0]]])
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    t1 = a - (a @ n) * n
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(n, t1)
+    return np.stack([t1, t2])
+
+
+@dataclass(frozen=True)
+class Contact:
+    """One point contact between a fixture element and the workpiece, in world coordinates."""
+
+    name: str
+    point_world: FloatArray  # material point of the workpiece [m]
+    normal_world: FloatArray  # unit, from the fixture into the workpiece
+    friction: float  # Coulomb μ
+    torsion_m: float = 0.0  # soft-finger torsional radius e_r [m]; 0 = no spin row
+    gap_m: float = 0.0  # signed distance at this configuration [m]
+    kind: str = "locator"  # "locator" or "explicit"
+
+    def __post_init__(self) -> None:
+        n = np.array(self.normal_world, dtype=float)
+        object.__setattr__(self, "normal_world", n / np.linalg.norm(n))
+        object.__setattr__(self, "point_world", np.array(self.point_world, dtype=float))
+
+    @property
+    def dimension(self) -> int:
+        return int(self.point_world.shape[0])
+
+    @property
+    def soft(self) -> bool:
+        """A soft-finger contact (3D with a torsional radius): it has a spin row."""
+        return self.dimension == 3 and self.torsion_m > 0.0
+
+    @property
+    def size(self) -> int:
+        """Number of force components: 2 (2D), 3 (3D point), 4 (3D soft finger)."""
+        return 2 if self.dimension == 2 else (4 if self.soft else 3)
+
+    @cached_property
+    def tangents_world(self) -> FloatArray:
+        return tangent_basis(self.normal_world)
+
+    def jacobian(self, com_world: ArrayLike) -> FloatArray:
+        """``J_i`` (size × ndof): the contact-frame velocity of the material point from ``ν``."""
+        r = self.point_world - np.asarray(com_world, dtype=float)
+        n = self.normal_world
+        if self.dimension == 2:
+            t = self.tangents_world[0]
+            return np.array([[n[0], n[1], cross2(r, n)], [t[0], t[1], cross2(r, t)]])
+        t1, t2 = self.tangents_world
+        rows = [
+            np.concatenate([n, np.cross(r, n)]),
+            np.concatenate([t1, np.cross(r, t1)]),
+            np.concatenate([t2, np.cross(r, t2)]),
+        ]
+        if self.soft:
+            rows.append(np.concatenate([np.zeros(3), n]))
+        return np.array(rows)
+
+
+@dataclass(frozen=True)
+class ContactSet:
+    """Contacts at one configuration of the workpiece, with its mass matrix.
+
+    All matrices are in world axes about the centre of mass ``com_world``.
+    """
+
+    contacts: tuple[Contact, ...]
+    com_world: FloatArray
+    mass_matrix: FloatArray  # M = diag(m I, R I_b Rᵀ)
+    body_origin_world: FloatArray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def dimension(self) -> int:
+        return int(self.com_world.shape[0])
+
+    @property
+    def ndof(self) -> int:
+        return 6 if self.dimension == 3 else 3
+
+    @property
+    def names(self) -> list[str]:
+        return [c.name for c in self.contacts]
+
+    def __len__(self) -> int:
+        return len(self.contacts)
+
+    @cached_property
+    def sizes(self) -> NDArray[np.int64]:
+        return np.array([c.size for c in self.contacts], dtype=np.int64)
+
+    @cached_property
+    def offsets(self) -> NDArray[np.int64]:
+        return np.concatenate([[0], np.cumsum(self.sizes)[:-1]]).astype(np.int64)
+
+    @cached_property
+    def J(self) -> FloatArray:
+        """Stacked contact Jacobian (Σ sizes × ndof)."""
+        if not self.contacts:
+            return np.zeros((0, self.ndof))
+        return np.vstack([c.jacobian(self.com_world) for c in self.contacts])
+
+    @cached_property
+    def G(self) -> FloatArray:
+        """Normal rows (n × ndof): ``G ν`` is the rate at which each gap opens."""
+        return self.J[self.offsets] if self.contacts else np.zeros((0, self.ndof))
+
+    @cached_property
+    def H(self) -> FloatArray:
+        """Tangent rows: (n × ndof) in 2D; in 3D the pair ``(H_x, H_y)`` stacked (2n × ndof)."""
+        if self.dimension == 2:
+            return self.J[self.offsets + 1]
+        return np.vstack([self.J[self.offsets + 1], self.J[self.offsets + 2]])
+
+    @cached_property
+    def M_inv(self) -> FloatArray:
+        return np.linalg.inv(self.mass_matrix)
+
+    @cached_property
+    def mu(self) -> FloatArray:
+        return np.array([c.friction for c in self.contacts])
+
+    @cached_property
+    def torsion(self) -> FloatArray:
+        return np.array([c.torsion_m for c in self.contacts])
+
+    def wrench_from_forces(self, forces: ArrayLike) -> FloatArray:
+        """``Jᵀ λ``: the wrench about the centre of mass of stacked contact forces."""
+        return self.J.T @ np.asarray(forces, dtype=float)
+
+    def wrench_about_com(self, wrench: ArrayLike, about_world: ArrayLike | None = None) -> FloatArray:
+        """Re-express a wrench given about a world point (default: body origin) about ``c``."""
+        w = np.asarray(wrench, dtype=float)
+        d = self.dimension
+        point = self.body_origin_world if about_world is None else np.asarray(about_world, dtype=float)
+        offset = point - self.com_world
+        if d == 3:
+            return np.concatenate([w[:3], w[3:] + np.cross(offset, w[:3])])
+        return np.array([w[0], w[1], w[2] + cross2(offset, w[:2])])
+
+    def subset(self, names: Sequence[str]) -> ContactSet:
+        """The same configuration with only the named contacts, in the given order."""
+        by_name = {c.name: c for c in self.contacts}
+        missing = [n for n in names if n not in by_name]
+        if missing:
+            raise InputError(f"unknown contact {missing[0]!r} (known: {', '.join(by_name) or 'none'})")
+        return ContactSet(tuple(by_name[n] for n in names), self.com_world, self.mass_matrix, self.body_origin_world)
+
+
+def mass_matrix(mass_kg: float, inertia_body: ArrayLike, R_world_body: ArrayLike) -> FloatArray:
+    """``M = diag(m I, R I_b Rᵀ)`` (3D) or ``diag(m, m, I_zz)`` (2D)."""
+    I_b = np.asarray(inertia_body, dtype=float)
+    R = np.asarray(R_world_body, dtype=float)
+    if R.shape[0] == 2:
+        return np.diag([mass_kg, mass_kg, float(I_b.reshape(-1)[0])])
+    M = np.zeros((6, 6))
+    M[:3, :3] = mass_kg * np.eye(3)
+    M[3:, 3:] = R @ I_b @ R.T
+    return M
+
+
+def com_world(pose: Pose, com_body: ArrayLike) -> FloatArray:
+    """The centre of mass in world coordinates."""
+    return pose.point_world_from_body(com_body)

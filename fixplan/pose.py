@@ -1,0 +1,190 @@
+"""Rigid poses in 2D and 3D: ``T_world_body`` as a rotation and the body-origin position.
+
+Conventions (used everywhere in fixplan):
+
+- ``rpy_deg = [roll, pitch, yaw]`` in files means ``R = Rz(yaw) · Ry(pitch) · Rx(roll)``
+  (fixed-axis X-Y-Z, as in URDF and pinocchio's ``rpy.rpyToMatrix``).
+- A 2D pose is ``(x, y, θ)`` with ``θ`` counter-clockwise.
+- Twists are ``(v, ω)`` in **world axes** about the centre of mass ``c`` (MATH.md); a pose is
+  moved by a twist with the left (world-frame) retraction
+  ``c⁺ = c + v,  R⁺ = exp(ω̂) R`` (3D) or ``θ⁺ = θ + ω`` (2D).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+def rot2(theta_rad: float) -> FloatArray:
+    """2×2 rotation by ``theta_rad`` counter-clockwise."""
+    c, s = np.cos(theta_rad), np.sin(theta_rad)
+    return np.array([[c, -s], [s, c]])
+
+
+def matrix_from_rpy(rpy_rad: ArrayLike) -> FloatArray:
+    """``Rz(yaw) Ry(pitch) Rx(roll)`` from ``[roll, pitch, yaw]`` in radians."""
+    r, p, y = np.asarray(rpy_rad, dtype=float)
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
+
+
+def rpy_from_matrix(R: ArrayLike) -> FloatArray:
+    """Inverse of :func:`matrix_from_rpy` (pitch in [-π/2, π/2])."""
+    R = np.asarray(R, dtype=float)
+    pitch = np.arctan2(-R[2, 0], np.hypot(R[0, 0], R[1, 0]))
+    roll = np.arctan2(R[2, 1], R[2, 2])
+    yaw = np.arctan2(R[1, 0], R[0, 0])
+    return np.array([roll, pitch, yaw])
+
+
+def exp_so3(omega: ArrayLike) -> FloatArray:
+    """Rodrigues' formula: the rotation ``exp(ω̂)``."""
+    w = np.asarray(omega, dtype=float)
+    theta = float(np.linalg.norm(w))
+    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    if theta < 1e-8:
+        return np.eye(3) + K + 0.5 * K @ K
+    return np.eye(3) + np.sin(theta) / theta * K + (1.0 - np.cos(theta)) / theta**2 * K @ K
+
+
+def log_so3(R: ArrayLike) -> FloatArray:
+    """The rotation vector ``ω`` with ``exp(ω̂) = R``."""
+    R = np.asarray(R, dtype=float)
+    cos_t = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    theta = float(np.arccos(cos_t))
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if theta < 1e-8:
+        return 0.5 * v
+    if np.pi - theta < 1e-6:
+        # Near π: take the axis from the symmetric part.
+        B = (R + np.eye(3)) / 2.0
+        k = int(np.argmax(np.diag(B)))
+        axis = B[:, k] / np.sqrt(max(B[k, k], 1e-300))
+        axis /= np.linalg.norm(axis)
+        if axis @ v < 0:
+            axis = -axis
+        return theta * axis
+    return theta / (2.0 * np.sin(theta)) * v
+
+
+def quaternion_wxyz_from_matrix(R: ArrayLike) -> FloatArray:
+    """Unit quaternion ``(w, x, y, z)`` with ``w ≥ 0``."""
+    R = np.asarray(R, dtype=float)
+    tr = np.trace(R)
+    if tr > 0:
+        s = 2.0 * np.sqrt(tr + 1.0)
+        q = np.array([0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s])
+    else:
+        k = int(np.argmax(np.diag(R)))
+        i, j, m = k, (k + 1) % 3, (k + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + R[i, i] - R[j, j] - R[m, m])
+        q = np.empty(4)
+        q[0] = (R[m, j] - R[j, m]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (R[j, i] + R[i, j]) / s
+        q[1 + m] = (R[m, i] + R[i, m]) / s
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
+def matrix_from_quaternion_wxyz(q: ArrayLike) -> FloatArray:
+    """Rotation matrix of a (normalised) quaternion ``(w, x, y, z)``."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def cross2(a: ArrayLike, b: ArrayLike) -> float:
+    """Scalar planar cross product ``a_x b_y − a_y b_x``."""
+    return float(a[0] * b[1] - a[1] * b[0])  # type: ignore[index]
+
+
+@dataclass(frozen=True)
+class Pose:
+    """``T_world_body``: rotation ``R_world_body`` (d×d) and body-origin position ``p_world`` (d,)."""
+
+    R_world_body: FloatArray
+    p_world: FloatArray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "R_world_body", np.array(self.R_world_body, dtype=float))
+        object.__setattr__(self, "p_world", np.array(self.p_world, dtype=float))
+        self.R_world_body.setflags(write=False)
+        self.p_world.setflags(write=False)
+
+    @property
+    def dimension(self) -> int:
+        return int(self.p_world.shape[0])
+
+    @staticmethod
+    def identity(dimension: int) -> Pose:
+        return Pose(np.eye(dimension), np.zeros(dimension))
+
+    @staticmethod
+    def from_rpy_deg(position: ArrayLike, rpy_deg: ArrayLike) -> Pose:
+        return Pose(matrix_from_rpy(np.radians(np.asarray(rpy_deg, dtype=float))), np.asarray(position))
+
+    @staticmethod
+    def from_angle_deg(position: ArrayLike, angle_deg: float) -> Pose:
+        return Pose(rot2(np.radians(angle_deg)), np.asarray(position))
+
+    @property
+    def angle_rad(self) -> float:
+        """Planar angle (2D poses only)."""
+        return float(np.arctan2(self.R_world_body[1, 0], self.R_world_body[0, 0]))
+
+    def point_world_from_body(self, p_body: ArrayLike) -> FloatArray:
+        return self.R_world_body @ np.asarray(p_body, dtype=float) + self.p_world
+
+    def point_body_from_world(self, p_world: ArrayLike) -> FloatArray:
+        return self.R_world_body.T @ (np.asarray(p_world, dtype=float) - self.p_world)
+
+    def retract(self, twist: ArrayLike, com_body: ArrayLike) -> Pose:
+        """Move by a world-axes twist ``(v, ω)`` of the centre of mass (displacement, not rate).
+
+        The centre of mass ``c = p + R com_body`` moves by ``v``; the body turns by ``ω`` about it.
+        """
+        xi = np.asarray(twist, dtype=float)
+        d = self.dimension
+        com_body = np.asarray(com_body, dtype=float)
+        c = self.point_world_from_body(com_body)
+        if d == 3:
+            R_new = exp_so3(xi[3:6]) @ self.R_world_body
+        else:
+            R_new = rot2(xi[2]) @ self.R_world_body
+        c_new = c + xi[:d]
+        return Pose(R_new, c_new - R_new @ com_body)
+
+    def to_json(self) -> dict:
+        """The fixture spec's JSON pose form."""
+        if self.dimension == 3:
+            return {
+                "position": [float(x) for x in self.p_world],
+                "quaternion_wxyz": [float(x) for x in quaternion_wxyz_from_matrix(self.R_world_body)],
+            }
+        return {"position": [float(x) for x in self.p_world], "angle_deg": float(np.degrees(self.angle_rad))}
+
+    def distance_to(self, other: Pose) -> tuple[float, float]:
+        """(translation distance [m], rotation angle [rad]) between two poses."""
+        dp = float(np.linalg.norm(self.p_world - other.p_world))
+        if self.dimension == 3:
+            ang = float(np.linalg.norm(log_so3(self.R_world_body.T @ other.R_world_body)))
+        else:
+            ang = abs((other.angle_rad - self.angle_rad + np.pi) % (2 * np.pi) - np.pi)
+        return dp, ang

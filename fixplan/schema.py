@@ -1,0 +1,176 @@
+"""Reading untyped TOML tables into typed values, collecting every problem with its key path.
+
+The fixture loader asks a :class:`Reader` for each key; the reader records an
+:class:`~fixplan.errors.Issue` (dotted key path, what is wrong, what was expected) instead of
+raising, so ``fixplan validate`` can print all problems of a file at once. A value that could
+not be read comes back as ``None`` and the caller skips checks that depend on it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from fixplan.errors import Issue
+
+
+def _kind(value: Any) -> str:
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int | float):
+        return f"the number {value!r}"
+    if isinstance(value, str):
+        return f"the string {value!r}"
+    if isinstance(value, list):
+        return f"a list of {len(value)}"
+    if isinstance(value, dict):
+        return "a table"
+    return type(value).__name__
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+class Reader:
+    """Collects :class:`Issue` objects while reading values out of nested tables."""
+
+    def __init__(self) -> None:
+        self.issues: list[Issue] = []
+
+    def error(self, key: str, message: str) -> None:
+        self.issues.append(Issue(key, message))
+
+    # -- tables ------------------------------------------------------------------------------
+    def table(self, parent: Mapping[str, Any], name: str, path: str, *, required: bool) -> dict | None:
+        if name not in parent:
+            if required:
+                self.error(path, "missing (expected a table)")
+            return None
+        value = parent[name]
+        if not isinstance(value, dict):
+            self.error(path, f"got {_kind(value)} (expected a table)")
+            return None
+        return value
+
+    def tables(self, parent: Mapping[str, Any], name: str, path: str) -> list[dict]:
+        if name not in parent:
+            return []
+        value = parent[name]
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            self.error(path, f"got {_kind(value)} (expected an array of tables [[{name}]])")
+            return []
+        return value
+
+    def unknown_keys(self, table: Mapping[str, Any], allowed: Iterable[str], path: str) -> None:
+        allowed = set(allowed)
+        for key in table:
+            if key not in allowed:
+                where = f"{path}.{key}" if path else key
+                self.error(where, f"unknown key (expected one of: {', '.join(sorted(allowed))})")
+
+    # -- scalars -----------------------------------------------------------------------------
+    def number(
+        self,
+        table: Mapping[str, Any],
+        name: str,
+        path: str,
+        *,
+        required: bool = False,
+        default: float | None = None,
+        minimum: float | None = None,
+        exclusive_minimum: float | None = None,
+        maximum: float | None = None,
+        what: str = "a number",
+    ) -> float | None:
+        if name not in table:
+            if required:
+                self.error(path, f"missing (expected {what})")
+            return default
+        value = table[name]
+        if not _is_number(value):
+            self.error(path, f"got {_kind(value)} (expected {what})")
+            return None
+        value = float(value)
+        if not math.isfinite(value):
+            self.error(path, f"got {value} (expected a finite number)")
+            return None
+        if exclusive_minimum is not None and value <= exclusive_minimum:
+            self.error(path, f"got {value:g} (expected {what} > {exclusive_minimum:g})")
+            return None
+        if minimum is not None and value < minimum:
+            self.error(path, f"got {value:g} (expected {what} ≥ {minimum:g})")
+            return None
+        if maximum is not None and value > maximum:
+            self.error(path, f"got {value:g} (expected {what} ≤ {maximum:g})")
+            return None
+        return value
+
+    def integer(self, table: Mapping[str, Any], name: str, path: str, *, required: bool, allowed: tuple[int, ...]) -> int | None:
+        expected = " or ".join(str(a) for a in allowed)
+        if name not in table:
+            if required:
+                self.error(path, f"missing (expected {expected})")
+            return None
+        value = table[name]
+        if not isinstance(value, int) or isinstance(value, bool) or value not in allowed:
+            self.error(path, f"got {_kind(value)} (expected {expected})")
+            return None
+        return int(value)
+
+    def string(
+        self,
+        table: Mapping[str, Any],
+        name: str,
+        path: str,
+        *,
+        required: bool = False,
+        choices: tuple[str, ...] | None = None,
+    ) -> str | None:
+        if name not in table:
+            if required:
+                expected = f"one of: {', '.join(choices)}" if choices else "a string"
+                self.error(path, f"missing (expected {expected})")
+            return None
+        value = table[name]
+        if not isinstance(value, str) or not value.strip():
+            self.error(path, f"got {_kind(value)} (expected a non-empty string)")
+            return None
+        if choices is not None and value not in choices:
+            self.error(path, f"got {value!r} (expected one of: {', '.join(choices)})")
+            return None
+        return value
+
+    def vector(
+        self,
+        table: Mapping[str, Any],
+        name: str,
+        path: str,
+        length: int,
+        *,
+        required: bool = False,
+        default: list[float] | None = None,
+        what: str = "numbers",
+        dimension_hint: int | None = None,
+    ) -> list[float] | None:
+        if name not in table:
+            if required:
+                self.error(path, f"missing (expected {length} {what})")
+            return None if default is None else list(default)
+        value = table[name]
+        if not isinstance(value, list):
+            self.error(path, f"got {_kind(value)} (expected a list of {length} {what})")
+            return None
+        if len(value) != length:
+            hint = f" for a {dimension_hint}D scene" if dimension_hint else ""
+            self.error(path, f"got {len(value)} numbers (expected {length}{hint})")
+            return None
+        for i, x in enumerate(value):
+            if not _is_number(x):
+                self.error(f"{path}[{i}]", f"got {_kind(x)} (expected a number)")
+                return None
+            if not math.isfinite(float(x)):
+                self.error(f"{path}[{i}]", f"got {x} (expected a finite number)")
+                return None
+        return [float(x) for x in value]
