@@ -1,0 +1,322 @@
+"""The ``fixplan`` command line.
+
+Every command validates its fixture first. Bad input (a malformed file, a wrench of the wrong
+length, an unknown contact) prints clear one-line errors on stderr and exits with status 2,
+never a traceback. ``--json`` prints exactly one JSON object on stdout; progress and logs go
+to stderr. Files are never overwritten without ``--force``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+
+try:  # typer ≥ 0.20 vendors click; older typer depends on it
+    from typer._click import exceptions as click_exc
+except ImportError:  # pragma: no cover - depends on the installed typer
+    from click import exceptions as click_exc  # type: ignore[no-redef]
+
+_CLICK_EXIT = tuple(c for c in (getattr(click_exc, "Exit", None),) if c is not None)
+_CLICK_ABORT = tuple(c for c in (getattr(click_exc, "Abort", None),) if c is not None)
+
+from fixplan.errors import FixplanError, FixtureError, InputError
+
+app = typer.Typer(
+    name="fixplan",
+    help="Plan how a workpiece is loaded into a fixture without jamming.",
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+
+FileArg = Annotated[Path | None, typer.Argument(help="Fixture file (TOML). Default: the bundled 3-2-1 box.", show_default=False)]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")]
+ContactsOpt = Annotated[str | None, typer.Option("--contacts", help="Comma-separated contact names (default: locators touching at the pose, plus [[contact]] entries).")]
+AtOpt = Annotated[str | None, typer.Option("--at", help="World point X,Y[,Z] the moments are taken about (default: the body-frame origin).")]
+PoseOpt = Annotated[str, typer.Option("--pose", help="Analyse the part at its 'start' or 'goal' pose.")]
+
+
+def _err(message: str) -> None:
+    typer.echo(f"fixplan: {message}", err=True)
+
+
+def _load(path: Path | None):
+    from fixplan.fixture import default_fixture_path, load
+
+    return load(path if path is not None else default_fixture_path())
+
+
+def _numbers(text: str, what: str, n: int | None = None) -> np.ndarray:
+    try:
+        values = np.array([float(x) for x in text.split(",")], dtype=float)
+    except ValueError:
+        raise InputError(f"{what} must be comma-separated numbers, got {text!r}") from None
+    if n is not None and values.shape[0] != n:
+        raise InputError(f"{what} expects {n} numbers, got {values.shape[0]} in {text!r}")
+    if not np.all(np.isfinite(values)):
+        raise InputError(f"{what} must be finite numbers, got {text!r}")
+    return values
+
+
+def _names(text: str | None) -> list[str] | None:
+    if text is None:
+        return None
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    if not names:
+        raise InputError("--contacts is empty (expected comma-separated contact names)")
+    return names
+
+
+def _pose(fixture, pose: str):
+    if pose not in ("start", "goal"):
+        raise InputError(f"--pose must be 'start' or 'goal', got {pose!r}")
+    if pose == "goal":
+        from fixplan.locating import require_full
+
+        require_full(fixture, "--pose goal")
+    return pose
+
+
+def _writable(path: Path, force: bool) -> Path:
+    if path.exists() and not force:
+        raise InputError(f"{path} exists (use --force to overwrite it)")
+    if path.parent and not path.parent.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def _emit_json(obj: dict[str, Any]) -> None:
+    sys.stdout.write(json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n")
+
+
+def _json_default(x: Any) -> Any:
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.floating | np.integer):
+        return x.item()
+    raise TypeError(type(x))
+
+
+@app.command()
+def validate(files: Annotated[list[Path], typer.Argument(help="Fixture files to check.")]) -> None:
+    """Check fixture files; print one line per problem (FILE: key: message) and exit 2 if any."""
+    from fixplan.fixture import load
+
+    bad = False
+    for path in files:
+        try:
+            fixture = load(path)
+        except FixtureError as exc:
+            bad = True
+            for issue in exc.issues:
+                typer.echo(issue.format(str(path)), err=True)
+            continue
+        kind = f"{fixture.dimension}D {fixture.workpiece.shape.name}, {len(fixture.locators)} locators, {len(fixture.contacts)} contacts"
+        goal = ""
+        if fixture.is_full:
+            goal = ", goal " + ("given and checked" if fixture.goal_given is not None else "computed")
+        typer.echo(f"{path}: ok ({kind}{goal})")
+    if bad:
+        raise typer.Exit(2)
+
+
+def _classify_table(fixture, results, names) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"{fixture.name}: contacts {', '.join(names)}")
+    table.add_column("#", justify="right")
+    table.add_column("wrench")
+    table.add_column("mode")
+    table.add_column("margin", justify="right")
+    table.add_column("decided by")
+    for i, r in enumerate(results, 1):
+        table.add_row(str(i), ",".join(f"{x:g}" for x in r.wrench), r.mode, f"{r.margin:.3g}", r.certificate)
+    Console().print(table)
+
+
+@app.command()
+def classify(
+    file: FileArg = None,
+    wrench: Annotated[str | None, typer.Option("--wrench", help="Fx,Fy,Fz,Tx,Ty,Tz (2D: Fx,Fy,Mz), about the body origin, world axes.")] = None,
+    wrenches: Annotated[Path | None, typer.Option("--wrenches", help="CSV file, one wrench per line.")] = None,
+    contacts: ContactsOpt = None,
+    at: AtOpt = None,
+    pose: PoseOpt = "start",
+    backend: Annotated[str, typer.Option("--backend", help="clarabel (fast matrix path) or cvxpy (reference model).")] = "clarabel",
+    json_out: JsonOpt = False,
+) -> None:
+    """Classify pushes: held, jammed, separates, slides, rolls or indeterminate."""
+    from fixplan.jamming import classify as run
+    from fixplan.locating import contact_set
+
+    fixture = _load(file)
+    if (wrench is None) == (wrenches is None):
+        raise InputError("give exactly one of --wrench or --wrenches")
+    n = fixture.ndof
+    if wrench is not None:
+        W = _numbers(wrench, "--wrench", n)[None, :]
+    else:
+        W = _read_wrench_csv(wrenches, n)  # type: ignore[arg-type]
+    at_p = None if at is None else _numbers(at, "--at", fixture.dimension)
+    p = _pose(fixture, pose)
+    names = _names(contacts)
+    cs = contact_set(fixture, p, names)
+    for c in cs.contacts:
+        if c.kind == "locator" and c.gap_m > fixture.tolerances.touch_m:
+            _err(f"warning: {c.name} does not touch at the {pose} pose (gap {c.gap_m:.3g} m); analysed as if it did")
+    results = run(fixture, W, names, at_p, pose=p, backend=backend)
+    if json_out:
+        _emit_json({"file": fixture.source, "pose": pose, "contacts": cs.names, "results": [r.to_json() for r in results]})
+    else:
+        _classify_table(fixture, results, cs.names)
+
+
+def _read_wrench_csv(path: Path, n: int) -> np.ndarray:
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    rows = []
+    for lineno, line in enumerate(text.splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        try:
+            rows.append(_numbers(line, f"{path}:{lineno}", n))
+        except InputError:
+            # a header line is allowed as the first non-empty line
+            if not rows and not any(ch.isdigit() for ch in line.replace("Fx", "")):
+                continue
+            raise
+    if not rows:
+        raise InputError(f"{path}: no wrenches (expected one wrench of {n} numbers per line)")
+    return np.array(rows)
+
+
+@app.command()
+def search(
+    file: FileArg = None,
+    motion: Annotated[str, typer.Option("--motion", help="Desired acceleration of the body origin: ax,ay,az,αx,αy,αz (2D: ax,ay,α) [m/s², rad/s²].")] = "",
+    contacts: ContactsOpt = None,
+    at: AtOpt = None,
+    pose: PoseOpt = "start",
+    json_out: JsonOpt = False,
+) -> None:
+    """Find the non-jamming push for a desired motion (exit 1 when none exists)."""
+    from fixplan.jamming import search_wrench
+
+    fixture = _load(file)
+    if not motion:
+        raise InputError("--motion is required (the desired acceleration, e.g. 0.1,0,0,0,0,0)")
+    m = _numbers(motion, "--motion", fixture.ndof)
+    at_p = None if at is None else _numbers(at, "--at", fixture.dimension)
+    result = search_wrench(fixture, m, _names(contacts), pose=_pose(fixture, pose), at=at_p)
+    if json_out:
+        _emit_json(result.to_json())
+    else:
+        if result.found and result.wrench is not None:
+            typer.echo(f"wrench: {','.join(f'{x:.6g}' for x in result.wrench)}")
+            typer.echo(f"margin: least normal force {result.margin_N:.4g} N; check: {result.check.mode if result.check else '-'}")
+            typer.echo("contacts: " + ", ".join(f"{k} {v}" for k, v in result.contact_roles.items()))
+            if result.binding:
+                typer.echo("binding limits: " + ", ".join(result.binding))
+        typer.echo(result.reason)
+    if not result.found:
+        raise typer.Exit(1)
+
+
+AXES_3D = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
+AXES_2D = ("Fx", "Fy", "Mz")
+
+
+@app.command("map")
+def map_(
+    file: FileArg = None,
+    axes: Annotated[str, typer.Option("--axes", help="Two wrench components, e.g. Fx,Mz (3D names Fx..Tz; 2D Fx,Fy,Mz).")] = "Fx,Tz",
+    range_: Annotated[str, typer.Option("--range", help="min:max for each axis, e.g. -20:20,-2:2.")] = "-10:10,-1:1",
+    n: Annotated[int, typer.Option("--n", help="Grid points per axis.", min=2, max=1000)] = 100,
+    wrench: Annotated[str | None, typer.Option("--wrench", help="Base wrench for the other components (default 0).")] = None,
+    contacts: ContactsOpt = None,
+    at: AtOpt = None,
+    pose: PoseOpt = "start",
+    out: Annotated[Path, typer.Option("--out", help="PNG to write; a CSV with the same stem is written beside it.")] = Path("map.png"),
+    force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Classify a grid of pushes over two wrench components and draw the jamming diagram."""
+    from fixplan.mapping import jamming_map, save_map
+
+    fixture = _load(file)
+    names_all = AXES_3D if fixture.dimension == 3 else AXES_2D
+    ax = [a.strip() for a in axes.split(",")]
+    if len(ax) != 2 or any(a not in names_all for a in ax) or ax[0] == ax[1]:
+        raise InputError(f"--axes expects two different names from {','.join(names_all)}, got {axes!r}")
+    parts = range_.split(",")
+    if len(parts) != 2:
+        raise InputError(f"--range expects min:max,min:max, got {range_!r}")
+    bounds = []
+    for part in parts:
+        lo_hi = _numbers(part.replace(":", ","), "--range", 2)
+        if lo_hi[0] >= lo_hi[1]:
+            raise InputError(f"--range {part!r}: min must be below max")
+        bounds.append((float(lo_hi[0]), float(lo_hi[1])))
+    base = np.zeros(fixture.ndof) if wrench is None else _numbers(wrench, "--wrench", fixture.ndof)
+    at_p = None if at is None else _numbers(at, "--at", fixture.dimension)
+    png = _writable(out, force)
+    csv_path = _writable(out.with_suffix(".csv"), force)
+    result = jamming_map(
+        fixture,
+        (names_all.index(ax[0]), names_all.index(ax[1])),
+        bounds,
+        n,
+        base=base,
+        contacts=_names(contacts),
+        at=at_p,
+        pose=_pose(fixture, pose),
+        progress=not json_out,
+        axis_names=(ax[0], ax[1]),
+    )
+    save_map(result, png, csv_path)
+    summary = {"png": str(png), "csv": str(csv_path), "counts": result.counts(), "time_s": result.time_s, "per_classification_s": result.time_s / result.modes.size}
+    if json_out:
+        _emit_json(summary)
+    else:
+        typer.echo(f"wrote {png} and {csv_path}: {result.modes.size} pushes in {result.time_s:.2f} s; " + ", ".join(f"{k} {v}" for k, v in summary["counts"].items()))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point: run the app and turn every expected failure into one line and exit 2."""
+    try:
+        rv = app(args=argv, standalone_mode=False)
+    except FixtureError as exc:
+        for issue in exc.issues:
+            typer.echo(issue.format(exc.source), err=True)
+        return 2
+    except FixplanError as exc:
+        _err(str(exc))
+        return 2
+    except (typer.Exit, *_CLICK_EXIT) as exc:
+        return int(exc.exit_code)
+    except (typer.Abort, *_CLICK_ABORT):
+        _err("aborted")
+        return 130
+    except click_exc.UsageError as exc:
+        hint = f" (see 'fixplan {exc.ctx.info_name} --help')" if exc.ctx is not None and exc.ctx.info_name != "fixplan" else " (see 'fixplan --help')"
+        _err(exc.format_message().replace("\n", " ") + hint)
+        return 2
+    except click_exc.ClickException as exc:
+        _err(exc.format_message().replace("\n", " "))
+        return 2
+    return rv if isinstance(rv, int) else 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,792 @@
+"""Exact one-contact solvers: the contact law for ``u = W_jj P + α̂`` at a single contact.
+
+Every nonsmooth Gauss–Seidel sweep (:mod:`fixplan.engine.nsgs`) calls one of these per contact.
+They solve the one-contact problem *exactly* (to rounding), never on a linearized cone.
+
+Problem
+-------
+Given a ``d × d`` matrix ``W`` (the diagonal Delassus block ``W_jj``, symmetric positive
+definite in the usual case; a non-symmetric ``W`` with positive definite symmetric part is
+also handled), a vector ``α̂`` (the free velocity of the contact, ``α̂ = q_j + Σ_{k≠j} W_jk P_k``)
+and a friction coefficient ``μ ≥ 0``, find the impulse ``P = (P_n, P_t)`` and the velocity
+``u = W P + α̂`` with (MATH.md, "Contact laws")::
+
+    K_μ ∋ P ⊥ ũ ∈ K_μ*,   ũ = u + (μ ‖u_t‖, 0, …),   K_μ = {‖P_t‖ ≤ μ P_n}.
+
+Component order is always ``(normal, tangent1[, tangent2[, spin]])``, as in FCLib.
+``d = 1 + k`` with ``k = 1`` (2D Coulomb), ``k = 2`` (3D Coulomb), ``k = 3`` (soft finger after
+scaling, below).
+
+Method (all ``k``)
+------------------
+The law has three regimes, tried in this order:
+
+1. **open** – ``α̂_n ≥ 0``: ``P = 0`` (then ``ũ_n − μ‖ũ_t‖ = α̂_n ≥ 0``, so ``ũ ∈ K_μ*``).
+2. **stick** – ``u = 0``: ``P = −W⁻¹ α̂``, accepted when it lies in ``K_μ``.
+3. **slide** – ``u_n = 0``, ``u_t = −γ P_t`` for some ``γ > 0`` (friction opposes sliding,
+   ``‖P_t‖ = μ P_n``). For a fixed ``γ`` the two conditions are the linear system
+   ``(W + γ E_t) P(γ) = −α̂`` with ``E_t = diag(0, I_k)``, so the whole sliding case is the
+   scalar equation::
+
+       φ(γ) = ‖P_t(γ)‖ − μ P_n(γ) = 0,   γ ∈ (0, ∞).
+
+   If stick failed, ``φ(0⁺) > 0``; as ``γ → ∞``, ``P_t → 0`` and ``P_n → −α̂_n / W_nn > 0`` so
+   ``φ(∞) < 0``; ``W + γE_t`` is nonsingular for ``γ > 0`` whenever ``W`` is positive
+   semidefinite with ``W_nn > 0``. A root therefore exists and is bracketed; it is found by
+   safeguarded Newton (``φ'`` from the same LU factors) with geometric bisection. Any root has
+   ``P_n = ‖P_t‖/μ ≥ 0``. Finally ``P_t`` is rescaled onto the cone surface so that cone
+   membership holds exactly. This is the "hybrid" exact approach: closed-form regimes plus a
+   one-dimensional root find; no cone is ever linearized.
+
+For ``k = 1`` the sliding case is in closed form (the sliding direction is ``±1``):
+``P_n = −α̂_n / (W_nn ∓ μ W_nt)``; :func:`solve_coulomb_2d` enumerates the four regimes and only
+falls back on the root find when rounding rejects all of them.
+
+Soft finger (MATH.md [10])
+--------------------------
+``P_t1² + P_t2² + P_s²/e_r² ≤ μ² P_n²`` (``e_x = e_y = 1``, ``e_r`` the torsion radius [m]).
+With ``s = (1, 1, 1, e_r)`` the scaled impulse ``P̃ = P / s`` and scaled velocity ``ũ = s ∘ u``
+satisfy the standard law in a 4-dimensional second-order cone, with ``W̃ = diag(s) W diag(s)``
+and ``α̃ = s ∘ α̂`` (the power ``P·u = P̃·ũ`` is unchanged). :func:`solve_soft_finger` solves the
+scaled problem with :func:`solve_cone` and maps back: ``P = s ∘ P̃``.
+
+Status codes
+------------
+``OPEN = 0``, ``STICK = 1``, ``SLIDE = 2``; ``FAILED = -1`` when no regime could be established
+(e.g. ``W_nn = 0`` with ``α̂_n < 0``: the contact cannot stop its own approach); ``P`` is then
+the candidate of least natural-map residual, always finite.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+OPEN = 0
+STICK = 1
+SLIDE = 2
+FAILED = -1
+
+STATUS_NAMES = {OPEN: "open", STICK: "stick", SLIDE: "slide", FAILED: "failed"}
+
+_EPS = 2.220446049250313e-16
+_PIVOT_REL = 1e-13  # a pivot below this fraction of max|W| counts as singular
+_MAX_ROOT_ITER = 200
+
+
+# --------------------------------------------------------------------------- small dense LU
+
+
+@numba.njit(cache=True)
+def _lu_factor(A, gamma, LU, piv):
+    """LU with partial pivoting of ``A + γ E_t`` (``d ≤ 4``); ``False`` if singular."""
+    d = A.shape[0]
+    scale = 0.0
+    for i in range(d):
+        piv[i] = i
+        for j in range(d):
+            v = A[i, j]
+            if i == j and i > 0:
+                v += gamma
+            LU[i, j] = v
+            if abs(v) > scale:
+                scale = abs(v)
+    if scale == 0.0 or not math.isfinite(scale):
+        return False
+    for k in range(d):
+        p = k
+        big = abs(LU[k, k])
+        for i in range(k + 1, d):
+            if abs(LU[i, k]) > big:
+                big = abs(LU[i, k])
+                p = i
+        if big <= _PIVOT_REL * scale:
+            return False
+        if p != k:
+            for j in range(d):
+                tmp = LU[k, j]
+                LU[k, j] = LU[p, j]
+                LU[p, j] = tmp
+            itmp = piv[k]
+            piv[k] = piv[p]
+            piv[p] = itmp
+        for i in range(k + 1, d):
+            f = LU[i, k] / LU[k, k]
+            LU[i, k] = f
+            for j in range(k + 1, d):
+                LU[i, j] -= f * LU[k, j]
+    return True
+
+
+@numba.njit(cache=True)
+def _lu_solve(LU, piv, b, sign, x):
+    """Solve ``(LU) x = sign · b`` in place of ``x`` using the pivots of :func:`_lu_factor`."""
+    d = LU.shape[0]
+    for i in range(d):
+        s = sign * b[piv[i]]
+        for j in range(i):
+            s -= LU[i, j] * x[j]
+        x[i] = s
+    for i in range(d - 1, -1, -1):
+        s = x[i]
+        for j in range(i + 1, d):
+            s -= LU[i, j] * x[j]
+        x[i] = s / LU[i, i]
+
+
+@numba.njit(cache=True)
+def _lu_solve_t(LU, piv, b, x):
+    """Solve ``Aᵀ x = b`` with the factors ``A[piv] = L U`` of :func:`_lu_factor`."""
+    d = LU.shape[0]
+    y = np.empty(d)
+    for i in range(d):  # Uᵀ y = b
+        s = b[i]
+        for j in range(i):
+            s -= LU[j, i] * y[j]
+        y[i] = s / LU[i, i]
+    for i in range(d - 1, -1, -1):  # Lᵀ w = y (unit diagonal)
+        s = y[i]
+        for j in range(i + 1, d):
+            s -= LU[j, i] * y[j]
+        y[i] = s
+    for i in range(d):  # x = Pᵀ w
+        x[piv[i]] = y[i]
+
+
+# --------------------------------------------------------------------------- cone helpers
+
+
+@numba.njit(cache=True)
+def _tangent_norm(x):
+    s = 0.0
+    for i in range(1, x.shape[0]):
+        s += x[i] * x[i]
+    return math.sqrt(s)
+
+
+@numba.njit(cache=True)
+def project_cone_into(x, mu, out):
+    """Euclidean projection of ``x = (x_n, x_t)`` onto ``K_μ``, written into ``out``.
+
+    Parameters
+    ----------
+    x : ndarray, shape (d,)
+        Point to project, normal component first.
+    mu : float
+        Friction coefficient ``μ ≥ 0`` (``μ = 0`` is the ray ``{x_t = 0, x_n ≥ 0}``).
+    out : ndarray, shape (d,)
+        Receives ``Proj_{K_μ}(x)``; may be the same array as ``x``.
+    """
+    d = x.shape[0]
+    xn = x[0]
+    nt = _tangent_norm(x)
+    if mu * nt <= -xn:
+        for i in range(d):
+            out[i] = 0.0
+    elif nt <= mu * xn:
+        for i in range(d):
+            out[i] = x[i]
+    else:
+        pn = (xn + mu * nt) / (1.0 + mu * mu)
+        f = mu * pn / nt
+        out[0] = pn
+        for i in range(1, d):
+            out[i] = f * x[i]
+
+
+@numba.njit(cache=True)
+def project_cone(x, mu):
+    """Euclidean projection of ``x`` onto the Coulomb cone ``K_μ`` (MATH.md formula).
+
+    Parameters
+    ----------
+    x : ndarray, shape (d,)
+        Point ``(x_n, x_t)``.
+    mu : float
+        Friction coefficient.
+
+    Returns
+    -------
+    ndarray, shape (d,)
+        ``Proj_{K_μ}(x)``.
+    """
+    out = np.empty(x.shape[0])
+    project_cone_into(x, mu, out)
+    return out
+
+
+@numba.njit(cache=True)
+def _natural_map_sq(W, alpha, mu, P, u, tmp):
+    """Squared natural-map residual ``‖P − Proj_K(P − ũ)‖²`` of one contact (fills ``u``)."""
+    d = alpha.shape[0]
+    for i in range(d):
+        s = alpha[i]
+        for j in range(d):
+            s += W[i, j] * P[j]
+        u[i] = s
+    ut = _tangent_norm(u)
+    tmp[0] = P[0] - (u[0] + mu * ut)
+    for i in range(1, d):
+        tmp[i] = P[i] - u[i]
+    project_cone_into(tmp, mu, tmp)
+    e = 0.0
+    for i in range(d):
+        e += (P[i] - tmp[i]) ** 2
+    return e
+
+
+# --------------------------------------------------------------------------- general cone
+
+
+@numba.njit(cache=True)
+def _phi(A, alpha, mu, gamma, LU, piv, P, dP, b):
+    """``φ(γ) = ‖P_t(γ)‖ − μ P_n(γ)`` and ``φ'(γ)``; fills ``P``; ok flag first."""
+    d = alpha.shape[0]
+    if not _lu_factor(A, gamma, LU, piv):
+        return False, 0.0, 0.0
+    _lu_solve(LU, piv, alpha, -1.0, P)
+    # dP/dγ = −(A + γE_t)⁻¹ E_t P, same factors
+    b[0] = 0.0
+    for i in range(1, d):
+        b[i] = P[i]
+    _lu_solve(LU, piv, b, -1.0, dP)
+    nt = _tangent_norm(P)
+    phi = nt - mu * P[0]
+    if nt > 0.0:
+        dt = 0.0
+        for i in range(1, d):
+            dt += P[i] * dP[i]
+        dphi = dt / nt - mu * dP[0]
+    else:
+        dphi = -mu * dP[0]
+    ok = math.isfinite(phi) and math.isfinite(dphi)
+    return ok, phi, dphi
+
+
+@numba.njit(cache=True)
+def _polish(A, mu, P, LU, piv, z, y):
+    """Cancel the cone-membership error of a sliding ``P`` at the least change of ``u``.
+
+    ``P(γ)`` from an ill-conditioned ``W + γE_t`` is backward stable (``u`` accurate) but
+    ``φ = ‖P_t‖ − μP_n`` carries a rounding error of order ``cond(W)·ε·‖P‖``. The correction
+    ``δP = −φ (WᵀW)⁻¹g / (gᵀ(WᵀW)⁻¹g)`` with ``g = ∇φ`` removes it to first order while moving
+    ``u = WP + α`` by only ``|φ| / ‖W⁻ᵀg‖``. Skipped when ``W`` is singular.
+    """
+    d = P.shape[0]
+    nt = _tangent_norm(P)
+    if nt == 0.0 or not _lu_factor(A, 0.0, LU, piv):
+        return
+    phi = nt - mu * P[0]
+    g = np.empty(d)
+    g[0] = -mu
+    for i in range(1, d):
+        g[i] = P[i] / nt
+    _lu_solve_t(LU, piv, g, z)
+    _lu_solve(LU, piv, z, 1.0, y)
+    zz = 0.0
+    yy = 0.0
+    pp = 0.0
+    for i in range(d):
+        zz += z[i] * z[i]
+        yy += y[i] * y[i]
+        pp += P[i] * P[i]
+    if not (zz > 0.0 and math.isfinite(zz) and math.isfinite(yy)):
+        return
+    f = -phi / zz
+    if f * f * yy > 1e-6 * pp:  # not a rounding-size correction: leave P alone
+        return
+    for i in range(d):
+        P[i] += f * y[i]
+
+
+@numba.njit(cache=True)
+def _slide_root(A, alpha, mu, P):
+    """Sliding regime by the root of ``φ(γ)``; returns ``(status, iterations)``.
+
+    ``status`` is ``SLIDE``, or ``STICK`` when the root sits at ``γ ≈ 0`` (a singular ``W_jj``
+    whose stick solution the LU could not produce directly), or ``FAILED``.
+    """
+    d = alpha.shape[0]
+    LU = np.empty((d, d))
+    piv = np.empty(d, dtype=np.int64)
+    dP = np.empty(d)
+    Pw = np.empty(d)
+    b = np.empty(d)
+    # scale of γ: mean tangential diagonal of A (units of W)
+    s = 0.0
+    amax = 0.0
+    for i in range(d):
+        for j in range(d):
+            if abs(A[i, j]) > amax:
+                amax = abs(A[i, j])
+    for i in range(1, d):
+        s += abs(A[i, i])
+    s /= d - 1
+    if s <= 0.0:
+        s = amax
+    gamma_floor = 1e-14 * amax
+    # bracket: lo with φ > 0 (lo = 0 stands for the failed stick), hi with φ < 0
+    lo = 0.0
+    hi = s
+    it = 0
+    found_hi = False
+    phi_hi = 0.0
+    dphi_hi = 0.0
+    while it < _MAX_ROOT_ITER:
+        it += 1
+        ok, phi, dphi = _phi(A, alpha, mu, hi, LU, piv, Pw, dP, b)
+        if ok and phi <= 0.0:
+            found_hi = True
+            phi_hi = phi
+            dphi_hi = dphi
+            break
+        if ok:
+            lo = hi
+        hi *= 8.0
+        if hi > 1e250:
+            break
+    if not found_hi:
+        return FAILED, it
+    for i in range(d):
+        P[i] = Pw[i]
+    if phi_hi == 0.0:
+        return SLIDE, it
+    x = hi
+    phi_x = phi_hi
+    dphi_x = dphi_hi
+    phi_p = phi_hi  # φ at the point stored in P (always the latest φ ≤ 0 point, or better)
+    force_bisect = False
+    while it < _MAX_ROOT_ITER:
+        it += 1
+        base = max(lo, gamma_floor)
+        if hi <= base * (1.0 + 8.0 * _EPS):
+            break  # bracket collapsed onto the singular floor
+        # candidate: Newton step from the current point, else bisection
+        newton_ok = (not force_bisect) and dphi_x != 0.0 and math.isfinite(dphi_x)
+        xn = x - phi_x / dphi_x if newton_ok else -1.0
+        if newton_ok and xn > base and xn < hi and abs(xn - x) <= 4.0 * _EPS * x:
+            break  # Newton step below rounding: converged
+        if not (xn > base and xn < hi):
+            if lo > 0.0:
+                xn = math.sqrt(lo * hi) if hi > 4.0 * lo else 0.5 * (lo + hi)
+            else:
+                xn = hi / 64.0
+            xn = max(xn, gamma_floor)
+        ok, phi, dphi = _phi(A, alpha, mu, xn, LU, piv, Pw, dP, b)
+        if not ok:
+            # W + γE_t singular to working precision: γ ≤ xn is numerically γ = 0
+            gamma_floor = xn
+            force_bisect = True
+            continue
+        force_bisect = abs(phi) > 0.5 * abs(phi_x)
+        x = xn
+        phi_x = phi
+        dphi_x = dphi
+        nt = _tangent_norm(Pw)
+        if phi <= 0.0:
+            hi = x
+        else:
+            lo = x
+        if phi <= 0.0 or abs(phi) < abs(phi_p):
+            phi_p = phi
+            for i in range(d):
+                P[i] = Pw[i]
+        if abs(phi) <= 4.0 * _EPS * (nt + mu * abs(Pw[0])):
+            break
+        if lo > 0.0 and hi - lo <= 4.0 * _EPS * hi:
+            break
+    if P[0] < 0.0:
+        return FAILED, it
+    if lo < gamma_floor and hi <= gamma_floor * (1.0 + 8.0 * _EPS) and phi_p < 0.0:
+        # P(γ) stayed inside the cone down to γ ≈ 0: a stick solution of a singular W_jj if
+        # u = −γ E_t P is negligible; otherwise P(γ) diverges (no finite solution exists).
+        ut = _tangent_norm(P) * hi
+        an = 0.0
+        for i in range(d):
+            an += alpha[i] * alpha[i]
+        if ut <= 1e-8 * math.sqrt(an):
+            return STICK, it
+        return FAILED, it
+    _polish(A, mu, P, LU, piv, b, dP)
+    # exact cone membership: put P_t on the surface ‖P_t‖ = μ P_n
+    nt = _tangent_norm(P)
+    if nt > 0.0:
+        f = mu * P[0] / nt
+        for i in range(1, d):
+            P[i] *= f
+    if not _slide_is_sound(A, alpha, P):
+        return FAILED, it
+    return SLIDE, it
+
+
+@numba.njit(cache=True)
+def _slide_is_sound(A, alpha, P):
+    """Backward check of a sliding ``P``: ``u_n ≈ 0`` and ``u_t`` opposes ``P_t``.
+
+    Guards against a root that is an artefact of rounding (no finite solution exists for some
+    singular ``W_jj``): accepted when ``|u_n|`` and the part of ``u_t`` along ``P_t`` are below
+    ``1e-9 (‖α‖ + max|W| ‖P‖)``.
+    """
+    d = alpha.shape[0]
+    amax = 0.0
+    pp = 0.0
+    aa = 0.0
+    for i in range(d):
+        pp += P[i] * P[i]
+        aa += alpha[i] * alpha[i]
+        for j in range(d):
+            amax = max(amax, abs(A[i, j]))
+    scale = math.sqrt(aa) + amax * math.sqrt(pp)
+    un = alpha[0]
+    along = 0.0
+    for j in range(d):
+        un += A[0, j] * P[j]
+    for i in range(1, d):
+        ui = alpha[i]
+        for j in range(d):
+            ui += A[i, j] * P[j]
+        along += ui * P[i]
+    nt = _tangent_norm(P)
+    if nt > 0.0:
+        along /= nt
+    ok = abs(un) <= 1e-9 * scale and along <= 1e-9 * scale
+    return ok and math.isfinite(scale)
+
+
+@numba.njit(cache=True)
+def _fallback(A, alpha, mu, P):
+    """No regime established: the least-residual finite candidate among open and normal-only."""
+    d = alpha.shape[0]
+    u = np.empty(d)
+    tmp = np.empty(d)
+    for i in range(d):
+        P[i] = 0.0
+    best = _natural_map_sq(A, alpha, mu, P, u, tmp)
+    if A[0, 0] > 0.0:
+        cand = np.zeros(d)
+        cand[0] = max(0.0, -alpha[0] / A[0, 0])
+        e = _natural_map_sq(A, alpha, mu, cand, u, tmp)
+        if e < best:
+            for i in range(d):
+                P[i] = cand[i]
+
+
+@numba.njit(cache=True)
+def cone_solve_into(A, alpha, mu, P):
+    """Solve the one-contact law in a ``(1+k)``-dimensional Coulomb cone, in place.
+
+    Parameters
+    ----------
+    A : ndarray, shape (d, d)
+        Diagonal Delassus block ``W_jj``, ``d = 1 + k`` with ``k ∈ {1, 2, 3}``.
+    alpha : ndarray, shape (d,)
+        Free velocity ``α̂_j``.
+    mu : float
+        Friction coefficient ``μ ≥ 0``.
+    P : ndarray, shape (d,)
+        Receives the impulse.
+
+    Returns
+    -------
+    status : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    iterations : int
+        Root-finding iterations (0 for the closed-form regimes).
+    """
+    d = alpha.shape[0]
+    if alpha[0] >= 0.0:
+        for i in range(d):
+            P[i] = 0.0
+        return OPEN, 0
+    amax = 0.0
+    for i in range(d):
+        for j in range(d):
+            if abs(A[i, j]) > amax:
+                amax = abs(A[i, j])
+    if not (A[0, 0] > _PIVOT_REL * amax) or not math.isfinite(amax):
+        _fallback(A, alpha, mu, P)
+        return FAILED, 0
+    if mu <= 0.0:
+        P[0] = -alpha[0] / A[0, 0]
+        for i in range(1, d):
+            P[i] = 0.0
+        return SLIDE, 0
+    LU = np.empty((d, d))
+    piv = np.empty(d, dtype=np.int64)
+    if _lu_factor(A, 0.0, LU, piv):
+        _lu_solve(LU, piv, alpha, -1.0, P)
+        if P[0] >= 0.0 and _tangent_norm(P) <= mu * P[0]:
+            return STICK, 0
+    status, it = _slide_root(A, alpha, mu, P)
+    if status != FAILED:
+        return status, it
+    _fallback(A, alpha, mu, P)
+    return FAILED, it
+
+
+@numba.njit(cache=True)
+def coulomb_2d_into(A, alpha, mu, P):
+    """Closed-form 2D Coulomb one-contact solver (open / stick / slide ±), in place.
+
+    Parameters
+    ----------
+    A : ndarray, shape (2, 2)
+        Diagonal Delassus block, order ``(n, t)``.
+    alpha : ndarray, shape (2,)
+        Free velocity.
+    mu : float
+        Friction coefficient ``μ ≥ 0``.
+    P : ndarray, shape (2,)
+        Receives the impulse ``(P_n, P_t)``.
+
+    Returns
+    -------
+    status : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    iterations : int
+        0, unless rounding rejected every closed-form regime and the root find ran.
+    """
+    if alpha[0] >= 0.0:
+        P[0] = 0.0
+        P[1] = 0.0
+        return OPEN, 0
+    amax = max(max(abs(A[0, 0]), abs(A[0, 1])), max(abs(A[1, 0]), abs(A[1, 1])))
+    if not (A[0, 0] > _PIVOT_REL * amax) or not math.isfinite(amax):
+        _fallback(A, alpha, mu, P)
+        return FAILED, 0
+    if mu <= 0.0:
+        P[0] = -alpha[0] / A[0, 0]
+        P[1] = 0.0
+        return SLIDE, 0
+    det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+    if abs(det) > _PIVOT_REL * amax * amax:
+        pn = -(A[1, 1] * alpha[0] - A[0, 1] * alpha[1]) / det
+        pt = -(-A[1, 0] * alpha[0] + A[0, 0] * alpha[1]) / det
+        if pn >= 0.0 and abs(pt) <= mu * pn:
+            P[0] = pn
+            P[1] = pt
+            return STICK, 0
+    for k in range(2):
+        s = 1.0 if k == 0 else -1.0  # sliding direction sign(u_t); P_t = −s μ P_n
+        den = A[0, 0] - s * mu * A[0, 1]
+        if den > 0.0:
+            pn = -alpha[0] / den
+            pt = -s * mu * pn
+            ut = A[1, 0] * pn + A[1, 1] * pt + alpha[1]
+            if s * ut >= 0.0:
+                P[0] = pn
+                P[1] = pt
+                return SLIDE, 0
+    status, it = _slide_root(A, alpha, mu, P)
+    if status != FAILED:
+        return status, it
+    _fallback(A, alpha, mu, P)
+    return FAILED, it
+
+
+@numba.njit(cache=True)
+def soft_finger_into(A, alpha, mu, torsion_radius, P):
+    """Soft-finger (elliptic, condim 4) one-contact solver by scaling, in place.
+
+    Parameters
+    ----------
+    A : ndarray, shape (4, 4)
+        Diagonal Delassus block, order ``(n, t1, t2, spin)``.
+    alpha : ndarray, shape (4,)
+        Free velocity ``(u_n, u_t1, u_t2, ω_n)`` [m/s, m/s, m/s, rad/s].
+    mu : float
+        Friction coefficient.
+    torsion_radius : float
+        ``e_r ≥ 0`` [m]; the spin impulse obeys ``|P_s| ≤ e_r μ P_n`` at ``P_t = 0``.
+    P : ndarray, shape (4,)
+        Receives ``(P_n, P_t1, P_t2, P_s)`` [N·s, N·s, N·s, N·m·s].
+
+    Returns
+    -------
+    status, iterations : int
+        As :func:`cone_solve_into`.
+    """
+    As = np.empty((4, 4))
+    al = np.empty(4)
+    sc = np.array([1.0, 1.0, 1.0, torsion_radius])
+    for i in range(4):
+        al[i] = sc[i] * alpha[i]
+        for j in range(4):
+            As[i, j] = sc[i] * A[i, j] * sc[j]
+    status, it = cone_solve_into(As, al, mu, P)
+    P[3] *= torsion_radius
+    return status, it
+
+
+# --------------------------------------------------------------------------- public wrappers
+
+
+@numba.njit(cache=True)
+def solve_cone(W, alpha, mu):
+    """Exact one-contact solver for a ``(1+k)``-dimensional Coulomb cone, ``k = 1, 2, 3``.
+
+    Parameters
+    ----------
+    W : ndarray, shape (d, d)
+        Diagonal Delassus block ``W_jj`` (positive definite, or PSD with ``W_nn > 0``).
+    alpha : ndarray, shape (d,)
+        Free velocity ``α̂_j``, normal first.
+    mu : float
+        Friction coefficient ``μ ≥ 0``.
+
+    Returns
+    -------
+    P : ndarray, shape (d,)
+        Impulse satisfying the law.
+    status : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    iterations : int
+        Root-finding iterations.
+    """
+    P = np.empty(alpha.shape[0])
+    status, it = cone_solve_into(W, alpha, mu, P)
+    return P, status, it
+
+
+@numba.njit(cache=True)
+def solve_coulomb_2d(W, alpha, mu):
+    """Exact 2D Coulomb one-contact solver (closed form by enumeration).
+
+    Parameters
+    ----------
+    W : ndarray, shape (2, 2)
+        Diagonal Delassus block, order ``(n, t)``.
+    alpha : ndarray, shape (2,)
+        Free velocity.
+    mu : float
+        Friction coefficient ``μ ≥ 0``.
+
+    Returns
+    -------
+    P : ndarray, shape (2,)
+        Impulse ``(P_n, P_t)``.
+    status : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    iterations : int
+        0 for the closed forms.
+    """
+    P = np.empty(2)
+    status, it = coulomb_2d_into(W, alpha, mu, P)
+    return P, status, it
+
+
+@numba.njit(cache=True)
+def solve_coulomb_3d(W, alpha, mu):
+    """Exact 3D Coulomb one-contact solver (second-order cone, no linearization).
+
+    Parameters
+    ----------
+    W : ndarray, shape (3, 3)
+        Diagonal Delassus block, order ``(n, t1, t2)``.
+    alpha : ndarray, shape (3,)
+        Free velocity.
+    mu : float
+        Friction coefficient ``μ ≥ 0``.
+
+    Returns
+    -------
+    P : ndarray, shape (3,)
+        Impulse ``(P_n, P_t1, P_t2)``.
+    status : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    iterations : int
+        Root-finding iterations of the sliding case.
+    """
+    P = np.empty(3)
+    status, it = cone_solve_into(W, alpha, mu, P)
+    return P, status, it
+
+
+@numba.njit(cache=True)
+def solve_soft_finger(W, alpha, mu, torsion_radius):
+    """Exact soft-finger one-contact solver (ellipsoid [10] with ``e_x = e_y = 1``).
+
+    Parameters
+    ----------
+    W : ndarray, shape (4, 4)
+        Diagonal Delassus block, order ``(n, t1, t2, spin)``.
+    alpha : ndarray, shape (4,)
+        Free velocity.
+    mu : float
+        Friction coefficient ``μ ≥ 0``.
+    torsion_radius : float
+        ``e_r ≥ 0`` [m].
+
+    Returns
+    -------
+    P : ndarray, shape (4,)
+        Impulse ``(P_n, P_t1, P_t2, P_s)``.
+    status : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    iterations : int
+        Root-finding iterations of the sliding case.
+    """
+    P = np.empty(4)
+    status, it = soft_finger_into(W, alpha, mu, torsion_radius, P)
+    return P, status, it
+
+
+# --------------------------------------------------------------------------- checks (NumPy)
+
+
+def law_violation(
+    W: np.ndarray,
+    alpha: np.ndarray,
+    mu: float,
+    P: np.ndarray,
+    torsion_radius: float | None = None,
+) -> float:
+    """Scale-free violation of the one-contact law by ``P`` (0 when it holds exactly).
+
+    Plain NumPy, independent of the compiled solvers. With ``ũ = u + μ‖u_t‖ e_n`` and
+    ``u = W P + α``, it is the largest of the cone violation ``max(0, ‖P_t‖ − μ P_n, −P_n)/‖P‖``,
+    the dual-cone violation ``max(0, −u_n)/s_u`` and the complementarity ``|P·ũ|/(‖P‖ s_u)``,
+    with the velocity scale ``s_u = max(‖ũ‖, ‖α‖, ‖W‖‖P‖)``. For a soft finger (``d = 4`` with
+    ``torsion_radius``) the check runs in the scaled variables of the module docstring.
+
+    Parameters
+    ----------
+    W : ndarray, shape (d, d)
+        Diagonal Delassus block.
+    alpha : ndarray, shape (d,)
+        Free velocity.
+    mu : float
+        Friction coefficient.
+    P : ndarray, shape (d,)
+        Impulse to check.
+    torsion_radius : float, optional
+        ``e_r`` for a soft finger.
+
+    Returns
+    -------
+    float
+        The violation, relative.
+    """
+    W = np.asarray(W, dtype=float)
+    alpha = np.asarray(alpha, dtype=float)
+    P = np.asarray(P, dtype=float)
+    if torsion_radius is not None:
+        s = np.array([1.0, 1.0, 1.0, float(torsion_radius)])
+        W = s[:, None] * W * s[None, :]
+        alpha = s * alpha
+        P = P / np.where(s > 0, s, 1.0)
+    u = W @ P + alpha
+    ut = float(np.linalg.norm(u[1:]))
+    u_mod = u.copy()
+    u_mod[0] += mu * ut
+    norm_p = float(np.linalg.norm(P))
+    s_u = max(float(np.linalg.norm(u_mod)), float(np.linalg.norm(alpha)),
+              float(np.linalg.norm(W, 2)) * norm_p)
+    if s_u == 0.0:
+        s_u = 1.0
+    cone = max(0.0, float(np.linalg.norm(P[1:])) - mu * P[0], -P[0]) / norm_p if norm_p else 0.0
+    dual = max(0.0, -u[0]) / s_u
+    comp = abs(float(P @ u_mod)) / (norm_p * s_u) if norm_p else 0.0
+    return max(cone, dual, comp)

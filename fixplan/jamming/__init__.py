@@ -1,0 +1,79 @@
+"""Jamming analysis: what a push does to a part at rest in its contacts, and which push won't jam.
+
+- :func:`classify` — the mode per wrench (held, jammed, separates, slides, rolls, indeterminate);
+- :func:`search_wrench` — the non-jamming wrench for a desired motion (MATH.md program 2);
+- :func:`can_wedge` — whether the contacts can hold self-equilibrated forces.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from fixplan.errors import InputError
+from fixplan.jamming.classify import MODES, Classification, Classifier, wrench_array
+from fixplan.jamming.search import WrenchSearch, search_wrench
+from fixplan.jamming.wedge import can_wedge, wedge_force
+from fixplan.locating import contact_set
+from fixplan.tolerances import Tolerances
+
+if TYPE_CHECKING:
+    from fixplan.fixture import Fixture
+    from fixplan.pose import Pose
+
+__all__ = [
+    "MODES",
+    "Classification",
+    "Classifier",
+    "WrenchSearch",
+    "can_wedge",
+    "classify",
+    "search_wrench",
+    "wedge_force",
+]
+
+
+def classify(
+    fixture: Fixture,
+    wrenches: ArrayLike | Sequence[Sequence[float]],
+    contacts: Sequence[str] | None = None,
+    at: ArrayLike | None = None,
+    *,
+    pose: Pose | str | None = None,
+    backend: str = "clarabel",
+    tolerances: Tolerances | None = None,
+) -> list[Classification]:
+    """Classify each applied wrench (in addition to gravity) for the workpiece at rest.
+
+    Parameters
+    ----------
+    fixture : Fixture
+        A loaded fixture (:func:`fixplan.load`).
+    wrenches : array_like, (N, 6) or (6,) in 3D, (N, 3) or (3,) in 2D
+        ``Fx,Fy,Fz,Tx,Ty,Tz`` (2D: ``Fx,Fy,Mz``) about the body-frame origin, world axes.
+    contacts : sequence of str, optional
+        Contact names; default: the locators touching at ``pose`` plus explicit contacts.
+    at : array_like, optional
+        World point the moments are taken about, instead of the body-frame origin.
+    pose : Pose or "start" or "goal", optional
+        Where the workpiece is (default: the start pose).
+    backend : {"clarabel", "cvxpy"}
+        The fast matrix path or the cvxpy reference model.
+
+    Returns
+    -------
+    list of Classification
+        One per wrench, in input order.
+    """
+    W = wrench_array(wrenches, fixture.ndof)
+    cs = contact_set(fixture, pose, contacts)
+    if at is not None:
+        at = np.asarray(at, dtype=float)
+        if at.shape != (fixture.dimension,):
+            raise InputError(f"--at expects {fixture.dimension} coordinates, got {at.shape[0] if at.ndim else 1}")
+    tol = tolerances or fixture.tolerances
+    clf = Classifier(cs, fixture.gravity_wrench(), tolerances=tol, backend=backend)
+    return [clf.classify(cs.wrench_about_com(w, at), w) for w in W]

@@ -1,0 +1,231 @@
+"""Classify what a wrench does to a workpiece at rest in contact (MATH.md, "As cone programs").
+
+For the total wrench ``w_e`` (applied + gravity, about the centre of mass) the verdict is the
+first certificate found, in this order:
+
+1. ``held`` — normal forces alone balance ``w_e`` (a non-negative least-squares problem);
+2. ``jammed`` — the static-balance SOCP is feasible: balance needs friction;
+3. ``separates`` — not balanced, and no forces in the cones keep every contact
+   (the maintained-motion SOCP has a positive residual): some contact must open;
+4. ``rolls`` — a motion with no slip at any contact is consistent with forces in the cones;
+5. ``slides`` — Theorem 1's witness: every contact kept and sliding with friction at its limit;
+6. ``pivots`` — every contact kept, some sticking while the others slide (the body turns about
+   the sticking contacts). Not in the issue's list: added because it is a definite outcome, and
+   by Theorem 1 it is *not* a non-jamming motion for n ≥ 3 (a contact's tangential constraint
+   is active while the body moves);
+7. ``indeterminate`` — no certificate either way (say which, e.g. mixed stick–slip, or a
+   residual within tolerance of a boundary).
+
+Every program is solved on the wrench scaled to unit ``M⁻¹``-norm, so verdicts do not depend
+on the wrench's magnitude (1e-6 N and 1e6 N give the same answer in a gravity-free scene) and
+tolerances are relative. The margin reported is the least ``M⁻¹``-weighted residual of static
+balance, ``min_f ‖w_e + Jᵀ f‖_{M⁻¹}`` over the cones, in the wrench's own units
+([N/√kg] = [√kg·m/s²]): 0 when balanced, else the size of the smallest acceleration the wrench
+can cause, weighted by the mass matrix.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.optimize as so
+from numpy.typing import ArrayLike, NDArray
+
+from fixplan.errors import InputError
+from fixplan.jamming.backends import BACKENDS, ClarabelProgram, ConeSolution
+from fixplan.jamming.programs import ProgramBuilder
+from fixplan.jamming.sliding import motion_witness
+from fixplan.kinematics import ContactSet
+from fixplan.tolerances import DEFAULT, Tolerances
+
+FloatArray = NDArray[np.float64]
+
+MODES = ("held", "jammed", "separates", "slides", "pivots", "rolls", "indeterminate")
+
+
+@dataclass(frozen=True)
+class Classification:
+    """What one wrench does: the mode, the margin, the contact forces and how it was decided."""
+
+    wrench: tuple[float, ...]  # applied wrench as given (about the body origin or ``at``)
+    mode: str
+    margin: float  # least M⁻¹-weighted static-balance residual; 0 when balanced
+    contact_forces: dict[str, FloatArray]  # λ_i in the contact frame (n, t1, t2[, spin])
+    certificate: str  # which program decided
+    reason: str  # one line for a person
+    solve_time_s: float
+    acceleration: FloatArray | None = None  # centre-of-mass twist rate, world axes (moving modes)
+    residuals: dict[str, float] = field(default_factory=dict)
+    contact_frames: dict[str, FloatArray] = field(default_factory=dict)  # rows n, t1[, t2] (world)
+
+    @property
+    def balanced(self) -> bool:
+        return self.mode in ("held", "jammed")
+
+    def force_world(self, name: str) -> FloatArray:
+        """The contact force on the workpiece at contact ``name``, world axes [N]."""
+        lam = self.contact_forces[name]
+        frame = self.contact_frames[name]
+        d = frame.shape[1]
+        return frame[:d].T @ lam[:d] if d == 2 else frame.T @ lam[:3]
+
+    def to_json(self) -> dict[str, Any]:
+        forces = {}
+        for name, lam in self.contact_forces.items():
+            entry: dict[str, Any] = {"normal": float(lam[0]), "tangential": [float(x) for x in lam[1 : 1 + (1 if len(self.contact_frames[name][0]) == 2 else 2)]]}
+            if len(lam) == 4:
+                entry["spin"] = float(lam[3])
+            entry["force_world"] = [float(x) for x in self.force_world(name)]
+            forces[name] = entry
+        return {
+            "wrench": [float(x) for x in self.wrench],
+            "mode": self.mode,
+            "margin": float(self.margin),
+            "contact_forces": forces,
+            "certificate": self.certificate,
+            "reason": self.reason,
+            "acceleration": None if self.acceleration is None else [float(x) for x in self.acceleration],
+            "residuals": {k: float(v) for k, v in self.residuals.items()},
+            "solve_time_s": float(self.solve_time_s),
+        }
+
+
+class Classifier:
+    """Classifies many wrenches for one contact set; programs are built once and reused."""
+
+    def __init__(self, cs: ContactSet, gravity_wrench: ArrayLike, *, tolerances: Tolerances = DEFAULT, backend: str = "clarabel"):
+        if backend not in BACKENDS:
+            raise InputError(f"unknown backend {backend!r} (expected one of: {', '.join(BACKENDS)})")
+        if len(cs) == 0:
+            raise InputError("no contacts to analyse (the workpiece touches no locator here; name contacts explicitly)")
+        self.cs = cs
+        self.gravity = np.asarray(gravity_wrench, dtype=float)
+        self.tol = tolerances
+        self.backend = backend
+        self.builder = ProgramBuilder(cs)
+        b = self.builder
+        self._normal_matrix = b.C @ cs.G.T  # NNLS: min ‖C(w + Gᵀ f_n)‖, f_n ≥ 0
+        self._projectors: dict[str, FloatArray] = {
+            "balance": b.projector(None),
+            "maintain": b.projector(b.N_maintain),
+            "roll": b.projector(b.N_roll),
+        }
+        self._programs: dict[str, ClarabelProgram] = {}
+        self.frames = {c.name: np.vstack([c.normal_world, c.tangents_world]) for c in cs.contacts}
+
+    # -- programs ------------------------------------------------------------------------------
+    def _solve(self, kind: str, w_hat: FloatArray) -> tuple[ConeSolution, FloatArray]:
+        """Least residual of program ``kind`` for ŵ; returns the solution and the full λ."""
+        P = self._projectors[kind]
+        if self.backend == "cvxpy":
+            from fixplan.jamming.cvx import least_residual
+
+            sol, lam = least_residual(self.cs, w_hat, P, self.builder.C, eps=self.tol.cone_eps)
+            return sol, lam
+        prog = self._programs.get(kind)
+        if prog is None:
+            prog = ClarabelProgram(self.builder.residual_program(kind, P), eps=self.tol.cone_eps)
+            self._programs[kind] = prog
+        sol = prog.solve(self.builder.rhs(prog.program, P, w_hat))
+        f = sol.x[: prog.program.nf]
+        return sol, self.builder.layout.S @ f
+
+    def _residual_of(self, kind: str, w_hat: FloatArray, lam: FloatArray) -> float:
+        """The program's value recomputed from the forces (never trust a solver's own number)."""
+        P = self._projectors[kind]
+        return float(np.linalg.norm(P @ self.builder.C @ (w_hat + self.cs.J.T @ lam)))
+
+    # -- the verdict ---------------------------------------------------------------------------
+    def classify(self, wrench_com: ArrayLike, wrench_given: ArrayLike | None = None) -> Classification:
+        """Classify the applied wrench ``wrench_com`` (about the centre of mass, world axes)."""
+        t0 = time.perf_counter()
+        cs, tol = self.cs, self.tol
+        w_applied = np.asarray(wrench_com, dtype=float)
+        given = tuple(float(x) for x in (w_applied if wrench_given is None else np.asarray(wrench_given, dtype=float)))
+        w_e = w_applied + self.gravity
+        scale = self.builder.m_inv_norm(w_e)
+        names = cs.names
+        zero_forces = {n: np.zeros(c.size) for n, c in zip(names, cs.contacts, strict=True)}
+
+        def result(mode: str, margin: float, lam: FloatArray | None, certificate: str, reason: str, accel: FloatArray | None = None, **res: float) -> Classification:
+            forces = dict(zero_forces)
+            if lam is not None:
+                forces = {n: lam[o : o + c.size] * scale for n, o, c in zip(names, cs.offsets, cs.contacts, strict=True)}
+            return Classification(given, mode, margin, forces, certificate, reason, time.perf_counter() - t0, accel, dict(res), self.frames)
+
+        if not np.all(np.isfinite(w_e)):
+            raise InputError(f"wrench has non-finite components: {list(given)}")
+        if scale == 0.0:
+            return result("held", 0.0, None, "zero-wrench", "no net wrench: nothing to balance")
+        w_hat = w_e / scale
+
+        # 1. held: normal forces alone (NNLS on the M⁻¹-weighted residual)
+        f_n, normal_res = so.nnls(self._normal_matrix, -(self.builder.C @ w_hat), maxiter=50 * len(cs) + 50)
+        if normal_res <= tol.balance_rel:
+            lam = np.zeros(cs.J.shape[0])
+            lam[cs.offsets] = f_n
+            return result("held", normal_res * scale, lam, "normal-balance", "normal forces alone balance the wrench", normal_balance=normal_res)
+
+        # 2. jammed: static balance with friction
+        sol, lam = self._solve("balance", w_hat)
+        margin = self._residual_of("balance", w_hat, lam) if sol.solved else float("nan")
+        residuals = {"normal_balance": normal_res, "balance": margin, "cone_violation": sol.cone_violation}
+        if not sol.solved:
+            return result("indeterminate", float("nan"), None, "none", f"static-balance program failed ({sol.status})", **residuals)
+        if margin <= tol.balance_rel:
+            return result("jammed", margin * scale, lam, "static-balance", "balanced, but only with friction: the push jams", **residuals)
+        lam_balance = lam
+
+        # 3. separates: no motion keeps every contact
+        if self.builder.N_maintain.shape[1] == 0:
+            maintain = margin  # G has full column rank: keeping every contact means rest
+        else:
+            sol_m, lam_m = self._solve("maintain", w_hat)
+            maintain = self._residual_of("maintain", w_hat, lam_m) if sol_m.solved else float("nan")
+            if not sol_m.solved:
+                return result("indeterminate", margin * scale, lam_balance, "none", f"maintained-motion program failed ({sol_m.status})", **residuals)
+        residuals["maintain"] = maintain
+        if maintain > tol.balance_rel:
+            return result("separates", margin * scale, lam_balance, "no-maintained-motion", "no forces in the cones keep every contact: some contact opens", **residuals)
+
+        # 4. rolls: a motion with no slip at any contact
+        if self.builder.N_roll.shape[1] > 0:
+            sol_r, lam_r = self._solve("roll", w_hat)
+            roll = self._residual_of("roll", w_hat, lam_r) if sol_r.solved else float("nan")
+            residuals["roll"] = roll
+            if sol_r.solved and roll <= tol.balance_rel:
+                accel = cs.M_inv @ (w_hat + cs.J.T @ lam_r) * scale
+                return result("rolls", margin * scale, lam_r, "rolling", "the contacts are kept without slip while the body turns", accel, **residuals)
+
+        # 5. slides (Theorem 1's witness), else 6. pivots (some contacts stick, the rest slide)
+        witness = motion_witness(cs, w_hat, self.builder.C, slip_rel=tol.slip_rel, res_tol=max(tol.balance_rel * 1e-3, 1e-12))
+        if witness is not None:
+            residuals["motion"] = witness.residual
+            accel = witness.acceleration * scale
+            if not witness.sticking:
+                return result("slides", margin * scale, witness.forces, "sliding-witness", "every contact is kept and slides (Theorem 1)", accel, **residuals)
+            stuck = ", ".join(names[i] for i in witness.sticking)
+            return result("pivots", margin * scale, witness.forces, "pivot-witness", f"every contact is kept; {stuck} sticks while the others slide: the body turns about it", accel, **residuals)
+
+        near = " (static-balance residual within 100× tolerance: near a boundary)" if margin <= 100 * tol.balance_rel else ""
+        return result("indeterminate", margin * scale, lam_balance, "none", "the body moves keeping its contacts, but no sliding, pivoting or rolling motion was found" + near, **residuals)
+
+
+def wrench_array(wrenches: ArrayLike | Sequence[Sequence[float]], ndof: int) -> FloatArray:
+    """Wrenches as an (N, ndof) array, with a clear error for the wrong shape."""
+    try:
+        W = np.asarray(wrenches, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"wrenches must be numbers ({exc})") from None
+    if W.ndim == 1:
+        W = W[None, :]
+    if W.ndim != 2 or W.shape[1] != ndof:
+        what = "Fx,Fy,Fz,Tx,Ty,Tz" if ndof == 6 else "Fx,Fy,Mz"
+        raise InputError(f"expected wrenches of {ndof} numbers ({what}), got shape {W.shape}")
+    if not np.all(np.isfinite(W)):
+        raise InputError("wrenches must be finite numbers")
+    return W

@@ -1,0 +1,45 @@
+"""Wedging: can the contacts hold a self-equilibrated set of forces?
+
+A contact set *wedges* when nonzero contact forces inside the friction cones balance each
+other with no applied wrench: ``∃ f ∈ K, f ≠ 0, Jᵀ f = 0``. Whitney's peg in a hole wedges at
+two-point contact exactly when the line joining the contacts lies inside both friction cones,
+i.e. ``l < 2 r μ`` for horizontal wall normals (depth ``l``, peg diameter ``2r``).
+
+Decided by one SOCP: maximise the total normal force subject to ``Jᵀ f = 0``, ``f ∈ K`` and
+``Σ f_n ≤ 1``; the optimum is positive exactly when the contacts can wedge.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fixplan.jamming.backends import ClarabelProgram
+from fixplan.jamming.programs import ConeProgram, force_layout
+from fixplan.kinematics import ContactSet
+
+
+def wedge_program(cs: ContactSet) -> ConeProgram:
+    """``min −Σ f_n  s.t.  Jᵀ S f = 0, 1 − Σ f_n ≥ 0, f ∈ K``."""
+    lay = force_layout(cs)
+    nf = lay.nf
+    c = np.zeros(nf)
+    c[lay.normal_index] = -1.0
+    B = cs.J.T @ lay.S
+    ones = np.zeros((1, nf))
+    ones[0, lay.normal_index] = 1.0
+    A = np.vstack([B, ones, -lay.cone_rows])
+    b = np.concatenate([np.zeros(cs.ndof), [1.0], np.zeros(lay.cone_rows.shape[0])])
+    cones = (("zero", cs.ndof), ("nonneg", 1), *lay.cones)
+    return ConeProgram(c, A, b, cones, "wedge", nf)
+
+
+def wedge_force(cs: ContactSet) -> float:
+    """Largest total normal force (out of 1) the contacts can hold with no applied wrench."""
+    prog = wedge_program(cs)
+    sol = ClarabelProgram(prog).solve(prog.b)
+    return max(0.0, -sol.value) if sol.solved else 0.0
+
+
+def can_wedge(cs: ContactSet, tol: float = 1e-7) -> bool:
+    """True when the contacts can hold nonzero self-equilibrated forces (they wedge)."""
+    return wedge_force(cs) > tol

@@ -1,0 +1,134 @@
+"""Jamming maps: two wrench components on a grid, classified, drawn like Whitney's diagram."""
+
+from __future__ import annotations
+
+import csv
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fixplan.jamming.classify import MODES, Classifier
+from fixplan.locating import contact_set
+
+if TYPE_CHECKING:
+    from fixplan.fixture import Fixture
+
+MODE_COLORS = {
+    "held": "#4c72b0",
+    "jammed": "#c44e52",
+    "separates": "#dddddd",
+    "slides": "#55a868",
+    "pivots": "#dd8452",
+    "rolls": "#8172b2",
+    "indeterminate": "#000000",
+}
+
+
+@dataclass(frozen=True)
+class JammingMap:
+    """Modes and margins on a grid of two wrench components."""
+
+    axis_names: tuple[str, str]
+    x: NDArray[np.float64]
+    y: NDArray[np.float64]
+    modes: NDArray[np.str_]  # (len(y), len(x))
+    margins: NDArray[np.float64]
+    title: str
+    time_s: float
+
+    def counts(self) -> dict[str, int]:
+        return {m: int((self.modes == m).sum()) for m in MODES if (self.modes == m).any()}
+
+
+def jamming_map(
+    fixture: Fixture,
+    components: tuple[int, int],
+    bounds: Sequence[tuple[float, float]],
+    n: int,
+    *,
+    base: NDArray[np.float64] | None = None,
+    contacts: Sequence[str] | None = None,
+    at: NDArray[np.float64] | None = None,
+    pose: str | None = None,
+    progress: bool = False,
+    axis_names: tuple[str, str] = ("x", "y"),
+) -> JammingMap:
+    """Classify ``n × n`` wrenches varying two components over ``bounds``."""
+    cs = contact_set(fixture, pose, contacts)
+    clf = Classifier(cs, fixture.gravity_wrench(), tolerances=fixture.tolerances)
+    base = np.zeros(fixture.ndof) if base is None else np.asarray(base, dtype=float)
+    xs = np.linspace(bounds[0][0], bounds[0][1], n)
+    ys = np.linspace(bounds[1][0], bounds[1][1], n)
+    modes = np.empty((n, n), dtype=object)
+    margins = np.zeros((n, n))
+    t0 = time.perf_counter()
+    bar = None
+    if progress:
+        from rich.progress import Progress
+
+        bar = Progress(transient=True, console=__import__("rich.console").console.Console(file=sys.stderr))
+        bar.start()
+        task = bar.add_task("classifying", total=n)
+    try:
+        for j, yv in enumerate(ys):
+            for i, xv in enumerate(xs):
+                w = base.copy()
+                w[components[0]] = xv
+                w[components[1]] = yv
+                r = clf.classify(cs.wrench_about_com(w, at), w)
+                modes[j, i] = r.mode
+                margins[j, i] = r.margin
+            if bar is not None:
+                bar.update(task, advance=1)
+    finally:
+        if bar is not None:
+            bar.stop()
+    elapsed = time.perf_counter() - t0
+    title = f"{fixture.name}: contacts {', '.join(cs.names)}"
+    return JammingMap(axis_names, xs, ys, modes.astype(str), margins, title, elapsed)
+
+
+def save_map(result: JammingMap, png: Path, csv_path: Path | None = None) -> None:
+    """Write the diagram as a PNG (matplotlib, no display needed) and the grid as CSV."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    codes = {m: k for k, m in enumerate(MODES)}
+    grid = np.vectorize(codes.get)(result.modes)
+    cmap = ListedColormap([MODE_COLORS[m] for m in MODES])
+    fig, ax = plt.subplots(figsize=(6, 5), dpi=100)
+    ax.imshow(
+        grid,
+        origin="lower",
+        extent=(result.x[0], result.x[-1], result.y[0], result.y[-1]),
+        aspect="auto",
+        cmap=cmap,
+        vmin=-0.5,
+        vmax=len(MODES) - 0.5,
+        interpolation="nearest",
+    )
+    ax.set_xlabel(result.axis_names[0])
+    ax.set_ylabel(result.axis_names[1])
+    ax.set_title(result.title, fontsize=9)
+    present = [m for m in MODES if (result.modes == m).any()]
+    ax.legend(handles=[Patch(color=MODE_COLORS[m], label=m) for m in present], loc="upper right", fontsize=8, framealpha=0.9)
+    fig.tight_layout()
+    fig.savefig(png)
+    plt.close(fig)
+    if csv_path is not None:
+        with open(csv_path, "w", newline="") as fh:
+            writer = csv.writer(fh)
+            writer.writerow([result.axis_names[0], result.axis_names[1], "mode", "margin"])
+            for j, yv in enumerate(result.y):
+                for i, xv in enumerate(result.x):
+                    writer.writerow([f"{xv:.9g}", f"{yv:.9g}", result.modes[j, i], f"{result.margins[j, i]:.6g}"])
