@@ -18,7 +18,7 @@ _LAZY = {
     "default_fixture_path": ("fixplan.fixture", "default_fixture_path"),
     "classify": ("fixplan.jamming", "classify"),
     "search_wrench": ("fixplan.jamming", "search_wrench"),
-    "contact_set": ("fixplan.kinematics", "contact_set"),
+    "contact_set": ("fixplan.locating", "contact_set"),
     "FixplanError": ("fixplan.errors", "FixplanError"),
     "FixtureError": ("fixplan.errors", "FixtureError"),
     "InputError": ("fixplan.errors", "InputError"),

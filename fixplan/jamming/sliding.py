@@ -185,6 +185,31 @@ def frictionless_start(cs: ContactSet, w_e: FloatArray) -> FloatArray:
     return np.linalg.lstsq(K, rhs, rcond=None)[0]
 
 
+def fixed_point_start(rows: _Rows, w_e: FloatArray, z0: FloatArray, sweeps: int = 4) -> FloatArray:
+    """Freeze the slip directions at the current ``a``, solve the linear all-slide system, repeat."""
+    cs = rows.cs
+    n, k = cs.ndof, len(cs)
+    z = z0.copy()
+    for _ in range(sweeps):
+        a = z[:n]
+        K = np.zeros((n + k, n + k))
+        K[:n, :n] = cs.mass_matrix
+        for i in range(k):
+            col = rows.Jn[i].copy()
+            if rows.mu[i] > 0.0:
+                s = rows.D[i] * (rows.T[i] @ a)
+                ns = float(np.linalg.norm(s))
+                if ns > 0.0:
+                    col -= rows.mu[i] * rows.T[i].T @ (rows.D[i] * s / ns)
+            K[:n, n + i] = -col
+            K[n + i, :n] = rows.Jn[i]
+        try:
+            z = np.linalg.solve(K, np.concatenate([w_e, np.zeros(k)]))
+        except np.linalg.LinAlgError:
+            break
+    return z
+
+
 def _start_for(cs: ContactSet, base: FloatArray, stick: tuple[int, ...]) -> FloatArray:
     n = cs.ndof
     parts = [base[:n]]
@@ -217,7 +242,7 @@ def motion_witness(
 
     N = null_basis(cs.G)
     rng = np.random.default_rng(rng_seed)
-    starts = [base]
+    starts = [fixed_point_start(rows, w_e, base), base]
     for _ in range(1 if N.shape[1] else 0):
         a = N @ rng.standard_normal(N.shape[1])
         a *= max(float(np.linalg.norm(base[:n])), 1e-3) / max(float(np.linalg.norm(a)), 1e-300)

@@ -1,0 +1,238 @@
+"""Jamming analysis against closed forms derived by hand (see each test's docstring)."""
+
+import numpy as np
+import pytest
+
+import fixplan
+from fixplan.jamming import can_wedge, classify, search_wrench, wedge_force
+
+
+def box_on_supports(mu=0.3, mass=2.0, gravity="[0.0, 0.0, -9.81]", torsion=None):
+    """A 0.2×0.1×0.05 box on three point supports under its -z face (CoM inside the triangle)."""
+    tors = f"\ntorsion = {torsion}" if torsion else ""
+    locs = "".join(
+        f'[[locator]]\nname = "B{i}"\nposition = [{x}, {y}, 0.0]\nfriction = {mu}{tors}\n'
+        for i, (x, y) in enumerate([(-0.06, -0.03), (0.06, -0.03), (0.0, 0.03)], 1)
+    )
+    return fixplan.loads(
+        f"""format = 1
+[scene]
+name = "box-3-supports"
+gravity = {gravity}
+[workpiece]
+shape = "box"
+size = [0.2, 0.1, 0.05]
+mass = {mass}
+start = {{ position = [0.0, 0.0, 0.025] }}
+{locs}"""
+    )
+
+
+def peg(l, r=0.01, mu=0.3, gravity="[0.0, 0.0]"):
+    """2D peg in a hole, two-point contact: A on the left wall at height l (normal +x), B on the right at 0 (normal -x).
+
+    The body origin is the peg tip centre (0, 0)."""
+    return fixplan.loads(
+        f"""format = 1
+[scene]
+name = "peg"
+dimension = 2
+gravity = {gravity}
+[workpiece]
+shape = "rectangle"
+size = [{2 * r}, {4 * l + 0.1}]
+mass = 0.5
+start = {{ position = [0.0, 0.0] }}
+[[contact]]
+name = "A"
+point = [{-r}, {l}]
+normal = [1.0, 0.0]
+friction = {mu}
+[[contact]]
+name = "B"
+point = [{r}, 0.0]
+normal = [-1.0, 0.0]
+friction = {mu}
+"""
+    )
+
+
+def test_box_on_three_supports_held_jammed_slides_closed_form():
+    """Held by gravity alone; a push through the CoM jams iff F ≤ μ m g, else slides with a = (F − μ m g)/m."""
+    f = box_on_supports(mu=0.3, mass=2.0)
+    limit = 0.3 * 2.0 * 9.81
+    assert classify(f, [0, 0, 0, 0, 0, 0])[0].mode == "held"
+    for F in (0.5 * limit, 0.95 * limit):
+        r = classify(f, [F, 0, 0, 0, 0, 0])[0]
+        assert r.mode == "jammed" and r.margin <= 1e-6 * F
+        total = sum(r.force_world(n) for n in r.contact_forces)
+        assert np.allclose(total, [-F, 0, 2.0 * 9.81], atol=1e-5)
+    for F in (1.05 * limit, 3 * limit):
+        r = classify(f, [F, 0, 0, 0, 0, 0])[0]
+        assert r.mode == "slides"
+        assert r.acceleration[0] == pytest.approx((F - limit) / 2.0, rel=1e-8)
+        assert np.allclose(r.acceleration[1:], 0, atol=1e-9)
+        for name, lam in r.contact_forces.items():  # friction at the cone's edge, opposing the slip
+            assert np.hypot(lam[1], lam[2]) == pytest.approx(0.3 * lam[0], rel=1e-8)
+            assert r.force_world(name)[0] < 0
+
+
+def test_lift_separates_and_pull_along_normal():
+    f = box_on_supports()
+    assert classify(f, [0, 0, 2.0 * 9.81 * 1.1, 0, 0, 0])[0].mode == "separates"
+    assert classify(f, [0, 0, 2.0 * 9.81 * 0.9, 0, 0, 0])[0].mode == "held"
+
+
+@pytest.mark.parametrize("mu", [0.0, 2.0])
+def test_extreme_friction(mu):
+    """μ = 0: any horizontal push slides; μ = 2: a push below 2 m g jams, above it slides.
+
+    The push acts in the support plane (``at`` z = 0) so friction cannot tip the box: with μ = 2
+    a push at the centre of mass would need 0.98 N·m from the supports, which can give only 0.59."""
+    f = box_on_supports(mu=mu)
+    r = classify(f, [1.0, 0, 0, 0, 0, 0], at=[0.0, 0.0, 0.0])[0]
+    if mu == 0.0:
+        assert r.mode == "slides" and r.acceleration[0] == pytest.approx(0.5, rel=1e-9)
+    else:
+        assert r.mode == "jammed"
+        r = classify(f, [1.1 * 2 * 2 * 9.81, 0, 0, 0, 0, 0], at=[0.0, 0.0, 0.0])[0]
+        assert r.mode == "slides" and r.acceleration[0] == pytest.approx(0.1 * 2 * 9.81 * 2 / 2, rel=1e-8)
+
+
+@pytest.mark.parametrize("wrench", [[1.0, 0.3, -2.0, 0, 0, 0.01], [0.2, -0.1, -1.0, 0.0, 0.0, 0.0], [3.0, 1.0, -1.0, 0, 0, 0.05], [0, 0, 1.0, 0, 0, 0]])
+def test_mode_invariant_under_scaling_in_zero_gravity(wrench):
+    """Without gravity the problem is homogeneous: 1e-6 N and 1e6 N give the same verdict."""
+    f = box_on_supports(gravity="[0.0, 0.0, 0.0]")
+    modes = {classify(f, [np.array(wrench) * s])[0].mode for s in (1e-6, 1e-3, 1.0, 1e3, 1e6)}
+    assert len(modes) == 1, modes
+
+
+def test_boundary_wrenches_never_raise():
+    """Within 1e-9 of the slide threshold the verdict is definite or indeterminate, never an exception."""
+    f = box_on_supports(mu=0.3)
+    limit = 0.3 * 2.0 * 9.81
+    for F in (limit - 1e-9, limit, limit + 1e-9):
+        r = classify(f, [F, 0, 0, 0, 0, 0])[0]
+        assert r.mode in ("jammed", "slides", "indeterminate")
+        assert np.isfinite(r.margin)
+
+
+def test_backends_agree():
+    """The Clarabel matrix path and the independent cvxpy model give the same modes and margins."""
+    f = box_on_supports(mu=0.25)
+    rng = np.random.default_rng(0)
+    W = np.column_stack([rng.uniform(-8, 8, 12), rng.uniform(-8, 8, 12), rng.uniform(-30, 5, 12), np.zeros(12), np.zeros(12), rng.uniform(-0.3, 0.3, 12)])
+    fast = classify(f, W)
+    ref = classify(f, W, backend="cvxpy")
+    for a, b in zip(fast, ref, strict=True):
+        assert a.mode == b.mode
+        assert a.margin == pytest.approx(b.margin, rel=1e-5, abs=1e-7)
+
+
+def test_six_locators_located_box():
+    """At the goal of the 3-2-1 box: pushing into the locators is held, pulling away separates."""
+    f = fixplan.load(fixplan.default_fixture_path())
+    assert classify(f, [-5, -5, -5, 0, 0, 0], pose="goal")[0].mode == "held"
+    # base friction plus side-locator friction resist up to μ m g √(1+μ²) = 5.06 N: 8 N must open E1
+    assert classify(f, [5, 0, 0, 0, 0, 0], pose="goal")[0].mode == "jammed"
+    assert classify(f, [8, 0, 0, 0, 0, 0], pose="goal")[0].mode == "separates"
+    r = classify(f, [-5, -5, -5, 0, 0, 0], pose="goal")[0]
+    total = sum(r.force_world(n) for n in r.contact_forces)
+    assert np.allclose(total, [5, 5, 5 + 2 * 9.81], atol=1e-6)
+
+
+def test_concurrent_normals_rank_deficient():
+    """Three frictionless contacts on a disk: normals meet at the centre (rank G = 2 < 3).
+
+    Any moment turns the disk freely (it slides at every contact); forces through the centre are held."""
+    f = fixplan.loads(
+        """format = 1
+[scene]
+name = "disk"
+dimension = 2
+gravity = [0.0, 0.0]
+[workpiece]
+shape = "disk"
+radius = 0.05
+mass = 1.0
+start = { position = [0.0, 0.0] }
+[[locator]]
+name = "L1"
+position = [0.0, -0.05]
+friction = 0.0
+[[locator]]
+name = "L2"
+position = [0.0433012701892, 0.025]
+friction = 0.0
+[[locator]]
+name = "L3"
+position = [-0.0433012701892, 0.025]
+friction = 0.0
+"""
+    )
+    cs = fixplan.contact_set(f)
+    assert np.linalg.matrix_rank(cs.G) == 2
+    assert classify(f, [0.0, 0.0, 0.01])[0].mode == "slides"
+    assert classify(f, [1.0, 2.0, 0.0])[0].mode == "held"
+
+
+def test_wedging_iff_depth_below_2_r_mu():
+    """Two-point contact with horizontal normals wedges iff l < 2 r μ (Whitney)."""
+    r, mu = 0.01, 0.3
+    for l in (0.5 * 2 * r * mu, 0.9 * 2 * r * mu):
+        assert can_wedge(fixplan.contact_set(peg(l, r, mu)))
+    for l in (1.1 * 2 * r * mu, 3 * 2 * r * mu):
+        assert not can_wedge(fixplan.contact_set(peg(l, r, mu)))
+    assert wedge_force(fixplan.contact_set(peg(3 * 2 * r * mu, r, mu))) == pytest.approx(0.0, abs=1e-7)
+
+
+def _peg_expected(Fx, Fy, Mz, l, r, mu):
+    """Closed form for the two-point peg (moments about the tip centre, insertion pushes Fy < 0).
+
+    Sliding down (friction +y at both contacts): N_A = (Mz + μ r Fx)/l, N_B = Fx + N_A, and the
+    peg accelerates down iff −Fy > μ (N_A + N_B). Static balance: with T_A free,
+    N_A = (Mz − r Fy − 2 r T_A)/l, N_B = Fx + N_A, T_B = −Fy − T_A, |T| ≤ μ N, N ≥ 0.
+    """
+    NA = (Mz + mu * r * Fx) / l
+    NB = Fx + NA
+    if NA > 0 and NB > 0 and -Fy > mu * (NA + NB):
+        return "slides"
+    for TA in np.linspace(-abs(Fy) * 5 - 10, abs(Fy) * 5 + 10, 200001):
+        nA = (Mz - r * Fy - 2 * r * TA) / l
+        nB = Fx + nA
+        TB = -Fy - TA
+        if nA >= 0 and nB >= 0 and abs(TA) <= mu * nA and abs(TB) <= mu * nB:
+            return "balanced"
+    return "other"
+
+
+def test_peg_whitney_two_point_contact():
+    """Inside the sliding region (Whitney's parallelogram side for two-point contact) the peg slides; outside it jams or a contact opens."""
+    l, r, mu = 0.03, 0.01, 0.3
+    f = peg(l, r, mu)
+    grid = [(Fx, -10.0, Mz) for Fx in (-4.0, -1.0, 0.5, 2.0, 5.0) for Mz in (-0.2, -0.05, 0.02, 0.1, 0.3)]
+    results = classify(f, grid)
+    for (Fx, Fy, Mz), res in zip(grid, results, strict=True):
+        expected = _peg_expected(Fx, Fy, Mz, l, r, mu)
+        if expected == "slides":
+            assert res.mode == "slides", (Fx, Mz, res.mode)
+        elif expected == "balanced":
+            assert res.mode in ("jammed", "held"), (Fx, Mz, res.mode)
+        else:
+            assert res.mode in ("separates", "pivots", "rolls"), (Fx, Mz, res.mode)
+
+
+def test_search_finds_nonjamming_push_and_respects_limits():
+    f = fixplan.load(fixplan.default_fixture_path())
+    res = search_wrench(f, [0.1, 0, 0, 0, 0, 0])
+    assert res.found and res.check.mode == "slides"
+    assert np.linalg.norm(res.wrench[:3]) <= 40.0 + 1e-6
+    assert np.linalg.norm(res.wrench[3:]) <= 2.0 + 1e-6
+    assert res.check.acceleration[0] >= 0.1 - 1e-6
+
+
+def test_search_reports_weak_manipulator():
+    text = fixplan.default_fixture_path().read_text().replace("max_force = 40.0", "max_force = 1.0")
+    f = fixplan.loads(text)
+    res = search_wrench(f, [0.1, 0, 0, 0, 0, 0])
+    assert not res.found and "too weak" in res.reason
