@@ -16,7 +16,9 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: install
-	$(BIN)/fixplan demo
+	$(BIN)/fixplan validate fixplan/data/default.toml
+	$(BIN)/fixplan classify --wrenches fixplan/data/demo_wrenches.csv
+	$(BIN)/fixplan map --axes Fx,Tz --range -10:10,-1:1 --n 40 --out out/demo-map.png --force
 
 test: install
 	$(BIN)/python -m pytest -q tests

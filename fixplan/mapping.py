@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from fixplan.jamming.classify import MODES, Classifier
+from fixplan.jamming.classify import MODES
 from fixplan.locating import contact_set
 
 if TYPE_CHECKING:
@@ -58,37 +58,40 @@ def jamming_map(
     pose: str | None = None,
     progress: bool = False,
     axis_names: tuple[str, str] = ("x", "y"),
+    jobs: int | None = None,
 ) -> JammingMap:
     """Classify ``n × n`` wrenches varying two components over ``bounds``."""
+    from fixplan.jamming import classify
+
     cs = contact_set(fixture, pose, contacts)
-    clf = Classifier(cs, fixture.gravity_wrench(), tolerances=fixture.tolerances)
     base = np.zeros(fixture.ndof) if base is None else np.asarray(base, dtype=float)
     xs = np.linspace(bounds[0][0], bounds[0][1], n)
     ys = np.linspace(bounds[1][0], bounds[1][1], n)
-    modes = np.empty((n, n), dtype=object)
-    margins = np.zeros((n, n))
+    W = np.tile(base, (n * n, 1))
+    X, Y = np.meshgrid(xs, ys)  # row j: y = ys[j]
+    W[:, components[0]] = X.ravel()
+    W[:, components[1]] = Y.ravel()
     t0 = time.perf_counter()
     bar = None
+    callback = None
     if progress:
+        from rich.console import Console
         from rich.progress import Progress
 
-        bar = Progress(transient=True, console=__import__("rich.console").console.Console(file=sys.stderr))
+        bar = Progress(transient=True, console=Console(file=sys.stderr))
         bar.start()
-        task = bar.add_task("classifying", total=n)
+        task = bar.add_task("classifying", total=n * n)
+
+        def callback(k: int) -> None:
+            bar.update(task, advance=k)
+
     try:
-        for j, yv in enumerate(ys):
-            for i, xv in enumerate(xs):
-                w = base.copy()
-                w[components[0]] = xv
-                w[components[1]] = yv
-                r = clf.classify(cs.wrench_about_com(w, at), w)
-                modes[j, i] = r.mode
-                margins[j, i] = r.margin
-            if bar is not None:
-                bar.update(task, advance=1)
+        results = classify(fixture, W, contacts, at, pose=pose, progress=callback, jobs=jobs)
     finally:
         if bar is not None:
             bar.stop()
+    modes = np.array([r.mode for r in results], dtype=object).reshape(n, n)
+    margins = np.array([r.margin for r in results]).reshape(n, n)
     elapsed = time.perf_counter() - t0
     title = f"{fixture.name}: contacts {', '.join(cs.names)}"
     return JammingMap(axis_names, xs, ys, modes.astype(str), margins, title, elapsed)

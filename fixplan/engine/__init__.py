@@ -1,0 +1,120 @@
+"""Contact engine: exact one-contact solvers, NSGS, the robust SOCP solver, FCLib I/O.
+
+Solvers share one signature, ``solver(problem, r0=None, tol=..., max_iter=...) ->
+ContactSolution``, and are looked up by name in :data:`SOLVERS` (imported lazily, so
+``import fixplan.engine`` does not compile numba kernels or import Clarabel):
+
+- ``"nsgs"``: compiled nonsmooth Gauss–Seidel (``max_iter`` = sweeps);
+- ``"socp"``: successive SOCPs (Clarabel) with NSGS polishing (``max_iter`` = rounds);
+- ``"auto"``: 100 NSGS sweeps, then ``"socp"`` if needed (``max_iter`` = SOCP rounds);
+- ``"nsgs-numpy"``: the plain NumPy reference sweep (slow; for checking).
+
+Example
+-------
+>>> from fixplan.engine import build_problem, solve
+>>> sol = solve(build_problem(W, q, mu=0.5, dims=3), solver="auto", tol=1e-8)  # doctest: +SKIP
+>>> sol.converged, sol.error, sol.residual()  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from fixplan.engine.nsgs import ContactProblem, ContactSolution
+
+SOLVERS: dict[str, tuple[str, str]] = {
+    "auto": ("fixplan.engine.socp", "solve_auto"),
+    "nsgs": ("fixplan.engine.nsgs", "solve_nsgs"),
+    "nsgs-numpy": ("fixplan.engine.nsgs", "solve_nsgs_reference"),
+    "socp": ("fixplan.engine.socp", "solve_socp"),
+}
+"""Solver registry: name → (module, function), imported on first use."""
+
+_LAZY = {
+    "ContactProblem": ("fixplan.engine.nsgs", "ContactProblem"),
+    "ContactSolution": ("fixplan.engine.nsgs", "ContactSolution"),
+    "build_problem": ("fixplan.engine.nsgs", "build_problem"),
+    "fclib_error": ("fixplan.engine.nsgs", "fclib_error"),
+    "solve_nsgs": ("fixplan.engine.nsgs", "solve_nsgs"),
+    "solve_nsgs_reference": ("fixplan.engine.nsgs", "solve_nsgs_reference"),
+    "solve_socp": ("fixplan.engine.socp", "solve_socp"),
+    "solve_auto": ("fixplan.engine.socp", "solve_auto"),
+    "FclibProblem": ("fixplan.engine.fclib", "FclibProblem"),
+    "FclibResult": ("fixplan.engine.fclib", "FclibResult"),
+    "read_fclib": ("fixplan.engine.fclib", "read_fclib"),
+    "solve_fclib_file": ("fixplan.engine.fclib", "solve_fclib_file"),
+    "solve_cone": ("fixplan.engine.local", "solve_cone"),
+    "solve_coulomb_2d": ("fixplan.engine.local", "solve_coulomb_2d"),
+    "solve_coulomb_3d": ("fixplan.engine.local", "solve_coulomb_3d"),
+    "solve_soft_finger": ("fixplan.engine.local", "solve_soft_finger"),
+    "project_cone": ("fixplan.engine.local", "project_cone"),
+    "law_violation": ("fixplan.engine.local", "law_violation"),
+}
+
+__all__ = sorted([*_LAZY, "SOLVERS", "get_solver", "solve"])
+
+
+def get_solver(name: str) -> Callable[..., ContactSolution]:
+    """The solver registered under ``name``.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`SOLVERS`.
+
+    Returns
+    -------
+    callable
+        ``solver(problem, r0=None, tol=..., max_iter=...) -> ContactSolution``.
+
+    Raises
+    ------
+    InputError
+        For an unknown name; the message lists the known ones.
+    """
+    from fixplan.errors import InputError
+
+    try:
+        module_name, attr = SOLVERS[name]
+    except (KeyError, TypeError):
+        known = ", ".join(sorted(SOLVERS))
+        raise InputError(f"unknown contact solver {name!r}; known solvers: {known}") from None
+    return getattr(import_module(module_name), attr)
+
+
+def solve(problem: ContactProblem, solver: str = "auto", **options: Any) -> ContactSolution:
+    """Solve a contact problem with a solver chosen by name.
+
+    Parameters
+    ----------
+    problem : ContactProblem
+        From :func:`build_problem`.
+    solver : str
+        A key of :data:`SOLVERS`.
+    **options
+        ``r0``, ``tol``, ``max_iter`` and solver-specific options.
+
+    Returns
+    -------
+    ContactSolution
+        The answer and its residual.
+    """
+    return get_solver(solver)(problem, **options)
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module_name, attr = _LAZY[name]
+    except KeyError:
+        raise AttributeError(f"module 'fixplan.engine' has no attribute {name!r}") from None
+    value = getattr(import_module(module_name), attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return __all__

@@ -72,7 +72,7 @@ FAILED = -1
 STATUS_NAMES = {OPEN: "open", STICK: "stick", SLIDE: "slide", FAILED: "failed"}
 
 _EPS = 2.220446049250313e-16
-_PIVOT_REL = 1e-13  # a pivot below this fraction of max|W| counts as singular
+_PIVOT_REL = 1e-13  # a pivot below this fraction of its column's max counts as zero
 _MAX_ROOT_ITER = 200
 
 
@@ -81,9 +81,13 @@ _MAX_ROOT_ITER = 200
 
 @numba.njit(cache=True)
 def _lu_factor(A, gamma, LU, piv):
-    """LU with partial pivoting of ``A + γ E_t`` (``d ≤ 4``); ``False`` if singular."""
+    """LU with partial pivoting of ``A + γ E_t`` (``d ≤ 4``); ``False`` if singular.
+
+    A pivot counts as zero when it is below ``_PIVOT_REL`` times the largest entry of its
+    column, so the test is blind to column scaling (``γ ≫ ‖A‖`` is not "singular").
+    """
     d = A.shape[0]
-    scale = 0.0
+    colscale = np.zeros(d)
     for i in range(d):
         piv[i] = i
         for j in range(d):
@@ -91,10 +95,11 @@ def _lu_factor(A, gamma, LU, piv):
             if i == j and i > 0:
                 v += gamma
             LU[i, j] = v
-            if abs(v) > scale:
-                scale = abs(v)
-    if scale == 0.0 or not math.isfinite(scale):
-        return False
+            if abs(v) > colscale[j]:
+                colscale[j] = abs(v)
+    for k in range(d):
+        if colscale[k] == 0.0 or not math.isfinite(colscale[k]):
+            return False
     for k in range(d):
         p = k
         big = abs(LU[k, k])
@@ -102,7 +107,7 @@ def _lu_factor(A, gamma, LU, piv):
             if abs(LU[i, k]) > big:
                 big = abs(LU[i, k])
                 p = i
-        if big <= _PIVOT_REL * scale:
+        if big <= _PIVOT_REL * colscale[k]:
             return False
         if p != k:
             for j in range(d):
@@ -342,10 +347,14 @@ def _slide_root(A, alpha, mu, P):
             phi_hi = phi
             dphi_hi = dphi
             break
+        factor = 8.0
         if ok:
             lo = hi
-        hi *= 8.0
-        if hi > 1e250:
+            # for large γ, ‖P_t‖ ∝ 1/γ: jump close to the root when it is far out
+            if Pw[0] > 0.0 and mu * Pw[0] > 0.0:
+                factor = max(factor, min(2.0 * _tangent_norm(Pw) / (mu * Pw[0]), 1e100))
+        hi *= factor
+        if hi > 1e300 or not math.isfinite(hi):
             break
     if not found_hi:
         return FAILED, it
@@ -782,8 +791,11 @@ def law_violation(
     u_mod = u.copy()
     u_mod[0] += mu * ut
     norm_p = float(np.linalg.norm(P))
-    s_u = max(float(np.linalg.norm(u_mod)), float(np.linalg.norm(alpha)),
-              float(np.linalg.norm(W, 2)) * norm_p)
+    s_u = max(
+        float(np.linalg.norm(u_mod)),
+        float(np.linalg.norm(alpha)),
+        float(np.linalg.norm(W, 2)) * norm_p,
+    )
     if s_u == 0.0:
         s_u = 1.0
     cone = max(0.0, float(np.linalg.norm(P[1:])) - mu * P[0], -P[0]) / norm_p if norm_p else 0.0

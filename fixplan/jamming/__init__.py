@@ -7,13 +7,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from fixplan.errors import InputError
+from fixplan.jamming.batch import classify_batch
 from fixplan.jamming.classify import MODES, Classification, Classifier, wrench_array
 from fixplan.jamming.search import WrenchSearch, search_wrench
 from fixplan.jamming.wedge import can_wedge, wedge_force
@@ -45,6 +46,8 @@ def classify(
     pose: Pose | str | None = None,
     backend: str = "clarabel",
     tolerances: Tolerances | None = None,
+    jobs: int | None = None,
+    progress: Callable[[int], None] | None = None,
 ) -> list[Classification]:
     """Classify each applied wrench (in addition to gravity) for the workpiece at rest.
 
@@ -62,6 +65,10 @@ def classify(
         Where the workpiece is (default: the start pose).
     backend : {"clarabel", "cvxpy"}
         The fast matrix path or the cvxpy reference model.
+    jobs : int, optional
+        Worker processes for large batches (default: the CPUs available; 1 = in-process).
+    progress : callable, optional
+        Called with the number of wrenches finished since the last call.
 
     Returns
     -------
@@ -75,5 +82,7 @@ def classify(
         if at.shape != (fixture.dimension,):
             raise InputError(f"--at expects {fixture.dimension} coordinates, got {at.shape[0] if at.ndim else 1}")
     tol = tolerances or fixture.tolerances
-    clf = Classifier(cs, fixture.gravity_wrench(), tolerances=tol, backend=backend)
-    return [clf.classify(cs.wrench_about_com(w, at), w) for w in W]
+    W_com = np.array([cs.wrench_about_com(w, at) for w in W])
+    if len(cs) == 0:
+        Classifier(cs, fixture.gravity_wrench(), tolerances=tol, backend=backend)  # raises the clear error
+    return classify_batch(cs, fixture.gravity_wrench(), tol, backend, W_com, W, jobs=jobs, progress=progress)

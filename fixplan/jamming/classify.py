@@ -38,7 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from fixplan.errors import InputError
 from fixplan.jamming.backends import BACKENDS, ClarabelProgram, ConeSolution
 from fixplan.jamming.programs import ProgramBuilder
-from fixplan.jamming.sliding import motion_witness
+from fixplan.jamming.sliding import Rows, motion_witness
 from fixplan.kinematics import ContactSet
 from fixplan.tolerances import DEFAULT, Tolerances
 
@@ -115,6 +115,7 @@ class Classifier:
             "roll": b.projector(b.N_roll),
         }
         self._programs: dict[str, ClarabelProgram] = {}
+        self._rows = Rows(cs)
         self.frames = {c.name: np.vstack([c.normal_world, c.tangents_world]) for c in cs.contacts}
 
     # -- programs ------------------------------------------------------------------------------
@@ -180,7 +181,24 @@ class Classifier:
             return result("jammed", margin * scale, lam, "static-balance", "balanced, but only with friction: the push jams", **residuals)
         lam_balance = lam
 
-        # 3. separates: no motion keeps every contact
+        # 3. slides (Theorem 1's witness), else pivots (some contacts stick, the rest slide).
+        #    A witness proves a kept-contact motion exists, so it needs no maintained-motion program.
+        witness = None
+        if self.builder.N_maintain.shape[1] > 0:
+            witness = motion_witness(
+                cs, w_hat, self.builder.C, slip_rel=tol.slip_rel, res_tol=max(tol.balance_rel * 1e-3, 1e-12), rows=self._rows, null_G=self.builder.N_maintain
+            )
+        if witness is not None:
+            residuals["motion"] = witness.residual
+            accel = witness.acceleration * scale
+            if len(witness.sticking) == len(cs):
+                return result("rolls", margin * scale, witness.forces, "rolling", "the contacts are kept without slip while the body turns", accel, **residuals)
+            if not witness.sticking:
+                return result("slides", margin * scale, witness.forces, "sliding-witness", "every contact is kept and slides (Theorem 1)", accel, **residuals)
+            stuck = ", ".join(names[i] for i in witness.sticking)
+            return result("pivots", margin * scale, witness.forces, "pivot-witness", f"every contact is kept; {stuck} sticks while the others slide: the body turns about it", accel, **residuals)
+
+        # 4. separates: no motion keeps every contact
         if self.builder.N_maintain.shape[1] == 0:
             maintain = margin  # G has full column rank: keeping every contact means rest
         else:
@@ -192,7 +210,7 @@ class Classifier:
         if maintain > tol.balance_rel:
             return result("separates", margin * scale, lam_balance, "no-maintained-motion", "no forces in the cones keep every contact: some contact opens", **residuals)
 
-        # 4. rolls: a motion with no slip at any contact
+        # 5. rolls: a motion with no slip at any contact
         if self.builder.N_roll.shape[1] > 0:
             sol_r, lam_r = self._solve("roll", w_hat)
             roll = self._residual_of("roll", w_hat, lam_r) if sol_r.solved else float("nan")
@@ -200,16 +218,6 @@ class Classifier:
             if sol_r.solved and roll <= tol.balance_rel:
                 accel = cs.M_inv @ (w_hat + cs.J.T @ lam_r) * scale
                 return result("rolls", margin * scale, lam_r, "rolling", "the contacts are kept without slip while the body turns", accel, **residuals)
-
-        # 5. slides (Theorem 1's witness), else 6. pivots (some contacts stick, the rest slide)
-        witness = motion_witness(cs, w_hat, self.builder.C, slip_rel=tol.slip_rel, res_tol=max(tol.balance_rel * 1e-3, 1e-12))
-        if witness is not None:
-            residuals["motion"] = witness.residual
-            accel = witness.acceleration * scale
-            if not witness.sticking:
-                return result("slides", margin * scale, witness.forces, "sliding-witness", "every contact is kept and slides (Theorem 1)", accel, **residuals)
-            stuck = ", ".join(names[i] for i in witness.sticking)
-            return result("pivots", margin * scale, witness.forces, "pivot-witness", f"every contact is kept; {stuck} sticks while the others slide: the body turns about it", accel, **residuals)
 
         near = " (static-balance residual within 100× tolerance: near a boundary)" if margin <= 100 * tol.balance_rel else ""
         return result("indeterminate", margin * scale, lam_balance, "none", "the body moves keeping its contacts, but no sliding, pivoting or rolling motion was found" + near, **residuals)

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.jamming import _witness_kernels as kernels
 from fixplan.kinematics import ContactSet
 
 FloatArray = NDArray[np.float64]
@@ -44,17 +45,31 @@ class MotionWitness:
     min_slip: float  # least slip speed over sliding frictional contacts, relative
 
 
-class _Rows:
-    """Per-contact row blocks, precomputed once per contact set."""
+class Rows:
+    """Per-contact data in the compiled kernels' layout, precomputed once per contact set."""
 
     def __init__(self, cs: ContactSet):
         self.cs = cs
-        J = cs.J
-        self.Jn = [J[o] for o in cs.offsets]
-        self.T = [J[o + 1 : o + c.size] for c, o in zip(cs.contacts, cs.offsets, strict=True)]
-        self.D = [np.array([1.0, 1.0, c.torsion_m]) if c.soft else np.ones(c.size - 1) for c in cs.contacts]
-        self.J = [J[o : o + c.size] for c, o in zip(cs.contacts, cs.offsets, strict=True)]
-        self.mu = [c.friction for c in cs.contacts]
+        k = len(cs)
+        self.M = np.ascontiguousarray(cs.mass_matrix)
+        self.Jall = np.ascontiguousarray(cs.J)
+        self.off = np.ascontiguousarray(cs.offsets, dtype=np.int64)
+        self.size = np.ascontiguousarray(cs.sizes, dtype=np.int64)
+        self.mu_arr = np.array([c.friction for c in cs.contacts], dtype=float)
+        self.Dm = np.ones((k, 3))
+        for i, c in enumerate(cs.contacts):
+            if c.soft:
+                self.Dm[i, 2] = c.torsion_m
+        self.Jn = [self.Jall[o] for o in cs.offsets]
+        self.T = [self.Jall[o + 1 : o + c.size] for c, o in zip(cs.contacts, cs.offsets, strict=True)]
+        self.D = [self.Dm[i, : c.size - 1] for i, c in enumerate(cs.contacts)]
+        self.J = [self.Jall[o : o + c.size] for c, o in zip(cs.contacts, cs.offsets, strict=True)]
+        self.mu = list(self.mu_arr)
+
+    def mask(self, stick: tuple[int, ...]) -> NDArray[np.bool_]:
+        m = np.zeros(len(self.cs), dtype=np.bool_)
+        m[list(stick)] = True
+        return m
 
 
 def _layout(cs: ContactSet, stick: tuple[int, ...]) -> list[tuple[int, int]]:
@@ -67,79 +82,16 @@ def _layout(cs: ContactSet, stick: tuple[int, ...]) -> list[tuple[int, int]]:
     return out
 
 
-def _system(rows: _Rows, w_e: FloatArray, z: FloatArray, stick: tuple[int, ...]) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Residual, Jacobian and full λ for unknowns ``z = (a, per-contact unknowns)``."""
-    cs = rows.cs
-    n = cs.ndof
-    a = z[:n]
-    lay = _layout(cs, stick)
-    nz = z.shape[0]
-    F = np.zeros(nz)
-    Jac = np.zeros((nz, nz))
-    F[:n] = cs.mass_matrix @ a - w_e
-    Jac[:n, :n] = cs.mass_matrix
-    lam = np.zeros(cs.J.shape[0])
-    row = n
-    for i, (c, off) in enumerate(zip(cs.contacts, cs.offsets, strict=True)):
-        start, size = lay[i]
-        if i in stick:
-            li = z[start : start + size]
-            lam[off : off + size] = li
-            F[:n] -= rows.J[i].T @ li
-            Jac[:n, start : start + size] = -rows.J[i].T
-            F[row : row + size] = rows.J[i] @ a
-            Jac[row : row + size, :n] = rows.J[i]
-            row += size
-            continue
-        fn = z[start]
-        col = rows.Jn[i].copy()
-        lam[off] = fn
-        if rows.mu[i] > 0.0:
-            D, T = rows.D[i], rows.T[i]
-            s = D * (T @ a)
-            ns = float(np.linalg.norm(s))
-            if ns > 0.0:
-                d = s / ns
-                DTd = T.T @ (D * d)
-                col -= rows.mu[i] * DTd
-                lam[off + 1 : off + c.size] = -rows.mu[i] * fn * D * d
-                P = (np.eye(d.shape[0]) - np.outer(d, d)) / ns
-                DT = D[:, None] * T
-                Jac[:n, :n] += rows.mu[i] * fn * DT.T @ P @ DT
-        F[:n] -= fn * col
-        Jac[:n, start] = -col
-        F[row] = rows.Jn[i] @ a
-        Jac[row, :n] = rows.Jn[i]
-        row += 1
-    return F, Jac, lam
+def _system(rows: Rows, w_e: FloatArray, z: FloatArray, stick: tuple[int, ...]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Residual, Jacobian and full λ for unknowns ``z = (a, per-contact unknowns)`` (compiled)."""
+    return kernels.system(rows.M, rows.Jall, rows.off, rows.size, rows.mu_arr, rows.Dm, w_e, z, rows.mask(stick))
 
 
-def _newton(rows: _Rows, w_e: FloatArray, z0: FloatArray, stick: tuple[int, ...], iterations: int = 20) -> FloatArray:
-    z = z0.copy()
-    F, Jac, _ = _system(rows, w_e, z, stick)
-    scale = max(float(np.linalg.norm(w_e)), 1e-300)
-    for _ in range(iterations):
-        nF = float(np.linalg.norm(F))
-        if nF <= 1e-14 * scale:
-            break
-        try:
-            step = np.linalg.solve(Jac, -F)
-        except np.linalg.LinAlgError:
-            step = np.linalg.lstsq(Jac, -F, rcond=None)[0]
-        alpha = 1.0
-        while alpha > 1e-4:
-            trial = z + alpha * step
-            Ft, Jt, _ = _system(rows, w_e, trial, stick)
-            if float(np.linalg.norm(Ft)) < nF:
-                z, F, Jac = trial, Ft, Jt
-                break
-            alpha /= 2.0
-        else:
-            break
-    return z
+def _newton(rows: Rows, w_e: FloatArray, z0: FloatArray, stick: tuple[int, ...], iterations: int = 30) -> FloatArray:
+    return kernels.newton(rows.M, rows.Jall, rows.off, rows.size, rows.mu_arr, rows.Dm, w_e, z0, rows.mask(stick), iterations)
 
 
-def _accept(rows: _Rows, w_e: FloatArray, z: FloatArray, stick: tuple[int, ...], C: FloatArray, slip_rel: float, res_tol: float) -> MotionWitness | None:
+def _accept(rows: Rows, w_e: FloatArray, z: FloatArray, stick: tuple[int, ...], C: FloatArray, slip_rel: float, res_tol: float) -> MotionWitness | None:
     cs = rows.cs
     n = cs.ndof
     if not np.all(np.isfinite(z)):
@@ -185,29 +137,9 @@ def frictionless_start(cs: ContactSet, w_e: FloatArray) -> FloatArray:
     return np.linalg.lstsq(K, rhs, rcond=None)[0]
 
 
-def fixed_point_start(rows: _Rows, w_e: FloatArray, z0: FloatArray, sweeps: int = 4) -> FloatArray:
+def fixed_point_start(rows: Rows, w_e: FloatArray, z0: FloatArray, sweeps: int = 4) -> FloatArray:
     """Freeze the slip directions at the current ``a``, solve the linear all-slide system, repeat."""
-    cs = rows.cs
-    n, k = cs.ndof, len(cs)
-    z = z0.copy()
-    for _ in range(sweeps):
-        a = z[:n]
-        K = np.zeros((n + k, n + k))
-        K[:n, :n] = cs.mass_matrix
-        for i in range(k):
-            col = rows.Jn[i].copy()
-            if rows.mu[i] > 0.0:
-                s = rows.D[i] * (rows.T[i] @ a)
-                ns = float(np.linalg.norm(s))
-                if ns > 0.0:
-                    col -= rows.mu[i] * rows.T[i].T @ (rows.D[i] * s / ns)
-            K[:n, n + i] = -col
-            K[n + i, :n] = rows.Jn[i]
-        try:
-            z = np.linalg.solve(K, np.concatenate([w_e, np.zeros(k)]))
-        except np.linalg.LinAlgError:
-            break
-    return z
+    return kernels.fixed_point(rows.M, rows.Jall, rows.off, rows.size, rows.mu_arr, rows.Dm, w_e, z0, sweeps)
 
 
 def _start_for(cs: ContactSet, base: FloatArray, stick: tuple[int, ...]) -> FloatArray:
@@ -228,40 +160,49 @@ def motion_witness(
     slip_rel: float = 1e-6,
     res_tol: float = 1e-9,
     rng_seed: int = 0,
+    rows: Rows | None = None,
+    null_G: FloatArray | None = None,
 ) -> MotionWitness | None:
-    """An all-sliding witness if one exists, else (``allow_stick``) a pivoting one, else None."""
+    """An all-sliding witness if one exists, else (``allow_stick``) a pivoting one, else None.
+
+    ``rows`` and ``null_G`` may be passed in when many wrenches share one contact set.
+    """
     k = len(cs)
     if k == 0:
         return None
-    rows = _Rows(cs)
+    rows = rows if rows is not None else Rows(cs)
     if cs.dimension == 2 and k <= 6:
         return _enumerate_2d(rows, w_e, C, allow_stick, slip_rel, res_tol)
     base = frictionless_start(cs, w_e)
     n = cs.ndof
     from fixplan.jamming.programs import null_basis
 
-    N = null_basis(cs.G)
+    N = null_G if null_G is not None else null_basis(cs.G)
     rng = np.random.default_rng(rng_seed)
     starts = [fixed_point_start(rows, w_e, base), base]
-    for _ in range(1 if N.shape[1] else 0):
+    for _ in range(2 if N.shape[1] else 0):
         a = N @ rng.standard_normal(N.shape[1])
         a *= max(float(np.linalg.norm(base[:n])), 1e-3) / max(float(np.linalg.norm(a)), 1e-300)
         starts.append(np.concatenate([a, np.abs(base[n:]) + 1e-3]))
+    w_norm = max(float(np.linalg.norm(w_e)), 1e-300)
     patterns: list[tuple[int, ...]] = [()]
     if allow_stick:
         patterns += [(i,) for i in range(k)]
         if k > 2:
             patterns += list(itertools.combinations(range(k), 2))
     for stick in patterns:
-        for z0 in starts if not stick else starts[:1]:
+        for z0 in starts if not stick else starts[:2]:
             z = _newton(rows, w_e, _start_for(cs, z0, stick), stick)
+            F, _, _ = _system(rows, w_e, z, stick)
+            if not float(np.linalg.norm(F)) <= 1e-9 * w_norm:  # not a root (or NaN): skip the checks
+                continue
             witness = _accept(rows, w_e, z, stick, C, slip_rel, res_tol)
             if witness is not None:
                 return witness
     return None
 
 
-def _enumerate_2d(rows: _Rows, w_e: FloatArray, C: FloatArray, allow_stick: bool, slip_rel: float, res_tol: float) -> MotionWitness | None:
+def _enumerate_2d(rows: Rows, w_e: FloatArray, C: FloatArray, allow_stick: bool, slip_rel: float, res_tol: float) -> MotionWitness | None:
     """2D: every role pattern (slide +, slide −, stick) is a linear system; all-slide first."""
     cs = rows.cs
     n, k = cs.ndof, len(cs)
