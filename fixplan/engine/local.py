@@ -350,9 +350,13 @@ def _slide_root(A, alpha, mu, P):
         factor = 8.0
         if ok:
             lo = hi
-            # for large γ, ‖P_t‖ ∝ 1/γ: jump close to the root when it is far out
-            if Pw[0] > 0.0 and mu * Pw[0] > 0.0:
-                factor = max(factor, min(2.0 * _tangent_norm(Pw) / (mu * Pw[0]), 1e100))
+            # for large γ, P(γ) ≈ P(∞) + c/γ with P(∞) = (p∞, 0), p∞ = −α_n/W_nn > 0, so
+            # φ(γ) ≈ c'/γ − μ p∞ and the root is near γ (1 + φ(γ)/(μ p∞)): jump there
+            p_inf = -alpha[0] / A[0, 0]
+            if mu * p_inf > 0.0:
+                jump = 2.0 * (1.0 + phi / (mu * p_inf))
+                if math.isfinite(jump):
+                    factor = max(factor, min(jump, 1e100))
         hi *= factor
         if hi > 1e300 or not math.isfinite(hi):
             break
@@ -379,7 +383,7 @@ def _slide_root(A, alpha, mu, P):
             break  # Newton step below rounding: converged
         if not (xn > base and xn < hi):
             if lo > 0.0:
-                xn = math.sqrt(lo * hi) if hi > 4.0 * lo else 0.5 * (lo + hi)
+                xn = math.sqrt(lo) * math.sqrt(hi) if hi > 4.0 * lo else 0.5 * (lo + hi)
             else:
                 xn = hi / 64.0
             xn = max(xn, gamma_floor)

@@ -5,8 +5,9 @@ Data layout shared with the Python side:
 - ``J`` (m × ndof): stacked contact rows, contact ``i`` at rows ``off[i] : off[i] + size[i]``
   (normal, tangents, [spin]);
 - ``D`` (k × 3): scale of the tangent rows in the cone's standard form (1, 1, e_r);
-- ``stick`` (k,): role of each contact (True: sticking, False: sliding);
-- unknowns ``z = (a, per contact: λ_i if sticking else f_n,i)``.
+- ``role`` (k,): 0 sliding (kept, friction at its limit), 1 sticking (no relative
+  acceleration), 2 open (no force, no equation; its opening is checked afterwards);
+- unknowns ``z = (a, per contact: f_n,i if sliding, λ_i if sticking, nothing if open)``.
 """
 
 from __future__ import annotations
@@ -15,17 +16,23 @@ import numpy as np
 from numba import njit
 
 
+SLIDE, STICK, OPEN = 0, 1, 2
+
+
 @njit(cache=True)
-def n_unknowns(ndof, size, stick):
+def n_unknowns(ndof, size, role):
     nz = ndof
     for i in range(size.shape[0]):
-        nz += size[i] if stick[i] else 1
+        if role[i] == 1:
+            nz += size[i]
+        elif role[i] == 0:
+            nz += 1
     return nz
 
 
 @njit(cache=True)
-def system(M, J, off, size, mu, D, w, z, stick):
-    """Residual F, Jacobian and the stacked contact forces λ for the role pattern ``stick``."""
+def system(M, J, off, size, mu, D, w, z, role):
+    """Residual F, Jacobian and the stacked contact forces λ for the role pattern ``role``."""
     ndof = M.shape[0]
     k = off.shape[0]
     nz = z.shape[0]
@@ -44,7 +51,9 @@ def system(M, J, off, size, mu, D, w, z, stick):
     for i in range(k):
         o = off[i]
         sz = size[i]
-        if stick[i]:
+        if role[i] == 2:
+            continue
+        if role[i] == 1:
             for q in range(sz):
                 li = z[col + q]
                 lam[o + q] = li
@@ -116,10 +125,10 @@ def _solve(A, b):
 
 
 @njit(cache=True)
-def newton(M, J, off, size, mu, D, w, z0, stick, iterations):
+def newton(M, J, off, size, mu, D, w, z0, role, iterations):
     """Damped Newton on :func:`system`; returns the last iterate."""
     z = z0.copy()
-    F, Jac, lam = system(M, J, off, size, mu, D, w, z, stick)
+    F, Jac, lam = system(M, J, off, size, mu, D, w, z, role)
     scale = max(np.sqrt(np.sum(w * w)), 1e-300)
     for _ in range(iterations):
         nF = np.sqrt(np.sum(F * F))
@@ -130,7 +139,7 @@ def newton(M, J, off, size, mu, D, w, z0, stick, iterations):
         improved = False
         while alpha > 1e-4:
             trial = z + alpha * step
-            Ft, Jt, lt = system(M, J, off, size, mu, D, w, trial, stick)
+            Ft, Jt, lt = system(M, J, off, size, mu, D, w, trial, role)
             if np.sqrt(np.sum(Ft * Ft)) < nF:
                 z = trial
                 F = Ft

@@ -38,7 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from fixplan.errors import InputError
 from fixplan.jamming.backends import BACKENDS, ClarabelProgram, ConeSolution
 from fixplan.jamming.programs import ProgramBuilder
-from fixplan.jamming.sliding import Rows, motion_witness
+from fixplan.jamming.sliding import WitnessSearch
 from fixplan.kinematics import ContactSet
 from fixplan.tolerances import DEFAULT, Tolerances
 
@@ -115,7 +115,7 @@ class Classifier:
             "roll": b.projector(b.N_roll),
         }
         self._programs: dict[str, ClarabelProgram] = {}
-        self._rows = Rows(cs)
+        self._witness = WitnessSearch(cs, b.C, b.N_maintain, slip_rel=tolerances.slip_rel, res_tol=max(tolerances.balance_rel * 1e-3, 1e-12))
         self.frames = {c.name: np.vstack([c.normal_world, c.tangents_world]) for c in cs.contacts}
 
     # -- programs ------------------------------------------------------------------------------
@@ -185,9 +185,7 @@ class Classifier:
         #    A witness proves a kept-contact motion exists, so it needs no maintained-motion program.
         witness = None
         if self.builder.N_maintain.shape[1] > 0:
-            witness = motion_witness(
-                cs, w_hat, self.builder.C, slip_rel=tol.slip_rel, res_tol=max(tol.balance_rel * 1e-3, 1e-12), rows=self._rows, null_G=self.builder.N_maintain
-            )
+            witness = self._witness.kept(w_hat)
         if witness is not None:
             residuals["motion"] = witness.residual
             accel = witness.acceleration * scale
@@ -218,6 +216,13 @@ class Classifier:
             if sol_r.solved and roll <= tol.balance_rel:
                 accel = cs.M_inv @ (w_hat + cs.J.T @ lam_r) * scale
                 return result("rolls", margin * scale, lam_r, "rolling", "the contacts are kept without slip while the body turns", accel, **residuals)
+
+        # 6. separates after all: a motion that opens some contacts, consistent with every law
+        opening = self._witness.opening(w_hat)
+        if opening is not None:
+            residuals["motion"] = opening.residual
+            opened = ", ".join(names[i] for i in opening.opened)
+            return result("separates", margin * scale, opening.forces, "opening-witness", f"{opened} opens while the other contacts slide or stick: a motion consistent with every contact law (none keeping every contact was found)", opening.acceleration * scale, **residuals)
 
         near = " (static-balance residual within 100× tolerance: near a boundary)" if margin <= 100 * tol.balance_rel else ""
         return result("indeterminate", margin * scale, lam_balance, "none", "the body moves keeping its contacts, but no sliding, pivoting or rolling motion was found" + near, **residuals)
