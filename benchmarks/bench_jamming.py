@@ -43,7 +43,11 @@ def run(quick: bool) -> Section:
     for label, pose, six in (("3 contacts (start)", "start", False), ("6 contacts (goal)", "goal", True)):
         W = _wrenches(n_fast, six, rng)
         classify(fx, W[:4], pose=pose, jobs=1)  # warm caches (numba, imports)
-        for method, kwargs, n in (("fast (Clarabel direct), 1 process", {"jobs": 1}, n_fast), ("fast, all cores", {}, n_fast), ("cvxpy", {"backend": "cvxpy"}, n_cvx)):
+        for method, kwargs, n in (
+            ("fast (Clarabel direct), 1 process", {"jobs": 1}, n_fast),
+            ("fast, all cores", {}, n_fast),
+            ("cvxpy", {"backend": "cvxpy"}, n_cvx),
+        ):
             t0 = time.perf_counter()
             res = classify(fx, W[:n], pose=pose, **kwargs)
             dt = time.perf_counter() - t0
@@ -54,7 +58,10 @@ def run(quick: bool) -> Section:
                     "method": method,
                     "n": n,
                     "ms_per_classification": 1e3 * dt / n,
-                    "max_balance_residual_rel": max((r.residuals.get("balance", r.residuals.get("normal_balance", 0.0)) for r in balanced), default=0.0),
+                    "max_balance_residual_rel": max(
+                        (r.residuals.get("balance", r.residuals.get("normal_balance", 0.0)) for r in balanced),
+                        default=0.0,
+                    ),
                     "max_cone_violation": max((r.residuals.get("cone_violation", 0.0) for r in res), default=0.0),
                     "modes": " ".join(f"{k}:{v}" for k, v in sorted(Counter(r.mode for r in res).items())),
                 }
@@ -63,7 +70,17 @@ def run(quick: bool) -> Section:
         fast = classify(fx, W[:n_cvx], pose=pose, jobs=1)
         ref = classify(fx, W[:n_cvx], pose=pose, backend="cvxpy")
         agree = sum(a.mode == b.mode for a, b in zip(fast, ref, strict=True))
-        rows.append({"case": label, "method": "agreement fast vs cvxpy", "n": n_cvx, "ms_per_classification": float("nan"), "max_balance_residual_rel": max(abs(a.margin - b.margin) for a, b in zip(fast, ref, strict=True)), "max_cone_violation": float("nan"), "modes": f"{agree}/{n_cvx} same mode"})
+        rows.append(
+            {
+                "case": label,
+                "method": "agreement fast vs cvxpy",
+                "n": n_cvx,
+                "ms_per_classification": float("nan"),
+                "max_balance_residual_rel": max(abs(a.margin - b.margin) for a, b in zip(fast, ref, strict=True)),
+                "max_cone_violation": float("nan"),
+                "modes": f"{agree}/{n_cvx} same mode",
+            }
+        )
 
     # the whole CLI process, batch throughput: 6-contact classification of a CSV of wrenches
     with tempfile.TemporaryDirectory() as tmp:
@@ -73,14 +90,51 @@ def run(quick: bool) -> Section:
         np.savetxt(csv, W, delimiter=",")
         exe = str(Path(sys.executable).with_name("fixplan"))
         t0 = time.perf_counter()
-        subprocess.run([exe, "classify", "--wrenches", str(csv), "--pose", "goal", "--json"], check=True, capture_output=True)
+        subprocess.run(
+            [exe, "classify", "--wrenches", str(csv), "--pose", "goal", "--json"], check=True, capture_output=True
+        )
         cli_dt = time.perf_counter() - t0
         t0 = time.perf_counter()
         n_map = 50 if quick else 100
-        subprocess.run([exe, "map", "--axes", "Fx,Tz", "--range", "-10:10,-1:1", "--n", str(n_map), "--out", str(Path(tmp) / "m.png")], check=True, capture_output=True)
+        subprocess.run(
+            [
+                exe,
+                "map",
+                "--axes",
+                "Fx,Tz",
+                "--range",
+                "-10:10,-1:1",
+                "--n",
+                str(n_map),
+                "--out",
+                str(Path(tmp) / "m.png"),
+            ],
+            check=True,
+            capture_output=True,
+        )
         map_dt = time.perf_counter() - t0
-    rows.append({"case": "6 contacts (goal)", "method": "whole `fixplan classify --wrenches` process", "n": n_cli, "ms_per_classification": 1e3 * cli_dt / n_cli, "max_balance_residual_rel": float("nan"), "max_cone_violation": float("nan"), "modes": ""})
-    rows.append({"case": f"{n_map}x{n_map} map, 3 contacts", "method": "whole `fixplan map` process", "n": n_map * n_map, "ms_per_classification": 1e3 * map_dt / n_map**2, "max_balance_residual_rel": float("nan"), "max_cone_violation": float("nan"), "modes": f"total {map_dt:.2f} s"})
+    rows.append(
+        {
+            "case": "6 contacts (goal)",
+            "method": "whole `fixplan classify --wrenches` process",
+            "n": n_cli,
+            "ms_per_classification": 1e3 * cli_dt / n_cli,
+            "max_balance_residual_rel": float("nan"),
+            "max_cone_violation": float("nan"),
+            "modes": "",
+        }
+    )
+    rows.append(
+        {
+            "case": f"{n_map}x{n_map} map, 3 contacts",
+            "method": "whole `fixplan map` process",
+            "n": n_map * n_map,
+            "ms_per_classification": 1e3 * map_dt / n_map**2,
+            "max_balance_residual_rel": float("nan"),
+            "max_cone_violation": float("nan"),
+            "modes": f"total {map_dt:.2f} s",
+        }
+    )
 
     lines = [
         "Per-classification time of the default 3-2-1 box (`fixplan/data/default.toml`) against the",
@@ -91,7 +145,9 @@ def run(quick: bool) -> Section:
         "|---|---|---:|---:|---:|---:|---|",
     ]
     for r in rows:
-        lines.append(f"| {r['case']} | {r['method']} | {r['n']} | {r['ms_per_classification']:.3f} | {r['max_balance_residual_rel']:.2e} | {r['max_cone_violation']:.2e} | {r['modes']} |")
+        lines.append(
+            f"| {r['case']} | {r['method']} | {r['n']} | {r['ms_per_classification']:.3f} | {r['max_balance_residual_rel']:.2e} | {r['max_cone_violation']:.2e} | {r['modes']} |"
+        )
     whole = rows[-2]["ms_per_classification"]
     lines += [
         "",

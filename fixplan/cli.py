@@ -8,7 +8,6 @@ to stderr. Files are never overwritten without ``--force``.
 
 from __future__ import annotations
 
-import csv
 import json
 import sys
 from pathlib import Path
@@ -17,6 +16,8 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
+from fixplan.errors import FixplanError, FixtureError, InputError
+
 try:  # typer ≥ 0.20 vendors click; older typer depends on it
     from typer._click import exceptions as click_exc
 except ImportError:  # pragma: no cover - depends on the installed typer
@@ -24,8 +25,6 @@ except ImportError:  # pragma: no cover - depends on the installed typer
 
 _CLICK_EXIT = tuple(c for c in (getattr(click_exc, "Exit", None),) if c is not None)
 _CLICK_ABORT = tuple(c for c in (getattr(click_exc, "Abort", None),) if c is not None)
-
-from fixplan.errors import FixplanError, FixtureError, InputError
 
 app = typer.Typer(
     name="fixplan",
@@ -36,10 +35,21 @@ app = typer.Typer(
     rich_markup_mode=None,
 )
 
-FileArg = Annotated[Path | None, typer.Argument(help="Fixture file (TOML). Default: the bundled 3-2-1 box.", show_default=False)]
+FileArg = Annotated[
+    Path | None, typer.Argument(help="Fixture file (TOML). Default: the bundled 3-2-1 box.", show_default=False)
+]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")]
-ContactsOpt = Annotated[str | None, typer.Option("--contacts", help="Comma-separated contact names (default: locators touching at the pose, plus [[contact]] entries).")]
-AtOpt = Annotated[str | None, typer.Option("--at", help="World point X,Y[,Z] the moments are taken about (default: the body-frame origin).")]
+ContactsOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--contacts",
+        help="Comma-separated contact names (default: locators touching at the pose, plus [[contact]] entries).",
+    ),
+]
+AtOpt = Annotated[
+    str | None,
+    typer.Option("--at", help="World point X,Y[,Z] the moments are taken about (default: the body-frame origin)."),
+]
 PoseOpt = Annotated[str, typer.Option("--pose", help="Analyse the part at its 'start' or 'goal' pose.")]
 
 
@@ -105,12 +115,25 @@ def _json_default(x: Any) -> Any:
 
 
 @app.command()
-def validate(files: Annotated[list[Path], typer.Argument(help="Fixture files to check.")]) -> None:
+def validate(files: Annotated[list[Path], typer.Argument(help="Fixture files (or expected-verdict tables) to check.")]) -> None:
     """Check fixture files; print one line per problem (FILE: key: message) and exit 2 if any."""
+    import numpy as np
+
+    from fixplan.expectations import check_expectations, looks_like_expectations, read_toml
     from fixplan.fixture import load
+    from fixplan.locating import contact_set
 
     bad = False
     for path in files:
+        data = read_toml(path)
+        if data is not None and looks_like_expectations(data):
+            issues, counts = check_expectations(path, data)
+            for issue in issues:
+                typer.echo(issue.format(str(path)), err=True)
+            bad |= bool(issues)
+            if not issues:
+                typer.echo(f"{path}: ok (expected verdicts: " + ", ".join(f"{n} {k}" for k, n in counts.items()) + ")")
+            continue
         try:
             fixture = load(path)
         except FixtureError as exc:
@@ -118,11 +141,16 @@ def validate(files: Annotated[list[Path], typer.Argument(help="Fixture files to 
             for issue in exc.issues:
                 typer.echo(issue.format(str(path)), err=True)
             continue
-        kind = f"{fixture.dimension}D {fixture.workpiece.shape.name}, {len(fixture.locators)} locators, {len(fixture.contacts)} contacts"
-        goal = ""
+        kind = f"{fixture.dimension}D {fixture.workpiece.shape.name}, {len(fixture.locators)} locators"
+        kind += f", {len(fixture.contacts)} contacts"
+        note = ""
         if fixture.is_full:
-            goal = ", goal " + ("given and checked" if fixture.goal_given is not None else "computed")
-        typer.echo(f"{path}: ok ({kind}{goal})")
+            note = ", goal " + ("given and checked" if fixture.goal_given is not None else "computed")
+            cs = contact_set(fixture, "goal", [loc.name for loc in fixture.locators])
+            rank = int(np.linalg.matrix_rank(cs.G, tol=1e-9))
+            if rank < fixture.ndof:
+                note += f"; warning: the locators do not determine the pose (rank G = {rank} < {fixture.ndof})"
+        typer.echo(f"{path}: ok ({kind}{note})")
     if bad:
         raise typer.Exit(2)
 
@@ -145,12 +173,17 @@ def _classify_table(fixture, results, names) -> None:
 @app.command()
 def classify(
     file: FileArg = None,
-    wrench: Annotated[str | None, typer.Option("--wrench", help="Fx,Fy,Fz,Tx,Ty,Tz (2D: Fx,Fy,Mz), about the body origin, world axes.")] = None,
+    wrench: Annotated[
+        str | None,
+        typer.Option("--wrench", help="Fx,Fy,Fz,Tx,Ty,Tz (2D: Fx,Fy,Mz), about the body origin, world axes."),
+    ] = None,
     wrenches: Annotated[Path | None, typer.Option("--wrenches", help="CSV file, one wrench per line.")] = None,
     contacts: ContactsOpt = None,
     at: AtOpt = None,
     pose: PoseOpt = "start",
-    backend: Annotated[str, typer.Option("--backend", help="clarabel (fast matrix path) or cvxpy (reference model).")] = "clarabel",
+    backend: Annotated[
+        str, typer.Option("--backend", help="clarabel (fast matrix path) or cvxpy (reference model).")
+    ] = "clarabel",
     json_out: JsonOpt = False,
 ) -> None:
     """Classify pushes: held, jammed, separates, slides, rolls or indeterminate."""
@@ -174,7 +207,9 @@ def classify(
             _err(f"warning: {c.name} does not touch at the {pose} pose (gap {c.gap_m:.3g} m); analysed as if it did")
     results = run(fixture, W, names, at_p, pose=p, backend=backend)
     if json_out:
-        _emit_json({"file": fixture.source, "pose": pose, "contacts": cs.names, "results": [r.to_json() for r in results]})
+        _emit_json(
+            {"file": fixture.source, "pose": pose, "contacts": cs.names, "results": [r.to_json() for r in results]}
+        )
     else:
         _classify_table(fixture, results, cs.names)
 
@@ -204,7 +239,12 @@ def _read_wrench_csv(path: Path, n: int) -> np.ndarray:
 @app.command()
 def search(
     file: FileArg = None,
-    motion: Annotated[str, typer.Option("--motion", help="Desired acceleration of the body origin: ax,ay,az,αx,αy,αz (2D: ax,ay,α) [m/s², rad/s²].")] = "",
+    motion: Annotated[
+        str,
+        typer.Option(
+            "--motion", help="Desired acceleration of the body origin: ax,ay,az,αx,αy,αz (2D: ax,ay,α) [m/s², rad/s²]."
+        ),
+    ] = "",
     contacts: ContactsOpt = None,
     at: AtOpt = None,
     pose: PoseOpt = "start",
@@ -224,7 +264,9 @@ def search(
     else:
         if result.found and result.wrench is not None:
             typer.echo(f"wrench: {','.join(f'{x:.6g}' for x in result.wrench)}")
-            typer.echo(f"margin: least normal force {result.margin_N:.4g} N; check: {result.check.mode if result.check else '-'}")
+            typer.echo(
+                f"margin: least normal force {result.margin_N:.4g} N; check: {result.check.mode if result.check else '-'}"
+            )
             typer.echo("contacts: " + ", ".join(f"{k} {v}" for k, v in result.contact_roles.items()))
             if result.binding:
                 typer.echo("binding limits: " + ", ".join(result.binding))
@@ -240,14 +282,20 @@ AXES_2D = ("Fx", "Fy", "Mz")
 @app.command("map")
 def map_(
     file: FileArg = None,
-    axes: Annotated[str, typer.Option("--axes", help="Two wrench components, e.g. Fx,Mz (3D names Fx..Tz; 2D Fx,Fy,Mz).")] = "Fx,Tz",
+    axes: Annotated[
+        str, typer.Option("--axes", help="Two wrench components, e.g. Fx,Mz (3D names Fx..Tz; 2D Fx,Fy,Mz).")
+    ] = "Fx,Tz",
     range_: Annotated[str, typer.Option("--range", help="min:max for each axis, e.g. -20:20,-2:2.")] = "-10:10,-1:1",
     n: Annotated[int, typer.Option("--n", help="Grid points per axis.", min=2, max=1000)] = 100,
-    wrench: Annotated[str | None, typer.Option("--wrench", help="Base wrench for the other components (default 0).")] = None,
+    wrench: Annotated[
+        str | None, typer.Option("--wrench", help="Base wrench for the other components (default 0).")
+    ] = None,
     contacts: ContactsOpt = None,
     at: AtOpt = None,
     pose: PoseOpt = "start",
-    out: Annotated[Path, typer.Option("--out", help="PNG to write; a CSV with the same stem is written beside it.")] = Path("map.png"),
+    out: Annotated[
+        Path, typer.Option("--out", help="PNG to write; a CSV with the same stem is written beside it.")
+    ] = Path("map.png"),
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
     json_out: JsonOpt = False,
 ) -> None:
@@ -285,11 +333,21 @@ def map_(
         axis_names=(ax[0], ax[1]),
     )
     save_map(result, png, csv_path)
-    summary = {"png": str(png), "csv": str(csv_path), "counts": result.counts(), "time_s": result.time_s, "per_classification_s": result.time_s / result.modes.size}
+    counts = result.counts()
+    summary: dict[str, Any] = {
+        "png": str(png),
+        "csv": str(csv_path),
+        "counts": counts,
+        "time_s": result.time_s,
+        "per_classification_s": result.time_s / result.modes.size,
+    }
     if json_out:
         _emit_json(summary)
     else:
-        typer.echo(f"wrote {png} and {csv_path}: {result.modes.size} pushes in {result.time_s:.2f} s; " + ", ".join(f"{k} {v}" for k, v in summary["counts"].items()))
+        typer.echo(
+            f"wrote {png} and {csv_path}: {result.modes.size} pushes in {result.time_s:.2f} s; "
+            + ", ".join(f"{k} {v}" for k, v in counts.items())
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -309,7 +367,11 @@ def main(argv: list[str] | None = None) -> int:
         _err("aborted")
         return 130
     except click_exc.UsageError as exc:
-        hint = f" (see 'fixplan {exc.ctx.info_name} --help')" if exc.ctx is not None and exc.ctx.info_name != "fixplan" else " (see 'fixplan --help')"
+        hint = (
+            f" (see 'fixplan {exc.ctx.info_name} --help')"
+            if exc.ctx is not None and exc.ctx.info_name != "fixplan"
+            else " (see 'fixplan --help')"
+        )
         _err(exc.format_message().replace("\n", " ") + hint)
         return 2
     except click_exc.ClickException as exc:

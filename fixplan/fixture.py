@@ -132,9 +132,7 @@ class Fixture:
             return self.goal_given
         result = solve_goal(self.workpiece, self.locators, self.start)
         if not result.converged:
-            raise InfeasibleError(
-                f"{self.source}: no pose touches all locators (largest gap {result.max_gap_m:.3g} m)"
-            )
+            raise InfeasibleError(f"{self.source}: no pose touches all locators (largest gap {result.max_gap_m:.3g} m)")
         return result.pose
 
     def gravity_wrench(self) -> FloatArray:
@@ -164,7 +162,9 @@ def load(path: str | Path, tolerances: Tolerances = DEFAULT) -> Fixture:
     return loads(text, source=source, base_dir=path.parent, tolerances=tolerances)
 
 
-def loads(text: str, source: str = "<string>", base_dir: Path | None = None, tolerances: Tolerances = DEFAULT) -> Fixture:
+def loads(
+    text: str, source: str = "<string>", base_dir: Path | None = None, tolerances: Tolerances = DEFAULT
+) -> Fixture:
     """Validate fixture TOML text (see :func:`load`)."""
     try:
         data = tomllib.loads(text)
@@ -195,7 +195,11 @@ class _Builder:
         scene = r.table(data, "scene", "scene", required=True) or {}
         r.unknown_keys(scene, ("name", "dimension", "gravity"), "scene")
         name = r.string(scene, "name", "scene.name", required=True) or "?"
-        dim = r.integer(scene, "dimension", "scene.dimension", required=False, allowed=(2, 3)) if "dimension" in scene else 3
+        dim = (
+            r.integer(scene, "dimension", "scene.dimension", required=False, allowed=(2, 3))
+            if "dimension" in scene
+            else 3
+        )
         if dim is None:
             # Without a valid dimension nothing else can be checked meaningfully.
             raise FixtureError(self.source, r.issues)
@@ -243,7 +247,10 @@ class _Builder:
         kind = t.get("shape")
         other = SHAPES_2D if dim == 3 else SHAPES_3D
         if isinstance(kind, str) and kind in other:
-            r.error("workpiece.shape", f"got {kind!r}, a {5 - dim}D shape (expected one of: {', '.join(shapes)} for a {dim}D scene)")
+            r.error(
+                "workpiece.shape",
+                f"got {kind!r}, a {5 - dim}D shape (expected one of: {', '.join(shapes)} for a {dim}D scene)",
+            )
             kind = None
         else:
             kind = r.string(t, "shape", "workpiece.shape", required=True, choices=shapes)
@@ -320,9 +327,11 @@ class _Builder:
             r.error("workpiece.vertices", "vertices are clockwise (expected counter-clockwise)")
             return None
         if not np.all(cross > 0):
-            r.error("workpiece.vertices", "polygon is not strictly convex (expected a convex polygon, counter-clockwise)")
+            r.error(
+                "workpiece.vertices", "polygon is not strictly convex (expected a convex polygon, counter-clockwise)"
+            )
             return None
-        return Polygon(tuple(tuple(v) for v in verts))
+        return Polygon(tuple((float(v[0]), float(v[1])) for v in verts))
 
     def inertia(self, t: dict, dim: int) -> FloatArray | None:
         r = self.r
@@ -331,7 +340,9 @@ class _Builder:
         if dim == 2:
             izz = r.number(t, "inertia", "workpiece.inertia", exclusive_minimum=0.0, what="Izz [kg·m²]")
             return None if izz is None else np.array([[izz]])
-        vals = r.vector(t, "inertia", "workpiece.inertia", 3, what="principal moments [Ixx, Iyy, Izz]", dimension_hint=3)
+        vals = r.vector(
+            t, "inertia", "workpiece.inertia", 3, what="principal moments [Ixx, Iyy, Izz]", dimension_hint=3
+        )
         if vals is None:
             return None
         a, b, c = vals
@@ -339,7 +350,10 @@ class _Builder:
             r.error("workpiece.inertia", f"got {vals} (expected a positive-definite inertia: every moment > 0)")
             return None
         if a + b < c or a + c < b or b + c < a:
-            r.error("workpiece.inertia", f"got {vals} (expected moments satisfying the triangle inequality, as any rigid body does)")
+            r.error(
+                "workpiece.inertia",
+                f"got {vals} (expected moments satisfying the triangle inequality, as any rigid body does)",
+            )
             return None
         return np.diag(vals)
 
@@ -380,7 +394,9 @@ class _Builder:
             name = self._name(entry, path, seen)
             pos = r.vector(entry, "position", f"{path}.position", dim, required=True, dimension_hint=dim)
             radius = r.number(entry, "radius", f"{path}.radius", default=0.0, minimum=0.0, what="a tip radius [m]")
-            mu = r.number(entry, "friction", f"{path}.friction", required=True, minimum=0.0, what="a friction coefficient")
+            mu = r.number(
+                entry, "friction", f"{path}.friction", required=True, minimum=0.0, what="a friction coefficient"
+            )
             torsion = self._torsion(entry, path, dim)
             face = None
             if "face" in entry:
@@ -438,9 +454,11 @@ class _Builder:
             if normal is not None and np.linalg.norm(normal) <= 1e-12:
                 r.error(f"{path}.normal", "got a zero vector (expected a direction)")
                 normal = None
-            mu = r.number(entry, "friction", f"{path}.friction", required=True, minimum=0.0, what="a friction coefficient")
+            mu = r.number(
+                entry, "friction", f"{path}.friction", required=True, minimum=0.0, what="a friction coefficient"
+            )
             torsion = self._torsion(entry, path, dim)
-            if None in (name, point, normal, mu, torsion):
+            if name is None or point is None or normal is None or mu is None or torsion is None:
                 continue
             n = np.array(normal) / np.linalg.norm(normal)
             out.append(ExplicitContact(name, np.array(point), n, mu, torsion))  # type: ignore[arg-type]
@@ -452,8 +470,17 @@ class _Builder:
         if t is None:
             return Manipulator()
         r.unknown_keys(t, ("max_force", "max_torque"), "manipulator")
-        f = r.number(t, "max_force", "manipulator.max_force", default=float("inf"), exclusive_minimum=0.0, what="a force [N]")
-        m = r.number(t, "max_torque", "manipulator.max_torque", default=float("inf"), exclusive_minimum=0.0, what="a torque [N·m]")
+        f = r.number(
+            t, "max_force", "manipulator.max_force", default=float("inf"), exclusive_minimum=0.0, what="a force [N]"
+        )
+        m = r.number(
+            t,
+            "max_torque",
+            "manipulator.max_torque",
+            default=float("inf"),
+            exclusive_minimum=0.0,
+            what="a torque [N·m]",
+        )
         return Manipulator(f if f is not None else float("inf"), m if m is not None else float("inf"))
 
     def simulation(self) -> SimulationSettings:
@@ -462,9 +489,33 @@ class _Builder:
         if t is None:
             return SimulationSettings()
         r.unknown_keys(t, ("timestep", "restitution", "tolerance"), "simulation")
-        h = r.number(t, "timestep", "simulation.timestep", default=1e-3, exclusive_minimum=0.0, maximum=1.0, what="a time step [s]")
-        e = r.number(t, "restitution", "simulation.restitution", default=0.0, minimum=0.0, maximum=1.0, what="a restitution coefficient")
-        tol = r.number(t, "tolerance", "simulation.tolerance", default=1e-8, exclusive_minimum=0.0, maximum=1.0, what="a solver tolerance")
+        h = r.number(
+            t,
+            "timestep",
+            "simulation.timestep",
+            default=1e-3,
+            exclusive_minimum=0.0,
+            maximum=1.0,
+            what="a time step [s]",
+        )
+        e = r.number(
+            t,
+            "restitution",
+            "simulation.restitution",
+            default=0.0,
+            minimum=0.0,
+            maximum=1.0,
+            what="a restitution coefficient",
+        )
+        tol = r.number(
+            t,
+            "tolerance",
+            "simulation.tolerance",
+            default=1e-8,
+            exclusive_minimum=0.0,
+            maximum=1.0,
+            what="a solver tolerance",
+        )
         return SimulationSettings(h or 1e-3, e or 0.0, tol or 1e-8)
 
     # -- checks that need the whole model -------------------------------------------------------------
@@ -491,18 +542,27 @@ class _Builder:
                 )
         if r.issues or not fixture.is_full:
             if fixture.goal_given is not None and not fixture.is_full and not r.issues:
-                r.error("workpiece.goal", f"a goal needs a full fixture ({6 if fixture.dimension == 3 else 3} locators); this one has {len(locs)}")
+                r.error(
+                    "workpiece.goal",
+                    f"a goal needs a full fixture ({6 if fixture.dimension == 3 else 3} locators); this one has {len(locs)}",
+                )
             return
         if fixture.goal_given is not None:
             goal = fixture.goal_given
             for loc in locs:
                 gap = locator_contact(wp, goal, loc).gap_m
                 if abs(gap) > tol.goal_gap_m:
-                    r.error("workpiece.goal", f"locator {loc.name} does not touch at the given goal (gap {gap:.3g} m; expected |gap| ≤ {tol.goal_gap_m:g} m)")
+                    r.error(
+                        "workpiece.goal",
+                        f"locator {loc.name} does not touch at the given goal (gap {gap:.3g} m; expected |gap| ≤ {tol.goal_gap_m:g} m)",
+                    )
         else:
             result = solve_goal(wp, locs, fixture.start)
             if not result.converged:
-                r.error("locator", f"no pose touches all {len(locs)} locators (largest gap {result.max_gap_m:.3g} m after {result.iterations} iterations)")
+                r.error(
+                    "locator",
+                    f"no pose touches all {len(locs)} locators (largest gap {result.max_gap_m:.3g} m after {result.iterations} iterations)",
+                )
                 return
             goal = result.pose
             object.__setattr__(fixture, "goal", goal)  # cache the computed goal

@@ -151,7 +151,7 @@ class ContactSet:
 
     @cached_property
     def M_inv(self) -> FloatArray:
-        return np.linalg.inv(self.mass_matrix)
+        return np.asarray(np.linalg.inv(self.mass_matrix), dtype=np.float64)
 
     @cached_property
     def mu(self) -> FloatArray:

@@ -124,7 +124,9 @@ def save_map(result: JammingMap, png: Path, csv_path: Path | None = None) -> Non
     ax.set_ylabel(result.axis_names[1])
     ax.set_title(result.title, fontsize=9)
     present = [m for m in MODES if (result.modes == m).any()]
-    ax.legend(handles=[Patch(color=MODE_COLORS[m], label=m) for m in present], loc="upper right", fontsize=8, framealpha=0.9)
+    ax.legend(
+        handles=[Patch(color=MODE_COLORS[m], label=m) for m in present], loc="upper right", fontsize=8, framealpha=0.9
+    )
     fig.tight_layout()
     fig.savefig(png)
     plt.close(fig)

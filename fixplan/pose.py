@@ -112,7 +112,9 @@ def matrix_from_quaternion_wxyz(q: ArrayLike) -> FloatArray:
 
 def cross2(a: ArrayLike, b: ArrayLike) -> float:
     """Scalar planar cross product ``a_x b_y − a_y b_x``."""
-    return float(a[0] * b[1] - a[1] * b[0])  # type: ignore[index]
+    u = np.asarray(a, dtype=float)
+    v = np.asarray(b, dtype=float)
+    return float(u[0] * v[1] - u[1] * v[0])
 
 
 @dataclass(frozen=True)

@@ -107,7 +107,9 @@ class Reader:
             return None
         return value
 
-    def integer(self, table: Mapping[str, Any], name: str, path: str, *, required: bool, allowed: tuple[int, ...]) -> int | None:
+    def integer(
+        self, table: Mapping[str, Any], name: str, path: str, *, required: bool, allowed: tuple[int, ...]
+    ) -> int | None:
         expected = " or ".join(str(a) for a in allowed)
         if name not in table:
             if required:

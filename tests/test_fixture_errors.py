@@ -33,22 +33,95 @@ CASES = [
     ("bad-format", GOOD.replace("format = 1", "format = 2"), "format", "got the number 2 (expected 1)"),
     ("unknown-key", GOOD.replace('name = "t"', 'name = "t"\ncolour = "red"'), "scene.colour", "unknown key"),
     ("negative-mass", GOOD.replace("mass = 2.0", "mass = -1.0"), "workpiece.mass", "expected a mass [kg] > 0"),
-    ("wrong-length", GOOD.replace("size = [0.2, 0.1, 0.05]", "size = [0.2, 0.1]"), "workpiece.size", "got 2 numbers (expected 3 for a 3D scene)"),
-    ("string-number", GOOD.replace("friction = 0.3", 'friction = "high"'), "locator.B1.friction", "got the string 'high' (expected a friction coefficient)"),
-    ("negative-friction", GOOD.replace("friction = 0.3", "friction = -0.1"), "locator.B1.friction", "expected a friction coefficient ≥ 0"),
+    (
+        "wrong-length",
+        GOOD.replace("size = [0.2, 0.1, 0.05]", "size = [0.2, 0.1]"),
+        "workpiece.size",
+        "got 2 numbers (expected 3 for a 3D scene)",
+    ),
+    (
+        "string-number",
+        GOOD.replace("friction = 0.3", 'friction = "high"'),
+        "locator.B1.friction",
+        "got the string 'high' (expected a friction coefficient)",
+    ),
+    (
+        "negative-friction",
+        GOOD.replace("friction = 0.3", "friction = -0.1"),
+        "locator.B1.friction",
+        "expected a friction coefficient ≥ 0",
+    ),
     ("nan", GOOD.replace("mass = 2.0", "mass = nan"), "workpiece.mass", "expected a finite number"),
-    ("negative-radius", GOOD.replace("radius = 0.001", "radius = -0.001"), "locator.B1.radius", "expected a tip radius [m] ≥ 0"),
-    ("bad-inertia", GOOD.replace("mass = 2.0", "mass = 2.0\ninertia = [1.0, 1.0, 3.0]"), "workpiece.inertia", "triangle inequality"),
-    ("nonpositive-inertia", GOOD.replace("mass = 2.0", "mass = 2.0\ninertia = [1.0, 0.0, 1.0]"), "workpiece.inertia", "positive-definite"),
-    ("twin-locators", GOOD + '[[locator]]\nname = "B2"\nposition = [0.05, 0.03, -0.001]\nradius = 0.001\nfriction = 0.3\n', "locator.B2.position", "at one place"),
-    ("inside", GOOD.replace("position = [0.05, 0.03, -0.001]", "position = [0.05, 0.03, 0.01]"), "locator.B1.position", "inside the workpiece"),
-    ("2d-with-3d-vector", GOOD.replace("dimension = 3", "dimension = 2").replace('shape = "box"', 'shape = "rectangle"').replace("size = [0.2, 0.1, 0.05]", "size = [0.2, 0.1]").replace("rpy_deg = [0.0, 0.0, 0.0]", "angle_deg = 0.0"), "workpiece.start.position", "got 3 numbers (expected 2 for a 2D scene)"),
+    (
+        "negative-radius",
+        GOOD.replace("radius = 0.001", "radius = -0.001"),
+        "locator.B1.radius",
+        "expected a tip radius [m] ≥ 0",
+    ),
+    (
+        "bad-inertia",
+        GOOD.replace("mass = 2.0", "mass = 2.0\ninertia = [1.0, 1.0, 3.0]"),
+        "workpiece.inertia",
+        "triangle inequality",
+    ),
+    (
+        "nonpositive-inertia",
+        GOOD.replace("mass = 2.0", "mass = 2.0\ninertia = [1.0, 0.0, 1.0]"),
+        "workpiece.inertia",
+        "positive-definite",
+    ),
+    (
+        "twin-locators",
+        GOOD + '[[locator]]\nname = "B2"\nposition = [0.05, 0.03, -0.001]\nradius = 0.001\nfriction = 0.3\n',
+        "locator.B2.position",
+        "at one place",
+    ),
+    (
+        "inside",
+        GOOD.replace("position = [0.05, 0.03, -0.001]", "position = [0.05, 0.03, 0.01]"),
+        "locator.B1.position",
+        "inside the workpiece",
+    ),
+    (
+        "2d-with-3d-vector",
+        GOOD.replace("dimension = 3", "dimension = 2")
+        .replace('shape = "box"', 'shape = "rectangle"')
+        .replace("size = [0.2, 0.1, 0.05]", "size = [0.2, 0.1]")
+        .replace("rpy_deg = [0.0, 0.0, 0.0]", "angle_deg = 0.0"),
+        "workpiece.start.position",
+        "got 3 numbers (expected 2 for a 2D scene)",
+    ),
     ("shape-of-other-dimension", GOOD.replace('shape = "box"', 'shape = "disk"'), "workpiece.shape", "a 2D shape"),
-    ("mesh-refused", GOOD.replace('shape = "box"\nsize = [0.2, 0.1, 0.05]', 'shape = "mesh"\nfile = "part.stl"'), "workpiece.shape", "mesh workpieces are not supported yet"),
-    ("duplicate-name", GOOD + '[[locator]]\nname = "B1"\nposition = [0.15, 0.03, -0.001]\nradius = 0.001\nfriction = 0.3\n', "locator[1].name", "used twice"),
+    (
+        "mesh-refused",
+        GOOD.replace('shape = "box"\nsize = [0.2, 0.1, 0.05]', 'shape = "mesh"\nfile = "part.stl"'),
+        "workpiece.shape",
+        "mesh workpieces are not supported yet",
+    ),
+    (
+        "duplicate-name",
+        GOOD + '[[locator]]\nname = "B1"\nposition = [0.15, 0.03, -0.001]\nradius = 0.001\nfriction = 0.3\n',
+        "locator[1].name",
+        "used twice",
+    ),
     ("bad-toml", GOOD.replace("mass = 2.0", "mass = = 2.0"), "<toml>", "invalid TOML"),
-    ("zero-normal", GOOD + '[[contact]]\nname = "c"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 0.0]\nfriction = 0.2\n', "contact.c.normal", "zero vector"),
-    ("torsion-in-2d", GOOD.replace("dimension = 3", "dimension = 2").replace('shape = "box"', 'shape = "rectangle"').replace("size = [0.2, 0.1, 0.05]", "size = [0.2, 0.1]").replace("position = [0.1, 0.05, 0.025], rpy_deg = [0.0, 0.0, 0.0]", "position = [0.1, 0.05], angle_deg = 0.0").replace("position = [0.05, 0.03, -0.001]", "position = [0.05, -0.001]").replace("friction = 0.3", "friction = 0.3\ntorsion = 0.01"), "locator.B1.torsion", "3D only"),
+    (
+        "zero-normal",
+        GOOD + '[[contact]]\nname = "c"\npoint = [0.0, 0.0, 0.0]\nnormal = [0.0, 0.0, 0.0]\nfriction = 0.2\n',
+        "contact.c.normal",
+        "zero vector",
+    ),
+    (
+        "torsion-in-2d",
+        GOOD.replace("dimension = 3", "dimension = 2")
+        .replace('shape = "box"', 'shape = "rectangle"')
+        .replace("size = [0.2, 0.1, 0.05]", "size = [0.2, 0.1]")
+        .replace("position = [0.1, 0.05, 0.025], rpy_deg = [0.0, 0.0, 0.0]", "position = [0.1, 0.05], angle_deg = 0.0")
+        .replace("position = [0.05, 0.03, -0.001]", "position = [0.05, -0.001]")
+        .replace("friction = 0.3", "friction = 0.3\ntorsion = 0.01"),
+        "locator.B1.torsion",
+        "3D only",
+    ),
 ]
 
 

@@ -28,8 +28,8 @@ start = {{ position = [0.0, 0.0, 0.025] }}
     )
 
 
-def peg(l, r=0.01, mu=0.3, gravity="[0.0, 0.0]"):
-    """2D peg in a hole, two-point contact: A on the left wall at height l (normal +x), B on the right at 0 (normal -x).
+def peg(depth, r=0.01, mu=0.3, gravity="[0.0, 0.0]"):
+    """2D peg in a hole, two-point contact: A on the left wall at height depth (normal +x), B on the right at 0 (normal -x).
 
     The body origin is the peg tip centre (0, 0)."""
     return fixplan.loads(
@@ -40,12 +40,12 @@ dimension = 2
 gravity = {gravity}
 [workpiece]
 shape = "rectangle"
-size = [{2 * r}, {4 * l + 0.1}]
+size = [{2 * r}, {4 * depth + 0.1}]
 mass = 0.5
 start = {{ position = [0.0, 0.0] }}
 [[contact]]
 name = "A"
-point = [{-r}, {l}]
+point = [{-r}, {depth}]
 normal = [1.0, 0.0]
 friction = {mu}
 [[contact]]
@@ -99,7 +99,15 @@ def test_extreme_friction(mu):
         assert r.mode == "slides" and r.acceleration[0] == pytest.approx(0.1 * 2 * 9.81 * 2 / 2, rel=1e-8)
 
 
-@pytest.mark.parametrize("wrench", [[1.0, 0.3, -2.0, 0, 0, 0.01], [0.2, -0.1, -1.0, 0.0, 0.0, 0.0], [3.0, 1.0, -1.0, 0, 0, 0.05], [0, 0, 1.0, 0, 0, 0]])
+@pytest.mark.parametrize(
+    "wrench",
+    [
+        [1.0, 0.3, -2.0, 0, 0, 0.01],
+        [0.2, -0.1, -1.0, 0.0, 0.0, 0.0],
+        [3.0, 1.0, -1.0, 0, 0, 0.05],
+        [0, 0, 1.0, 0, 0, 0],
+    ],
+)
 def test_mode_invariant_under_scaling_in_zero_gravity(wrench):
     """Without gravity the problem is homogeneous: 1e-6 N and 1e6 N give the same verdict."""
     f = box_on_supports(gravity="[0.0, 0.0, 0.0]")
@@ -121,7 +129,16 @@ def test_backends_agree():
     """The Clarabel matrix path and the independent cvxpy model give the same modes and margins."""
     f = box_on_supports(mu=0.25)
     rng = np.random.default_rng(0)
-    W = np.column_stack([rng.uniform(-8, 8, 12), rng.uniform(-8, 8, 12), rng.uniform(-30, 5, 12), np.zeros(12), np.zeros(12), rng.uniform(-0.3, 0.3, 12)])
+    W = np.column_stack(
+        [
+            rng.uniform(-8, 8, 12),
+            rng.uniform(-8, 8, 12),
+            rng.uniform(-30, 5, 12),
+            np.zeros(12),
+            np.zeros(12),
+            rng.uniform(-0.3, 0.3, 12),
+        ]
+    )
     fast = classify(f, W)
     ref = classify(f, W, backend="cvxpy")
     for a, b in zip(fast, ref, strict=True):
@@ -177,28 +194,28 @@ friction = 0.0
 
 
 def test_wedging_iff_depth_below_2_r_mu():
-    """Two-point contact with horizontal normals wedges iff l < 2 r μ (Whitney)."""
+    """Two-point contact with horizontal normals wedges iff depth < 2 r μ (Whitney)."""
     r, mu = 0.01, 0.3
-    for l in (0.5 * 2 * r * mu, 0.9 * 2 * r * mu):
-        assert can_wedge(fixplan.contact_set(peg(l, r, mu)))
-    for l in (1.1 * 2 * r * mu, 3 * 2 * r * mu):
-        assert not can_wedge(fixplan.contact_set(peg(l, r, mu)))
+    for depth in (0.5 * 2 * r * mu, 0.9 * 2 * r * mu):
+        assert can_wedge(fixplan.contact_set(peg(depth, r, mu)))
+    for depth in (1.1 * 2 * r * mu, 3 * 2 * r * mu):
+        assert not can_wedge(fixplan.contact_set(peg(depth, r, mu)))
     assert wedge_force(fixplan.contact_set(peg(3 * 2 * r * mu, r, mu))) == pytest.approx(0.0, abs=1e-7)
 
 
-def _peg_expected(Fx, Fy, Mz, l, r, mu):
+def _peg_expected(Fx, Fy, Mz, depth, r, mu):
     """Closed form for the two-point peg (moments about the tip centre, insertion pushes Fy < 0).
 
-    Sliding down (friction +y at both contacts): N_A = (Mz + μ r Fx)/l, N_B = Fx + N_A, and the
+    Sliding down (friction +y at both contacts): N_A = (Mz + μ r Fx)/depth, N_B = Fx + N_A, and the
     peg accelerates down iff −Fy > μ (N_A + N_B). Static balance: with T_A free,
-    N_A = (Mz − r Fy − 2 r T_A)/l, N_B = Fx + N_A, T_B = −Fy − T_A, |T| ≤ μ N, N ≥ 0.
+    N_A = (Mz − r Fy − 2 r T_A)/depth, N_B = Fx + N_A, T_B = −Fy − T_A, |T| ≤ μ N, N ≥ 0.
     """
-    NA = (Mz + mu * r * Fx) / l
+    NA = (Mz + mu * r * Fx) / depth
     NB = Fx + NA
     if NA > 0 and NB > 0 and -Fy > mu * (NA + NB):
         return "slides"
     for TA in np.linspace(-abs(Fy) * 5 - 10, abs(Fy) * 5 + 10, 200001):
-        nA = (Mz - r * Fy - 2 * r * TA) / l
+        nA = (Mz - r * Fy - 2 * r * TA) / depth
         nB = Fx + nA
         TB = -Fy - TA
         if nA >= 0 and nB >= 0 and abs(TA) <= mu * nA and abs(TB) <= mu * nB:
@@ -208,12 +225,12 @@ def _peg_expected(Fx, Fy, Mz, l, r, mu):
 
 def test_peg_whitney_two_point_contact():
     """Inside the sliding region (Whitney's parallelogram side for two-point contact) the peg slides; outside it jams or a contact opens."""
-    l, r, mu = 0.03, 0.01, 0.3
-    f = peg(l, r, mu)
+    depth, r, mu = 0.03, 0.01, 0.3
+    f = peg(depth, r, mu)
     grid = [(Fx, -10.0, Mz) for Fx in (-4.0, -1.0, 0.5, 2.0, 5.0) for Mz in (-0.2, -0.05, 0.02, 0.1, 0.3)]
     results = classify(f, grid)
     for (Fx, Fy, Mz), res in zip(grid, results, strict=True):
-        expected = _peg_expected(Fx, Fy, Mz, l, r, mu)
+        expected = _peg_expected(Fx, Fy, Mz, depth, r, mu)
         if expected == "slides":
             assert res.mode == "slides", (Fx, Mz, res.mode)
         elif expected == "balanced":

@@ -39,7 +39,11 @@ def test_contact_jacobian_matches_finite_differences(shape, rng):
     wp = _workpiece(shape)
     d = shape.dimension
     for _ in range(5):
-        pose = Pose.from_rpy_deg(rng.normal(size=3) * 0.05, rng.uniform(-30, 30, 3)) if d == 3 else Pose.from_angle_deg(rng.normal(size=2) * 0.05, rng.uniform(-30, 30))
+        pose = (
+            Pose.from_rpy_deg(rng.normal(size=3) * 0.05, rng.uniform(-30, 30, 3))
+            if d == 3
+            else Pose.from_angle_deg(rng.normal(size=2) * 0.05, rng.uniform(-30, 30))
+        )
         # a locator tip outside the part, 1 cm from its surface
         direction = rng.normal(size=d)
         direction /= np.linalg.norm(direction)
@@ -95,6 +99,11 @@ def test_polygon_inertia_equals_rectangle_closed_form():
 
 
 def test_inertia_closed_forms():
-    assert np.allclose(Cylinder(0.1, 0.4).inertia_body(2.0), np.diag([2 * (3 * 0.01 + 0.16) / 12] * 2 + [0.5 * 2 * 0.01]))
+    assert np.allclose(
+        Cylinder(0.1, 0.4).inertia_body(2.0), np.diag([2 * (3 * 0.01 + 0.16) / 12] * 2 + [0.5 * 2 * 0.01])
+    )
     assert np.allclose(Sphere(0.1).inertia_body(2.0), np.eye(3) * 0.4 * 2 * 0.01)
-    assert np.allclose(Box((0.2, 0.1, 0.05)).inertia_body(2.0), np.diag([2 * (0.01 + 0.0025) / 12, 2 * (0.04 + 0.0025) / 12, 2 * (0.04 + 0.01) / 12]))
+    assert np.allclose(
+        Box((0.2, 0.1, 0.05)).inertia_body(2.0),
+        np.diag([2 * (0.01 + 0.0025) / 12, 2 * (0.04 + 0.0025) / 12, 2 * (0.04 + 0.01) / 12]),
+    )

@@ -82,7 +82,9 @@ class ClarabelProgram:
         self._A = sp.csc_matrix(program.A)
         self._cones = _clarabel_cones(program)
         self._settings = clarabel_settings(eps)
-        self._solver = clarabel.DefaultSolver(self._P, program.c, self._A, program.b.copy(), self._cones, self._settings)
+        self._solver = clarabel.DefaultSolver(
+            self._P, program.c, self._A, program.b.copy(), self._cones, self._settings
+        )
         self._fresh = True
 
     def solve(self, b: FloatArray) -> ConeSolution:

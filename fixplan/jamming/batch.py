@@ -63,7 +63,11 @@ def classify_batch(
         return out
     n_chunks = max(jobs * 4, 1)
     bounds = np.linspace(0, n, n_chunks + 1).astype(int)
-    tasks = [(cs, gravity, tol, backend, W_com[a:b], W_given[a:b]) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
+    tasks = [
+        (cs, gravity, tol, backend, W_com[a:b], W_given[a:b])
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+        if b > a
+    ]
     results: list[list[Classification]] = [[] for _ in tasks]
     ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else mp.get_context()
     with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:

@@ -76,7 +76,10 @@ class Classification:
     def to_json(self) -> dict[str, Any]:
         forces = {}
         for name, lam in self.contact_forces.items():
-            entry: dict[str, Any] = {"normal": float(lam[0]), "tangential": [float(x) for x in lam[1 : 1 + (1 if len(self.contact_frames[name][0]) == 2 else 2)]]}
+            entry: dict[str, Any] = {
+                "normal": float(lam[0]),
+                "tangential": [float(x) for x in lam[1 : 1 + (1 if len(self.contact_frames[name][0]) == 2 else 2)]],
+            }
             if len(lam) == 4:
                 entry["spin"] = float(lam[3])
             entry["force_world"] = [float(x) for x in self.force_world(name)]
@@ -97,7 +100,9 @@ class Classification:
 class Classifier:
     """Classifies many wrenches for one contact set; programs are built once and reused."""
 
-    def __init__(self, cs: ContactSet, gravity_wrench: ArrayLike, *, tolerances: Tolerances = DEFAULT, backend: str = "clarabel"):
+    def __init__(
+        self, cs: ContactSet, gravity_wrench: ArrayLike, *, tolerances: Tolerances = DEFAULT, backend: str = "clarabel"
+    ):
         if backend not in BACKENDS:
             raise InputError(f"unknown backend {backend!r} (expected one of: {', '.join(BACKENDS)})")
         if len(cs) == 0:
@@ -115,7 +120,9 @@ class Classifier:
             "roll": b.projector(b.N_roll),
         }
         self._programs: dict[str, ClarabelProgram] = {}
-        self._witness = WitnessSearch(cs, b.C, b.N_maintain, slip_rel=tolerances.slip_rel, res_tol=max(tolerances.balance_rel * 1e-3, 1e-12))
+        self._witness = WitnessSearch(
+            cs, b.C, b.N_maintain, slip_rel=tolerances.slip_rel, res_tol=max(tolerances.balance_rel * 1e-3, 1e-12)
+        )
         self.frames = {c.name: np.vstack([c.normal_world, c.tangents_world]) for c in cs.contacts}
 
     # -- programs ------------------------------------------------------------------------------
@@ -152,11 +159,32 @@ class Classifier:
         names = cs.names
         zero_forces = {n: np.zeros(c.size) for n, c in zip(names, cs.contacts, strict=True)}
 
-        def result(mode: str, margin: float, lam: FloatArray | None, certificate: str, reason: str, accel: FloatArray | None = None, **res: float) -> Classification:
+        def result(
+            mode: str,
+            margin: float,
+            lam: FloatArray | None,
+            certificate: str,
+            reason: str,
+            accel: FloatArray | None = None,
+            **res: float,
+        ) -> Classification:
             forces = dict(zero_forces)
             if lam is not None:
-                forces = {n: lam[o : o + c.size] * scale for n, o, c in zip(names, cs.offsets, cs.contacts, strict=True)}
-            return Classification(given, mode, margin, forces, certificate, reason, time.perf_counter() - t0, accel, dict(res), self.frames)
+                forces = {
+                    n: lam[o : o + c.size] * scale for n, o, c in zip(names, cs.offsets, cs.contacts, strict=True)
+                }
+            return Classification(
+                given,
+                mode,
+                margin,
+                forces,
+                certificate,
+                reason,
+                time.perf_counter() - t0,
+                accel,
+                dict(res),
+                self.frames,
+            )
 
         if not np.all(np.isfinite(w_e)):
             raise InputError(f"wrench has non-finite components: {list(given)}")
@@ -169,16 +197,37 @@ class Classifier:
         if normal_res <= tol.balance_rel:
             lam = np.zeros(cs.J.shape[0])
             lam[cs.offsets] = f_n
-            return result("held", normal_res * scale, lam, "normal-balance", "normal forces alone balance the wrench", normal_balance=normal_res)
+            return result(
+                "held",
+                normal_res * scale,
+                lam,
+                "normal-balance",
+                "normal forces alone balance the wrench",
+                normal_balance=normal_res,
+            )
 
         # 2. jammed: static balance with friction
         sol, lam = self._solve("balance", w_hat)
         margin = self._residual_of("balance", w_hat, lam) if sol.solved else float("nan")
         residuals = {"normal_balance": normal_res, "balance": margin, "cone_violation": sol.cone_violation}
         if not sol.solved:
-            return result("indeterminate", float("nan"), None, "none", f"static-balance program failed ({sol.status})", **residuals)
+            return result(
+                "indeterminate",
+                float("nan"),
+                None,
+                "none",
+                f"static-balance program failed ({sol.status})",
+                **residuals,
+            )
         if margin <= tol.balance_rel:
-            return result("jammed", margin * scale, lam, "static-balance", "balanced, but only with friction: the push jams", **residuals)
+            return result(
+                "jammed",
+                margin * scale,
+                lam,
+                "static-balance",
+                "balanced, but only with friction: the push jams",
+                **residuals,
+            )
         lam_balance = lam
 
         # 3. slides (Theorem 1's witness), else pivots (some contacts stick, the rest slide).
@@ -190,11 +239,35 @@ class Classifier:
             residuals["motion"] = witness.residual
             accel = witness.acceleration * scale
             if len(witness.sticking) == len(cs):
-                return result("rolls", margin * scale, witness.forces, "rolling", "the contacts are kept without slip while the body turns", accel, **residuals)
+                return result(
+                    "rolls",
+                    margin * scale,
+                    witness.forces,
+                    "rolling",
+                    "the contacts are kept without slip while the body turns",
+                    accel,
+                    **residuals,
+                )
             if not witness.sticking:
-                return result("slides", margin * scale, witness.forces, "sliding-witness", "every contact is kept and slides (Theorem 1)", accel, **residuals)
+                return result(
+                    "slides",
+                    margin * scale,
+                    witness.forces,
+                    "sliding-witness",
+                    "every contact is kept and slides (Theorem 1)",
+                    accel,
+                    **residuals,
+                )
             stuck = ", ".join(names[i] for i in witness.sticking)
-            return result("pivots", margin * scale, witness.forces, "pivot-witness", f"every contact is kept; {stuck} sticks while the others slide: the body turns about it", accel, **residuals)
+            return result(
+                "pivots",
+                margin * scale,
+                witness.forces,
+                "pivot-witness",
+                f"every contact is kept; {stuck} sticks while the others slide: the body turns about it",
+                accel,
+                **residuals,
+            )
 
         # 4. separates: no motion keeps every contact
         if self.builder.N_maintain.shape[1] == 0:
@@ -203,10 +276,24 @@ class Classifier:
             sol_m, lam_m = self._solve("maintain", w_hat)
             maintain = self._residual_of("maintain", w_hat, lam_m) if sol_m.solved else float("nan")
             if not sol_m.solved:
-                return result("indeterminate", margin * scale, lam_balance, "none", f"maintained-motion program failed ({sol_m.status})", **residuals)
+                return result(
+                    "indeterminate",
+                    margin * scale,
+                    lam_balance,
+                    "none",
+                    f"maintained-motion program failed ({sol_m.status})",
+                    **residuals,
+                )
         residuals["maintain"] = maintain
         if maintain > tol.balance_rel:
-            return result("separates", margin * scale, lam_balance, "no-maintained-motion", "no forces in the cones keep every contact: some contact opens", **residuals)
+            return result(
+                "separates",
+                margin * scale,
+                lam_balance,
+                "no-maintained-motion",
+                "no forces in the cones keep every contact: some contact opens",
+                **residuals,
+            )
 
         # 5. rolls: a motion with no slip at any contact
         if self.builder.N_roll.shape[1] > 0:
@@ -215,17 +302,44 @@ class Classifier:
             residuals["roll"] = roll
             if sol_r.solved and roll <= tol.balance_rel:
                 accel = cs.M_inv @ (w_hat + cs.J.T @ lam_r) * scale
-                return result("rolls", margin * scale, lam_r, "rolling", "the contacts are kept without slip while the body turns", accel, **residuals)
+                return result(
+                    "rolls",
+                    margin * scale,
+                    lam_r,
+                    "rolling",
+                    "the contacts are kept without slip while the body turns",
+                    accel,
+                    **residuals,
+                )
 
         # 6. separates after all: a motion that opens some contacts, consistent with every law
         opening = self._witness.opening(w_hat)
         if opening is not None:
             residuals["motion"] = opening.residual
             opened = ", ".join(names[i] for i in opening.opened)
-            return result("separates", margin * scale, opening.forces, "opening-witness", f"{opened} opens while the other contacts slide or stick: a motion consistent with every contact law (none keeping every contact was found)", opening.acceleration * scale, **residuals)
+            return result(
+                "separates",
+                margin * scale,
+                opening.forces,
+                "opening-witness",
+                f"{opened} opens while the other contacts slide or stick: a motion consistent with every contact law (none keeping every contact was found)",
+                opening.acceleration * scale,
+                **residuals,
+            )
 
-        near = " (static-balance residual within 100× tolerance: near a boundary)" if margin <= 100 * tol.balance_rel else ""
-        return result("indeterminate", margin * scale, lam_balance, "none", "the body moves keeping its contacts, but no sliding, pivoting or rolling motion was found" + near, **residuals)
+        near = (
+            " (static-balance residual within 100× tolerance: near a boundary)"
+            if margin <= 100 * tol.balance_rel
+            else ""
+        )
+        return result(
+            "indeterminate",
+            margin * scale,
+            lam_balance,
+            "none",
+            "the body moves keeping its contacts, but no sliding, pivoting or rolling motion was found" + near,
+            **residuals,
+        )
 
 
 def wrench_array(wrenches: ArrayLike | Sequence[Sequence[float]], ndof: int) -> FloatArray:

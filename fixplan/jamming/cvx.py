@@ -18,7 +18,9 @@ from fixplan.kinematics import ContactSet
 FloatArray = NDArray[np.float64]
 
 
-def least_residual(cs: ContactSet, w_hat: FloatArray, P: FloatArray, C: FloatArray, eps: float = 1e-9) -> tuple[ConeSolution, FloatArray]:
+def least_residual(
+    cs: ContactSet, w_hat: FloatArray, P: FloatArray, C: FloatArray, eps: float = 1e-9
+) -> tuple[ConeSolution, FloatArray]:
     """``min ‖P C (ŵ + Σ J_iᵀ λ_i)‖`` over ``λ_i`` in the exact friction cones.
 
     Returns the solution (``x`` = stacked full contact vectors λ) and λ itself.
@@ -52,7 +54,13 @@ def least_residual(cs: ContactSet, w_hat: FloatArray, P: FloatArray, C: FloatArr
     elapsed = time.perf_counter() - t0
     status = str(problem.status)
     solved = status in ("optimal", "optimal_inaccurate")
-    lam_full = np.concatenate([np.asarray(lam.value if lam.value is not None else np.zeros(lam.shape)).ravel() for lam in lambdas]) if lambdas else np.zeros(0)
+    lam_full = (
+        np.concatenate(
+            [np.asarray(lam.value if lam.value is not None else np.zeros(lam.shape)).ravel() for lam in lambdas]
+        )
+        if lambdas
+        else np.zeros(0)
+    )
     value = float(t.value) if t.value is not None else float("inf")
     iters = int(problem.solver_stats.num_iters or 0) if problem.solver_stats else 0
     return ConeSolution(lam_full, value, solved, status, iters, elapsed, 0.0), lam_full

@@ -91,10 +91,14 @@ def _roles(cs: ContactSet, a_hat: FloatArray, tol: float) -> dict[str, str]:
     for c, off in zip(cs.contacts, cs.offsets, strict=True):
         u = cs.J[off : off + c.size] @ a_hat
         if u[0] < -tol * scale:
-            raise InputError(f"the motion pushes the workpiece into contact {c.name} (normal rate {u[0]:.3g}); expected a motion that keeps or opens it")
+            raise InputError(
+                f"the motion pushes the workpiece into contact {c.name} (normal rate {u[0]:.3g}); expected a motion that keeps or opens it"
+            )
         if u[0] > tol * scale:
             roles[c.name] = "opening"
-        elif float(np.linalg.norm(u[1:3] if c.dimension == 3 else u[1:2])) > tol * scale or (c.soft and abs(u[3]) * c.torsion_m > tol * scale):
+        elif float(np.linalg.norm(u[1:3] if c.dimension == 3 else u[1:2])) > tol * scale or (
+            c.soft and abs(u[3]) * c.torsion_m > tol * scale
+        ):
             roles[c.name] = "sliding"
         else:
             roles[c.name] = "sticking"
@@ -149,7 +153,9 @@ def search_wrench(
             reason = f"the manipulator is too weak: this motion needs more than max_force {F_max:.3g} N or max_torque {T_max:.3g} N·m (unbounded search used ‖F‖ = {F_need:.3g} N){defaulted}"
             binding = ["max_force", "max_torque"]
         else:
-            reason = "no wrench moves the part this way while keeping the contacts (every such push jams or opens a contact)"
+            reason = (
+                "no wrench moves the part this way while keeping the contacts (every such push jams or opens a contact)"
+            )
             binding = []
         return WrenchSearch(False, None, 0.0, None, roles, {}, None, reason, binding, (F_max, T_max))
 
@@ -186,7 +192,15 @@ def _about_point(cs: ContactSet, w_com: FloatArray, point: FloatArray) -> FloatA
     return np.array([w_com[0], w_com[1], w_com[2] + cross2(off, w_com[:2])])
 
 
-def _build(cs: ContactSet, a_hat: FloatArray, roles: dict[str, str], w_g: FloatArray, about: FloatArray, F_max: float, T_max: float) -> tuple[ConeProgram, dict]:
+def _build(
+    cs: ContactSet,
+    a_hat: FloatArray,
+    roles: dict[str, str],
+    w_g: FloatArray,
+    about: FloatArray,
+    F_max: float,
+    T_max: float,
+) -> tuple[ConeProgram, dict]:
     """Variables x = (w [n], f_n sliding [ks], f sticking [reduced], s, τ)."""
     n, d = cs.ndof, cs.dimension
     slide = [i for i, c in enumerate(cs.contacts) if roles[c.name] == "sliding"]

@@ -78,14 +78,18 @@ class Rows:
         return kernels.system(self.M, self.Jall, self.off, self.size, self.mu_arr, self.Dm, w_e, z, self.code(roles))
 
     def newton(self, w_e: FloatArray, z0: FloatArray, roles: Roles, iterations: int = 30) -> FloatArray:
-        return kernels.newton(self.M, self.Jall, self.off, self.size, self.mu_arr, self.Dm, w_e, z0, self.code(roles), iterations)
+        return kernels.newton(
+            self.M, self.Jall, self.off, self.size, self.mu_arr, self.Dm, w_e, z0, self.code(roles), iterations
+        )
 
     def fixed_point(self, w_e: FloatArray, z0: FloatArray, sweeps: int = 4) -> FloatArray:
         """All-slide start: freeze slip directions at the current a, solve the linear system, repeat."""
         return kernels.fixed_point(self.M, self.Jall, self.off, self.size, self.mu_arr, self.Dm, w_e, z0, sweeps)
 
 
-def _accept(rows: Rows, w_e: FloatArray, z: FloatArray, roles: Roles, C: FloatArray, slip_rel: float, res_tol: float) -> MotionWitness | None:
+def _accept(
+    rows: Rows, w_e: FloatArray, z: FloatArray, roles: Roles, C: FloatArray, slip_rel: float, res_tol: float
+) -> MotionWitness | None:
     cs = rows.cs
     n = cs.ndof
     if not np.all(np.isfinite(z)):
@@ -95,7 +99,9 @@ def _accept(rows: Rows, w_e: FloatArray, z: FloatArray, roles: Roles, C: FloatAr
     _, _, lam = rows.system(w_e, z, roles)
     scale = max(float(np.linalg.norm(C @ w_e)), 1e-300)
     dyn = float(np.linalg.norm(C @ (cs.mass_matrix @ a - w_e - cs.J.T @ lam))) / scale
-    acc_ref = float(np.linalg.norm(a[: cs.dimension])) + float(np.linalg.norm(a[cs.dimension :])) * max(rows.lever, 1e-12)
+    acc_ref = float(np.linalg.norm(a[: cs.dimension])) + float(np.linalg.norm(a[cs.dimension :])) * max(
+        rows.lever, 1e-12
+    )
     if acc_ref <= 0.0 or dyn > res_tol:
         return None
     f_scale = max(float(np.abs(lam).max()), 1e-300)
@@ -173,7 +179,16 @@ def opening_patterns(k: int) -> list[Roles]:
 class WitnessSearch:
     """Searches role patterns for a consistent motion; one per contact set, reused per wrench."""
 
-    def __init__(self, cs: ContactSet, C: FloatArray, null_G: FloatArray, *, slip_rel: float = 1e-6, res_tol: float = 1e-9, rng_seed: int = 0):
+    def __init__(
+        self,
+        cs: ContactSet,
+        C: FloatArray,
+        null_G: FloatArray,
+        *,
+        slip_rel: float = 1e-6,
+        res_tol: float = 1e-9,
+        rng_seed: int = 0,
+    ):
         self.cs = cs
         self.C = C
         self.rows = Rows(cs)
@@ -264,7 +279,12 @@ class WitnessSearch:
             except np.linalg.LinAlgError:
                 continue
             a = z[:n]
-            if not all(r not in "+-" or rows.mu_arr[i] <= 0.0 or (1.0 if r == "+" else -1.0) * float(J[cs.offsets[i] + 1] @ a) > 0 for i, r in enumerate(pat)):
+            if not all(
+                r not in "+-"
+                or rows.mu_arr[i] <= 0.0
+                or (1.0 if r == "+" else -1.0) * float(J[cs.offsets[i] + 1] @ a) > 0
+                for i, r in enumerate(pat)
+            ):
                 continue
             witness = _accept(rows, w_e, z, (stick, opened), self.C, self.slip_rel, self.res_tol)
             if witness is not None:

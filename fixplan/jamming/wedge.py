@@ -1,4 +1,4 @@
-"""Wedging: can the contacts hold a self-equilibrated set of forces?
+"""Wedging: whether the contacts can hold a self-equilibrated set of forces.
 
 A contact set *wedges* when nonzero contact forces inside the friction cones balance each
 other with no applied wrench: ``∃ f ∈ K, f ≠ 0, Jᵀ f = 0``. Whitney's peg in a hole wedges at

@@ -1,0 +1,96 @@
+"""Expected-verdict tables (``problems/expected.toml``): read and checked like fixture files.
+
+A table holds ``[[case]]`` entries (``file``, ``pose``, ``contacts``, ``wrench``, ``mode``,
+``why``), ``[[wedge]]`` entries (``file``, ``wedges``, ``why``) and ``[[touching]]`` entries
+(``file``, ``names``). ``fixplan validate`` recognises such a file (it has ``case`` entries and
+no ``format`` key) and checks that every referenced fixture exists and loads, that wrenches
+have the fixture's length, that modes and poses are known and that contact names exist.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from fixplan.errors import FixtureError, Issue
+from fixplan.schema import Reader
+
+KINDS = {
+    "case": ("file", "pose", "contacts", "wrench", "mode", "why"),
+    "wedge": ("file", "wedges", "why"),
+    "touching": ("file", "names"),
+}
+
+
+def looks_like_expectations(data: dict[str, Any]) -> bool:
+    """An expected-verdict table rather than a fixture file."""
+    return "format" not in data and any(k in data for k in KINDS)
+
+
+def check_expectations(path: Path, data: dict[str, Any]) -> tuple[list[Issue], dict[str, int]]:
+    """Every problem of an expected-verdict table, and how many entries of each kind it has."""
+    from fixplan.fixture import load
+    from fixplan.jamming.classify import MODES
+
+    r = Reader()
+    r.unknown_keys(data, KINDS, "")
+    cache: dict[str, Any] = {}
+    counts = {}
+    for kind, keys in KINDS.items():
+        entries = r.tables(data, kind, kind)
+        counts[kind] = len(entries)
+        for i, entry in enumerate(entries):
+            where = f"{kind}[{i}]"
+            r.unknown_keys(entry, keys, where)
+            name = r.string(entry, "file", f"{where}.file", required=True)
+            if name is None:
+                continue
+            if name not in cache:
+                target = path.parent / name
+                try:
+                    cache[name] = load(target)
+                except FixtureError as exc:
+                    cache[name] = None
+                    r.error(f"{where}.file", f"{name} does not load ({exc.issues[0].key}: {exc.issues[0].message})")
+            fixture = cache[name]
+            if fixture is None:
+                continue
+            if kind == "case":
+                r.vector(entry, "wrench", f"{where}.wrench", fixture.ndof, required=True, dimension_hint=fixture.dimension)
+                r.string(entry, "mode", f"{where}.mode", required=True, choices=MODES)
+                pose = r.string(entry, "pose", f"{where}.pose", choices=("start", "goal"))
+                if pose == "goal" and not fixture.is_full:
+                    r.error(f"{where}.pose", f"{name} is not a full fixture (expected pose 'start')")
+                r.string(entry, "why", f"{where}.why", required=True)
+                _names(r, entry, "contacts", f"{where}.contacts", fixture.names)
+            elif kind == "wedge":
+                if not isinstance(entry.get("wedges"), bool):
+                    r.error(f"{where}.wedges", "expected true or false")
+                r.string(entry, "why", f"{where}.why", required=True)
+            else:
+                _names(r, entry, "names", f"{where}.names", [loc.name for loc in fixture.locators], required=True)
+    return r.issues, counts
+
+
+def _names(r: Reader, entry: dict, key: str, path: str, known: list[str], required: bool = False) -> None:
+    if key not in entry:
+        if required:
+            r.error(path, "missing (expected a list of names)")
+        return
+    value = entry[key]
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        r.error(path, "expected a list of names")
+        return
+    for v in value:
+        if v not in known:
+            r.error(path, f"unknown name {v!r} (known: {', '.join(known)})")
+
+
+def read_toml(path: Path) -> dict[str, Any] | None:
+    """The parsed document, or None when it cannot be read or parsed (the loader says why)."""
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except (OSError, tomllib.TOMLDecodeError):
+        return None
