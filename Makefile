@@ -22,6 +22,7 @@ demo: install
 
 test: install
 	$(BIN)/python -m pytest -q tests
+	FIXPLAN_SHORT=1 MPLBACKEND=Agg $(BIN)/python -m pytest -q --nbmake notebooks
 
 bench: install
 	$(BIN)/python benchmarks/run.py
