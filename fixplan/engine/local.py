@@ -74,17 +74,22 @@ STATUS_NAMES = {OPEN: "open", STICK: "stick", SLIDE: "slide", FAILED: "failed"}
 _EPS = 2.220446049250313e-16
 _PIVOT_REL = 1e-13  # a pivot below this fraction of its column's max counts as zero
 _MAX_ROOT_ITER = 200
+_MU_ZERO = 1e-17  # μ below this is frictionless: the friction it allows is below rounding
 
 
 # --------------------------------------------------------------------------- small dense LU
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _lu_factor(A, gamma, LU, piv):
-    """LU with partial pivoting of ``A + γ E_t`` (``d ≤ 4``); ``False`` if singular.
+    """LU of ``A + γ E_t`` with diagonal pivots (``d ≤ 4``); ``False`` if singular.
 
-    A pivot counts as zero when it is below ``_PIVOT_REL`` times the largest entry of its
-    column, so the test is blind to column scaling (``γ ≫ ‖A‖`` is not "singular").
+    No row exchanges: ``W_jj`` has a positive definite (or semidefinite) symmetric part, for
+    which diagonal pivoting is backward stable (it is Cholesky up to scaling), and it keeps the
+    normal row apart from the ``γ``-sized tangential rows — partial pivoting swapped them for
+    ``γ ≫ ‖W‖`` and lost ``P_n`` to cancellation. A pivot counts as zero when it is below
+    ``_PIVOT_REL`` times the largest entry of its column. ``piv`` is the identity (kept so the
+    solves read like a pivoted LU).
     """
     d = A.shape[0]
     colscale = np.zeros(d)
@@ -101,22 +106,8 @@ def _lu_factor(A, gamma, LU, piv):
         if colscale[k] == 0.0 or not math.isfinite(colscale[k]):
             return False
     for k in range(d):
-        p = k
-        big = abs(LU[k, k])
-        for i in range(k + 1, d):
-            if abs(LU[i, k]) > big:
-                big = abs(LU[i, k])
-                p = i
-        if big <= _PIVOT_REL * colscale[k]:
+        if not abs(LU[k, k]) > _PIVOT_REL * colscale[k]:
             return False
-        if p != k:
-            for j in range(d):
-                tmp = LU[k, j]
-                LU[k, j] = LU[p, j]
-                LU[p, j] = tmp
-            itmp = piv[k]
-            piv[k] = piv[p]
-            piv[p] = itmp
         for i in range(k + 1, d):
             f = LU[i, k] / LU[k, k]
             LU[i, k] = f
@@ -125,7 +116,7 @@ def _lu_factor(A, gamma, LU, piv):
     return True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _lu_solve(LU, piv, b, sign, x):
     """Solve ``(LU) x = sign · b`` in place of ``x`` using the pivots of :func:`_lu_factor`."""
     d = LU.shape[0]
@@ -141,7 +132,7 @@ def _lu_solve(LU, piv, b, sign, x):
         x[i] = s / LU[i, i]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _lu_solve_t(LU, piv, b, x):
     """Solve ``Aᵀ x = b`` with the factors ``A[piv] = L U`` of :func:`_lu_factor`."""
     d = LU.shape[0]
@@ -163,15 +154,22 @@ def _lu_solve_t(LU, piv, b, x):
 # --------------------------------------------------------------------------- cone helpers
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _tangent_norm(x):
+    """``‖x_t‖`` without underflow or overflow (scaled by ``max|x_t|``, like ``hypot``)."""
+    big = 0.0
+    for i in range(1, x.shape[0]):
+        big = max(big, abs(x[i]))
+    if big == 0.0 or not math.isfinite(big):
+        return big
     s = 0.0
     for i in range(1, x.shape[0]):
-        s += x[i] * x[i]
-    return math.sqrt(s)
+        t = x[i] / big
+        s += t * t
+    return big * math.sqrt(s)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def project_cone_into(x, mu, out):
     """Euclidean projection of ``x = (x_n, x_t)`` onto ``K_μ``, written into ``out``.
 
@@ -187,6 +185,10 @@ def project_cone_into(x, mu, out):
     d = x.shape[0]
     xn = x[0]
     nt = _tangent_norm(x)
+    if not (math.isfinite(xn) and math.isfinite(nt)):
+        for i in range(d):  # propagate: callers detect non-finite values
+            out[i] = x[i] + 0.0 * xn
+        return
     if mu * nt <= -xn:
         for i in range(d):
             out[i] = 0.0
@@ -201,7 +203,7 @@ def project_cone_into(x, mu, out):
             out[i] = f * x[i]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def project_cone(x, mu):
     """Euclidean projection of ``x`` onto the Coulomb cone ``K_μ`` (MATH.md formula).
 
@@ -222,7 +224,7 @@ def project_cone(x, mu):
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _natural_map_sq(W, alpha, mu, P, u, tmp):
     """Squared natural-map residual ``‖P − Proj_K(P − ũ)‖²`` of one contact (fills ``u``)."""
     d = alpha.shape[0]
@@ -245,7 +247,7 @@ def _natural_map_sq(W, alpha, mu, P, u, tmp):
 # --------------------------------------------------------------------------- general cone
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _phi(A, alpha, mu, gamma, LU, piv, P, dP, b):
     """``φ(γ) = ‖P_t(γ)‖ − μ P_n(γ)`` and ``φ'(γ)``; fills ``P``; ok flag first."""
     d = alpha.shape[0]
@@ -270,7 +272,7 @@ def _phi(A, alpha, mu, gamma, LU, piv, P, dP, b):
     return ok, phi, dphi
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _polish(A, mu, P, LU, piv, z, y):
     """Cancel the cone-membership error of a sliding ``P`` at the least change of ``u``.
 
@@ -306,7 +308,7 @@ def _polish(A, mu, P, LU, piv, z, y):
         P[i] += f * y[i]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _slide_root(A, alpha, mu, P):
     """Sliding regime by the root of ``φ(γ)``; returns ``(status, iterations)``.
 
@@ -348,6 +350,9 @@ def _slide_root(A, alpha, mu, P):
             dphi_hi = dphi
             break
         factor = 8.0
+        if ok and hi >= 1e16 * amax and _slide_asymptotic(A, alpha, mu, P):
+            # the root is so far out that ‖P‖ < 1e-16 ‖α‖/‖W‖: u_t = α_t to rounding
+            return SLIDE, it
         if ok:
             lo = hi
             # for large γ, P(γ) ≈ P(∞) + c/γ with P(∞) = (p∞, 0), p∞ = −α_n/W_nn > 0, so
@@ -410,8 +415,6 @@ def _slide_root(A, alpha, mu, P):
             break
         if lo > 0.0 and hi - lo <= 4.0 * _EPS * hi:
             break
-    if P[0] < 0.0:
-        return FAILED, it
     if lo < gamma_floor and hi <= gamma_floor * (1.0 + 8.0 * _EPS) and phi_p < 0.0:
         # P(γ) stayed inside the cone down to γ ≈ 0: a stick solution of a singular W_jj if
         # u = −γ E_t P is negligible; otherwise P(γ) diverges (no finite solution exists).
@@ -419,22 +422,64 @@ def _slide_root(A, alpha, mu, P):
         an = 0.0
         for i in range(d):
             an += alpha[i] * alpha[i]
-        if ut <= 1e-8 * math.sqrt(an):
+        if ut <= 1e-8 * math.sqrt(an) and P[0] >= 0.0:
             return STICK, it
         return FAILED, it
-    _polish(A, mu, P, LU, piv, b, dP)
-    # exact cone membership: put P_t on the surface ‖P_t‖ = μ P_n
+    if P[0] >= 0.0:
+        for i in range(d):
+            Pw[i] = P[i]
+        _polish(A, mu, P, LU, piv, b, dP)
+        # exact cone membership: put P_t on the surface ‖P_t‖ = μ P_n
+        nt = _tangent_norm(P)
+        if nt > 0.0:
+            f = mu * P[0] / nt
+            for i in range(1, d):
+                P[i] *= f
+        if _slide_is_sound(A, alpha, P):
+            return SLIDE, it
+        for i in range(d):
+            P[i] = Pw[i]
+    # closed-form fallback: keep the sliding direction of the root, solve u_n = 0 for P_n
+    if _slide_from_direction(A, alpha, mu, P):
+        return SLIDE, it
+    return FAILED, it
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _slide_asymptotic(A, alpha, mu, P):
+    """Sliding along ``ŝ = α_t/‖α_t‖`` (exact when ``‖W P‖ ≪ ‖α_t‖``); ``False`` if unsound."""
+    d = alpha.shape[0]
+    for i in range(d):
+        P[i] = -alpha[i] if i > 0 else 0.0
+    return _slide_from_direction(A, alpha, mu, P)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _slide_from_direction(A, alpha, mu, P):
+    """Sliding impulse for the direction of ``P_t``: ``P = P_n (1, −μ ŝ)``, ``u_n = 0``.
+
+    ``ŝ = −P_t/‖P_t‖`` is the sliding direction; ``P_n = −α_n / (W_nn − μ W_nt·ŝ)``. Used when
+    rounding spoiled ``P_n`` at the root (e.g. ``|α_n| ≪ ‖α_t‖`` by 150 orders of magnitude,
+    where ``γ`` is so large that ``P(γ)`` underflows). Returns ``False`` if not sound.
+    """
+    d = alpha.shape[0]
     nt = _tangent_norm(P)
-    if nt > 0.0:
-        f = mu * P[0] / nt
-        for i in range(1, d):
-            P[i] *= f
-    if not _slide_is_sound(A, alpha, P):
-        return FAILED, it
-    return SLIDE, it
+    if not (nt > 0.0 and math.isfinite(nt)):
+        return False
+    den = A[0, 0]
+    for i in range(1, d):
+        den += mu * A[0, i] * P[i] / nt
+    if not den > 0.0:
+        return False
+    pn = -alpha[0] / den
+    f = mu * pn / nt
+    for i in range(1, d):
+        P[i] *= f
+    P[0] = pn
+    return pn >= 0.0 and _slide_is_sound(A, alpha, P)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _slide_is_sound(A, alpha, P):
     """Backward check of a sliding ``P``: ``u_n ≈ 0`` and ``u_t`` opposes ``P_t``.
 
@@ -468,7 +513,7 @@ def _slide_is_sound(A, alpha, P):
     return ok and math.isfinite(scale)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _fallback(A, alpha, mu, P):
     """No regime established: the least-residual finite candidate among open and normal-only."""
     d = alpha.shape[0]
@@ -480,15 +525,53 @@ def _fallback(A, alpha, mu, P):
     if A[0, 0] > 0.0:
         cand = np.zeros(d)
         cand[0] = max(0.0, -alpha[0] / A[0, 0])
+        if not math.isfinite(cand[0]):
+            return
         e = _natural_map_sq(A, alpha, mu, cand, u, tmp)
         if e < best:
             for i in range(d):
                 P[i] = cand[i]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
+def _normalized_solve(A, alpha, mu, P, planar):
+    """Run a core solver on ``(W/max|W|, α/max|α|)`` and scale ``P`` back (homogeneity)."""
+    d = alpha.shape[0]
+    amax = 0.0
+    alm = 0.0
+    for i in range(d):
+        alm = max(alm, abs(alpha[i]))
+        for j in range(d):
+            amax = max(amax, abs(A[i, j]))
+    if not (amax > 0.0 and alm > 0.0 and math.isfinite(amax) and math.isfinite(alm)):
+        if planar:
+            return _coulomb_2d_core(A, alpha, mu, P)
+        return _cone_solve_core(A, alpha, mu, P)
+    As = np.empty((d, d))
+    als = np.empty(d)
+    for i in range(d):
+        als[i] = alpha[i] / alm
+        for j in range(d):
+            As[i, j] = A[i, j] / amax
+    if planar:
+        status, it = _coulomb_2d_core(As, als, mu, P)
+    else:
+        status, it = _cone_solve_core(As, als, mu, P)
+    for i in range(d):
+        P[i] = (P[i] * alm) / amax if alm < amax else P[i] * (alm / amax)
+    for i in range(d):
+        if not math.isfinite(P[i]):
+            _fallback(A, alpha, mu, P)
+            return FAILED, it
+    return status, it
+
+
+@numba.njit(cache=True, error_model="numpy")
 def cone_solve_into(A, alpha, mu, P):
     """Solve the one-contact law in a ``(1+k)``-dimensional Coulomb cone, in place.
+
+    The data are first normalized (``W / max|W|``, ``α / max|α|``; the law is homogeneous in
+    both), so that no intermediate quantity overflows or underflows.
 
     Parameters
     ----------
@@ -508,6 +591,12 @@ def cone_solve_into(A, alpha, mu, P):
     iterations : int
         Root-finding iterations (0 for the closed-form regimes).
     """
+    return _normalized_solve(A, alpha, mu, P, False)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _cone_solve_core(A, alpha, mu, P):
+    """:func:`cone_solve_into` on normalized data (same arguments and returns)."""
     d = alpha.shape[0]
     if alpha[0] >= 0.0:
         for i in range(d):
@@ -521,7 +610,7 @@ def cone_solve_into(A, alpha, mu, P):
     if not (A[0, 0] > _PIVOT_REL * amax) or not math.isfinite(amax):
         _fallback(A, alpha, mu, P)
         return FAILED, 0
-    if mu <= 0.0:
+    if mu <= _MU_ZERO:
         P[0] = -alpha[0] / A[0, 0]
         for i in range(1, d):
             P[i] = 0.0
@@ -539,28 +628,9 @@ def cone_solve_into(A, alpha, mu, P):
     return FAILED, it
 
 
-@numba.njit(cache=True)
-def coulomb_2d_into(A, alpha, mu, P):
-    """Closed-form 2D Coulomb one-contact solver (open / stick / slide ±), in place.
-
-    Parameters
-    ----------
-    A : ndarray, shape (2, 2)
-        Diagonal Delassus block, order ``(n, t)``.
-    alpha : ndarray, shape (2,)
-        Free velocity.
-    mu : float
-        Friction coefficient ``μ ≥ 0``.
-    P : ndarray, shape (2,)
-        Receives the impulse ``(P_n, P_t)``.
-
-    Returns
-    -------
-    status : int
-        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
-    iterations : int
-        0, unless rounding rejected every closed-form regime and the root find ran.
-    """
+@numba.njit(cache=True, error_model="numpy")
+def _coulomb_2d_core(A, alpha, mu, P):
+    """:func:`coulomb_2d_into` on normalized data (same arguments and returns)."""
     if alpha[0] >= 0.0:
         P[0] = 0.0
         P[1] = 0.0
@@ -569,7 +639,7 @@ def coulomb_2d_into(A, alpha, mu, P):
     if not (A[0, 0] > _PIVOT_REL * amax) or not math.isfinite(amax):
         _fallback(A, alpha, mu, P)
         return FAILED, 0
-    if mu <= 0.0:
+    if mu <= _MU_ZERO:
         P[0] = -alpha[0] / A[0, 0]
         P[1] = 0.0
         return SLIDE, 0
@@ -599,7 +669,32 @@ def coulomb_2d_into(A, alpha, mu, P):
     return FAILED, it
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
+def coulomb_2d_into(A, alpha, mu, P):
+    """Closed-form 2D Coulomb one-contact solver (open / stick / slide ±), in place.
+
+    Parameters
+    ----------
+    A : ndarray, shape (2, 2)
+        Diagonal Delassus block, order ``(n, t)``.
+    alpha : ndarray, shape (2,)
+        Free velocity.
+    mu : float
+        Friction coefficient ``μ ≥ 0``.
+    P : ndarray, shape (2,)
+        Receives the impulse ``(P_n, P_t)``.
+
+    Returns
+    -------
+    status : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    iterations : int
+        0, unless rounding rejected every closed-form regime and the root find ran.
+    """
+    return _normalized_solve(A, alpha, mu, P, True)
+
+
+@numba.njit(cache=True, error_model="numpy")
 def soft_finger_into(A, alpha, mu, torsion_radius, P):
     """Soft-finger (elliptic, condim 4) one-contact solver by scaling, in place.
 
@@ -636,7 +731,7 @@ def soft_finger_into(A, alpha, mu, torsion_radius, P):
 # --------------------------------------------------------------------------- public wrappers
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def solve_cone(W, alpha, mu):
     """Exact one-contact solver for a ``(1+k)``-dimensional Coulomb cone, ``k = 1, 2, 3``.
 
@@ -663,7 +758,7 @@ def solve_cone(W, alpha, mu):
     return P, status, it
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def solve_coulomb_2d(W, alpha, mu):
     """Exact 2D Coulomb one-contact solver (closed form by enumeration).
 
@@ -690,7 +785,7 @@ def solve_coulomb_2d(W, alpha, mu):
     return P, status, it
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def solve_coulomb_3d(W, alpha, mu):
     """Exact 3D Coulomb one-contact solver (second-order cone, no linearization).
 
@@ -717,7 +812,7 @@ def solve_coulomb_3d(W, alpha, mu):
     return P, status, it
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def solve_soft_finger(W, alpha, mu, torsion_radius):
     """Exact soft-finger one-contact solver (ellipsoid [10] with ``e_x = e_y = 1``).
 
@@ -747,6 +842,12 @@ def solve_soft_finger(W, alpha, mu, torsion_radius):
 
 
 # --------------------------------------------------------------------------- checks (NumPy)
+
+
+def _norm(x: np.ndarray) -> float:
+    """Euclidean norm without under/overflow of the squares."""
+    big = float(np.max(np.abs(x))) if x.size else 0.0
+    return big * float(np.linalg.norm(x / big)) if big > 0.0 else 0.0
 
 
 def law_violation(
@@ -790,19 +891,19 @@ def law_violation(
         W = s[:, None] * W * s[None, :]
         alpha = s * alpha
         P = P / np.where(s > 0, s, 1.0)
+    # the law is homogeneous: normalize so that no square below under- or overflows
+    c_w = float(np.max(np.abs(W))) or 1.0
+    c_a = max(float(np.max(np.abs(alpha))), c_w * float(np.max(np.abs(P)))) or 1.0
+    W, alpha, P = W / c_w, alpha / c_a, (P / c_a) * c_w
     u = W @ P + alpha
-    ut = float(np.linalg.norm(u[1:]))
     u_mod = u.copy()
-    u_mod[0] += mu * ut
-    norm_p = float(np.linalg.norm(P))
-    s_u = max(
-        float(np.linalg.norm(u_mod)),
-        float(np.linalg.norm(alpha)),
-        float(np.linalg.norm(W, 2)) * norm_p,
-    )
-    if s_u == 0.0:
-        s_u = 1.0
-    cone = max(0.0, float(np.linalg.norm(P[1:])) - mu * P[0], -P[0]) / norm_p if norm_p else 0.0
+    u_mod[0] += mu * _norm(u[1:])
+    norm_p = _norm(P)
+    s_u = max(_norm(u_mod), _norm(alpha), float(np.linalg.norm(W, 2)) * norm_p) or 1.0
+    if norm_p == 0.0:
+        return max(0.0, -u[0]) / s_u
+    p = P / norm_p
+    cone = max(0.0, _norm(p[1:]) - mu * p[0], -p[0])
     dual = max(0.0, -u[0]) / s_u
-    comp = abs(float(P @ u_mod)) / (norm_p * s_u) if norm_p else 0.0
+    comp = abs(float(p @ (u_mod / s_u)))
     return max(cone, dual, comp)

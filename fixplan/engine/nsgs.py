@@ -325,7 +325,7 @@ def fclib_error(problem: ContactProblem, reaction: np.ndarray) -> float:
 # --------------------------------------------------------------------------- compiled kernels
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def diagonal_blocks(indptr, indices, data, offsets, dims):
     """Diagonal blocks ``W_jj`` of a CSR matrix, padded to shape ``(n_c, 4, 4)``."""
     nc = offsets.shape[0]
@@ -342,7 +342,7 @@ def diagonal_blocks(indptr, indices, data, offsets, dims):
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _spmv(indptr, indices, data, x, q, out):
     """``out = W x + q`` for CSR ``W``."""
     m = q.shape[0]
@@ -353,7 +353,7 @@ def _spmv(indptr, indices, data, x, q, out):
         out[i] = s
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def error_kernel(indptr, indices, data, q, mu, offsets, dims, r, u):
     """FCLib residual of ``r`` (standard cones); fills ``u = W r + q``."""
     _spmv(indptr, indices, data, r, q, u)
@@ -387,7 +387,7 @@ def error_kernel(indptr, indices, data, q, mu, offsets, dims, r, u):
     return math.sqrt(total)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def local_solve_into(A, alpha, mu, d, P):
     """One-contact solve in a standard cone of dimension ``d`` (closed form for ``d = 2``)."""
     if d == 2:
@@ -395,7 +395,7 @@ def local_solve_into(A, alpha, mu, d, P):
     return cone_solve_into(A, alpha, mu, P)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def sweep_kernel(indptr, indices, data, q, mu, offsets, dims, diag, r, omega):
     """One Gauss–Seidel sweep in place on ``r``; returns the number of failed local solves."""
     nc = offsets.shape[0]
@@ -421,7 +421,7 @@ def sweep_kernel(indptr, indices, data, q, mu, offsets, dims, diag, r, omega):
     return failures
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _all_finite(x):
     for i in range(x.shape[0]):
         if not math.isfinite(x[i]):
@@ -429,7 +429,7 @@ def _all_finite(x):
     return True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def nsgs_kernel(indptr, indices, data, q, mu, offsets, dims, r, tol, max_iter, omega, history):
     """NSGS sweeps until the FCLib residual is ``≤ tol`` (``max_iter`` caps the sweeps).
 
@@ -526,9 +526,15 @@ def _finish(
 ) -> ContactSolution:
     s = problem.row_scale
     r = s * r_tilde
-    u = problem.W @ r + problem.q
+    with np.errstate(all="ignore"):
+        u = problem.W @ r + problem.q
     extras = dict(extras)
     extras["status"] = _STATUS_TEXT[status]
+    if not math.isfinite(error):
+        error = math.inf  # never NaN: an overflowed residual reads as "infinitely wrong"
+    if not np.all(np.isfinite(u)):
+        extras["velocity_overflow"] = True
+        u = np.nan_to_num(u, nan=np.inf)
     converged = status == STATUS_CONVERGED
     if status == STATUS_NAN:
         extras["reason"] = "NaN/inf during the sweep; reaction is the last finite iterate"
@@ -582,9 +588,7 @@ def solve_nsgs(
     arrays = kernel_arrays(problem)
     r = _initial_scaled(problem, r0)
     history = np.full(min(max(int(max_iter), 1), _HISTORY_CAP), np.nan)
-    it, err, status, failures = nsgs_kernel(
-        *arrays, r, float(tol), int(max_iter), float(omega), history
-    )
+    it, err, status, failures = nsgs_kernel(*arrays, r, float(tol), int(max_iter), float(omega), history)
     extras = {
         "history": history[: min(it, history.shape[0])].copy(),
         "omega": float(omega),
