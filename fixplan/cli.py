@@ -350,6 +350,83 @@ def map_(
         )
 
 
+@app.command()
+def simulate(
+    file: FileArg = None,
+    duration: Annotated[float, typer.Option("--duration", help="Simulated time [s].")] = 1.0,
+    dt: Annotated[float | None, typer.Option("--dt", help="Time step [s] (default: [simulation] timestep).")] = None,
+    wrench: Annotated[str | None, typer.Option("--wrench", help="Constant applied wrench about the body origin (default 0).")] = None,
+    tolerance: Annotated[float | None, typer.Option("--tolerance", help="NSGS residual (default: [simulation] tolerance).")] = None,
+    pose: PoseOpt = "start",
+    out: Annotated[Path | None, typer.Option("--out", help="Write the trajectory as CSV.")] = None,
+    every: Annotated[int, typer.Option("--every", help="Record every N-th step in --out.", min=1)] = 1,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite --out if it exists.")] = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Simulate the workpiece among its locators (Moreau–Jean, exact Coulomb and soft-finger friction)."""
+    from fixplan.simulator import Simulator
+
+    fixture = _load(file)
+    if not (duration >= 0 and np.isfinite(duration)):
+        raise InputError(f"--duration must be a non-negative number of seconds, got {duration}")
+    if dt is not None and not (dt > 0 and np.isfinite(dt)):
+        raise InputError(f"--dt must be a positive number of seconds, got {dt}")
+    w = None if wrench is None else _numbers(wrench, "--wrench", fixture.ndof)
+    target = None if out is None else _writable(out, force)
+    sim = Simulator(fixture, dt=dt, tolerance=tolerance)
+    if _pose(fixture, pose) == "goal":
+        sim.set_state(fixture.goal)
+    n_steps = int(round(duration / sim.dt))
+    bar = None
+    callback = None
+    if n_steps >= 20000 and not json_out:
+        from rich.console import Console
+        from rich.progress import Progress
+
+        bar = Progress(transient=True, console=Console(file=sys.stderr))
+        bar.start()
+        task = bar.add_task("simulating", total=n_steps)
+
+        def callback(k: int) -> None:
+            bar.update(task, advance=k)
+
+    try:
+        traj = sim.run(duration, w, record_every=every, progress=callback)
+    finally:
+        if bar is not None:
+            bar.stop()
+    if target is not None:
+        traj.to_csv(target)
+    twist = sim.twist
+    d = fixture.dimension
+    result = {
+        "steps": sim.steps,
+        "time": sim.time_s,
+        "pose": sim.pose.to_json(),
+        "velocity": {"linear": [float(x) for x in twist[:d]], "angular": [float(x) for x in twist[d:]]},
+        "max_penetration": float(traj.max_penetration_m),
+        "contacts": [c.to_json() for c in sim.contacts()],
+        "solver": {
+            "max_error": float(max(traj.error, default=0.0)),
+            "mean_iterations": float(np.mean(traj.iterations)) if traj.iterations else 0.0,
+            "converged": bool(max(traj.error, default=0.0) <= sim.tolerance),
+            "tolerance": sim.tolerance,
+        },
+        "wall_time_s": traj.wall_time_s,
+    }
+    if json_out:
+        _emit_json(result)
+        return
+    typer.echo(f"{fixture.name}: {sim.steps} steps of {sim.dt:g} s in {traj.wall_time_s:.3f} s ({sim.steps / max(traj.wall_time_s, 1e-9):,.0f} steps/s)")
+    typer.echo(f"pose: {json.dumps(result['pose'])}")
+    typer.echo(f"velocity: linear {result['velocity']['linear']} angular {result['velocity']['angular']}")
+    typer.echo(f"max penetration: {traj.max_penetration_m:.3g} m; solver: max residual {result['solver']['max_error']:.3g}, mean sweeps {result['solver']['mean_iterations']:.2f}")
+    for c in sim.contacts():
+        typer.echo(f"  {c.name:6s} {c.mode:9s} gap {c.gap_m: .3e} m  normal force {c.normal_force_N:.4g} N")
+    if target is not None:
+        typer.echo(f"wrote {target}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the app and turn every expected failure into one line and exit 2."""
     try:

@@ -307,7 +307,7 @@ class Simulator:
             raise InputError(f"duration must be a non-negative number of seconds, got {duration_s}")
         n_steps = int(round(duration_s / self.dt))
         if self.dimension == 3 and not callable(wrench):
-            return self._run_compiled(n_steps, wrench, record_every)
+            return self._run_compiled(n_steps, wrench, record_every, progress)
         traj = Trajectory(list(self.names), self.dimension)
         t0 = time.perf_counter()
         self._record(traj)
@@ -323,45 +323,66 @@ class Simulator:
         traj.max_penetration_m = self.max_penetration_m
         return traj
 
-    def _run_compiled(self, n_steps: int, wrench: ArrayLike | None, record_every: int) -> Trajectory:
-        """A constant-wrench 3D run as one compiled loop (no Python per step)."""
-        d = self.dimension
+    def _run_compiled(
+        self, n_steps: int, wrench: ArrayLike | None, record_every: int, progress: Callable[[int], None] | None
+    ) -> Trajectory:
+        """A constant-wrench 3D run as compiled loops of up to 5000 steps (no Python per step)."""
+        every = max(1, record_every)
         f, _ = self._external(wrench)
         tau_origin = np.zeros(3) if wrench is None else np.asarray(wrench, dtype=float)[3:6]
-        t0 = time.perf_counter()
-        out = kernels.run3(
-            n_steps, max(1, record_every), self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv,
-            self._com_b, self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu,
-            self._tors, self.dt, f, tau_origin, self.restitution, self.margin_m, self._bound, self.tolerance,
-            self.max_iterations, self._P, self._active,
-        )  # fmt: skip
-        wall = time.perf_counter() - t0
-        R, p, v, w, P, active, gap, n_w, u, rp, rR, rnu, rfn, rgap, rerr, rit, pen, worst, status = out
-        if status == kernels.STATUS_NONFINITE:
-            raise SolverError(f"a step produced a non-finite state near t = {self.time_s + len(rp) * record_every * self.dt:.6g} s")
-        if status == kernels.STATUS_NOT_CONVERGED and self.strict:
-            raise SolverError(f"NSGS did not reach {self.tolerance:g} in some step (worst error {worst:.3g})")
-        self._R, self._p, self._v, self._w, self._P, self._active, self._gap = R, p, v, w, P, active, gap
-        self._nw, self._u = n_w, u
-        traj = Trajectory(list(self.names), d)
-        times = self.time_s + self.dt * record_every * np.arange(len(rp))
-        self.time_s += n_steps * self.dt
-        self.steps += n_steps
-        times[-1] = self.time_s if n_steps % max(1, record_every) == 0 else times[-1]
-        traj.time_s = [float(t) for t in times]
-        traj.position = list(rp)
-        traj.orientation = [quaternion_wxyz_from_matrix(Rk) for Rk in rR]
-        traj.velocity = list(rnu)
-        traj.normal_force = list(rfn)
-        traj.gap = list(rgap)
-        traj.error = [float(e) for e in rerr[1:]]
-        traj.iterations = [int(i) for i in rit[1:]]
-        self.max_penetration_m = max(self.max_penetration_m, float(pen))
+        traj = Trajectory(list(self.names), self.dimension)
+        self._record(traj)
+        traj.error.clear()
+        traj.iterations.clear()
+        chunk = max(every, (5000 // every) * every)
+        done = 0
+        wall = 0.0
+        worst = 0.0
+        status = kernels.STATUS_OK
+        while done < n_steps:
+            n = min(chunk, n_steps - done)
+            t0 = time.perf_counter()
+            out = kernels.run3(
+                n, every, self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv,
+                self._com_b, self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu,
+                self._tors, self.dt, f, tau_origin, self.restitution, self.margin_m, self._bound, self.tolerance,
+                self.max_iterations, self._P, self._active,
+            )  # fmt: skip
+            wall += time.perf_counter() - t0
+            R, p, v, w, P, active, gap, n_w, u, rp, rR, rnu, rfn, rgap, rerr, rit, pen, worst_k, status_k = out
+            if status_k == kernels.STATUS_NONFINITE:
+                raise SolverError(f"a step produced a non-finite state between t = {self.time_s:.6g} s and {self.time_s + n * self.dt:.6g} s; the state before it was kept")
+            if status_k == kernels.STATUS_NOT_CONVERGED:
+                status = status_k
+                if self.strict:
+                    raise SolverError(f"NSGS did not reach {self.tolerance:g} in some step (worst error {worst_k:.3g})")
+            self._R, self._p, self._v, self._w, self._P, self._active, self._gap = R, p, v, w, P, active, gap
+            self._nw, self._u = n_w, u
+            times = self.time_s + self.dt * every * np.arange(1, len(rp))
+            traj.time_s += [float(t) for t in times]
+            traj.position += list(rp[1:])
+            traj.orientation += [quaternion_wxyz_from_matrix(Rk) for Rk in rR[1:]]
+            traj.velocity += list(rnu[1:])
+            traj.normal_force += list(rfn[1:])
+            traj.gap += list(rgap[1:])
+            traj.error += [float(e) for e in rerr[1:]]
+            traj.iterations += [int(i) for i in rit[1:]]
+            self.time_s += n * self.dt
+            self.steps += n
+            done += n
+            worst = max(worst, float(worst_k))
+            self.max_penetration_m = max(self.max_penetration_m, float(pen))
+            if progress is not None:
+                progress(n)
         traj.max_penetration_m = self.max_penetration_m
         traj.wall_time_s = wall
         traj.steps = n_steps
-        self.last = StepInfo(float(rerr[-1]), int(rit[-1]), status == kernels.STATUS_OK, 0, float(pen),
-                             tuple(n for n, a in zip(self.names, active, strict=True) if a))  # fmt: skip
+        self.worst_error = worst
+        self.last = StepInfo(
+            float(traj.error[-1]) if traj.error else 0.0, int(traj.iterations[-1]) if traj.iterations else 0,
+            status == kernels.STATUS_OK, 0, float(self.max_penetration_m),
+            tuple(n for n, a in zip(self.names, self._active, strict=True) if a),
+        )  # fmt: skip
         return traj
 
     def _record(self, traj: Trajectory) -> None:

@@ -1,0 +1,75 @@
+"""The command line: JSON contracts, exit codes, and never overwriting a user's file."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PROBLEMS = ROOT / "problems"
+
+
+def fixplan(*args, check_rc=None):
+    proc = subprocess.run([sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args], capture_output=True, text=True)
+    if check_rc is not None:
+        assert proc.returncode == check_rc, proc.stderr
+    return proc
+
+
+def test_classify_json_contract(tmp_path):
+    csv = tmp_path / "w.csv"
+    csv.write_text("Fx,Fy,Fz,Tx,Ty,Tz\n0,0,0,0,0,0\n6,0,0,0,0,0\n\n# comment\n0,0,30,0,0,0\n")
+    out = json.loads(fixplan("classify", "--wrenches", str(csv), "--json", check_rc=0).stdout)
+    assert [r["mode"] for r in out["results"]] == ["held", "slides", "separates"]
+    r = out["results"][1]
+    assert r["wrench"] == [6, 0, 0, 0, 0, 0]
+    assert set(r) >= {"wrench", "mode", "margin", "contact_forces", "certificate", "acceleration", "residuals"}
+    assert r["acceleration"][0] == pytest.approx((6 - 0.25 * 2 * 9.81) / 2, rel=1e-8)
+    assert set(r["contact_forces"]) == {"B1", "B2", "B3"}
+    total = np.sum([f["force_world"] for f in r["contact_forces"].values()], axis=0)
+    assert total[2] == pytest.approx(2 * 9.81, rel=1e-8)
+
+
+def test_search_json_and_exit_codes():
+    out = json.loads(fixplan("search", "--motion", "0.1,0,0,0,0,0", "--json", check_rc=0).stdout)
+    assert out["found"] and out["check_mode"] == "slides" and out["margin"] > 0
+    weak = fixplan("search", str(PROBLEMS / "box-3-2-1.toml"), "--motion", "0,0,0,0,0,5", "--contacts", "B1,B2,B3", "--json")
+    assert weak.returncode in (0, 1)
+
+
+def test_map_writes_png_and_csv_and_refuses_to_overwrite(tmp_path):
+    png = tmp_path / "m.png"
+    out = json.loads(fixplan("map", "--n", "6", "--out", str(png), "--json", check_rc=0).stdout)
+    assert png.stat().st_size > 1000 and png.read_bytes()[:4] == b"\x89PNG"
+    rows = png.with_suffix(".csv").read_text().splitlines()
+    assert rows[0] == "Fx,Tz,mode,margin" and len(rows) == 37
+    assert sum(out["counts"].values()) == 36
+    before = png.read_bytes()
+    again = fixplan("map", "--n", "6", "--out", str(png))
+    assert again.returncode == 2 and "exists" in again.stderr and png.read_bytes() == before
+
+
+def test_simulate_json_contract(tmp_path):
+    traj = tmp_path / "t.csv"
+    out = json.loads(fixplan("simulate", str(PROBLEMS / "box-3-2-1.toml"), "--duration", "0.2", "--wrench", "-5,-5,-5,0,0,0", "--json", "--out", str(traj), check_rc=0).stdout)
+    assert out["steps"] == 200 and out["time"] == pytest.approx(0.2)
+    assert set(out["pose"]) == {"position", "quaternion_wxyz"}
+    assert set(out["velocity"]) == {"linear", "angular"}
+    assert out["max_penetration"] <= 1e-6
+    assert {c["name"] for c in out["contacts"]} == {"B1", "B2", "B3", "S1", "S2", "E1"}
+    assert all(set(c) == {"name", "gap", "normal_force", "mode"} for c in out["contacts"])
+    assert all(c["mode"] != "open" for c in out["contacts"])
+    assert len(traj.read_text().splitlines()) == 202
+
+
+def test_simulate_refuses_contact_only_fixture():
+    proc = fixplan("simulate", str(PROBLEMS / "peg-hole-mid.toml"))
+    assert proc.returncode == 2 and "no geometry to simulate" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_goal_needs_full_fixture():
+    proc = fixplan("classify", str(PROBLEMS / "box-3-supports.toml"), "--wrench", "0,0,0,0,0,0", "--pose", "goal")
+    assert proc.returncode == 2 and "full fixture" in proc.stderr
