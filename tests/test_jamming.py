@@ -253,3 +253,26 @@ def test_search_reports_weak_manipulator():
     f = fixplan.loads(text)
     res = search_wrench(f, [0.1, 0, 0, 0, 0, 0])
     assert not res.found and "too weak" in res.reason
+
+
+@pytest.mark.parametrize("roles", [((), ()), ((1,), ()), ((), (2,)), ((0,), (2,))])
+@pytest.mark.parametrize("soft", [False, True])
+def test_witness_jacobian_matches_finite_differences(roles, soft, rng):
+    """The analytic Jacobian of the kept/sliding/sticking/open system, against central differences."""
+    from fixplan.jamming.sliding import Rows, _start_for
+
+    f = box_on_supports(mu=0.4, torsion=0.01 if soft else None)
+    cs = fixplan.contact_set(f)
+    rows = Rows(cs)
+    w = rng.normal(size=6)
+    base = np.concatenate([rng.normal(size=6), rng.uniform(0.5, 2.0, size=3)])
+    z = _start_for(cs, base, roles)
+    z[6:] += rng.normal(size=z.shape[0] - 6) * 0.1
+    F, Jac, _ = rows.system(w, z, roles)
+    eps = 1e-6
+    fd = np.empty_like(Jac)
+    for k in range(z.shape[0]):
+        dz = np.zeros_like(z)
+        dz[k] = eps
+        fd[:, k] = (rows.system(w, z + dz, roles)[0] - rows.system(w, z - dz, roles)[0]) / (2 * eps)
+    assert np.allclose(Jac, fd, atol=1e-7 * max(1.0, np.abs(Jac).max()))
