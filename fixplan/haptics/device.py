@@ -1,0 +1,137 @@
+"""Haptic devices: the abstraction (after CHAI3D's ``cGenericHapticDevice``) and a simulated one.
+
+A device has a handle with a pose and a twist in its workspace, and accepts a force and a torque
+to display. :class:`SimulatedDevice` models the handle as a rigid body with mass, inertia and
+viscous damping ``b`` (the physical damping that makes a virtual coupling passive, see
+:mod:`.coupling`), saturates the displayed wrench at the device's limits, and can quantize its
+position readings like an encoder.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fixplan.errors import InputError
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class DeviceSpecs:
+    """What a device can do (CHAI3D's ``cHapticDeviceInfo``)."""
+
+    max_force_N: float
+    max_torque_Nm: float
+    max_stiffness_N_per_m: float
+    max_damping_Ns_per_m: float
+    workspace_radius_m: float
+    physical_damping_Ns_per_m: float  # b: the handle's own viscous damping
+
+
+class HapticDevice(ABC):
+    """The calls a loop makes on a device, real or simulated."""
+
+    @abstractmethod
+    def open(self) -> None: ...
+
+    @abstractmethod
+    def close(self) -> None: ...
+
+    @property
+    @abstractmethod
+    def specs(self) -> DeviceSpecs: ...
+
+    @abstractmethod
+    def position(self) -> FloatArray:
+        """Handle position [m] (and, in 3D, orientation as a rotation vector [rad]) — the device's pose coordinates."""
+
+    @abstractmethod
+    def velocity(self) -> FloatArray:
+        """Handle twist in the same coordinates [m/s, rad/s]."""
+
+    @abstractmethod
+    def set_force_and_torque(self, wrench: ArrayLike) -> FloatArray:
+        """Display a wrench (saturated at the device's limits); returns what is displayed."""
+
+
+class SimulatedDevice(HapticDevice):
+    """A handle of mass ``m`` (and rotational inertia) with viscous damping, driven by the operator.
+
+    Coordinates: ``ndof`` generalised coordinates, 6 in 3D (position, small-angle rotation
+    vector) or 3 in 2D (x, y, θ). Each tick :meth:`advance` integrates
+    ``M ẍ = f_operator + f_displayed − b ẋ`` with semi-implicit Euler.
+    """
+
+    def __init__(
+        self,
+        ndof: int,
+        *,
+        mass_kg: float = 0.2,
+        inertia_kgm2: float = 2e-4,
+        specs: DeviceSpecs | None = None,
+        quantization_m: float = 0.0,
+        x0: ArrayLike | None = None,
+    ):
+        if ndof not in (3, 6):
+            raise InputError(f"a device has 3 (2D) or 6 (3D) coordinates, got {ndof}")
+        self.ndof = ndof
+        d = 2 if ndof == 3 else 3
+        self._M = np.concatenate([np.full(d, mass_kg), np.full(ndof - d, inertia_kgm2)])
+        self._specs = specs or DeviceSpecs(
+            max_force_N=40.0,
+            max_torque_Nm=2.0,
+            max_stiffness_N_per_m=5000.0,
+            max_damping_Ns_per_m=50.0,
+            workspace_radius_m=0.5,
+            physical_damping_Ns_per_m=8.0,
+        )
+        self.quantization_m = float(quantization_m)
+        self._x = np.zeros(ndof) if x0 is None else np.array(x0, dtype=float)
+        self._v = np.zeros(ndof)
+        self._displayed = np.zeros(ndof)
+        self._open = False
+
+    def open(self) -> None:
+        self._open = True
+
+    def close(self) -> None:
+        self._displayed[:] = 0.0
+        self._open = False
+
+    @property
+    def specs(self) -> DeviceSpecs:
+        return self._specs
+
+    def position(self) -> FloatArray:
+        if self.quantization_m > 0:
+            return np.round(self._x / self.quantization_m) * self.quantization_m
+        return self._x.copy()
+
+    def velocity(self) -> FloatArray:
+        return self._v.copy()
+
+    def set_force_and_torque(self, wrench: ArrayLike) -> FloatArray:
+        w = np.array(wrench, dtype=float)
+        d = 2 if self.ndof == 3 else 3
+        F, T = w[:d], w[d:]
+        nF, nT = float(np.linalg.norm(F)), float(np.linalg.norm(T))
+        if nF > self._specs.max_force_N:
+            F = F * (self._specs.max_force_N / nF)
+        if nT > self._specs.max_torque_Nm:
+            T = T * (self._specs.max_torque_Nm / nT)
+        self._displayed = np.concatenate([F, T])
+        return self._displayed.copy()
+
+    def advance(self, dt: float, operator_wrench: ArrayLike) -> None:
+        """Integrate the handle for one tick under the operator's hand and the displayed wrench."""
+        b = self._specs.physical_damping_Ns_per_m
+        d = 2 if self.ndof == 3 else 3
+        damping = np.concatenate([np.full(d, b), np.full(self.ndof - d, b * 1e-2)])
+        f = np.asarray(operator_wrench, dtype=float) + self._displayed
+        # semi-implicit: damping implicit for unconditional stability
+        self._v = (self._v + dt * f / self._M) / (1.0 + dt * damping / self._M)
+        self._x = self._x + dt * self._v

@@ -1,0 +1,126 @@
+"""The haptic loop: operator → device → virtual coupling → engine, one tick per sample period.
+
+Per tick (period ``T``, 1 ms by default):
+
+1. the operator model pushes the device handle (``operator(t, device) -> wrench``);
+2. the coupling wrench ``w_c = K (x_d − x_w) + B (ẋ_d − ẋ_w)`` is computed from the device and
+   workpiece coordinates (position of the body origin; in 3D the rotation vector of
+   ``R_w R_0ᵀ`` relative to the start orientation ``R_0``);
+3. the engine advances the workpiece one step under ``w_c`` (plus gravity);
+4. the device displays ``−w_c`` (saturated at its limits): what the user feels;
+5. the device handle is integrated under the operator's push and the displayed wrench.
+
+Each tick's compute time (steps 2–4, the part a real-time loop must finish within ``T``) is
+measured with ``time.perf_counter``; a tick longer than ``T`` is a deadline miss.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from fixplan.errors import InputError
+from fixplan.haptics.coupling import VirtualCoupling
+from fixplan.haptics.device import SimulatedDevice
+from fixplan.pose import log_so3
+from fixplan.simulator import Simulator
+
+FloatArray = NDArray[np.float64]
+Operator = Callable[[float, SimulatedDevice], ArrayLike]
+
+
+@dataclass
+class LoopRecord:
+    """What happened in a run of the loop, per tick."""
+
+    time_s: list[float] = field(default_factory=list)
+    compute_s: list[float] = field(default_factory=list)
+    coupling_wrench: list[FloatArray] = field(default_factory=list)  # on the workpiece
+    felt_wrench: list[FloatArray] = field(default_factory=list)  # displayed on the device (saturated)
+    device_position: list[FloatArray] = field(default_factory=list)
+    workpiece_position: list[FloatArray] = field(default_factory=list)
+    active_contacts: list[tuple[str, ...]] = field(default_factory=list)
+    period_s: float = 1e-3
+
+    @property
+    def deadline_misses(self) -> int:
+        return int(sum(c > self.period_s for c in self.compute_s))
+
+    @property
+    def mean_compute_s(self) -> float:
+        return float(np.mean(self.compute_s)) if self.compute_s else 0.0
+
+    @property
+    def max_compute_s(self) -> float:
+        return float(np.max(self.compute_s)) if self.compute_s else 0.0
+
+
+class HapticLoop:
+    """Runs the engine behind a virtual coupling and a (simulated) device."""
+
+    def __init__(self, sim: Simulator, device: SimulatedDevice, coupling: VirtualCoupling):
+        if abs(coupling.period_s - sim.dt) > 1e-12:
+            raise InputError(f"coupling period {coupling.period_s:g} s must equal the engine step {sim.dt:g} s")
+        if device.ndof != (6 if sim.dimension == 3 else 3):
+            raise InputError(f"a {sim.dimension}D scene needs a device with {6 if sim.dimension == 3 else 3} coordinates")
+        specs = device.specs
+        if coupling.K_lin > specs.max_stiffness_N_per_m or coupling.B_lin > specs.max_damping_Ns_per_m:
+            raise InputError(
+                f"coupling gains exceed the device: K = {coupling.K_lin:g} > {specs.max_stiffness_N_per_m:g} N/m "
+                f"or B = {coupling.B_lin:g} > {specs.max_damping_Ns_per_m:g} N·s/m"
+            )
+        self.sim = sim
+        self.device = device
+        self.coupling = coupling
+        self._R0 = sim.pose.R_world_body.copy()
+
+    def workpiece_coordinates(self) -> tuple[FloatArray, FloatArray]:
+        """Workpiece coordinates matching the device's: body origin (+ rotation vector), and their rates."""
+        pose, twist = self.sim.state
+        d = self.sim.dimension
+        if d == 3:
+            x = np.concatenate([pose.p_world, log_so3(pose.R_world_body @ self._R0.T)])
+            w = twist[3:]
+            v_origin = twist[:3] + np.cross(w, pose.p_world - self.sim.com_world)
+            return x, np.concatenate([v_origin, w])
+        x = np.array([pose.p_world[0], pose.p_world[1], pose.angle_rad])
+        w = float(twist[2])
+        off = pose.p_world - self.sim.com_world
+        return x, np.array([twist[0] - w * off[1], twist[1] + w * off[0], w])
+
+    def tick(self, operator_wrench: ArrayLike) -> tuple[FloatArray, FloatArray, float]:
+        """One sample period; returns (coupling wrench on the workpiece, felt wrench, compute time [s])."""
+        t0 = time.perf_counter()
+        d = self.sim.dimension
+        x_d, v_d = self.device.position(), self.device.velocity()
+        x_w, v_w = self.workpiece_coordinates()
+        w_c = self.coupling.wrench(x_d - x_w, v_d - v_w, d)
+        self.sim.step(w_c)
+        felt = self.device.set_force_and_torque(-w_c)
+        compute = time.perf_counter() - t0
+        self.device.advance(self.coupling.period_s, operator_wrench)
+        return w_c, felt, compute
+
+    def run(self, duration_s: float, operator: Operator) -> LoopRecord:
+        """Run ticks for ``duration_s`` with ``operator(t, device)`` pushing the handle."""
+        rec = LoopRecord(period_s=self.coupling.period_s)
+        n = int(round(duration_s / self.coupling.period_s))
+        self.device.open()
+        try:
+            for _ in range(n):
+                t = self.sim.time_s
+                w_c, felt, compute = self.tick(operator(t, self.device))
+                rec.time_s.append(self.sim.time_s)
+                rec.compute_s.append(compute)
+                rec.coupling_wrench.append(w_c)
+                rec.felt_wrench.append(felt)
+                rec.device_position.append(self.device.position())
+                rec.workpiece_position.append(self.sim.pose.p_world.copy())
+                rec.active_contacts.append(self.sim.last.active if self.sim.last else ())
+        finally:
+            self.device.close()
+        return rec

@@ -1,0 +1,43 @@
+"""The simulated haptic loop: passivity check, what the user feels, the loop's timing record."""
+
+import numpy as np
+import pytest
+
+import fixplan
+from fixplan.errors import InputError
+from fixplan.haptics import HapticLoop, SimulatedDevice, VirtualCoupling, check_passivity
+from fixplan.simulator import Simulator
+
+
+def test_passivity_condition_is_enforced():
+    """Colgate & Schenkel: b > K T / 2 + |B|."""
+    assert check_passivity(K=1000.0, B=2.0, T=1e-3, b=3.0) == pytest.approx(3.0 - 0.5 - 2.0)
+    with pytest.raises(InputError, match="not passive"):
+        check_passivity(K=5000.0, B=2.0, T=1e-3, b=3.0)  # 2.5 + 2 = 4.5 > 3
+    with pytest.raises(InputError, match="not passive"):
+        VirtualCoupling(1000.0, 8.0, 1.0, 0.01, 1e-3, device_damping=8.0, device_damping_rot=0.08)
+
+
+def test_device_saturates_displayed_force():
+    dev = SimulatedDevice(6)
+    shown = dev.set_force_and_torque([300.0, 400.0, 0.0, 0.0, 0.0, 10.0])
+    assert np.linalg.norm(shown[:3]) == pytest.approx(dev.specs.max_force_N)
+    assert np.allclose(shown[:3] / np.linalg.norm(shown[:3]), [0.6, 0.8, 0.0])
+    assert shown[5] == pytest.approx(dev.specs.max_torque_Nm)
+
+
+def test_user_feels_the_locator_reaction():
+    """Pushing the located box into E1 through the coupling: the felt force settles at the push (the box is held)."""
+    f = fixplan.load(fixplan.default_fixture_path())
+    sim = Simulator(f)
+    sim.set_state(f.goal)
+    dev = SimulatedDevice(6, x0=np.concatenate([f.goal.p_world, np.zeros(3)]))
+    coupling = VirtualCoupling(1000.0, 2.0, 20.0, 0.02, 1e-3, device_damping=dev.specs.physical_damping_Ns_per_m, device_damping_rot=0.08)
+    loop = HapticLoop(sim, dev, coupling)
+    push = np.array([-10.0, 0, 0, 0, 0, 0])
+    rec = loop.run(1.0, lambda t, d: push)
+    # quasi-static end: the device is held by the coupling, the user feels +10 N back
+    assert rec.felt_wrench[-1][0] == pytest.approx(10.0, rel=1e-3)
+    assert "E1" in rec.active_contacts[-1]
+    assert np.linalg.norm(rec.workpiece_position[-1] - f.goal.p_world) < 1e-6  # the box stays located
+    assert len(rec.compute_s) == 1000 and rec.mean_compute_s > 0
