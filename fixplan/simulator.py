@@ -27,7 +27,7 @@ from fixplan.engine import step as kernels
 from fixplan.engine.detect import encode
 from fixplan.errors import InputError, SolverError
 from fixplan.fixture import Fixture
-from fixplan.pose import Pose, cross2, quaternion_wxyz_from_matrix, rot2
+from fixplan.pose import Pose, quaternion_wxyz_from_matrix, rot2
 
 FloatArray = NDArray[np.float64]
 WrenchInput = ArrayLike | Callable[[float, "Simulator"], ArrayLike] | None
@@ -46,6 +46,13 @@ class ContactReport:
 
     def to_json(self) -> dict[str, Any]:
         return {"name": self.name, "gap": self.gap_m, "normal_force": self.normal_force_N, "mode": self.mode}
+
+
+class _Active(tuple):
+    """Names of the active contacts, built lazily from the step's mask (cheap per step)."""
+
+    def __new__(cls, names: list[str], mask: NDArray[np.bool_]) -> _Active:
+        return super().__new__(cls, (n for n, a in zip(names, mask, strict=True) if a))
 
 
 @dataclass(frozen=True)
@@ -174,6 +181,7 @@ class Simulator:
         self._gap = np.zeros(k)
         self._nw = np.zeros((k, self.dimension))
         self.last: StepInfo | None = None
+        self._state3 = np.zeros((4, 3, 3))
         self.max_penetration_m = 0.0
         self.set_state(fixture.start)
 
@@ -217,34 +225,46 @@ class Simulator:
         if wrench is None:
             return g, (np.zeros(3) if d == 3 else 0.0)
         w = np.asarray(wrench, dtype=float)
-        if w.shape != ((6,) if d == 3 else (3,)) or not np.all(np.isfinite(w)):
+        if w.shape != ((6,) if d == 3 else (3,)) or not np.isfinite(w).all():
             raise InputError(f"wrench expects {6 if d == 3 else 3} finite numbers, got {np.asarray(wrench).tolist()}")
-        offset = self._p - self.com_world  # moment point (body origin) relative to the centre of mass
+        o = -(self._R @ self._com_b)  # body origin relative to the centre of mass
         if d == 3:
-            return g + w[:3], w[3:] + np.cross(offset, w[:3])
-        return g + w[:2], float(w[2] + cross2(offset, w[:2]))
+            F = w[:3]
+            cross = np.array([o[1] * F[2] - o[2] * F[1], o[2] * F[0] - o[0] * F[2], o[0] * F[1] - o[1] * F[0]])
+            return g + F, w[3:] + cross
+        return g + w[:2], float(w[2] + o[0] * w[1] - o[1] * w[0])
 
     def step(self, wrench: ArrayLike | None = None) -> StepInfo:
         """Advance one step under ``wrench`` (about the body origin) plus gravity."""
         f, tau = self._external(wrench)
         h = self.dt
-        speed = float(np.linalg.norm(self._v)) + float(np.linalg.norm(np.atleast_1d(self._w))) * self._bound
+        v, w = self._v, self._w
+        speed = math.sqrt(float(v @ v)) + (math.sqrt(float(w @ w)) if self.dimension == 3 else abs(w)) * self._bound
         margin = self.margin_m + 2.0 * h * speed
-        args_common = (self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu)
         if self.dimension == 3:
-            out = kernels.step3(
-                self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b,
-                *args_common, self._tors, h, f, tau, self.restitution, margin, self.tolerance,
-                self.max_iterations, self._P, self._active, self._bound,
+            st = self._state3
+            st[0] = self._R
+            st[1, 0], st[1, 1], st[1, 2] = self._p, self._v, self._w
+            err, iters, status, failures, pen = kernels.step3_into(
+                st, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind, self._params, self._verts,
+                self._enorm, self._loc_p, self._loc_r, self._mu, self._tors, h, f, tau, self.restitution, margin,
+                self.tolerance, self.max_iterations, self._P, self._active, self._gap, self._u, self._nw, self._bound,
             )  # fmt: skip
+            if status != kernels.STATUS_NONFINITE:
+                self._R, self._p, self._v, self._w = st[0].copy(), st[1, 0].copy(), st[1, 1].copy(), st[1, 2].copy()
         else:
             theta = math.atan2(self._R[1, 0], self._R[0, 0])
             out = kernels.step2(
                 theta, self._p, self._v, self._w, self._mass, float(self._Ib[0, 0]), self._com_b,
-                *args_common, h, f, tau, self.restitution, margin, self.tolerance,
-                self.max_iterations, self._P, self._active, self._bound,
+                self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu,
+                h, f, tau, self.restitution, margin, self.tolerance, self.max_iterations, self._P, self._active,
+                self._bound,
             )  # fmt: skip
-        rot, p, v, w, P, active, gap, u, n_w, _pt, err, iters, status, failures, pen = out
+            rot, p, v2, w2, P, active, gap, u, n_w, _pt, err, iters, status, failures, pen = out
+            self._gap = gap
+            if status != kernels.STATUS_NONFINITE:
+                self._R, self._p, self._v, self._w = rot2(rot), p, v2, w2
+                self._P, self._active, self._u, self._nw = P, active, u, n_w
         if status == kernels.STATUS_NONFINITE:
             raise SolverError(
                 f"step {self.steps} at t = {self.time_s:.6g} s produced a non-finite state; the state was kept",
@@ -252,17 +272,18 @@ class Simulator:
             )
         if status == kernels.STATUS_NOT_CONVERGED and self.strict:
             raise SolverError(f"NSGS did not reach {self.tolerance:g} at t = {self.time_s:.6g} s (error {err:.3g})")
-        self._R = rot if self.dimension == 3 else rot2(rot)
-        self._p, self._v = p, v
-        self._w = w
-        self._P, self._active, self._u, self._gap, self._nw = P, active, u, gap, n_w
         self.time_s += h
         self.steps += 1
-        self.max_penetration_m = max(self.max_penetration_m, pen)
+        if pen > self.max_penetration_m:
+            self.max_penetration_m = pen
         self.last = StepInfo(
-            float(err), int(iters), status == kernels.STATUS_OK, int(failures), float(pen),
-            tuple(n for n, a in zip(self.names, active, strict=True) if a),
-        )  # fmt: skip
+            float(err),
+            int(iters),
+            status == kernels.STATUS_OK,
+            int(failures),
+            float(pen),
+            _Active(self.names, self._active),
+        )
         return self.last
 
     def contacts(self) -> list[ContactReport]:
@@ -351,7 +372,9 @@ class Simulator:
             wall += time.perf_counter() - t0
             R, p, v, w, P, active, gap, n_w, u, rp, rR, rnu, rfn, rgap, rerr, rit, pen, worst_k, status_k = out
             if status_k == kernels.STATUS_NONFINITE:
-                raise SolverError(f"a step produced a non-finite state between t = {self.time_s:.6g} s and {self.time_s + n * self.dt:.6g} s; the state before it was kept")
+                raise SolverError(
+                    f"a step produced a non-finite state between t = {self.time_s:.6g} s and {self.time_s + n * self.dt:.6g} s; the state before it was kept"
+                )
             if status_k == kernels.STATUS_NOT_CONVERGED:
                 status = status_k
                 if self.strict:

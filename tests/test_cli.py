@@ -13,7 +13,11 @@ PROBLEMS = ROOT / "problems"
 
 
 def fixplan(*args, check_rc=None):
-    proc = subprocess.run([sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args], capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args],
+        capture_output=True,
+        text=True,
+    )
     if check_rc is not None:
         assert proc.returncode == check_rc, proc.stderr
     return proc
@@ -36,7 +40,9 @@ def test_classify_json_contract(tmp_path):
 def test_search_json_and_exit_codes():
     out = json.loads(fixplan("search", "--motion", "0.1,0,0,0,0,0", "--json", check_rc=0).stdout)
     assert out["found"] and out["check_mode"] == "slides" and out["margin"] > 0
-    weak = fixplan("search", str(PROBLEMS / "box-3-2-1.toml"), "--motion", "0,0,0,0,0,5", "--contacts", "B1,B2,B3", "--json")
+    weak = fixplan(
+        "search", str(PROBLEMS / "box-3-2-1.toml"), "--motion", "0,0,0,0,0,5", "--contacts", "B1,B2,B3", "--json"
+    )
     assert weak.returncode in (0, 1)
 
 
@@ -54,7 +60,20 @@ def test_map_writes_png_and_csv_and_refuses_to_overwrite(tmp_path):
 
 def test_simulate_json_contract(tmp_path):
     traj = tmp_path / "t.csv"
-    out = json.loads(fixplan("simulate", str(PROBLEMS / "box-3-2-1.toml"), "--duration", "0.2", "--wrench", "-5,-5,-5,0,0,0", "--json", "--out", str(traj), check_rc=0).stdout)
+    out = json.loads(
+        fixplan(
+            "simulate",
+            str(PROBLEMS / "box-3-2-1.toml"),
+            "--duration",
+            "0.2",
+            "--wrench",
+            "-5,-5,-5,0,0,0",
+            "--json",
+            "--out",
+            str(traj),
+            check_rc=0,
+        ).stdout
+    )
     assert out["steps"] == 200 and out["time"] == pytest.approx(0.2)
     assert set(out["pose"]) == {"position", "quaternion_wxyz"}
     assert set(out["velocity"]) == {"linear", "angular"}
@@ -67,7 +86,9 @@ def test_simulate_json_contract(tmp_path):
 
 def test_simulate_refuses_contact_only_fixture():
     proc = fixplan("simulate", str(PROBLEMS / "peg-hole-mid.toml"))
-    assert proc.returncode == 2 and "no geometry to simulate" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert (
+        proc.returncode == 2 and "no geometry to simulate" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    )
 
 
 def test_goal_needs_full_fixture():

@@ -32,7 +32,9 @@ def test_user_feels_the_locator_reaction():
     sim = Simulator(f)
     sim.set_state(f.goal)
     dev = SimulatedDevice(6, x0=np.concatenate([f.goal.p_world, np.zeros(3)]))
-    coupling = VirtualCoupling(1000.0, 2.0, 20.0, 0.02, 1e-3, device_damping=dev.specs.physical_damping_Ns_per_m, device_damping_rot=0.08)
+    coupling = VirtualCoupling(
+        1000.0, 2.0, 20.0, 0.02, 1e-3, device_damping=dev.specs.physical_damping_Ns_per_m, device_damping_rot=0.08
+    )
     loop = HapticLoop(sim, dev, coupling)
     push = np.array([-10.0, 0, 0, 0, 0, 0])
     rec = loop.run(1.0, lambda t, d: push)

@@ -7,7 +7,6 @@ running fixplan; these tests hold :func:`fixplan.classify` and
 
 from __future__ import annotations
 
-import importlib.util
 import itertools
 import math
 import subprocess

@@ -150,7 +150,8 @@ def fclib_error(W, q, mu, offsets, sizes, P, u):
 def nsgs_dense(W, q, mu, offsets, sizes, P, tol, max_iter):
     """Gauss–Seidel sweeps with exact local solves until the FCLib residual ≤ tol.
 
-    Returns (error, iterations, converged, failed local solves in the last sweep)."""
+    Returns (error, iterations, converged, failed local solves in the last sweep).
+    """
     m = q.shape[0]
     nc = offsets.shape[0]
     alpha = np.empty(4)
@@ -355,7 +356,23 @@ def step3(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p
         for a in range(sizes[jj]):
             P_full[i, a] = P[offsets[jj] + a]
             u_full[i, a] = u[offsets[jj] + a]
-    return R_new, p_new, v_new, w_new, P_full, active, gap, u_full, n_w, pt_w, err, iters, status, failures, max(pen, 0.0)
+    return (
+        R_new,
+        p_new,
+        v_new,
+        w_new,
+        P_full,
+        active,
+        gap,
+        u_full,
+        n_w,
+        pt_w,
+        err,
+        iters,
+        status,
+        failures,
+        max(pen, 0.0),
+    )
 
 
 @njit(cache=True)
@@ -435,7 +452,23 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
     u = mv(W, P) + q
     status = STATUS_OK if converged else STATUS_NOT_CONVERGED
     if not (np.all(np.isfinite(nu)) and math.isfinite(err)):
-        return theta, p, v, w, np.zeros((k, 4)), active, gap, np.zeros((k, 4)), n_w, pt_w, err, iters, STATUS_NONFINITE, failures, 0.0
+        return (
+            theta,
+            p,
+            v,
+            w,
+            np.zeros((k, 4)),
+            active,
+            gap,
+            np.zeros((k, 4)),
+            n_w,
+            pt_w,
+            err,
+            iters,
+            STATUS_NONFINITE,
+            failures,
+            0.0,
+        )
     v_new = nu[0:2].copy()
     w_new = nu[2]
     c_new = c + h * v_new
@@ -478,7 +511,23 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
         i = idx[jj]
         P_full[i, 0:2] = P[2 * jj : 2 * jj + 2]
         u_full[i, 0:2] = u[2 * jj : 2 * jj + 2]
-    return th_new, p_new, v_new, w_new, P_full, active, gap, u_full, n_w, pt_w, err, iters, status, failures, max(pen, 0.0)
+    return (
+        th_new,
+        p_new,
+        v_new,
+        w_new,
+        P_full,
+        active,
+        gap,
+        u_full,
+        n_w,
+        pt_w,
+        err,
+        iters,
+        status,
+        failures,
+        max(pen, 0.0),
+    )
 
 
 @njit(cache=True)
@@ -487,7 +536,8 @@ def run3(n_steps, record_every, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, param
     """``n_steps`` of :func:`step3` under a constant wrench, compiled end to end.
 
     ``tau_world`` is the applied moment about the body origin; it is re-expressed about the
-    moving centre of mass every step. Returns the final state and the recorded samples."""
+    moving centre of mass every step. Returns the final state and the recorded samples.
+    """
     k = loc_p.shape[0]
     n_rec = n_steps // record_every + 1
     rec_p = np.zeros((n_rec, 3))
@@ -540,3 +590,31 @@ def run3(n_steps, record_every, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, param
             r += 1
     return (R, p, v, w, P, active, gap, n_last, u_last, rec_p[:r], rec_R[:r], rec_nu[:r], rec_fn[:r], rec_gap[:r],
             rec_err[:r], rec_it[:r], max_pen, worst_err, status)  # fmt: skip
+
+
+@njit(cache=True)
+def step3_into(state, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, h, f_ext,
+               tau_ext, restitution, margin, tol, max_iter, P, active, gap, u, n_w, bound):  # fmt: skip
+    """:func:`step3` writing into caller-owned buffers (cheap to call from Python).
+
+    ``state`` is a (4, 3, 3) buffer: ``state[0]`` = R, ``state[1, 0]`` = p, ``state[1, 1]`` = v,
+    ``state[1, 2]`` = ω. Returns (error, iterations, status, failures, penetration).
+    """
+    R = state[0].copy()
+    p = state[1, 0].copy()
+    v = state[1, 1].copy()
+    w = state[1, 2].copy()
+    out = step3(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, h,
+                f_ext, tau_ext, restitution, margin, tol, max_iter, P.copy(), active.copy(), bound)  # fmt: skip
+    R2, p2, v2, w2, P2, act2, gap2, u2, nw2, _pt, err, iters, status, failures, pen = out
+    if status != STATUS_NONFINITE:
+        state[0] = R2
+        state[1, 0] = p2
+        state[1, 1] = v2
+        state[1, 2] = w2
+        P[:] = P2
+        active[:] = act2
+        u[:] = u2
+        n_w[:] = nw2
+    gap[:] = gap2
+    return err, iters, status, failures, pen

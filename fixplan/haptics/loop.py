@@ -66,7 +66,9 @@ class HapticLoop:
         if abs(coupling.period_s - sim.dt) > 1e-12:
             raise InputError(f"coupling period {coupling.period_s:g} s must equal the engine step {sim.dt:g} s")
         if device.ndof != (6 if sim.dimension == 3 else 3):
-            raise InputError(f"a {sim.dimension}D scene needs a device with {6 if sim.dimension == 3 else 3} coordinates")
+            raise InputError(
+                f"a {sim.dimension}D scene needs a device with {6 if sim.dimension == 3 else 3} coordinates"
+            )
         specs = device.specs
         if coupling.K_lin > specs.max_stiffness_N_per_m or coupling.B_lin > specs.max_damping_Ns_per_m:
             raise InputError(

@@ -6,11 +6,12 @@ import pytest
 import fixplan
 from fixplan.engine.reference import reference_step
 from fixplan.errors import InputError
-from fixplan.pose import Pose
 from fixplan.simulator import Simulator
 
 
-@pytest.mark.parametrize("name", ["box-3-2-1.toml", "box-3-2-1-soft.toml", "rect-3.toml", "cylinder-5.toml", "polygon-2d.toml"])
+@pytest.mark.parametrize(
+    "name", ["box-3-2-1.toml", "box-3-2-1-soft.toml", "rect-3.toml", "cylinder-5.toml", "polygon-2d.toml"]
+)
 def test_compiled_step_matches_numpy_reference(name, rng):
     f = fixplan.load(fixplan.default_fixture_path().parents[2] / "problems" / name)
     sim = Simulator(f, tolerance=1e-12)

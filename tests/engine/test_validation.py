@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import fixplan
-from fixplan.pose import Pose, log_so3
+from fixplan.pose import log_so3
 from fixplan.simulator import Simulator
 
 BOX3 = """format = 1
