@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fixplan.engine.local import project_cone, solve_coulomb_2d, solve_cone
+from fixplan.engine.local import project_cone, solve_cone, solve_coulomb_2d
 from fixplan.fixture import Fixture
 from fixplan.kinematics import Contact
 from fixplan.locating import locator_contact
@@ -19,6 +19,7 @@ from fixplan.pose import Pose, exp_so3, rot2
 
 
 def fclib_error(W, q, mu, offsets, sizes, P):
+    """The FCLib residual, written plainly."""
     u = W @ P + q
     total = 0.0
     for o, d, m in zip(offsets, sizes, mu, strict=True):
@@ -92,7 +93,7 @@ def reference_step(fixture: Fixture, pose: Pose, twist: np.ndarray, P_warm: np.n
         if warm_active[i]:
             P[o : o + s] = P_warm[i, :s]
     err, it = np.inf, 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 - the count is returned
         for o, s, mu in zip(offsets, sizes, mus, strict=True):
             alpha = q[o : o + s] + W[o : o + s] @ P - W[o : o + s, o : o + s] @ P[o : o + s]
             Wjj = np.ascontiguousarray(W[o : o + s, o : o + s])

@@ -16,7 +16,7 @@ def test_compiled_step_matches_numpy_reference(name, rng):
     f = fixplan.load(fixplan.default_fixture_path().parents[2] / "problems" / name)
     sim = Simulator(f, tolerance=1e-12)
     d = f.dimension
-    for trial in range(4):
+    for _trial in range(4):
         # a pose near the start with a random twist and push, so some contacts open and some slide
         twist = rng.normal(size=6 if d == 3 else 3) * 0.05
         wrench = rng.normal(size=6 if d == 3 else 3) * np.r_[[5.0] * d, [0.2] * (3 if d == 3 else 1)]
