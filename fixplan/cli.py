@@ -427,6 +427,45 @@ def simulate(
         typer.echo(f"wrote {target}")
 
 
+@app.command()
+def fclib(
+    file: Annotated[Path, typer.Argument(help="An FCLib HDF5 problem (local or global, 3D or 2D).")],
+    tol: Annotated[float, typer.Option("--tol", help="Target FCLib residual (natural map, relative).")] = 1e-8,
+    max_iter: Annotated[int | None, typer.Option("--max-iter", help="Iteration cap (sweeps for nsgs, rounds for socp/auto).", min=1)] = None,
+    solver: Annotated[str, typer.Option("--solver", help="auto, nsgs, nsgs-numpy or socp.")] = "auto",
+    json_out: JsonOpt = False,
+) -> None:
+    """Solve an FCLib frictional-contact problem; exit 0 converged, 1 not converged, 2 bad input."""
+    from fixplan.engine.fclib import solve_fclib_file
+
+    if not (tol > 0 and np.isfinite(tol)):
+        raise InputError(f"--tol must be a positive number, got {tol}")
+    result = solve_fclib_file(file, tol=tol, max_iter=max_iter, solver=solver)
+    if json_out:
+        _emit_json(
+            {
+                "file": str(file),
+                "kind": result.kind,
+                "contacts": result.n_contacts,
+                "solver": result.solver,
+                "error": float(result.error),
+                "iterations": int(result.iterations),
+                "converged": bool(result.converged),
+                "time_s": float(result.time_s),
+                "reaction": [float(x) for x in result.reaction],
+                "velocity": [float(x) for x in result.velocity],
+            }
+        )
+    else:
+        verdict = "converged" if result.converged else "NOT converged"
+        typer.echo(
+            f"{file}: {result.kind} problem, {result.n_contacts} contacts; {result.solver}: error {result.error:.3g} "
+            f"after {result.iterations} iterations in {result.time_s * 1e3:.1f} ms ({verdict}, tol {tol:g})"
+        )
+    if not result.converged:
+        raise typer.Exit(1)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the app and turn every expected failure into one line and exit 2."""
     try:

@@ -94,3 +94,22 @@ def test_simulate_refuses_contact_only_fixture():
 def test_goal_needs_full_fixture():
     proc = fixplan("classify", str(PROBLEMS / "box-3-supports.toml"), "--wrench", "0,0,0,0,0,0", "--pose", "goal")
     assert proc.returncode == 2 and "full fixture" in proc.stderr
+
+
+def test_fclib_cli_converges_and_reports_json(fclib_dir):
+    path = next(iter(sorted(fclib_dir.glob("Box_Stacks*.hdf5"))))
+    out = json.loads(fixplan("fclib", str(path), "--json", check_rc=0).stdout)
+    assert out["converged"] and out["error"] <= 1e-8
+    assert len(out["reaction"]) == len(out["velocity"]) == 3 * out["contacts"]
+    assert {"error", "iterations", "converged", "time_s", "reaction", "velocity"} <= set(out)
+
+
+def test_fclib_cli_exit_codes(fclib_dir, tmp_path):
+    path = next(iter(sorted(fclib_dir.glob("Capsules*.hdf5"))))
+    assert fixplan("fclib", str(path), "--solver", "nsgs", "--max-iter", "5").returncode == 1
+    bad = tmp_path / "x.hdf5"
+    bad.write_text("not hdf5")
+    proc = fixplan("fclib", str(bad))
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
+    proc = fixplan("fclib", str(path), "--solver", "nope")
+    assert proc.returncode == 2 and "known solvers" in proc.stderr

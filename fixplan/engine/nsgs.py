@@ -9,7 +9,7 @@ or 4 (soft finger with torsion radius ``e_r``).
 Soft-finger contacts are solved in the scaled variables of :mod:`fixplan.engine.local`:
 with ``s = 1`` on every row except ``s = e_r`` on spin rows, ``W̃ = diag(s) W diag(s)``,
 ``q̃ = s ∘ q``, ``r = s ∘ r̃``, ``ũ = s ∘ u``. The scaled problem has only second-order cones,
-so the sweep, the residual and the Newton solver see one kind of cone.
+so the sweep, the residual and the SOCP solver see one kind of cone.
 
 Stopping rule: the Siconos/FCLib residual (natural map, ``ρ = 1``), in the scaled variables::
 
@@ -35,7 +35,13 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from fixplan.engine.local import FAILED, cone_solve_into, coulomb_2d_into, project_cone_into
+from fixplan.engine.local import (
+    FAILED,
+    WORKSPACE_SIZE,
+    cone_solve_ws,
+    coulomb_2d_ws,
+    project_cone_into,
+)
 from fixplan.errors import InputError
 
 DEFAULT_TOL = 1e-8
@@ -319,7 +325,7 @@ def fclib_error(problem: ContactProblem, reaction: np.ndarray) -> float:
             proj = np.concatenate(([pn], mu * pn * x[1:] / nt))
         total += float(np.sum((rj - proj) ** 2))
     scale = max(np.linalg.norm(q_tilde), np.linalg.norm(r_tilde), np.linalg.norm(u_tilde))
-    return math.sqrt(total) / scale if scale > 0 else math.sqrt(total)
+    return math.sqrt(total) / float(scale) if scale > 0 else math.sqrt(total)
 
 
 # --------------------------------------------------------------------------- compiled kernels
@@ -390,9 +396,15 @@ def error_kernel(indptr, indices, data, q, mu, offsets, dims, r, u):
 @numba.njit(cache=True, error_model="numpy")
 def local_solve_into(A, alpha, mu, d, P):
     """One-contact solve in a standard cone of dimension ``d`` (closed form for ``d = 2``)."""
+    return local_solve_ws(A, alpha, mu, d, P, np.empty(WORKSPACE_SIZE))
+
+
+@numba.njit(cache=True, error_model="numpy")
+def local_solve_ws(A, alpha, mu, d, P, ws):
+    """:func:`local_solve_into` with a caller-owned workspace (``WORKSPACE_SIZE`` floats)."""
     if d == 2:
-        return coulomb_2d_into(A, alpha, mu, P)
-    return cone_solve_into(A, alpha, mu, P)
+        return coulomb_2d_ws(A, alpha, mu, P, ws)
+    return cone_solve_ws(A, alpha, mu, P, ws)
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -401,6 +413,7 @@ def sweep_kernel(indptr, indices, data, q, mu, offsets, dims, diag, r, omega):
     nc = offsets.shape[0]
     alpha = np.empty(4)
     P = np.empty(4)
+    ws = np.empty(WORKSPACE_SIZE)
     failures = 0
     for j in range(nc):
         o = offsets[j]
@@ -413,7 +426,7 @@ def sweep_kernel(indptr, indices, data, q, mu, offsets, dims, diag, r, omega):
                 if c < o or c >= o + d:
                     s += data[p] * r[c]
             alpha[a] = s
-        st, _ = local_solve_into(diag[j, :d, :d], alpha[:d], mu[j], d, P[:d])
+        st, _ = local_solve_ws(diag[j, :d, :d], alpha[:d], mu[j], d, P[:d], ws)
         if st == FAILED:
             failures += 1
         for a in range(d):
@@ -588,7 +601,9 @@ def solve_nsgs(
     arrays = kernel_arrays(problem)
     r = _initial_scaled(problem, r0)
     history = np.full(min(max(int(max_iter), 1), _HISTORY_CAP), np.nan)
-    it, err, status, failures = nsgs_kernel(*arrays, r, float(tol), int(max_iter), float(omega), history)
+    it, err, status, failures = nsgs_kernel(  # type: ignore[call-arg]  # numba dispatcher
+        *arrays, r, float(tol), int(max_iter), float(omega), history
+    )
     extras = {
         "history": history[: min(it, history.shape[0])].copy(),
         "omega": float(omega),

@@ -13,10 +13,12 @@ With the friction "offset" ``s_j = μ_j ‖u_t,j‖`` frozen, the contact law
     minimize  ½ rᵀ W_sym r + (q + s)ᵀ r   subject to  r_j ∈ K_μj (second-order cones),
 
 solved by Clarabel's interior point method, which is indifferent to a rank-deficient ``W``.
-Updating ``s`` from the new ``u`` and solving again is a fixed-point iteration on ``s``; when it
-slows down, a short NSGS run from the current ``r`` finishes the job (NSGS converges fast close
-to the solution), and if NSGS stalls in turn, the next SOCP restarts from its result. Each
-round = one SOCP + at most ``polish_sweeps`` NSGS sweeps; ``max_iter`` caps the rounds.
+Updating ``s`` from the new ``u`` and solving again is a fixed-point iteration on ``s``. Each
+round is one SOCP then a short NSGS polish (``polish_sweeps`` sweeps) from the current ``r``:
+NSGS converges fast close to the solution, and when it stalls the next SOCP restarts from its
+result. The iteration is monotone: an SOCP iterate is kept only if it lowers the residual, and
+when it does not, the polish budget of the following rounds is multiplied by 4. ``max_iter``
+caps the rounds.
 ``W_sym = (W + Wᵀ)/2``: a non-symmetric ``W`` (one FCLib file has a relative asymmetry of
 1.3e-3) only slows the fixed point; the NSGS polish and the residual use the true ``W``.
 Cones are exact (``μ = 0``: ``r_n ≥ 0``, ``r_t = 0``); soft-finger contacts are solved in the
@@ -28,27 +30,30 @@ Candidates were prototyped and run on 24 synthetic box stacks (3 or 8 boxes, 4 c
 contacts per interface, so ``W`` has rank 18/36 and 48/96; mass ratio 1 or 10 between
 boxes; μ ∈ {0.3, 1}; resting, pushed, and moving) and on the four FCLib files:
 
-============================  ===============  =========================================
-method                        stacks solved    notes
-============================  ===============  =========================================
-NSGS (20 000 sweeps cap)      18/24            the 6 failures: 8 boxes, ratio 10, error
-                                               stuck at 5e-6 .. 9e-5 after 20 000 sweeps
-                                               (1.4–2.6 s); ratio-10 3-box stacks need
-                                               3 000–14 000 sweeps
-semismooth Newton, AC         ~0/24            Jacobian exactly singular (stick rows of a
-(plain, Armijo)                                rank-deficient W); 0/4 FCLib
-Levenberg–Marquardt on AC     12/24            λ = min(1, ‖Φ‖), Armijo on ½‖Φ‖²; fails on
-(semismooth, line search)                      all ratio-10 stacks (error 1e-4 .. 2e-1
-                                               after 100 steps, 0.3–2.7 s); 1/4 FCLib
-successive SOCP + NSGS        24/24            1–30 SOCPs (13–34 IPM iterations each,
-polish                                         0.01–0.17 s); stuck ratio-10 stacks in
-                                               3–14 SOCPs, ≤ 0.05 s; 4/4 FCLib
-============================  ===============  =========================================
+=============================  ==========  ========  ======================================
+method                         stacks      FCLib     notes
+=============================  ==========  ========  ======================================
+NSGS (cap 20 000 sweeps)       18/24       4/4       fails on all six 8-box ratio-10 stacks
+                                                     (error stuck at 5e-6 .. 9e-5 after
+                                                     20 000 sweeps, 1.4–2.6 s); ratio-10
+                                                     3-box stacks need 3 000–14 000 sweeps
+semismooth Newton on           0/7 (*)     1/4       Jacobian exactly singular (stick rows
+Alart–Curnier, Armijo                                of a rank-deficient W); only Spheres
+                                                     (full-rank W) converges, in 7 steps
+Levenberg–Marquardt on AC,     9/24        1/4       λ = min(1, ‖Φ‖); fails on every ratio-10
+Armijo on ½‖Φ‖²                                      stack (error 1e-4 .. 2e-1 after 100
+                                                     steps, 0.3–2.7 s); FCLib: Box_Stacks only
+successive SOCP + NSGS         24/24       4/4       1–30 SOCPs of 13–34 IPM iterations;
+polish (this module)                                 the stuck 8-box stacks in 3–8 SOCPs,
+                                                     ≤ 0.05 s
+=============================  ==========  ========  ======================================
 
-On FCLib, successive SOCP alone stagnates between 3e-8 and 2e-5 (Box_Stacks, Spheres,
-Capsules: the fixed point on ``s`` converges linearly with μ = 0.3–0.7), and a short NSGS
-polish from there reaches 1e-8 in 2–131 sweeps (Capsules: 131 sweeps instead of 2 302 from a
-cold start). Per-problem timings are in ``benchmarks/bench_fclib.py``'s report.
+(*) on the 7 stacks of a first, smaller set. On FCLib, successive SOCP alone stagnates
+(60 rounds: Box_Stacks 3e-8, Capsules 2e-5; Spheres reaches 1e-8 after 39): the fixed point on
+``s`` converges linearly for μ = 0.3–0.7, and Capsules' non-symmetric ``W`` is only
+approximated by ``W_sym``. A short NSGS polish from the SOCP iterate reaches 1e-8 in 2–131
+sweeps (Capsules: 131 sweeps instead of 2 302 from a cold start). Per-problem timings are in
+``benchmarks/bench_fclib.py``'s report.
 """
 
 from __future__ import annotations
@@ -174,9 +179,11 @@ def _settings() -> Any:
 def _offsets_s(u: np.ndarray, problem: ContactProblem) -> np.ndarray:
     """``s``: ``μ_j ‖ũ_t,j‖`` on normal rows, 0 elsewhere (scaled variables)."""
     s = np.zeros(problem.size)
-    for j in range(problem.n_contacts):
-        o, d = int(problem.offsets[j]), int(problem.dims[j])
-        s[o] = problem.mu[j] * float(np.linalg.norm(u[o + 1 : o + d]))
+    if problem.n_contacts == 0:
+        return s
+    tangential_sq = u * u
+    tangential_sq[problem.offsets] = 0.0  # drop the normal rows
+    s[problem.offsets] = problem.mu * np.sqrt(np.add.reduceat(tangential_sq, problem.offsets))
     return s
 
 
@@ -265,7 +272,9 @@ def solve_socp(
         if polish:
             hist = np.full(polish, np.nan)
             r_try = r.copy()
-            it, err_p, st, _ = nsgs_kernel(*arrays, r_try, float(tol), polish, 1.0, hist)
+            it, err_p, st, _ = nsgs_kernel(  # type: ignore[call-arg]  # numba dispatcher
+                *arrays, r_try, float(tol), polish, 1.0, hist
+            )
             sweeps_total += it
             if st != STATUS_NAN and err_p <= err:
                 r = r_try

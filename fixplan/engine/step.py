@@ -147,6 +147,69 @@ def fclib_error(W, q, mu, offsets, sizes, P, u):
 
 
 @njit(cache=True)
+def _invert_small(A, out):
+    """Gauss–Jordan inverse of a small SPD block; False when it is (nearly) singular."""
+    d = A.shape[0]
+    M = np.zeros((d, 2 * d))
+    scale = 0.0
+    for i in range(d):
+        for j in range(d):
+            M[i, j] = A[i, j]
+            scale = max(scale, abs(A[i, j]))
+        M[i, d + i] = 1.0
+    if scale == 0.0:
+        return False
+    for c in range(d):
+        piv = c
+        for r in range(c + 1, d):
+            if abs(M[r, c]) > abs(M[piv, c]):
+                piv = r
+        if abs(M[piv, c]) <= 1e-10 * scale:
+            return False
+        if piv != c:
+            for j in range(2 * d):
+                M[c, j], M[piv, j] = M[piv, j], M[c, j]
+        f = 1.0 / M[c, c]
+        for j in range(2 * d):
+            M[c, j] *= f
+        for r in range(d):
+            if r != c and M[r, c] != 0.0:
+                g = M[r, c]
+                for j in range(2 * d):
+                    M[r, j] -= g * M[c, j]
+    for i in range(d):
+        for j in range(d):
+            out[i, j] = M[i, d + j]
+    return True
+
+
+@njit(cache=True)
+def _fast_local(alpha, mu, d, inv, has_inv, P):
+    """The open and stick regimes in closed form when they hold clearly; False: use the full solver.
+
+    Open: ``α_n ≥ 0`` gives ``P = 0`` exactly (the local solver's first regime). Stick:
+    ``P = −W_jj⁻¹ α`` is accepted only strictly inside the cone (a relative margin of 1e-9), so
+    every boundary case still goes to the exact solver."""
+    if alpha[0] >= 0.0:
+        for a in range(d):
+            P[a] = 0.0
+        return True
+    if not has_inv:
+        return False
+    for a in range(d):
+        acc = 0.0
+        for b in range(d):
+            acc -= inv[a, b] * alpha[b]
+        P[a] = acc
+    if P[0] <= 0.0:
+        return False
+    nt = 0.0
+    for a in range(1, d):
+        nt += P[a] * P[a]
+    return math.sqrt(nt) < mu * P[0] * (1.0 - 1e-9)
+
+
+@njit(cache=True)
 def nsgs_dense(W, q, mu, offsets, sizes, P, tol, max_iter):
     """Gauss–Seidel sweeps with exact local solves until the FCLib residual ≤ tol.
 
@@ -162,11 +225,14 @@ def nsgs_dense(W, q, mu, offsets, sizes, P, tol, max_iter):
     if m == 0:
         return 0.0, 0, True, 0
     diag = np.zeros((nc, 4, 4))
+    inv = np.zeros((nc, 4, 4))
+    has_inv = np.zeros(nc, dtype=np.bool_)
     for j in range(nc):
         o, d = offsets[j], sizes[j]
         for a in range(d):
             for b in range(d):
                 diag[j, a, b] = W[o + a, o + b]
+        has_inv[j] = _invert_small(diag[j, :d, :d], inv[j, :d, :d])
     it = 0
     for it in range(1, max_iter + 1):
         failures = 0
@@ -178,9 +244,10 @@ def nsgs_dense(W, q, mu, offsets, sizes, P, tol, max_iter):
                     if c < o or c >= o + d:
                         s += W[o + a, c] * P[c]
                 alpha[a] = s
-            st, _ = local_solve_into(diag[j, :d, :d], alpha[:d], mu[j], d, Pj[:d])
-            if st == FAILED:
-                failures += 1
+            if not _fast_local(alpha, mu[j], d, inv[j], has_inv[j], Pj):
+                st, _ = local_solve_into(diag[j, :d, :d], alpha[:d], mu[j], d, Pj[:d])
+                if st == FAILED:
+                    failures += 1
             for a in range(d):
                 P[o + a] = Pj[a]
         for r in range(m):
@@ -318,8 +385,12 @@ def step3(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p
     R_new = mm(exp_so3(h * w_new), R)
     # position post-stabilisation; a body that does not move keeps g + h u_n ≥ 0 exactly
     pen = 0.0
+    deepest = 0.0
+    for i in range(k):
+        if active[i] and -gap[i] > deepest:
+            deepest = -gap[i]
     moved = h * (math.sqrt(np.sum(v_new * v_new)) + math.sqrt(np.sum(w_new * w_new)) * bound_m)
-    for _ in range(3 if moved > 1e-12 else 0):
+    for _ in range(3 if (moved > 1e-12 or deepest > 1e-12) else 0):
         p_new = c_new - mv(R_new, com_b)
         G = np.zeros((nc, 6))
         g = np.zeros(nc)
@@ -371,7 +442,7 @@ def step3(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p
         iters,
         status,
         failures,
-        max(pen, 0.0),
+        max(pen, deepest, 0.0),
     )
 
 
@@ -474,8 +545,12 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
     c_new = c + h * v_new
     th_new = theta + h * w_new
     pen = 0.0
+    deepest = 0.0
+    for i in range(k):
+        if active[i] and -gap[i] > deepest:
+            deepest = -gap[i]
     moved = h * (math.sqrt(np.sum(v_new * v_new)) + abs(w_new) * bound_m)
-    for _ in range(3 if moved > 1e-12 else 0):
+    for _ in range(3 if (moved > 1e-12 or deepest > 1e-12) else 0):
         cs, sn = math.cos(th_new), math.sin(th_new)
         Rn = np.array([[cs, -sn], [sn, cs]])
         p_new = c_new - mv(Rn, com_b)
@@ -526,7 +601,7 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
         iters,
         status,
         failures,
-        max(pen, 0.0),
+        max(pen, deepest, 0.0),
     )
 
 
@@ -539,7 +614,7 @@ def run3(n_steps, record_every, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, param
     moving centre of mass every step. Returns the final state and the recorded samples.
     """
     k = loc_p.shape[0]
-    n_rec = n_steps // record_every + 1
+    n_rec = n_steps // record_every + 2
     rec_p = np.zeros((n_rec, 3))
     rec_R = np.zeros((n_rec, 3, 3))
     rec_nu = np.zeros((n_rec, 6))
@@ -558,6 +633,7 @@ def run3(n_steps, record_every, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, param
     gap = np.zeros(k)
     n_last = np.zeros((k, 3))
     u_last = np.zeros((k, 4))
+    last_err, last_it = 0.0, 0
     for s in range(1, n_steps + 1):
         c = p + mv(R, com_b)
         off = p - c
@@ -577,7 +653,8 @@ def run3(n_steps, record_every, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, param
         n_last, u_last = n_w, u
         max_pen = max(max_pen, pen)
         worst_err = max(worst_err, err)
-        if s % record_every == 0 and r < n_rec:
+        last_err, last_it = err, iters
+        if (s % record_every == 0 or s == n_steps) and r < n_rec:
             rec_p[r] = p
             rec_R[r] = R
             rec_nu[r, 0:3] = v
@@ -589,7 +666,7 @@ def run3(n_steps, record_every, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, param
             rec_it[r] = iters
             r += 1
     return (R, p, v, w, P, active, gap, n_last, u_last, rec_p[:r], rec_R[:r], rec_nu[:r], rec_fn[:r], rec_gap[:r],
-            rec_err[:r], rec_it[:r], max_pen, worst_err, status)  # fmt: skip
+            rec_err[:r], rec_it[:r], max_pen, worst_err, status, last_err, last_it)  # fmt: skip
 
 
 @njit(cache=True)

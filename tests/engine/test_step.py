@@ -6,6 +6,7 @@ import pytest
 import fixplan
 from fixplan.engine.reference import reference_step
 from fixplan.errors import InputError
+from fixplan.pose import Pose
 from fixplan.simulator import Simulator
 
 
@@ -51,3 +52,25 @@ def test_resting_box_normal_forces_carry_its_weight():
     assert np.allclose(total, [0, 0, 2.0 * 9.81], atol=1e-6)
     assert {n for n, c in reports.items() if c.mode != "open"} == {"B1", "B2", "B3"}
     assert all(reports[n].mode == "sticking" for n in ("B1", "B2", "B3"))
+
+
+def test_initial_penetration_at_rest_is_removed_and_reported():
+    """A box started 1 mm into its base locators is pushed out by post-stabilisation, and the depth is reported."""
+    f = fixplan.load(fixplan.default_fixture_path())
+    sim = Simulator(f)
+    start = f.start
+    sim.set_state(Pose(start.R_world_body, start.p_world - np.array([0.0, 0.0, 1e-3])))
+    sim.run(0.01)
+    assert sim.max_penetration_m == pytest.approx(1e-3, rel=1e-6)
+    gaps = {c.name: c.gap_m for c in sim.contacts()}
+    assert min(gaps["B1"], gaps["B2"], gaps["B3"]) >= -1e-9
+    assert abs(sim.twist).max() < 1e-6  # positions only: no velocity (energy) injected
+
+
+def test_compiled_run_records_the_last_step_and_true_solver_figures():
+    f = fixplan.load(fixplan.default_fixture_path())
+    sim = Simulator(f)
+    traj = sim.run(0.015, [3.0, 0, 0, 0, 0, 0], record_every=10)
+    assert traj.time_s == pytest.approx([0.0, 0.01, 0.015])
+    assert sim.last.iterations >= 1 and sim.last.error > 0
+    assert sim.time_s == pytest.approx(0.015)
