@@ -100,13 +100,25 @@ def mmt(A, B):
 
 @njit(cache=True)
 def exp_so3(w):
-    """Rodrigues' formula."""
-    th = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
-    K = np.zeros((3, 3))
-    K[0, 1], K[0, 2], K[1, 0], K[1, 2], K[2, 0], K[2, 1] = -w[2], w[1], w[2], -w[0], -w[1], w[0]
+    """Rodrigues' formula, entry by entry (one allocation)."""
+    x, y, z = w[0], w[1], w[2]
+    th2 = x * x + y * y + z * z
+    th = math.sqrt(th2)
     if th < 1e-8:
-        return np.eye(3) + K + 0.5 * mm(K, K)
-    return np.eye(3) + (math.sin(th) / th) * K + ((1.0 - math.cos(th)) / (th * th)) * mm(K, K)
+        a, b = 1.0, 0.5
+    else:
+        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+    R = np.empty((3, 3))
+    R[0, 0] = 1.0 - b * (y * y + z * z)
+    R[1, 1] = 1.0 - b * (x * x + z * z)
+    R[2, 2] = 1.0 - b * (x * x + y * y)
+    R[0, 1] = -a * z + b * x * y
+    R[1, 0] = a * z + b * x * y
+    R[0, 2] = a * y + b * x * z
+    R[2, 0] = -a * y + b * x * z
+    R[1, 2] = -a * x + b * y * z
+    R[2, 1] = a * x + b * y * z
+    return R
 
 
 @njit(cache=True)
@@ -126,9 +138,13 @@ def tangents3(n):
 @njit(cache=True)
 def fclib_error(W, q, mu, offsets, sizes, P, u):
     """Siconos/FCLib residual (natural map, ρ = 1), normalised by max(‖q‖, ‖P‖, ‖u‖)."""
+    return fclib_error_ws(q, mu, offsets, sizes, P, u, np.empty(4), np.empty(4))
+
+
+@njit(cache=True)
+def fclib_error_ws(q, mu, offsets, sizes, P, u, x, pr):
+    """:func:`fclib_error` with caller-owned scratch vectors ``x``, ``pr`` (length 4)."""
     total = 0.0
-    x = np.empty(4)
-    pr = np.empty(4)
     for j in range(offsets.shape[0]):
         o, d = offsets[j], sizes[j]
         nt = 0.0
@@ -148,8 +164,30 @@ def fclib_error(W, q, mu, offsets, sizes, P, u):
 
 @njit(cache=True)
 def _invert_small(A, out):
-    """Gauss–Jordan inverse of a small SPD block; False when it is (nearly) singular."""
+    """Inverse of a small block (cofactors for 3×3, Gauss–Jordan otherwise); False when (nearly) singular."""
     d = A.shape[0]
+    if d == 3:
+        c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
+        c01 = A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]
+        c02 = A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]
+        det = A[0, 0] * c00 + A[0, 1] * c01 + A[0, 2] * c02
+        scale = 0.0
+        for i in range(3):
+            for j in range(3):
+                scale = max(scale, abs(A[i, j]))
+        if not (abs(det) > 1e-10 * scale * scale * scale):
+            return False
+        inv_det = 1.0 / det
+        out[0, 0] = c00 * inv_det
+        out[1, 0] = c01 * inv_det
+        out[2, 0] = c02 * inv_det
+        out[0, 1] = (A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]) * inv_det
+        out[1, 1] = (A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]) * inv_det
+        out[2, 1] = (A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]) * inv_det
+        out[0, 2] = (A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]) * inv_det
+        out[1, 2] = (A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]) * inv_det
+        out[2, 2] = (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]) * inv_det
+        return True
     M = np.zeros((d, 2 * d))
     scale = 0.0
     for i in range(d):
@@ -220,6 +258,8 @@ def nsgs_dense(W, q, mu, offsets, sizes, P, tol, max_iter):
     alpha = np.empty(4)
     Pj = np.empty(4)
     u = np.empty(m)
+    xbuf = np.empty(4)
+    prbuf = np.empty(4)
     err = math.inf
     failures = 0
     if m == 0:
@@ -255,7 +295,7 @@ def nsgs_dense(W, q, mu, offsets, sizes, P, tol, max_iter):
             for c in range(m):
                 s += W[r, c] * P[c]
             u[r] = s
-        err = fclib_error(W, q, mu, offsets, sizes, P, u)
+        err = fclib_error_ws(q, mu, offsets, sizes, P, u, xbuf, prbuf)
         if not math.isfinite(err):
             return err, it, False, failures
         if err <= tol:
@@ -306,14 +346,16 @@ def step3(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p
     L_free = mv(R, mv(Ib, mtv(R, w))) + h * tau_ext
     w_pred = w.copy()
     Rn = R
-    for _ in range(50):
+    spinning = (w[0] != 0.0 or w[1] != 0.0 or w[2] != 0.0) or (L_free[0] != 0.0 or L_free[1] != 0.0 or L_free[2] != 0.0)
+    for _ in range(50 if spinning else 0):
         Rn = mm(exp_so3(h * w_pred), R)
         w_new = mv(Rn, mv(Ib_inv, mtv(Rn, L_free)))
         dw = math.sqrt(np.sum((w_new - w_pred) ** 2))
         w_pred = w_new
         if dw <= 1e-15 * (1.0 + math.sqrt(np.sum(w_new * w_new))):
             break
-    Rn = mm(exp_so3(h * w_pred), R)
+    if spinning:
+        Rn = mm(exp_so3(h * w_pred), R)
     Iinv = mmt(mm(Rn, Ib_inv), Rn)
     # contact rows
     nc = 0
@@ -351,10 +393,19 @@ def step3(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p
     nu_free = np.concatenate((v_free, w_pred))
     nu_old = np.concatenate((v, w))
     MinvJt = np.empty((6, m))
+    inv_m = 1.0 / mass
     for r_ in range(m):
-        MinvJt[0:3, r_] = J[r_, 0:3] / mass
-        MinvJt[3:6, r_] = mv(Iinv, J[r_, 3:6])
-    W = mm(J, MinvJt)
+        for a in range(3):
+            MinvJt[a, r_] = J[r_, a] * inv_m
+            MinvJt[3 + a, r_] = Iinv[a, 0] * J[r_, 3] + Iinv[a, 1] * J[r_, 4] + Iinv[a, 2] * J[r_, 5]
+    W = np.empty((m, m))
+    for r_ in range(m):
+        for c_ in range(r_, m):
+            acc = 0.0
+            for a in range(6):
+                acc += J[r_, a] * MinvJt[a, c_]
+            W[r_, c_] = acc
+            W[c_, r_] = acc
     q = mv(J, nu_free)
     for jj in range(nc):
         i = idx[jj]
