@@ -115,7 +115,9 @@ def _json_default(x: Any) -> Any:
 
 
 @app.command()
-def validate(files: Annotated[list[Path], typer.Argument(help="Fixture files (or expected-verdict tables) to check.")]) -> None:
+def validate(
+    files: Annotated[list[Path], typer.Argument(help="Fixture files (or expected-verdict tables) to check.")],
+) -> None:
     """Check fixture files; print one line per problem (FILE: key: message) and exit 2 if any."""
     import numpy as np
 
@@ -355,8 +357,12 @@ def simulate(
     file: FileArg = None,
     duration: Annotated[float, typer.Option("--duration", help="Simulated time [s].")] = 1.0,
     dt: Annotated[float | None, typer.Option("--dt", help="Time step [s] (default: [simulation] timestep).")] = None,
-    wrench: Annotated[str | None, typer.Option("--wrench", help="Constant applied wrench about the body origin (default 0).")] = None,
-    tolerance: Annotated[float | None, typer.Option("--tolerance", help="NSGS residual (default: [simulation] tolerance).")] = None,
+    wrench: Annotated[
+        str | None, typer.Option("--wrench", help="Constant applied wrench about the body origin (default 0).")
+    ] = None,
+    tolerance: Annotated[
+        float | None, typer.Option("--tolerance", help="NSGS residual (default: [simulation] tolerance).")
+    ] = None,
     pose: PoseOpt = "start",
     out: Annotated[Path | None, typer.Option("--out", help="Write the trajectory as CSV.")] = None,
     every: Annotated[int, typer.Option("--every", help="Record every N-th step in --out.", min=1)] = 1,
@@ -399,7 +405,7 @@ def simulate(
         traj.to_csv(target)
     twist = sim.twist
     d = fixture.dimension
-    result = {
+    result: dict[str, Any] = {
         "steps": sim.steps,
         "time": sim.time_s,
         "pose": sim.pose.to_json(),
@@ -417,10 +423,14 @@ def simulate(
     if json_out:
         _emit_json(result)
         return
-    typer.echo(f"{fixture.name}: {sim.steps} steps of {sim.dt:g} s in {traj.wall_time_s:.3f} s ({sim.steps / max(traj.wall_time_s, 1e-9):,.0f} steps/s)")
+    typer.echo(
+        f"{fixture.name}: {sim.steps} steps of {sim.dt:g} s in {traj.wall_time_s:.3f} s ({sim.steps / max(traj.wall_time_s, 1e-9):,.0f} steps/s)"
+    )
     typer.echo(f"pose: {json.dumps(result['pose'])}")
     typer.echo(f"velocity: linear {result['velocity']['linear']} angular {result['velocity']['angular']}")
-    typer.echo(f"max penetration: {traj.max_penetration_m:.3g} m; solver: max residual {result['solver']['max_error']:.3g}, mean sweeps {result['solver']['mean_iterations']:.2f}")
+    typer.echo(
+        f"max penetration: {traj.max_penetration_m:.3g} m; solver: max residual {result['solver']['max_error']:.3g}, mean sweeps {result['solver']['mean_iterations']:.2f}"
+    )
     for c in sim.contacts():
         typer.echo(f"  {c.name:6s} {c.mode:9s} gap {c.gap_m: .3e} m  normal force {c.normal_force_N:.4g} N")
     if target is not None:
@@ -431,7 +441,9 @@ def simulate(
 def fclib(
     file: Annotated[Path, typer.Argument(help="An FCLib HDF5 problem (local or global, 3D or 2D).")],
     tol: Annotated[float, typer.Option("--tol", help="Target FCLib residual (natural map, relative).")] = 1e-8,
-    max_iter: Annotated[int | None, typer.Option("--max-iter", help="Iteration cap (sweeps for nsgs, rounds for socp/auto).", min=1)] = None,
+    max_iter: Annotated[
+        int | None, typer.Option("--max-iter", help="Iteration cap (sweeps for nsgs, rounds for socp/auto).", min=1)
+    ] = None,
     solver: Annotated[str, typer.Option("--solver", help="auto, nsgs, nsgs-numpy or socp.")] = "auto",
     json_out: JsonOpt = False,
 ) -> None:

@@ -57,7 +57,9 @@ def check_expectations(path: Path, data: dict[str, Any]) -> tuple[list[Issue], d
             if fixture is None:
                 continue
             if kind == "case":
-                r.vector(entry, "wrench", f"{where}.wrench", fixture.ndof, required=True, dimension_hint=fixture.dimension)
+                r.vector(
+                    entry, "wrench", f"{where}.wrench", fixture.ndof, required=True, dimension_hint=fixture.dimension
+                )
                 r.string(entry, "mode", f"{where}.mode", required=True, choices=MODES)
                 pose = r.string(entry, "pose", f"{where}.pose", choices=("start", "goal"))
                 if pose == "goal" and not fixture.is_full:

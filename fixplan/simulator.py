@@ -199,6 +199,9 @@ class Simulator:
             raise InputError(f"twist expects {6 if d == 3 else 3} numbers, got {nu.shape}")
         self._v = nu[:d].copy()
         self._w = nu[d:].copy() if d == 3 else float(nu[2])
+        # a new state makes the previous step's impulses meaningless as a warm start
+        self._P = np.zeros((len(self.names), 4))
+        self._active = np.zeros(len(self.names), dtype=np.bool_)
 
     @property
     def pose(self) -> Pose:
@@ -238,8 +241,9 @@ class Simulator:
         """Advance one step under ``wrench`` (about the body origin) plus gravity."""
         f, tau = self._external(wrench)
         h = self.dt
-        v, w = self._v, self._w
-        speed = math.sqrt(float(v @ v)) + (math.sqrt(float(w @ w)) if self.dimension == 3 else abs(w)) * self._bound
+        v = self._v
+        w_norm = float(np.sqrt(np.dot(self._w, self._w))) if self.dimension == 3 else abs(float(self._w))
+        speed = math.sqrt(float(v @ v)) + w_norm * self._bound
         margin = self.margin_m + 2.0 * h * speed
         if self.dimension == 3:
             st = self._state3
@@ -370,7 +374,29 @@ class Simulator:
                 self.max_iterations, self._P, self._active,
             )  # fmt: skip
             wall += time.perf_counter() - t0
-            R, p, v, w, P, active, gap, n_w, u, rp, rR, rnu, rfn, rgap, rerr, rit, pen, worst_k, status_k = out
+            (
+                R,
+                p,
+                v,
+                w,
+                P,
+                active,
+                gap,
+                n_w,
+                u,
+                rp,
+                rR,
+                rnu,
+                rfn,
+                rgap,
+                rerr,
+                rit,
+                pen,
+                worst_k,
+                status_k,
+                last_err,
+                last_it,
+            ) = out
             if status_k == kernels.STATUS_NONFINITE:
                 raise SolverError(
                     f"a step produced a non-finite state between t = {self.time_s:.6g} s and {self.time_s + n * self.dt:.6g} s; the state before it was kept"
@@ -381,7 +407,7 @@ class Simulator:
                     raise SolverError(f"NSGS did not reach {self.tolerance:g} in some step (worst error {worst_k:.3g})")
             self._R, self._p, self._v, self._w, self._P, self._active, self._gap = R, p, v, w, P, active, gap
             self._nw, self._u = n_w, u
-            times = self.time_s + self.dt * every * np.arange(1, len(rp))
+            times = self.time_s + self.dt * np.minimum(every * np.arange(1, len(rp)), n)
             traj.time_s += [float(t) for t in times]
             traj.position += list(rp[1:])
             traj.orientation += [quaternion_wxyz_from_matrix(Rk) for Rk in rR[1:]]
@@ -402,8 +428,7 @@ class Simulator:
         traj.steps = n_steps
         self.worst_error = worst
         self.last = StepInfo(
-            float(traj.error[-1]) if traj.error else 0.0, int(traj.iterations[-1]) if traj.iterations else 0,
-            status == kernels.STATUS_OK, 0, float(self.max_penetration_m),
+            float(last_err), int(last_it), status == kernels.STATUS_OK, 0, float(self.max_penetration_m),
             tuple(n for n, a in zip(self.names, self._active, strict=True) if a),
         )  # fmt: skip
         return traj

@@ -227,7 +227,8 @@ def _fast_local(alpha, mu, d, inv, has_inv, P):
 
     Open: ``α_n ≥ 0`` gives ``P = 0`` exactly (the local solver's first regime). Stick:
     ``P = −W_jj⁻¹ α`` is accepted only strictly inside the cone (a relative margin of 1e-9), so
-    every boundary case still goes to the exact solver."""
+    every boundary case still goes to the exact solver.
+    """
     if alpha[0] >= 0.0:
         for a in range(d):
             P[a] = 0.0

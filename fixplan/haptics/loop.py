@@ -90,9 +90,9 @@ class HapticLoop:
             v_origin = twist[:3] + np.cross(w, pose.p_world - self.sim.com_world)
             return x, np.concatenate([v_origin, w])
         x = np.array([pose.p_world[0], pose.p_world[1], pose.angle_rad])
-        w = float(twist[2])
+        wz = float(twist[2])
         off = pose.p_world - self.sim.com_world
-        return x, np.array([twist[0] - w * off[1], twist[1] + w * off[0], w])
+        return x, np.array([twist[0] - wz * off[1], twist[1] + wz * off[0], wz])
 
     def tick(self, operator_wrench: ArrayLike) -> tuple[FloatArray, FloatArray, float]:
         """One sample period; returns (coupling wrench on the workpiece, felt wrench, compute time [s])."""
