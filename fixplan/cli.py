@@ -102,8 +102,13 @@ def _writable(path: Path, force: bool) -> Path:
     return path
 
 
-def _emit_json(obj: dict[str, Any]) -> None:
-    sys.stdout.write(json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n")
+def _emit_json(obj: dict[str, Any], *, compact: bool = False) -> None:
+    """One JSON object on stdout: indented for people, compact for large batches."""
+    if compact:
+        text = json.dumps(obj, separators=(",", ":"), allow_nan=False, default=_json_default)
+    else:
+        text = json.dumps(obj, indent=2, allow_nan=False, default=_json_default)
+    sys.stdout.write(text + "\n")
 
 
 def _json_default(x: Any) -> Any:
@@ -207,10 +212,11 @@ def classify(
     for c in cs.contacts:
         if c.kind == "locator" and c.gap_m > fixture.tolerances.touch_m:
             _err(f"warning: {c.name} does not touch at the {pose} pose (gap {c.gap_m:.3g} m); analysed as if it did")
-    results = run(fixture, W, names, at_p, pose=p, backend=backend)
+    results = run(fixture, W, names, at_p, pose=p, backend=backend, as_json=json_out)
     if json_out:
         _emit_json(
-            {"file": fixture.source, "pose": pose, "contacts": cs.names, "results": [r.to_json() for r in results]}
+            {"file": fixture.source, "pose": pose, "contacts": cs.names, "results": results},
+            compact=len(results) > 100,
         )
     else:
         _classify_table(fixture, results, cs.names)
@@ -466,7 +472,8 @@ def fclib(
                 "time_s": float(result.time_s),
                 "reaction": [float(x) for x in result.reaction],
                 "velocity": [float(x) for x in result.velocity],
-            }
+            },
+            compact=True,
         )
     else:
         verdict = "converged" if result.converged else "NOT converged"
@@ -505,6 +512,16 @@ def main(argv: list[str] | None = None) -> int:
     except click_exc.ClickException as exc:
         _err(exc.format_message().replace("\n", " "))
         return 2
+    except KeyboardInterrupt:
+        _err("interrupted")
+        return 130
+    except Exception as exc:  # noqa: BLE001 - a bug in fixplan, not bad input: one line, exit 3
+        import os
+
+        if os.environ.get("FIXPLAN_DEBUG"):
+            raise
+        _err(f"internal error: {type(exc).__name__}: {exc} (a bug in fixplan; FIXPLAN_DEBUG=1 shows the traceback)")
+        return 3
     return rv if isinstance(rv, int) else 0
 
 

@@ -63,12 +63,12 @@ class Contact:
     def dimension(self) -> int:
         return int(self.point_world.shape[0])
 
-    @property
+    @cached_property
     def soft(self) -> bool:
         """A soft-finger contact (3D with a torsional radius): it has a spin row."""
         return self.dimension == 3 and self.torsion_m > 0.0
 
-    @property
+    @cached_property
     def size(self) -> int:
         """Number of force components: 2 (2D), 3 (3D point), 4 (3D soft finger)."""
         return 2 if self.dimension == 2 else (4 if self.soft else 3)
@@ -172,8 +172,19 @@ class ContactSet:
         point = self.body_origin_world if about_world is None else np.asarray(about_world, dtype=float)
         offset = point - self.com_world
         if d == 3:
-            return np.concatenate([w[:3], w[3:] + np.cross(offset, w[:3])])
-        return np.array([w[0], w[1], w[2] + cross2(offset, w[:2])])
+            F = w[:3]
+            o = offset
+            return np.array(
+                [
+                    F[0],
+                    F[1],
+                    F[2],
+                    w[3] + o[1] * F[2] - o[2] * F[1],
+                    w[4] + o[2] * F[0] - o[0] * F[2],
+                    w[5] + o[0] * F[1] - o[1] * F[0],
+                ]
+            )
+        return np.array([w[0], w[1], w[2] + offset[0] * w[1] - offset[1] * w[0]])
 
     def subset(self, names: Sequence[str]) -> ContactSet:
         """The same configuration with only the named contacts, in the given order."""

@@ -48,6 +48,7 @@ def classify(
     tolerances: Tolerances | None = None,
     jobs: int | None = None,
     progress: Callable[[int], None] | None = None,
+    as_json: bool = False,
 ) -> list[Classification]:
     """Classify each applied wrench (in addition to gravity) for the workpiece at rest.
 
@@ -69,6 +70,9 @@ def classify(
         Worker processes for large batches (default: the CPUs available; 1 = in-process).
     progress : callable, optional
         Called with the number of wrenches finished since the last call.
+    as_json : bool
+        Return each result's JSON dictionary instead (built in the worker processes; what the
+        CLI prints).
 
     Returns
     -------
@@ -85,4 +89,6 @@ def classify(
     W_com = np.array([cs.wrench_about_com(w, at) for w in W])
     if len(cs) == 0:
         Classifier(cs, fixture.gravity_wrench(), tolerances=tol, backend=backend)  # raises the clear error
-    return classify_batch(cs, fixture.gravity_wrench(), tol, backend, W_com, W, jobs=jobs, progress=progress)
+    return classify_batch(
+        cs, fixture.gravity_wrench(), tol, backend, W_com, W, jobs=jobs, progress=progress, as_json=as_json
+    )

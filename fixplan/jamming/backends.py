@@ -21,7 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from fixplan.jamming.programs import ConeProgram
+from fixplan.jamming.programs import ConeProgram, cone_violation_of
 
 FloatArray = NDArray[np.float64]
 
@@ -108,5 +108,5 @@ class ClarabelProgram:
             x = np.zeros_like(self.program.c)
             solved = False
         prog = self.program
-        violation = ConeProgram(prog.c, prog.A, b, prog.cones, prog.name, prog.nf).cone_violation(x)
+        violation = cone_violation_of(b - prog.A @ x, prog.cones)
         return ConeSolution(x, float(prog.c @ x), solved, status, int(sol.iterations), elapsed, violation)

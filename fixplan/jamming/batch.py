@@ -23,10 +23,11 @@ FloatArray = NDArray[np.float64]
 PARALLEL_MIN = 400  # wrenches below which one process is faster
 
 
-def _chunk(args: tuple) -> list[Classification]:
-    cs, gravity, tol, backend, W_com, W_given = args
+def _chunk(args: tuple) -> list:
+    cs, gravity, tol, backend, W_com, W_given, as_json = args
     clf = Classifier(cs, gravity, tolerances=tol, backend=backend)
-    return [clf.classify(w, g) for w, g in zip(W_com, W_given, strict=True)]
+    out = [clf.classify(w, g) for w, g in zip(W_com, W_given, strict=True)]
+    return [r.to_json() for r in out] if as_json else out
 
 
 def default_jobs() -> int:
@@ -47,8 +48,11 @@ def classify_batch(
     *,
     jobs: int | None = None,
     progress: Callable[[int], None] | None = None,
-) -> list[Classification]:
-    """Classify every row of ``W_com`` (about the centre of mass); results in input order."""
+    as_json: bool = False,
+) -> list:
+    """Classify every row of ``W_com`` (about the centre of mass); results in input order.
+
+    With ``as_json`` the results come back as their JSON dictionaries, built in the workers."""
     n = W_com.shape[0]
     jobs = default_jobs() if jobs is None else max(1, jobs)
     if jobs == 1 or n < PARALLEL_MIN or backend != "clarabel":
@@ -60,15 +64,15 @@ def classify_batch(
                 progress(100)
         if progress is not None and n % 100:
             progress(n % 100)
-        return out
+        return [r.to_json() for r in out] if as_json else out
     n_chunks = max(jobs * 4, 1)
     bounds = np.linspace(0, n, n_chunks + 1).astype(int)
     tasks = [
-        (cs, gravity, tol, backend, W_com[a:b], W_given[a:b])
+        (cs, gravity, tol, backend, W_com[a:b], W_given[a:b], as_json)
         for a, b in zip(bounds[:-1], bounds[1:], strict=True)
         if b > a
     ]
-    results: list[list[Classification]] = [[] for _ in tasks]
+    results: list[list] = [[] for _ in tasks]
     ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else mp.get_context()
     with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
         futures = {pool.submit(_chunk, t): i for i, t in enumerate(tasks)}

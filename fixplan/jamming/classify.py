@@ -124,6 +124,9 @@ class Classifier:
             cs, b.C, b.N_maintain, slip_rel=tolerances.slip_rel, res_tol=max(tolerances.balance_rel * 1e-3, 1e-12)
         )
         self.frames = {c.name: np.vstack([c.normal_world, c.tangents_world]) for c in cs.contacts}
+        self._names = cs.names
+        self._sizes = [int(k) for k in cs.sizes]
+        self._offsets = [int(o) for o in cs.offsets]
 
     # -- programs ------------------------------------------------------------------------------
     def _solve(self, kind: str, w_hat: FloatArray) -> tuple[ConeSolution, FloatArray]:
@@ -156,8 +159,10 @@ class Classifier:
         given = tuple(float(x) for x in (w_applied if wrench_given is None else np.asarray(wrench_given, dtype=float)))
         w_e = w_applied + self.gravity
         scale = self.builder.m_inv_norm(w_e)
-        names = cs.names
-        zero_forces = {n: np.zeros(c.size) for n, c in zip(names, cs.contacts, strict=True)}
+        names = self._names
+        sizes = self._sizes
+        offsets = self._offsets
+        zero_forces = {n: np.zeros(k) for n, k in zip(names, sizes, strict=True)}
 
         def result(
             mode: str,

@@ -124,18 +124,22 @@ class ConeProgram:
 
     def cone_violation(self, x: FloatArray) -> float:
         """Largest violation of ``b − A x ∈ K`` (0 when feasible)."""
-        s = self.slack(x)
-        worst, row = 0.0, 0
-        for kind, dim in self.cones:
+        return cone_violation_of(self.slack(x), self.cones)
+
+
+def cone_violation_of(s: FloatArray, cones: tuple[tuple[str, int], ...]) -> float:
+    """Largest violation of ``s ∈ K`` for a product of cones listed in row order."""
+    worst, row = 0.0, 0
+    for kind, dim in cones:
+        if kind == "nonneg":
+            worst = max(worst, -float(s[row : row + dim].min()))
+        elif kind == "soc":
             block = s[row : row + dim]
-            if kind == "nonneg":
-                worst = max(worst, float(-block.min()))
-            elif kind == "soc":
-                worst = max(worst, float(np.linalg.norm(block[1:]) - block[0]))
-            else:  # "zero"
-                worst = max(worst, float(np.abs(block).max()))
-            row += dim
-        return worst
+            worst = max(worst, float(np.sqrt(block[1:] @ block[1:])) - float(block[0]))
+        else:  # "zero"
+            worst = max(worst, float(np.abs(s[row : row + dim]).max()))
+        row += dim
+    return worst
 
 
 class ProgramBuilder:
