@@ -15,7 +15,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 from numpy.typing import NDArray
 
-from fixplan.jamming.classify import Classification, Classifier
+from fixplan.jamming.classify import Classifier
 from fixplan.kinematics import ContactSet
 from fixplan.tolerances import Tolerances
 
@@ -52,7 +52,8 @@ def classify_batch(
 ) -> list:
     """Classify every row of ``W_com`` (about the centre of mass); results in input order.
 
-    With ``as_json`` the results come back as their JSON dictionaries, built in the workers."""
+    With ``as_json`` the results come back as their JSON dictionaries, built in the workers.
+    """
     n = W_com.shape[0]
     jobs = default_jobs() if jobs is None else max(1, jobs)
     if jobs == 1 or n < PARALLEL_MIN or backend != "clarabel":

@@ -161,7 +161,6 @@ class Classifier:
         scale = self.builder.m_inv_norm(w_e)
         names = self._names
         sizes = self._sizes
-        offsets = self._offsets
         zero_forces = {n: np.zeros(k) for n, k in zip(names, sizes, strict=True)}
 
         def result(
