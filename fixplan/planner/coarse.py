@@ -1,0 +1,150 @@
+"""The coarse plan: a search over contact states, one locator more per transition (Section IV).
+
+States are the sets of touched locators. From the state at the start pose, every transition adds
+one locator (contacts increase monotonically) until all are touched — a lattice of at most 2ⁿ
+states. Each transition is priced by a fine plan (``evaluate``): its cost, or a failure with the
+reason. Dijkstra's algorithm over the lattice finds the cheapest complete sequence; a fixed
+``order`` restricts the search to that one sequence. The result records every transition that
+was tried and why each failed, so a user can see why an order was not chosen.
+
+A node's pose is the end pose of the cheapest transition that reached it (the state is settled
+then), so later transitions start where the part really is.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from fixplan.errors import InputError
+from fixplan.pose import Pose
+
+State = frozenset[str]
+
+
+class TransitionResult(Protocol):
+    """What the coarse search needs from a fine plan."""
+
+    success: bool
+    reason: str
+
+    @property
+    def cost(self) -> float: ...
+
+    @property
+    def end_pose(self) -> Pose: ...
+
+
+Evaluate = Callable[[Pose, State, str], TransitionResult]
+
+
+@dataclass(frozen=True)
+class Attempt:
+    """One transition the search priced."""
+
+    established: tuple[str, ...]
+    target: str
+    success: bool
+    cost: float
+    reason: str
+
+
+@dataclass
+class CoarsePlan:
+    """The chosen sequence of states, the fine plans along it, and everything that was tried."""
+
+    found: bool
+    sequence: list[tuple[str, ...]]  # states from the first contact to all locators, one more each step
+    transitions: list[Any]  # the fine plans along the sequence
+    cost: float
+    attempts: list[Attempt] = field(default_factory=list)
+    reason: str = ""
+
+    def failed_orders(self) -> list[Attempt]:
+        return [a for a in self.attempts if not a.success]
+
+
+def _key(state: State) -> tuple[str, ...]:
+    return tuple(sorted(state))
+
+
+def search(
+    start_state: State,
+    all_locators: Sequence[str],
+    start_pose: Pose,
+    evaluate: Evaluate,
+    *,
+    order: Sequence[str] | None = None,
+    progress: Callable[[Attempt], None] | None = None,
+) -> CoarsePlan:
+    """Cheapest monotone sequence of contact states from ``start_state`` to all locators."""
+    goal: State = frozenset(all_locators)
+    unknown = start_state - goal
+    if unknown:
+        raise InputError(f"start state names unknown locators: {', '.join(sorted(unknown))}")
+    if order is not None:
+        order = list(order)
+        missing = goal - start_state - set(order)
+        extra = [n for n in order if n not in goal]
+        if extra:
+            raise InputError(f"--order names unknown locators: {', '.join(extra)} (known: {', '.join(all_locators)})")
+        if len(set(order)) != len(order):
+            raise InputError(f"--order repeats a locator: {','.join(order)}")
+        already = [n for n in order if n in start_state]
+        if already:
+            raise InputError(f"--order names locators already touching at the start: {', '.join(already)}")
+        if missing:
+            raise InputError(f"--order leaves out {', '.join(sorted(missing))} (expected every locator not touching at the start)")
+    attempts: list[Attempt] = []
+    best: dict[State, float] = {start_state: 0.0}
+    came_from: dict[State, tuple[State, Any]] = {}
+    pose_at: dict[State, Pose] = {start_state: start_pose}
+    counter = itertools.count()  # deterministic tie-breaking
+    queue: list[tuple[float, int, tuple[str, ...], State]] = [(0.0, next(counter), _key(start_state), start_state)]
+    settled: set[State] = set()
+    while queue:
+        cost, _, _, state = heapq.heappop(queue)
+        if state in settled:
+            continue
+        settled.add(state)
+        if state == goal:
+            break
+        if order is not None:
+            candidates = [order[len(state) - len(start_state)]]
+        else:
+            candidates = sorted(goal - state)
+        for target in candidates:
+            result = evaluate(pose_at[state], state, target)
+            attempt = Attempt(_key(state), target, bool(result.success), float(result.cost) if result.success else float("inf"), result.reason)
+            attempts.append(attempt)
+            if progress is not None:
+                progress(attempt)
+            if not result.success:
+                continue
+            nxt = state | {target}
+            new_cost = cost + float(result.cost)
+            if nxt not in settled and new_cost < best.get(nxt, float("inf")):
+                best[nxt] = new_cost
+                came_from[nxt] = (state, result)
+                pose_at[nxt] = result.end_pose
+                heapq.heappush(queue, (new_cost, next(counter), _key(nxt), nxt))
+    if goal not in settled:
+        failures = [a for a in attempts if not a.success]
+        reason = "no sequence of transitions reaches every locator"
+        if failures:
+            last = failures[-1]
+            reason += f"; e.g. adding {last.target} to {{{', '.join(last.established)}}} fails: {last.reason}"
+        return CoarsePlan(False, [], [], float("inf"), attempts, reason)
+    states = [goal]
+    transitions = []
+    while states[-1] != start_state:
+        prev, result = came_from[states[-1]]
+        transitions.append(result)
+        states.append(prev)
+    states.reverse()
+    transitions.reverse()
+    sequence = [_key(s) for s in states if s]  # the free state is not part of the sequence
+    return CoarsePlan(True, sequence, transitions, best[goal], attempts, "")

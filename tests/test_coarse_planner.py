@@ -1,0 +1,74 @@
+"""The coarse search on a scripted evaluator: cheapest order, forbidden transitions, fixed orders, reasons."""
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from fixplan.errors import InputError
+from fixplan.planner.coarse import search
+from fixplan.pose import Pose
+
+START = Pose.identity(3)
+
+
+@dataclass(frozen=True)
+class Fake:
+    success: bool
+    reason: str
+    cost: float
+    end_pose: Pose
+
+
+def scripted(costs, forbidden=()):
+    """Cost of adding a locator depends only on (state, target); some transitions jam."""
+
+    def evaluate(pose, state, target):
+        key = (tuple(sorted(state)), target)
+        if key in forbidden:
+            return Fake(False, f"adding {target} jams (margin < 0)", 0.0, pose)
+        return Fake(True, "", costs.get(target, 1.0) * (1.0 + 0.1 * len(state)), Pose(pose.R_world_body, pose.p_world + np.array([0.0, 0.0, 1.0])))
+
+    return evaluate
+
+
+def test_cheapest_order_is_found_and_poses_chain():
+    """B2 then C costs 1.0·1.1 + 5.0·1.2 = 7.1; C then B2 costs 5.0·1.1 + 1.0·1.2 = 6.7: C first."""
+    plan = search(frozenset({"B1"}), ["B1", "B2", "C"], START, scripted({"B2": 1.0, "C": 5.0}))
+    assert plan.found
+    assert plan.sequence == [("B1",), ("B1", "C"), ("B1", "B2", "C")]
+    assert plan.cost == pytest.approx(6.7)
+    # each transition started where the previous one ended
+    assert plan.transitions[-1].end_pose.p_world[2] == pytest.approx(2.0)
+
+
+def test_naive_order_jams_and_another_is_found():
+    """The cheaper order (C first) jams at its second transition; the planner takes B2 first."""
+    forbidden = {(("B1", "C"), "B2")}
+    plan = search(frozenset({"B1"}), ["B1", "B2", "C"], START, scripted({"B2": 1.0, "C": 5.0}, forbidden))
+    assert plan.found and plan.sequence[1] == ("B1", "B2")
+    assert plan.cost == pytest.approx(7.1)
+    assert any(not a.success and a.target == "B2" and a.established == ("B1", "C") and "jams" in a.reason for a in plan.attempts)
+
+
+def test_fixed_order_failure_names_the_transition():
+    forbidden = {(("B1", "C"), "B2")}
+    plan = search(frozenset({"B1"}), ["B1", "B2", "C"], START, scripted({}, forbidden), order=["C", "B2"])
+    assert not plan.found
+    assert "adding B2 to {B1, C} fails" in plan.reason and "jams" in plan.reason
+
+
+def test_bad_orders_are_input_errors():
+    ev = scripted({})
+    with pytest.raises(InputError, match="leaves out"):
+        search(frozenset(), ["A", "B"], START, ev, order=["A"])
+    with pytest.raises(InputError, match="unknown"):
+        search(frozenset(), ["A", "B"], START, ev, order=["A", "Z"])
+    with pytest.raises(InputError, match="already touching"):
+        search(frozenset({"A"}), ["A", "B"], START, ev, order=["A", "B"])
+
+
+def test_lattice_is_searched_deterministically():
+    runs = [search(frozenset(), ["A", "B", "C"], START, scripted({"A": 1.0, "B": 1.0, "C": 1.0})) for _ in range(3)]
+    assert all(r.sequence == runs[0].sequence for r in runs)
+    assert runs[0].sequence[0] == ("A",)
