@@ -290,6 +290,11 @@ class Simulator:
         )
         return self.last
 
+    def pressed(self, min_force_N: float = 1e-9) -> tuple[str, ...]:
+        """Names of the locators that pushed on the workpiece in the last step (normal force > min)."""
+        f = self._P[:, 0] / self.dt
+        return tuple(n for n, a, fn in zip(self.names, self._active, f, strict=True) if a and fn > min_force_N)
+
     def contacts(self) -> list[ContactReport]:
         """Per-locator gap, force and mode after the last step."""
         h = self.dt

@@ -43,3 +43,21 @@ def test_user_feels_the_locator_reaction():
     assert "E1" in rec.active_contacts[-1]
     assert np.linalg.norm(rec.workpiece_position[-1] - f.goal.p_world) < 1e-6  # the box stays located
     assert len(rec.compute_s) == 1000 and rec.mean_compute_s > 0
+
+
+def test_compiled_coupling_matches_the_python_formula(rng):
+    """The tick's compiled coupling equals K (x_d − x_w) + B (ẋ_d − ẋ_w) computed from the workpiece coordinates."""
+    from fixplan.haptics import _kernels
+    from fixplan.pose import Pose
+
+    f = fixplan.load(fixplan.default_fixture_path())
+    sim = Simulator(f)
+    dev = SimulatedDevice(6)
+    coupling = VirtualCoupling(1000.0, 2.0, 20.0, 0.02, 1e-3, device_damping=8.0, device_damping_rot=0.08)
+    loop = HapticLoop(sim, dev, coupling)
+    sim.set_state(Pose.from_rpy_deg(f.start.p_world + 0.01, [3.0, -2.0, 10.0]), rng.normal(size=6))
+    x_d, v_d = rng.normal(size=6) * 0.01, rng.normal(size=6)
+    x_w, v_w = loop.workpiece_coordinates()
+    expected = coupling.wrench(x_d - x_w, v_d - v_w, 3)
+    got = _kernels.coupling3(sim._R, sim._p, sim.com_world, sim._v, sim._w, loop._R0, x_d, v_d, loop._K, loop._B)
+    assert np.allclose(got, expected, atol=1e-12)

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fixplan.errors import InputError
+from fixplan.haptics import _kernels
 from fixplan.haptics.coupling import VirtualCoupling
 from fixplan.haptics.device import SimulatedDevice
 from fixplan.pose import log_so3
@@ -43,7 +44,7 @@ class LoopRecord:
     felt_wrench: list[FloatArray] = field(default_factory=list)  # displayed on the device (saturated)
     device_position: list[FloatArray] = field(default_factory=list)
     workpiece_position: list[FloatArray] = field(default_factory=list)
-    active_contacts: list[tuple[str, ...]] = field(default_factory=list)
+    active_contacts: list[tuple[str, ...]] = field(default_factory=list)  # locators pressing on the part
     period_s: float = 1e-3
 
     @property
@@ -79,6 +80,10 @@ class HapticLoop:
         self.device = device
         self.coupling = coupling
         self._R0 = sim.pose.R_world_body.copy()
+        d = sim.dimension
+        n = 6 if d == 3 else 3
+        self._K = np.concatenate([np.full(d, coupling.K_lin), np.full(n - d, coupling.K_rot)])
+        self._B = np.concatenate([np.full(d, coupling.B_lin), np.full(n - d, coupling.B_rot)])
 
     def workpiece_coordinates(self) -> tuple[FloatArray, FloatArray]:
         """Workpiece coordinates matching the device's: body origin (+ rotation vector), and their rates."""
@@ -99,8 +104,14 @@ class HapticLoop:
         t0 = time.perf_counter()
         d = self.sim.dimension
         x_d, v_d = self.device.position(), self.device.velocity()
-        x_w, v_w = self.workpiece_coordinates()
-        w_c = self.coupling.wrench(x_d - x_w, v_d - v_w, d)
+        if d == 3:
+            sim = self.sim
+            w_c = _kernels.coupling3(
+                sim._R, sim._p, sim.com_world, sim._v, sim._w, self._R0, x_d, v_d, self._K, self._B
+            )
+        else:
+            x_w, v_w = self.workpiece_coordinates()
+            w_c = self._K * (x_d - x_w) + self._B * (v_d - v_w)
         self.sim.step(w_c)
         felt = self.device.set_force_and_torque(-w_c)
         compute = time.perf_counter() - t0
@@ -122,7 +133,7 @@ class HapticLoop:
                 rec.felt_wrench.append(felt)
                 rec.device_position.append(self.device.position())
                 rec.workpiece_position.append(self.sim.pose.p_world.copy())
-                rec.active_contacts.append(self.sim.last.active if self.sim.last else ())
+                rec.active_contacts.append(self.sim.pressed())
         finally:
             self.device.close()
         return rec

@@ -97,7 +97,9 @@ def search(
         if already:
             raise InputError(f"--order names locators already touching at the start: {', '.join(already)}")
         if missing:
-            raise InputError(f"--order leaves out {', '.join(sorted(missing))} (expected every locator not touching at the start)")
+            raise InputError(
+                f"--order leaves out {', '.join(sorted(missing))} (expected every locator not touching at the start)"
+            )
     attempts: list[Attempt] = []
     best: dict[State, float] = {start_state: 0.0}
     came_from: dict[State, tuple[State, Any]] = {}
@@ -118,7 +120,13 @@ def search(
             candidates = sorted(goal - state)
         for target in candidates:
             result = evaluate(pose_at[state], state, target)
-            attempt = Attempt(_key(state), target, bool(result.success), float(result.cost) if result.success else float("inf"), result.reason)
+            attempt = Attempt(
+                _key(state),
+                target,
+                bool(result.success),
+                float(result.cost) if result.success else float("inf"),
+                result.reason,
+            )
             attempts.append(attempt)
             if progress is not None:
                 progress(attempt)

@@ -1,0 +1,211 @@
+"""Verification: run a plan through the simulated haptic loop and check what really happened.
+
+The operator model follows the plan: along each transition the device reference is the planned
+workpiece pose, led by ``w_plan / K`` so that the coupling transmits the planned wrench, and the
+operator pushes the handle with the feedforward ``w_plan + b ẋ_ref`` plus PD tracking. The
+engine runs at the coupling rate (1 kHz). A plan passes when
+
+- the observed contact-state sequence (sets of locators pressed for at least ``dwell_s``)
+  matches the planned one;
+- the workpiece never stalls where the plan expects motion;
+- at the end every locator touches (gaps ≤ ``final_gap_m``);
+- penetration stays below ``max_penetration_m``.
+
+A failure says where (transition, time) and why.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fixplan.fixture import Fixture
+from fixplan.haptics import HapticLoop, SimulatedDevice, VirtualCoupling
+from fixplan.pose import Pose, log_so3
+from fixplan.simulator import Simulator
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass
+class Verification:
+    """The outcome of running a plan through the haptic loop."""
+
+    passed: bool
+    reason: str
+    final_pose: Pose
+    max_penetration_m: float
+    deadline_misses: int
+    tick_mean_us: float
+    tick_max_us: float
+    observed_sequence: list[tuple[str, ...]]
+    final_gaps_m: dict[str, float]
+    duration_s: float
+    felt_force_max_N: float
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "passed": self.passed,
+            "reason": self.reason,
+            "final_pose": self.final_pose.to_json(),
+            "max_penetration": self.max_penetration_m,
+            "deadline_misses": self.deadline_misses,
+            "tick_mean_us": self.tick_mean_us,
+            "tick_max_us": self.tick_max_us,
+            "observed_sequence": [list(s) for s in self.observed_sequence],
+            "final_gaps": self.final_gaps_m,
+            "duration_s": self.duration_s,
+            "felt_force_max": self.felt_force_max_N,
+        }
+
+
+def pose_coordinates(pose: Pose, R0: FloatArray) -> FloatArray:
+    """Device coordinates of a workpiece pose: body origin (+ rotation vector of R R0ᵀ in 3D)."""
+    if pose.dimension == 3:
+        return np.concatenate([pose.p_world, log_so3(pose.R_world_body @ R0.T)])
+    return np.array([pose.p_world[0], pose.p_world[1], pose.angle_rad])
+
+
+def compress_states(samples: Sequence[tuple[float, frozenset[str]]], dwell_s: float) -> list[tuple[str, ...]]:
+    """The sequence of contact states held for at least ``dwell_s`` (chatter removed)."""
+    out: list[tuple[str, ...]] = []
+    i = 0
+    n = len(samples)
+    while i < n:
+        t0, s = samples[i]
+        j = i
+        while j + 1 < n and samples[j + 1][1] == s:
+            j += 1
+        t1 = samples[j][0]
+        key = tuple(sorted(s))
+        if t1 - t0 >= dwell_s - 1e-12 and key and (not out or out[-1] != key):
+            out.append(key)
+        i = j + 1
+    return out
+
+
+def verify(
+    fixture: Fixture,
+    sequence: Sequence[Sequence[str]],
+    knots: Sequence[Sequence[Pose]],
+    wrenches: Sequence[FloatArray],
+    durations_s: Sequence[float],
+    *,
+    settle_s: float = 0.3,
+    dwell_s: float = 0.01,
+    final_gap_m: float = 1e-4,
+    max_penetration_m: float = 1e-5,
+    stall_speed: float = 1e-5,
+    stall_s: float = 0.1,
+) -> Verification:
+    """Run the plan (per transition: knot poses, one wrench per transition, a duration) through the loop."""
+    sim = Simulator(fixture)
+    R0 = fixture.start.R_world_body.copy()
+    ndof = 6 if fixture.dimension == 3 else 3
+    x0 = pose_coordinates(fixture.start, R0)
+    dev = SimulatedDevice(ndof, x0=x0)
+    b = dev.specs.physical_damping_Ns_per_m
+    coupling = VirtualCoupling(2000.0, 2.0, 40.0, 0.02, sim.dt, device_damping=b, device_damping_rot=b * 1e-2)
+    loop = HapticLoop(sim, dev, coupling)
+    K = np.concatenate([np.full(fixture.dimension, coupling.K_lin), np.full(ndof - fixture.dimension, coupling.K_rot)])
+    # the reference: knot coordinates spread evenly over each transition, then a settling phase
+    times: list[float] = [0.0]
+    refs: list[FloatArray] = [x0]
+    pushes: list[FloatArray] = []
+    t = 0.0
+    for poses, w, T in zip(knots, wrenches, durations_s, strict=True):
+        coords = [pose_coordinates(p, R0) for p in poses]
+        for k, c in enumerate(coords[1:], 1):
+            times.append(t + T * k / (len(coords) - 1))
+            refs.append(c)
+        pushes.append(np.asarray(w, dtype=float))
+        t += T
+    ends = np.cumsum(durations_s)
+    total = t + settle_s
+    times_arr = np.array(times)
+    refs_arr = np.array(refs)
+    final_push = pushes[-1] if pushes else np.zeros(ndof)
+
+    def reference(tt: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+        i = int(np.searchsorted(ends, tt, side="right"))
+        push = pushes[min(i, len(pushes) - 1)] if pushes else np.zeros(ndof)
+        if tt >= times_arr[-1]:
+            return refs_arr[-1], np.zeros(ndof), final_push
+        k = int(np.searchsorted(times_arr, tt, side="right")) - 1
+        dt = times_arr[k + 1] - times_arr[k]
+        s = (tt - times_arr[k]) / dt
+        x = (1 - s) * refs_arr[k] + s * refs_arr[k + 1]
+        v = (refs_arr[k + 1] - refs_arr[k]) / dt
+        return x, v, push
+
+    kp, kd = 400.0, 40.0
+
+    def operator(tt: float, device: SimulatedDevice) -> FloatArray:
+        x_ref, v_ref, push = reference(tt)
+        lead = push / K
+        damping = np.concatenate([np.full(fixture.dimension, b), np.full(ndof - fixture.dimension, b * 1e-2)])
+        return push + damping * v_ref + kp * (x_ref + lead - device.position()) + kd * (v_ref - device.velocity())
+
+    rec = loop.run(total, operator)
+    # observed contact states: locators pressed (positive normal force) at each tick
+    samples: list[tuple[float, frozenset[str]]] = []
+    for tt, active in zip(rec.time_s, rec.active_contacts, strict=True):
+        samples.append((tt, frozenset(active)))
+    observed = compress_states(samples, dwell_s)
+    planned = [tuple(sorted(s)) for s in sequence]
+    gaps = {c.name: float(c.gap_m) for c in sim.contacts()}
+    pen = sim.max_penetration_m
+    reasons = []
+    if observed != planned:
+        k = next(
+            (i for i, (a, b) in enumerate(zip(observed, planned, strict=False)) if a != b),
+            min(len(observed), len(planned)),
+        )
+        seen = observed[k] if k < len(observed) else "nothing more"
+        want = planned[k] if k < len(planned) else "nothing more"
+        reasons.append(f"the contact states leave the plan at step {k + 1}: observed {seen}, planned {want}")
+    far = {n: g for n, g in gaps.items() if abs(g) > final_gap_m}
+    if far:
+        reasons.append(
+            "at the end "
+            + ", ".join(f"{n} is {g:.3g} m away" for n, g in far.items())
+            + f" (expected ≤ {final_gap_m:g} m)"
+        )
+    if pen > max_penetration_m:
+        reasons.append(f"penetration reached {pen:.3g} m (expected ≤ {max_penetration_m:g} m)")
+    # stall: no progress for stall_s while the plan expects motion
+    pos = np.array(rec.workpiece_position)
+    speed = np.linalg.norm(np.diff(pos, axis=0), axis=1) / sim.dt if len(pos) > 1 else np.zeros(0)
+    run_len = int(math.ceil(stall_s / sim.dt))
+    still = 0
+    for k, sp in enumerate(speed):
+        tt = rec.time_s[k]
+        j = int(np.searchsorted(times_arr, tt, side="right")) - 1
+        moving_expected = 0 <= j < len(refs_arr) - 1 and float(np.linalg.norm(refs_arr[j + 1] - refs_arr[j])) > 1e-9
+        still = still + 1 if (moving_expected and sp < stall_speed) else 0
+        if still >= run_len:
+            i = int(np.searchsorted(ends, tt, side="right"))
+            reasons.append(
+                f"the workpiece stalled at t = {tt:.3f} s in transition {i + 1} while the plan expects motion"
+            )
+            break
+    felt = max((float(np.linalg.norm(f[: fixture.dimension])) for f in rec.felt_wrench), default=0.0)
+    return Verification(
+        passed=not reasons,
+        reason="; ".join(reasons) if reasons else "every check passed",
+        final_pose=sim.pose,
+        max_penetration_m=pen,
+        deadline_misses=rec.deadline_misses,
+        tick_mean_us=rec.mean_compute_s * 1e6,
+        tick_max_us=rec.max_compute_s * 1e6,
+        observed_sequence=observed,
+        final_gaps_m=gaps,
+        duration_s=total,
+        felt_force_max_N=felt,
+    )

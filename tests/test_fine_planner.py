@@ -1,0 +1,211 @@
+"""The fine plan of one transition: exact gaps along the path, closed-form end poses, wrenches, failures.
+
+Closed forms used (derived in each test's docstring): a point-locator pivot keeps the touched body
+point fixed in the world, so the end pose of a roll is known from the contact's body coordinates.
+"""
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import fixplan
+from fixplan.errors import InputError
+from fixplan.fixture import default_fixture_path
+from fixplan.locating import locator_contact
+from fixplan.planner.fine import Transition, feature_at, plan_transition
+from fixplan.pose import Pose
+
+ROOT = Path(__file__).resolve().parents[1]
+TOUCH = 1e-6  # [m]
+
+
+def gaps(fixture, pose):
+    return {loc.name: locator_contact(fixture.workpiece, pose, loc).gap_m for loc in fixture.locators}
+
+
+def assert_plan_geometry(fixture, tr, established, target, clearance):
+    """Exact numpy gaps at every knot: established touch, target closes monotonically to 0, others clear."""
+    others = [loc.name for loc in fixture.locators if loc.name not in established and loc.name != target]
+    prev = np.inf
+    for pose in tr.poses:
+        g = gaps(fixture, pose)
+        for n in established:
+            assert abs(g[n]) <= TOUCH, (n, g[n])
+        for n in others:
+            assert g[n] >= clearance - TOUCH, (n, g[n])
+        assert g[target] >= -TOUCH and g[target] <= prev + TOUCH
+        prev = g[target]
+    assert abs(gaps(fixture, tr.poses[-1])[target]) <= TOUCH
+    assert tr.max_constraint_violation_m <= TOUCH
+
+
+@pytest.fixture(scope="module")
+def default():
+    return fixplan.load(default_fixture_path())
+
+
+@pytest.fixture(scope="module")
+def default_s1(default):
+    return plan_transition(default, default.start, ["B1", "B2", "B3"], "S1")
+
+
+def test_default_slides_on_the_base_to_touch_s1(default, default_s1):
+    tr = default_s1
+    assert tr.success, tr.reason
+    assert tr.kind == "slide" and tr.ipopt_status == "Solve_Succeeded"
+    assert len(tr.poses) == 21 and tr.poses[0].distance_to(default.start) == (0.0, 0.0)
+    assert_plan_geometry(default, tr, ["B1", "B2", "B3"], "S1", 1e-3)
+    # Sliding on the -z face keeps the box flat: z of the centre and roll/pitch stay at the start's.
+    for pose in tr.poses:
+        assert abs(pose.p_world[2] - 0.025) <= TOUCH
+        assert abs(pose.R_world_body[2, 2] - 1.0) <= 1e-9
+    # Wrenches: found for every segment, within the manipulator's limits, base contacts pressed.
+    assert tr.found.all() and tr.wrenches.shape == (20, 6) and np.isfinite(tr.wrenches).all()
+    assert np.all(np.linalg.norm(tr.wrenches[:, :3], axis=1) <= 40.0 * (1 + 1e-6))
+    assert np.all(np.linalg.norm(tr.wrenches[:, 3:], axis=1) <= 2.0 * (1 + 1e-6))
+    assert np.all(tr.margins > 0.0)
+    assert tr.solve_time_s < 10.0 and tr.cost > 0.0
+    doc = json.loads(json.dumps(tr.to_json()))
+    assert (
+        doc["kind"] == "slide" and len(doc["poses"]) == 21 and set(doc["poses"][0]) == {"position", "quaternion_wxyz"}
+    )
+
+
+def test_warm_start_reproduces_the_plan(default, default_s1):
+    again = plan_transition(default, default.start, ["B1", "B2", "B3"], "S1", knots=10, warm_start=default_s1)
+    assert again.success, again.reason
+    dp, ang = again.poses[-1].distance_to(default_s1.poses[-1])
+    assert dp <= 1e-6 and ang <= 1e-5
+    assert again.ipopt_iterations <= default_s1.ipopt_iterations
+
+
+def rect_touching_b1(angle_deg=5.0, contact_x_body=-0.07):
+    """rect-3 turned by +5° and resting on B1 (0.05, 0) at body point (−0.07, −0.05); B2, S1 clear."""
+    th = np.radians(angle_deg)
+    R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+    p = np.array([0.05, 0.0]) - R @ np.array([contact_x_body, -0.05])
+    text = (ROOT / "problems" / "rect-3.toml").read_text()
+    old = "start = { position = [0.10, 0.05], angle_deg = 0.0 }"
+    assert old in text
+    return fixplan.loads(
+        text.replace(old, f"start = {{ position = [{p[0]:.17g}, {p[1]:.17g}], angle_deg = {angle_deg} }}")
+    )
+
+
+def test_rect_rolls_on_b1_to_b2_then_slides_to_s1():
+    """Rolling on the point B1 is a pivot: the body point (−0.07, −0.05) stays at B1, so the roll
+    ends at angle 0 with the centre at B1 + (0.07, 0.05) = (0.12, 0.05). Sliding on B1, B2 then
+    moves the part 2 cm in −x to the located pose (0.10, 0.05)."""
+    fx = rect_touching_b1()
+    g0 = gaps(fx, fx.start)
+    assert abs(g0["B1"]) <= 1e-12 and g0["B2"] > 5e-3 and g0["S1"] > 5e-3
+    roll = plan_transition(fx, fx.start, ["B1"], "B2")
+    assert roll.success, roll.reason
+    assert roll.kind == "roll"
+    assert_plan_geometry(fx, roll, ["B1"], "B2", 1e-3)
+    b1 = fx.locator("B1").p_world
+    for pose in roll.poses:
+        np.testing.assert_allclose(pose.point_body_from_world(b1), [-0.07, -0.05], atol=1e-6)
+    np.testing.assert_allclose(roll.poses[-1].p_world, [0.12, 0.05], atol=1e-6)
+    assert abs(roll.poses[-1].angle_rad) <= 1e-6
+    assert roll.max_slip_m <= 1e-6 and roll.found.all()
+    assert set(json.loads(json.dumps(roll.to_json()))["poses"][-1]) == {"position", "angle_deg"}
+
+    slide = plan_transition(fx, roll.end_pose, ["B1", "B2"], "S1")
+    assert slide.success, slide.reason
+    assert slide.kind == "slide"
+    assert_plan_geometry(fx, slide, ["B1", "B2"], "S1", 1e-3)
+    np.testing.assert_allclose(slide.poses[-1].p_world, [0.10, 0.05], atol=1e-6)
+
+
+def test_tilted_box_rolls_about_b1_b2_onto_b3():
+    """box-tilted-start rests on B1, B2 at body points (−0.075, −0.04, −0.025), (0.045, −0.04, −0.025):
+    rolling keeps both fixed, i.e. a pivot about the B1-B2 line, which lands flat on B3 with the
+    centre at B1 − (−0.075, −0.04, −0.025) = (0.115, 0.06, 0.025)."""
+    fx = fixplan.load(ROOT / "problems" / "box-tilted-start.toml")
+    tr = plan_transition(fx, fx.start, ["B1", "B2"], "B3")
+    assert tr.success, tr.reason
+    assert tr.kind == "roll"
+    assert_plan_geometry(fx, tr, ["B1", "B2"], "B3", 1e-3)
+    np.testing.assert_allclose(tr.poses[-1].p_world, [0.115, 0.06, 0.025], atol=1e-6)
+    np.testing.assert_allclose(tr.poses[-1].R_world_body, np.eye(3), atol=1e-6)
+    assert tr.max_slip_m <= 1e-6 and tr.found.all()
+
+
+def test_rolling_on_b1_b2_cannot_reach_s1():
+    """The only rolling motion on two point contacts is the pivot about their line; it brings B3
+    in long before the -y face reaches S1, so the program is infeasible and says so."""
+    fx = fixplan.load(ROOT / "problems" / "box-tilted-start.toml")
+    tr = plan_transition(fx, fx.start, ["B1", "B2"], "S1", knots=8)
+    assert not tr.success
+    assert tr.ipopt_status == "Infeasible_Problem_Detected"
+    assert "no path" in tr.reason and "S1" in tr.reason
+
+
+def test_weak_manipulator_fails_with_its_reason(default):
+    """Sliding the 2 kg box on μ = 0.25 needs at least μ m g ≈ 4.9 N of push: 0.5 N cannot."""
+    text = default_fixture_path().read_text()
+    assert "max_force = 40.0" in text
+    weak = fixplan.loads(text.replace("max_force = 40.0", "max_force = 0.5"))
+    tr = plan_transition(weak, weak.start, ["B1", "B2", "B3"], "S1", knots=6)
+    assert not tr.success
+    assert "too weak" in tr.reason and "segment 0" in tr.reason
+    assert not tr.found.any() and np.isnan(tr.wrenches).all()
+    assert tr.max_constraint_violation_m <= TOUCH  # the path itself is fine
+    assert tr.cost == float("inf")
+
+
+def test_bad_questions_are_input_errors(default):
+    with pytest.raises(InputError, match="already established"):
+        plan_transition(default, default.start, ["B1", "B2", "B3"], "B1")
+    with pytest.raises(InputError, match="must touch at the start"):
+        plan_transition(default, default.start, ["B1", "S1"], "S2")
+    with pytest.raises(InputError, match="unknown locator"):
+        plan_transition(default, default.start, ["B1"], "X9")
+
+
+@pytest.mark.parametrize(
+    ("shape", "point_body"),
+    [
+        ("box", [0.03, -0.01, -0.04]),  # below the -z face
+        ("cylinder", [0.05, 0.02, 0.01]),  # beside the lateral surface
+        ("cylinder", [0.01, -0.01, 0.07]),  # above the +z end
+        ("sphere", [0.03, 0.04, -0.02]),
+        ("polygon", [0.05, -0.02]),  # below the bottom edge
+        ("disk", [-0.03, 0.05]),
+    ],
+)
+def test_closed_form_gap_matches_the_exact_distance(shape, point_body, rng):
+    """The CasADi feature distance equals Shape.project's where the closest point is on the feature."""
+    import casadi as ca
+
+    from fixplan.geometry import Box, Cylinder, Disk, Polygon, Sphere
+
+    shapes = {
+        "box": Box((0.2, 0.1, 0.05)),
+        "cylinder": Cylinder(0.03, 0.1),
+        "sphere": Sphere(0.04),
+        "polygon": Polygon(((0.0, 0.0), (0.12, 0.0), (0.1, 0.06), (0.02, 0.08))),
+        "disk": Disk(0.04),
+    }
+    s = shapes[shape]
+    fx = SimpleNamespace(workpiece=SimpleNamespace(shape=s))
+    pose = Pose.identity(s.dimension)
+    q0 = np.asarray(point_body, dtype=float)
+    feature = feature_at(fx, SimpleNamespace(p_world=q0), pose)
+    for q in q0 + 1e-3 * rng.standard_normal((5, q0.shape[0])):
+        closed = float(feature.distance(ca, ca.DM(q)))
+        proj = s.project(q)
+        assert closed == pytest.approx(proj.distance, abs=1e-12)
+        np.testing.assert_allclose(
+            np.asarray(ca.evalf(feature.point_at(ca, ca.DM(q)))).ravel(), proj.point_body, atol=1e-12
+        )
+
+
+def test_transition_is_frozen(default_s1):
+    assert isinstance(default_s1, Transition)
+    with pytest.raises(AttributeError):
+        default_s1.success = False  # type: ignore[misc]
