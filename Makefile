@@ -17,6 +17,7 @@ $(STAMP): pyproject.toml
 
 demo: install
 	$(BIN)/fixplan validate fixplan/data/default.toml
+	$(BIN)/fixplan solve --out out/demo-plan.json --force
 	$(BIN)/fixplan classify --wrenches fixplan/data/demo_wrenches.csv
 	$(BIN)/fixplan map --axes Fx,Tz --range -10:10,-1:1 --n 40 --out out/demo-map.png --force
 

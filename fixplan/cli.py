@@ -444,6 +444,74 @@ def simulate(
 
 
 @app.command()
+def solve(
+    file: FileArg = None,
+    order: Annotated[
+        str | None, typer.Option("--order", help="Impose the order in which locators are added, e.g. S1,S2,E1.")
+    ] = None,
+    out: Annotated[Path | None, typer.Option("--out", help="Write the plan as JSON.")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite --out if it exists.")] = False,
+    no_verify: Annotated[bool, typer.Option("--no-verify", help="Skip the simulated haptic verification.")] = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Plan the loading of a full fixture and verify it in the simulated haptic loop.
+
+    Exit 0 planned and verified, 1 no plan (or verification failed), 2 bad input."""
+    from fixplan.planner.solve import solve as run_solve
+
+    fixture = _load(file)
+    target = None if out is None else _writable(out, force)
+    names = _names(order)
+    progress = None
+    if not json_out:
+
+        def progress(a) -> None:  # type: ignore[no-untyped-def]
+            verdict = "ok" if a.success else f"fails: {a.reason}"
+            typer.echo(f"  tried {{{', '.join(a.established)}}} + {a.target}: {verdict}", err=True)
+
+    result = run_solve(fixture, order=names, run_verification=not no_verify, progress=progress)
+    payload = result.to_json()
+    if target is not None:
+        target.write_text(json.dumps(payload, indent=2, default=_json_default) + "\n")
+    if json_out:
+        _emit_json(payload)
+    else:
+        from rich.console import Console
+        from rich.table import Table
+
+        if result.status == "planned":
+            table = Table(title=f"{fixture.name}: loading plan")
+            for col in ("#", "from → to", "motion", "wrench (mean)", "least margin [N]", "time [s]"):
+                table.add_column(col)
+            for i, tr in enumerate(payload["transitions"], 1):
+                w = ",".join(f"{x:.3g}" for x in tr["wrench"])
+                margin = "-" if tr["margin"] is None else f"{tr['margin']:.3g}"
+                table.add_row(
+                    str(i),
+                    f"{{{','.join(tr['from'])}}} + {tr['added']}",
+                    tr["motion"],
+                    w,
+                    margin,
+                    f"{tr['time_s']:.2f}",
+                )
+            Console().print(table)
+            v = result.verification
+            if v is not None:
+                verdict = "passed" if v.passed else f"FAILED: {v.reason}"
+                typer.echo(
+                    f"verification {verdict}; final gaps ≤ {max(abs(g) for g in v.final_gaps_m.values()):.2e} m, "
+                    f"max penetration {v.max_penetration_m:.2e} m, tick mean {v.tick_mean_us:.0f} µs, {v.deadline_misses} deadline misses"
+                )
+        else:
+            typer.echo(f"no plan: {result.reason}")
+        typer.echo(f"time: {result.timings.get('total_s', 0.0):.2f} s")
+        if target is not None:
+            typer.echo(f"wrote {target}")
+    if not result.ok:
+        raise typer.Exit(1)
+
+
+@app.command()
 def fclib(
     file: Annotated[Path, typer.Argument(help="An FCLib HDF5 problem (local or global, 3D or 2D).")],
     tol: Annotated[float, typer.Option("--tol", help="Target FCLib residual (natural map, relative).")] = 1e-8,

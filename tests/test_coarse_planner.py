@@ -27,7 +27,12 @@ def scripted(costs, forbidden=()):
         key = (tuple(sorted(state)), target)
         if key in forbidden:
             return Fake(False, f"adding {target} jams (margin < 0)", 0.0, pose)
-        return Fake(True, "", costs.get(target, 1.0) * (1.0 + 0.1 * len(state)), Pose(pose.R_world_body, pose.p_world + np.array([0.0, 0.0, 1.0])))
+        return Fake(
+            True,
+            "",
+            costs.get(target, 1.0) * (1.0 + 0.1 * len(state)),
+            Pose(pose.R_world_body, pose.p_world + np.array([0.0, 0.0, 1.0])),
+        )
 
     return evaluate
 
@@ -48,7 +53,10 @@ def test_naive_order_jams_and_another_is_found():
     plan = search(frozenset({"B1"}), ["B1", "B2", "C"], START, scripted({"B2": 1.0, "C": 5.0}, forbidden))
     assert plan.found and plan.sequence[1] == ("B1", "B2")
     assert plan.cost == pytest.approx(7.1)
-    assert any(not a.success and a.target == "B2" and a.established == ("B1", "C") and "jams" in a.reason for a in plan.attempts)
+    assert any(
+        not a.success and a.target == "B2" and a.established == ("B1", "C") and "jams" in a.reason
+        for a in plan.attempts
+    )
 
 
 def test_fixed_order_failure_names_the_transition():

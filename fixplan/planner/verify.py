@@ -109,7 +109,7 @@ def verify(
     R0 = fixture.start.R_world_body.copy()
     ndof = 6 if fixture.dimension == 3 else 3
     x0 = pose_coordinates(fixture.start, R0)
-    dev = SimulatedDevice(ndof, x0=x0)
+    dev = SimulatedDevice(ndof, mass_kg=0.2, inertia_kgm2=2e-4, x0=x0)
     b = dev.specs.physical_damping_Ns_per_m
     coupling = VirtualCoupling(2000.0, 2.0, 40.0, 0.02, sim.dt, device_damping=b, device_damping_rot=b * 1e-2)
     loop = HapticLoop(sim, dev, coupling)
@@ -144,12 +144,17 @@ def verify(
         v = (refs_arr[k + 1] - refs_arr[k]) / dt
         return x, v, push
 
-    kp, kd = 400.0, 40.0
+    # operator PD gains per coordinate, scaled by the handle's mass and inertia so both have the
+    # same natural frequency (≈ 45 rad/s) and damping ratio (≈ 1) at the 1 kHz tick
+    d = fixture.dimension
+    m_dev, i_dev = 0.2, 2e-4
+    kp = np.concatenate([np.full(d, 400.0), np.full(ndof - d, 400.0 * i_dev / m_dev)])
+    kd = np.concatenate([np.full(d, 18.0), np.full(ndof - d, 18.0 * i_dev / m_dev)])
+    damping = np.concatenate([np.full(d, b), np.full(ndof - d, b * 1e-2)])
 
     def operator(tt: float, device: SimulatedDevice) -> FloatArray:
         x_ref, v_ref, push = reference(tt)
         lead = push / K
-        damping = np.concatenate([np.full(fixture.dimension, b), np.full(ndof - fixture.dimension, b * 1e-2)])
         return push + damping * v_ref + kp * (x_ref + lead - device.position()) + kd * (v_ref - device.velocity())
 
     rec = loop.run(total, operator)
@@ -183,16 +188,20 @@ def verify(
     pos = np.array(rec.workpiece_position)
     speed = np.linalg.norm(np.diff(pos, axis=0), axis=1) / sim.dt if len(pos) > 1 else np.zeros(0)
     run_len = int(math.ceil(stall_s / sim.dt))
+    # a stall: stopped for stall_s before reaching the end pose of the current transition
+    # (arriving early and waiting against the next locator is not a stall)
+    end_positions = [np.asarray(poses[-1].p_world) for poses in knots]
     still = 0
     for k, sp in enumerate(speed):
         tt = rec.time_s[k]
-        j = int(np.searchsorted(times_arr, tt, side="right")) - 1
-        moving_expected = 0 <= j < len(refs_arr) - 1 and float(np.linalg.norm(refs_arr[j + 1] - refs_arr[j])) > 1e-9
-        still = still + 1 if (moving_expected and sp < stall_speed) else 0
+        i = int(np.searchsorted(ends, tt, side="right"))
+        if i >= len(end_positions):
+            break
+        away = float(np.linalg.norm(pos[k + 1] - end_positions[i]))
+        still = still + 1 if (sp < stall_speed and away > final_gap_m) else 0
         if still >= run_len:
-            i = int(np.searchsorted(ends, tt, side="right"))
             reasons.append(
-                f"the workpiece stalled at t = {tt:.3f} s in transition {i + 1} while the plan expects motion"
+                f"the workpiece stalled at t = {tt:.3f} s in transition {i + 1}, {away * 1e3:.2f} mm from where it should end"
             )
             break
     felt = max((float(np.linalg.norm(f[: fixture.dimension])) for f in rec.felt_wrench), default=0.0)

@@ -1,0 +1,68 @@
+"""fixplan solve: a verified plan for the default fixture, a clear infeasible case, determinism."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+import fixplan
+from fixplan.planner.solve import solve
+
+
+@pytest.fixture(scope="module")
+def default_plan():
+    return solve(fixplan.load(fixplan.default_fixture_path()))
+
+
+def test_default_fixture_plans_and_verifies(default_plan):
+    r = default_plan
+    assert r.status == "planned" and r.ok, r.reason
+    assert r.sequence[0] == ("B1", "B2", "B3") and r.sequence[-1] == ("B1", "B2", "B3", "E1", "S1", "S2")
+    assert all(len(b) == len(a) + 1 and set(a) < set(b) for a, b in zip(r.sequence, r.sequence[1:], strict=False))
+    v = r.verification
+    assert v.passed and v.observed_sequence == r.sequence
+    assert max(abs(g) for g in v.final_gaps_m.values()) <= 1e-4
+    assert v.max_penetration_m <= 1e-5
+    for tr in r.transitions:
+        assert tr.success and tr.max_constraint_violation_m <= 1e-6
+        assert min(tr.margins) > 0
+
+
+def test_plans_are_deterministic(default_plan):
+    again = solve(fixplan.load(fixplan.default_fixture_path()), run_verification=False)
+    assert again.sequence == default_plan.sequence
+    for a, b in zip(again.transitions, default_plan.transitions, strict=True):
+        assert a.end_pose.distance_to(b.end_pose)[0] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_weak_manipulator_is_infeasible_with_the_binding_constraint():
+    text = fixplan.default_fixture_path().read_text().replace("max_force = 40.0", "max_force = 0.5")
+    r = solve(fixplan.loads(text, source="weak.toml"), run_verification=False)
+    assert r.status == "infeasible" and not r.ok
+    assert "too weak" in r.reason and "max_force" in r.reason
+
+
+def test_solve_cli_json_and_exit_codes(tmp_path):
+    out = tmp_path / "plan.json"
+    cmd = [
+        sys.executable,
+        "-c",
+        "import sys; from fixplan.cli import main; sys.exit(main())",
+        "solve",
+        "--json",
+        "--no-verify",
+        "--order",
+        "S1,S2,E1",
+        "--out",
+        str(out),
+    ]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    payload = json.loads(proc.stdout)
+    assert payload["status"] == "planned" and [t["added"] for t in payload["transitions"]] == ["S1", "S2", "E1"]
+    assert json.loads(out.read_text()) == payload
+    again = subprocess.run(cmd, capture_output=True, text=True)
+    assert again.returncode == 2 and "exists" in again.stderr
+    bad = subprocess.run(cmd[:4] + ["--order", "S1,S9"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "unknown" in bad.stderr
