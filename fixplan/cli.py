@@ -456,7 +456,8 @@ def solve(
 ) -> None:
     """Plan the loading of a full fixture and verify it in the simulated haptic loop.
 
-    Exit 0 planned and verified, 1 no plan (or verification failed), 2 bad input."""
+    Exit 0 planned and verified, 1 no plan (or verification failed), 2 bad input.
+    """
     from fixplan.planner.solve import solve as run_solve
 
     fixture = _load(file)
