@@ -48,13 +48,6 @@ class ContactReport:
         return {"name": self.name, "gap": self.gap_m, "normal_force": self.normal_force_N, "mode": self.mode}
 
 
-class _Active(tuple):
-    """Names of the active contacts, built lazily from the step's mask (cheap per step)."""
-
-    def __new__(cls, names: list[str], mask: NDArray[np.bool_]) -> _Active:
-        return super().__new__(cls, (n for n, a in zip(names, mask, strict=True) if a))
-
-
 @dataclass(frozen=True)
 class StepInfo:
     """How the last step's contact problem was solved."""
@@ -286,7 +279,7 @@ class Simulator:
             status == kernels.STATUS_OK,
             int(failures),
             float(pen),
-            _Active(self.names, self._active),
+            tuple(n for n, a in zip(self.names, self._active, strict=True) if a),
         )
         return self.last
 

@@ -118,10 +118,23 @@ class HapticLoop:
         self.device.advance(self.coupling.period_s, operator_wrench)
         return w_c, felt, compute
 
+    def _warm_up(self) -> None:
+        """Load every compiled kernel once on a scratch copy, so no tick pays for compilation."""
+        import copy
+
+        scratch = copy.deepcopy(self.sim)
+        x_d, v_d = self.device.position(), self.device.velocity()
+        if scratch.dimension == 3:
+            _kernels.coupling3(
+                scratch._R, scratch._p, scratch.com_world, scratch._v, scratch._w, self._R0, x_d, v_d, self._K, self._B
+            )
+        scratch.step(np.zeros(6 if scratch.dimension == 3 else 3))
+
     def run(self, duration_s: float, operator: Operator) -> LoopRecord:
         """Run ticks for ``duration_s`` with ``operator(t, device)`` pushing the handle."""
         rec = LoopRecord(period_s=self.coupling.period_s)
         n = int(round(duration_s / self.coupling.period_s))
+        self._warm_up()
         self.device.open()
         try:
             for _ in range(n):
