@@ -499,8 +499,9 @@ def solve(
             v = result.verification
             if v is not None:
                 verdict = "passed" if v.passed else f"FAILED: {v.reason}"
+                worst_gap = max((abs(g) for g in v.final_gaps_m.values()), default=float("nan"))
                 typer.echo(
-                    f"verification {verdict}; final gaps ≤ {max(abs(g) for g in v.final_gaps_m.values()):.2e} m, "
+                    f"verification {verdict}; final gaps ≤ {worst_gap:.2e} m, "
                     f"max penetration {v.max_penetration_m:.2e} m, tick mean {v.tick_mean_us:.0f} µs, {v.deadline_misses} deadline misses"
                 )
         else:

@@ -66,3 +66,10 @@ def test_solve_cli_json_and_exit_codes(tmp_path):
     assert again.returncode == 2 and "exists" in again.stderr
     bad = subprocess.run(cmd[:4] + ["--order", "S1,S9"], capture_output=True, text=True)
     assert bad.returncode == 2 and "unknown" in bad.stderr
+
+
+def test_fixture_located_at_start_needs_no_transition():
+    r = solve(fixplan.load(fixplan.default_fixture_path().parents[2] / "problems" / "rect-3.toml"))
+    assert r.status == "planned" and r.ok and r.transitions == []
+    assert r.sequence == [("B1", "B2", "S1")]
+    assert max(abs(g) for g in r.verification.final_gaps_m.values()) <= 1e-4

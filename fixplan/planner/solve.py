@@ -21,7 +21,6 @@ from typing import Any
 
 import numpy as np
 
-from fixplan.errors import InputError
 from fixplan.fixture import Fixture
 from fixplan.locating import contact_set, require_full
 from fixplan.planner.coarse import Attempt, search
@@ -99,7 +98,20 @@ def solve(
     touching = contact_set(fixture, "start")
     start_state = frozenset(c.name for c in touching.contacts if c.kind == "locator")
     if start_state == frozenset(names):
-        raise InputError(f"{fixture.source}: every locator already touches at the start pose: nothing to plan")
+        # already located: nothing to plan; verification checks that the part stays there
+        verification = verify(fixture, [], [], [], []) if run_verification else None
+        timings = {"plan_s": 0.0, "fine_s": 0.0, "total_s": time.perf_counter() - t0}
+        reason = "" if verification is None or verification.passed else f"verification failed: {verification.reason}"
+        return PlanResult(
+            "planned",
+            reason or "already located at the start pose",
+            [tuple(sorted(names))],
+            [],
+            [],
+            verification,
+            [],
+            timings,
+        )
     cache: dict[tuple[tuple[str, ...], str], Transition] = {}
     fine_time = 0.0
 

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.errors import SolverError
 from fixplan.fixture import Fixture
 from fixplan.haptics import HapticLoop, SimulatedDevice, VirtualCoupling
 from fixplan.pose import Pose, log_so3
@@ -70,6 +71,11 @@ def pose_coordinates(pose: Pose, R0: FloatArray) -> FloatArray:
     if pose.dimension == 3:
         return np.concatenate([pose.p_world, log_so3(pose.R_world_body @ R0.T)])
     return np.array([pose.p_world[0], pose.p_world[1], pose.angle_rad])
+
+
+def _phase(ends: FloatArray, t: float) -> str:
+    i = int(np.searchsorted(ends, t, side="right"))
+    return f"transition {i + 1}" if i < len(ends) else "settling after the last transition"
 
 
 def compress_states(samples: Sequence[tuple[float, frozenset[str]]], dwell_s: float) -> list[tuple[str, ...]]:
@@ -157,7 +163,22 @@ def verify(
         lead = push / K
         return push + damping * v_ref + kp * (x_ref + lead - device.position()) + kd * (v_ref - device.velocity())
 
-    rec = loop.run(total, operator)
+    try:
+        rec = loop.run(total, operator)
+    except SolverError as exc:
+        return Verification(
+            passed=False,
+            reason=f"the simulated load diverged at t = {sim.time_s:.3f} s ({_phase(ends, sim.time_s)}): {exc}",
+            final_pose=sim.pose,
+            max_penetration_m=sim.max_penetration_m,
+            deadline_misses=0,
+            tick_mean_us=0.0,
+            tick_max_us=0.0,
+            observed_sequence=[],
+            final_gaps_m={},
+            duration_s=sim.time_s,
+            felt_force_max_N=0.0,
+        )
     # observed contact states: locators pressed (positive normal force) at each tick
     samples: list[tuple[float, frozenset[str]]] = []
     for tt, active in zip(rec.time_s, rec.active_contacts, strict=True):
@@ -167,7 +188,7 @@ def verify(
     gaps = {c.name: float(c.gap_m) for c in sim.contacts()}
     pen = sim.max_penetration_m
     reasons = []
-    if observed != planned:
+    if planned and observed != planned:
         k = next(
             (i for i, (a, b) in enumerate(zip(observed, planned, strict=False)) if a != b),
             min(len(observed), len(planned)),
