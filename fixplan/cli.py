@@ -450,7 +450,8 @@ def solve(
         str | None, typer.Option("--order", help="Impose the order in which locators are added, e.g. S1,S2,E1.")
     ] = None,
     out: Annotated[Path | None, typer.Option("--out", help="Write the plan as JSON.")] = None,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite --out if it exists.")] = False,
+    report: Annotated[Path | None, typer.Option("--report", help="Write a Markdown report of the plan.")] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite --out/--report if they exist.")] = False,
     no_verify: Annotated[bool, typer.Option("--no-verify", help="Skip the simulated haptic verification.")] = False,
     json_out: JsonOpt = False,
 ) -> None:
@@ -458,10 +459,12 @@ def solve(
 
     Exit 0 planned and verified, 1 no plan (or verification failed), 2 bad input.
     """
+    from fixplan.planner.solve import report_markdown
     from fixplan.planner.solve import solve as run_solve
 
     fixture = _load(file)
     target = None if out is None else _writable(out, force)
+    report_path = None if report is None else _writable(report, force)
     names = _names(order)
     progress = None
     if not json_out:
@@ -474,6 +477,8 @@ def solve(
     payload = result.to_json()
     if target is not None:
         target.write_text(json.dumps(payload, indent=2, default=_json_default) + "\n")
+    if report_path is not None:
+        report_path.write_text(report_markdown(result, fixture))
     if json_out:
         _emit_json(payload)
     else:

@@ -37,14 +37,17 @@ def test_plans_are_deterministic(default_plan):
 
 
 def test_weak_manipulator_is_infeasible_with_the_binding_constraint():
-    text = fixplan.default_fixture_path().read_text().replace("max_force = 40.0", "max_force = 0.5")
-    r = solve(fixplan.loads(text, source="weak.toml"), run_verification=False)
+    r = solve(
+        fixplan.load(fixplan.default_fixture_path().parents[2] / "problems" / "box-weak-hand.toml"),
+        run_verification=False,
+    )
     assert r.status == "infeasible" and not r.ok
     assert "too weak" in r.reason and "max_force" in r.reason
 
 
 def test_solve_cli_json_and_exit_codes(tmp_path):
     out = tmp_path / "plan.json"
+    md = tmp_path / "plan.md"
     cmd = [
         sys.executable,
         "-c",
@@ -56,12 +59,16 @@ def test_solve_cli_json_and_exit_codes(tmp_path):
         "S1,S2,E1",
         "--out",
         str(out),
+        "--report",
+        str(md),
     ]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     payload = json.loads(proc.stdout)
     assert payload["status"] == "planned" and [t["added"] for t in payload["transitions"]] == ["S1", "S2", "E1"]
     assert json.loads(out.read_text()) == payload
+    text = md.read_text()
+    assert "# Loading plan: box-3-2-1" in text and "| 3 | {B1, B2, B3, S1, S2} | E1 | slide |" in text
     again = subprocess.run(cmd, capture_output=True, text=True)
     assert again.returncode == 2 and "exists" in again.stderr
     bad = subprocess.run(cmd[:4] + ["--order", "S1,S9"], capture_output=True, text=True)

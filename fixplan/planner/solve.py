@@ -78,6 +78,50 @@ class PlanResult:
         }
 
 
+def report_markdown(result: PlanResult, fixture: Fixture) -> str:
+    """A Markdown report of a plan: the sequence, the transitions, what was tried, the verification."""
+    payload = result.to_json()
+    lines = [f"# Loading plan: {fixture.name}", "", f"- file: `{fixture.source}`", f"- status: **{result.status}**"]
+    if payload["reason"]:
+        lines.append(f"- reason: {payload['reason']}")
+    lines += [f"- sequence: {' → '.join('{' + ', '.join(s) + '}' for s in result.sequence) or '(none)'}", ""]
+    if payload["transitions"]:
+        lines += [
+            "## Transitions",
+            "",
+            "| # | from | added | motion | mean wrench [N, N·m] | least margin [N] | time [s] | path [m] | max gap violation [m] |",
+            "|---:|---|---|---|---|---:|---:|---:|---:|",
+        ]
+        for i, tr in enumerate(payload["transitions"], 1):
+            w = ", ".join(f"{x:.3g}" for x in tr["wrench"])
+            margin = "–" if tr["margin"] is None else f"{tr['margin']:.3g}"
+            lines.append(
+                f"| {i} | {{{', '.join(tr['from'])}}} | {tr['added']} | {tr['motion']} | {w} | {margin} | "
+                f"{tr['time_s']:.2f} | {tr['path_length_m']:.4g} | {tr['max_constraint_violation_m']:.1e} |"
+            )
+        lines.append("")
+    failed = [a for a in payload["tried"] if not a["ok"]]
+    lines += ["## Transitions tried", "", f"{len(payload['tried'])} priced, {len(failed)} failed.", ""]
+    for a in failed:
+        lines.append(f"- {{{', '.join(a['from'])}}} + {a['add']}: {a['reason']}")
+    v = payload["verification"]
+    lines += ["", "## Verification (simulated haptic loop, 1 kHz)", ""]
+    if v is None:
+        lines.append("Not run (`--no-verify`).")
+    else:
+        worst = max((abs(g) for g in v["final_gaps"].values()), default=float("nan"))
+        lines += [
+            f"- result: **{'passed' if v['passed'] else 'failed'}** — {v['reason']}",
+            f"- observed states: {' → '.join('{' + ', '.join(s) + '}' for s in v['observed_sequence'])}",
+            f"- final gaps ≤ {worst:.2e} m; max penetration {v['max_penetration']:.2e} m",
+            f"- tick compute: mean {v['tick_mean_us']:.0f} µs, max {v['tick_max_us']:.0f} µs; deadline misses {v['deadline_misses']}",
+            f"- largest force felt by the user: {v['felt_force_max']:.3g} N",
+        ]
+    t = payload["timings"]
+    lines += ["", "## Timings", "", ", ".join(f"{k} {x:.2f} s" for k, x in t.items()), ""]
+    return "\n".join(lines)
+
+
 def _duration(tr: Transition, acceleration_mps2: float) -> float:
     length = float(tr.cost) if math.isfinite(tr.cost) else 0.0
     return 0.15 + 2.0 * math.sqrt(max(length, 0.0) / acceleration_mps2)
