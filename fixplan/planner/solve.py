@@ -179,7 +179,13 @@ def solve(
     verification = None
     if run_verification:
         t1 = time.perf_counter()
-        wrenches = [np.nanmean(tr.wrenches, axis=0) for tr in transitions]
+        # per-segment feedforward; a segment without a wrench (NaN row) borrows the transition's mean
+        wrenches = []
+        for tr in transitions:
+            W = np.array(tr.wrenches, dtype=float)
+            mean = np.nanmean(W, axis=0)
+            W[~np.isfinite(W).all(axis=1)] = mean
+            wrenches.append(W)
         sequence = (
             [tuple(sorted(start_state))] + [tuple(s) for s in coarse.sequence[1:]] if start_state else coarse.sequence
         )

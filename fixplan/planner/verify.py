@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from fixplan.errors import SolverError
 from fixplan.fixture import Fixture
-from fixplan.haptics import HapticLoop, SimulatedDevice, VirtualCoupling
+from fixplan.haptics import DeviceSpecs, HapticLoop, SimulatedDevice, VirtualCoupling
 from fixplan.pose import Pose, log_so3
 from fixplan.simulator import Simulator
 
@@ -110,12 +110,31 @@ def verify(
     stall_speed: float = 1e-5,
     stall_s: float = 0.1,
 ) -> Verification:
-    """Run the plan (per transition: knot poses, one wrench per transition, a duration) through the loop."""
+    """Run the plan through the loop: per transition the knot poses, the wrench per segment (or one), a duration."""
     sim = Simulator(fixture)
     R0 = fixture.start.R_world_body.copy()
     ndof = 6 if fixture.dimension == 3 else 3
     x0 = pose_coordinates(fixture.start, R0)
-    dev = SimulatedDevice(ndof, mass_kg=0.2, inertia_kgm2=2e-4, x0=x0)
+    # the device is sized to the limits the plan was made for (the manipulator's, or the wrench
+    # search's defaults): a plan may push as hard as those allow, and a weaker device would let
+    # the operator overpower its motors and spin the handle away
+    wp = fixture.workpiece
+    g = float(np.linalg.norm(fixture.gravity)) or 9.81
+    F_max = fixture.manipulator.max_force_N if math.isfinite(fixture.manipulator.max_force_N) else 5.0 * wp.mass_kg * g
+    T_max = (
+        fixture.manipulator.max_torque_Nm
+        if math.isfinite(fixture.manipulator.max_torque_Nm)
+        else F_max * wp.shape.bounding_radius
+    )
+    specs = DeviceSpecs(
+        max_force_N=1.05 * F_max,
+        max_torque_Nm=1.05 * T_max,
+        max_stiffness_N_per_m=5000.0,
+        max_damping_Ns_per_m=50.0,
+        workspace_radius_m=0.5,
+        physical_damping_Ns_per_m=8.0,
+    )
+    dev = SimulatedDevice(ndof, mass_kg=0.2, inertia_kgm2=2e-4, specs=specs, x0=x0)
     b = dev.specs.physical_damping_Ns_per_m
     coupling = VirtualCoupling(2000.0, 2.0, 40.0, 0.02, sim.dt, device_damping=b, device_damping_rot=b * 1e-2)
     loop = HapticLoop(sim, dev, coupling)
@@ -125,12 +144,15 @@ def verify(
     refs: list[FloatArray] = [x0]
     pushes: list[FloatArray] = []
     t = 0.0
+    seg_pushes: list[FloatArray] = []  # the feedforward for each reference segment
     for poses, w, T in zip(knots, wrenches, durations_s, strict=True):
         coords = [pose_coordinates(p, R0) for p in poses]
+        W = np.atleast_2d(np.asarray(w, dtype=float))
         for k, c in enumerate(coords[1:], 1):
             times.append(t + T * k / (len(coords) - 1))
             refs.append(c)
-        pushes.append(np.asarray(w, dtype=float))
+            seg_pushes.append(W[min(k - 1, W.shape[0] - 1)])
+        pushes.append(W[-1])
         t += T
     ends = np.cumsum(durations_s)
     total = t + settle_s
@@ -139,11 +161,10 @@ def verify(
     final_push = pushes[-1] if pushes else np.zeros(ndof)
 
     def reference(tt: float) -> tuple[FloatArray, FloatArray, FloatArray]:
-        i = int(np.searchsorted(ends, tt, side="right"))
-        push = pushes[min(i, len(pushes) - 1)] if pushes else np.zeros(ndof)
         if tt >= times_arr[-1]:
             return refs_arr[-1], np.zeros(ndof), final_push
         k = int(np.searchsorted(times_arr, tt, side="right")) - 1
+        push = seg_pushes[k]
         dt = times_arr[k + 1] - times_arr[k]
         s = (tt - times_arr[k]) / dt
         x = (1 - s) * refs_arr[k] + s * refs_arr[k + 1]
@@ -209,8 +230,9 @@ def verify(
     pos = np.array(rec.workpiece_position)
     speed = np.linalg.norm(np.diff(pos, axis=0), axis=1) / sim.dt if len(pos) > 1 else np.zeros(0)
     run_len = int(math.ceil(stall_s / sim.dt))
-    # a stall: stopped for stall_s before reaching the end pose of the current transition
-    # (arriving early and waiting against the next locator is not a stall)
+    # a stall: stopped for stall_s while the current transition's target is not yet pressed
+    # (arriving early, or in a slightly different orientation, and waiting is not a stall)
+    targets = [sorted(set(b) - set(a)) for a, b in zip(planned, planned[1:], strict=False)]
     end_positions = [np.asarray(poses[-1].p_world) for poses in knots]
     still = 0
     for k, sp in enumerate(speed):
@@ -218,11 +240,14 @@ def verify(
         i = int(np.searchsorted(ends, tt, side="right"))
         if i >= len(end_positions):
             break
+        target = targets[i] if i < len(targets) else []
+        reached = bool(target) and all(n in rec.active_contacts[k + 1] for n in target)
         away = float(np.linalg.norm(pos[k + 1] - end_positions[i]))
-        still = still + 1 if (sp < stall_speed and away > final_gap_m) else 0
+        still = still + 1 if (sp < stall_speed and not reached) else 0
         if still >= run_len:
             reasons.append(
                 f"the workpiece stalled at t = {tt:.3f} s in transition {i + 1}, {away * 1e3:.2f} mm from where it should end"
+                + (f", before touching {', '.join(target)}" if target else "")
             )
             break
     felt = max((float(np.linalg.norm(f[: fixture.dimension])) for f in rec.felt_wrench), default=0.0)
