@@ -76,7 +76,10 @@ def main() -> int:
         parts += [f"## {section.title}", "", section.markdown.strip(), "", f"_({name}: {elapsed:.1f} s)_", ""]
         if section.rows:
             with open(results_dir / f"{name}.csv", "w", newline="") as fh:
-                writer = csv.DictWriter(fh, fieldnames=list(section.rows[0]))
+                fields: list[str] = []
+                for row in section.rows:  # rows of one benchmark may differ (e.g. two tables)
+                    fields += [k for k in row if k not in fields]
+                writer = csv.DictWriter(fh, fieldnames=fields)
                 writer.writeheader()
                 writer.writerows(section.rows)
     Path(args.out).write_text("\n".join(parts))

@@ -45,6 +45,7 @@ class LoopRecord:
     device_position: list[FloatArray] = field(default_factory=list)
     workpiece_position: list[FloatArray] = field(default_factory=list)
     active_contacts: list[tuple[str, ...]] = field(default_factory=list)  # locators pressing on the part
+    unconverged_steps: int = 0  # engine steps that stopped at the sweep cap
     period_s: float = 1e-3
 
     @property
@@ -147,6 +148,8 @@ class HapticLoop:
                 rec.device_position.append(self.device.position())
                 rec.workpiece_position.append(self.sim.pose.p_world.copy())
                 rec.active_contacts.append(self.sim.pressed())
+                if self.sim.last is not None and not self.sim.last.converged:
+                    rec.unconverged_steps += 1
         finally:
             self.device.close()
         return rec

@@ -48,6 +48,7 @@ class Verification:
     final_gaps_m: dict[str, float]
     duration_s: float
     felt_force_max_N: float
+    unconverged_steps: int = 0
     extras: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
@@ -63,6 +64,7 @@ class Verification:
             "final_gaps": self.final_gaps_m,
             "duration_s": self.duration_s,
             "felt_force_max": self.felt_force_max_N,
+            "unconverged_steps": self.unconverged_steps,
         }
 
 
@@ -111,7 +113,9 @@ def verify(
     stall_s: float = 0.1,
 ) -> Verification:
     """Run the plan through the loop: per transition the knot poses, the wrench per segment (or one), a duration."""
-    sim = Simulator(fixture)
+    # a real-time loop bounds its work: a haptic-grade residual and at most 100 sweeps per tick;
+    # steps that stop at the cap are counted and reported (rank-deficient contact sets stall NSGS)
+    sim = Simulator(fixture, tolerance=1e-6, max_iterations=100)
     R0 = fixture.start.R_world_body.copy()
     ndof = 6 if fixture.dimension == 3 else 3
     x0 = pose_coordinates(fixture.start, R0)
@@ -263,4 +267,5 @@ def verify(
         final_gaps_m=gaps,
         duration_s=total,
         felt_force_max_N=felt,
+        unconverged_steps=rec.unconverged_steps,
     )
