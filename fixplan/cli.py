@@ -193,7 +193,7 @@ def classify(
     ] = "clarabel",
     json_out: JsonOpt = False,
 ) -> None:
-    """Classify pushes: held, jammed, separates, slides, rolls or indeterminate."""
+    """Classify pushes: held, jammed, separates, slides, pivots, rolls or indeterminate."""
     from fixplan.jamming import classify as run
     from fixplan.locating import contact_set
 
