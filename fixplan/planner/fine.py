@@ -520,47 +520,22 @@ def plan_transition(
     dxi = np.diff(xi_sol, axis=1)
     cost = float(sum(np.sqrt(max(float(v @ M0 @ v), 0.0)) for v in dxi.T) / np.sqrt(wp.mass_kg))
 
-    nan_w = np.full((K, nv), np.nan)
-    nan_m = np.full(K, np.nan)
-    if not ipopt_ok:
-        reason = f"no path from {_state(est)} to touch {target} keeping the others ≥ {clearance_m:g} m away (IPOPT: {status}, {guess_note})"
+    def failed(reason: str) -> Transition:
+        """A transition with no path (or an unsound one): no wrenches, infinite cost."""
         return Transition(
-            est,
-            target,
-            kind,
-            poses,
-            nan_w,
-            nan_m,
-            False,
-            reason,
-            violation,
-            solve_time,
-            status,
-            np.zeros(K, dtype=bool),
-            [],
-            slip,
-            float("inf"),
-            iterations,
+            est, target, kind, poses, np.full((K, nv), np.nan), np.full(K, np.nan), False, reason, violation,
+            solve_time, status, np.zeros(K, dtype=bool), [], slip, float("inf"), iterations,
+        )  # fmt: skip
+
+    if not ipopt_ok:
+        return failed(
+            f"no path from {_state(est)} to touch {target} keeping the others ≥ {clearance_m:g} m away "
+            f"(IPOPT: {status}, {guess_note})"
         )
     if violation > tol_touch:
-        reason = f"the planned poses violate the contacts by {violation:.3g} m with the exact gaps (allowed {tol_touch:g} m): a feature's closed form does not hold along the path"
-        return Transition(
-            est,
-            target,
-            kind,
-            poses,
-            nan_w,
-            nan_m,
-            False,
-            reason,
-            violation,
-            solve_time,
-            status,
-            np.zeros(K, dtype=bool),
-            [],
-            slip,
-            float("inf"),
-            iterations,
+        return failed(
+            f"the planned poses violate the contacts by {violation:.3g} m with the exact gaps (allowed {tol_touch:g} m): "
+            "a feature's closed form does not hold along the path"
         )
 
     # --- wrenches per segment -----------------------------------------------------------------
