@@ -57,7 +57,13 @@ class StepInfo:
     converged: bool
     failed_local_solves: int
     penetration_m: float  # deepest penetration after the step (0: none)
-    active: tuple[str, ...]
+    names: tuple[str, ...]
+    active_mask: NDArray[np.bool_]
+
+    @property
+    def active(self) -> tuple[str, ...]:
+        """Names of the contacts the step solved for (within the detection margin)."""
+        return tuple(n for n, a in zip(self.names, self.active_mask, strict=True) if a)
 
 
 @dataclass
@@ -156,6 +162,7 @@ class Simulator:
         self._kind, self._params, self._verts, self._enorm = encode(wp.shape)
         locs = fixture.locators
         self.names = [loc.name for loc in locs]
+        self._names_t = tuple(self.names)
         self._loc_p = np.ascontiguousarray([loc.p_world for loc in locs], dtype=float)
         self._loc_r = np.array([loc.radius_m for loc in locs])
         self._mu = np.array([loc.friction for loc in locs])
@@ -279,7 +286,8 @@ class Simulator:
             status == kernels.STATUS_OK,
             int(failures),
             float(pen),
-            tuple(n for n, a in zip(self.names, self._active, strict=True) if a),
+            self._names_t,
+            self._active.copy(),
         )
         return self.last
 
@@ -427,7 +435,7 @@ class Simulator:
         self.worst_error = worst
         self.last = StepInfo(
             float(last_err), int(last_it), status == kernels.STATUS_OK, 0, float(self.max_penetration_m),
-            tuple(n for n, a in zip(self.names, self._active, strict=True) if a),
+            self._names_t, self._active.copy(),
         )  # fmt: skip
         return traj
 

@@ -59,5 +59,5 @@ def test_compiled_coupling_matches_the_python_formula(rng):
     x_d, v_d = rng.normal(size=6) * 0.01, rng.normal(size=6)
     x_w, v_w = loop.workpiece_coordinates()
     expected = coupling.wrench(x_d - x_w, v_d - v_w, 3)
-    got = _kernels.coupling3(sim._R, sim._p, sim.com_world, sim._v, sim._w, loop._R0, x_d, v_d, loop._K, loop._B)
+    got = _kernels.coupling3(sim._R, sim._p, sim._com_b, sim._v, sim._w, loop._R0, x_d, v_d, loop._K, loop._B)
     assert np.allclose(got, expected, atol=1e-12)

@@ -31,8 +31,9 @@ def log_so3(R):
 
 
 @njit(cache=True)
-def coupling3(R, p, c, v, w, R0, x_d, v_d, K, B):
+def coupling3(R, p, com_b, v, w, R0, x_d, v_d, K, B):
     """Coupling wrench on the workpiece (about its body origin) from device and workpiece coordinates."""
+    c = p + R @ com_b
     Rrel = R @ R0.T
     rot = log_so3(Rrel)
     o = p - c

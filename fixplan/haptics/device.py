@@ -9,6 +9,7 @@ position readings like an encoder.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
@@ -117,14 +118,14 @@ class SimulatedDevice(HapticDevice):
     def set_force_and_torque(self, wrench: ArrayLike) -> FloatArray:
         w = np.array(wrench, dtype=float)
         d = 2 if self.ndof == 3 else 3
-        F, T = w[:d], w[d:]
-        nF, nT = float(np.linalg.norm(F)), float(np.linalg.norm(T))
+        nF = math.sqrt(float(w[:d] @ w[:d]))
+        nT = math.sqrt(float(w[d:] @ w[d:]))
         if nF > self._specs.max_force_N:
-            F = F * (self._specs.max_force_N / nF)
+            w[:d] *= self._specs.max_force_N / nF
         if nT > self._specs.max_torque_Nm:
-            T = T * (self._specs.max_torque_Nm / nT)
-        self._displayed = np.concatenate([F, T])
-        return self._displayed.copy()
+            w[d:] *= self._specs.max_torque_Nm / nT
+        self._displayed = w
+        return w.copy()
 
     def advance(self, dt: float, operator_wrench: ArrayLike) -> None:
         """Integrate the handle for one tick under the operator's hand and the displayed wrench."""
