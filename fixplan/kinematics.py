@@ -17,14 +17,12 @@ The paper's ``G`` [11] is the stack of normal rows, ``H_x``/``H_y`` the tangent 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fixplan.errors import InputError
 from fixplan.pose import Pose, cross2
 
 FloatArray = NDArray[np.float64]
@@ -185,14 +183,6 @@ class ContactSet:
                 ]
             )
         return np.array([w[0], w[1], w[2] + offset[0] * w[1] - offset[1] * w[0]])
-
-    def subset(self, names: Sequence[str]) -> ContactSet:
-        """The same configuration with only the named contacts, in the given order."""
-        by_name = {c.name: c for c in self.contacts}
-        missing = [n for n in names if n not in by_name]
-        if missing:
-            raise InputError(f"unknown contact {missing[0]!r} (known: {', '.join(by_name) or 'none'})")
-        return ContactSet(tuple(by_name[n] for n in names), self.com_world, self.mass_matrix, self.body_origin_world)
 
 
 def mass_matrix(mass_kg: float, inertia_body: ArrayLike, R_world_body: ArrayLike) -> FloatArray:

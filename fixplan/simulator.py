@@ -368,7 +368,6 @@ class Simulator:
         chunk = max(every, (5000 // every) * every)
         done = 0
         wall = 0.0
-        worst = 0.0
         status = kernels.STATUS_OK
         while done < n_steps:
             n = min(chunk, n_steps - done)
@@ -425,14 +424,12 @@ class Simulator:
             self.time_s += n * self.dt
             self.steps += n
             done += n
-            worst = max(worst, float(worst_k))
             self.max_penetration_m = max(self.max_penetration_m, float(pen))
             if progress is not None:
                 progress(n)
         traj.max_penetration_m = self.max_penetration_m
         traj.wall_time_s = wall
         traj.steps = n_steps
-        self.worst_error = worst
         self.last = StepInfo(
             float(last_err), int(last_it), status == kernels.STATUS_OK, 0, float(self.max_penetration_m),
             self._names_t, self._active.copy(),

@@ -25,9 +25,6 @@ class Tolerances:
         Static balance holds when the least M⁻¹-weighted residual is at most this fraction of
         the wrench's own M⁻¹-norm (scale-free, so a wrench of 1e-6 N and of 1e6 N get the same
         verdict).
-    boundary_rel : float
-        Width of the band around a decision threshold in which a verdict is reported as
-        ``indeterminate`` rather than guessed.
     cone_eps : float
         Solver accuracy requested from the cone-program backends (relative).
     slip_rel : float
@@ -39,7 +36,6 @@ class Tolerances:
     penetration_m: float = 1e-6
     goal_gap_m: float = 1e-6
     balance_rel: float = 1e-6
-    boundary_rel: float = 1e-7
     cone_eps: float = 1e-9
     slip_rel: float = 1e-6
 
@@ -49,9 +45,9 @@ class Tolerances:
 
 
 PROFILES: dict[str, Tolerances] = {
-    "strict": Tolerances(balance_rel=1e-8, boundary_rel=1e-9, cone_eps=1e-10, slip_rel=1e-8),
+    "strict": Tolerances(balance_rel=1e-8, cone_eps=1e-10, slip_rel=1e-8),
     "default": Tolerances(),
-    "haptic": Tolerances(balance_rel=1e-4, boundary_rel=1e-5, cone_eps=1e-7, slip_rel=1e-4),
+    "haptic": Tolerances(balance_rel=1e-4, cone_eps=1e-7, slip_rel=1e-4),
 }
 
 DEFAULT = PROFILES["default"]

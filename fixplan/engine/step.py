@@ -136,14 +136,11 @@ def tangents3(n):
 
 
 @njit(cache=True)
-def fclib_error(W, q, mu, offsets, sizes, P, u):
-    """Siconos/FCLib residual (natural map, ρ = 1), normalised by max(‖q‖, ‖P‖, ‖u‖)."""
-    return fclib_error_ws(q, mu, offsets, sizes, P, u, np.empty(4), np.empty(4))
-
-
-@njit(cache=True)
 def fclib_error_ws(q, mu, offsets, sizes, P, u, x, pr):
-    """:func:`fclib_error` with caller-owned scratch vectors ``x``, ``pr`` (length 4)."""
+    """Siconos/FCLib residual (natural map, ρ = 1), normalised by max(‖q‖, ‖P‖, ‖u‖).
+
+    ``x`` and ``pr`` are caller-owned scratch vectors of length 4 (no allocation per sweep).
+    """
     total = 0.0
     for j in range(offsets.shape[0]):
         o, d = offsets[j], sizes[j]

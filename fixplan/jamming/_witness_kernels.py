@@ -19,17 +19,6 @@ SLIDE, STICK, OPEN = 0, 1, 2
 
 
 @njit(cache=True)
-def n_unknowns(ndof, size, role):
-    nz = ndof
-    for i in range(size.shape[0]):
-        if role[i] == 1:
-            nz += size[i]
-        elif role[i] == 0:
-            nz += 1
-    return nz
-
-
-@njit(cache=True)
 def system(M, J, off, size, mu, D, w, z, role):
     """Residual F, Jacobian and the stacked contact forces λ for the role pattern ``role``."""
     ndof = M.shape[0]

@@ -159,9 +159,7 @@ class Classifier:
         given = tuple(float(x) for x in (w_applied if wrench_given is None else np.asarray(wrench_given, dtype=float)))
         w_e = w_applied + self.gravity
         scale = self.builder.m_inv_norm(w_e)
-        names = self._names
-        sizes = self._sizes
-        zero_forces = {n: np.zeros(k) for n, k in zip(names, sizes, strict=True)}
+        names, sizes, offsets = self._names, self._sizes, self._offsets
 
         def result(
             mode: str,
@@ -172,11 +170,10 @@ class Classifier:
             accel: FloatArray | None = None,
             **res: float,
         ) -> Classification:
-            forces = dict(zero_forces)
-            if lam is not None:
-                forces = {
-                    n: lam[o : o + c.size] * scale for n, o, c in zip(names, cs.offsets, cs.contacts, strict=True)
-                }
+            if lam is None:
+                forces = {n: np.zeros(k) for n, k in zip(names, sizes, strict=True)}
+            else:
+                forces = {n: lam[o : o + k] * scale for n, o, k in zip(names, offsets, sizes, strict=True)}
             return Classification(
                 given,
                 mode,
