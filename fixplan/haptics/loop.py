@@ -27,8 +27,8 @@ from fixplan.errors import InputError
 from fixplan.haptics import _kernels
 from fixplan.haptics.coupling import VirtualCoupling
 from fixplan.haptics.device import SimulatedDevice
-from fixplan.pose import log_so3
-from fixplan.simulator import Simulator
+from fixplan.pose import Pose, log_so3
+from fixplan.simulator import ContactReport, Simulator
 
 FloatArray = NDArray[np.float64]
 Operator = Callable[[float, SimulatedDevice], ArrayLike]
@@ -47,6 +47,8 @@ class LoopRecord:
     active_contacts: list[tuple[str, ...]] = field(default_factory=list)  # locators pressing on the part
     unconverged_steps: int = 0  # engine steps that stopped at the sweep cap
     period_s: float = 1e-3
+    # every ``trace_every`` ticks (and the last): (tick index, time [s], pose, per-locator contact reports)
+    trace: list[tuple[int, float, Pose, list[ContactReport]]] = field(default_factory=list)
 
     @property
     def deadline_misses(self) -> int:
@@ -131,14 +133,18 @@ class HapticLoop:
             )
         scratch.step(np.zeros(6 if scratch.dimension == 3 else 3))
 
-    def run(self, duration_s: float, operator: Operator) -> LoopRecord:
-        """Run ticks for ``duration_s`` with ``operator(t, device)`` pushing the handle."""
+    def run(self, duration_s: float, operator: Operator, *, trace_every: int = 0) -> LoopRecord:
+        """Run ticks for ``duration_s`` with ``operator(t, device)`` pushing the handle.
+
+        ``trace_every > 0`` also samples the pose and the contact reports every that many ticks
+        and at the last one (outside the timed part of the tick) into ``LoopRecord.trace``.
+        """
         rec = LoopRecord(period_s=self.coupling.period_s)
         n = int(round(duration_s / self.coupling.period_s))
         self._warm_up()
         self.device.open()
         try:
-            for _ in range(n):
+            for i in range(n):
                 t = self.sim.time_s
                 w_c, felt, compute = self.tick(operator(t, self.device))
                 rec.time_s.append(self.sim.time_s)
@@ -150,6 +156,8 @@ class HapticLoop:
                 rec.active_contacts.append(self.sim.pressed())
                 if self.sim.last is not None and not self.sim.last.converged:
                     rec.unconverged_steps += 1
+                if trace_every > 0 and (i % trace_every == 0 or i == n - 1):
+                    rec.trace.append((i, self.sim.time_s, self.sim.pose, self.sim.contacts()))
         finally:
             self.device.close()
         return rec

@@ -104,7 +104,11 @@ def _accept(
     )
     if acc_ref <= 0.0 or dyn > res_tol:
         return None
-    f_scale = max(float(np.abs(lam).max()), 1e-300)
+    # force scale: the largest contact force, floored by the push itself so that forces that
+    # vanish (a free spin among frictionless contacts) are judged against it, not against round-off
+    d = cs.dimension
+    push_scale = float(np.linalg.norm(w_e[:d])) + float(np.linalg.norm(w_e[d:])) / max(rows.lever, 1e-12)
+    f_scale = max(float(np.abs(lam).max()) if lam.size else 0.0, push_scale, 1e-300)
     slips = []
     for i, (c, off) in enumerate(zip(cs.contacts, cs.offsets, strict=True)):
         un = float(cs.J[off] @ a)
@@ -277,7 +281,15 @@ class WitnessSearch:
             try:
                 z = np.linalg.solve(K, rhs)
             except np.linalg.LinAlgError:
-                continue
+                z = None
+            if (
+                z is None
+                or not np.all(np.isfinite(z))
+                or np.linalg.norm(K @ z - rhs) > 1e-9 * max(np.linalg.norm(rhs), 1e-300)
+            ):
+                # singular (rank-deficient G, e.g. concurrent normals): the least-norm solution is
+                # one of many consistent motions; _accept checks its residual like any other
+                z = np.linalg.lstsq(K, rhs, rcond=None)[0]
             a = z[:n]
             if not all(
                 r not in "+-"

@@ -26,11 +26,66 @@ from numpy.typing import NDArray
 
 from fixplan.errors import SolverError
 from fixplan.fixture import Fixture
-from fixplan.haptics import DeviceSpecs, HapticLoop, SimulatedDevice, VirtualCoupling
+from fixplan.haptics import DeviceSpecs, HapticLoop, LoopRecord, SimulatedDevice, VirtualCoupling
 from fixplan.pose import Pose, log_so3
 from fixplan.simulator import Simulator
 
 FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class VerificationTrace:
+    """What the simulated load looked like, sampled every ``every_s`` (and at the last tick).
+
+    ``coupling_wrench`` is the wrench the virtual coupling applied to the workpiece (device
+    coordinates: force and moment about the body origin, world axes); ``felt_wrench`` is what the
+    device displayed to the user (saturated). Contact forces are on the workpiece, world axes.
+    """
+
+    every_s: float
+    names: tuple[str, ...]  # locators, in file order
+    time_s: FloatArray  # (T,)
+    poses: tuple[Pose, ...]  # (T,)
+    gaps_m: FloatArray  # (T, n)
+    normal_forces_N: FloatArray  # (T, n)
+    forces_world_N: FloatArray  # (T, n, d)
+    coupling_wrench: FloatArray  # (T, ndof)
+    felt_wrench: FloatArray  # (T, ndof)
+    pressed: tuple[tuple[str, ...], ...]  # locators pushing on the part at each sample
+
+    def to_json(self) -> dict[str, Any]:
+        def rows(a: FloatArray) -> list[list[float]]:
+            return [[float(x) for x in r] for r in a]
+
+        return {
+            "every_s": self.every_s,
+            "names": list(self.names),
+            "time_s": [float(t) for t in self.time_s],
+            "poses": [p.to_json() for p in self.poses],
+            "gaps_m": {n: [float(x) for x in self.gaps_m[:, i]] for i, n in enumerate(self.names)},
+            "normal_forces_N": {n: [float(x) for x in self.normal_forces_N[:, i]] for i, n in enumerate(self.names)},
+            "forces_world_N": {n: rows(self.forces_world_N[:, i]) for i, n in enumerate(self.names)},
+            "coupling_wrench": rows(self.coupling_wrench),
+            "felt_wrench": rows(self.felt_wrench),
+            "pressed": [list(s) for s in self.pressed],
+        }
+
+
+def trace_from_record(rec: LoopRecord, names: Sequence[str], every: int) -> VerificationTrace:
+    """Collect the loop's sampled trace (``HapticLoop.run(..., trace_every=every)``) into arrays."""
+    ticks = [k for k, _, _, _ in rec.trace]
+    return VerificationTrace(
+        every_s=every * rec.period_s,
+        names=tuple(names),
+        time_s=np.array([t for _, t, _, _ in rec.trace]),
+        poses=tuple(p for _, _, p, _ in rec.trace),
+        gaps_m=np.array([[c.gap_m for c in cs] for _, _, _, cs in rec.trace]),
+        normal_forces_N=np.array([[c.normal_force_N for c in cs] for _, _, _, cs in rec.trace]),
+        forces_world_N=np.array([[c.force_world for c in cs] for _, _, _, cs in rec.trace]),
+        coupling_wrench=np.array([rec.coupling_wrench[k] for k in ticks]),
+        felt_wrench=np.array([rec.felt_wrench[k] for k in ticks]),
+        pressed=tuple(rec.active_contacts[k] for k in ticks),
+    )
 
 
 @dataclass
@@ -49,6 +104,7 @@ class Verification:
     duration_s: float
     felt_force_max_N: float
     unconverged_steps: int = 0
+    trace: VerificationTrace | None = None
     extras: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
@@ -65,6 +121,7 @@ class Verification:
             "duration_s": self.duration_s,
             "felt_force_max": self.felt_force_max_N,
             "unconverged_steps": self.unconverged_steps,
+            "trace": None if self.trace is None else self.trace.to_json(),
         }
 
 
@@ -111,6 +168,7 @@ def verify(
     max_penetration_m: float = 1e-5,
     stall_speed: float = 1e-5,
     stall_s: float = 0.1,
+    trace_every_s: float = 0.01,
 ) -> Verification:
     """Run the plan through the loop: per transition the knot poses, the wrench per segment (or one), a duration."""
     # a real-time loop bounds its work: a haptic-grade residual and at most 100 sweeps per tick;
@@ -189,7 +247,8 @@ def verify(
         return push + damping * v_ref + kp * (x_ref + lead - device.position()) + kd * (v_ref - device.velocity())
 
     try:
-        rec = loop.run(total, operator)
+        trace_every = max(int(round(trace_every_s / sim.dt)), 1) if trace_every_s > 0 else 0
+        rec = loop.run(total, operator, trace_every=trace_every)
     except SolverError as exc:
         return Verification(
             passed=False,
@@ -268,4 +327,5 @@ def verify(
         duration_s=total,
         felt_force_max_N=felt,
         unconverged_steps=rec.unconverged_steps,
+        trace=trace_from_record(rec, sim.names, trace_every) if rec.trace else None,
     )
