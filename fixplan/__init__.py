@@ -19,6 +19,8 @@ _LAZY = {
     "classify": ("fixplan.jamming", "classify"),
     "search_wrench": ("fixplan.jamming", "search_wrench"),
     "contact_set": ("fixplan.locating", "contact_set"),
+    "Simulator": ("fixplan.simulator", "Simulator"),
+    "solve": ("fixplan.planner.solve", "solve"),
     "FixplanError": ("fixplan.errors", "FixplanError"),
     "FixtureError": ("fixplan.errors", "FixtureError"),
     "InputError": ("fixplan.errors", "InputError"),
