@@ -112,11 +112,20 @@ def search_wrench(
     *,
     pose: Pose | str | None = None,
     at: ArrayLike | None = None,
+    objective: str = "margin",
+    min_margin_N: float | None = None,
 ) -> WrenchSearch:
-    """The applied wrench with the best margin that moves the part with acceleration ≥ ``motion``.
+    """The applied wrench that moves the part with acceleration ≥ ``motion``.
 
     ``motion`` is the desired acceleration of the body-frame origin (or of ``at``) as a twist
     rate in world axes: ``ax,ay,az,αx,αy,αz`` (2D ``ax,ay,α``) [m/s², rad/s²].
+
+    ``objective="margin"`` (default) returns the wrench with the largest least normal force τ*
+    within the limits. ``objective="effort"`` then solves a second program: the least push
+    ``‖(F, T_c / L)‖`` (``T_c`` about the centre of mass, ``L`` the largest contact lever) that
+    keeps every kept contact pressed by at least ``min(min_margin_N, τ*)`` (default
+    ``min_margin_N = m |g|``, the part's weight): a push an operator or a compliant robot can follow
+    without the large forces that turn small tracking errors into large disturbances.
     """
     m = np.asarray(motion, dtype=float)
     if m.shape != (fixture.ndof,) or not np.all(np.isfinite(m)):
@@ -160,9 +169,20 @@ def search_wrench(
         return WrenchSearch(False, None, 0.0, None, roles, {}, None, reason, binding, (F_max, T_max))
 
     x = sol.x
+    tau = float(-sol.value)
+    if objective == "effort":
+        tau_req = min(wp.mass_kg * g if min_margin_N is None else float(min_margin_N), tau)
+        prog_e, meta_e = _build(
+            cs, a_hat, roles, fixture.gravity_wrench(), about, F_max, T_max, effort_margin_N=tau_req * (1 - 1e-6)
+        )
+        sol_e = ClarabelProgram(prog_e).solve(prog_e.b)
+        if sol_e.solved:
+            x, meta = sol_e.x, meta_e
+            tau = float(x[meta["tau"]])
+    elif objective != "margin":
+        raise InputError(f"unknown search objective {objective!r} (expected 'margin' or 'effort')")
     w_com = x[:n]
     s = float(x[meta["s"]])
-    tau = float(-sol.value)
     lam = meta["expand"](x)
     forces = {c.name: lam[o : o + c.size] for c, o in zip(cs.contacts, cs.offsets, strict=True)}
     # the applied wrench about the user's point
@@ -200,8 +220,13 @@ def _build(
     about: FloatArray,
     F_max: float,
     T_max: float,
+    effort_margin_N: float | None = None,
 ) -> tuple[ConeProgram, dict]:
-    """Variables x = (w [n], f_n sliding [ks], f sticking [reduced], s, τ)."""
+    """Variables x = (w [n], f_n sliding [ks], f sticking [reduced], s, τ[, e]).
+
+    Without ``effort_margin_N`` the program maximises τ. With it, it minimises the effort
+    ``e ≥ ‖(F, T_c / L)‖`` subject to ``τ ≥ effort_margin_N``.
+    """
     n, d = cs.ndof, cs.dimension
     slide = [i for i, c in enumerate(cs.contacts) if roles[c.name] == "sliding"]
     stick = [i for i, c in enumerate(cs.contacts) if roles[c.name] == "sticking"]
@@ -211,7 +236,9 @@ def _build(
     ks = len(slide)
     i_w, i_fn, i_fs = 0, n, n + ks
     i_s, i_tau = n + ks + nf_stick, n + ks + nf_stick + 1
-    nx = i_tau + 1
+    effort = effort_margin_N is not None
+    i_e = i_tau + 1
+    nx = i_tau + 1 + (1 if effort else 0)
     J = cs.J
     # sliding contact wrench columns J_iᵀ φ_i
     phis = []
@@ -263,7 +290,7 @@ def _build(
             lin.append((e, 0.0))
     e = np.zeros(nx)
     e[i_tau] = -1.0
-    lin.append((e, 0.0))
+    lin.append((e, -float(effort_margin_N) if effort else 0.0))  # τ ≥ τ_req (effort) or τ ≥ 0
     rows_A.append(np.array([r for r, _ in lin]))
     rows_b.append(np.array([b for _, b in lin]))
     cones.append(("nonneg", len(lin)))
@@ -299,7 +326,19 @@ def _build(
         rows_b.append(np.array([T_max, T_max]))
         cones.append(("nonneg", 2))
     c_vec = np.zeros(nx)
-    c_vec[i_tau] = -1.0
+    if effort:
+        # e ≥ ‖(F, T_c / L)‖ with the moment about the centre of mass (w is about the com)
+        L = max(max(float(np.linalg.norm(c.point_world - cs.com_world)) for c in cs.contacts), 1e-9)
+        A_e = np.zeros((n + 1, nx))
+        A_e[0, i_e] = -1.0
+        A_e[1 : 1 + d, i_w : i_w + d] = -np.eye(d)
+        A_e[1 + d :, i_w + d : i_w + n] = -np.eye(n - d) / L
+        rows_A.append(A_e)
+        rows_b.append(np.zeros(n + 1))
+        cones.append(("soc", n + 1))
+        c_vec[i_e] = 1.0
+    else:
+        c_vec[i_tau] = -1.0
     A = np.vstack(rows_A)
     b = np.concatenate(rows_b)
 
@@ -316,4 +355,4 @@ def _build(
                 lam[off_i : off_i + c.size] = lam_stick[o : o + c.size]
         return lam
 
-    return ConeProgram(c_vec, A, b, tuple(cones), "wrench-search", 0), {"s": i_s, "expand": expand}
+    return ConeProgram(c_vec, A, b, tuple(cones), "wrench-search", 0), {"s": i_s, "tau": i_tau, "expand": expand}

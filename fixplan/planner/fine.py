@@ -775,7 +775,7 @@ def _segment_wrenches(
             wrenches[k] = wr
             continue
         try:
-            res = search_wrench(fixture, motion, list(est), pose=a)
+            res = search_wrench(fixture, motion, list(est), pose=a, objective="effort")
         except InputError as exc:
             reasons.append(str(exc))
             continue
