@@ -9,6 +9,7 @@ to stderr. Files are never overwritten without ``--force``.
 from __future__ import annotations
 
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Annotated, Any
@@ -256,6 +257,17 @@ def search(
     contacts: ContactsOpt = None,
     at: AtOpt = None,
     pose: PoseOpt = "start",
+    objective: Annotated[
+        str,
+        typer.Option(
+            "--objective",
+            help="margin: the largest least normal force; effort: the least push keeping each contact pressed by ≥ --min-margin.",
+        ),
+    ] = "margin",
+    min_margin: Annotated[
+        float | None,
+        typer.Option("--min-margin", help="Least normal force for --objective effort [N] (default: the part's weight)."),
+    ] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Find the non-jamming push for a desired motion (exit 1 when none exists)."""
@@ -266,7 +278,13 @@ def search(
         raise InputError("--motion is required (the desired acceleration, e.g. 0.1,0,0,0,0,0)")
     m = _numbers(motion, "--motion", fixture.ndof)
     at_p = None if at is None else _numbers(at, "--at", fixture.dimension)
-    result = search_wrench(fixture, m, _names(contacts), pose=_pose(fixture, pose), at=at_p)
+    if objective not in ("margin", "effort"):
+        raise InputError(f"--objective must be margin or effort, got {objective!r}")
+    if min_margin is not None and not (min_margin >= 0.0 and math.isfinite(min_margin)):
+        raise InputError(f"--min-margin must be a non-negative number of newtons, got {min_margin}")
+    result = search_wrench(
+        fixture, m, _names(contacts), pose=_pose(fixture, pose), at=at_p, objective=objective, min_margin_N=min_margin
+    )
     if json_out:
         _emit_json(result.to_json())
     else:
