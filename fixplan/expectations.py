@@ -2,7 +2,9 @@
 
 A table holds ``[[case]]`` entries (``file``, ``pose``, ``contacts``, ``wrench``, ``mode``,
 ``why``), ``[[wedge]]`` entries (``file``, ``wedges``, ``why``) and ``[[touching]]`` entries
-(``file``, ``names``). ``fixplan validate`` recognises such a file (it has ``case`` entries and
+(``file``, ``names``), and ``[[plan]]`` entries (``file``, ``status`` planned | infeasible,
+``verified``, ``first``/``last`` states, ``sequence``, ``binding`` limit named in the reason,
+``why``) for ``fixplan solve``. ``fixplan validate`` recognises such a file (it has ``case`` entries and
 no ``format`` key) and checks that every referenced fixture exists and loads, that wrenches
 have the fixture's length, that modes and poses are known and that contact names exist.
 """
@@ -20,6 +22,7 @@ KINDS = {
     "case": ("file", "pose", "contacts", "wrench", "mode", "why"),
     "wedge": ("file", "wedges", "why"),
     "touching": ("file", "names"),
+    "plan": ("file", "status", "verified", "first", "last", "sequence", "binding", "why"),
 }
 
 
@@ -70,8 +73,28 @@ def check_expectations(path: Path, data: dict[str, Any]) -> tuple[list[Issue], d
                 if not isinstance(entry.get("wedges"), bool):
                     r.error(f"{where}.wedges", "expected true or false")
                 r.string(entry, "why", f"{where}.why", required=True)
-            else:
+            elif kind == "touching":
                 _names(r, entry, "names", f"{where}.names", [loc.name for loc in fixture.locators], required=True)
+            else:
+                locs = [loc.name for loc in fixture.locators]
+                if not fixture.is_full:
+                    r.error(f"{where}.file", f"{name} is not a full fixture (expected one that can be planned)")
+                status = r.string(entry, "status", f"{where}.status", required=True, choices=("planned", "infeasible"))
+                if "verified" in entry and not isinstance(entry["verified"], bool):
+                    r.error(f"{where}.verified", "expected true or false")
+                if status == "infeasible" and entry.get("verified"):
+                    r.error(f"{where}.verified", "an infeasible plan cannot be verified (expected false or absent)")
+                for key in ("first", "last"):
+                    _names(r, entry, key, f"{where}.{key}", locs)
+                seq = entry.get("sequence")
+                if seq is not None:
+                    if not isinstance(seq, list) or not seq:
+                        r.error(f"{where}.sequence", "expected a list of states (lists of names)")
+                    else:
+                        for j, state in enumerate(seq):
+                            _names(r, {"s": state}, "s", f"{where}.sequence[{j}]", locs, required=True)
+                r.string(entry, "binding", f"{where}.binding", choices=("max_force", "max_torque"))
+                r.string(entry, "why", f"{where}.why", required=True)
     return r.issues, counts
 
 
