@@ -468,8 +468,16 @@ def solve(
         str | None, typer.Option("--order", help="Impose the order in which locators are added, e.g. S1,S2,E1.")
     ] = None,
     out: Annotated[Path | None, typer.Option("--out", help="Write the plan as JSON.")] = None,
-    report: Annotated[Path | None, typer.Option("--report", help="Write a Markdown report of the plan.")] = None,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite --out/--report if they exist.")] = False,
+    report: Annotated[
+        Path | None,
+        typer.Option(
+            "--report",
+            help="Write a Markdown report of the plan, and its figure beside it (plan.md -> plan.png).",
+        ),
+    ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Overwrite --out/--report (and the report's figure) if they exist.")
+    ] = False,
     no_verify: Annotated[bool, typer.Option("--no-verify", help="Skip the simulated haptic verification.")] = False,
     json_out: JsonOpt = False,
 ) -> None:
@@ -479,8 +487,14 @@ def solve(
     """
     from fixplan.planner.solve import report_markdown
     from fixplan.planner.solve import solve as run_solve
+    from fixplan.plots import figure_path, save_plan_figure
 
     fixture = _load(file)
+    figure = None if report is None else figure_path(report)
+    # every output is checked before any is created (or any work done)
+    for path in (out, report, figure):
+        if path is not None and path.exists() and not force:
+            raise InputError(f"{path} exists (use --force to overwrite it)")
     target = None if out is None else _writable(out, force)
     report_path = None if report is None else _writable(report, force)
     names = _names(order)
@@ -495,8 +509,16 @@ def solve(
     payload = result.to_json()
     if target is not None:
         target.write_text(json.dumps(payload, indent=2, default=_json_default) + "\n")
+    written = [] if target is None else [target]
     if report_path is not None:
-        report_path.write_text(report_markdown(result, fixture))
+        figures = []
+        if figure is not None and result.status == "planned":
+            # the figure first, so the report never links to a missing file
+            save_plan_figure(result, fixture, figure)
+            figures.append(figure.name)  # beside the report: a relative link
+            written.append(figure)
+        report_path.write_text(report_markdown(result, fixture, figures=figures))
+        written.append(report_path)
     if json_out:
         _emit_json(payload)
     else:
@@ -530,8 +552,8 @@ def solve(
         else:
             typer.echo(f"no plan: {result.reason}")
         typer.echo(f"time: {result.timings.get('total_s', 0.0):.2f} s")
-        if target is not None:
-            typer.echo(f"wrote {target}")
+        if written:
+            typer.echo("wrote " + ", ".join(str(p) for p in written))
     if not result.ok:
         raise typer.Exit(1)
 

@@ -78,13 +78,30 @@ class PlanResult:
         }
 
 
-def report_markdown(result: PlanResult, fixture: Fixture) -> str:
-    """A Markdown report of a plan: the sequence, the transitions, what was tried, the verification."""
+def report_markdown(result: PlanResult, fixture: Fixture, figures: Sequence[str] = ()) -> str:
+    """A Markdown report of a plan: the sequence, figures, the transitions, what was tried, the verification.
+
+    ``figures`` are image links (paths relative to the report, e.g. ``plan.png`` from
+    :func:`fixplan.plots.save_plan_figure`), shown in a ``## Figures`` section.
+    """
     payload = result.to_json()
     lines = [f"# Loading plan: {fixture.name}", "", f"- file: `{fixture.source}`", f"- status: **{result.status}**"]
     if payload["reason"]:
         lines.append(f"- reason: {payload['reason']}")
     lines += [f"- sequence: {' → '.join('{' + ', '.join(s) + '}' for s in result.sequence) or '(none)'}", ""]
+    if figures:
+        if result.verification is not None and result.verification.trace is not None:
+            what = (
+                "Over time, in the simulated haptic loop: normal force and gap per locator, the wrench the"
+                " coupling applied (dashed: the plan's), and which locators press (grey: planned, colour: observed)."
+            )
+        else:
+            what = (
+                "The plan alone (no verification trace): gap per locator at the knot poses, the planned wrench"
+                " per segment, and the planned contact states."
+            )
+        lines += ["## Figures", "", what + " Dashed vertical lines mark the ends of the planned transitions.", ""]
+        lines += [f"![{fixture.name}: loading plan over time]({link})" for link in figures] + [""]
     if payload["transitions"]:
         lines += [
             "## Transitions",
