@@ -4,6 +4,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 import fixplan
@@ -80,3 +81,23 @@ def test_fixture_located_at_start_needs_no_transition():
     assert r.status == "planned" and r.ok and r.transitions == []
     assert r.sequence == [("B1", "B2", "S1")]
     assert max(abs(g) for g in r.verification.final_gaps_m.values()) <= 1e-4
+
+
+def test_verification_trace_balances_forces_at_rest(default_plan):
+    """At the end the part is at rest in its locators: contact forces + coupling force + weight = 0."""
+    fx = fixplan.load(fixplan.default_fixture_path())
+    v = default_plan.verification
+    tr = v.trace
+    assert tr is not None and tr.names == tuple(loc.name for loc in fx.locators)
+    assert np.allclose(np.diff(tr.time_s[:-1]), tr.every_s, atol=1e-9)  # every 10 ms, plus the last tick
+    assert 0 < tr.time_s[-1] - tr.time_s[-2] <= tr.every_s
+    assert tr.time_s[-1] == pytest.approx(v.duration_s, abs=1.5e-3)
+    weight = fx.workpiece.mass_kg * np.asarray(fx.gravity)
+    total = tr.forces_world_N[-1].sum(axis=0) + tr.coupling_wrench[-1, :3] + weight
+    assert np.linalg.norm(total) <= 1e-3 * np.linalg.norm(weight)
+    # every locator presses at the end, and the trace's gaps are the verification's
+    assert set(tr.pressed[-1]) == set(tr.names)
+    assert np.all(tr.normal_forces_N[-1] > 0)
+    # the real-time budget keeps every tick within the period, and its price is reported
+    assert 0 < v.max_solver_error <= 1e-3
+    assert v.to_json()["trace"]["normal_forces_N"]["B1"][-1] == pytest.approx(tr.normal_forces_N[-1, 0])
