@@ -152,12 +152,15 @@ def solve(
     acceleration_mps2: float = 1.0,
     knots: int = 10,
     progress: Callable[[Attempt], None] | None = None,
+    verify_options: dict[str, Any] | None = None,
 ) -> PlanResult:
     """Plan (and by default verify) the loading of ``fixture``.
 
     ``knots`` per transition: 10 by default — on the default box the exact gaps between knots
     stay within 1e-17 m at 10 as at 20 (``benchmarks/bench_planner.py``) for half the time.
+    ``verify_options`` are passed to :func:`~fixplan.planner.verify.verify` (e.g. ``max_sweeps``).
     """
+    vopts = dict(verify_options or {})
     require_full(fixture, "planning")
     t0 = time.perf_counter()
     names = [loc.name for loc in fixture.locators]
@@ -165,7 +168,7 @@ def solve(
     start_state = frozenset(c.name for c in touching.contacts if c.kind == "locator")
     if start_state == frozenset(names):
         # already located: nothing to plan; verification checks that the part stays there
-        verification = verify(fixture, [], [], [], []) if run_verification else None
+        verification = verify(fixture, [], [], [], [], **vopts) if run_verification else None
         timings = {"plan_s": 0.0, "fine_s": 0.0, "total_s": time.perf_counter() - t0}
         reason = "" if verification is None or verification.passed else f"verification failed: {verification.reason}"
         return PlanResult(
@@ -213,7 +216,7 @@ def solve(
         sequence = (
             [tuple(sorted(start_state))] + [tuple(s) for s in coarse.sequence[1:]] if start_state else coarse.sequence
         )
-        verification = verify(fixture, sequence, [tr.poses for tr in transitions], wrenches, durations)
+        verification = verify(fixture, sequence, [tr.poses for tr in transitions], wrenches, durations, **vopts)
         timings["verify_s"] = time.perf_counter() - t1
     timings["total_s"] = time.perf_counter() - t0
     reason = "" if verification is None or verification.passed else f"verification failed: {verification.reason}"
