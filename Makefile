@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test bench lint clean
+.PHONY: install demo test bench lint gallery clean
 
 install: $(STAMP)
 
@@ -13,6 +13,12 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev,bench]'
 	@test -x $(BIN)/fixplan
+	@# Headless Chromium for `fixplan view`'s browser test and `make gallery` (Debian's package; Playwright
+	@# drives it, `playwright install` is never run). As root apt-get runs directly, else through sudo if present.
+	@command -v chromium >/dev/null || { \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=; elif command -v sudo >/dev/null; then SUDO=sudo; \
+	  else echo "make install: chromium missing and not root (browser tests will skip)" >&2; exit 0; fi; \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends chromium >/dev/null; }
 	touch $(STAMP)
 
 demo: install
@@ -27,6 +33,14 @@ test: install
 
 bench: install
 	$(BIN)/python benchmarks/run.py
+
+# Pictures for the docs, regenerated from the default fixture.
+gallery: install
+	mkdir -p docs/gallery
+	$(BIN)/fixplan solve --out out/gallery-plan.json --force
+	$(BIN)/fixplan view --plan out/gallery-plan.json --out out/scene.html --force
+	$(BIN)/python -m fixplan._browser out/scene.html docs/gallery/scene.png --width 900 --height 600
+	@# Jamming map (added by the map owner): `fixplan map ... --out docs/gallery/jamming-map.png --force` goes here.
 
 lint: install
 	$(BIN)/ruff check fixplan tests benchmarks

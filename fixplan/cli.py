@@ -559,6 +559,41 @@ def solve(
 
 
 @app.command()
+def view(
+    file: FileArg = None,
+    plan: Annotated[
+        Path | None, typer.Option("--plan", help="A plan JSON from 'fixplan solve --out' to replay (for this FILE).")
+    ] = None,
+    out: Annotated[Path, typer.Option("--out", help="HTML page to write (self-contained).")] = Path("scene.html"),
+    frames: Annotated[
+        int, typer.Option("--frames", help="Most frames in the replay (a longer trace is subsampled).", min=2, max=2000)
+    ] = 150,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite --out if it exists.")] = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Write the scene as a self-contained HTML page: workpiece, locators, normals, forces, plan replay.
+
+    With --plan the page replays the plan's simulated verification (or its knot poses); without
+    it, the start pose at rest under gravity. The page embeds plotly.js and fetches nothing.
+    """
+    from fixplan.view import read_plan, rest_replay, scene_figure, scene_info, write_scene
+
+    fixture = _load(file)
+    target = _writable(out, force)
+    replay = rest_replay(fixture) if plan is None else read_plan(plan, fixture)
+    fig = scene_figure(fixture, replay, max_frames=frames)
+    size = write_scene(fig, target)
+    info = scene_info(fig)
+    if json_out:
+        _emit_json(
+            {"html": str(target), "bytes": size, "source": info.source, "frames": info.frames, "samples": info.samples}
+        )
+    else:
+        what = f"{info.frames} frames of {info.samples} samples ({info.source})" if info.frames else "a still scene"
+        typer.echo(f"wrote {target} ({size / 1e6:.1f} MB): {fixture.name}, {what}")
+
+
+@app.command()
 def fclib(
     file: Annotated[Path, typer.Argument(help="An FCLib HDF5 problem (local or global, 3D or 2D).")],
     tol: Annotated[float, typer.Option("--tol", help="Target FCLib residual (natural map, relative).")] = 1e-8,

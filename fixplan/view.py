@@ -1,0 +1,954 @@
+"""The scene as one self-contained HTML page: workpiece, locators, contact normals, force arrows, replay.
+
+:func:`read_plan` turns the JSON written by ``fixplan solve --out`` into a :class:`Replay` (the
+verification trace when present: the simulated motion sampled every 10 ms, with the contact
+forces; else the planned knot poses), checking that the plan belongs to the fixture.
+:func:`rest_replay` is the scene without a plan: the start pose with the contact forces that
+hold the part at rest under gravity. :func:`scene_figure` draws a replay with plotly (3D: Mesh3d
+workpiece and locator tips; 2D: filled polygons) and :func:`write_scene` writes the page with
+plotly.js embedded, so the page fetches nothing when it is opened.
+
+Drawing conventions (one place):
+
+- a locator's *tip* is the point of its sphere nearest the workpiece, ``p + ρ n``, with ``n`` the
+  contact normal at that pose (from the locator into the workpiece); at contact it is the
+  contact point;
+- a contact-force arrow starts at the tip and is the force on the workpiece times
+  :attr:`SceneInfo.force_scale_m_per_N` (one scale for the whole replay, so that the largest
+  force is drawn :data:`FORCE_ARROW_FRACTION` of the workpiece's bounding radius long); the
+  workpiece is drawn translucent, so arrows pointing into it stay visible;
+- contact normals are drawn at every locator tip with a fixed length; locators pressed at a
+  sample are highlighted.
+
+plotly is imported inside the functions that need it, so ``import fixplan`` stays light.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fixplan.errors import FixplanError, InputError
+from fixplan.geometry.shapes import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
+from fixplan.pose import Pose, matrix_from_quaternion_wxyz, rot2
+
+if TYPE_CHECKING:
+    from fixplan.fixture import Fixture
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+MAX_FRAMES = 150  # frames in the page's replay (a longer trace is subsampled evenly)
+FORCE_ARROW_FRACTION = 0.8  # the largest force arrow, as a fraction of the workpiece's bounding radius
+NORMAL_FRACTION = 0.25  # contact-normal length, as a fraction of the workpiece's bounding radius
+START_TOLERANCE_M = 1e-3  # a plan must start within this of the fixture's start pose ...
+START_TOLERANCE_RAD = 1e-2  # ... and this rotation, else it is for another fixture
+COORD_DECIMALS = 7  # coordinates written to the page are rounded to 0.1 µm (keeps the page small)
+FRAME_MS = 60  # display time per frame of the replay [ms]
+
+# Colours
+WORKPIECE = "#4a7fb5"
+GOAL = "#9aa5b1"
+LOCATOR = "#7f7f7f"
+PRESSED = "#d62728"
+NORMAL = "#333333"
+FORCE = "#ff7f0e"
+PUSH = "#2ca02c"
+PATH = "#17becf"
+
+
+# -- the replay ----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Replay:
+    """What the page shows: workpiece poses over time with the forces and pressed locators.
+
+    Attributes
+    ----------
+    source : {"trace", "plan", "rest"}
+        The simulated verification trace, the planned knot poses, or the start pose at rest.
+    time_s : (T,) array
+        Sample times [s].
+    poses : tuple of Pose
+        ``T_world_body`` per sample.
+    forces_world_N : (T, n, d) array or None
+        Force on the workpiece at each locator (fixture order), world axes [N]; None: not known.
+    pressed : tuple of tuple of str
+        Locators pushing on the part at each sample.
+    push_wrench : (T, ndof) array or None
+        The hand's wrench on the workpiece (force, moment about the body origin), world axes.
+    note : str
+        One line for the title (what is shown, status).
+    extra_forces : tuple of (point_world, force_world_N)
+        Forces at explicit ``[[contact]]`` entries (rest only), drawn like locator forces.
+    """
+
+    source: str
+    time_s: FloatArray
+    poses: tuple[Pose, ...]
+    forces_world_N: FloatArray | None
+    pressed: tuple[tuple[str, ...], ...]
+    push_wrench: FloatArray | None
+    note: str
+    extra_forces: tuple[tuple[FloatArray, FloatArray], ...] = ()
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+
+def pose_from_json(obj: Any, dimension: int, where: str) -> Pose:
+    """A pose in the spec's JSON form: 3D ``{position, quaternion_wxyz}``, 2D ``{position, angle_deg}``."""
+    if not isinstance(obj, dict) or "position" not in obj:
+        raise InputError(f"{where}: expected a pose {{'position', ...}}, got {_short(obj)}")
+    other = 2 if dimension == 3 else 3
+    if dimension == 3 and "quaternion_wxyz" not in obj and "angle_deg" in obj:
+        raise InputError(f"{where}: a 2D pose (angle_deg) in a plan for a 3D fixture: the plan is for another fixture")
+    if dimension == 2 and "quaternion_wxyz" in obj:
+        raise InputError(
+            f"{where}: a 3D pose (quaternion_wxyz) in a plan for a 2D fixture: the plan is for another fixture"
+        )
+    position = _vector(obj["position"], f"{where}.position")
+    if position.shape[0] != dimension:
+        raise InputError(
+            f"{where}.position: expected {dimension} numbers, got {position.shape[0]} (a plan for a {other}D fixture?)"
+        )
+    if dimension == 3:
+        q = _vector(obj.get("quaternion_wxyz"), f"{where}.quaternion_wxyz")
+        if q.shape[0] != 4 or not np.linalg.norm(q) > 0.0:
+            raise InputError(f"{where}.quaternion_wxyz: expected 4 numbers, not all zero")
+        return Pose(matrix_from_quaternion_wxyz(q), position)
+    angle = obj.get("angle_deg")
+    if not isinstance(angle, int | float) or isinstance(angle, bool) or not math.isfinite(angle):
+        raise InputError(f"{where}.angle_deg: expected a number [deg], got {_short(angle)}")
+    return Pose(rot2(math.radians(angle)), position)
+
+
+def read_plan(path: Path, fixture: Fixture) -> Replay:
+    """Read a plan JSON (``fixplan solve --out``) and check it belongs to ``fixture``.
+
+    Raises
+    ------
+    InputError
+        The file is unreadable, not JSON, not a fixplan plan, malformed, or for another fixture
+        (other locator names, another dimension, or another start pose).
+    """
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+    return replay_from_plan(data, fixture, str(path))
+
+
+def replay_from_plan(data: Any, fixture: Fixture, source: str = "plan") -> Replay:
+    """The replay of a plan's JSON object (see :func:`read_plan`)."""
+    if not isinstance(data, dict) or not isinstance(data.get("transitions"), list) or "status" not in data:
+        raise InputError(f"{source}: not a fixplan plan (expected the JSON object written by 'fixplan solve --out')")
+    known = [loc.name for loc in fixture.locators]
+    mentioned: list[str] = []
+    for i, tr in enumerate(data["transitions"]):
+        if not isinstance(tr, dict):
+            raise InputError(f"{source}: transitions[{i}]: expected an object, got {_short(tr)}")
+        mentioned += [*_names(tr.get("from", []), f"{source}: transitions[{i}].from")]
+        if "added" in tr:
+            mentioned += _names([tr["added"]], f"{source}: transitions[{i}].added")
+    for i, s in enumerate(data.get("sequence") or []):
+        mentioned += _names(s, f"{source}: sequence[{i}]")
+    verification = data.get("verification")
+    trace = verification.get("trace") if isinstance(verification, dict) else None
+    if trace is not None:
+        if not isinstance(trace, dict):
+            raise InputError(f"{source}: verification.trace: expected an object, got {_short(trace)}")
+        names = _names(trace.get("names"), f"{source}: verification.trace.names")
+        if names != known:
+            missing = [n for n in names if n not in known] or [n for n in known if n not in names]
+            raise InputError(
+                f"{source}: the plan is for another fixture: its trace has locators {', '.join(names)}, "
+                f"{fixture.source} has {', '.join(known)} (differing: {', '.join(missing) or 'order'})"
+            )
+    unknown = sorted(set(mentioned) - set(known))
+    if unknown:
+        raise InputError(
+            f"{source}: the plan is for another fixture: it names locators {', '.join(unknown)} "
+            f"that {fixture.source} does not have (it has {', '.join(known)})"
+        )
+
+    status = str(data["status"])
+    if trace is not None:
+        replay = _replay_from_trace(trace, fixture, source)
+        v = cast(dict[str, Any], verification)
+        verdict = "passed" if v.get("passed") else f"FAILED: {v.get('reason', '')}"
+        note = f"simulated verification ({verdict}), {len(replay)} samples, {replay.time_s[-1]:.2f} s"
+        replay = _with_note(replay, note)
+    elif data["transitions"]:
+        replay = _replay_from_knots(data["transitions"], fixture, source)
+    else:
+        reason = str(data.get("reason") or "")
+        replay = Replay(
+            "plan",
+            np.zeros(1),
+            (fixture.start,),
+            None,
+            (),
+            None,
+            f"plan {status}{': ' + reason if reason else ''} (nothing to replay)",
+        )
+        replay = _with_pressed_at_rest(replay, fixture)
+    _check_starts_at(replay.poses[0], fixture, source)
+    return replay
+
+
+def _replay_from_trace(trace: dict, fixture: Fixture, source: str) -> Replay:
+    d = fixture.dimension
+    where = f"{source}: verification.trace"
+    names = [loc.name for loc in fixture.locators]
+    time_s = _vector(trace.get("time_s"), f"{where}.time_s")
+    T = time_s.shape[0]
+    if T == 0:
+        raise InputError(f"{where}.time_s: empty (expected the sample times)")
+    poses_json = trace.get("poses")
+    if not isinstance(poses_json, list) or len(poses_json) != T:
+        raise InputError(f"{where}.poses: expected {T} poses (one per time_s), got {_short(poses_json)}")
+    poses = tuple(pose_from_json(p, d, f"{where}.poses[{k}]") for k, p in enumerate(poses_json))
+    forces_json = trace.get("forces_world_N")
+    if not isinstance(forces_json, dict):
+        raise InputError(f"{where}.forces_world_N: expected {{locator: [[f...]...]}}, got {_short(forces_json)}")
+    forces = np.zeros((T, len(names), d))
+    for i, name in enumerate(names):
+        try:
+            f = np.asarray(forces_json[name], dtype=float)
+        except (KeyError, TypeError, ValueError):
+            raise InputError(f"{where}.forces_world_N.{name}: expected {T} rows of {d} numbers") from None
+        if f.shape != (T, d) or not np.all(np.isfinite(f)):
+            raise InputError(f"{where}.forces_world_N.{name}: expected {T} rows of {d} finite numbers, got {f.shape}")
+        forces[:, i] = f
+    pressed_json = trace.get("pressed")
+    if not isinstance(pressed_json, list) or len(pressed_json) != T:
+        raise InputError(f"{where}.pressed: expected {T} lists of locator names")
+    pressed = tuple(tuple(_names(s, f"{where}.pressed[{k}]")) for k, s in enumerate(pressed_json))
+    push = None
+    if trace.get("coupling_wrench") is not None:
+        try:
+            push = np.asarray(trace["coupling_wrench"], dtype=float)
+        except (TypeError, ValueError):
+            push = None
+        if push is None or push.shape != (T, fixture.ndof) or not np.all(np.isfinite(push)):
+            raise InputError(f"{where}.coupling_wrench: expected {T} rows of {fixture.ndof} finite numbers")
+    return Replay("trace", time_s, poses, forces, pressed, push, "")
+
+
+def _replay_from_knots(transitions: list, fixture: Fixture, source: str) -> Replay:
+    d = fixture.dimension
+    times: list[float] = []
+    poses: list[Pose] = []
+    pressed: list[tuple[str, ...]] = []
+    pushes: list[FloatArray] = []
+    t0 = 0.0
+    for i, tr in enumerate(transitions):
+        where = f"{source}: transitions[{i}]"
+        knots = tr.get("poses")
+        if not isinstance(knots, list) or not knots:
+            raise InputError(f"{where}.poses: expected the planned knot poses, got {_short(knots)}")
+        duration = tr.get("time_s", 1.0)
+        if not isinstance(duration, int | float) or not (duration >= 0 and math.isfinite(duration)):
+            raise InputError(f"{where}.time_s: expected a non-negative number [s], got {_short(duration)}")
+        wrench = _vector(tr.get("wrench", [0.0] * fixture.ndof), f"{where}.wrench")
+        if wrench.shape[0] != fixture.ndof:
+            raise InputError(f"{where}.wrench: expected {fixture.ndof} numbers, got {wrench.shape[0]}")
+        before = tuple(_names(tr.get("from", []), f"{where}.from"))
+        after = tuple(sorted([*before, str(tr.get("added", ""))])) if tr.get("added") else before
+        n = len(knots)
+        for k, knot in enumerate(knots):
+            if i > 0 and k == 0:
+                continue  # the previous transition ended here
+            poses.append(pose_from_json(knot, d, f"{where}.poses[{k}]"))
+            times.append(t0 + (duration * k / (n - 1) if n > 1 else 0.0))
+            pressed.append(after if k == n - 1 else before)
+            pushes.append(wrench)
+        t0 += duration
+    note = f"planned knot poses ({len(poses)} knots, {t0:.2f} s; no verification trace, so no contact forces)"
+    return Replay("plan", np.array(times), tuple(poses), None, tuple(pressed), np.array(pushes), note)
+
+
+def rest_replay(fixture: Fixture, *, forces: bool = True) -> Replay:
+    """The start pose at rest: the locators touching there, and (``forces``) the contact forces under gravity.
+
+    The forces come from :func:`fixplan.classify` with no push: drawn when the part is ``held``
+    or ``jammed`` at rest, else the note says what gravity alone does.
+    """
+    replay = Replay("rest", np.zeros(1), (fixture.start,), None, (), None, "start pose")
+    replay = _with_pressed_at_rest(replay, fixture)
+    if not forces:
+        return replay
+    from fixplan.jamming import classify
+    from fixplan.locating import contact_set
+
+    try:
+        cs = contact_set(fixture, "start")
+        if not cs.contacts:
+            return _with_note(replay, "start pose (no contacts: nothing holds the part)")
+        # as_json: each result is its JSON dictionary, with the contact forces in world axes
+        result = cast(
+            dict[str, Any], classify(fixture, np.zeros((1, fixture.ndof)), pose="start", jobs=1, as_json=True)[0]
+        )
+    except FixplanError as exc:
+        return _with_note(replay, f"start pose (no rest forces: {exc})")
+    mode = result["mode"]
+    if mode not in ("held", "jammed"):
+        return _with_note(replay, f"start pose (under gravity alone the part {mode}: no rest forces)")
+    names = [loc.name for loc in fixture.locators]
+    F = np.zeros((1, len(names), fixture.dimension))
+    extra = []
+    points = {c.name: c.point_world for c in cs.contacts}
+    for name, f in result["contact_forces"].items():
+        fw = np.asarray(f["force_world"], dtype=float)
+        if name in names:
+            F[0, names.index(name)] = fw
+        else:
+            extra.append((np.asarray(points[name], dtype=float), fw))
+    return Replay(
+        "rest",
+        replay.time_s,
+        replay.poses,
+        F,
+        replay.pressed,
+        None,
+        f"start pose at rest under gravity ({mode})",
+        tuple(extra),
+    )
+
+
+def _with_pressed_at_rest(replay: Replay, fixture: Fixture) -> Replay:
+    from fixplan.locating import locator_contact
+
+    tol = fixture.tolerances.touch_m
+    pose = replay.poses[0]
+    touching = tuple(loc.name for loc in fixture.locators if locator_contact(fixture.workpiece, pose, loc).gap_m <= tol)
+    return Replay(
+        replay.source,
+        replay.time_s,
+        replay.poses,
+        replay.forces_world_N,
+        (touching,) * len(replay),
+        replay.push_wrench,
+        replay.note,
+        replay.extra_forces,
+    )
+
+
+def _with_note(replay: Replay, note: str) -> Replay:
+    return Replay(
+        replay.source,
+        replay.time_s,
+        replay.poses,
+        replay.forces_world_N,
+        replay.pressed,
+        replay.push_wrench,
+        note,
+        replay.extra_forces,
+    )
+
+
+def _check_starts_at(first: Pose, fixture: Fixture, source: str) -> None:
+    dp, dr = first.distance_to(fixture.start)
+    if dp > START_TOLERANCE_M or dr > START_TOLERANCE_RAD:
+        pos = ", ".join(f"{x:.4g}" for x in first.p_world)
+        start = ", ".join(f"{x:.4g}" for x in fixture.start.p_world)
+        raise InputError(
+            f"{source}: the plan is for another fixture: it starts at ({pos}), {fixture.source} starts at "
+            f"({start}) ({dp:.3g} m, {math.degrees(dr):.3g}° away; expected ≤ {START_TOLERANCE_M:g} m, "
+            f"{math.degrees(START_TOLERANCE_RAD):.2g}°)"
+        )
+
+
+def _vector(obj: Any, where: str) -> FloatArray:
+    if not isinstance(obj, list) or not all(
+        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in obj
+    ):
+        raise InputError(f"{where}: expected a list of finite numbers, got {_short(obj)}")
+    return np.asarray(obj, dtype=float)
+
+
+def _names(obj: Any, where: str) -> list[str]:
+    if not isinstance(obj, list) or not all(isinstance(x, str) for x in obj):
+        raise InputError(f"{where}: expected a list of locator names, got {_short(obj)}")
+    return list(obj)
+
+
+def _short(obj: Any) -> str:
+    text = json.dumps(obj) if not isinstance(obj, str) else repr(obj)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def frame_indices(n_samples: int, max_frames: int = MAX_FRAMES) -> IntArray:
+    """At most ``max_frames`` evenly spread sample indices, always the first and the last."""
+    if n_samples <= 0:
+        return np.zeros(0, dtype=np.int64)
+    if n_samples <= max_frames:
+        return np.arange(n_samples, dtype=np.int64)
+    if max_frames < 2:
+        return np.array([n_samples - 1], dtype=np.int64)
+    return np.unique(np.round(np.linspace(0, n_samples - 1, max_frames)).astype(np.int64))
+
+
+# -- geometry ------------------------------------------------------------------------------------
+def box_mesh(half: Sequence[float]) -> tuple[FloatArray, IntArray]:
+    """The 8 corners (body frame) and 12 outward-oriented triangles of a box of half extents ``half``."""
+    hx, hy, hz = (float(h) for h in half)
+    V = np.array([[sx * hx, sy * hy, sz * hz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    # corner index = 4 i_x + 2 i_y + i_z (i = 0 for −, 1 for +)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]  # -x +x -y +y -z +z
+    F = np.array([t for a, b, c, e in quads for t in ((a, b, c), (a, c, e))], dtype=np.int64)
+    return V, F
+
+
+def cylinder_mesh(radius: float, length: float, segments: int = 32) -> tuple[FloatArray, IntArray]:
+    """A closed cylinder, axis along body z: two rings of ``segments`` vertices and the two cap centres."""
+    a = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+    ring = np.stack([radius * np.cos(a), radius * np.sin(a)], axis=1)
+    h = length / 2.0
+    V = np.vstack(
+        [np.column_stack([ring, np.full(segments, -h)]), np.column_stack([ring, np.full(segments, h)]), [[0, 0, -h]]]
+    )
+    V = np.vstack([V, [[0.0, 0.0, h]]])
+    bottom, top = 2 * segments, 2 * segments + 1
+    F = []
+    for k in range(segments):
+        j = (k + 1) % segments
+        F += [(k, j, segments + j), (k, segments + j, segments + k), (bottom, j, k), (top, segments + k, segments + j)]
+    return V, np.array(F, dtype=np.int64)
+
+
+def sphere_mesh(radius: float, rings: int = 12, segments: int = 24) -> tuple[FloatArray, IntArray]:
+    """A UV sphere: two poles and ``rings − 1`` rings of ``segments`` vertices."""
+    V = [[0.0, 0.0, radius]]
+    for i in range(1, rings):
+        th = np.pi * i / rings
+        for k in range(segments):
+            ph = 2.0 * np.pi * k / segments
+            V.append([radius * np.sin(th) * np.cos(ph), radius * np.sin(th) * np.sin(ph), radius * np.cos(th)])
+    V.append([0.0, 0.0, -radius])
+    south = len(V) - 1
+    F = []
+
+    def at(i: int, k: int) -> int:
+        return 1 + (i - 1) * segments + k % segments
+
+    for k in range(segments):
+        F.append((0, at(1, k), at(1, k + 1)))
+        F.append((south, at(rings - 1, k + 1), at(rings - 1, k)))
+        for i in range(1, rings - 1):
+            F += [(at(i, k), at(i + 1, k), at(i + 1, k + 1)), (at(i, k), at(i + 1, k + 1), at(i, k + 1))]
+    return np.array(V), np.array(F, dtype=np.int64)
+
+
+def shape_mesh(shape: Shape) -> tuple[FloatArray, IntArray]:
+    """Vertices (body frame) and triangles of a 3D shape."""
+    if isinstance(shape, Box):
+        return box_mesh(tuple(float(h) for h in shape.half))
+    if isinstance(shape, Cylinder):
+        return cylinder_mesh(shape.radius, shape.length)
+    if isinstance(shape, Sphere):
+        return sphere_mesh(shape.radius)
+    raise InputError(f"no mesh for a {shape.name} workpiece (expected box, cylinder or sphere)")
+
+
+def shape_outline(shape: Shape, segments: int = 64) -> FloatArray:
+    """The outline of a 2D shape, counter-clockwise vertices in the body frame (not closed)."""
+    if isinstance(shape, Rectangle):
+        hx, hy = shape.half
+        return np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+    if isinstance(shape, Disk):
+        a = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+        return shape.radius * np.stack([np.cos(a), np.sin(a)], axis=1)
+    if isinstance(shape, Polygon):
+        return shape.array.copy()
+    raise InputError(f"no outline for a {shape.name} workpiece (expected rectangle, disk or polygon)")
+
+
+def points_world(pose: Pose, points_body: FloatArray) -> FloatArray:
+    """Body-frame points (rows) moved to the world frame by ``T_world_body``."""
+    return np.asarray(points_body, dtype=float) @ pose.R_world_body.T + pose.p_world
+
+
+def locator_tips(fixture: Fixture, pose: Pose) -> tuple[FloatArray, FloatArray]:
+    """Per locator (fixture order): the tip ``p + ρ n`` and the contact normal ``n`` at ``pose``."""
+    from fixplan.locating import locator_contact
+
+    tips, normals = [], []
+    for loc in fixture.locators:
+        c = locator_contact(fixture.workpiece, pose, loc)
+        tips.append(loc.p_world + loc.radius_m * c.normal_world)
+        normals.append(c.normal_world)
+    d = fixture.dimension
+    return np.array(tips).reshape(-1, d), np.array(normals).reshape(-1, d)
+
+
+def force_scale(fixture: Fixture, replay: Replay) -> float:
+    """Arrow length per newton [m/N]: the largest force (contact or push) spans a fixed part of the part's size."""
+    biggest = 0.0
+    if replay.forces_world_N is not None and replay.forces_world_N.size:
+        biggest = float(np.linalg.norm(replay.forces_world_N, axis=-1).max())
+    for _, f in replay.extra_forces:
+        biggest = max(biggest, float(np.linalg.norm(f)))
+    if replay.push_wrench is not None and replay.push_wrench.size:
+        biggest = max(biggest, float(np.linalg.norm(replay.push_wrench[:, : fixture.dimension], axis=1).max()))
+    if biggest <= 0.0:
+        return 0.0
+    return FORCE_ARROW_FRACTION * fixture.workpiece.shape.bounding_radius / biggest
+
+
+def segments_xyz(starts: FloatArray, ends: FloatArray) -> list[list[float | None]]:
+    """Coordinate lists (x, y[, z]) for plotly lines: one segment per row, separated by None."""
+    starts = np.asarray(starts, dtype=float)
+    ends = np.asarray(ends, dtype=float)
+    d = starts.shape[1] if starts.ndim == 2 else 0
+    out: list[list[float | None]] = [[] for _ in range(max(d, 0))]
+    for a, b in zip(starts, ends, strict=True):
+        for k in range(d):
+            out[k] += [_r(a[k]), _r(b[k]), None]
+    return out
+
+
+def _r(x: float) -> float:
+    return float(round(float(x), COORD_DECIMALS))
+
+
+def _rounded(a: FloatArray) -> list[float]:
+    return [float(x) for x in np.round(np.asarray(a, dtype=float), COORD_DECIMALS)]
+
+
+# -- the figure ----------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SceneInfo:
+    """Facts about a built scene, also stored in the figure's ``layout.meta``."""
+
+    source: str
+    frames: int  # frames in the replay (0: a still scene)
+    samples: int  # samples in the replay before subsampling
+    force_scale_m_per_N: float
+    traces: dict[str, int]  # trace name → index in fig.data
+
+
+def scene_figure(fixture: Fixture, replay: Replay, *, max_frames: int = MAX_FRAMES) -> Any:
+    """The plotly figure of ``replay``: a still scene for one sample, else an animation.
+
+    Frames update only the traces that move (workpiece, pressed highlight, normals, forces,
+    push); the axes are fixed over the whole replay. ``fig.layout.meta`` holds the
+    :class:`SceneInfo` as a dictionary.
+    """
+    import plotly.graph_objects as go
+
+    d = fixture.dimension
+    shape = fixture.workpiece.shape
+    scale = force_scale(fixture, replay)
+    idx = frame_indices(len(replay), max_frames)
+    animated = len(idx) > 1
+    R = shape.bounding_radius
+    normal_len = NORMAL_FRACTION * R
+    names = [loc.name for loc in fixture.locators]
+    centres = np.array([loc.p_world for loc in fixture.locators]).reshape(-1, d)
+
+    if d == 3:
+        V_body, F = shape_mesh(shape)
+    else:
+        outline = shape_outline(shape)
+
+    def workpiece_trace(pose: Pose, *, ghost: bool = False) -> Any:
+        if d == 3:
+            V = points_world(pose, V_body)
+            return go.Mesh3d(
+                x=_rounded(V[:, 0]),
+                y=_rounded(V[:, 1]),
+                z=_rounded(V[:, 2]),
+                i=F[:, 0].tolist(),
+                j=F[:, 1].tolist(),
+                k=F[:, 2].tolist(),
+                color=GOAL if ghost else WORKPIECE,
+                opacity=0.15 if ghost else 0.35,
+                flatshading=True,
+                name="goal pose" if ghost else "workpiece",
+                showlegend=True,
+                hoverinfo="name",
+            )
+        P = points_world(pose, outline)
+        P = np.vstack([P, P[:1]])
+        return go.Scatter(
+            x=_rounded(P[:, 0]),
+            y=_rounded(P[:, 1]),
+            mode="lines",
+            fill="toself",
+            fillcolor="rgba(154,165,177,0.15)" if ghost else "rgba(74,127,181,0.45)",
+            line={"color": GOAL if ghost else WORKPIECE, "dash": "dash" if ghost else "solid"},
+            name="goal pose" if ghost else "workpiece",
+            hoverinfo="name",
+        )
+
+    def lines(starts: FloatArray, ends: FloatArray, name: str, color: str, width: float) -> Any:
+        xyz = segments_xyz(starts, ends) if len(starts) else [[] for _ in range(d)]
+        if d == 3:
+            return go.Scatter3d(
+                x=xyz[0], y=xyz[1], z=xyz[2], mode="lines", line={"color": color, "width": width}, name=name
+            )
+        return go.Scatter(x=xyz[0], y=xyz[1], mode="lines", line={"color": color, "width": width}, name=name)
+
+    def arrows(starts: FloatArray, vectors: FloatArray, name: str, color: str) -> Any:
+        """Shafts as lines; heads as markers at the ends (2D: arrow markers pointing along the shaft)."""
+        starts = np.asarray(starts, dtype=float).reshape(-1, d)
+        vectors = np.asarray(vectors, dtype=float).reshape(-1, d)
+        keep = np.linalg.norm(vectors, axis=1) * scale > 1e-4 * R  # drop zero-length arrows
+        starts, ends = starts[keep], starts[keep] + scale * vectors[keep]
+        xyz = segments_xyz(starts, ends) if len(starts) else [[] for _ in range(d)]
+        n = len(starts)
+        if d == 3:
+            size = [0, 4, 0] * n
+            return go.Scatter3d(
+                x=xyz[0],
+                y=xyz[1],
+                z=xyz[2],
+                mode="lines+markers",
+                line={"color": color, "width": 6},
+                marker={"size": size, "color": color, "symbol": "diamond"},
+                name=name,
+            )
+        return go.Scatter(
+            x=xyz[0],
+            y=xyz[1],
+            mode="lines+markers",
+            line={"color": color, "width": 3},
+            marker={"size": [0, 12, 0] * n, "color": color, "symbol": "arrow", "angleref": "previous"},
+            name=name,
+        )
+
+    if d == 3:
+        loc_mesh, loc_owner = _locator_mesh(fixture, go)
+
+    def dynamic(k: int, *, full: bool = False) -> dict[str, Any]:
+        """The traces that change from sample to sample, by name (``full``: complete traces, for fig.data)."""
+        pose = replay.poses[k]
+        tips, normals = locator_tips(fixture, pose)
+        pressed = set(replay.pressed[k]) if replay.pressed else set()
+        flags = [1 if n in pressed else 0 for n in names]
+        if d == 3:
+            # the locator spheres themselves turn red; a frame carries only the per-vertex intensity
+            intensity = [flags[i] for i in loc_owner]
+            highlight = loc_mesh.update(intensity=intensity) if full else go.Mesh3d(intensity=intensity)
+        else:
+            highlight = go.Scatter(
+                x=_rounded(centres[:, 0]),
+                y=_rounded(centres[:, 1]),
+                mode="markers",
+                marker={
+                    "size": 9,
+                    "color": [PRESSED if f else LOCATOR for f in flags],
+                    "line": {"color": "black", "width": 1},
+                },
+                name="pressed (red)",
+                hoverinfo="skip",
+            )
+        out = {
+            "workpiece": workpiece_trace(pose),
+            "locators": highlight,
+            "normals": lines(tips, tips + normal_len * normals, "contact normals", NORMAL, 2),
+        }
+        if replay.forces_world_N is not None or replay.extra_forces:
+            starts = [tips] if replay.forces_world_N is not None else []
+            vecs = [replay.forces_world_N[k]] if replay.forces_world_N is not None else []
+            for p, f in replay.extra_forces:
+                starts.append(np.asarray(p, dtype=float).reshape(1, d))
+                vecs.append(np.asarray(f, dtype=float).reshape(1, d))
+            out["forces"] = arrows(np.vstack(starts), np.vstack(vecs), "contact forces", FORCE)
+        if replay.push_wrench is not None:
+            out["push"] = arrows(pose.p_world[None, :], replay.push_wrench[k, :d][None, :], "hand push (force)", PUSH)
+        return out
+
+    static: dict[str, Any] = {}
+    if fixture.is_full:
+        static["goal"] = workpiece_trace(fixture.goal, ghost=True)
+    if d == 2:
+        static["locator tips"] = _locator_bodies(fixture, go)
+    static["locator names"] = _locator_labels(fixture, go)
+    if fixture.contacts:
+        pts = np.array([c.point_world for c in fixture.contacts]).reshape(-1, d)
+        nrm = np.array([c.normal_world for c in fixture.contacts]).reshape(-1, d)
+        static["explicit contacts"] = lines(pts, pts + normal_len * nrm, "explicit contacts (normals)", NORMAL, 4)
+    if animated:
+        path = np.array([replay.poses[k].p_world for k in idx])
+        if d == 3:
+            static["path"] = go.Scatter3d(
+                x=_rounded(path[:, 0]),
+                y=_rounded(path[:, 1]),
+                z=_rounded(path[:, 2]),
+                mode="lines",
+                line={"color": PATH, "width": 3, "dash": "dot"},
+                name="body-origin path",
+            )
+        else:
+            static["path"] = go.Scatter(
+                x=_rounded(path[:, 0]),
+                y=_rounded(path[:, 1]),
+                mode="lines",
+                line={"color": PATH, "width": 2, "dash": "dot"},
+                name="body-origin path",
+            )
+
+    first = dynamic(int(idx[0]), full=True)
+    order = list(static) + list(first)
+    traces = {name: i for i, name in enumerate(order)}
+    fig = go.Figure(data=[*static.values(), *first.values()])
+
+    frames = []
+    if animated:
+        moving = [traces[name] for name in first]
+        for k in idx:
+            dyn = dynamic(int(k))
+            frames.append(
+                go.Frame(
+                    name=f"{replay.time_s[k]:.3f}",
+                    data=[dyn[name] for name in first],
+                    traces=moving,
+                )
+            )
+        fig.frames = frames
+
+    info = SceneInfo(replay.source, len(frames), len(replay), scale, traces)
+    title = f"{fixture.name}: {replay.note}"
+    if scale > 0:
+        kinds = [
+            k
+            for k, on in (
+                ("orange: contact forces on the part", "forces" in first),
+                ("green: the hand's push", "push" in first),
+            )
+            if on
+        ]
+        title += f"<br><sup>arrows: 1 N = {scale * 1e3:.3g} mm ({', '.join(kinds)})</sup>"
+    fig.update_layout(
+        title={"text": title, "x": 0.02, "xanchor": "left"},
+        meta={
+            "source": info.source,
+            "frames": info.frames,
+            "samples": info.samples,
+            "force_scale_m_per_N": info.force_scale_m_per_N,
+            "traces": info.traces,
+        },
+        legend={
+            "x": 1.0,
+            "xanchor": "right",
+            "y": 0.98,
+            "yanchor": "top",
+            "bgcolor": "rgba(255,255,255,0.7)",
+            "font": {"size": 11},
+        },
+        margin={"l": 10, "r": 10, "t": 60, "b": 10 + (90 if animated else 0)},
+        paper_bgcolor="white",
+    )
+    lo, hi = _bounds(fixture, replay, idx, fig)
+    if d == 3:
+        span = hi - lo
+        ratio = span / span.max()
+        fig.update_layout(
+            scene={
+                "xaxis": {"title": {"text": "x [m]"}, "range": [lo[0], hi[0]]},
+                "yaxis": {"title": {"text": "y [m]"}, "range": [lo[1], hi[1]]},
+                "zaxis": {"title": {"text": "z [m]"}, "range": [lo[2], hi[2]]},
+                "aspectmode": "manual",
+                "aspectratio": {"x": ratio[0], "y": ratio[1], "z": ratio[2]},
+                "camera": {"eye": {"x": -0.75, "y": -1.0, "z": 0.62}},
+            }
+        )
+    else:
+        fig.update_layout(
+            xaxis={"title": {"text": "x [m]"}, "range": [lo[0], hi[0]], "constrain": "domain"},
+            yaxis={"title": {"text": "y [m]"}, "range": [lo[1], hi[1]], "scaleanchor": "x", "scaleratio": 1},
+            plot_bgcolor="white",
+        )
+    if animated:
+        _add_controls(fig, [f.name for f in frames], [float(replay.time_s[k]) for k in idx], redraw=d == 3)
+    return fig
+
+
+def scene_info(fig: Any) -> SceneInfo:
+    """The :class:`SceneInfo` stored in a figure built by :func:`scene_figure`."""
+    meta = fig.layout.meta
+    return SceneInfo(
+        meta["source"], int(meta["frames"]), int(meta["samples"]), float(meta["force_scale_m_per_N"]), meta["traces"]
+    )
+
+
+def _locator_mesh(fixture: Fixture, go: Any) -> tuple[Any, list[int]]:
+    """The locators' spheres as one Mesh3d, and the locator index of each vertex.
+
+    A point locator is drawn small. The spheres are coloured by a 0/1 intensity (grey: open,
+    red: pressed) that the frames update.
+    """
+    R = fixture.workpiece.shape.bounding_radius
+    Vs, Fs, owner, base = [], [], [], 0
+    for i, loc in enumerate(fixture.locators):
+        V, F = sphere_mesh(loc.radius_m if loc.radius_m > 0 else 0.02 * R, rings=6, segments=10)
+        Vs.append(V + loc.p_world)
+        Fs.append(F + base)
+        owner += [i] * len(V)
+        base += len(V)
+    V = np.vstack(Vs) if Vs else np.zeros((0, 3))
+    F = np.vstack(Fs) if Fs else np.zeros((0, 3), dtype=np.int64)
+    mesh = go.Mesh3d(
+        x=_rounded(V[:, 0]),
+        y=_rounded(V[:, 1]),
+        z=_rounded(V[:, 2]),
+        i=F[:, 0].tolist(),
+        j=F[:, 1].tolist(),
+        k=F[:, 2].tolist(),
+        intensity=[0] * len(V),
+        intensitymode="vertex",
+        colorscale=[[0.0, LOCATOR], [1.0, PRESSED]],
+        cmin=0,
+        cmax=1,
+        showscale=False,
+        flatshading=True,
+        name="locators (red: pressed)",
+        showlegend=True,
+        hoverinfo="skip",
+    )
+    return mesh, owner
+
+
+def _locator_labels(fixture: Fixture, go: Any) -> Any:
+    """The locators' names beside them."""
+    d = fixture.dimension
+    P = np.array([loc.p_world for loc in fixture.locators]).reshape(-1, d)
+    common = {
+        "mode": "text",
+        "text": [loc.name for loc in fixture.locators],
+        "textposition": "top center",
+        "name": "locator names",
+        "showlegend": False,
+        "hoverinfo": "skip",
+    }
+    if d == 3:
+        return go.Scatter3d(x=_rounded(P[:, 0]), y=_rounded(P[:, 1]), z=_rounded(P[:, 2]), **common)
+    return go.Scatter(x=_rounded(P[:, 0]), y=_rounded(P[:, 1]), **common)
+
+
+def _locator_bodies(fixture: Fixture, go: Any) -> Any:
+    """The locators' circles (2D), a point locator drawn small."""
+    R = fixture.workpiece.shape.bounding_radius
+    xs: list[float | None] = []
+    ys: list[float | None] = []
+    a = np.linspace(0.0, 2.0 * np.pi, 33)
+    for loc in fixture.locators:
+        r = loc.radius_m if loc.radius_m > 0 else 0.02 * R
+        xs += [*_rounded(loc.p_world[0] + r * np.cos(a)), None]
+        ys += [*_rounded(loc.p_world[1] + r * np.sin(a)), None]
+    return go.Scatter(
+        x=xs,
+        y=ys,
+        mode="lines",
+        fill="toself",
+        fillcolor="rgba(127,127,127,0.6)",
+        line={"color": LOCATOR},
+        name="locator tips",
+        hoverinfo="skip",
+    )
+
+
+def _bounds(fixture: Fixture, replay: Replay, idx: IntArray, fig: Any) -> tuple[FloatArray, FloatArray]:
+    """Axis ranges holding every trace of every frame, padded, so the view does not jump."""
+    d = fixture.dimension
+    pts = []
+    for trace in [*fig.data, *(t for f in fig.frames for t in f.data)]:
+        cols: list[Any] = [getattr(trace, c, None) for c in "xyz"[:d]]
+        if any(c is None for c in cols):
+            continue
+        arr = np.array([[np.nan if v is None else float(v) for v in c] for c in cols], dtype=float).T
+        if arr.size:
+            pts.append(arr)
+    P = np.vstack(pts)
+    lo, hi = np.nanmin(P, axis=0), np.nanmax(P, axis=0)
+    pad = 0.1 * float(np.max(hi - lo)) + 1e-3
+    return np.round(lo - pad, 4), np.round(hi + pad, 4)
+
+
+def _add_controls(fig: Any, names: list[str], times: list[float], *, redraw: bool) -> None:
+    """Play/pause buttons and a time slider over the frames."""
+    play = {
+        "frame": {"duration": FRAME_MS, "redraw": redraw},
+        "transition": {"duration": 0},
+        "fromcurrent": True,
+        "mode": "immediate",
+    }
+    pause = {"frame": {"duration": 0, "redraw": redraw}, "transition": {"duration": 0}, "mode": "immediate"}
+    fig.update_layout(
+        updatemenus=[
+            {
+                "type": "buttons",
+                "direction": "left",
+                "x": 0.0,
+                "y": 0.0,
+                "xanchor": "left",
+                "yanchor": "top",
+                "pad": {"t": 50, "r": 4},
+                "showactive": False,
+                "buttons": [
+                    {"label": "▶ play", "method": "animate", "args": [None, play]},
+                    {"label": "❚❚ pause", "method": "animate", "args": [[None], pause]},
+                ],
+            }
+        ],
+        sliders=[
+            {
+                "active": 0,
+                "x": 0.22,
+                "len": 0.78,
+                "y": 0.0,
+                "yanchor": "top",
+                "pad": {"t": 30},
+                "currentvalue": {"prefix": "t = ", "suffix": " s"},
+                "steps": [
+                    {"label": f"{t:.2f}", "method": "animate", "args": [[name], pause]}
+                    for name, t in zip(names, times, strict=True)
+                ],
+            }
+        ],
+    )
+
+
+# -- the page ------------------------------------------------------------------------------------
+_EXTERNAL = re.compile(r"""<(?:script|link|img|iframe)\b[^>]*\b(?:src|href)\s*=\s*["']?\s*(?:https?:)?//""", re.I)
+
+
+def external_references(html: str) -> list[str]:
+    """Tags of ``html`` that would load something from the network (script/link/img/iframe src or href)."""
+    return [m.group(0) for m in _EXTERNAL.finditer(html)]
+
+
+def write_scene(fig: Any, path: Path) -> int:
+    """Write ``fig`` as a self-contained HTML page (plotly.js embedded, no MathJax); return its size [bytes].
+
+    Raises
+    ------
+    FixplanError
+        The page would fetch something (a bug: every script is embedded).
+    """
+    html = fig.to_html(
+        include_plotlyjs=True,
+        include_mathjax=False,
+        full_html=True,
+        auto_play=False,
+        config={"displaylogo": False, "responsive": True},
+    )
+    refs = external_references(html)
+    if refs:
+        raise FixplanError(f"the page would fetch {refs[0]!r}: refusing to write {path}")
+    Path(path).write_text(html, encoding="utf-8")
+    return len(html.encode("utf-8"))
