@@ -40,7 +40,12 @@ gallery: install
 	$(BIN)/fixplan solve --out out/gallery-plan.json --force
 	$(BIN)/fixplan view --plan out/gallery-plan.json --out out/scene.html --force
 	$(BIN)/python -m fixplan._browser out/scene.html docs/gallery/scene.png --width 900 --height 600
-	@# Jamming map (added by the map owner): `fixplan map ... --out docs/gallery/jamming-map.png --force` goes here.
+	@# Whitney's jamming diagram: the peg in the hole (peg-hole-mid) pushed down 1 N, lateral force x moment
+	$(BIN)/fixplan map problems/peg-hole-mid.toml --axes Fx,Mz --range -0.6:0.6,-0.03:0.03 --wrench 0,-1,0 --n 60 --out out/gallery/jamming-map.png --force
+	cp out/gallery/jamming-map.png docs/gallery/jamming-map.png
+	@# The plan's figure (forces, gaps, wrench, contact states over time) that solve --report writes beside the report
+	$(BIN)/fixplan solve --report out/gallery/plan.md --force
+	cp out/gallery/plan.png docs/gallery/plan.png
 
 lint: install
 	$(BIN)/ruff check fixplan tests benchmarks
