@@ -266,7 +266,9 @@ def search(
     ] = "margin",
     min_margin: Annotated[
         float | None,
-        typer.Option("--min-margin", help="Least normal force for --objective effort [N] (default: the part's weight)."),
+        typer.Option(
+            "--min-margin", help="Least normal force for --objective effort [N] (default: the part's weight)."
+        ),
     ] = None,
     json_out: JsonOpt = False,
 ) -> None:

@@ -290,7 +290,7 @@ def _build(
             lin.append((e, 0.0))
     e = np.zeros(nx)
     e[i_tau] = -1.0
-    lin.append((e, -float(effort_margin_N) if effort else 0.0))  # τ ≥ τ_req (effort) or τ ≥ 0
+    lin.append((e, -effort_margin_N if effort_margin_N is not None else 0.0))  # τ ≥ τ_req (effort) or τ ≥ 0
     rows_A.append(np.array([r for r, _ in lin]))
     rows_b.append(np.array([b for _, b in lin]))
     cones.append(("nonneg", len(lin)))

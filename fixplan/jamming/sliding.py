@@ -285,7 +285,7 @@ class WitnessSearch:
             if (
                 z is None
                 or not np.all(np.isfinite(z))
-                or np.linalg.norm(K @ z - rhs) > 1e-9 * max(np.linalg.norm(rhs), 1e-300)
+                or float(np.linalg.norm(K @ z - rhs)) > 1e-9 * max(float(np.linalg.norm(rhs)), 1e-300)
             ):
                 # singular (rank-deficient G, e.g. concurrent normals): the least-norm solution is
                 # one of many consistent motions; _accept checks its residual like any other
