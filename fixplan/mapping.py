@@ -99,17 +99,16 @@ def jamming_map(
 
 def save_map(result: JammingMap, png: Path, csv_path: Path | None = None) -> None:
     """Write the diagram as a PNG (matplotlib, no display needed) and the grid as CSV."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # a Figure of its own (no pyplot, no backend switch): safe headless and inside a notebook
     from matplotlib.colors import ListedColormap
+    from matplotlib.figure import Figure
     from matplotlib.patches import Patch
 
     codes = {m: k for k, m in enumerate(MODES)}
     grid = np.vectorize(codes.get)(result.modes)
     cmap = ListedColormap([MODE_COLORS[m] for m in MODES])
-    fig, ax = plt.subplots(figsize=(6, 5), dpi=100)
+    fig = Figure(figsize=(6, 5), dpi=100)
+    ax = fig.subplots()
     ax.imshow(
         grid,
         origin="lower",
@@ -129,7 +128,6 @@ def save_map(result: JammingMap, png: Path, csv_path: Path | None = None) -> Non
     )
     fig.tight_layout()
     fig.savefig(png)
-    plt.close(fig)
     if csv_path is not None:
         with open(csv_path, "w", newline="") as fh:
             writer = csv.writer(fh)

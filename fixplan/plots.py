@@ -20,7 +20,8 @@ panels show the plan alone: the gap per locator at the knot poses (computed with
 locator queries, the knots spread evenly over each transition as the verification's reference
 spreads them), the planned wrench per segment, and the planned states.
 
-matplotlib is imported inside the functions, with the headless ``Agg`` backend.
+matplotlib is imported inside the functions; figures are plain ``Figure`` objects (no pyplot, no
+backend switch), so they draw headless and leave a notebook's backend alone.
 """
 
 from __future__ import annotations
@@ -185,16 +186,16 @@ def plan_figure(result: PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> 
     own curves have the gid ``planned``; bars have the gid ``pressed:NAME`` or ``planned:NAME``;
     boundaries the gid ``boundary``.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    # a Figure of its own (no pyplot, no backend switch): safe headless and inside a notebook
+    from matplotlib import colormaps
+    from matplotlib.figure import Figure
 
     names = [loc.name for loc in fixture.locators]
     d = fixture.dimension
     comp = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz") if d == 3 else ("Fx", "Fy", "Mz")
-    colors = {name: plt.get_cmap("tab10")(i % 10) for i, name in enumerate(names)}
-    comp_colors = {c: plt.get_cmap("tab10")(i % 3) for i, c in enumerate(comp)}
+    tab10 = colormaps["tab10"]
+    colors = {name: tab10(i % 10) for i, name in enumerate(names)}
+    comp_colors = {c: tab10(i % 3) for i, c in enumerate(comp)}
     trace = result.verification.trace if result.verification is not None else None
     bounds = boundaries_s(result.durations_s)
     planned_end = float(bounds[-1]) if len(bounds) else 0.0
@@ -205,12 +206,11 @@ def plan_figure(result: PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> 
 
     panels = (["normal_forces"] if trace is not None else []) + ["gaps", "force", "moment", "states"]
     heights = {"normal_forces": 2.0, "gaps": 2.0, "force": 1.6, "moment": 1.6, "states": 0.35 * len(names) + 0.6}
-    fig, axes_arr = plt.subplots(
+    fig = Figure(figsize=(8.0, sum(heights[p] for p in panels) + 0.8), dpi=dpi)
+    axes_arr = fig.subplots(
         len(panels),
         1,
         sharex=True,
-        figsize=(8.0, sum(heights[p] for p in panels) + 0.8),
-        dpi=dpi,
         gridspec_kw={"height_ratios": [heights[p] for p in panels]},
         squeeze=False,
     )
@@ -321,11 +321,5 @@ def plan_figure(result: PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> 
 
 def save_plan_figure(result: PlanResult, fixture: Fixture, png: Path, *, dpi: float = 100.0) -> Path:
     """Draw :func:`plan_figure` and write it as a PNG; returns ``png``."""
-    import matplotlib.pyplot as plt
-
-    fig = plan_figure(result, fixture, dpi=dpi)
-    try:
-        fig.savefig(png, dpi=dpi)
-    finally:
-        plt.close(fig)
+    plan_figure(result, fixture, dpi=dpi).savefig(png, dpi=dpi)
     return png

@@ -61,3 +61,38 @@ def test_compiled_coupling_matches_the_python_formula(rng):
     expected = coupling.wrench(x_d - x_w, v_d - v_w, 3)
     got = _kernels.coupling3(sim._R, sim._p, sim._com_b, sim._v, sim._w, loop._R0, x_d, v_d, loop._K, loop._B)
     assert np.allclose(got, expected, atol=1e-12)
+
+
+def test_tick_applies_the_coupling_of_the_rotating_part(rng):
+    """The wrench a tick applies is K (x_d − x_w) + B (ẋ_d − ẋ_w) of the part's state before the step (spinning part)."""
+    from fixplan.pose import Pose
+
+    f = fixplan.load(fixplan.default_fixture_path())
+    sim = Simulator(f)
+    dev = SimulatedDevice(6, x0=np.concatenate([f.start.p_world + 0.05, np.zeros(3)]))
+    coupling = VirtualCoupling(1000.0, 2.0, 20.0, 0.02, 1e-3, device_damping=8.0, device_damping_rot=0.08)
+    loop = HapticLoop(sim, dev, coupling)
+    # lifted clear of the locators and spinning about z: the body origin (the box centre) moves
+    sim.set_state(Pose.from_rpy_deg(f.start.p_world + [0, 0, 0.05], [0, 0, 4.0]), [0.1, -0.2, 0.0, 0.3, -0.1, 1.0])
+    x_w, v_w = loop.workpiece_coordinates()
+    expected = coupling.wrench(dev.position() - x_w, dev.velocity() - v_w, 3)
+    w_c, _, _ = loop.tick(np.zeros(6))
+    assert np.allclose(w_c, expected, atol=1e-12)
+
+
+def test_loop_refuses_a_coupling_checked_with_more_damping_than_the_device_has():
+    from fixplan.haptics import DeviceSpecs
+
+    f = fixplan.load(fixplan.default_fixture_path())
+    specs = DeviceSpecs(
+        max_force_N=20.0,
+        max_torque_Nm=1.0,
+        max_stiffness_N_per_m=5000.0,
+        max_damping_Ns_per_m=50.0,
+        workspace_radius_m=0.5,
+        physical_damping_Ns_per_m=0.0,
+    )
+    dev = SimulatedDevice(6, specs=specs)
+    coupling = VirtualCoupling(1000.0, 2.0, 20.0, 0.02, 1e-3, device_damping=8.0, device_damping_rot=0.08)
+    with pytest.raises(InputError, match="device damping"):
+        HapticLoop(Simulator(f), dev, coupling)

@@ -196,3 +196,20 @@ def test_cli_infeasible_plan_has_no_figure(tmp_path, capsys):
     md = tmp_path / "weak.md"
     assert main(["solve", str(WEAK), "--no-verify", "--report", str(md)]) == 1
     assert md.exists() and not (tmp_path / "weak.png").exists() and _links(md) == []
+
+
+def test_drawing_leaves_the_callers_backend_alone(fixture, verified, tmp_path):
+    """A notebook's inline backend must survive save_map and the plan figure (no matplotlib.use inside)."""
+    from fixplan.mapping import jamming_map, save_map
+    from fixplan.plots import save_plan_figure
+
+    before = matplotlib.get_backend()
+    matplotlib.use("svg")
+    try:
+        save_plan_figure(verified, fixture, tmp_path / "plan.png")
+        m = jamming_map(fixture, (0, 2), [(-1.0, 1.0), (-0.1, 0.1)], 3, axis_names=("Fx", "Mz"))
+        save_map(m, tmp_path / "map.png")
+        assert matplotlib.get_backend() == "svg"
+        assert (tmp_path / "plan.png").stat().st_size > 10_000 and (tmp_path / "map.png").stat().st_size > 1_000
+    finally:
+        matplotlib.use(before)

@@ -81,6 +81,15 @@ class HapticLoop:
                 f"coupling gains exceed the device: K = {coupling.K_lin:g} > {specs.max_stiffness_N_per_m:g} N/m "
                 f"or B = {coupling.B_lin:g} > {specs.max_damping_Ns_per_m:g} N·s/m"
             )
+        # the coupling's passivity was checked against the damping it was told the handle has;
+        # the handle must really have at least that much (the simulated one: b, and b·1e-2 in rotation)
+        b_dev = specs.physical_damping_Ns_per_m
+        if coupling.device_damping > b_dev * (1 + 1e-12) or coupling.device_damping_rot > 1e-2 * b_dev * (1 + 1e-12):
+            raise InputError(
+                f"the coupling was checked for passivity with device damping b = {coupling.device_damping:g} N·s/m "
+                f"(rotation {coupling.device_damping_rot:g}), but the device has {b_dev:g} N·s/m "
+                f"(rotation {1e-2 * b_dev:g}): expected at most the device's own damping"
+            )
         self.sim = sim
         self.device = device
         self.coupling = coupling
@@ -111,9 +120,7 @@ class HapticLoop:
         x_d, v_d = self.device.position(), self.device.velocity()
         if d == 3:
             sim = self.sim
-            w_c = _kernels.coupling3(
-                sim._R, sim._p, sim.com_world, sim._v, sim._w, self._R0, x_d, v_d, self._K, self._B
-            )
+            w_c = _kernels.coupling3(sim._R, sim._p, sim._com_b, sim._v, sim._w, self._R0, x_d, v_d, self._K, self._B)
         else:
             x_w, v_w = self.workpiece_coordinates()
             w_c = self._K * (x_d - x_w) + self._B * (v_d - v_w)
@@ -131,7 +138,7 @@ class HapticLoop:
         x_d, v_d = self.device.position(), self.device.velocity()
         if scratch.dimension == 3:
             _kernels.coupling3(
-                scratch._R, scratch._p, scratch.com_world, scratch._v, scratch._w, self._R0, x_d, v_d, self._K, self._B
+                scratch._R, scratch._p, scratch._com_b, scratch._v, scratch._w, self._R0, x_d, v_d, self._K, self._B
             )
         scratch.step(np.zeros(6 if scratch.dimension == 3 else 3))
 
