@@ -121,6 +121,11 @@ class ContactSet:
         return len(self.contacts)
 
     @cached_property
+    def max_lever_m(self) -> float:
+        """Largest distance from the centre of mass to a contact point [m] (0 without contacts)."""
+        return max((float(np.linalg.norm(c.point_world - self.com_world)) for c in self.contacts), default=0.0)
+
+    @cached_property
     def sizes(self) -> NDArray[np.int64]:
         return np.array([c.size for c in self.contacts], dtype=np.int64)
 

@@ -524,6 +524,19 @@ def _r(x: float) -> float:
     return float(round(float(x), COORD_DECIMALS))
 
 
+def _mesh3d(go: Any, V: FloatArray, F: IntArray, **style: Any) -> Any:
+    """A plotly Mesh3d of vertices ``V`` (world, rounded) and triangles ``F``, with ``style``."""
+    return go.Mesh3d(
+        x=_rounded(V[:, 0]),
+        y=_rounded(V[:, 1]),
+        z=_rounded(V[:, 2]),
+        i=F[:, 0].tolist(),
+        j=F[:, 1].tolist(),
+        k=F[:, 2].tolist(),
+        **style,
+    )
+
+
 def _rounded(a: FloatArray) -> list[float]:
     return [float(x) for x in np.round(np.asarray(a, dtype=float), COORD_DECIMALS)]
 
@@ -567,13 +580,10 @@ def scene_figure(fixture: Fixture, replay: Replay, *, max_frames: int = MAX_FRAM
     def workpiece_trace(pose: Pose, *, ghost: bool = False) -> Any:
         if d == 3:
             V = points_world(pose, V_body)
-            return go.Mesh3d(
-                x=_rounded(V[:, 0]),
-                y=_rounded(V[:, 1]),
-                z=_rounded(V[:, 2]),
-                i=F[:, 0].tolist(),
-                j=F[:, 1].tolist(),
-                k=F[:, 2].tolist(),
+            return _mesh3d(
+                go,
+                V,
+                F,
                 color=GOAL if ghost else WORKPIECE,
                 opacity=0.15 if ghost else 0.35,
                 flatshading=True,
@@ -802,13 +812,10 @@ def _locator_mesh(fixture: Fixture, go: Any) -> tuple[Any, list[int]]:
         base += len(V)
     V = np.vstack(Vs) if Vs else np.zeros((0, 3))
     F = np.vstack(Fs) if Fs else np.zeros((0, 3), dtype=np.int64)
-    mesh = go.Mesh3d(
-        x=_rounded(V[:, 0]),
-        y=_rounded(V[:, 1]),
-        z=_rounded(V[:, 2]),
-        i=F[:, 0].tolist(),
-        j=F[:, 1].tolist(),
-        k=F[:, 2].tolist(),
+    mesh = _mesh3d(
+        go,
+        V,
+        F,
         intensity=[0] * len(V),
         intensitymode="vertex",
         colorscale=[[0.0, LOCATOR], [1.0, PRESSED]],

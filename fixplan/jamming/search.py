@@ -84,9 +84,7 @@ def twist_at_com(cs: ContactSet, twist: FloatArray, about_world: FloatArray) -> 
 
 
 def _roles(cs: ContactSet, a_hat: FloatArray, tol: float) -> dict[str, str]:
-    scale = float(np.linalg.norm(a_hat[: cs.dimension])) + float(np.linalg.norm(a_hat[cs.dimension :])) * max(
-        float(np.linalg.norm(c.point_world - cs.com_world)) for c in cs.contacts
-    )
+    scale = float(np.linalg.norm(a_hat[: cs.dimension])) + float(np.linalg.norm(a_hat[cs.dimension :])) * cs.max_lever_m
     roles: dict[str, str] = {}
     for c, off in zip(cs.contacts, cs.offsets, strict=True):
         u = cs.J[off : off + c.size] @ a_hat
@@ -141,13 +139,13 @@ def search_wrench(
     wp = fixture.workpiece
     g = float(np.linalg.norm(fixture.gravity)) or 9.81
     F_max, T_max = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
-    defaulted = ""
+    notes = ""
     if not np.isfinite(F_max):
         F_max = 5.0 * wp.mass_kg * g
-        defaulted += f" (no manipulator.max_force: bounded at 5 m|g| = {F_max:.3g} N)"
+        notes += f" (no manipulator.max_force: bounded at 5 m|g| = {F_max:.3g} N)"
     if not np.isfinite(T_max):
         T_max = F_max * wp.shape.bounding_radius
-        defaulted += f" (no manipulator.max_torque: bounded at {T_max:.3g} N·m)"
+        notes += f" (no manipulator.max_torque: bounded at {T_max:.3g} N·m)"
 
     prog, meta = _build(cs, a_hat, roles, fixture.gravity_wrench(), about, F_max, T_max)
     sol = ClarabelProgram(prog).solve(prog.b)
@@ -159,7 +157,7 @@ def search_wrench(
         if free.solved and -free.value > 1e-9 * F_max:
             w_free = free.x[:n]
             F_need = float(np.linalg.norm(w_free[: cs.dimension]))
-            reason = f"the manipulator is too weak: this motion needs more than max_force {F_max:.3g} N or max_torque {T_max:.3g} N·m (unbounded search used ‖F‖ = {F_need:.3g} N){defaulted}"
+            reason = f"the manipulator is too weak: this motion needs more than max_force {F_max:.3g} N or max_torque {T_max:.3g} N·m (unbounded search used ‖F‖ = {F_need:.3g} N){notes}"
             binding = ["max_force", "max_torque"]
         else:
             reason = (
@@ -179,6 +177,8 @@ def search_wrench(
         if sol_e.solved:
             x, meta = sol_e.x, meta_e
             tau = float(x[meta["tau"]])
+        else:
+            notes += " (the least-effort program did not solve: the best-margin push is returned)"
     elif objective != "margin":
         raise InputError(f"unknown search objective {objective!r} (expected 'margin' or 'effort')")
     w_com = x[:n]
@@ -196,7 +196,7 @@ def search_wrench(
     check = clf.classify(w_com, w_user)
     ok = not check.balanced
     reason = (
-        f"moves as asked with every kept contact pressed by ≥ {tau:.3g} N{defaulted}"
+        f"moves as asked with every kept contact pressed by ≥ {tau:.3g} N{notes}"
         if ok
         else f"the wrench found is statically balanced ({check.mode}): it would not move the part"
     )
@@ -328,7 +328,7 @@ def _build(
     c_vec = np.zeros(nx)
     if effort:
         # e ≥ ‖(F, T_c / L)‖ with the moment about the centre of mass (w is about the com)
-        L = max(max(float(np.linalg.norm(c.point_world - cs.com_world)) for c in cs.contacts), 1e-9)
+        L = max(cs.max_lever_m, 1e-9)
         A_e = np.zeros((n + 1, nx))
         A_e[0, i_e] = -1.0
         A_e[1 : 1 + d, i_w : i_w + d] = -np.eye(d)

@@ -65,7 +65,7 @@ class Rows:
         for i, c in enumerate(cs.contacts):
             if c.soft:
                 self.Dm[i, 2] = c.torsion_m
-        self.lever = max(float(np.linalg.norm(c.point_world - cs.com_world)) for c in cs.contacts) if k else 0.0
+        self.lever = cs.max_lever_m
 
     def code(self, roles: Roles) -> NDArray[np.int64]:
         """Role codes for the kernels: 0 slide, 1 stick, 2 open."""
