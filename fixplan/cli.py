@@ -637,6 +637,53 @@ def fclib(
         raise typer.Exit(1)
 
 
+@app.command()
+def generate(
+    family: Annotated[str | None, typer.Argument(help="Fixture family (see --list).", show_default=False)] = None,
+    count: Annotated[int, typer.Option("--count", help="How many fixtures (index 0 .. N-1).", min=1)] = 10,
+    seed: Annotated[
+        int, typer.Option("--seed", help="Seed ≥ 0; fixture k of a seed is the same whatever --count.", min=0)
+    ] = 0,
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Directory for FAMILY-sSEED-NNN.toml (created if absent).")
+    ] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite existing files.")] = False,
+    list_: Annotated[bool, typer.Option("--list", help="List the families and exit.")] = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Write seeded random fixtures of a family (box-321, plate-2d), each checked before it is written."""
+    from fixplan.generate import FAMILIES, check_family, fixture_name
+    from fixplan.generate import generate as run
+
+    if list_:
+        if json_out:
+            _emit_json({"families": FAMILIES})
+        else:
+            for name, description in FAMILIES.items():
+                typer.echo(f"{name}: {description}")
+        return
+    if family is None:
+        raise InputError("give a FAMILY (one of: " + ", ".join(FAMILIES) + ") or --list")
+    check_family(family)
+    if out is None:
+        raise InputError("--out DIR is required (the directory to write the fixtures into)")
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out} is a file (expected a directory)")
+    targets = [out / f"{fixture_name(family, seed, i)}.toml" for i in range(count)]
+    for target in targets:
+        _writable(target, force)
+    fixtures = run(family, count, seed)
+    for target, fx in zip(targets, fixtures, strict=True):
+        target.write_text(fx.toml_text, encoding="utf-8")
+    if json_out:
+        files = [
+            {"name": fx.name, "path": str(t), "params": fx.params} for t, fx in zip(targets, fixtures, strict=True)
+        ]
+        _emit_json({"family": family, "seed": seed, "count": count, "out": str(out), "files": files})
+    else:
+        typer.echo(f"wrote {count} {family} fixtures (seed {seed}) to {out}: {targets[0].name} .. {targets[-1].name}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the app and turn every expected failure into one line and exit 2."""
     try:

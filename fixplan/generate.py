@@ -1,0 +1,570 @@
+"""Generated fixture families: seeded random fixtures, so the planner is judged on cases it was not tuned on.
+
+A family draws every number of a fixture file (sizes, mass, the locator layout, tip radii,
+friction, soft fingers, the start pose, the hand's limits) from
+``numpy.random.default_rng([seed, index])``: fixture ``index`` of a seed is the same text
+whatever ``count`` is asked for.
+
+The located (goal) pose is simple, the part in the corner of the world axes and unrotated, so
+the locators are placed exactly on the faces there and the file states the goal. The start pose
+is then built exactly: resting on the base locators with zero gap, clear of the others. Every
+draw is loaded with :func:`fixplan.fixture.loads` and checked with the gap functions of
+:mod:`fixplan.locating` (no penetration, the resting locators touch, the others are clear,
+rank-full ``G`` at the goal, the goal found again from the start); a draw that fails a check is
+replaced by the next draw from the same generator, so no invalid file is produced. The header
+comment of each file records the family, seed, index, draw and the drawn parameters.
+
+Families (ranges below are module constants)
+---------------------------------------------
+box-321
+    A box, edges log-uniform in 4–40 cm, of a solid's density (500–8000 kg/m³). Locators
+    B1, B2, B3 under the -z face, their triangle containing the centre of mass with a margin at
+    the goal and at the start; S1, S2 on the -y face; E1 on the -x face. Start: slid by
+    ``(dx, dy)`` (2–30 mm each, at most a quarter of the box along that axis) away from S and E
+    and turned by a yaw of ±(0–10)° about z, resting flat on B1, B2, B3.
+plate-2d
+    A rectangle, trapezoid or pentagon (side edges slanted −30° to 40° from vertical), width
+    and height log-uniform in 4–40 cm, a plate 5–30 mm thick. Locators B1, B2 under the bottom
+    edge (gravity −y) on either side of the centre of mass, S on the left edge (slanted on
+    trapezoids and pentagons). Start: slid 2–30 mm (at most a quarter of the width) along the
+    bottom, away from S, and tilted 0–10° about ONE base locator it rests on: counter-clockwise
+    on B1 (B2 below with a gap) or clockwise on B2 (B1 below with a gap).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fixplan.errors import FixtureError, InfeasibleError, InputError
+from fixplan.fixture import Fixture, loads
+from fixplan.geometry import Polygon
+from fixplan.locating import contact_set, locator_gaps, solve_goal
+from fixplan.pose import cross2, rot2
+
+FAMILIES: dict[str, str] = {
+    "box-321": (
+        "3D boxes (edges 4-40 cm) on 3 base, 2 side and 1 end locator; start slid 2-30 mm off the side "
+        "and end locators and turned up to 10 deg about z, resting on the base"
+    ),
+    "plate-2d": (
+        "2D rectangles, trapezoids and pentagons on 2 base locators and 1 side locator (often on a slanted "
+        "edge); start slid 2-30 mm along the bottom and tilted up to 10 deg, resting on one base locator"
+    ),
+}
+
+# What the families draw from (the README lists them; tests/test_generate.py checks them).
+EDGE_M = (0.04, 0.40)  # box edges, plate width and height [m], log-uniform
+DENSITY_KG_M3 = (500.0, 8000.0)  # wood to steel, log-uniform
+PLATE_THICKNESS_M = (0.005, 0.030)  # plate-2d: mass = area × thickness × density
+TIP_RADIUS_M = (0.0, 0.006)
+FRICTION = (0.1, 0.6)  # per fixture; half the fixtures vary it per locator by ±FRICTION_SPREAD
+FRICTION_SPREAD = 0.05
+TORSION_M = (0.0005, 0.003)  # box-321: soft-finger torsional radius, half the fixtures
+OFFSET_M = (0.002, 0.030)  # start offset, and at most OFFSET_MAX_FRACTION of the part along it
+OFFSET_MAX_FRACTION = 0.25
+TILT_DEG = (0.0, 10.0)  # magnitude of the start tilt
+SLANT_DEG = (-30.0, 40.0)  # plate-2d side edges from vertical, positive leaning inwards
+FORCE_PER_WEIGHT = (1.5, 8.0)  # manipulator.max_force / (m g)
+TORQUE_PER_WEIGHT_LEVER = (0.3, 3.0)  # manipulator.max_torque / (m g × half the bounding-box diagonal)
+GRAVITY_M_S2 = 9.81
+
+# Checks every generated file passes.
+EXACT_M = 1e-9  # resting locators touch within this at the start; nothing penetrates more
+CLEARANCE_M = 1e-5  # the other locators are at least this far at the start (10 × the touch tolerance)
+MAX_DRAWS = 1000
+
+
+@dataclass(frozen=True)
+class GeneratedFixture:
+    """One generated fixture file.
+
+    Attributes
+    ----------
+    name : str
+        ``FAMILY-sSEED-INDEX`` (index zero-padded to 3 digits); also ``scene.name`` and the file stem.
+    family, seed, index
+        What it was generated from: ``numpy.random.default_rng([seed, index])``.
+    params : dict
+        The drawn parameters (JSON-ready: numbers, strings, booleans and lists).
+    toml_text : str
+        The fixture file, a header comment and the TOML.
+    draws : int
+        Draws it took: the earlier ``draws - 1`` failed a check and were replaced.
+    """
+
+    name: str
+    family: str
+    seed: int
+    index: int
+    params: dict[str, Any]
+    toml_text: str
+    draws: int
+
+
+def fixture_name(family: str, seed: int, index: int) -> str:
+    """The name (and file stem) of fixture ``index`` of ``seed`` in ``family``."""
+    return f"{family}-s{seed}-{index:03d}"
+
+
+def check_family(family: str) -> None:
+    """Raise :class:`InputError` naming the known families when ``family`` is not one."""
+    if family not in FAMILIES:
+        raise InputError(f"unknown fixture family {family!r} (known: {', '.join(FAMILIES)})")
+
+
+def generate(family: str, count: int, seed: int) -> list[GeneratedFixture]:
+    """Fixtures ``0 .. count-1`` of ``family`` for ``seed`` (see the module docstring)."""
+    check_family(family)
+    _check_int(count, "count")
+    return [generate_one(family, seed, index) for index in range(count)]
+
+
+def generate_one(family: str, seed: int, index: int) -> GeneratedFixture:
+    """Fixture ``index`` of ``family`` for ``seed``: the first draw that passes every check."""
+    check_family(family)
+    _check_int(seed, "seed")
+    _check_int(index, "index")
+    name = fixture_name(family, seed, index)
+    rng = np.random.default_rng([seed, index])
+    reason = ""
+    for draw in range(1, MAX_DRAWS + 1):
+        draft = _DRAWS[family](rng)
+        if isinstance(draft, str):
+            reason = draft
+            continue
+        body = _render(name, draft)
+        try:
+            fixture = loads(body, source=name)
+        except FixtureError as exc:
+            reason = f"the loader refused it: {exc.issues[0].key}: {exc.issues[0].message}"
+            continue
+        problem = _check(fixture, draft)
+        if problem is not None:
+            reason = problem
+            continue
+        text = _header(name, family, seed, index, draw, draft, fixture) + body
+        return GeneratedFixture(name, family, seed, index, dict(draft.params), text, draw)
+    raise InfeasibleError(f"{name}: no draw passed the checks in {MAX_DRAWS} draws (last: {reason})")
+
+
+def _check_int(value: Any, what: str) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+        raise InputError(f"{what} must be an integer ≥ 0, got {value!r}")
+
+
+# -- drafts: what a family draws, before it is written and checked --------------------------------
+
+
+@dataclass
+class _Draft:
+    dimension: int
+    shape: dict[str, Any]  # workpiece keys before the mass: shape and size or vertices
+    mass_kg: float
+    start: dict[str, Any]  # the start pose in the file's form
+    goal: dict[str, Any]
+    locators: list[dict[str, Any]]  # name, position, radius, friction[, torsion][, face]
+    max_force_N: float
+    max_torque_Nm: float
+    params: dict[str, Any]
+    resting: tuple[str, ...]  # locators that touch at the start; the others must be clear
+    story: list[str]  # a few lines on the start, for the header
+    check: Callable[[Fixture], str | None]  # the family's own geometric check of the loaded file
+
+
+def _uniform(rng: np.random.Generator, lo: float, hi: float, decimals: int) -> float:
+    return round(float(rng.uniform(lo, hi)), decimals)
+
+
+def _log_uniform(rng: np.random.Generator, lo: float, hi: float, decimals: int) -> float:
+    return round(math.exp(float(rng.uniform(math.log(lo), math.log(hi)))), decimals)
+
+
+def _offset_cap(length_m: float) -> float:
+    """Largest start offset along a part of this length [m], floored to 0.1 mm."""
+    return math.floor(min(OFFSET_M[1], OFFSET_MAX_FRACTION * length_m) * 1e4) / 1e4
+
+
+def _frictions(rng: np.random.Generator, n: int) -> tuple[float, bool, list[float]]:
+    """The fixture's μ, whether it varies per locator, and the n locators' μ."""
+    mu = _uniform(rng, *FRICTION, 3)
+    varied = bool(rng.random() < 0.5)
+    if not varied:
+        return mu, False, [mu] * n
+    spread = rng.uniform(-FRICTION_SPREAD, FRICTION_SPREAD, n)
+    return mu, True, [round(float(np.clip(mu + s, *FRICTION)), 3) for s in spread]
+
+
+def _hand(rng: np.random.Generator, weight_N: float, lever_m: float) -> tuple[float, float, float, float]:
+    """Force and torque factors and the limits they give, weak to strong relative to the weight."""
+    kf = _uniform(rng, *FORCE_PER_WEIGHT, 3)
+    kt = _uniform(rng, *TORQUE_PER_WEIGHT_LEVER, 3)
+    return kf, kt, kf * weight_N, kt * weight_N * lever_m
+
+
+def _sig(x: float, digits: int) -> float:
+    return float(f"{x:.{digits}g}")
+
+
+# -- box-321 ----------------------------------------------------------------------------------------
+
+
+def _draw_box(rng: np.random.Generator) -> _Draft | str:
+    a, b, c = (_log_uniform(rng, *EDGE_M, 4) for _ in range(3))
+    density = round(_log_uniform(rng, *DENSITY_KG_M3, 0))
+    mass = _sig(density * a * b * c, 4)
+    rho = _uniform(rng, *TIP_RADIUS_M, 4)
+    mu, varied, mus = _frictions(rng, 6)
+    soft = bool(rng.random() < 0.5)
+    torsion = _uniform(rng, *TORSION_M, 4) if soft else 0.0
+    dx = _uniform(rng, OFFSET_M[0], _offset_cap(a), 4)
+    dy = _uniform(rng, OFFSET_M[0], _offset_cap(b), 4)
+    tilt = _uniform(rng, *TILT_DEG, 2)
+    yaw = tilt if rng.random() < 0.5 else -tilt
+
+    # At the goal the box fills [0, a] x [0, b] x [0, c]; at the start (before the yaw) it is
+    # shifted by (dx, dy). Base locators are drawn in the part of the bottom face under the box at
+    # both, 8 % in from its edges, around the midpoint of the two centres of mass: B1 left and
+    # B2 right on the near (-y) side, B3 on the far side.
+    lo_x, hi_x = dx + 0.08 * a, 0.92 * a
+    lo_y, hi_y = dy + 0.08 * b, 0.92 * b
+
+    def base(u: tuple[float, float], v: tuple[float, float]) -> tuple[float, float]:
+        x = _uniform(rng, lo_x + (u[0] + 1) / 2 * (hi_x - lo_x), lo_x + (u[1] + 1) / 2 * (hi_x - lo_x), 4)
+        y = _uniform(rng, lo_y + (v[0] + 1) / 2 * (hi_y - lo_y), lo_y + (v[1] + 1) / 2 * (hi_y - lo_y), 4)
+        return x, y
+
+    def along(lo: float, hi: float, length: float) -> float:
+        return _uniform(rng, lo * length, hi * length, 4)
+
+    b1 = base((-1.0, -0.7), (-1.0, -0.6))
+    b2 = base((0.7, 1.0), (-1.0, -0.6))
+    b3 = base((-0.2, 0.3), (0.6, 1.0))
+    s1 = (along(0.1, 0.4, a), along(0.2, 0.8, c))
+    s2 = (along(0.6, 0.9, a), along(0.2, 0.8, c))
+    e1 = (along(0.2, 0.8, b), along(0.2, 0.8, c))
+    tri = np.array([b1, b2, b3])
+    need = 0.05 * min(a, b)
+    for centre in ((a / 2, b / 2), (a / 2 + dx, b / 2 + dy)):
+        if _triangle_margin(np.array(centre), tri) < need:
+            return "the base triangle does not hold the centre of mass with a margin"
+    weight = mass * GRAVITY_M_S2
+    half_diagonal = 0.5 * math.sqrt(a * a + b * b + c * c)
+    kf, kt, max_force, max_torque = _hand(rng, weight, half_diagonal)
+
+    spots = {
+        "B1": ([b1[0], b1[1], -rho], "-z"),
+        "B2": ([b2[0], b2[1], -rho], "-z"),
+        "B3": ([b3[0], b3[1], -rho], "-z"),
+        "S1": ([s1[0], -rho, s1[1]], "-y"),
+        "S2": ([s2[0], -rho, s2[1]], "-y"),
+        "E1": ([-rho, e1[0], e1[1]], "-x"),
+    }
+    locators = []
+    for (name, (position, face)), mu_i in zip(spots.items(), mus, strict=True):
+        entry: dict[str, Any] = {"name": name, "position": position, "radius": rho, "friction": mu_i}
+        if soft:
+            entry["torsion"] = torsion
+        entry["face"] = face
+        locators.append(entry)
+    goal_c = [a / 2, b / 2, c / 2]
+    start_c = [a / 2 + dx, b / 2 + dy, c / 2]
+    params = {
+        "size_m": [a, b, c],
+        "density_kg_m3": density,
+        "mass_kg": mass,
+        "tip_radius_m": rho,
+        "friction": mu,
+        "friction_per_locator": varied,
+        "soft_fingers": soft,
+        "torsion_m": torsion,
+        "offset_m": [dx, dy],
+        "yaw_deg": yaw,
+        "force_per_weight": kf,
+        "torque_per_weight_lever": kt,
+    }
+    story = [
+        f"Goal: the box fills [0, {a:g}] x [0, {b:g}] x [0, {c:g}] m, unrotated; every locator touches a face there.",
+        f"Start: slid by ({dx * 1e3:g}, {dy * 1e3:g}) mm off S1, S2 and E1 and turned {yaw:g} deg about z,",
+        "resting flat on B1, B2, B3 (gap 0); their triangle holds the centre of mass at the goal and the start.",
+    ]
+    return _Draft(
+        dimension=3,
+        shape={"shape": "box", "size": [a, b, c]},
+        mass_kg=mass,
+        start={"position": start_c, "rpy_deg": [0.0, 0.0, yaw]},
+        goal={"position": goal_c, "rpy_deg": [0.0, 0.0, 0.0]},
+        locators=locators,
+        max_force_N=max_force,
+        max_torque_Nm=max_torque,
+        params=params,
+        resting=("B1", "B2", "B3"),
+        story=story,
+        check=_check_box,
+    )
+
+
+def _triangle_margin(p: np.ndarray, tri: np.ndarray) -> float:
+    """Signed distance from ``p`` to the nearest side of a triangle (positive inside) [m]."""
+    area2 = cross2(tri[1] - tri[0], tri[2] - tri[0])
+    if abs(area2) <= 1e-15:
+        return -math.inf
+    sign = 1.0 if area2 > 0 else -1.0
+    margins = []
+    for i in range(3):
+        u, v = tri[i], tri[(i + 1) % 3]
+        margins.append(sign * cross2(v - u, p - u) / float(np.linalg.norm(v - u)))
+    return min(margins)
+
+
+def _check_box(fixture: Fixture) -> str | None:
+    size = np.asarray(fixture.workpiece.shape.size)  # type: ignore[attr-defined]
+    half = size / 2.0
+    base = [fixture.locator(n) for n in ("B1", "B2", "B3")]
+    for loc in base:
+        p_body = fixture.start.point_body_from_world(loc.p_world)
+        if np.any(np.abs(p_body[:2]) > half[:2] - 0.05 * size[:2]):
+            return f"{loc.name} is not under the bottom face at the start (body point {p_body[:2]})"
+    tri = np.array([loc.p_world[:2] for loc in base])
+    need = 0.05 * float(min(size[0], size[1]))
+    for which, pose in (("goal", fixture.goal), ("start", fixture.start)):
+        margin = _triangle_margin(pose.p_world[:2], tri)
+        if margin < need:
+            return f"the centre of mass is {margin:.3g} m inside the base triangle at the {which} (need {need:.3g} m)"
+    return None
+
+
+# -- plate-2d ---------------------------------------------------------------------------------------
+
+
+def _turns_ok(vertices: list[tuple[float, float]], min_turn_deg: float = 5.0) -> bool:
+    """Counter-clockwise and convex, each vertex turning by at least ``min_turn_deg``."""
+    V = np.array(vertices)
+    E = np.roll(V, -1, axis=0) - V
+    F = np.roll(E, -1, axis=0)
+    cross = E[:, 0] * F[:, 1] - E[:, 1] * F[:, 0]
+    dot = np.einsum("ij,ij->i", E, F)
+    turns = np.degrees(np.arctan2(cross, dot))
+    return bool(np.all(turns >= min_turn_deg))
+
+
+def _draw_plate(rng: np.random.Generator) -> _Draft | str:
+    kind = ("rectangle", "trapezoid", "pentagon")[int(rng.integers(3))]
+    L = _log_uniform(rng, *EDGE_M, 4)
+    H = _log_uniform(rng, *EDGE_M, 4)
+    slants = [0.0, 0.0]
+    # Vertices in the plate frame: the bottom edge from (0, 0) to (L, 0), counter-clockwise, the
+    # left (side) edge last, from vertices[-1] down to (0, 0).
+    if kind == "rectangle":
+        vertices = [(0.0, 0.0), (L, 0.0), (L, H), (0.0, H)]
+    else:
+        slants = [_uniform(rng, *SLANT_DEG, 1), _uniform(rng, *SLANT_DEG, 1)]
+        hl, hr = (
+            (H, H) if kind == "trapezoid" else (_uniform(rng, 0.3 * H, 0.8 * H, 4), _uniform(rng, 0.3 * H, 0.8 * H, 4))
+        )
+        d_left = round(hl * math.tan(math.radians(slants[0])), 4)
+        d_right = round(hr * math.tan(math.radians(slants[1])), 4)
+        if kind == "trapezoid":
+            vertices = [(0.0, 0.0), (L, 0.0), (L - d_right, H), (d_left, H)]
+        else:
+            apex = _uniform(rng, 0.3 * L, 0.7 * L, 4)
+            vertices = [(0.0, 0.0), (L, 0.0), (L - d_right, hr), (apex, H), (d_left, hl)]
+        if not _turns_ok(vertices):
+            return f"the {kind} is not convex with every corner turning at least 5 deg"
+    polygon = Polygon(tuple(vertices))
+    area = polygon.area
+    cx = float(polygon.com_body[0])
+    thickness = _uniform(rng, *PLATE_THICKNESS_M, 4)
+    density = round(_log_uniform(rng, *DENSITY_KG_M3, 0))
+    mass = _sig(area * thickness * density, 4)
+    rho = _uniform(rng, *TIP_RADIUS_M, 4)
+    mu, varied, mus = _frictions(rng, 3)
+    shift = _uniform(rng, OFFSET_M[0], _offset_cap(L), 4)
+    # Base locators on either side of the centre of mass, on the part of the bottom edge that
+    # stays under the part when it has slid by `shift`.
+    lo1, hi1 = max(0.1 * L, 0.05 * L + shift), cx - 0.08 * L
+    lo2, hi2 = cx + 0.08 * L, 0.9 * L
+    if lo1 >= hi1 or lo2 >= hi2:
+        return f"no room for the base locators (centre of mass at x = {cx:.4g} m on a {L:g} m bottom edge)"
+    x1 = _uniform(rng, lo1, hi1, 4)
+    x2 = _uniform(rng, lo2, hi2, 4)
+    t_side = _uniform(rng, 0.25, 0.75, 3)
+    pivot = "B1" if rng.random() < 0.5 else "B2"
+    tilt = _uniform(rng, *TILT_DEG, 2)
+    angle = tilt if pivot == "B1" else -tilt  # B1: right end up; B2: left end up
+    xs, ys = vertices[-1]
+    side_len = math.hypot(xs, ys)
+    n_out = (-ys / side_len, xs / side_len)  # outward normal of the edge vertices[-1] -> (0, 0)
+    side = [t_side * xs + rho * n_out[0], t_side * ys + rho * n_out[1]]
+    xmin, xmax = min(v[0] for v in vertices), max(v[0] for v in vertices)
+    half_diagonal = 0.5 * math.hypot(xmax - xmin, max(v[1] for v in vertices))
+    kf, kt, max_force, max_torque = _hand(rng, mass * GRAVITY_M_S2, half_diagonal)
+
+    # The start: the pivot's tip touches the bottom edge at plate-frame (x_pivot - shift, -rho).
+    x_pivot = x1 if pivot == "B1" else x2
+    R = rot2(math.radians(angle))
+    tip = np.array([x_pivot, -rho])
+    p_plate = tip - R @ np.array([x_pivot - shift, -rho])
+    origin_in_plate = np.array([L / 2, H / 2]) if kind == "rectangle" else np.zeros(2)
+    p_start = p_plate + R @ origin_in_plate
+    faces = ("-y", "-y", "-x") if kind == "rectangle" else (None, None, None)
+    spots = {"B1": [x1, -rho], "B2": [x2, -rho], "S": side}
+    locators = []
+    for (name, position), mu_i, face in zip(spots.items(), mus, faces, strict=True):
+        entry: dict[str, Any] = {"name": name, "position": position, "radius": rho, "friction": mu_i}
+        if face is not None:
+            entry["face"] = face
+        locators.append(entry)
+    if kind == "rectangle":
+        shape: dict[str, Any] = {"shape": "rectangle", "size": [L, H]}
+        goal_p = [L / 2, H / 2]
+    else:
+        shape = {"shape": "polygon", "vertices": [list(v) for v in vertices]}
+        goal_p = [0.0, 0.0]
+    other = "B2" if pivot == "B1" else "B1"
+    params = {
+        "kind": kind,
+        "width_m": L,
+        "height_m": H,
+        "slant_deg": slants,
+        "thickness_m": thickness,
+        "density_kg_m3": density,
+        "mass_kg": mass,
+        "tip_radius_m": rho,
+        "friction": mu,
+        "friction_per_locator": varied,
+        "side_fraction": t_side,
+        "pivot": pivot,
+        "offset_m": shift,
+        "tilt_deg": angle,
+        "force_per_weight": kf,
+        "torque_per_weight_lever": kt,
+    }
+    turn = "counter-clockwise" if angle >= 0 else "clockwise"
+    story = [
+        f"Goal: the bottom edge on y = 0 from x = 0 to {L:g} m, unrotated; every locator touches there.",
+        f"Start: slid {shift * 1e3:g} mm along the bottom away from S and turned {abs(angle):g} deg {turn},",
+        f"resting on {pivot} alone (gap 0) with {other} below the part and S clear.",
+    ]
+    return _Draft(
+        dimension=2,
+        shape=shape,
+        mass_kg=mass,
+        start={"position": [float(x) for x in p_start], "angle_deg": angle},
+        goal={"position": goal_p, "angle_deg": 0.0},
+        locators=locators,
+        max_force_N=max_force,
+        max_torque_Nm=max_torque,
+        params=params,
+        resting=(pivot,),
+        story=story,
+        check=_check_plate,
+    )
+
+
+def _check_plate(fixture: Fixture) -> str | None:
+    com_x = float(fixture.goal.point_world_from_body(fixture.workpiece.com_body)[0])
+    x1, x2 = (float(fixture.locator(n).p_world[0]) for n in ("B1", "B2"))
+    if not x1 < com_x < x2:
+        return f"the centre of mass (x = {com_x:.4g} m) is not between B1 and B2 at the goal"
+    return None
+
+
+_DRAWS: dict[str, Callable[[np.random.Generator], _Draft | str]] = {"box-321": _draw_box, "plate-2d": _draw_plate}
+
+
+# -- checks and output ------------------------------------------------------------------------------
+
+
+def _check(fixture: Fixture, draft: _Draft) -> str | None:
+    """Why the loaded draft is not a valid generated fixture, or None."""
+    if not fixture.is_full:
+        return f"only {len(fixture.locators)} locators"
+    wp = fixture.workpiece
+    names = [loc.name for loc in fixture.locators]
+    goal_gaps = locator_gaps(wp, fixture.goal, fixture.locators)
+    if np.max(np.abs(goal_gaps)) > EXACT_M:
+        return f"a locator does not touch at the goal (gaps {goal_gaps})"
+    for name, gap in zip(names, locator_gaps(wp, fixture.start, fixture.locators), strict=True):
+        if gap < -EXACT_M:
+            return f"{name} penetrates the part at the start by {-gap:.3g} m"
+        if name in draft.resting and gap > EXACT_M:
+            return f"{name} should touch at the start but has a gap of {gap:.3g} m"
+        if name not in draft.resting and gap < CLEARANCE_M:
+            return f"{name} should be clear at the start but has a gap of {gap:.3g} m"
+    G = contact_set(fixture, "goal", names).G
+    rank = int(np.linalg.matrix_rank(G, tol=1e-9))
+    if rank < fixture.ndof:
+        return f"rank G = {rank} < {fixture.ndof} at the goal"
+    found = solve_goal(wp, fixture.locators, fixture.start)
+    dp, dang = found.pose.distance_to(fixture.goal)
+    if not found.converged or dp > 1e-7 or dang > 1e-7:
+        return f"the goal found from the start is not the given goal ({dp:.3g} m, {dang:.3g} rad away)"
+    return draft.check(fixture)
+
+
+def _value(x: Any) -> str:
+    """A TOML value: numbers with at most 12 significant digits (no binary noise such as 0.30000000000000004)."""
+    if isinstance(x, bool):
+        return "true" if x else "false"
+    if isinstance(x, int | np.integer):
+        return str(int(x))
+    if isinstance(x, float | np.floating):
+        v = float(f"{float(x):.12g}")
+        return repr(v + 0.0)  # + 0.0 turns -0.0 into 0.0
+    if isinstance(x, str):
+        return '"' + x.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(x, list | tuple | np.ndarray):
+        return "[" + ", ".join(_value(v) for v in x) + "]"
+    if isinstance(x, dict):
+        return "{ " + ", ".join(f"{k} = {_value(v)}" for k, v in x.items()) + " }"
+    raise TypeError(f"cannot write {type(x).__name__} as TOML")
+
+
+def _render(name: str, draft: _Draft) -> str:
+    gravity = [0.0, 0.0, -GRAVITY_M_S2] if draft.dimension == 3 else [0.0, -GRAVITY_M_S2]
+    lines = [
+        "format = 1",
+        "",
+        "[scene]",
+        f"name = {_value(name)}",
+        f"dimension = {draft.dimension}",
+        f"gravity = {_value(gravity)}",
+        "",
+        "[workpiece]",
+        *(f"{k} = {_value(v)}" for k, v in draft.shape.items()),
+        f"mass = {_value(draft.mass_kg)}",
+        f"start = {_value(draft.start)}",
+        f"goal = {_value(draft.goal)}",
+    ]
+    for loc in draft.locators:
+        lines += ["", "[[locator]]", *(f"{k} = {_value(v)}" for k, v in loc.items())]
+    lines += [
+        "",
+        "[manipulator]",
+        f"max_force = {_value(draft.max_force_N)}",
+        f"max_torque = {_value(draft.max_torque_Nm)}",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def _header(name: str, family: str, seed: int, index: int, draw: int, draft: _Draft, fixture: Fixture) -> str:
+    gaps = locator_gaps(fixture.workpiece, fixture.start, fixture.locators)
+    gap_text = ", ".join(f"{loc.name} {g * 1e3:.3f}" for loc, g in zip(fixture.locators, gaps, strict=True))
+    weight = draft.mass_kg * GRAVITY_M_S2
+    lines = [
+        f"{name}: generated by `fixplan generate {family} --seed {seed}` (fixture index {index}).",
+        f"Family {family}: {FAMILIES[family]}.",
+        f"Drawn from numpy.random.default_rng([{seed}, {index}]), draw {draw} "
+        f"({draw - 1} earlier draws failed a check and were replaced).",
+        *draft.story,
+        f"Start gaps [mm]: {gap_text}.",
+        f"Weight m g = {weight:.4g} N; hand limits {draft.max_force_N:.4g} N, {draft.max_torque_Nm:.4g} N m.",
+        "Drawn parameters:",
+        *(f"  {k} = {_value(v)}" for k, v in draft.params.items()),
+    ]
+    return "".join(f"# {line}\n" for line in lines)
