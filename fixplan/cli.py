@@ -174,7 +174,8 @@ def _classify_table(fixture, results, names) -> None:
     table.add_column("margin", justify="right")
     table.add_column("decided by")
     for i, r in enumerate(results, 1):
-        table.add_row(str(i), ",".join(f"{x:g}" for x in r.wrench), r.mode, f"{r.margin:.3g}", r.certificate)
+        margin = f"{r.margin:.3g}" if math.isfinite(r.margin) else "-"
+        table.add_row(str(i), ",".join(f"{x:g}" for x in r.wrench), r.mode, margin, r.certificate)
     Console().print(table)
 
 
@@ -267,12 +268,14 @@ def search(
     min_margin: Annotated[
         float | None,
         typer.Option(
-            "--min-margin", help="Least normal force for --objective effort [N] (default: the part's weight)."
+            "--min-margin",
+            help="Target least normal force [N]: kept by --objective effort (default: the part's weight); "
+            "exit 1 when even the best margin falls short of it.",
         ),
     ] = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Find the non-jamming push for a desired motion (exit 1 when none exists)."""
+    """Find the non-jamming push for a desired motion (exit 1 when none exists or --min-margin is not met)."""
     from fixplan.jamming import search_wrench
 
     fixture = _load(file)
@@ -292,14 +295,13 @@ def search(
     else:
         if result.found and result.wrench is not None:
             typer.echo(f"wrench: {','.join(f'{x:.6g}' for x in result.wrench)}")
-            typer.echo(
-                f"margin: least normal force {result.margin_N:.4g} N; check: {result.check.mode if result.check else '-'}"
-            )
+            margin = "none (no kept contact)" if result.margin_N is None else f"{result.margin_N:.4g} N"
+            typer.echo(f"margin: least normal force {margin}; check: {result.check.mode if result.check else '-'}")
             typer.echo("contacts: " + ", ".join(f"{k} {v}" for k, v in result.contact_roles.items()))
             if result.binding:
                 typer.echo("binding limits: " + ", ".join(result.binding))
         typer.echo(result.reason)
-    if not result.found:
+    if not result.found or result.margin_target_met is False:
         raise typer.Exit(1)
 
 

@@ -47,6 +47,11 @@ FloatArray = NDArray[np.float64]
 MODES = ("held", "jammed", "separates", "slides", "pivots", "rolls", "indeterminate")
 
 
+def _finite_or_none(x: float) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
 @dataclass(frozen=True)
 class Classification:
     """What one wrench does: the mode, the margin, the contact forces and how it was decided."""
@@ -74,6 +79,7 @@ class Classification:
         return frame[:d].T @ lam[:d] if d == 2 else frame.T @ lam[:3]
 
     def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dictionary; an undefined number (NaN) is ``None``, never NaN or Infinity."""
         forces = {}
         for name, lam in self.contact_forces.items():
             entry: dict[str, Any] = {
@@ -87,12 +93,12 @@ class Classification:
         return {
             "wrench": [float(x) for x in self.wrench],
             "mode": self.mode,
-            "margin": float(self.margin),
+            "margin": _finite_or_none(self.margin),  # None: undefined (a program failed; see reason)
             "contact_forces": forces,
             "certificate": self.certificate,
             "reason": self.reason,
             "acceleration": None if self.acceleration is None else [float(x) for x in self.acceleration],
-            "residuals": {k: float(v) for k, v in self.residuals.items()},
+            "residuals": {k: _finite_or_none(v) for k, v in self.residuals.items()},
             "solve_time_s": float(self.solve_time_s),
         }
 
@@ -250,12 +256,19 @@ class Classifier:
                     **residuals,
                 )
             if not witness.sticking:
+                idle = (
+                    " ("
+                    + ", ".join(names[i] for i in witness.idle)
+                    + " on the motion's axis: kept with neither slip nor force)"
+                    if witness.idle
+                    else ""
+                )
                 return result(
                     "slides",
                     margin * scale,
                     witness.forces,
                     "sliding-witness",
-                    "every contact is kept and slides (Theorem 1)",
+                    "every contact is kept and slides (Theorem 1)" + idle,
                     accel,
                     **residuals,
                 )

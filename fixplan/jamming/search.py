@@ -13,8 +13,34 @@ With ``a = s â`` the dynamics ``M a = w + w_g + Σ J_iᵀ λ_i`` is linear in t
 ``(w, f_n, λ_stick, s)``, and the manipulator limits ``‖F‖ ≤ F_max``, ``‖T‖ ≤ T_max`` are
 second-order cones. The program maximises the least normal force ``τ`` over the kept contacts
 (the margin against losing a contact) subject to ``s ≥ 1`` (at least the requested
-acceleration). The wrench found is then checked with the static-balance program: it must not
-be balanced (else it would jam instead of moving).
+acceleration).
+
+**Not jamming is a constraint of the program, not only a check afterwards.** The sliding
+solution above is one motion consistent with Coulomb's law, but the same wrench can also be
+balanced by contact forces in the cones whose tangential parts do not oppose the slip (rigid
+bodies with friction have non-unique solutions: the body may stay wedged). Example: sliding the
+located 3-2-1 box along +x on its base and side locators, base friction tilted towards the side
+wall presses the side locators, whose friction tilted downwards presses the base — a wedge that
+holds a little more than ``μ Σ N``. Maximising ``τ`` presses every contact as hard as the limits
+allow while the drive ``M a`` stays fixed, so the best-margin wrench ends up exactly balanced:
+``jammed``. The classifier (which reports ``jammed`` whenever static balance is possible) is right;
+the program must exclude such wrenches. By Farkas' lemma ``w_e`` is *not* balanced iff some
+motion ``y`` with ``J_i y ∈ K_i*`` at every contact (each contact separates at least ``μ`` times
+as fast as it slips) has ``yᵀ w_e > 0``, and then ``yᵀ w_e / ‖y‖_M`` is a lower bound on the
+classifier's margin ``min_f ‖w_e + Jᵀ f‖_{M⁻¹}``. The search takes ``ŷ`` = the ``M``-projection
+of ``â`` onto that cone of motions (an SOCP; ``ŷᵀ M â > 0`` unless every push producing ``â`` is
+provably balanced) and adds the second-order cone constraint
+``ŷᵀ w_e ≥ ρ ‖w_e‖_{M⁻¹}`` (``ρ = jam_margin_rel``, default 10⁻³, three orders above the
+classifier's ``balance_rel``): the wrench found is certified unbalanced, at least a relative
+distance ``ρ`` from every balanced wrench. ``ŷ`` is then improved once with the classifier's own
+dual direction for the wrench found (the previous optimum stays feasible, so ``τ`` cannot drop).
+
+The wrench found is classified twice: with every contact of the set (it must not be ``held`` or
+``jammed``) and with the kept contacts only (the verdict of the motion itself: ``slides`` when
+every kept contact slides, ``pivots`` or ``rolls`` when some or all stick; its acceleration must
+reach the requested one along ``â`` and open every opening contact). When every contact opens
+the push is ``M â − w_g`` (no contact force), checked against the limits; there is no kept
+contact, so there is no normal-force margin (``margin_N`` is ``None``).
 
 Without manipulator limits in the file the search bounds the wrench by ``F_max = 5 m |g|``
 (``5 m·9.81`` in zero gravity) and ``T_max = F_max ×`` the part's bounding radius, and says so.
@@ -22,7 +48,8 @@ Without manipulator limits in the file the search bounds the wrench by ``F_max =
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -42,35 +69,92 @@ if TYPE_CHECKING:
 
 FloatArray = NDArray[np.float64]
 
+JAM_MARGIN_REL = 1e-3  # default least relative distance of the wrench found from static balance
+_TARGET_REL = 1e-6  # a margin target counts as met within this relative shortfall (solver accuracy)
+_MOVING = ("slides", "pivots", "rolls")
+
+
+def floor_sig(x: float, digits: int = 4) -> str:
+    """``x`` rounded *down* to ``digits`` significant digits, for "≥ x" statements.
+
+    A relative slack of 1e-7 (well below the cone solver's accuracy) keeps ``0.99999999``
+    from printing as ``0.9999``; a value is never printed above what was achieved by more
+    than that.
+    """
+    if not math.isfinite(x):
+        return str(x)
+    if x == 0.0:
+        return "0"
+    v = x * (1 + 1e-7) if x > 0 else x * (1 - 1e-7)
+    e = math.floor(math.log10(abs(v))) - digits + 1
+    q = math.floor(v / 10.0**e) * 10.0**e
+    return f"{q:.{digits}g}"
+
+
+def _short_of(value: float, target: float) -> str:
+    """``value`` (below ``target``) to 4 significant digits, with more if rounding would reach ``target``."""
+    text = f"{value:.4g}"
+    digits = 4
+    while float(text) >= target and digits < 12:
+        text = floor_sig(value, digits)
+        digits += 1
+    return text
+
+
+def _finite_or_none(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
 
 @dataclass(frozen=True)
 class WrenchSearch:
-    """The result of :func:`search_wrench`."""
+    """The result of :func:`search_wrench`.
+
+    ``found`` means a push exists that produces the motion without jamming; a margin target
+    that is not met leaves ``found`` true but sets ``margin_target_met`` to ``False`` (and says
+    so in ``reason``).
+    """
 
     found: bool
     wrench: FloatArray | None  # applied, about the body origin (or ``at``), world axes
-    margin_N: float  # least normal force over the kept contacts [N]
+    margin_N: float | None  # least normal force over the kept contacts [N]; None: no kept contact
     acceleration: FloatArray | None  # achieved centre-of-mass twist rate (s · â)
     contact_roles: dict[str, str]  # name → "sliding" | "sticking" | "opening"
     contact_forces: dict[str, FloatArray]
-    check: Classification | None  # static-balance check of the wrench found
+    check: Classification | None  # the motion's verdict: the wrench classified on the kept contacts
     reason: str
     binding: list[str] = field(default_factory=list)  # active limits at the optimum
     limits: tuple[float, float] = (float("inf"), float("inf"))
+    balance_check: Classification | None = None  # the wrench classified on every contact of the set
+    margin_target_N: float | None = None  # the margin asked for (min_margin_N), if any
+    margin_target_met: bool | None = None  # None when no target was asked for
+    jam_margin_rel: float | None = None  # balance_check's margin / ‖w_e‖_{M⁻¹} (relative distance from balance)
+    confirmed: bool = False  # the classifier's motion is the requested one (kind, acceleration ≥ asked)
 
     def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dictionary; undefined numbers are ``None`` (never NaN or Infinity)."""
+        check, bal = self.check, self.balance_check
         return {
             "found": self.found,
             "wrench": None if self.wrench is None else [float(x) for x in self.wrench],
-            "margin": float(self.margin_N),
+            "margin": _finite_or_none(self.margin_N),
+            "margin_note": None if self.margin_N is not None else "no kept contact: no normal-force margin",
+            "margin_target": _finite_or_none(self.margin_target_N),
+            "margin_target_met": self.margin_target_met,
             "acceleration": None if self.acceleration is None else [float(x) for x in self.acceleration],
             "contact_roles": dict(self.contact_roles),
             "contact_forces": {k: [float(x) for x in v] for k, v in self.contact_forces.items()},
-            "check_mode": None if self.check is None else self.check.mode,
-            "check_margin": None if self.check is None else float(self.check.margin),
+            "check_mode": None if check is None else check.mode,
+            "check_margin": None if check is None else _finite_or_none(check.margin),
+            "check_acceleration": None
+            if check is None or check.acceleration is None
+            else [float(x) for x in check.acceleration],
+            "balance_check_mode": None if bal is None else bal.mode,
+            "balance_check_margin": None if bal is None else _finite_or_none(bal.margin),
+            "jam_margin_rel": _finite_or_none(self.jam_margin_rel),
+            "confirmed": self.confirmed,
             "reason": self.reason,
             "binding": list(self.binding),
-            "limits": {"max_force": self.limits[0], "max_torque": self.limits[1]},
+            "limits": {"max_force": _finite_or_none(self.limits[0]), "max_torque": _finite_or_none(self.limits[1])},
         }
 
 
@@ -103,6 +187,76 @@ def _roles(cs: ContactSet, a_hat: FloatArray, tol: float) -> dict[str, str]:
     return roles
 
 
+def _polar_rows(cs: ContactSet) -> tuple[FloatArray, tuple[tuple[str, int], ...]]:
+    """``(Q, cones)`` with ``Q y ∈ cones`` ⇔ ``J_i y ∈ K_i*`` at every contact.
+
+    The balanced wrenches are ``{−Jᵀ S f : R f ∈ K}`` (:func:`force_layout`: ``R`` = its
+    ``cone_rows``, square and invertible per contact). ``yᵀ(Jᵀ S f) ≥ 0`` for every such ``f``
+    ⇔ ``Sᵀ J y ∈ Rᵀ K`` (the cones are self-dual) ⇔ ``Q y = R⁻ᵀ Sᵀ J y ∈ K``.
+    """
+    lay = force_layout(cs)
+    Q = np.linalg.solve(lay.cone_rows.T, lay.S.T @ cs.J)
+    return Q, lay.cones
+
+
+def _certificate(cs: ContactSet, target: FloatArray, *, project: bool) -> FloatArray | None:
+    """A unit (``‖ŷ‖_M = 1``) motion ``ŷ`` with ``J_i ŷ ∈ K_i*`` at every contact, or None.
+
+    ``project=True``: the ``M``-projection of the acceleration ``target`` onto that cone.
+    ``project=False``: the direction maximising ``ŷᵀ target`` for the wrench ``target`` (the
+    dual of the classifier's margin program: its optimum *is* the margin).
+    """
+    n = cs.ndof
+    L = np.linalg.cholesky(cs.mass_matrix)
+    Q, cones = _polar_rows(cs)
+    nx = n + 1
+    A_soc = np.zeros((n + 1, nx))
+    b_soc = np.zeros(n + 1)
+    c = np.zeros(nx)
+    if project:  # min t  s.t. ‖Lᵀ(y − â)‖ ≤ t
+        A_soc[0, n] = -1.0
+        A_soc[1:, :n] = -L.T
+        b_soc[1:] = -L.T @ target
+        c[n] = 1.0
+    else:  # max yᵀ w  s.t. ‖Lᵀ y‖ ≤ 1 (the last variable is unused: fixed at 0)
+        A_soc[1:, :n] = -L.T
+        b_soc[0] = 1.0
+        c[:n] = -target
+    A_p = np.zeros((Q.shape[0], nx))
+    A_p[:, :n] = -Q
+    A_fix = np.zeros((1, nx))
+    A_fix[0, n] = 1.0
+    parts_A, parts_b, parts_c = [A_soc, A_p], [b_soc, np.zeros(Q.shape[0])], [("soc", n + 1), *cones]
+    if not project:
+        parts_A.insert(0, A_fix)
+        parts_b.insert(0, np.zeros(1))
+        parts_c.insert(0, ("zero", 1))
+    prog = ConeProgram(c, np.vstack(parts_A), np.concatenate(parts_b), tuple(parts_c), "jam-certificate", 0)
+    sol = ClarabelProgram(prog).solve(prog.b)
+    if not sol.solved:
+        return None
+    y = sol.x[:n]
+    size = float(np.linalg.norm(L.T @ y))
+    ref = float(np.linalg.norm(L.T @ target)) if project else float(np.linalg.norm(np.linalg.solve(L, target)))
+    if size <= 1e-9 * max(ref, 1e-300) or (not project and float(y @ target) <= 0.0):
+        return None
+    return y / size
+
+
+def _limits(fixture: Fixture) -> tuple[float, float, str]:
+    wp = fixture.workpiece
+    g = float(np.linalg.norm(fixture.gravity)) or 9.81
+    F_max, T_max = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
+    notes = ""
+    if not np.isfinite(F_max):
+        F_max = 5.0 * wp.mass_kg * g
+        notes += f" (no manipulator.max_force: bounded at 5 m|g| = {F_max:.4g} N)"
+    if not np.isfinite(T_max):
+        T_max = F_max * wp.shape.bounding_radius
+        notes += f" (no manipulator.max_torque: bounded at {T_max:.4g} N·m)"
+    return F_max, T_max, notes
+
+
 def search_wrench(
     fixture: Fixture,
     motion: ArrayLike,
@@ -112,8 +266,11 @@ def search_wrench(
     at: ArrayLike | None = None,
     objective: str = "margin",
     min_margin_N: float | None = None,
+    jam_margin_rel: float = JAM_MARGIN_REL,
+    friction_margin: float = 0.0,
+    max_accel_factor: float = math.inf,
 ) -> WrenchSearch:
-    """The applied wrench that moves the part with acceleration ≥ ``motion``.
+    """The applied wrench that moves the part with acceleration ≥ ``motion``, without jamming.
 
     ``motion`` is the desired acceleration of the body-frame origin (or of ``at``) as a twist
     rate in world axes: ``ax,ay,az,αx,αy,αz`` (2D ``ax,ay,α``) [m/s², rad/s²].
@@ -124,12 +281,33 @@ def search_wrench(
     keeps every kept contact pressed by at least ``min(min_margin_N, τ*)`` (default
     ``min_margin_N = m |g|``, the part's weight): a push an operator or a compliant robot can follow
     without the large forces that turn small tracking errors into large disturbances.
+
+    ``min_margin_N`` given explicitly is a *target*: when τ* falls short of it the best push is
+    still returned (``found`` true) but ``margin_target_met`` is ``False`` and the reason says
+    "margin target … N not met: best … N". Every wrench returned is certified at least
+    ``jam_margin_rel`` (relative, in the ``M⁻¹``-norm) away from static balance (see the module
+    docstring). When the motion opens every contact the push is ``M â − w_g``.
+
+    ``friction_margin = δ ≥ 0`` makes the push robust to friction known only within a factor
+    ``1 ± δ``: the program gives sliding contacts ``μ(1 + δ)`` (the push overcomes the worst
+    friction with at least the requested acceleration) and sticking contacts the cone
+    ``μ / (1 + δ)`` (they stick even with the least friction). The checks use the nominal μ.
+    ``max_accel_factor`` bounds the acceleration along ``motion`` at that many times the
+    requested one (a feedback controller asks for *this* acceleration, not at least it).
     """
     m = np.asarray(motion, dtype=float)
     if m.shape != (fixture.ndof,) or not np.all(np.isfinite(m)):
         raise InputError(f"--motion expects {fixture.ndof} finite numbers, got {list(np.atleast_1d(m))}")
     if float(np.linalg.norm(m)) == 0.0:
         raise InputError("--motion is zero (expected the desired acceleration of the part)")
+    if objective not in ("margin", "effort"):
+        raise InputError(f"unknown search objective {objective!r} (expected 'margin' or 'effort')")
+    if min_margin_N is not None and not (math.isfinite(min_margin_N) and min_margin_N >= 0.0):
+        raise InputError(f"min_margin_N must be a non-negative number of newtons, got {min_margin_N}")
+    if not (math.isfinite(friction_margin) and friction_margin >= 0.0):
+        raise InputError(f"friction_margin must be a finite number ≥ 0, got {friction_margin}")
+    if not (0.0 < jam_margin_rel < 1.0):
+        raise InputError(f"jam_margin_rel must lie in (0, 1), got {jam_margin_rel}")
     cs = contact_set(fixture, pose, contacts)
     if len(cs) == 0:
         raise InputError("no contacts to analyse (the workpiece touches no locator here; name contacts explicitly)")
@@ -138,69 +316,206 @@ def search_wrench(
     roles = _roles(cs, a_hat, 1e-9)
     wp = fixture.workpiece
     g = float(np.linalg.norm(fixture.gravity)) or 9.81
-    F_max, T_max = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
-    notes = ""
-    if not np.isfinite(F_max):
-        F_max = 5.0 * wp.mass_kg * g
-        notes += f" (no manipulator.max_force: bounded at 5 m|g| = {F_max:.3g} N)"
-    if not np.isfinite(T_max):
-        T_max = F_max * wp.shape.bounding_radius
-        notes += f" (no manipulator.max_torque: bounded at {T_max:.3g} N·m)"
+    F_max, T_max, notes = _limits(fixture)
+    w_g = fixture.gravity_wrench()
+    target = None if min_margin_N is None else float(min_margin_N)
+    clf_all = Classifier(cs, w_g, tolerances=fixture.tolerances)
+    kept = [i for i, c in enumerate(cs.contacts) if roles[c.name] != "opening"]
+    if not kept:
+        return _free_push(cs, clf_all, a_hat, roles, about, w_g, F_max, T_max, notes, target)
 
-    prog, meta = _build(cs, a_hat, roles, fixture.gravity_wrench(), about, F_max, T_max)
+    def not_found(reason: str, binding: list[str] | None = None) -> WrenchSearch:
+        return WrenchSearch(
+            False, None, None, None, roles, {}, None, reason, binding or [], (F_max, T_max), margin_target_N=target
+        )
+
+    y = _certificate(cs, a_hat, project=True)
+    if y is None or float(y @ cs.mass_matrix @ a_hat) <= 0.0:
+        return not_found(
+            "every push that produces this motion can also be balanced by the contact forces (M a is a contact"
+            " reaction): it jams"
+        )
+    cs_design = _robust_friction(cs, roles, friction_margin) if friction_margin > 0 else cs
+    if not max_accel_factor >= 1.0:
+        raise InputError(f"max_accel_factor must be ≥ 1, got {max_accel_factor}")
+    build = dict(
+        cs=cs_design, a_hat=a_hat, roles=roles, w_g=w_g, about=about, jam=jam_margin_rel, s_max=max_accel_factor
+    )
+    prog, meta = _build(**build, cert=y, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
     sol = ClarabelProgram(prog).solve(prog.b)
     n = cs.ndof
     if not sol.solved or -sol.value <= 1e-9 * F_max:
         # Diagnose: is it the limits, or the motion itself?
-        prog_free, _ = _build(cs, a_hat, roles, fixture.gravity_wrench(), about, 1e3 * F_max, 1e3 * T_max)
+        prog_free, _ = _build(**build, cert=y, F_max=1e3 * F_max, T_max=1e3 * T_max)  # type: ignore[arg-type]
         free = ClarabelProgram(prog_free).solve(prog_free.b)
         if free.solved and -free.value > 1e-9 * F_max:
-            w_free = free.x[:n]
-            F_need = float(np.linalg.norm(w_free[: cs.dimension]))
-            reason = f"the manipulator is too weak: this motion needs more than max_force {F_max:.3g} N or max_torque {T_max:.3g} N·m (unbounded search used ‖F‖ = {F_need:.3g} N){notes}"
-            binding = ["max_force", "max_torque"]
-        else:
-            reason = (
-                "no wrench moves the part this way while keeping the contacts (every such push jams or opens a contact)"
+            F_need = float(np.linalg.norm(free.x[: cs.dimension]))
+            return not_found(
+                f"the manipulator is too weak: this motion needs more than max_force {F_max:.4g} N or max_torque"
+                f" {T_max:.4g} N·m (unbounded search used ‖F‖ = {F_need:.4g} N){notes}",
+                ["max_force", "max_torque"],
             )
-            binding = []
-        return WrenchSearch(False, None, 0.0, None, roles, {}, None, reason, binding, (F_max, T_max))
-
-    x = sol.x
-    tau = float(-sol.value)
-    if objective == "effort":
-        tau_req = min(wp.mass_kg * g if min_margin_N is None else float(min_margin_N), tau)
-        prog_e, meta_e = _build(
-            cs, a_hat, roles, fixture.gravity_wrench(), about, F_max, T_max, effort_margin_N=tau_req * (1 - 1e-6)
+        return not_found(
+            "no wrench moves the part this way while keeping the contacts pressed and clear of jamming"
+            " (every such push jams or opens a contact)"
         )
+    x, tau = sol.x, float(-sol.value)
+    # a better certificate: the classifier's own dual direction for the wrench found (the
+    # optimum above stays feasible with it, so τ cannot drop)
+    y2 = _certificate(cs, x[:n] + w_g, project=False)
+    if y2 is not None:
+        prog2, meta2 = _build(**build, cert=y2, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
+        sol2 = ClarabelProgram(prog2).solve(prog2.b)
+        if sol2.solved and -sol2.value >= tau:
+            x, tau, meta, y = sol2.x, float(-sol2.value), meta2, y2
+    tau_best = tau
+    if objective == "effort":
+        wanted = wp.mass_kg * g if target is None else target
+        tau_req = wanted if wanted < tau * (1 - _TARGET_REL) else tau * (1 - _TARGET_REL)
+        prog_e, meta_e = _build(**build, cert=y, F_max=F_max, T_max=T_max, effort_margin_N=tau_req)  # type: ignore[arg-type]
         sol_e = ClarabelProgram(prog_e).solve(prog_e.b)
         if sol_e.solved:
             x, meta = sol_e.x, meta_e
             tau = float(x[meta["tau"]])
         else:
             notes += " (the least-effort program did not solve: the best-margin push is returned)"
-    elif objective != "margin":
-        raise InputError(f"unknown search objective {objective!r} (expected 'margin' or 'effort')")
+        if target is None and wanted > tau_best * (1 + _TARGET_REL):
+            notes += f" (default margin m|g| = {wanted:.4g} N not reachable: best {floor_sig(tau_best)} N used)"
     w_com = x[:n]
     s = float(x[meta["s"]])
     lam = meta["expand"](x)
     forces = {c.name: lam[o : o + c.size] for c, o in zip(cs.contacts, cs.offsets, strict=True)}
-    # the applied wrench about the user's point
-    w_user = _about_point(cs, w_com, about)
+    w_user = _about_point(cs, w_com, about)  # the applied wrench about the user's point
     binding = []
     if abs(float(np.linalg.norm(w_com[: cs.dimension])) - F_max) <= 1e-6 * F_max:
         binding.append("max_force")
     if abs(float(np.linalg.norm(w_user[cs.dimension :])) - T_max) <= 1e-6 * T_max:
         binding.append("max_torque")
-    clf = Classifier(cs, fixture.gravity_wrench(), tolerances=fixture.tolerances)
-    check = clf.classify(w_com, w_user)
-    ok = not check.balanced
-    reason = (
-        f"moves as asked with every kept contact pressed by ≥ {tau:.3g} N{notes}"
-        if ok
-        else f"the wrench found is statically balanced ({check.mode}): it would not move the part"
+
+    bal = clf_all.classify(w_com, w_user)
+    w_e_norm = clf_all.builder.m_inv_norm(w_com + w_g)
+    jam_rel = bal.margin / w_e_norm if w_e_norm > 0 and math.isfinite(bal.margin) else None
+    if len(kept) == len(cs):
+        check = bal
+    else:
+        kept_cs = ContactSet(tuple(cs.contacts[i] for i in kept), cs.com_world, cs.mass_matrix, cs.body_origin_world)
+        check = Classifier(kept_cs, w_g, tolerances=fixture.tolerances).classify(w_com, w_user)
+    confirmed, why_not = _confirm(cs, check, a_hat, roles)
+    met = None if target is None else bool(tau_best >= target * (1 - _TARGET_REL))
+    if bal.balanced:
+        reason = f"the wrench found is statically balanced ({bal.mode}): it would not move the part"
+    else:
+        reason = f"moves as asked with every kept contact pressed by ≥ {floor_sig(tau)} N{notes}"
+        if met is False:
+            reason = f"margin target {target:.4g} N not met: best {_short_of(tau_best, target)} N; " + reason
+        if not confirmed:
+            reason += f" (not confirmed by the classifier: {why_not})"
+    return WrenchSearch(
+        not bal.balanced,
+        w_user,
+        tau,
+        s * a_hat,
+        roles,
+        forces,
+        check,
+        reason,
+        binding,
+        (F_max, T_max),
+        balance_check=bal,
+        margin_target_N=target,
+        margin_target_met=met,
+        jam_margin_rel=jam_rel,
+        confirmed=confirmed and not bal.balanced,
     )
-    return WrenchSearch(ok, w_user, tau, s * a_hat, roles, forces, check, reason, binding, (F_max, T_max))
+
+
+def _confirm(cs: ContactSet, check: Classification, a_hat: FloatArray, roles: dict[str, str]) -> tuple[bool, str]:
+    """Check the classifier's motion against the request: kind, acceleration ≥ â along â, openings."""
+    kept_roles = [r for r in roles.values() if r != "opening"]
+    if all(r == "sliding" for r in kept_roles):
+        expected = "slides"
+    elif all(r == "sticking" for r in kept_roles):
+        expected = "rolls"
+    else:
+        expected = "pivots"
+    if check.mode not in _MOVING or check.acceleration is None:
+        return False, f"it says {check.mode} where {expected} was expected"
+    a = np.asarray(check.acceleration, dtype=float)
+    M = cs.mass_matrix
+    ref = float(a_hat @ M @ a_hat)
+    along = float(a @ M @ a_hat) / ref
+    off_axis = a - along * a_hat
+    if along < 1 - 1e-6:
+        return False, f"its acceleration is {along:.4g} × the requested one"
+    if float(off_axis @ M @ off_axis) > (1e-4) ** 2 * float(a @ M @ a):
+        return False, "its acceleration points elsewhere than the requested motion"
+    for c, off in zip(cs.contacts, cs.offsets, strict=True):
+        if roles[c.name] == "opening" and float(cs.J[off] @ a) <= 0.0:
+            return False, f"{c.name} does not open under its motion"
+    return True, ""
+
+
+def _free_push(
+    cs: ContactSet,
+    clf: Classifier,
+    a_hat: FloatArray,
+    roles: dict[str, str],
+    about: FloatArray,
+    w_g: FloatArray,
+    F_max: float,
+    T_max: float,
+    notes: str,
+    target: float | None,
+) -> WrenchSearch:
+    """Every contact opens: no contact force, the push is ``w = M â − w_g`` (checked, not optimised)."""
+    d = cs.dimension
+    w_com = cs.mass_matrix @ a_hat - w_g
+    w_user = _about_point(cs, w_com, about)
+    F = float(np.linalg.norm(w_com[:d]))
+    T = float(np.linalg.norm(w_user[d:]))
+    limits = (F_max, T_max)
+    forces = {c.name: np.zeros(c.size) for c in cs.contacts}
+    met = None if target is None else True  # no kept contact: the least normal force is vacuous
+    if F > F_max * (1 + 1e-9) or T > T_max * (1 + 1e-9):
+        binding = [k for k, over in (("max_force", F > F_max), ("max_torque", T > T_max)) if over]
+        reason = (
+            f"the manipulator is too weak: every contact opens, so the push is M a − w_g with ‖F‖ = {F:.4g} N,"
+            f" ‖T‖ = {T:.4g} N·m (max_force {F_max:.4g} N, max_torque {T_max:.4g} N·m){notes}"
+        )
+        return WrenchSearch(False, None, None, None, roles, {}, None, reason, binding, limits, margin_target_N=target)
+    bal = clf.classify(w_com, w_user)
+    w_e_norm = clf.builder.m_inv_norm(w_com + w_g)
+    jam_rel = bal.margin / w_e_norm if w_e_norm > 0 and math.isfinite(bal.margin) else None
+    if bal.balanced:
+        reason = f"every contact opens, but M a − w_g is statically balanced ({bal.mode}): it would not move the part"
+    else:
+        reason = f"every contact opens: free motion, the push is M a − w_g, ‖F‖ = {F:.4g} N, ‖T‖ = {T:.4g} N·m{notes}"
+    return WrenchSearch(
+        not bal.balanced,
+        w_user,
+        None,
+        a_hat.copy(),
+        roles,
+        forces,
+        bal,
+        reason,
+        [],
+        limits,
+        balance_check=bal,
+        margin_target_N=target,
+        margin_target_met=met,
+        jam_margin_rel=jam_rel,
+        confirmed=not bal.balanced,
+    )
+
+
+def _robust_friction(cs: ContactSet, roles: dict[str, str], delta: float) -> ContactSet:
+    """The contact set with friction ``μ(1 + δ)`` on sliding contacts and ``μ / (1 + δ)`` on the others."""
+    contacts = tuple(
+        replace(c, friction=c.friction * ((1.0 + delta) if roles[c.name] == "sliding" else 1.0 / (1.0 + delta)))
+        for c in cs.contacts
+    )
+    return ContactSet(contacts, cs.com_world, cs.mass_matrix, cs.body_origin_world)
 
 
 def _about_point(cs: ContactSet, w_com: FloatArray, point: FloatArray) -> FloatArray:
@@ -221,11 +536,17 @@ def _build(
     F_max: float,
     T_max: float,
     effort_margin_N: float | None = None,
+    *,
+    cert: FloatArray,
+    jam: float,
+    s_max: float = math.inf,
 ) -> tuple[ConeProgram, dict]:
     """Variables x = (w [n], f_n sliding [ks], f sticking [reduced], s, τ[, e]).
 
     Without ``effort_margin_N`` the program maximises τ. With it, it minimises the effort
-    ``e ≥ ‖(F, T_c / L)‖`` subject to ``τ ≥ effort_margin_N``.
+    ``e ≥ ‖(F, T_c / L)‖`` subject to ``τ ≥ effort_margin_N``. Both keep the total wrench
+    ``w_e = w + w_g`` a relative distance ``jam`` from static balance, certified by the motion
+    ``cert`` (``ŷ``, ``‖ŷ‖_M = 1``, ``J_i ŷ ∈ K_i*``): ``ŷᵀ w_e ≥ jam ‖w_e‖_{M⁻¹}``.
     """
     n, d = cs.ndof, cs.dimension
     slide = [i for i, c in enumerate(cs.contacts) if roles[c.name] == "sliding"]
@@ -277,6 +598,10 @@ def _build(
     e = np.zeros(nx)
     e[i_s] = -1.0
     lin.append((e, -1.0))  # b − A x = s − 1 ≥ 0
+    if math.isfinite(s_max):
+        e = np.zeros(nx)
+        e[i_s] = 1.0
+        lin.append((e, s_max))  # s_max − s ≥ 0: no more than s_max times the requested acceleration
     for k in range(ks):
         e = np.zeros(nx)
         e[i_fn + k] = -1.0
@@ -325,6 +650,14 @@ def _build(
         rows_A.append(np.vstack([row, -row]))
         rows_b.append(np.array([T_max, T_max]))
         cones.append(("nonneg", 2))
+    # not jamming: (ŷᵀ w_e / jam, C w_e) ∈ SOC, C = L⁻¹ (‖C x‖ = ‖x‖_{M⁻¹})
+    C = np.linalg.inv(np.linalg.cholesky(cs.mass_matrix))
+    A_j = np.zeros((n + 1, nx))
+    A_j[0, i_w : i_w + n] = -cert / jam
+    A_j[1:, i_w : i_w + n] = -C
+    rows_A.append(A_j)
+    rows_b.append(np.concatenate([[float(cert @ w_g) / jam], C @ w_g]))
+    cones.append(("soc", n + 1))
     c_vec = np.zeros(nx)
     if effort:
         # e ≥ ‖(F, T_c / L)‖ with the moment about the centre of mass (w is about the com)

@@ -20,7 +20,12 @@ square; Newton's method with its analytic Jacobian solves it (compiled kernels i
 
 A root is accepted only if every normal force is ≥ 0, every sticking force lies in its cone,
 every sliding contact really slips, every open contact really opens, and the dynamics residual
-is below tolerance.
+is below tolerance. One exception: a "sliding" contact that neither slips nor carries force is
+*idle* (zero force obeys Coulomb's law for any slip direction) and is accepted as it is. Such a
+contact sits on the motion's fixed axis — an end stop on the axis of a cylinder spinning in a
+V-block. Calling it sticking instead gives a singular system (its stick rows repeat the other
+contacts' normal rows) whose Newton root carries round-off tangential forces at zero normal
+force, just outside its cone, so no witness would be found at all.
 """
 
 from __future__ import annotations
@@ -48,6 +53,7 @@ class MotionWitness:
     opened: tuple[int, ...]  # indices of opening contacts
     residual: float  # ‖M a − w_e − Jᵀλ‖_{M⁻¹} / ‖w_e‖_{M⁻¹}
     min_slip: float  # least slip speed over sliding frictional contacts, relative
+    idle: tuple[int, ...] = ()  # "sliding" contacts that neither slip nor carry force
 
 
 class Rows:
@@ -110,6 +116,7 @@ def _accept(
     push_scale = float(np.linalg.norm(w_e[:d])) + float(np.linalg.norm(w_e[d:])) / max(rows.lever, 1e-12)
     f_scale = max(float(np.abs(lam).max()) if lam.size else 0.0, push_scale, 1e-300)
     slips = []
+    idle: list[int] = []
     for i, (c, off) in enumerate(zip(cs.contacts, cs.offsets, strict=True)):
         un = float(cs.J[off] @ a)
         if i in opened:
@@ -129,11 +136,18 @@ def _accept(
                 return None
         elif c.friction > 0.0:
             s = rows.Dm[i, : c.size - 1] * (cs.J[off + 1 : off + c.size] @ a)
-            slips.append(float(np.linalg.norm(s)) / acc_ref)
+            slip = float(np.linalg.norm(s)) / acc_ref
+            if slip <= slip_rel and li[0] <= 1e-9 * f_scale:
+                # idle: kept, no slip and no force (a point on the motion's axis, e.g. an end stop
+                # on a spinning cylinder's axis). Zero force satisfies Coulomb's law whatever the
+                # slip direction, so it does not stop the others from sliding.
+                idle.append(i)
+                continue
+            slips.append(slip)
     min_slip = min(slips) if slips else float("inf")
     if slips and min_slip <= slip_rel:
         return None
-    return MotionWitness(a.copy(), lam, tuple(stick), tuple(opened), dyn, min_slip)
+    return MotionWitness(a.copy(), lam, tuple(stick), tuple(opened), dyn, min_slip, tuple(idle))
 
 
 def frictionless_start(cs: ContactSet, w_e: FloatArray) -> FloatArray:

@@ -1,0 +1,177 @@
+"""The wrench search against hand-derived answers: no jamming wrench, free motion, margin targets.
+
+Numbers (box-3-2-1.toml / default.toml: 2 kg, μ = 0.25, g = 9.81, m g = 19.62 N; cylinder-5.toml:
+1.5 kg, μ = 0.2, R = 0.04 m) are derived in the comments, never taken from a run.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fixplan
+from fixplan.cli import main
+from fixplan.jamming import classify, search_wrench
+from fixplan.jamming.classify import Classifier
+from fixplan.jamming.search import floor_sig
+from fixplan.kinematics import ContactSet
+
+PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
+G = 9.81
+
+
+def _com(fx, pose, wrench):
+    return fixplan.contact_set(fx, pose).wrench_about_com(wrench)
+
+
+# ---------------------------------------------------------------- A: the best-margin push jams
+def test_best_margin_push_at_the_goal_moves_the_box_instead_of_jamming():
+    """Sliding the located box along +x: B1-B3 and S1, S2 slide, E1 opens.
+
+    Before the fix the best-margin wrench pressed all five kept contacts with τ = 14.0 N and a
+    drive of only M a = 0.2 N, and was statically balanced (a wedge: base friction tilted to
+    press the side locators, side friction tilted to press the base) -> "jammed".
+    """
+    fx = fixplan.load(PROBLEMS / "box-3-2-1.toml")
+    res = search_wrench(fx, [0.1, 0, 0, 0, 0, 0], pose="goal")
+    assert res.found and res.confirmed, res.reason
+    assert res.contact_roles == {n: "sliding" for n in ("B1", "B2", "B3", "S1", "S2")} | {"E1": "opening"}
+    assert res.balance_check.mode == "separates"  # E1 opens: not held, not jammed
+    assert res.jam_margin_rel >= 1e-3 * (1 - 1e-4)  # certified distance from balance (solver accuracy)
+    assert res.check.mode == "slides"  # the kept contacts, classified on their own
+    assert res.check.acceleration[0] >= 0.1 * (1 - 1e-6)
+    assert np.linalg.norm(res.wrench[:3]) <= 40.0 * (1 + 1e-6)
+    # every kept contact is pressed by τ, and the friction of five contacts at μ τ is overcome:
+    # F_x ≥ 5 μ τ + m a
+    assert res.margin_N > 10.0
+    assert res.wrench[0] >= 5 * 0.25 * res.margin_N + 2.0 * 0.1
+
+
+def test_the_classifier_confirms_the_push_found():
+    fx = fixplan.load(PROBLEMS / "box-3-2-1.toml")
+    res = search_wrench(fx, [0.1, 0, 0, 0, 0, 0], pose="goal", objective="effort", min_margin_N=1.0)
+    (again,) = classify(fx, [res.wrench], pose="goal")
+    assert again.mode not in ("held", "jammed")
+    (kept,) = classify(fx, [res.wrench], ["B1", "B2", "B3", "S1", "S2"], pose="goal")
+    assert kept.mode == "slides" and kept.acceleration[0] >= 0.1 * (1 - 1e-6)
+
+
+@pytest.mark.parametrize("a", [0.1, 1.0])
+def test_sliding_on_the_base_with_the_side_and_end_locators_opening(a):
+    """Motion (a, a/2, 0): B1-B3 slide, S1, S2 (n = +y) and E1 (n = +x) open.
+
+    The base carries N = m g − F_z in total and friction μ N opposes the slip direction
+    d = (2, 1)/√5, so the horizontal push is F_h = m a_h + μ (m g − F_z) along d.
+    """
+    fx = fixplan.load(PROBLEMS / "box-3-2-1.toml")
+    m, mu = 2.0, 0.25
+    res = search_wrench(fx, [a, a / 2, 0, 0, 0, 0], pose="goal")
+    assert res.found and res.confirmed, res.reason
+    assert [res.contact_roles[n] for n in ("B1", "B2", "B3", "S1", "S2", "E1")] == ["sliding"] * 3 + ["opening"] * 3
+    assert res.check.mode == "slides"
+    w = _com(fx, "goal", res.wrench)
+    N = m * G - w[2]
+    d = np.array([2.0, 1.0]) / np.sqrt(5.0)
+    acc = np.asarray(res.check.acceleration)
+    a_h = float(d @ acc[:2])
+    assert acc[:2] == pytest.approx(a_h * d, abs=1e-9)
+    assert a_h >= np.hypot(a, a / 2) * (1 - 1e-6)
+    assert w[:2] == pytest.approx((m * a_h + mu * N) * d, rel=1e-6)
+    # the base alone is pressed by N ≥ 3 τ
+    assert N >= 3 * res.margin_N * (1 - 1e-6)
+
+
+# ---------------------------------------------------------------- B: every contact opens
+def test_lifting_the_default_box_off_its_supports_is_m_g_plus_a():
+    """At the default start the box rests on B1-B3 only; lifting at 1 m/s² opens all three:
+    no contact force, F = m (g + a) = 2 × 10.81 = 21.62 N through the centre of mass."""
+    fx = fixplan.load(fixplan.default_fixture_path())
+    res = search_wrench(fx, [0, 0, 1.0, 0, 0, 0])
+    assert set(res.contact_roles.values()) == {"opening"}
+    assert res.found and res.confirmed, res.reason
+    assert res.wrench == pytest.approx([0, 0, 21.62, 0, 0, 0], abs=1e-9)
+    assert res.margin_N is None and res.to_json()["margin"] is None
+    assert res.check.mode == "separates"
+    assert res.acceleration == pytest.approx([0, 0, 1.0, 0, 0, 0])
+
+
+def test_free_lift_beyond_the_limits_is_refused():
+    """Lifting at 15 m/s² needs m (g + a) = 49.62 N > max_force 40 N."""
+    fx = fixplan.load(fixplan.default_fixture_path())
+    res = search_wrench(fx, [0, 0, 15.0, 0, 0, 0])
+    assert not res.found and "too weak" in res.reason and "49.62" in res.reason
+
+
+# ---------------------------------------------------------------- C: margin targets
+def test_a_margin_target_above_the_best_is_reported_not_hidden(capsys):
+    fx = fixplan.load(fixplan.default_fixture_path())
+    best = search_wrench(fx, [0.1, 0, 0, 0, 0, 0])
+    res = search_wrench(fx, [0.1, 0, 0, 0, 0, 0], min_margin_N=25.0)
+    assert res.found and res.margin_target_met is False
+    assert res.margin_N == pytest.approx(best.margin_N, rel=1e-6) and res.margin_N < 25.0
+    assert f"margin target 25 N not met: best {best.margin_N:.4g} N" in res.reason
+    ok = search_wrench(fx, [0.1, 0, 0, 0, 0, 0], objective="effort", min_margin_N=2.0)
+    assert ok.margin_target_met is True and ok.margin_N >= 2.0 * (1 - 1e-6)
+    assert search_wrench(fx, [0.1, 0, 0, 0, 0, 0]).margin_target_met is None  # nothing asked
+    path = str(fixplan.default_fixture_path())
+    assert main(["search", path, "--motion", "0.1,0,0,0,0,0", "--objective", "effort", "--min-margin", "25"]) == 1
+    out = capsys.readouterr().out
+    assert "not met" in out and "≥ 19 N" not in out
+    assert main(["search", path, "--motion", "0.1,0,0,0,0,0", "--min-margin", "25", "--json"]) == 1
+    data = json.loads(capsys.readouterr().out)
+    assert data["found"] is True and data["margin_target_met"] is False and data["margin_target"] == 25.0
+
+
+@pytest.mark.parametrize(
+    ("x", "text"), [(18.9753, "18.97"), (0.99999999, "1"), (0.99995, "0.9999"), (123.456, "123.4")]
+)
+def test_floor_sig_never_prints_above_the_value(x, text):
+    assert floor_sig(x) == text
+    assert float(floor_sig(x)) <= x * (1 + 1e-7) + 1e-300
+
+
+# ---------------------------------------------------------------- D: spinning the cylinder
+def test_spinning_the_cylinder_slides_with_or_without_its_end_stop():
+    """Spin 0.5 N·m about the axis (world x). The V contacts slide with N_L = 6.003 N,
+    N_R = 4.002 N per block (expected.toml: 12.006 and 8.004 N over both blocks); E1 lies on
+    the axis: it neither slips nor carries force, so it must not change the verdict."""
+    fx = fixplan.load(PROBLEMS / "cylinder-5.toml")
+    wrench = [0, 0, 0, 0.5, 0, 0]
+    (default,) = classify(fx, [wrench])
+    (named,) = classify(fx, [wrench], ["L1", "R1", "L2", "R2"])
+    assert fixplan.contact_set(fx).names == ["L1", "R1", "L2", "R2", "E1"]
+    assert default.mode == named.mode == "slides"
+    for name, N in (("L1", 6.003), ("R1", 4.002), ("L2", 6.003), ("R2", 4.002)):
+        assert default.contact_forces[name][0] == pytest.approx(N, abs=2e-3)
+        assert named.contact_forces[name][0] == pytest.approx(N, abs=2e-3)
+    assert np.allclose(default.contact_forces["E1"], 0.0, atol=1e-9)
+    # α = (0.5 − μ R Σ N) / I_axis with I_axis = m R² / 2 = 1.2e-3 kg m²
+    alpha = (0.5 - 0.2 * 0.04 * 20.01) / 1.2e-3
+    assert default.acceleration[3] == pytest.approx(alpha, rel=1e-3)
+    assert named.acceleration[3] == pytest.approx(alpha, rel=1e-3)
+
+
+def test_search_for_the_spin_with_the_end_stop_named_or_not():
+    fx = fixplan.load(PROBLEMS / "cylinder-5.toml")
+    named = search_wrench(fx, [0, 0, 0, 10, 0, 0], ["L1", "R1", "L2", "R2"])
+    assert named.found and named.confirmed and named.check.mode == "slides"
+    default = search_wrench(fx, [0, 0, 0, 10, 0, 0])
+    # E1 on the axis has no relative motion: "sticking", pressed like every kept contact, so the
+    # body turns about it (pivots); the V contacts slide as with the contacts named
+    assert default.contact_roles["E1"] == "sticking"
+    assert default.found and default.confirmed and default.check.mode == "pivots", default.reason
+
+
+def test_the_search_check_uses_the_kept_contacts():
+    """With contacts opening, the motion's verdict comes from the kept contacts only."""
+    fx = fixplan.load(PROBLEMS / "box-3-2-1.toml")
+    res = search_wrench(fx, [0.1, 0, 0, 0, 0, 0], pose="goal")
+    cs = fixplan.contact_set(fx, "goal")
+    kept = ContactSet(
+        tuple(c for c in cs.contacts if c.name != "E1"), cs.com_world, cs.mass_matrix, cs.body_origin_world
+    )
+    again = Classifier(kept, fx.gravity_wrench()).classify(cs.wrench_about_com(res.wrench))
+    assert again.mode == res.check.mode == "slides"
