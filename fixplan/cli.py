@@ -482,12 +482,32 @@ def solve(
     force: Annotated[
         bool, typer.Option("--force", help="Overwrite --out/--report (and the report's figure) if they exist.")
     ] = False,
-    no_verify: Annotated[bool, typer.Option("--no-verify", help="Skip the simulated haptic verification.")] = False,
+    no_verify: Annotated[
+        bool, typer.Option("--no-verify", help="Skip the simulated haptic verification (status: unverified).")
+    ] = False,
+    accel: Annotated[
+        float,
+        typer.Option("--accel", help="Acceleration each push asks for [m/s², mass-weighted].", min=1e-3, max=100.0),
+    ] = 1.0,
+    margin: Annotated[
+        float | None,
+        typer.Option(
+            "--margin", help="Least normal force on the kept contacts [N] (default: the part's weight).", min=0.0
+        ),
+    ] = None,
+    friction_margin: Annotated[
+        float,
+        typer.Option(
+            "--friction-margin", help="δ: pushes must work with friction anywhere in μ(1 ± δ).", min=0.0, max=1.0
+        ),
+    ] = 0.1,
     json_out: JsonOpt = False,
 ) -> None:
     """Plan the loading of a full fixture and verify it in the simulated haptic loop.
 
-    Exit 0 planned and verified, 1 no plan (or verification failed), 2 bad input.
+    Status planned: a sequence was found and the feedback executor loaded the part in the loop
+    (exit 0). unverified: a sequence was found but the loop did not confirm it, or --no-verify
+    (exit 1). infeasible: no sequence, with the reason (exit 1). Bad input: exit 2.
     """
     from fixplan.planner.solve import report_markdown
     from fixplan.planner.solve import solve as run_solve
@@ -509,14 +529,22 @@ def solve(
             verdict = "ok" if a.success else f"fails: {a.reason}"
             typer.echo(f"  tried {{{', '.join(a.established)}}} + {a.target}: {verdict}", err=True)
 
-    result = run_solve(fixture, order=names, run_verification=not no_verify, progress=progress)
+    result = run_solve(
+        fixture,
+        order=names,
+        run_verification=not no_verify,
+        progress=progress,
+        acceleration_mps2=accel,
+        margin_N=margin,
+        friction_margin=friction_margin,
+    )
     payload = result.to_json()
     if target is not None:
-        target.write_text(json.dumps(payload, indent=2, default=_json_default) + "\n")
+        target.write_text(json.dumps(payload, indent=2, default=_json_default, allow_nan=False) + "\n")
     written = [] if target is None else [target]
     if report_path is not None:
         figures = []
-        if figure is not None and result.status == "planned":
+        if figure is not None and result.status != "infeasible":
             # the figure first, so the report never links to a missing file
             save_plan_figure(result, fixture, figure)
             figures.append(figure.name)  # beside the report: a relative link
@@ -526,40 +554,56 @@ def solve(
     if json_out:
         _emit_json(payload)
     else:
-        from rich.console import Console
-        from rich.table import Table
-
-        if result.status == "planned":
-            table = Table(title=f"{fixture.name}: loading plan")
-            for col in ("#", "from → to", "motion", "wrench (mean)", "least margin [N]", "time [s]"):
-                table.add_column(col)
-            for i, tr in enumerate(payload["transitions"], 1):
-                w = ",".join(f"{x:.3g}" for x in tr["wrench"])
-                margin = "-" if tr["margin"] is None else f"{tr['margin']:.3g}"
-                table.add_row(
-                    str(i),
-                    f"{{{','.join(tr['from'])}}} + {tr['added']}",
-                    tr["motion"],
-                    w,
-                    margin,
-                    f"{tr['time_s']:.2f}",
-                )
-            Console().print(table)
-            v = result.verification
-            if v is not None:
-                verdict = "passed" if v.passed else f"FAILED: {v.reason}"
-                worst_gap = max((abs(g) for g in v.final_gaps_m.values()), default=float("nan"))
-                typer.echo(
-                    f"verification {verdict}; final gaps ≤ {worst_gap:.2e} m, "
-                    f"max penetration {v.max_penetration_m:.2e} m, tick mean {v.tick_mean_us:.0f} µs, {v.deadline_misses} deadline misses"
-                )
-        else:
-            typer.echo(f"no plan: {result.reason}")
-        typer.echo(f"time: {result.timings.get('total_s', 0.0):.2f} s")
+        _print_plan(result, payload, fixture)
         if written:
             typer.echo("wrote " + ", ".join(str(p) for p in written))
     if not result.ok:
         raise typer.Exit(1)
+
+
+def _print_plan(result, payload: dict[str, Any], fixture) -> None:  # type: ignore[no-untyped-def]
+    from rich.console import Console
+    from rich.table import Table
+
+    if payload["transitions"]:
+        table = Table(title=f"{fixture.name}: loading plan")
+        for col in ("#", "from + added", "motion", "push (mean)", "least margin [N]", "friction δ", "time [s]"):
+            table.add_column(col)
+        for i, tr in enumerate(payload["transitions"], 1):
+            w = "-" if tr["wrench"] is None else ",".join(f"{x:.3g}" for x in tr["wrench"])
+            margin = "-" if tr["margin"] is None else f"{tr['margin']:.3g}"
+            rob = "-" if tr["friction_robustness"] is None else f"±{tr['friction_robustness']:.2g}"
+            table.add_row(
+                str(i),
+                f"{{{','.join(tr['from'])}}} + {tr['added']}",
+                tr["motion"],
+                w,
+                margin,
+                rob,
+                f"{tr['time_s']:.2f}",
+            )
+        Console().print(table)
+    typer.echo(f"status: {result.status}" + (f" — {result.reason}" if result.reason else ""))
+    v = result.verification
+    if v is not None:
+        ex = v.execution
+        if ex is not None:
+            c = ex.counts
+            typer.echo(
+                f"executed as a contact-state feedback policy: {c['solves']} wrench solves, {c['replans']} re-plans "
+                f"({c['lost_contact']} lost, {c['unplanned_contact']} unplanned contacts), {c['stalls']} stalls"
+            )
+        gaps = [abs(g) for g in v.final_gaps_m.values()]
+        parts = []
+        if gaps:
+            parts.append(f"final gaps ≤ {max(gaps):.2e} m")
+        parts.append(f"max penetration {v.max_penetration_m:.2e} m")
+        if v.max_push_force_N is not None:
+            parts.append(f"push on the part ≤ {v.max_push_force_N:.3g} N, {v.max_push_torque_Nm:.3g} N·m")
+        if v.tick_mean_us is not None:
+            parts.append(f"tick compute mean {v.tick_mean_us:.0f} µs, {v.deadline_misses} ticks over the 1 ms period")
+        typer.echo("; ".join(parts))
+    typer.echo(f"time: {result.timings.get('total_s', 0.0):.2f} s")
 
 
 @app.command()

@@ -296,6 +296,17 @@ class Simulator:
         f = self._P[:, 0] / self.dt
         return tuple(n for n, a, fn in zip(self.names, self._active, f, strict=True) if a and fn > min_force_N)
 
+    def in_contact(self, min_force_N: float, max_gap_m: float) -> tuple[str, ...]:
+        """Locators in contact after the last step: pressing (normal force > ``min_force_N``) or
+        touching (gap at the start of the step ≤ ``max_gap_m``, e.g. a contact friction keeps unloaded).
+        """
+        f = self._P[:, 0] / self.dt
+        return tuple(
+            n
+            for n, a, fn, g in zip(self.names, self._active, f, self._gap, strict=True)
+            if a and (fn > min_force_N or g <= max_gap_m)
+        )
+
     def contacts(self) -> list[ContactReport]:
         """Per-locator gap, force and mode after the last step."""
         h = self.dt

@@ -30,6 +30,13 @@ def _full_fixtures() -> list[str]:
     return out
 
 
+def ex_limit(fx):
+    from fixplan.planner.execute import Executor
+
+    e = Executor(fx, frozenset(), [])
+    return e.F_max, e.T_max
+
+
 def test_every_full_fixture_has_a_plan_entry():
     assert sorted(e["file"] for e in ENTRIES) == _full_fixtures()
 
@@ -63,8 +70,19 @@ def test_plan_matches_the_hand_derived_outcome(entry):
     assert v.passed is entry["verified"], v.reason
     if entry["verified"]:
         assert r.ok
-        if r.transitions:  # a located start has no planned motion: only its gaps are checked
-            assert [list(s) for s in v.observed_sequence] == seq
+        ex = v.execution
+        assert ex is not None and ex.outcome == "reached"
+        observed = [list(s) for s in v.observed_sequence]
+        assert observed[-1] == sorted(n.name for n in fx.locators)  # every locator, at the end
+        if r.transitions and ex.counts["replans"] == 0:
+            # without a guard firing, the executor saw exactly the planned states
+            assert observed == seq[1:] if seq[0] not in observed else observed == seq
+        else:
+            # a deviation is never silent: each one is a guard event with a re-plan
+            guards = [e for e in ex.events if e[1] == "guard"]
+            assert len(guards) == ex.counts["replans"] == ex.counts["lost_contact"] + ex.counts["unplanned_contact"]
+        # the hand's limits bind the push on the part
+        assert v.max_push_force_N is not None and v.max_push_force_N <= 1.05 * ex_limit(fx)[0]
         assert max(abs(g) for g in v.final_gaps_m.values()) <= 1e-4
         assert v.max_penetration_m <= 1e-5
         for tr in r.transitions:

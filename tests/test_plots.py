@@ -108,7 +108,8 @@ def test_state_bars_cover_exactly_the_pressed_samples(verified, verified_figure)
     ends = np.cumsum(verified.durations_s)
     assert verified.sequence == [("B1",), ("B1", "B2"), ("B1", "B2", "S1")]
     for name, start in (("B1", 0.0), ("B2", ends[0]), ("S1", ends[1])):
-        np.testing.assert_allclose(bar_intervals(ax, f"planned:{name}"), [(start, tr.time_s[-1])])
+        # (the plan's nominal schedule; the feedback executor may finish sooner than it)
+        np.testing.assert_allclose(bar_intervals(ax, f"planned:{name}"), [(start, max(start, tr.time_s[-1]))])
 
 
 def test_transition_boundaries_are_marked_in_every_panel(verified, verified_figure):
@@ -187,7 +188,9 @@ def test_cli_writes_the_figure_and_refuses_to_overwrite(tmp_path, capsys):
     assert len(err) == 1 and str(png) in err[0] and "exists" in err[0]
     assert not md.exists() and {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in before} == before
 
-    assert main(["solve", str(JAMS), "--report", str(md), "--no-verify", "--force"]) == 0
+    assert (
+        main(["solve", str(JAMS), "--report", str(md), "--no-verify", "--force"]) == 1
+    )  # written, but unverified: exit 1
     assert png.stat().st_mtime_ns != before[png][1]
     assert "The plan alone" in md.read_text() and all(p.exists() for p in _links(md))
 

@@ -68,7 +68,14 @@ class LoopRecord:
 class HapticLoop:
     """Runs the engine behind a virtual coupling and a (simulated) device."""
 
-    def __init__(self, sim: Simulator, device: SimulatedDevice, coupling: VirtualCoupling):
+    def __init__(
+        self,
+        sim: Simulator,
+        device: SimulatedDevice,
+        coupling: VirtualCoupling,
+        *,
+        push_limits: tuple[float, float] | None = None,
+    ):
         if abs(coupling.period_s - sim.dt) > 1e-12:
             raise InputError(f"coupling period {coupling.period_s:g} s must equal the engine step {sim.dt:g} s")
         if device.ndof != (6 if sim.dimension == 3 else 3):
@@ -93,6 +100,10 @@ class HapticLoop:
         self.sim = sim
         self.device = device
         self.coupling = coupling
+        # the hand's limits on the push the part receives (force [N], moment about the body origin
+        # [N·m]): a hand cannot push harder, so the coupling wrench is saturated there
+        self.push_limits = push_limits
+        self.saturated_ticks = 0
         self._R0 = sim.pose.R_world_body.copy()
         d = sim.dimension
         n = 6 if d == 3 else 3
@@ -124,11 +135,29 @@ class HapticLoop:
         else:
             x_w, v_w = self.workpiece_coordinates()
             w_c = self._K * (x_d - x_w) + self._B * (v_d - v_w)
+        if self.push_limits is not None:
+            w_c = self._saturate(w_c)
         self.sim.step(w_c)
         felt = self.device.set_force_and_torque(-w_c)
         compute = time.perf_counter() - t0
         self.device.advance(self.coupling.period_s, operator_wrench)
         return w_c, felt, compute
+
+    def _saturate(self, w: FloatArray) -> FloatArray:
+        assert self.push_limits is not None
+        d = self.sim.dimension
+        F_max, T_max = self.push_limits
+        F = float(np.linalg.norm(w[:d]))
+        T = float(np.linalg.norm(w[d:]))
+        if F <= F_max and T <= T_max:
+            return w
+        self.saturated_ticks += 1
+        out = np.array(w, dtype=float)
+        if F > F_max:
+            out[:d] *= F_max / F
+        if T > T_max:
+            out[d:] *= T_max / T
+        return out
 
     def _warm_up(self) -> None:
         """Load every compiled kernel once on a scratch copy, so no tick pays for compilation."""
@@ -142,11 +171,19 @@ class HapticLoop:
             )
         scratch.step(np.zeros(6 if scratch.dimension == 3 else 3))
 
-    def run(self, duration_s: float, operator: Operator, *, trace_every: int = 0) -> LoopRecord:
+    def run(
+        self,
+        duration_s: float,
+        operator: Operator,
+        *,
+        trace_every: int = 0,
+        until: Callable[[], bool] | None = None,
+    ) -> LoopRecord:
         """Run ticks for ``duration_s`` with ``operator(t, device)`` pushing the handle.
 
         ``trace_every > 0`` also samples the pose and the contact reports every that many ticks
         and at the last one (outside the timed part of the tick) into ``LoopRecord.trace``.
+        ``until()``, checked after every tick, ends the run early when it returns True.
         """
         rec = LoopRecord(period_s=self.coupling.period_s)
         n = int(round(duration_s / self.coupling.period_s))
@@ -172,8 +209,11 @@ class HapticLoop:
                     rec.max_solver_error = max(rec.max_solver_error, last.error)
                     if not last.converged:
                         rec.unconverged_steps += 1
-                if trace_every > 0 and (i % trace_every == 0 or i == n - 1):
+                stop = until is not None and until()
+                if trace_every > 0 and (i % trace_every == 0 or i == n - 1 or stop):
                     rec.trace.append((i, self.sim.time_s, self.sim.pose, self.sim.contacts()))
+                if stop:
+                    break
         finally:
             self.device.close()
             if gc_was_enabled:

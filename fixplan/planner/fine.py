@@ -338,6 +338,8 @@ def plan_transition(
     acceleration_mps2: float = 1.0,
     max_iter: int = 500,
     tol: float = 1e-9,
+    friction_margin: float = 0.0,
+    margin_N: float | None = None,
 ) -> Transition:
     """Plan the path and wrenches that add ``target`` to the ``established`` contacts.
 
@@ -363,6 +365,11 @@ def plan_transition(
         Size of the desired acceleration per segment, ``sqrt(âᵀ M â / m)`` [m/s²]. With many
         contacts a very small one can be statically balanced by the search's wrench (on
         default.toml, {B1,B2,B3,S1,S2} → E1 is reported jammed at 0.1 m/s² and moves at 1 m/s²).
+    friction_margin : float
+        δ: each segment's push must move the part with friction anywhere in ``μ(1 ± δ)``
+        (:func:`~fixplan.jamming.search.search_wrench`).
+    margin_N : float, optional
+        Least normal force on the kept contacts (default: the part's weight).
 
     Returns
     -------
@@ -539,7 +546,9 @@ def plan_transition(
         )
 
     # --- wrenches per segment -----------------------------------------------------------------
-    wrenches, margins, found, reasons = _segment_wrenches(fixture, poses, est, kind, acceleration_mps2)
+    wrenches, margins, found, reasons = _segment_wrenches(
+        fixture, poses, est, kind, acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N
+    )
     bad = [k for k in range(K) if not found[k]]
     if bad:
         k = bad[0]
@@ -731,7 +740,14 @@ def _slip(fixture: Fixture, poses: list[Pose], est: tuple[str, ...]) -> float:
 
 
 def _segment_wrenches(
-    fixture: Fixture, poses: list[Pose], est: tuple[str, ...], kind: str, acceleration_mps2: float
+    fixture: Fixture,
+    poses: list[Pose],
+    est: tuple[str, ...],
+    kind: str,
+    acceleration_mps2: float,
+    *,
+    friction_margin: float = 0.0,
+    margin_N: float | None = None,
 ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], list[str]]:
     """The non-jamming wrench search for every segment (see the module docstring)."""
     from fixplan.jamming.search import search_wrench
@@ -775,7 +791,15 @@ def _segment_wrenches(
             wrenches[k] = wr
             continue
         try:
-            res = search_wrench(fixture, motion, list(est), pose=a, objective="effort")
+            res = search_wrench(
+                fixture,
+                motion,
+                list(est),
+                pose=a,
+                objective="effort",
+                min_margin_N=margin_N,
+                friction_margin=friction_margin,
+            )
         except InputError as exc:
             reasons.append(str(exc))
             continue

@@ -21,18 +21,23 @@ from typing import Any
 
 import numpy as np
 
+from fixplan.errors import InputError
 from fixplan.fixture import Fixture
 from fixplan.locating import contact_set, require_full
-from fixplan.planner.coarse import Attempt, search
-from fixplan.planner.fine import Transition, plan_transition
+from fixplan.planner.coarse import Attempt, CoarsePlan, search
+from fixplan.planner.execute import ExecutionSettings, Step
+from fixplan.planner.fine import Transition, _segment_wrenches, plan_transition
 from fixplan.planner.verify import Verification, verify
+from fixplan.pose import Pose
+
+ROBUST_GRID = (0.05, 0.1, 0.2, 0.3, 0.5)
 
 
 @dataclass
 class PlanResult:
     """A plan (or the reason there is none), its verification and timings."""
 
-    status: str  # "planned" | "infeasible"
+    status: str  # "planned" (verified) | "unverified" | "infeasible"
     reason: str
     sequence: list[tuple[str, ...]]
     transitions: list[Transition]
@@ -40,23 +45,29 @@ class PlanResult:
     verification: Verification | None
     durations_s: list[float]
     timings: dict[str, float] = field(default_factory=dict)
+    friction_robustness: list[float] = field(default_factory=list)  # per transition: largest δ of ROBUST_GRID
 
     @property
     def ok(self) -> bool:
-        return self.status == "planned" and (self.verification is None or self.verification.passed)
+        return self.status == "planned"
 
     def to_json(self) -> dict[str, Any]:
         transitions = []
-        for tr, T in zip(self.transitions, self.durations_s, strict=True):
-            w = np.nanmean(tr.wrenches, axis=0) if len(tr.wrenches) else np.zeros(0)
+        robust = self.friction_robustness or [None] * len(self.transitions)
+        for tr, T, rob in zip(self.transitions, self.durations_s, robust, strict=True):
+            rows = tr.wrenches[np.isfinite(tr.wrenches).all(axis=1)] if len(tr.wrenches) else tr.wrenches
+            w = rows.mean(axis=0) if len(rows) else None
+            margins = tr.margins[np.isfinite(tr.margins)]
             transitions.append(
                 {
                     "from": list(tr.established),
                     "to": sorted([*tr.established, tr.target]),
                     "added": tr.target,
-                    "motion": tr.kind,
-                    "wrench": [float(x) for x in w],
-                    "margin": float(np.min(tr.margins)) if len(tr.margins) else None,
+                    "motion": tr.kind if tr.established else "free",
+                    "wrench": None if w is None else [float(x) for x in w],
+                    # the least normal force on the kept contacts; null from no contact (nothing to press)
+                    "margin": float(np.min(margins)) if len(margins) else None,
+                    "friction_robustness": None if rob is None or not math.isfinite(rob) else float(rob),
                     "time_s": T,
                     "path_length_m": float(tr.cost),
                     "max_constraint_violation_m": float(tr.max_constraint_violation_m),
@@ -106,34 +117,56 @@ def report_markdown(result: PlanResult, fixture: Fixture, figures: Sequence[str]
         lines += [
             "## Transitions",
             "",
-            "| # | from | added | motion | mean wrench [N, N·m] | least margin [N] | time [s] | path [m] | max gap violation [m] |",
-            "|---:|---|---|---|---|---:|---:|---:|---:|",
+            "| # | from | added | motion | mean wrench [N, N·m] | least margin [N] | friction δ | time [s] | path [m] | max gap violation [m] |",
+            "|---:|---|---|---|---|---:|---:|---:|---:|---:|",
         ]
         for i, tr in enumerate(payload["transitions"], 1):
-            w = ", ".join(f"{x:.3g}" for x in tr["wrench"])
+            w = "–" if tr["wrench"] is None else ", ".join(f"{x:.3g}" for x in tr["wrench"])
             margin = "–" if tr["margin"] is None else f"{tr['margin']:.3g}"
+            rob = "–" if tr["friction_robustness"] is None else f"±{tr['friction_robustness']:.2g}"
             lines.append(
-                f"| {i} | {{{', '.join(tr['from'])}}} | {tr['added']} | {tr['motion']} | {w} | {margin} | "
+                f"| {i} | {{{', '.join(tr['from'])}}} | {tr['added']} | {tr['motion']} | {w} | {margin} | {rob} | "
                 f"{tr['time_s']:.2f} | {tr['path_length_m']:.4g} | {tr['max_constraint_violation_m']:.1e} |"
             )
+        lines += [
+            "",
+            "Least margin: the least normal force on the kept contacts along the transition (– from no contact). "
+            "Friction δ: the largest δ (of 0.05, 0.1, 0.2, 0.3, 0.5) for which the first push still moves the part "
+            "with friction anywhere in μ(1 ± δ) within the hand's limits.",
+        ]
         lines.append("")
     failed = [a for a in payload["tried"] if not a["ok"]]
     lines += ["## Transitions tried", "", f"{len(payload['tried'])} priced, {len(failed)} failed.", ""]
     for a in failed:
         lines.append(f"- {{{', '.join(a['from'])}}} + {a['add']}: {a['reason']}")
     v = payload["verification"]
-    lines += ["", "## Verification (simulated haptic loop, 1 kHz)", ""]
+    lines += ["", "## Verification (simulated haptic loop, 1 kHz, contact-state feedback executor)", ""]
     if v is None:
         lines.append("Not run (`--no-verify`).")
     else:
-        worst = max((abs(g) for g in v["final_gaps"].values()), default=float("nan"))
+
+        def num(x: float | None, fmt: str) -> str:
+            return "–" if x is None else format(x, fmt)
+
+        gaps = [abs(g) for g in v["final_gaps"].values()]
         lines += [
             f"- result: **{'passed' if v['passed'] else 'failed'}** — {v['reason']}",
-            f"- observed states: {' → '.join('{' + ', '.join(s) + '}' for s in v['observed_sequence'])}",
-            f"- final gaps ≤ {worst:.2e} m; max penetration {v['max_penetration']:.2e} m",
-            f"- tick compute: mean {v['tick_mean_us']:.0f} µs, max {v['tick_max_us']:.0f} µs; deadline misses {v['deadline_misses']}",
-            f"- largest force felt by the user: {v['felt_force_max']:.3g} N",
+            f"- observed states: {' → '.join('{' + ', '.join(s) + '}' for s in v['observed_sequence']) or '(none)'}",
+            f"- final gaps ≤ {num(max(gaps) if gaps else None, '.2e')} m; max penetration {v['max_penetration']:.2e} m",
+            f"- push on the part ≤ {num(v['max_push_force'], '.3g')} N, {num(v['max_push_torque'], '.3g')} N·m "
+            f"(10 ms mean; {v['saturated_ticks']} ticks capped at the hand's limits)",
+            f"- tick compute: mean {num(v['tick_mean_us'], '.0f')} µs, max {num(v['tick_max_us'], '.0f')} µs; "
+            f"{num(v['deadline_misses'], 'd')} ticks over the 1 ms period",
+            f"- largest force felt by the user: {num(v['felt_force_max'], '.3g')} N",
         ]
+        ex = v.get("execution")
+        if ex:
+            c = ex["counts"]
+            lines.append(
+                f"- executor: {c['solves']} wrench solves, {c['replans']} re-plans ({c['lost_contact']} lost, "
+                f"{c['unplanned_contact']} unplanned contacts), {c['stalls']} stalls, {c['retries']} re-searches"
+            )
+            lines += [f"  - t = {e['time_s']:.3f} s, {e['kind']}: {e['message']}" for e in ex["events"]]
     t = payload["timings"]
     lines += ["", "## Timings", "", ", ".join(f"{k} {x:.2f} s" for k, x in t.items()), ""]
     return "\n".join(lines)
@@ -144,82 +177,167 @@ def _duration(tr: Transition, acceleration_mps2: float) -> float:
     return 0.15 + 2.0 * math.sqrt(max(length, 0.0) / acceleration_mps2)
 
 
+def plan_steps(transitions: Sequence[Transition]) -> list[Step]:
+    """The executor's policy from the fine plans: target, motion and guide path per transition."""
+    return [
+        Step(tuple(tr.established), tr.target, tr.kind if tr.established else "free", tuple(tr.poses))
+        for tr in transitions
+    ]
+
+
+def friction_robustness(
+    fixture: Fixture,
+    tr: Transition,
+    acceleration_mps2: float,
+    margin_N: float | None,
+    grid: Sequence[float] = ROBUST_GRID,
+) -> float:
+    """The largest δ of ``grid`` for which the transition's first segment has a push moving the
+    part with friction anywhere in ``μ(1 ± δ)`` within the hand's limits (0 if only the nominal μ).
+    """
+    if not tr.established or len(tr.poses) < 2:
+        return float("inf")
+    best = 0.0
+    for delta in grid:
+        _, _, found, _ = _segment_wrenches(
+            fixture, tr.poses[:2], tuple(tr.established), tr.kind, acceleration_mps2,
+            friction_margin=delta, margin_N=margin_N,
+        )  # fmt: skip
+        if not found[0]:
+            break
+        best = delta
+    return best
+
+
+class Planner:
+    """Coarse search with fine plans from any (pose, contact state); also the executor's re-planner."""
+
+    def __init__(
+        self,
+        fixture: Fixture,
+        *,
+        knots: int = 10,
+        acceleration_mps2: float = 1.0,
+        friction_margin: float = 0.1,
+        margin_N: float | None = None,
+        progress: Callable[[Attempt], None] | None = None,
+    ):
+        self.fixture = fixture
+        self.names = [loc.name for loc in fixture.locators]
+        self.knots = knots
+        self.acceleration_mps2 = acceleration_mps2
+        self.friction_margin = friction_margin
+        self.margin_N = margin_N
+        self.progress = progress
+        self.fine_time_s = 0.0
+
+    def plan_from(self, pose: Pose, state: frozenset[str], order: Sequence[str] | None = None) -> CoarsePlan:
+        """The cheapest monotone sequence from ``state`` at ``pose`` to every locator."""
+        cache: dict[tuple[tuple[str, ...], str], Transition] = {}
+
+        def evaluate(pose_: Pose, state_: frozenset[str], target: str) -> Transition:
+            key = (tuple(sorted(state_)), target)
+            if key not in cache:
+                t = time.perf_counter()
+                cache[key] = plan_transition(
+                    self.fixture, pose_, sorted(state_), target, knots=self.knots,
+                    acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
+                    margin_N=self.margin_N,
+                )  # fmt: skip
+                self.fine_time_s += time.perf_counter() - t
+            return cache[key]
+
+        return search(state, self.names, pose, evaluate, order=order, progress=self.progress)
+
+    def replan(self, pose: Pose, state: frozenset[str]) -> list[Step] | str:
+        """The executor's guard: a new policy from the observed state, or why there is none."""
+        if state == frozenset(self.names):
+            return []
+        coarse = self.plan_from(pose, state)
+        return plan_steps(coarse.transitions) if coarse.found else coarse.reason
+
+
 def solve(
     fixture: Fixture,
     *,
     order: Sequence[str] | None = None,
     run_verification: bool = True,
     acceleration_mps2: float = 1.0,
+    margin_N: float | None = None,
+    friction_margin: float = 0.1,
     knots: int = 10,
     progress: Callable[[Attempt], None] | None = None,
     verify_options: dict[str, Any] | None = None,
 ) -> PlanResult:
     """Plan (and by default verify) the loading of ``fixture``.
 
+    ``acceleration_mps2`` is the acceleration each push asks for, ``margin_N`` the least normal
+    force on the kept contacts (default: the part's weight) and ``friction_margin`` the δ the
+    pushes are robust to (friction anywhere in ``μ(1 ± δ)``); the executor uses the same values.
     ``knots`` per transition: 10 by default — on the default box the exact gaps between knots
     stay within 1e-17 m at 10 as at 20 (``benchmarks/bench_planner.py``) for half the time.
-    ``verify_options`` are passed to :func:`~fixplan.planner.verify.verify` (e.g. ``max_sweeps``).
+    ``verify_options`` are passed to :func:`~fixplan.planner.verify.verify` (e.g. ``max_sweeps``,
+    ``noise``).
     """
     vopts = dict(verify_options or {})
     require_full(fixture, "planning")
+    if order is not None:
+        _check_order(fixture, order)
     t0 = time.perf_counter()
     names = [loc.name for loc in fixture.locators]
     touching = contact_set(fixture, "start")
     start_state = frozenset(c.name for c in touching.contacts if c.kind == "locator")
+    settings = vopts.pop("settings", None) or ExecutionSettings(
+        accel_mps2=acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N
+    )
+    planner = Planner(fixture, knots=knots, acceleration_mps2=acceleration_mps2, friction_margin=friction_margin,
+                      margin_N=margin_N, progress=progress)  # fmt: skip
+    replan = planner.replan
     if start_state == frozenset(names):
         # already located: nothing to plan; verification checks that the part stays there
-        verification = verify(fixture, [], [], [], [], **vopts) if run_verification else None
-        timings = {"plan_s": 0.0, "fine_s": 0.0, "total_s": time.perf_counter() - t0}
-        reason = "" if verification is None or verification.passed else f"verification failed: {verification.reason}"
-        return PlanResult(
-            "planned",
-            reason or "already located at the start pose",
-            [tuple(sorted(names))],
-            [],
-            [],
-            verification,
-            [],
-            timings,
+        verification = (
+            verify(fixture, start_state, [], settings=settings, replan=replan, **vopts) if run_verification else None
         )
-    cache: dict[tuple[tuple[str, ...], str], Transition] = {}
-    fine_time = 0.0
-
-    def evaluate(pose, state, target):
-        nonlocal fine_time
-        key = (tuple(sorted(state)), target)
-        if key not in cache:
-            t = time.perf_counter()
-            cache[key] = plan_transition(
-                fixture, pose, sorted(state), target, knots=knots, acceleration_mps2=acceleration_mps2
-            )
-            fine_time += time.perf_counter() - t
-        return cache[key]
-
-    coarse = search(start_state, names, fixture.start, evaluate, order=order, progress=progress)
+        timings = {"plan_s": 0.0, "fine_s": 0.0, "total_s": time.perf_counter() - t0}
+        status, reason = _status(verification, "already located at the start pose: every locator touches")
+        return PlanResult(status, reason, [tuple(sorted(names))], [], [], verification, [], timings)
+    coarse = planner.plan_from(fixture.start, start_state, order)
     t_plan = time.perf_counter() - t0
-    timings = {"plan_s": t_plan, "fine_s": fine_time}
+    timings = {"plan_s": t_plan, "fine_s": planner.fine_time_s}
     if not coarse.found:
         timings["total_s"] = time.perf_counter() - t0
         return PlanResult("infeasible", coarse.reason, [], [], coarse.attempts, None, [], timings)
     transitions = list(coarse.transitions)
     durations = [_duration(tr, acceleration_mps2) for tr in transitions]
+    robustness = [friction_robustness(fixture, tr, acceleration_mps2, margin_N) for tr in transitions]
     verification = None
     if run_verification:
         t1 = time.perf_counter()
-        # per-segment feedforward; a segment without a wrench (NaN row) borrows the transition's mean
-        wrenches = []
-        for tr in transitions:
-            W = np.array(tr.wrenches, dtype=float)
-            mean = np.nanmean(W, axis=0)
-            W[~np.isfinite(W).all(axis=1)] = mean
-            wrenches.append(W)
-        sequence = (
-            [tuple(sorted(start_state))] + [tuple(s) for s in coarse.sequence[1:]] if start_state else coarse.sequence
-        )
-        verification = verify(fixture, sequence, [tr.poses for tr in transitions], wrenches, durations, **vopts)
+        verification = verify(fixture, start_state, plan_steps(transitions), settings=settings, replan=replan, **vopts)
         timings["verify_s"] = time.perf_counter() - t1
     timings["total_s"] = time.perf_counter() - t0
-    reason = "" if verification is None or verification.passed else f"verification failed: {verification.reason}"
+    status, reason = _status(verification, "")
     return PlanResult(
-        "planned", reason, coarse.sequence, transitions, coarse.attempts, verification, durations, timings
+        status, reason, coarse.sequence, transitions, coarse.attempts, verification, durations, timings, robustness
     )
+
+
+def _status(verification: Verification | None, note: str) -> tuple[str, str]:
+    """``planned`` only when the loop confirmed the plan; else ``unverified`` with where and why."""
+    if verification is None:
+        return "unverified", "verification skipped (--no-verify): the sequence was not run in the haptic loop"
+    if verification.passed:
+        ex = verification.execution
+        replans = ex.counts["replans"] if ex is not None else 0
+        extra = f"; verified after {replans} re-plan{'s' if replans != 1 else ''}" if replans else ""
+        return "planned", (note + extra).lstrip("; ")
+    return "unverified", f"verification failed: {verification.reason}"
+
+
+def _check_order(fixture: Fixture, order: Sequence[str]) -> None:
+    names = [loc.name for loc in fixture.locators]
+    extra = [n for n in order if n not in names]
+    if extra:
+        raise InputError(f"--order names unknown locators: {', '.join(extra)} (known: {', '.join(names)})")
+    if len(set(order)) != len(order):
+        raise InputError(f"--order repeats a locator: {','.join(order)}")

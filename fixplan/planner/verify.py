@@ -1,22 +1,25 @@
 """Verification: run a plan through the simulated haptic loop and check what really happened.
 
-The operator model follows the plan: along each transition the device reference is the planned
-workpiece pose, led by ``w_plan / K`` so that the coupling transmits the planned wrench, and the
-operator pushes the handle with the feedforward ``w_plan + b ẋ_ref`` plus PD tracking. The
-engine runs at the coupling rate (1 kHz). A plan passes when
+The plan is executed as a contact-state feedback policy (:class:`~fixplan.planner.execute.Executor`):
+at the control rate the executor observes the pressed locators and the pose, and re-solves the
+non-jamming wrench for the motion the current transition expects. The operator model makes the
+virtual coupling transmit that wrench: it holds the device handle ``w / K`` ahead of the
+workpiece (feedforward ``w + b ẋ`` plus PD on the handle). The engine runs at the coupling rate
+(1 kHz). A plan passes when
 
-- the observed contact-state sequence (sets of locators pressed for at least ``dwell_s``)
-  matches the planned one;
-- the workpiece never stalls where the plan expects motion;
+- the executor reaches the goal state (every locator pressed, at rest) — re-plans on the way
+  (after a lost or unplanned contact) are allowed, counted and reported;
 - at the end every locator touches (gaps ≤ ``final_gap_m``);
-- penetration stays below ``max_penetration_m``.
+- penetration stays below ``max_penetration_m``;
+- the push on the part stays within the manipulator's limits (averaged over 10 ms, 5 % slack
+  for the coupling's transients).
 
-A failure says where (transition, time) and why.
+A failure says where (transition, time) and why; divergence (non-finite state, a speed beyond
+what the push can cause) stops the run with that reason.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -27,6 +30,17 @@ from numpy.typing import NDArray
 from fixplan.errors import SolverError
 from fixplan.fixture import Fixture
 from fixplan.haptics import DeviceSpecs, HapticLoop, LoopRecord, SimulatedDevice, VirtualCoupling
+from fixplan.kinematics import mass_matrix
+from fixplan.planner.execute import (
+    ExecutionLog,
+    ExecutionNoise,
+    ExecutionSettings,
+    Executor,
+    Replan,
+    Step,
+    com_twist_between,
+    mass_speed,
+)
 from fixplan.pose import Pose, log_so3
 from fixplan.simulator import Simulator
 
@@ -96,16 +110,20 @@ class Verification:
     reason: str
     final_pose: Pose
     max_penetration_m: float
-    deadline_misses: int
-    tick_mean_us: float
-    tick_max_us: float
+    deadline_misses: int | None  # None: the loop did not finish (diverged)
+    tick_mean_us: float | None
+    tick_max_us: float | None
     observed_sequence: list[tuple[str, ...]]
     final_gaps_m: dict[str, float]
     duration_s: float
-    felt_force_max_N: float
+    felt_force_max_N: float | None
     unconverged_steps: int = 0
     max_solver_error: float = 0.0
     trace: VerificationTrace | None = None
+    execution: ExecutionLog | None = None
+    max_push_force_N: float | None = None  # on the part, averaged over 10 ms
+    max_push_torque_Nm: float | None = None
+    saturated_ticks: int = 0  # ticks where the coupling asked more than the hand's limits (capped there)
     extras: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
@@ -123,6 +141,10 @@ class Verification:
             "felt_force_max": self.felt_force_max_N,
             "unconverged_steps": self.unconverged_steps,
             "max_solver_error": self.max_solver_error,
+            "max_push_force": self.max_push_force_N,
+            "max_push_torque": self.max_push_torque_Nm,
+            "saturated_ticks": self.saturated_ticks,
+            "execution": None if self.execution is None else self.execution.to_json(),
             "trace": None if self.trace is None else self.trace.to_json(),
         }
 
@@ -159,44 +181,34 @@ def compress_states(samples: Sequence[tuple[float, frozenset[str]]], dwell_s: fl
 
 def verify(
     fixture: Fixture,
-    sequence: Sequence[Sequence[str]],
-    knots: Sequence[Sequence[Pose]],
-    wrenches: Sequence[FloatArray],
-    durations_s: Sequence[float],
+    start_state: frozenset[str],
+    steps: Sequence[Step],
     *,
-    settle_s: float = 0.3,
-    dwell_s: float = 0.01,
+    settings: ExecutionSettings | None = None,
+    noise: ExecutionNoise | None = None,
+    replan: Replan | None = None,
+    time_limit_s: float | None = None,
     final_gap_m: float = 1e-4,
     max_penetration_m: float = 1e-5,
-    stall_speed: float = 1e-5,
-    stall_s: float = 0.1,
+    limit_slack: float = 0.05,
     trace_every_s: float = 0.01,
     max_sweeps: int = 40,
 ) -> Verification:
-    """Run the plan through the loop: per transition the knot poses, the wrench per segment (or one), a duration."""
+    """Execute the plan (``steps`` from ``start_state``) in the haptic loop and check the outcome."""
     # a real-time loop bounds its work: a haptic-grade residual and at most ``max_sweeps`` NSGS
     # sweeps per tick (≈ 7 µs a sweep with five or six sliding contacts: 40 sweeps stay within
     # 0.3 ms of the 1 ms period). Steps that stop at the cap are counted, and the worst residual
-    # reached is reported: NSGS stalls near 1e-4 on some sliding contact sets, and 100 sweeps
-    # (1.3 ms, a missed deadline) only took it from 2e-4 to 7e-5 on the default box.
+    # reached is reported.
     sim = Simulator(fixture, tolerance=1e-6, max_iterations=max_sweeps)
     R0 = fixture.start.R_world_body.copy()
     ndof = 6 if fixture.dimension == 3 else 3
     x0 = pose_coordinates(fixture.start, R0)
-    # the device is sized to the limits the plan was made for (the manipulator's, or the wrench
-    # search's defaults): a plan may push as hard as those allow, and a weaker device would let
-    # the operator overpower its motors and spin the handle away
-    wp = fixture.workpiece
-    g = float(np.linalg.norm(fixture.gravity)) or 9.81
-    F_max = fixture.manipulator.max_force_N if math.isfinite(fixture.manipulator.max_force_N) else 5.0 * wp.mass_kg * g
-    T_max = (
-        fixture.manipulator.max_torque_Nm
-        if math.isfinite(fixture.manipulator.max_torque_Nm)
-        else F_max * wp.shape.bounding_radius
-    )
+    executor = Executor(fixture, start_state, steps, settings, replan=replan, noise=noise, tick_s=sim.dt)
+    F_max, T_max = executor.F_max, executor.T_max
+    # the device can display a little more than the hand may push (the coupling's transients)
     specs = DeviceSpecs(
-        max_force_N=1.05 * F_max,
-        max_torque_Nm=1.05 * T_max,
+        max_force_N=1.5 * F_max,
+        max_torque_Nm=1.5 * T_max,
         max_stiffness_N_per_m=5000.0,
         max_damping_Ns_per_m=50.0,
         workspace_radius_m=0.5,
@@ -205,87 +217,60 @@ def verify(
     dev = SimulatedDevice(ndof, mass_kg=0.2, inertia_kgm2=2e-4, specs=specs, x0=x0)
     b = dev.specs.physical_damping_Ns_per_m
     coupling = VirtualCoupling(2000.0, 2.0, 40.0, 0.02, sim.dt, device_damping=b, device_damping_rot=b * 1e-2)
-    loop = HapticLoop(sim, dev, coupling)
-    K = np.concatenate([np.full(fixture.dimension, coupling.K_lin), np.full(ndof - fixture.dimension, coupling.K_rot)])
-    # the reference: knot coordinates spread evenly over each transition, then a settling phase
-    times: list[float] = [0.0]
-    refs: list[FloatArray] = [x0]
-    pushes: list[FloatArray] = []
-    t = 0.0
-    seg_pushes: list[FloatArray] = []  # the feedforward for each reference segment
-    for poses, w, T in zip(knots, wrenches, durations_s, strict=True):
-        coords = [pose_coordinates(p, R0) for p in poses]
-        W = np.atleast_2d(np.asarray(w, dtype=float))
-        for k, c in enumerate(coords[1:], 1):
-            times.append(t + T * k / (len(coords) - 1))
-            refs.append(c)
-            seg_pushes.append(W[min(k - 1, W.shape[0] - 1)])
-        pushes.append(W[-1])
-        t += T
-    ends = np.cumsum(durations_s)
-    total = t + settle_s
-    times_arr = np.array(times)
-    refs_arr = np.array(refs)
-    final_push = pushes[-1] if pushes else np.zeros(ndof)
-
-    def reference(tt: float) -> tuple[FloatArray, FloatArray, FloatArray]:
-        if tt >= times_arr[-1]:
-            return refs_arr[-1], np.zeros(ndof), final_push
-        k = int(np.searchsorted(times_arr, tt, side="right")) - 1
-        push = seg_pushes[k]
-        dt = times_arr[k + 1] - times_arr[k]
-        s = (tt - times_arr[k]) / dt
-        x = (1 - s) * refs_arr[k] + s * refs_arr[k + 1]
-        v = (refs_arr[k + 1] - refs_arr[k]) / dt
-        return x, v, push
-
+    loop = HapticLoop(sim, dev, coupling, push_limits=(F_max, T_max))
+    d = fixture.dimension
+    K = np.concatenate([np.full(d, coupling.K_lin), np.full(ndof - d, coupling.K_rot)])
     # operator PD gains per coordinate, scaled by the handle's mass and inertia so both have the
     # same natural frequency (≈ 45 rad/s) and damping ratio (≈ 1) at the 1 kHz tick
-    d = fixture.dimension
     m_dev, i_dev = 0.2, 2e-4
     kp = np.concatenate([np.full(d, 400.0), np.full(ndof - d, 400.0 * i_dev / m_dev)])
     kd = np.concatenate([np.full(d, 18.0), np.full(ndof - d, 18.0 * i_dev / m_dev)])
     damping = np.concatenate([np.full(d, b), np.full(ndof - d, b * 1e-2)])
+    threshold = executor.threshold_N
+    contact_gap_m = executor.settings.contact_gap_m
 
     def operator(tt: float, device: SimulatedDevice) -> FloatArray:
-        x_ref, v_ref, push = reference(tt)
-        lead = push / K
-        return push + damping * v_ref + kp * (x_ref + lead - device.position()) + kd * (v_ref - device.velocity())
+        pressed = frozenset(sim.in_contact(threshold, contact_gap_m))
+        w = executor.command(tt, sim.pose, sim.twist, pressed)
+        x_w, v_w = loop.workpiece_coordinates()
+        return w + damping * v_w + kp * (x_w + w / K - device.position()) + kd * (v_w - device.velocity())
 
+    if time_limit_s is None:
+        # generous: every transition at the slowest speed the executor keeps, plus settling
+        nominal = sum(_path_length(fixture, st) for st in steps) / executor.settings.speed_mps
+        time_limit_s = min(3.0 * nominal + 2.0 + 0.5 * len(steps), 60.0)
+    trace_every = max(int(round(trace_every_s / sim.dt)), 1) if trace_every_s > 0 else 0
     try:
-        trace_every = max(int(round(trace_every_s / sim.dt)), 1) if trace_every_s > 0 else 0
-        rec = loop.run(total, operator, trace_every=trace_every)
+        rec = loop.run(time_limit_s, operator, trace_every=trace_every, until=lambda: executor.done)
     except SolverError as exc:
         return Verification(
             passed=False,
-            reason=f"the simulated load diverged at t = {sim.time_s:.3f} s ({_phase(ends, sim.time_s)}): {exc}",
+            reason=f"the simulated load diverged at t = {sim.time_s:.3f} s (transition {executor.index + 1}): {exc}",
             final_pose=sim.pose,
             max_penetration_m=sim.max_penetration_m,
-            deadline_misses=0,
-            tick_mean_us=0.0,
-            tick_max_us=0.0,
-            observed_sequence=[],
+            deadline_misses=None,
+            tick_mean_us=None,
+            tick_max_us=None,
+            observed_sequence=list(executor.log.observed),
             final_gaps_m={},
             duration_s=sim.time_s,
-            felt_force_max_N=0.0,
+            felt_force_max_N=None,
+            execution=executor.log,
         )
-    # observed contact states: locators pressed (positive normal force) at each tick
-    samples: list[tuple[float, frozenset[str]]] = []
-    for tt, active in zip(rec.time_s, rec.active_contacts, strict=True):
-        samples.append((tt, frozenset(active)))
-    observed = compress_states(samples, dwell_s)
-    planned = [tuple(sorted(s)) for s in sequence]
+    log = executor.log
+    if log.outcome == "running":
+        executor._fail(
+            sim.time_s,
+            f"timed out after {sim.time_s:.2f} s in transition {executor.index + 1} "
+            f"({_fmt_state(executor.states[min(executor.index, len(executor.states) - 1)])}"
+            + (f" + {executor.steps[executor.index].target}" if executor.index < len(executor.steps) else "")
+            + ")",
+        )
     gaps = {c.name: float(c.gap_m) for c in sim.contacts()}
     pen = sim.max_penetration_m
     reasons = []
-    if planned and observed != planned:
-        k = next(
-            (i for i, (a, b) in enumerate(zip(observed, planned, strict=False)) if a != b),
-            min(len(observed), len(planned)),
-        )
-        seen = observed[k] if k < len(observed) else "nothing more"
-        want = planned[k] if k < len(planned) else "nothing more"
-        reasons.append(f"the contact states leave the plan at step {k + 1}: observed {seen}, planned {want}")
+    if log.outcome != "reached":
+        reasons.append(log.reason)
     far = {n: g for n, g in gaps.items() if abs(g) > final_gap_m}
     if far:
         reasons.append(
@@ -295,31 +280,22 @@ def verify(
         )
     if pen > max_penetration_m:
         reasons.append(f"penetration reached {pen:.3g} m (expected ≤ {max_penetration_m:g} m)")
-    # stall: no progress for stall_s while the plan expects motion
-    pos = np.array(rec.workpiece_position)
-    speed = np.linalg.norm(np.diff(pos, axis=0), axis=1) / sim.dt if len(pos) > 1 else np.zeros(0)
-    run_len = int(math.ceil(stall_s / sim.dt))
-    # a stall: stopped for stall_s while the current transition's target is not yet pressed
-    # (arriving early, or in a slightly different orientation, and waiting is not a stall)
-    targets = [sorted(set(b) - set(a)) for a, b in zip(planned, planned[1:], strict=False)]
-    end_positions = [np.asarray(poses[-1].p_world) for poses in knots]
-    still = 0
-    for k, sp in enumerate(speed):
-        tt = rec.time_s[k]
-        i = int(np.searchsorted(ends, tt, side="right"))
-        if i >= len(end_positions):
-            break
-        target = targets[i] if i < len(targets) else []
-        reached = bool(target) and all(n in rec.active_contacts[k + 1] for n in target)
-        away = float(np.linalg.norm(pos[k + 1] - end_positions[i]))
-        still = still + 1 if (sp < stall_speed and not reached) else 0
-        if still >= run_len:
-            reasons.append(
-                f"the workpiece stalled at t = {tt:.3f} s in transition {i + 1}, {away * 1e3:.2f} mm from where it should end"
-                + (f", before touching {', '.join(target)}" if target else "")
-            )
-            break
-    felt = max((float(np.linalg.norm(f[: fixture.dimension])) for f in rec.felt_wrench), default=0.0)
+    # the push on the part, averaged over 10 ms, against the manipulator's limits
+    W = np.array(rec.coupling_wrench) if rec.coupling_wrench else np.zeros((1, ndof))
+    win = max(int(round(0.01 / sim.dt)), 1)
+    if W.shape[0] >= win:
+        kernel = np.ones(win) / win
+        Wf = np.array([np.convolve(W[:, j], kernel, mode="valid") for j in range(ndof)]).T
+    else:
+        Wf = W
+    push_F = float(np.max(np.linalg.norm(Wf[:, :d], axis=1)))
+    push_T = float(np.max(np.linalg.norm(Wf[:, d:], axis=1)))
+    if push_F > (1 + limit_slack) * F_max or push_T > (1 + limit_slack) * T_max:
+        reasons.append(
+            f"the push on the part exceeded the manipulator's limits: ‖F‖ up to {push_F:.3g} N (max_force {F_max:.3g} N), "
+            f"‖T‖ up to {push_T:.3g} N·m (max_torque {T_max:.3g} N·m), averaged over 10 ms"
+        )
+    felt = max((float(np.linalg.norm(f[:d])) for f in rec.felt_wrench), default=0.0)
     return Verification(
         passed=not reasons,
         reason="; ".join(reasons) if reasons else "every check passed",
@@ -328,11 +304,29 @@ def verify(
         deadline_misses=rec.deadline_misses,
         tick_mean_us=rec.mean_compute_s * 1e6,
         tick_max_us=rec.max_compute_s * 1e6,
-        observed_sequence=observed,
+        observed_sequence=list(log.observed),
         final_gaps_m=gaps,
-        duration_s=total,
+        duration_s=sim.time_s,
         felt_force_max_N=felt,
         unconverged_steps=rec.unconverged_steps,
         max_solver_error=rec.max_solver_error,
         trace=trace_from_record(rec, sim.names, trace_every) if rec.trace else None,
+        execution=log,
+        max_push_force_N=push_F,
+        max_push_torque_Nm=push_T,
+        saturated_ticks=loop.saturated_ticks,
     )
+
+
+def _path_length(fixture: Fixture, step: Step) -> float:
+    """Mass-weighted length of a step's guide path [m] (at least 1 cm)."""
+    wp = fixture.workpiece
+    total = 0.0
+    for a, b in zip(step.path[:-1], step.path[1:], strict=True):
+        M = mass_matrix(wp.mass_kg, wp.inertia_body, a.R_world_body)
+        total += mass_speed(com_twist_between(a, b, wp.com_body), M, wp.mass_kg)
+    return max(total, 0.01)
+
+
+def _fmt_state(state: frozenset[str]) -> str:
+    return "{" + ", ".join(sorted(state)) + "}" if state else "free"

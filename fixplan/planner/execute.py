@@ -1,0 +1,615 @@
+"""Executing a plan as a contact-state feedback policy (the paper's state-based scheme).
+
+A plan is a sequence of recognisable contact states ``S_0 ⊂ S_1 ⊂ … ⊂ S_n`` (sets of pressed
+locators) and, per transition ``S_i → S_{i+1}``, a :class:`Step`: the target locator, the
+motion on the established contacts (``roll``, ``slide`` or ``free``) and a guide path (the fine
+plan's knot poses). The :class:`Executor` does not replay that path. At the control rate it
+
+1. observes the *contact state* — the locators whose normal force exceeds a threshold, as a
+   force sensor at each locator would report it, or whose gap is within ``contact_gap_m`` (a
+   locator that friction leaves unloaded is still in contact), debounced over ``dwell_s`` — and
+   the pose;
+2. finds the current transition from the pressed set (advancing, or skipping ahead when a later
+   planned state is reached directly);
+3. chooses the desired motion at the *current* pose: toward the guide path a little ahead of
+   the nearest knot, or (near its end) the least-``M``-norm motion that closes the target's
+   gap, in both cases projected onto the motions that keep the established contacts
+   (normal rows for sliding, all rows for rolling);
+4. regulates speed along that motion (cruise at ``speed_mps``, slow down near the target) and
+   re-solves the non-jamming wrench (:func:`~fixplan.jamming.search.search_wrench`, least
+   effort, friction robust to ``±friction_margin``) at the current pose; the wrench is held
+   between solves.
+
+Guards, each counted and reported in :class:`ExecutionLog`:
+
+- **lost contact** (an established locator seen in contact is no longer) or **unplanned contact** (a
+  pressed set that is not in the plan): re-plan from the observed state and pose (the
+  ``replan`` callback: a coarse search from there);
+- **stall** (at rest while the current transition expects motion): the push is re-searched
+  with a larger acceleration and friction margin, then along the direct gap-closing motion; a
+  stall that no wrench within the hand's limits breaks ends the run with the search's reason;
+- **divergence**: a non-finite state, a speed beyond what the push can cause, or the part far
+  from the fixture ends the run with that reason.
+
+The same policy guides a person at a haptic device: :meth:`Executor.guidance` is the next
+target and the suggested push.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fixplan.errors import InputError
+from fixplan.locating import contact_set
+from fixplan.pose import Pose
+
+if TYPE_CHECKING:
+    from fixplan.fixture import Fixture
+
+FloatArray = NDArray[np.float64]
+State = frozenset[str]
+
+
+@dataclass(frozen=True)
+class Step:
+    """The policy of one transition: press ``target`` while keeping ``established`` pressed."""
+
+    established: tuple[str, ...]
+    target: str
+    kind: str  # "roll" | "slide" | "free"
+    path: tuple[Pose, ...]  # guide poses, the first near where the transition starts, the last where target touches
+
+    def to_json(self) -> dict[str, Any]:
+        return {"established": list(self.established), "target": self.target, "kind": self.kind}
+
+
+@dataclass(frozen=True)
+class ExecutionSettings:
+    """How the executor pushes. Speeds and accelerations are of the mass-weighted twist.
+
+    The mass-weighted speed of a twist ``ν`` of the centre of mass is ``√(νᵀ M ν / m)`` [m/s]:
+    the speed of the centre of mass for a translation, the radius-of-gyration speed for a spin.
+    """
+
+    control_rate_hz: float = 200.0  # wrench re-solves per second (held between solves)
+    speed_mps: float = 0.04  # cruise speed
+    min_speed_mps: float = 0.004  # speed kept up to the very end of a transition
+    accel_mps2: float = 1.0  # largest commanded acceleration
+    brake_mps2: float = 0.1  # deceleration of the speed profile toward the target
+    speed_time_s: float = 0.05  # the speed error is closed in about this long
+    min_accel_fraction: float = 0.05  # least |acceleration| asked (of accel_mps2): never a jamming push
+    max_accel_factor: float = 1.5  # the push may accelerate at most this × the acceleration asked
+    friction_margin: float = 0.1  # δ: pushes robust to friction μ(1 ± δ)
+    margin_N: float | None = None  # least normal force on kept contacts (default: the part's weight)
+    press_fraction: float = 0.02  # force-sensor threshold as a fraction of the weight
+    contact_gap_m: float = 2e-6  # a locator this close counts as in contact even when friction leaves it unloaded
+    dwell_s: float = 0.01  # a pressed set counts once held this long
+    stall_speed_mps: float = 1e-4
+    stall_s: float = 0.12
+    max_retries: int = 3  # stall recoveries per transition before giving up
+    max_replans: int = 4
+    settle_s: float = 0.2  # at rest with every locator pressed this long: done
+    hold_fraction: float = 0.25  # at the goal, each locator is pressed by this fraction of the weight
+    speed_limit_factor: float = 25.0  # speed beyond this × the cruise speed (and ≥ 1 m/s) is divergence
+
+
+@dataclass(frozen=True)
+class ExecutionNoise:
+    """Operator imperfections: relative force noise per control period and a reaction delay."""
+
+    force_noise: float = 0.0  # standard deviation, relative to each wrench component's size
+    latency_s: float = 0.0
+    seed: int = 0
+
+
+@dataclass
+class ExecutionLog:
+    """What the executor did and saw."""
+
+    events: list[tuple[float, str, str]] = field(default_factory=list)  # (time, kind, message)
+    counts: dict[str, int] = field(
+        default_factory=lambda: {
+            "solves": 0,
+            "failed_solves": 0,
+            "replans": 0,
+            "lost_contact": 0,
+            "unplanned_contact": 0,
+            "stalls": 0,
+            "retries": 0,
+            "skipped_states": 0,
+        }
+    )
+    observed: list[tuple[str, ...]] = field(default_factory=list)  # debounced pressed sets, in order
+    outcome: str = "running"  # "running" | "reached" | "failed"
+    reason: str = ""
+    transition_at_end: int = 0
+    max_command_force_N: float = 0.0
+    max_command_torque_Nm: float = 0.0
+
+    def event(self, t: float, kind: str, message: str) -> None:
+        self.events.append((t, kind, message))
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "outcome": self.outcome,
+            "reason": self.reason,
+            "counts": dict(self.counts),
+            "events": [{"time_s": t, "kind": k, "message": m} for t, k, m in self.events],
+            "max_command_force_N": self.max_command_force_N,
+            "max_command_torque_Nm": self.max_command_torque_Nm,
+        }
+
+
+Replan = Callable[[Pose, State], "list[Step] | str"]
+
+
+def mass_speed(nu: FloatArray, M: FloatArray, m: float) -> float:
+    """The mass-weighted size ``√(νᵀ M ν / m)`` of a twist (or twist rate) of the centre of mass."""
+    return float(math.sqrt(max(float(nu @ M @ nu), 0.0) / m))
+
+
+def com_twist_between(a: Pose, b: Pose, com_body: FloatArray) -> FloatArray:
+    """The twist of the centre of mass that takes pose ``a`` to pose ``b`` in unit time (world axes)."""
+    from fixplan.pose import log_so3
+
+    dc = b.point_world_from_body(com_body) - a.point_world_from_body(com_body)
+    if a.dimension == 3:
+        return np.concatenate([dc, log_so3(b.R_world_body @ a.R_world_body.T)])
+    dth = (b.angle_rad - a.angle_rad + np.pi) % (2 * np.pi) - np.pi
+    return np.concatenate([dc, [dth]])
+
+
+def origin_motion(com_rate: FloatArray, com_world: FloatArray, origin_world: FloatArray) -> FloatArray:
+    """A twist (rate) of the centre of mass re-expressed at the body origin."""
+    d = com_world.shape[0]
+    r = origin_world - com_world
+    if d == 3:
+        return np.concatenate([com_rate[:3] + np.cross(com_rate[3:], r), com_rate[3:]])
+    return np.array([com_rate[0] - com_rate[2] * r[1], com_rate[1] + com_rate[2] * r[0], com_rate[2]])
+
+
+def project_keeping(nu: FloatArray, A: FloatArray | None, M_inv: FloatArray) -> FloatArray:
+    """The ``M``-orthogonal projection of ``nu`` onto ``{ν : A ν = 0}``."""
+    if A is None or A.shape[0] == 0:
+        return nu
+    return nu - M_inv @ A.T @ np.linalg.pinv(A @ M_inv @ A.T, rcond=1e-10) @ (A @ nu)
+
+
+class Executor:
+    """The plan as a feedback policy; :meth:`command` is called once per tick with the observed state."""
+
+    def __init__(
+        self,
+        fixture: Fixture,
+        start_state: State,
+        steps: Sequence[Step],
+        settings: ExecutionSettings | None = None,
+        *,
+        replan: Replan | None = None,
+        noise: ExecutionNoise | None = None,
+        tick_s: float = 1e-3,
+    ):
+        self.fixture = fixture
+        self.settings = s = settings or ExecutionSettings()
+        self.noise = noise or ExecutionNoise()
+        self.rng = np.random.default_rng(self.noise.seed)
+        self.replan = replan
+        self.tick_s = tick_s
+        wp = fixture.workpiece
+        self.mass = wp.mass_kg
+        self.weight_N = wp.mass_kg * (float(np.linalg.norm(fixture.gravity)) or 9.81)
+        self.threshold_N = max(s.press_fraction * self.weight_N, 1e-6)
+        self.names = tuple(loc.name for loc in fixture.locators)
+        self.goal_state: State = frozenset(self.names)
+        self.ndof = fixture.ndof
+        self.log = ExecutionLog()
+        self._set_plan(start_state, list(steps))
+        self.every = max(int(round(1.0 / (s.control_rate_hz * tick_s))), 1)
+        self.wrench = np.zeros(self.ndof)  # held command (about the body origin, world axes)
+        self._applied = np.zeros(self.ndof)
+        self._tick = 0
+        self._candidate: State | None = None
+        self._candidate_since = 0.0
+        self._observed: State | None = None  # nothing seen yet
+        self._still_since: float | None = None
+        self._retry = 0
+        self._use_direct = False
+        self._last_reason = ""
+        self._settled_since: float | None = None
+        self._hold: FloatArray | None = None
+        self._seen: set[str] = set()  # locators observed in contact at least once
+        self._arrived = False  # the current target touches: holding until the state is confirmed
+        self._history: list[tuple[Pose, FloatArray, State]] = []
+        self._delay_ticks = int(round(self.noise.latency_s / tick_s))
+        self.F_max, self.T_max = self._limits()
+        self.v_limit = max(s.speed_limit_factor * s.speed_mps, 1.0)
+
+    # -- plan bookkeeping ----------------------------------------------------------------------
+    def _set_plan(self, start_state: State, steps: list[Step]) -> None:
+        self.steps = steps
+        self.states: list[State] = [start_state]
+        for st in steps:
+            self.states.append(frozenset(st.established) | {st.target})
+        self.index = 0  # current transition (== len(steps): holding at the goal)
+        self._hold = None
+        self._arrived = False
+
+    def _limits(self) -> tuple[float, float]:
+        m = self.fixture.manipulator
+        F = m.max_force_N if math.isfinite(m.max_force_N) else 5.0 * self.weight_N
+        T = m.max_torque_Nm if math.isfinite(m.max_torque_Nm) else F * self.fixture.workpiece.shape.bounding_radius
+        return F, T
+
+    @property
+    def done(self) -> bool:
+        return self.log.outcome != "running"
+
+    def guidance(self) -> dict[str, Any]:
+        """The next target and the suggested push (for a person at a device, or a display)."""
+        step = self.steps[self.index] if self.index < len(self.steps) else None
+        return {
+            "transition": self.index + 1 if step else None,
+            "target": step.target if step else None,
+            "motion": step.kind if step else "hold",
+            "wrench": [float(x) for x in self.wrench],
+        }
+
+    def _fail(self, t: float, reason: str) -> None:
+        if not self.done:
+            self.log.outcome = "failed"
+            self.log.reason = reason
+            self.log.transition_at_end = self.index + 1
+            self.log.event(t, "failed", reason)
+
+    # -- observation ---------------------------------------------------------------------------
+    def _observe(self, t: float, pressed: State) -> bool:
+        """Debounce the pressed set; True when a new state has just been accepted."""
+        if pressed == self._observed:
+            self._candidate = None
+            return False
+        if pressed != self._candidate:
+            self._candidate, self._candidate_since = pressed, t
+            return False
+        if t - self._candidate_since + 1e-12 < self.settings.dwell_s:
+            return False
+        self._observed = pressed
+        self._seen |= pressed
+        self._candidate = None
+        key = tuple(sorted(pressed))
+        if key and (not self.log.observed or self.log.observed[-1] != key):
+            self.log.observed.append(key)
+        return True
+
+    def _on_new_state(self, t: float, pose: Pose) -> None:
+        P = self._observed
+        if P is None:
+            return
+        later = [j for j in range(self.index + 1, len(self.states)) if self.states[j] == P]
+        if later:
+            j = later[0]
+            if j > self.index + 1:
+                self.log.counts["skipped_states"] += j - self.index - 1
+                self.log.event(t, "skipped", f"reached {_fmt(P)} directly")
+            self.index = j
+            self._retry, self._use_direct, self._still_since, self._arrived = 0, False, None, False
+            self.log.event(t, "state", f"reached {_fmt(P)}")
+            return
+        current = self.states[self.index]
+        if P == current:
+            return
+        # a locator can only be lost once it has been seen in contact (at the start the push that
+        # presses the part into its touching locators is still building up in the coupling)
+        lost = sorted((current - P) & self._seen)
+        if not lost and P < current:
+            return
+        if lost:
+            self.log.counts["lost_contact"] += 1
+            why = f"lost contact with {', '.join(lost)} in transition {self.index + 1}"
+        else:
+            self.log.counts["unplanned_contact"] += 1
+            why = f"unplanned contact state {_fmt(P)} in transition {self.index + 1} (planned {_fmt(self.states[self.index + 1]) if self.index + 1 < len(self.states) else 'the goal'})"
+        self.log.event(t, "guard", why)
+        self._replan(t, pose, P, why)
+
+    def _replan(self, t: float, pose: Pose, state: State, why: str) -> None:
+        if self.replan is None:
+            self._fail(t, f"{why}; no re-planning available")
+            return
+        if self.log.counts["replans"] >= self.settings.max_replans:
+            self._fail(t, f"{why}; gave up after {self.settings.max_replans} re-plans")
+            return
+        self.log.counts["replans"] += 1
+        result = self.replan(pose, state)
+        if isinstance(result, str):
+            self._fail(t, f"{why}; re-planning from {_fmt(state)} failed: {result}")
+            return
+        self._set_plan(state, result)
+        self._retry, self._use_direct, self._still_since = 0, False, None
+        seq = " → ".join(_fmt(s) for s in self.states)
+        self.log.event(t, "replan", f"re-planned from {_fmt(state)}: {seq}")
+
+    # -- the command ---------------------------------------------------------------------------
+    def command(self, t: float, pose: Pose, twist: FloatArray, pressed: State) -> FloatArray:
+        """The wrench the operator applies now (about the body origin, world axes)."""
+        self._history.append((pose, twist, pressed))
+        if self._delay_ticks:
+            k = max(len(self._history) - 1 - self._delay_ticks, 0)
+            pose, twist, pressed = self._history[k]
+            if len(self._history) > self._delay_ticks + 2:
+                self._history.pop(0)
+        else:
+            self._history.clear()
+        tick = self._tick
+        self._tick += 1
+        if self.done:
+            return self._applied
+        if not (np.all(np.isfinite(twist)) and np.all(np.isfinite(pose.p_world))):
+            self._fail(t, f"the simulated load diverged at t = {t:.3f} s: the state is not finite")
+            return self._applied
+        M = self._mass_matrix(pose)
+        speed = mass_speed(twist, M, self.mass)
+        if speed > self.v_limit:
+            self._fail(
+                t,
+                f"the simulated load diverged at t = {t:.3f} s (transition {self.index + 1}): speed {speed:.3g} m/s, "
+                f"beyond what the push can cause (limit {self.v_limit:.3g} m/s)",
+            )
+            return self._applied
+        if self._observe(t, pressed):
+            self._on_new_state(t, pose)
+            if self.done:
+                return self._applied
+        at_goal = self.index >= len(self.steps)
+        # at rest with everything pressed: done
+        if at_goal and self._observed == self.goal_state and speed < self.settings.stall_speed_mps * 10:
+            if self._settled_since is None:
+                self._settled_since = t
+            elif t - self._settled_since >= self.settings.settle_s:
+                self.log.outcome = "reached"
+                self.log.reason = "every locator pressed, at rest"
+                self.log.transition_at_end = len(self.steps)
+                self.log.event(t, "reached", "every locator pressed, at rest")
+        else:
+            self._settled_since = None
+        if not at_goal:
+            self._check_stall(t, pose, speed)
+            if self.done:
+                return self._applied
+        if not at_goal:
+            # the target touched: stop driving at once and press into the new state's contacts
+            # (the push that brought the part here would carry it on, or tip it back)
+            step = self.steps[self.index]
+            arrived = step.target in pressed and set(step.established) <= pressed
+            if arrived and not self._arrived:
+                self._arrived = True
+                self.wrench = self.hold_wrench(pose, [*step.established, step.target])
+                self._applied = self._with_noise(self.wrench)
+                return self._applied
+            if not arrived:
+                self._arrived = False
+        if tick % self.every == 0:
+            if self._arrived and not at_goal:
+                pass  # hold until the new state is confirmed (dwell), then the next transition
+            elif at_goal:
+                if self._hold is None:
+                    self._hold = self.hold_wrench(pose)
+                    self.log.event(t, "hold", "every planned state reached: pressing the part into every locator")
+                self.wrench = self._hold
+            else:
+                self._solve(t, pose, twist, M)
+            self._applied = self._with_noise(self.wrench)
+        return self._applied
+
+    def hold_wrench(self, pose: Pose, names: Sequence[str] | None = None) -> FloatArray:
+        """A push that keeps every locator (or ``names``) pressed at ``pose`` (about the body origin, world axes).
+
+        The contact forces that carry gravity (least squares, ≥ 0) plus ``hold_fraction`` of the
+        weight pressed into every locator: ``w = r − τ Σ_i G_iᵀ``, with ``r`` the part of gravity
+        the locators cannot carry; τ is reduced until the push is within the hand's limits.
+        """
+        from scipy.optimize import nnls
+
+        fx = self.fixture
+        cs = contact_set(fx, pose, list(self.names if names is None else names))
+        G = cs.G  # (k, n): unit normal wrenches about the centre of mass
+        w_g = fx.gravity_wrench()
+        f, _ = nnls(G.T, -w_g)
+        r = -w_g - G.T @ f
+        tau = self.settings.hold_fraction * self.weight_N
+        com = cs.com_world
+        d = fx.dimension
+        w_o = np.zeros(self.ndof)
+        for _ in range(30):
+            w_c = r - tau * G.sum(axis=0)
+            off = com - pose.p_world
+            if d == 3:
+                w_o = np.concatenate([w_c[:3], w_c[3:] + np.cross(off, w_c[:3])])
+            else:
+                w_o = np.array([w_c[0], w_c[1], w_c[2] + off[0] * w_c[1] - off[1] * w_c[0]])
+            if np.linalg.norm(w_o[:d]) <= self.F_max and np.linalg.norm(w_o[d:]) <= self.T_max:
+                break
+            tau *= 0.7
+        return w_o
+
+    def _with_noise(self, w: FloatArray) -> FloatArray:
+        if self.noise.force_noise <= 0:
+            return w.copy()
+        return w * (1.0 + self.noise.force_noise * self.rng.standard_normal(w.shape[0]))
+
+    def _mass_matrix(self, pose: Pose) -> FloatArray:
+        from fixplan.kinematics import mass_matrix
+
+        wp = self.fixture.workpiece
+        return mass_matrix(wp.mass_kg, wp.inertia_body, pose.R_world_body)
+
+    def _check_stall(self, t: float, pose: Pose, speed: float) -> None:
+        s = self.settings
+        if speed >= s.stall_speed_mps:
+            self._still_since = None
+            return
+        if self._still_since is None:
+            self._still_since = t
+            return
+        if t - self._still_since < s.stall_s:
+            return
+        self._still_since = None
+        self.log.counts["stalls"] += 1
+        step = self.steps[self.index]
+        if self._retry >= s.max_retries:
+            self._fail(
+                t,
+                f"stalled in transition {self.index + 1} ({_fmt(self.states[self.index])} + {step.target}) at t = {t:.3f} s "
+                f"after {self._retry} re-searches: {self._last_reason or 'no push moves the part'}",
+            )
+            return
+        self._retry += 1
+        self.log.counts["retries"] += 1
+        if self._retry >= 2:
+            self._use_direct = True
+        self.log.event(
+            t,
+            "stall",
+            f"at rest in transition {self.index + 1} before {step.target} touches: re-search #{self._retry}"
+            + (" along the direct gap-closing motion" if self._use_direct else " with a larger push"),
+        )
+
+    def direction(self, pose: Pose, step: Step) -> tuple[FloatArray, float]:
+        """Unit (mass-weighted) desired twist of the centre of mass and the distance left [m]."""
+        fx = self.fixture
+        wp = fx.workpiece
+        names = [*step.established, step.target]
+        cs = contact_set(fx, pose, names)
+        M, M_inv = cs.mass_matrix, cs.M_inv
+        n_est = len(step.established)
+        if n_est:
+            est_cs_rows = cs.J[: int(sum(c.size for c in cs.contacts[:n_est]))] if step.kind == "roll" else cs.G[:n_est]
+        else:
+            est_cs_rows = None
+        target = cs.contacts[-1]
+        gap = max(float(target.gap_m), 0.0)
+        # the direct motion: the least M-norm one that closes the target's gap (to first order)
+        A = cs.G[-1:] if est_cs_rows is None else np.vstack([est_cs_rows, cs.G[-1:]])
+        b = np.zeros(A.shape[0])
+        b[-1] = -max(gap, 1e-4)
+        direct = M_inv @ A.T @ np.linalg.pinv(A @ M_inv @ A.T, rcond=1e-10) @ b
+        left = gap
+        nu = direct
+        if not self._use_direct and len(step.path) >= 2:
+            twists = [com_twist_between(pose, q, wp.com_body) for q in step.path]
+            dist = [mass_speed(x, M, wp.mass_kg) for x in twists]
+            j = int(np.argmin(dist))
+            ahead = min(j + 1, len(step.path) - 1)
+            seg = [
+                mass_speed(com_twist_between(a, b_, wp.com_body), M, wp.mass_kg)
+                for a, b_ in zip(step.path[ahead:-1], step.path[ahead + 1 :], strict=True)
+            ]
+            left_path = dist[ahead] + float(sum(seg))
+            if left_path > max(2.0 * gap, 1e-3) or ahead < len(step.path) - 1:
+                to = project_keeping(twists[ahead], est_cs_rows, M_inv)
+                # blend in the gap-closing motion so the path leads onto the target
+                nu = to + 0.5 * direct * (mass_speed(to, M, wp.mass_kg) / max(mass_speed(direct, M, wp.mass_kg), 1e-15))
+                left = max(left_path, gap)
+        nu = project_keeping(nu, est_cs_rows, M_inv)
+        size = mass_speed(nu, M, wp.mass_kg)
+        if size <= 1e-15:
+            return np.zeros(self.ndof), left
+        return nu / size, left
+
+    def _solve(self, t: float, pose: Pose, twist: FloatArray, M: FloatArray) -> None:
+        from fixplan.jamming.search import search_wrench
+        from fixplan.planner.fine import _free_wrench
+
+        s = self.settings
+        step = self.steps[self.index]
+        try:
+            nu_hat, left = self.direction(pose, step)
+        except (InputError, np.linalg.LinAlgError) as exc:
+            self._last_reason = str(exc)
+            return
+        if not np.any(nu_hat):
+            self._last_reason = "no motion keeps the established contacts and closes the target's gap"
+            return
+        boost = 1.0 + self._retry
+        v_along = float(twist @ M @ nu_hat) / self.mass
+        # cruise, then brake at brake_mps2 so that contact is made at about min_speed_mps
+        v_des = max(s.min_speed_mps, min(s.speed_mps, math.sqrt(2.0 * s.brake_mps2 * max(left, 0.0))))
+        a_cmd = float(np.clip((v_des - v_along) / s.speed_time_s, -s.accel_mps2, s.accel_mps2))
+        floor = s.min_accel_fraction * s.accel_mps2 * boost
+        # sliding too fast: friction brakes the part when the push only presses the kept contacts
+        brake = (
+            float(np.clip(-a_cmd / (0.5 * s.accel_mps2), 0.0, 1.0))
+            if step.kind == "slide" and step.established
+            else 0.0
+        )
+        if step.kind != "roll" or not step.established:
+            a_cmd = max(a_cmd, floor)  # sliding and free motion: never command a jamming push
+        elif abs(a_cmd) < floor:
+            a_cmd = math.copysign(floor, a_cmd if a_cmd != 0 else 1.0)
+        a_cmd *= boost if a_cmd > 0 else 1.0
+        a_com = nu_hat * a_cmd
+        wp = self.fixture.workpiece
+        com = pose.point_world_from_body(wp.com_body)
+        self.log.counts["solves"] += 1
+        if not step.established:
+            ok, w, why = _free_wrench(self.fixture, pose, a_com, M)
+            if ok:
+                self._accept(w)
+            else:
+                self._reject(t, why)
+            return
+        motion = origin_motion(a_com, com, pose.p_world)
+        try:
+            res = search_wrench(
+                self.fixture,
+                motion,
+                list(step.established),
+                pose=pose,
+                objective="effort",
+                min_margin_N=s.margin_N,
+                friction_margin=s.friction_margin * boost,
+                max_accel_factor=s.max_accel_factor,
+            )
+        except InputError as exc:
+            self._reject(t, str(exc))
+            return
+        if res.found and res.wrench is not None:
+            w = np.asarray(res.wrench, dtype=float)
+            if brake > 0.0:
+                w = (1.0 - brake) * w + brake * self.hold_wrench(pose, step.established)
+            self._accept(w)
+        else:
+            self._reject(t, res.reason)
+
+    def _accept(self, w: FloatArray) -> None:
+        self.wrench = np.asarray(w, dtype=float).copy()
+        d = self.fixture.dimension
+        self.log.max_command_force_N = max(self.log.max_command_force_N, float(np.linalg.norm(w[:d])))
+        self.log.max_command_torque_Nm = max(self.log.max_command_torque_Nm, float(np.linalg.norm(w[d:])))
+        self._last_reason = ""
+
+    def _reject(self, t: float, reason: str) -> None:
+        self.log.counts["failed_solves"] += 1
+        self._last_reason = reason
+
+
+def _fmt(state: State | Sequence[str]) -> str:
+    return "{" + ", ".join(sorted(state)) + "}" if state else "free"
+
+
+__all__ = [
+    "ExecutionLog",
+    "ExecutionNoise",
+    "ExecutionSettings",
+    "Executor",
+    "Step",
+    "com_twist_between",
+    "mass_speed",
+    "origin_motion",
+    "project_keeping",
+]
