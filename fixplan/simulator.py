@@ -297,8 +297,10 @@ class Simulator:
         return tuple(n for n, a, fn in zip(self.names, self._active, f, strict=True) if a and fn > min_force_N)
 
     def in_contact(self, min_force_N: float, max_gap_m: float) -> tuple[str, ...]:
-        """Locators in contact after the last step: pressing (normal force > ``min_force_N``) or
-        touching (gap at the start of the step ≤ ``max_gap_m``, e.g. a contact friction keeps unloaded).
+        """Locators in contact after the last step.
+
+        In contact: pressing (normal force > ``min_force_N``) or touching (gap at the start of the
+        step ≤ ``max_gap_m``, e.g. a contact that friction leaves unloaded).
         """
         f = self._P[:, 0] / self.dt
         return tuple(

@@ -229,6 +229,12 @@ class Executor:
         self._delay_ticks = int(round(self.noise.latency_s / tick_s))
         self.F_max, self.T_max = self._limits()
         self.v_limit = max(s.speed_limit_factor * s.speed_mps, 1.0)
+        # the part never needs to leave the fixture's neighbourhood
+        self._home = fixture.start.p_world.copy()
+        reach = float(
+            np.max(np.linalg.norm([loc.p_world - self._home for loc in fixture.locators], axis=1), initial=0.0)
+        )
+        self._far_m = 3.0 * (reach + fixture.workpiece.shape.bounding_radius)
 
     # -- plan bookkeeping ----------------------------------------------------------------------
     def _set_plan(self, start_state: State, steps: list[Step]) -> None:
@@ -354,6 +360,14 @@ class Executor:
             return self._applied
         M = self._mass_matrix(pose)
         speed = mass_speed(twist, M, self.mass)
+        away = float(np.linalg.norm(pose.p_world - self._home))
+        if away > self._far_m:
+            self._fail(
+                t,
+                f"the simulated load diverged at t = {t:.3f} s (transition {self.index + 1}): the part is {away:.3g} m "
+                f"from where it started (limit {self._far_m:.3g} m)",
+            )
+            return self._applied
         if speed > self.v_limit:
             self._fail(
                 t,
@@ -539,7 +553,15 @@ class Executor:
         v_along = float(twist @ M @ nu_hat) / self.mass
         # cruise, then brake at brake_mps2 so that contact is made at about min_speed_mps
         v_des = max(s.min_speed_mps, min(s.speed_mps, math.sqrt(2.0 * s.brake_mps2 * max(left, 0.0))))
-        a_cmd = float(np.clip((v_des - v_along) / s.speed_time_s, -s.accel_mps2, s.accel_mps2))
+        # below the desired speed: speed up; up to 1.5× it: coast (the least push that keeps the
+        # motion); beyond: brake (a dead band, so the loop does not chatter between push and brake)
+        if v_along <= v_des:
+            a_raw = (v_des - v_along) / s.speed_time_s
+        elif v_along <= 1.5 * v_des:
+            a_raw = 0.0
+        else:
+            a_raw = (1.5 * v_des - v_along) / s.speed_time_s
+        a_cmd = float(np.clip(a_raw, -s.accel_mps2, s.accel_mps2))
         floor = s.min_accel_fraction * s.accel_mps2 * boost
         # sliding too fast: friction brakes the part when the push only presses the kept contacts
         brake = (

@@ -23,7 +23,7 @@ import numpy as np
 
 from fixplan.errors import InputError
 from fixplan.fixture import Fixture
-from fixplan.locating import contact_set, require_full
+from fixplan.locating import contact_set, require_full, solve_goal
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
 from fixplan.planner.execute import ExecutionSettings, Step
 from fixplan.planner.fine import Transition, _segment_wrenches, plan_transition
@@ -192,8 +192,10 @@ def friction_robustness(
     margin_N: float | None,
     grid: Sequence[float] = ROBUST_GRID,
 ) -> float:
-    """The largest δ of ``grid`` for which the transition's first segment has a push moving the
-    part with friction anywhere in ``μ(1 ± δ)`` within the hand's limits (0 if only the nominal μ).
+    """The largest δ of ``grid`` for which the first segment's push survives friction ``μ(1 ± δ)``.
+
+    The push must move the part as planned within the hand's limits; 0 when only the nominal μ
+    allows it, ``inf`` for a transition from no contact (nothing to slip).
     """
     if not tr.established or len(tr.poses) < 2:
         return float("inf")
@@ -253,7 +255,16 @@ class Planner:
         """The executor's guard: a new policy from the observed state, or why there is none."""
         if state == frozenset(self.names):
             return []
-        coarse = self.plan_from(pose, state)
+        fx = self.fixture
+        # the observed contacts touch within the sensor's tolerance; the planner wants them exact:
+        # the nearest pose (least-squares steps) where they do
+        settled = solve_goal(fx.workpiece, [fx.locator(n) for n in sorted(state)], pose, tol_m=1e-10)
+        if not settled.converged:
+            return f"no pose near the observed one keeps {{{', '.join(sorted(state))}}} touching"
+        try:
+            coarse = self.plan_from(settled.pose, state)
+        except InputError as exc:
+            return str(exc)
         return plan_steps(coarse.transitions) if coarse.found else coarse.reason
 
 
