@@ -48,7 +48,7 @@ def run_json(capsys, *args: str) -> tuple[int, dict | None]:
 def test_every_json_command_is_covered():
     commands = typer.main.get_command(app).commands
     with_json = {n for n, c in commands.items() if any("--json" in getattr(p, "opts", ()) for p in c.params)}
-    covered = {"classify", "search", "map", "simulate", "solve", "view", "fclib", "generate"}
+    covered = {"classify", "search", "map", "simulate", "solve", "view", "fclib", "generate", "robust"}
     assert with_json <= covered, f"--json commands without a contract test: {sorted(with_json - covered)}"
 
 
@@ -150,6 +150,18 @@ def test_solve_with_verification_2d(capsys):
 def test_solve_refuses_a_partial_fixture(capsys):
     rc, data = run_json(capsys, "solve", str(PROBLEMS / "cylinder-5.toml"))
     assert rc == 2 and data is None
+
+
+def test_solve_on_a_perturbed_world(capsys):
+    rc, data = run_json(capsys, "solve", str(SMALL_2D), "--perturb-seed", "2")
+    assert rc in (0, 1) and data is not None and data["perturbation"]["sample"] == 2
+
+
+# ---------------------------------------------------------------------------------- robust
+@pytest.mark.parametrize("name", ["rect-3.toml", "cylinder-5.toml"])
+def test_robust(capsys, name):
+    rc, data = run_json(capsys, "robust", str(PROBLEMS / name), "--samples", "2")
+    assert (rc, data is None) == ((0, False) if name == "rect-3.toml" else (2, True))
 
 
 # ---------------------------------------------------------------------------------- view, fclib, generate
