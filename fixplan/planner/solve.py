@@ -51,6 +51,21 @@ class PlanResult:
     def ok(self) -> bool:
         return self.status == "planned"
 
+    @property
+    def certificate(self) -> list[Attempt]:
+        """For ``infeasible``: the failed transitions whose wrench search proves no push within the
+        hand's limits moves the part as needed (``too weak``, or every such push jams)."""
+        return [a for a in self.attempts if not a.success and _wrench_certificate(a.reason)]
+
+    @property
+    def proven(self) -> bool | None:
+        """``infeasible`` with every blocking transition certified by its wrench search (not a path
+        the NLP did not find); ``None`` for other statuses."""
+        if self.status != "infeasible":
+            return None
+        failed = [a for a in self.attempts if not a.success]
+        return bool(failed) and all(_wrench_certificate(a.reason) for a in failed)
+
     def to_json(self) -> dict[str, Any]:
         transitions = []
         robust = self.friction_robustness or [None] * len(self.transitions)
@@ -84,9 +99,20 @@ class PlanResult:
                 {"from": list(a.established), "add": a.target, "ok": a.success, "reason": a.reason}
                 for a in self.attempts
             ],
+            "proven": self.proven,
+            "certificate": [
+                {"from": list(a.established), "add": a.target, "reason": a.reason} for a in self.certificate
+            ]
+            if self.status == "infeasible"
+            else [],
             "verification": None if self.verification is None else self.verification.to_json(),
             "timings": self.timings,
         }
+
+
+def _wrench_certificate(reason: str) -> bool:
+    """A transition's failure that the wrench search proves (not the path NLP's failure)."""
+    return "too weak" in reason or "jams" in reason
 
 
 def report_markdown(result: PlanResult, fixture: Fixture, figures: Sequence[str] = ()) -> str:
