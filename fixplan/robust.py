@@ -269,35 +269,19 @@ def perturbed_fixture(fixture: Fixture, sample_seed: int, settings: RobustSettin
 
 # -- one sample ------------------------------------------------------------------------------------
 def failure_cause(verification: Verification) -> str | None:
-    """A short category for a failed verification (None when it passed)."""
+    """A short category for a failed verification (None when it passed).
+
+    The executor's own failure kind (``ExecutionLog.failure_kind``: lost contact, unplanned
+    contact, replan failed, stall, diverged, timeout) when it failed, else the first failed check
+    of the verification (final gap, penetration, limits).
+    """
     if verification.passed:
         return None
     ex = verification.execution
-    reason = verification.reason
-    if "diverged" in reason.split(";")[0]:
-        return "diverged"
-    if ex is not None and ex.outcome == "failed":
-        first = ex.reason
-        if "re-planning from" in first:
-            return "replan failed"
-        for prefix, cause in (
-            ("lost contact", "lost contact"),
-            ("unplanned contact", "unplanned contact"),
-            ("stalled", "stall"),
-            ("timed out", "timeout"),
-        ):
-            if first.startswith(prefix):
-                return cause
-        if "diverged" in first:
-            return "diverged"
-        return "executor"
-    if "at the end" in reason:
-        return "final gap"
-    if "penetration reached" in reason:
-        return "penetration"
-    if "manipulator's limits" in reason:
-        return "limits"
-    return "other"
+    if ex is not None and ex.failure_kind is not None:
+        return ex.failure_kind
+    checks = [c for c in verification.failed_checks if c != "executor"]
+    return checks[0] if checks else "other"
 
 
 def _transition(verification: Verification) -> int | None:

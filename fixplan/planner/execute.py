@@ -55,6 +55,8 @@ if TYPE_CHECKING:
 FloatArray = NDArray[np.float64]
 State = frozenset[str]
 
+FAILURE_KINDS = ("lost contact", "unplanned contact", "replan failed", "stall", "diverged", "timeout")
+
 
 @dataclass(frozen=True)
 class Step:
@@ -128,6 +130,8 @@ class ExecutionLog:
     observed: list[tuple[str, ...]] = field(default_factory=list)  # debounced pressed sets, in order
     outcome: str = "running"  # "running" | "reached" | "failed"
     reason: str = ""
+    # why it failed, one of FAILURE_KINDS (None while running or when reached)
+    failure_kind: str | None = None
     transition_at_end: int = 0
     max_command_force_N: float = 0.0
     max_command_torque_Nm: float = 0.0
@@ -139,6 +143,7 @@ class ExecutionLog:
         return {
             "outcome": self.outcome,
             "reason": self.reason,
+            "failure_kind": self.failure_kind,
             "counts": dict(self.counts),
             "events": [{"time_s": t, "kind": k, "message": m} for t, k, m in self.events],
             "max_command_force_N": self.max_command_force_N,
@@ -266,10 +271,11 @@ class Executor:
             "wrench": [float(x) for x in self.wrench],
         }
 
-    def _fail(self, t: float, reason: str) -> None:
+    def _fail(self, t: float, reason: str, kind: str) -> None:
         if not self.done:
             self.log.outcome = "failed"
             self.log.reason = reason
+            self.log.failure_kind = kind
             self.log.transition_at_end = self.index + 1
             self.log.event(t, "failed", reason)
 
@@ -321,19 +327,19 @@ class Executor:
             self.log.counts["unplanned_contact"] += 1
             why = f"unplanned contact state {_fmt(P)} in transition {self.index + 1} (planned {_fmt(self.states[self.index + 1]) if self.index + 1 < len(self.states) else 'the goal'})"
         self.log.event(t, "guard", why)
-        self._replan(t, pose, P, why)
+        self._replan(t, pose, P, why, "lost contact" if lost else "unplanned contact")
 
-    def _replan(self, t: float, pose: Pose, state: State, why: str) -> None:
+    def _replan(self, t: float, pose: Pose, state: State, why: str, kind_of_guard: str) -> None:
         if self.replan is None:
-            self._fail(t, f"{why}; no re-planning available")
+            self._fail(t, f"{why}; no re-planning available", "replan failed")
             return
         if self.log.counts["replans"] >= self.settings.max_replans:
-            self._fail(t, f"{why}; gave up after {self.settings.max_replans} re-plans")
+            self._fail(t, f"{why}; gave up after {self.settings.max_replans} re-plans", kind_of_guard)
             return
         self.log.counts["replans"] += 1
         result = self.replan(pose, state)
         if isinstance(result, str):
-            self._fail(t, f"{why}; re-planning from {_fmt(state)} failed: {result}")
+            self._fail(t, f"{why}; re-planning from {_fmt(state)} failed: {result}", "replan failed")
             return
         self._set_plan(state, result)
         self._retry, self._use_direct, self._still_since = 0, False, None
@@ -356,7 +362,7 @@ class Executor:
         if self.done:
             return self._applied
         if not (np.all(np.isfinite(twist)) and np.all(np.isfinite(pose.p_world))):
-            self._fail(t, f"the simulated load diverged at t = {t:.3f} s: the state is not finite")
+            self._fail(t, f"the simulated load diverged at t = {t:.3f} s: the state is not finite", "diverged")
             return self._applied
         M = self._mass_matrix(pose)
         speed = mass_speed(twist, M, self.mass)
@@ -366,6 +372,7 @@ class Executor:
                 t,
                 f"the simulated load diverged at t = {t:.3f} s (transition {self.index + 1}): the part is {away:.3g} m "
                 f"from where it started (limit {self._far_m:.3g} m)",
+                "diverged",
             )
             return self._applied
         if speed > self.v_limit:
@@ -373,6 +380,7 @@ class Executor:
                 t,
                 f"the simulated load diverged at t = {t:.3f} s (transition {self.index + 1}): speed {speed:.3g} m/s, "
                 f"beyond what the push can cause (limit {self.v_limit:.3g} m/s)",
+                "diverged",
             )
             return self._applied
         if self._observe(t, pressed):
@@ -480,6 +488,7 @@ class Executor:
                 t,
                 f"stalled in transition {self.index + 1} ({_fmt(self.states[self.index])} + {step.target}) at t = {t:.3f} s "
                 f"after {self._retry} re-searches: {self._last_reason or 'no push moves the part'}",
+                "stall",
             )
             return
         self._retry += 1
@@ -625,6 +634,7 @@ def _fmt(state: State | Sequence[str]) -> str:
 
 
 __all__ = [
+    "FAILURE_KINDS",
     "ExecutionLog",
     "ExecutionNoise",
     "ExecutionSettings",

@@ -124,6 +124,7 @@ class Verification:
     max_push_force_N: float | None = None  # on the part, averaged over 10 ms
     max_push_torque_Nm: float | None = None
     saturated_ticks: int = 0  # ticks where the coupling asked more than the hand's limits (capped there)
+    failed_checks: list[str] = field(default_factory=list)  # "executor", "final gap", "penetration", "limits"
     extras: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
@@ -144,6 +145,7 @@ class Verification:
             "max_push_force": self.max_push_force_N,
             "max_push_torque": self.max_push_torque_Nm,
             "saturated_ticks": self.saturated_ticks,
+            "failed_checks": list(self.failed_checks),
             "execution": None if self.execution is None else self.execution.to_json(),
             "trace": None if self.trace is None else self.trace.to_json(),
         }
@@ -248,9 +250,12 @@ def verify(
     try:
         rec = loop.run(time_limit_s, operator, trace_every=trace_every, until=lambda: executor.done)
     except SolverError as exc:
+        why = f"the simulated load diverged at t = {sim.time_s:.3f} s (transition {executor.index + 1}): {exc}"
+        executor._fail(sim.time_s, why, "diverged")
         return Verification(
             passed=False,
-            reason=f"the simulated load diverged at t = {sim.time_s:.3f} s (transition {executor.index + 1}): {exc}",
+            reason=why,
+            failed_checks=["executor"],
             final_pose=sim.pose,
             max_penetration_m=sim.max_penetration_m,
             deadline_misses=None,
@@ -270,20 +275,25 @@ def verify(
             f"({_fmt_state(executor.states[min(executor.index, len(executor.states) - 1)])}"
             + (f" + {executor.steps[executor.index].target}" if executor.index < len(executor.steps) else "")
             + ")",
+            "timeout",
         )
     gaps = {c.name: float(c.gap_m) for c in sim.contacts()}
     pen = sim.max_penetration_m
     reasons = []
+    checks = []
     if log.outcome != "reached":
         reasons.append(log.reason)
+        checks.append("executor")
     far = {n: g for n, g in gaps.items() if abs(g) > final_gap_m}
     if far:
+        checks.append("final gap")
         reasons.append(
             "at the end "
             + ", ".join(f"{n} is {g:.3g} m away" for n, g in far.items())
             + f" (expected ≤ {final_gap_m:g} m)"
         )
     if pen > max_penetration_m:
+        checks.append("penetration")
         reasons.append(f"penetration reached {pen:.3g} m (expected ≤ {max_penetration_m:g} m)")
     # the push on the part, averaged over 10 ms, against the manipulator's limits
     W = np.array(rec.coupling_wrench) if rec.coupling_wrench else np.zeros((1, ndof))
@@ -296,6 +306,7 @@ def verify(
     push_F = float(np.max(np.linalg.norm(Wf[:, :d], axis=1)))
     push_T = float(np.max(np.linalg.norm(Wf[:, d:], axis=1)))
     if push_F > (1 + limit_slack) * F_max or push_T > (1 + limit_slack) * T_max:
+        checks.append("limits")
         reasons.append(
             f"the push on the part exceeded the manipulator's limits: ‖F‖ up to {push_F:.3g} N (max_force {F_max:.3g} N), "
             f"‖T‖ up to {push_T:.3g} N·m (max_torque {T_max:.3g} N·m), averaged over 10 ms"
@@ -304,6 +315,7 @@ def verify(
     return Verification(
         passed=not reasons,
         reason="; ".join(reasons) if reasons else "every check passed",
+        failed_checks=checks,
         final_pose=sim.pose,
         max_penetration_m=pen,
         deadline_misses=rec.deadline_misses,
