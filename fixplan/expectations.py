@@ -4,9 +4,11 @@ A table holds ``[[case]]`` entries (``file``, ``pose``, ``contacts``, ``wrench``
 ``why``), ``[[wedge]]`` entries (``file``, ``wedges``, ``why``) and ``[[touching]]`` entries
 (``file``, ``names``), and ``[[plan]]`` entries (``file``, ``status`` planned | infeasible,
 ``verified``, ``first``/``last`` states, ``sequence``, ``binding`` limit named in the reason,
-``why``) for ``fixplan solve``. ``fixplan validate`` recognises such a file (it has ``case`` entries and
-no ``format`` key) and checks that every referenced fixture exists and loads, that wrenches
-have the fixture's length, that modes and poses are known and that contact names exist.
+``why``, and ``xfail_reason`` where the planner disagrees with the derived outcome: the tests
+mark it as an expected failure) for ``fixplan solve``. ``fixplan validate`` recognises such a
+file (it has ``case`` entries and no ``format`` key) and checks that every referenced fixture
+exists and loads, that wrenches have the fixture's length, that modes and poses are known and
+that contact names exist.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ KINDS = {
     "case": ("file", "pose", "contacts", "wrench", "mode", "why"),
     "wedge": ("file", "wedges", "why"),
     "touching": ("file", "names"),
-    "plan": ("file", "status", "verified", "first", "last", "sequence", "binding", "why"),
+    "plan": ("file", "status", "verified", "first", "last", "sequence", "binding", "why", "xfail_reason"),
 }
 
 
@@ -95,6 +97,7 @@ def check_expectations(path: Path, data: dict[str, Any]) -> tuple[list[Issue], d
                             _names(r, {"s": state}, "s", f"{where}.sequence[{j}]", locs, required=True)
                 r.string(entry, "binding", f"{where}.binding", choices=("max_force", "max_torque"))
                 r.string(entry, "why", f"{where}.why", required=True)
+                r.string(entry, "xfail_reason", f"{where}.xfail_reason")
     return r.issues, counts
 
 

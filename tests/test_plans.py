@@ -44,8 +44,21 @@ def test_every_full_fixture_has_a_plan_entry():
 @pytest.mark.slow
 @pytest.mark.parametrize("entry", ENTRIES, ids=[e["file"] for e in ENTRIES])
 def test_plan_matches_the_hand_derived_outcome(entry):
+    """The derived outcome; an entry with ``xfail_reason`` (the planner disagrees with the physics)
+    is a visible xfail while it fails, and a failure once it passes (drop the key then)."""
     fx = fixplan.load(PROBLEMS / entry["file"])
     r = fixplan.solve(fx)
+    if "xfail_reason" not in entry:
+        _check_plan(entry, fx, r)
+        return
+    try:
+        _check_plan(entry, fx, r)
+    except AssertionError as exc:
+        pytest.xfail(f"{entry['xfail_reason']} [now: {r.status}: {str(exc).splitlines()[0][:200]}]")
+    pytest.fail(f"{entry['file']} now matches the derived outcome: remove its xfail_reason from expected.toml")
+
+
+def _check_plan(entry, fx, r):
     assert r.status == entry["status"], r.reason
     if entry["status"] == "infeasible":
         assert r.verification is None and not r.ok
@@ -101,6 +114,7 @@ def test_validate_checks_plan_entries(tmp_path):
         '[[plan]]\nfile = "box-3-2-1.toml"\nstatus = "maybe"\nwhy = "x"\n'
         '[[plan]]\nfile = "cylinder-5.toml"\nstatus = "planned"\nfirst = ["L1", "Q9"]\nwhy = "x"\n'
         '[[plan]]\nfile = "box-3-2-1.toml"\nstatus = "infeasible"\nverified = true\nbinding = "max_speed"\nwhy = "x"\n'
+        '[[plan]]\nfile = "box-3-2-1.toml"\nstatus = "planned"\nwhy = "x"\nxfail_reason = 3\n'
     )
     proc = subprocess.run(
         [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", "validate", str(table)],
@@ -113,4 +127,5 @@ def test_validate_checks_plan_entries(tmp_path):
     assert "plan[1].file" in err and "not a full fixture" in err
     assert "plan[1].first" in err and "Q9" in err
     assert "plan[2].verified" in err and "plan[2].binding" in err
+    assert "plan[3].xfail_reason" in err
     assert "Traceback" not in err
