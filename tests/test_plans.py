@@ -87,13 +87,17 @@ def _check_plan(entry, fx, r):
         assert ex is not None and ex.outcome == "reached"
         observed = [list(s) for s in v.observed_sequence]
         assert observed[-1] == sorted(n.name for n in fx.locators)  # every locator, at the end
-        if r.transitions and ex.counts["replans"] == 0:
+        c = ex.counts
+        deviations = c["lost_contact"] + c["unplanned_contact"]
+        if deviations == 0:
             # without a guard firing, the executor saw exactly the planned states
-            assert observed == seq[1:] if seq[0] not in observed else observed == seq
+            if r.transitions:
+                assert observed == seq[1:] if seq[0] not in observed else observed == seq
         else:
-            # a deviation is never silent: each one is a guard event with a re-plan
-            guards = [e for e in ex.events if e[1] == "guard"]
-            assert len(guards) == ex.counts["replans"] == ex.counts["lost_contact"] + ex.counts["unplanned_contact"]
+            # a deviation is never silent: each one is a guard event, answered by pressing the
+            # part back (recovered) or by a re-plan
+            assert sum(e[1] == "guard" for e in ex.events) >= deviations
+            assert 1 <= c["replans"] + c["recovered"] <= deviations
         # the hand's limits bind the push on the part
         assert v.max_push_force_N is not None and v.max_push_force_N <= 1.05 * ex_limit(fx)[0]
         assert max(abs(g) for g in v.final_gaps_m.values()) <= 1e-4

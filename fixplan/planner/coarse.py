@@ -39,6 +39,8 @@ class TransitionResult(Protocol):
 
 
 Evaluate = Callable[[Pose, State, str], TransitionResult]
+# a cheap guess of a transition: (cost, end pose), or None when it is clearly impossible
+Estimate = Callable[[Pose, State, str], "tuple[float, Pose] | None"]
 
 
 @dataclass(frozen=True)
@@ -79,8 +81,17 @@ def search(
     *,
     order: Sequence[str] | None = None,
     progress: Callable[[Attempt], None] | None = None,
+    estimate: Estimate | None = None,
 ) -> CoarsePlan:
-    """Cheapest monotone sequence of contact states from ``start_state`` to all locators."""
+    """Cheapest monotone sequence of contact states from ``start_state`` to all locators.
+
+    With ``estimate`` the search is *lazy* (LazySP): Dijkstra runs on estimated costs, only the
+    transitions on the current best sequence are fine-planned (``evaluate``), in order, and the
+    search repeats with what was learned until the best sequence is made of evaluated
+    transitions only. Without it every transition out of a settled state is evaluated.
+    """
+    if estimate is not None and order is None:
+        return _lazy_search(start_state, all_locators, start_pose, evaluate, estimate, progress)
     goal: State = frozenset(all_locators)
     unknown = start_state - goal
     if unknown:
@@ -156,3 +167,100 @@ def search(
     transitions.reverse()
     sequence = [_key(s) for s in states if s]  # the free state is not part of the sequence
     return CoarsePlan(True, sequence, transitions, best[goal], attempts, "")
+
+
+def _lazy_search(
+    start_state: State,
+    all_locators: Sequence[str],
+    start_pose: Pose,
+    evaluate: Evaluate,
+    estimate: Estimate,
+    progress: Callable[[Attempt], None] | None,
+) -> CoarsePlan:
+    """LazySP over the lattice: fine-plan only the transitions on the current best sequence."""
+    goal: State = frozenset(all_locators)
+    unknown = start_state - goal
+    if unknown:
+        raise InputError(f"start state names unknown locators: {', '.join(sorted(unknown))}")
+    attempts: list[Attempt] = []
+    done: dict[tuple[State, str], Any] = {}  # evaluated transitions
+    guessed: dict[tuple[State, str], tuple[float, Pose] | None] = {}
+
+    def weight(state: State, target: str, pose: Pose) -> tuple[float, Pose] | None:
+        key = (state, target)
+        if key in done:
+            r = done[key]
+            return (float(r.cost), r.end_pose) if r.success else None
+        if key not in guessed:
+            guessed[key] = estimate(pose, state, target)
+        return guessed[key]
+
+    for _ in range(4 * 2 ** len(goal)):  # each round evaluates at least one transition
+        # Dijkstra on evaluated costs where known, estimates elsewhere
+        best: dict[State, float] = {start_state: 0.0}
+        came_from: dict[State, tuple[State, str]] = {}
+        pose_at: dict[State, Pose] = {start_state: start_pose}
+        counter = itertools.count()
+        queue: list[tuple[float, int, tuple[str, ...], State]] = [(0.0, next(counter), _key(start_state), start_state)]
+        settled: set[State] = set()
+        while queue:
+            cost, _, _, state = heapq.heappop(queue)
+            if state in settled:
+                continue
+            settled.add(state)
+            if state == goal:
+                break
+            for target in sorted(goal - state):
+                w = weight(state, target, pose_at[state])
+                if w is None:
+                    continue
+                nxt = state | {target}
+                if nxt not in settled and cost + w[0] < best.get(nxt, float("inf")):
+                    best[nxt] = cost + w[0]
+                    came_from[nxt] = (state, target)
+                    pose_at[nxt] = w[1]
+                    heapq.heappush(queue, (cost + w[0], next(counter), _key(nxt), nxt))
+        if goal not in settled:
+            failures = [a for a in attempts if not a.success]
+            reason = "no sequence of transitions reaches every locator"
+            if failures:
+                last = failures[-1]
+                reason += f"; e.g. adding {last.target} to {{{', '.join(last.established)}}} fails: {last.reason}"
+            return CoarsePlan(False, [], [], float("inf"), attempts, reason)
+        path: list[tuple[State, str]] = []
+        node = goal
+        while node != start_state:
+            prev, target = came_from[node]
+            path.append((prev, target))
+            node = prev
+        path.reverse()
+        # evaluate the path's transitions in order, from where the part really is
+        pose = start_pose
+        complete = True
+        for state, target in path:
+            key = (state, target)
+            if key not in done:
+                result = evaluate(pose, state, target)
+                done[key] = result
+                attempt = Attempt(
+                    _key(state), target, bool(result.success),
+                    float(result.cost) if result.success else float("inf"), result.reason,
+                )  # fmt: skip
+                attempts.append(attempt)
+                if progress is not None:
+                    progress(attempt)
+                if not result.success:
+                    complete = False
+                    break
+                guess = guessed.get(key)
+                if guess is not None and float(result.cost) > 1.5 * guess[0] + 1e-9:
+                    complete = False  # dearer than guessed: another sequence may now be cheaper
+                    pose = result.end_pose
+                    break
+            pose = done[key].end_pose
+        if complete:
+            transitions = [done[k] for k in path]
+            states = [start_state] + [s | {t} for s, t in path]
+            sequence = [_key(s) for s in states if s]
+            return CoarsePlan(True, sequence, transitions, float(sum(float(t.cost) for t in transitions)), attempts, "")
+    return CoarsePlan(False, [], [], float("inf"), attempts, "the lazy search did not settle (too many rounds)")

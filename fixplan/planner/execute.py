@@ -97,6 +97,7 @@ class ExecutionSettings:
     max_retries: int = 3  # stall recoveries per transition before giving up
     max_replans: int = 4
     settle_s: float = 0.2  # at rest with every locator pressed this long: done
+    recover_s: float = 0.15  # after a lost contact, press the part back this long before re-planning
     hold_fraction: float = 0.25  # at the goal, each locator is pressed by this fraction of the weight
     speed_limit_factor: float = 25.0  # speed beyond this × the cruise speed (and ≥ 1 m/s) is divergence
 
@@ -125,6 +126,7 @@ class ExecutionLog:
             "stalls": 0,
             "retries": 0,
             "skipped_states": 0,
+            "recovered": 0,
         }
     )
     observed: list[tuple[str, ...]] = field(default_factory=list)  # debounced pressed sets, in order
@@ -230,6 +232,8 @@ class Executor:
         self._hold: FloatArray | None = None
         self._seen: set[str] = set()  # locators observed in contact at least once
         self._arrived = False  # the current target touches: holding until the state is confirmed
+        self._recover_until: float | None = None  # pressing a lost contact back until then
+        self._recover_why = ""
         self._history: list[tuple[Pose, FloatArray, State]] = []
         self._delay_ticks = int(round(self.noise.latency_s / tick_s))
         self.F_max, self.T_max = self._limits()
@@ -250,6 +254,7 @@ class Executor:
         self.index = 0  # current transition (== len(steps): holding at the goal)
         self._hold = None
         self._arrived = False
+        self._recover_until = None
 
     def _limits(self) -> tuple[float, float]:
         m = self.fixture.manipulator
@@ -310,10 +315,17 @@ class Executor:
                 self.log.event(t, "skipped", f"reached {_fmt(P)} directly")
             self.index = j
             self._retry, self._use_direct, self._still_since, self._arrived = 0, False, None, False
+            if self._recover_until is not None:
+                self._recover_until = None
+                self.log.counts["recovered"] += 1
             self.log.event(t, "state", f"reached {_fmt(P)}")
             return
         current = self.states[self.index]
         if P == current:
+            if self._recover_until is not None:
+                self._recover_until = None
+                self.log.counts["recovered"] += 1
+                self.log.event(t, "recovered", f"back in {_fmt(P)}")
             return
         # a locator can only be lost once it has been seen in contact (at the start the push that
         # presses the part into its touching locators is still building up in the coupling)
@@ -323,9 +335,20 @@ class Executor:
         if lost:
             self.log.counts["lost_contact"] += 1
             why = f"lost contact with {', '.join(lost)} in transition {self.index + 1}"
+            target = self.steps[self.index].target if self.index < len(self.steps) else None
+            if self._recover_until is None and (P - current) <= {target}:
+                # first press the part back into what it left (a part that rocks off a contact
+                # on impact settles back): re-plan only if that does not restore the state
+                self._recover_until = t + self.settings.recover_s
+                self._recover_why = why
+                self.wrench = self.hold_wrench(pose, sorted(current | P))
+                self._applied = self._with_noise(self.wrench)
+                self.log.event(t, "guard", why + ": pressing the part back into it")
+                return
         else:
             self.log.counts["unplanned_contact"] += 1
             why = f"unplanned contact state {_fmt(P)} in transition {self.index + 1} (planned {_fmt(self.states[self.index + 1]) if self.index + 1 < len(self.states) else 'the goal'})"
+        self._recover_until = None
         self.log.event(t, "guard", why)
         self._replan(t, pose, P, why, "lost contact" if lost else "unplanned contact")
 
@@ -399,9 +422,20 @@ class Executor:
                 self.log.event(t, "reached", "every locator pressed, at rest")
         else:
             self._settled_since = None
-        if not at_goal:
+        if not at_goal and self._recover_until is None:
             self._check_stall(t, pose, speed)
             if self.done:
+                return self._applied
+        if self._recover_until is not None:
+            if t >= self._recover_until:
+                # pressing did not restore the state: re-plan from what is observed
+                self._recover_until = None
+                P = self._observed if self._observed is not None else frozenset()
+                self.log.event(t, "guard", f"{self._recover_why}; not restored after {self.settings.recover_s:g} s")
+                self._replan(t, pose, P, self._recover_why, "lost contact")
+                if self.done:
+                    return self._applied
+            else:
                 return self._applied
         if not at_goal:
             # the target touched: stop driving at once and press into the new state's contacts

@@ -53,14 +53,20 @@ class PlanResult:
 
     @property
     def certificate(self) -> list[Attempt]:
-        """For ``infeasible``: the failed transitions whose wrench search proves no push within the
-        hand's limits moves the part as needed (``too weak``, or every such push jams)."""
+        """For ``infeasible``: the failed transitions that the wrench search certifies.
+
+        Each proves that no push within the hand's limits moves the part as needed (``too weak``,
+        or every such push jams).
+        """
         return [a for a in self.attempts if not a.success and _wrench_certificate(a.reason)]
 
     @property
     def proven(self) -> bool | None:
-        """``infeasible`` with every blocking transition certified by its wrench search (not a path
-        the NLP did not find); ``None`` for other statuses."""
+        """Whether an ``infeasible`` result is proven (``None`` for other statuses).
+
+        Proven: every blocking transition is certified by its wrench search, none is only a path
+        the NLP did not find.
+        """
         if self.status != "infeasible":
             return None
         failed = [a for a in self.attempts if not a.success]
@@ -275,7 +281,27 @@ class Planner:
                 self.fine_time_s += time.perf_counter() - t
             return cache[key]
 
-        return search(state, self.names, pose, evaluate, order=order, progress=self.progress)
+        return search(state, self.names, pose, evaluate, order=order, progress=self.progress, estimate=self.estimate)
+
+    def estimate(self, pose: Pose, state: frozenset[str], target: str) -> tuple[float, Pose] | None:
+        """A cheap guess of a transition for the lazy search: (mass-weighted length [m], end pose).
+
+        The least-``M``-norm step that closes the target's gap keeping the established contacts,
+        to first order. No IPOPT, no cone program.
+        """
+        fx = self.fixture
+        est = sorted(state)
+        cs = contact_set(fx, pose, [*est, target])
+        gap = float(cs.contacts[-1].gap_m)
+        rows = cs.G[: len(est)] if est else np.zeros((0, fx.ndof))
+        A = np.vstack([rows, cs.G[-1:]])
+        b = np.zeros(A.shape[0])
+        b[-1] = -max(gap, 0.0)
+        step = cs.M_inv @ A.T @ np.linalg.pinv(A @ cs.M_inv @ A.T, rcond=1e-10) @ b
+        if not np.all(np.isfinite(step)):
+            return None
+        length = float(np.sqrt(max(float(step @ cs.mass_matrix @ step), 0.0) / fx.workpiece.mass_kg))
+        return length, pose.retract(step, fx.workpiece.com_body)
 
     def replan(self, pose: Pose, state: frozenset[str]) -> list[Step] | str:
         """The executor's guard: a new policy from the observed state, or why there is none."""

@@ -207,18 +207,29 @@ def verify(
     x0 = pose_coordinates(fixture.start, R0)
     executor = Executor(fixture, start_state, steps, settings, replan=replan, noise=noise, tick_s=sim.dt)
     F_max, T_max = executor.F_max, executor.T_max
+    # The coupling is scaled to the part: 1000 N/m per kg and 4800 N·m/rad per kg·m² of its
+    # largest principal inertia (2000 N/m and 40 N·m/rad for the 2 kg default box), so the
+    # part-on-coupling frequency is about 32 rad/s in translation and 69 rad/s in rotation for
+    # every part. Fixed gains made a 22 g plate's sampled spring unstable (ω·T > 2: it rocked
+    # between its base locators for ever) and a 30 kg box's coupling need a lead beyond the
+    # workspace. The simulated device gets the damping that keeps the coupling passive
+    # (b > K T/2 + |B| with a 1.5 margin; at least 8 N·s/m, rotation 1 % of it).
+    wp = fixture.workpiece
+    I_max = float(np.max(np.linalg.eigvalsh(np.atleast_2d(wp.inertia_body))))
+    K_lin, K_rot = 1000.0 * wp.mass_kg, 4800.0 * I_max
+    B_lin, B_rot = 1e-3 * K_lin, 5e-4 * K_rot
+    b = max(8.0, 1.5 * (K_lin * sim.dt / 2 + B_lin), 150.0 * (K_rot * sim.dt / 2 + B_rot))
     # the device can display a little more than the hand may push (the coupling's transients)
     specs = DeviceSpecs(
         max_force_N=1.5 * F_max,
         max_torque_Nm=1.5 * T_max,
-        max_stiffness_N_per_m=5000.0,
-        max_damping_Ns_per_m=50.0,
+        max_stiffness_N_per_m=max(5000.0, 2.0 * K_lin),
+        max_damping_Ns_per_m=max(50.0, 2.0 * B_lin),
         workspace_radius_m=0.5,
-        physical_damping_Ns_per_m=8.0,
+        physical_damping_Ns_per_m=b,
     )
     dev = SimulatedDevice(ndof, mass_kg=0.2, inertia_kgm2=2e-4, specs=specs, x0=x0)
-    b = dev.specs.physical_damping_Ns_per_m
-    coupling = VirtualCoupling(2000.0, 2.0, 40.0, 0.02, sim.dt, device_damping=b, device_damping_rot=b * 1e-2)
+    coupling = VirtualCoupling(K_lin, B_lin, K_rot, B_rot, sim.dt, device_damping=b, device_damping_rot=b * 1e-2)
     loop = HapticLoop(sim, dev, coupling, push_limits=(F_max, T_max))
     d = fixture.dimension
     K = np.concatenate([np.full(d, coupling.K_lin), np.full(ndof - d, coupling.K_rot)])
