@@ -1,0 +1,239 @@
+"""The contact-state feedback executor and the robust push it re-solves.
+
+Unit level: the executor is driven with synthetic observations (pose, twist, contact set) to
+check its state machine and guards; the pushes are checked against closed forms and static
+balance; the haptic loop's push cap against the hand's limits.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fixplan
+from fixplan.jamming.search import search_wrench
+from fixplan.planner.execute import ExecutionSettings, Executor, Step, origin_motion, project_keeping
+from fixplan.pose import Pose
+
+PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
+G = 9.81
+
+
+def _rect():
+    return fixplan.load(PROBLEMS / "rect-3.toml")  # 1 kg, μ = 0.5 on B1, B2; located at the start
+
+
+def _com_wrench(fx, pose, w):
+    off = pose.p_world - pose.point_world_from_body(fx.workpiece.com_body)
+    w = np.asarray(w, dtype=float)
+    if fx.dimension == 3:
+        return np.concatenate([w[:3], w[3:] + np.cross(off, w[:3])])
+    return np.array([w[0], w[1], w[2] + off[0] * w[1] - off[1] * w[0]])
+
+
+# -- the robust push -------------------------------------------------------------------------------
+@pytest.mark.parametrize("delta", [0.0, 0.1, 0.3])
+def test_friction_margin_drags_as_if_friction_were_higher(delta):
+    """Sliding on B1, B2 the least push is (m a + μ' m g)/√(1 + μ'²) with μ' = μ(1 + δ)."""
+    fx = _rect()
+    m, mu, a = 1.0, 0.5, 1.0
+    res = search_wrench(fx, [a, 0.0, 0.0], ["B1", "B2"], objective="effort", min_margin_N=0.01, friction_margin=delta)
+    assert res.found, res.reason
+    w = _com_wrench(fx, fx.start, res.wrench)
+    mu_d = mu * (1 + delta)
+    assert np.hypot(w[0], w[1]) == pytest.approx((m * a + mu_d * m * G) / np.hypot(1.0, mu_d), rel=1e-5)
+    # with the nominal μ the same push accelerates at least as asked (the classifier's check)
+    assert res.check is not None and res.check.mode == "slides"
+
+
+def test_friction_margin_keeps_sticking_contacts_inside_the_smaller_cone():
+    """Rolling about B1 (sticking): with δ the contact force stays inside the cone μ/(1 + δ)."""
+    fx = fixplan.load(PROBLEMS / "naive-order-jams.toml")  # rests on B1 alone, μ = 0.15
+    delta = 0.3
+    # a pure rotation about B1's material point (the file's start is rounded to 1e-9 m): no slip
+    B1 = fixplan.contact_set(fx, "start", ["B1"]).contacts[0].point_world
+    res = search_wrench(fx, [0.0, 0.0, -1.0], ["B1"], pose="start", at=B1, objective="effort", friction_margin=delta)
+    assert res.found, res.reason
+    assert res.contact_roles["B1"] == "sticking"
+    f = res.contact_forces["B1"]  # (normal, tangential)
+    assert abs(f[1]) <= 0.15 / (1 + delta) * f[0] * (1 + 1e-6)
+
+
+def test_max_accel_factor_bounds_the_acceleration():
+    fx = _rect()
+    for factor in (1.0, 1.5):
+        res = search_wrench(fx, [0.5, 0.0, 0.0], ["B1", "B2"], objective="effort", max_accel_factor=factor)
+        assert res.found, res.reason
+        assert 0.5 * (1 - 1e-6) <= res.acceleration[0] <= 0.5 * factor * (1 + 1e-6)
+
+
+def test_bad_margins_are_refused():
+    fx = _rect()
+    with pytest.raises(fixplan.InputError, match="friction_margin"):
+        search_wrench(fx, [0.5, 0.0, 0.0], ["B1", "B2"], friction_margin=-0.1)
+    with pytest.raises(fixplan.InputError, match="max_accel_factor"):
+        search_wrench(fx, [0.5, 0.0, 0.0], ["B1", "B2"], max_accel_factor=0.5)
+
+
+# -- the hold push and the motion -------------------------------------------------------------------
+@pytest.mark.parametrize("name", ["rect-3.toml", "box-3-2-1.toml", "polygon-2d.toml"])
+def test_hold_wrench_is_balanced_with_every_locator_pressed(name):
+    """w + w_g + Σ G_iᵀ f_i = 0 has a solution with every f_i ≥ τ (the weight fraction asked)."""
+    from scipy.optimize import nnls
+
+    fx = fixplan.load(PROBLEMS / name)
+    ex = Executor(fx, frozenset(), [])
+    pose = fx.goal
+    w_c = _com_wrench(fx, pose, ex.hold_wrench(pose))
+    cs = fixplan.contact_set(fx, pose, [loc.name for loc in fx.locators])
+    tau = ex.settings.hold_fraction * ex.weight_N
+    # f = τ + g with g ≥ 0: G^T g = -(w + w_g) - τ Σ G_i
+    rhs = -(w_c + fx.gravity_wrench()) - tau * cs.G.sum(axis=0)
+    g, res = nnls(cs.G.T, rhs)
+    assert res <= 1e-9 * ex.weight_N
+    assert np.linalg.norm(w_c[: fx.dimension]) <= ex.F_max * (1 + 1e-9)
+
+
+def test_motion_is_projected_onto_the_kept_contacts_in_the_mass_metric():
+    fx = fixplan.load(PROBLEMS / "box-3-2-1.toml")
+    cs = fixplan.contact_set(fx, "start", ["B1", "B2", "B3"])
+    rng = np.random.default_rng(3)
+    nu = rng.normal(size=6)
+    p = project_keeping(nu, cs.G, cs.M_inv)
+    assert np.abs(cs.G @ p).max() <= 1e-12  # keeps the base contacts
+    # M-orthogonal: the removed part is M⁻¹Gᵀλ, orthogonal (in M) to every kept motion
+    kept = project_keeping(rng.normal(size=6), cs.G, cs.M_inv)
+    assert abs((nu - p) @ cs.mass_matrix @ kept) <= 1e-12
+    # the twist shift to the body origin is the rigid-body velocity field
+    c, o = cs.com_world, cs.body_origin_world
+    v = origin_motion(nu, c, o)
+    assert np.allclose(v[:3], nu[:3] + np.cross(nu[3:], o - c))
+
+
+# -- the state machine ------------------------------------------------------------------------------
+def _box_executor(replan=None, **kw):
+    """The default box at its start resting on the base; plan: base → +S2 → +S1 → +E1 (guide = start)."""
+    fx = fixplan.load(fixplan.default_fixture_path())
+    base = ("B1", "B2", "B3")
+    steps = [
+        Step(base, "S2", "slide", (fx.start, fx.start)),
+        Step((*base, "S2"), "S1", "slide", (fx.start, fx.start)),
+        Step((*base, "S1", "S2"), "E1", "slide", (fx.start, fx.start)),
+    ]
+    settings = ExecutionSettings(**kw)
+    return fx, Executor(fx, frozenset(base), steps, settings, replan=replan)
+
+
+def _feed(ex, fx, states, t0=0.0, dt=1e-3, pose=None, twist=None):
+    t = t0
+    pose = pose or fx.start
+    twist = np.zeros(6) if twist is None else twist
+    for state, n in states:
+        for _ in range(n):
+            ex.command(t, pose, twist, frozenset(state))
+            t += dt
+    return t
+
+
+def test_executor_advances_through_planned_states_and_skips_ahead():
+    fx, ex = _box_executor()
+    base = {"B1", "B2", "B3"}
+    t = _feed(ex, fx, [(base, 20), (base | {"S2"}, 20)])
+    assert ex.index == 1
+    # S1 and E1 together: the goal state is reached directly, one state skipped
+    _feed(ex, fx, [(base | {"S1", "S2", "E1"}, 20)], t0=t)
+    assert ex.index == 3 and ex.log.counts["skipped_states"] == 1
+    assert ex.log.observed[-1] == ("B1", "B2", "B3", "E1", "S1", "S2")
+
+
+def test_a_momentary_change_shorter_than_the_dwell_is_ignored():
+    fx, ex = _box_executor()
+    base = {"B1", "B2", "B3"}
+    _feed(ex, fx, [(base, 20), ({"B1", "B2"}, 5), (base, 20)])  # 5 ms < 10 ms dwell
+    assert ex.log.counts["lost_contact"] == 0 and ex.log.observed == [("B1", "B2", "B3")]
+
+
+def test_lost_contact_is_pressed_back_then_replanned_from_the_observed_state():
+    calls = []
+
+    def replan(pose, state):
+        calls.append(state)
+        return [Step(tuple(sorted(state)), "B3", "roll", (pose, pose))]
+
+    fx, ex = _box_executor(replan=replan)
+    base = {"B1", "B2", "B3"}
+    t = _feed(ex, fx, [(base, 20), ({"B1", "B2"}, 20)])
+    # first the executor presses the part back into B3 (no re-plan yet)
+    assert ex.log.counts["lost_contact"] == 1 and not calls
+    assert any(k == "guard" and "pressing the part back" in m for _, k, m in ex.log.events)
+    # still lost after recover_s: re-plan from what is observed
+    _feed(ex, fx, [({"B1", "B2"}, int(ex.settings.recover_s / 1e-3) + 5)], t0=t)
+    assert calls == [frozenset({"B1", "B2"})] and ex.log.counts["replans"] == 1
+    assert ex.states[0] == frozenset({"B1", "B2"}) and ex.steps[0].target == "B3"
+
+
+def test_lost_contact_that_comes_back_counts_as_recovered():
+    fx, ex = _box_executor(replan=lambda pose, state: "should not be called")
+    base = {"B1", "B2", "B3"}
+    _feed(ex, fx, [(base, 20), ({"B1", "B2"}, 20), (base, 20)])
+    assert ex.log.counts["recovered"] == 1 and ex.log.counts["replans"] == 0 and not ex.done
+
+
+def test_unplanned_contact_replans_and_a_failed_replan_says_why():
+    fx, ex = _box_executor(replan=lambda pose, state: "no sequence of transitions reaches every locator")
+    base = {"B1", "B2", "B3"}
+    _feed(ex, fx, [(base, 20), (base | {"E1"}, 20)])  # E1 before S2: not in the plan
+    assert ex.done and ex.log.outcome == "failed" and ex.log.failure_kind == "replan failed"
+    assert "unplanned contact state {B1, B2, B3, E1}" in ex.log.reason and "no sequence" in ex.log.reason
+
+
+def test_divergence_is_detected_and_named():
+    fx, ex = _box_executor()
+    _feed(ex, fx, [({"B1", "B2", "B3"}, 5)])
+    fast = np.array([50.0, 0, 0, 0, 0, 0])  # 50 m/s: no push within 40 N moves a 2 kg box so
+    ex.command(0.01, fx.start, fast, frozenset({"B1", "B2", "B3"}))
+    assert ex.done and ex.log.failure_kind == "diverged" and "beyond what the push can cause" in ex.log.reason
+
+    fx, ex = _box_executor()
+    far = Pose(fx.start.R_world_body, fx.start.p_world + np.array([9.8e16, 0, 0]))
+    ex.command(0.0, far, np.zeros(6), frozenset())
+    assert ex.done and ex.log.failure_kind == "diverged" and "from where it started" in ex.log.reason
+
+    fx, ex = _box_executor()
+    ex.command(0.0, fx.start, np.array([np.nan, 0, 0, 0, 0, 0]), frozenset())
+    assert ex.done and ex.log.failure_kind == "diverged" and "not finite" in ex.log.reason
+
+
+def test_a_stall_is_re_searched_then_fails_with_the_reason():
+    fx, ex = _box_executor(max_retries=2, stall_s=0.05)
+    base = {"B1", "B2", "B3"}
+    _feed(ex, fx, [(base, 400)])  # at rest for 0.4 s while S2 should be approached
+    assert ex.done and ex.log.failure_kind == "stall"
+    assert ex.log.counts["retries"] == 2 and "stalled in transition 1" in ex.log.reason
+
+
+def test_guidance_names_the_next_target_and_the_push():
+    fx, ex = _box_executor()
+    _feed(ex, fx, [({"B1", "B2", "B3"}, 20)])
+    g = ex.guidance()
+    assert g["target"] == "S2" and g["motion"] == "slide" and len(g["wrench"]) == 6
+    assert np.linalg.norm(g["wrench"][:3]) > 0
+
+
+# -- the loop caps the push at the hand's limits ----------------------------------------------------
+def test_the_loop_caps_the_push_on_the_part_at_the_hands_limits():
+    from fixplan.haptics import DeviceSpecs, HapticLoop, SimulatedDevice, VirtualCoupling
+    from fixplan.simulator import Simulator
+
+    fx = _rect()
+    sim = Simulator(fx)
+    specs = DeviceSpecs(100.0, 10.0, 5000.0, 50.0, 0.5, 8.0)
+    dev = SimulatedDevice(3, mass_kg=0.2, inertia_kgm2=2e-4, specs=specs, x0=np.array([0.1, 0.05, 0.0]))
+    coupling = VirtualCoupling(2000.0, 2.0, 40.0, 0.02, sim.dt, device_damping=8.0, device_damping_rot=0.08)
+    loop = HapticLoop(sim, dev, coupling, push_limits=(3.0, 0.05))
+    dev._x[:] = [0.2, 0.05, 0.5]  # 10 cm and 0.5 rad ahead: the coupling asks 200 N and 20 N·m
+    w, _, _ = loop.tick(np.zeros(3))
+    assert np.hypot(w[0], w[1]) == pytest.approx(3.0) and abs(w[2]) == pytest.approx(0.05)
+    assert loop.saturated_ticks == 1
