@@ -521,7 +521,10 @@ class Executor:
             self._fail(
                 t,
                 f"stalled in transition {self.index + 1} ({_fmt(self.states[self.index])} + {step.target}) at t = {t:.3f} s "
-                f"after {self._retry} re-searches: {self._last_reason or 'no push moves the part'}",
+                f"after {self._retry} re-searches: "
+                + (
+                    self._last_reason or f"it stays at rest under pushes found to move it ({self._verdict(pose, step)})"
+                ),
                 "stall",
             )
             return
@@ -532,9 +535,22 @@ class Executor:
         self.log.event(
             t,
             "stall",
-            f"at rest in transition {self.index + 1} before {step.target} touches: re-search #{self._retry}"
+            f"at rest in transition {self.index + 1} before {step.target} touches ({self._verdict(pose, step)}): "
+            f"re-search #{self._retry}"
             + (" along the direct gap-closing motion" if self._use_direct else " with a larger push"),
         )
+
+    def _verdict(self, pose: Pose, step: Step) -> str:
+        """What the held push does to the part at rest here (the classifier's mode and margin)."""
+        from fixplan.jamming import classify
+
+        names = [n for n in step.established] or None
+        try:
+            c = classify(self.fixture, self._applied, names, pose=pose, jobs=1)[0]
+        except Exception as exc:  # noqa: BLE001 - a report, never a reason to stop
+            return f"push not classified: {exc}"
+        margin = "" if c.margin is None or not math.isfinite(c.margin) else f", margin {c.margin:.3g}"
+        return f"the held push: {c.mode}{margin}"
 
     def direction(self, pose: Pose, step: Step) -> tuple[FloatArray, float]:
         """Unit (mass-weighted) desired twist of the centre of mass and the distance left [m]."""
