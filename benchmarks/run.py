@@ -3,6 +3,10 @@
 Each ``benchmarks/bench_*.py`` module defines ``run(quick: bool) -> Section``: the rows it
 measured (one per case, method and setting, with time *and* error) and the Markdown it wants
 in the report. This file only collects them, adds the machine and versions, and writes.
+
+Each section sits between ``<!-- bench:NAME -->`` and ``<!-- /bench:NAME -->`` markers. With
+``--only`` the report is not rewritten: only the named sections are replaced (or appended when
+the report has no markers for them yet), so the other benchmarks' figures are kept.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ class Section:
     title: str
     markdown: str
     rows: list[dict] = field(default_factory=list)
+    csv_name: str = ""  # results/<csv_name>.csv; default: the module's name
 
 
 def machine_markdown() -> str:
@@ -55,6 +60,16 @@ def machine_markdown() -> str:
     return "\n".join(lines)
 
 
+def splice(report: str, name: str, block: str) -> str:
+    """``report`` with the section between ``name``'s markers replaced by ``block`` (appended if absent)."""
+    begin, end = f"<!-- bench:{name} -->", f"<!-- /bench:{name} -->"
+    i, j = report.find(begin), report.find(end)
+    if i < 0 or j < i:
+        return report.rstrip("\n") + "\n\n" + block
+    tail = report[j + len(end) :].lstrip("\n")
+    return report[:i] + block + ("\n" + tail if tail else "")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="fewer repetitions (smoke run)")
@@ -68,21 +83,32 @@ def main() -> int:
     results_dir = HERE / "results"
     results_dir.mkdir(exist_ok=True)
     parts = ["# fixplan benchmark report", "", machine_markdown(), ""]
+    blocks: dict[str, str] = {}
     for name in names:
         t0 = time.perf_counter()
         print(f"[bench] {name} ...", file=sys.stderr, flush=True)
         section: Section = importlib.import_module(name).run(quick=args.quick)
         elapsed = time.perf_counter() - t0
-        parts += [f"## {section.title}", "", section.markdown.strip(), "", f"_({name}: {elapsed:.1f} s)_", ""]
+        block = [f"<!-- bench:{name} -->", f"## {section.title}", "", section.markdown.strip(), ""]
+        block += [f"_({name}: {elapsed:.1f} s)_", f"<!-- /bench:{name} -->", ""]
+        blocks[name] = "\n".join(block)
+        parts += block
         if section.rows:
-            with open(results_dir / f"{name}.csv", "w", newline="") as fh:
+            with open(results_dir / f"{section.csv_name or name}.csv", "w", newline="") as fh:
                 fields: list[str] = []
                 for row in section.rows:  # rows of one benchmark may differ (e.g. two tables)
                     fields += [k for k in row if k not in fields]
                 writer = csv.DictWriter(fh, fieldnames=fields)
                 writer.writeheader()
                 writer.writerows(section.rows)
-    Path(args.out).write_text("\n".join(parts))
+    out = Path(args.out)
+    if args.only and out.is_file():
+        text = out.read_text()
+        for name, block in blocks.items():
+            text = splice(text, name, block)
+        out.write_text(text)
+    else:
+        out.write_text("\n".join(parts))
     print(f"[bench] wrote {args.out}", file=sys.stderr)
     return 0
 
