@@ -195,7 +195,7 @@ def _polar_rows(cs: ContactSet) -> tuple[FloatArray, tuple[tuple[str, int], ...]
     ⇔ ``Sᵀ J y ∈ Rᵀ K`` (the cones are self-dual) ⇔ ``Q y = R⁻ᵀ Sᵀ J y ∈ K``.
     """
     lay = force_layout(cs)
-    Q = np.linalg.solve(lay.cone_rows.T, lay.S.T @ cs.J)
+    Q = np.asarray(np.linalg.solve(lay.cone_rows.T, lay.S.T @ cs.J), dtype=np.float64)
     return Q, lay.cones
 
 
@@ -406,7 +406,7 @@ def search_wrench(
         reason = f"the wrench found is statically balanced ({bal.mode}): it would not move the part"
     else:
         reason = f"moves as asked with every kept contact pressed by ≥ {floor_sig(tau)} N{notes}"
-        if met is False:
+        if met is False and tau_best is not None and target is not None:
             reason = f"margin target {target:.4g} N not met: best {_short_of(tau_best, target)} N; " + reason
         if not confirmed:
             reason += f" (not confirmed by the classifier: {why_not})"

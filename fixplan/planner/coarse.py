@@ -28,8 +28,11 @@ State = frozenset[str]
 class TransitionResult(Protocol):
     """What the coarse search needs from a fine plan."""
 
-    success: bool
-    reason: str
+    @property
+    def success(self) -> bool: ...
+
+    @property
+    def reason(self) -> str: ...
 
     @property
     def cost(self) -> float: ...

@@ -74,7 +74,7 @@ class PlanResult:
 
     def to_json(self) -> dict[str, Any]:
         transitions = []
-        robust = self.friction_robustness or [None] * len(self.transitions)
+        robust: list[float | None] = list(self.friction_robustness) or [None] * len(self.transitions)
         for tr, T, rob in zip(self.transitions, self.durations_s, robust, strict=True):
             rows = tr.wrenches[np.isfinite(tr.wrenches).all(axis=1)] if len(tr.wrenches) else tr.wrenches
             w = rows.mean(axis=0) if len(rows) else None
