@@ -372,6 +372,7 @@ class Executor:
     # -- the command ---------------------------------------------------------------------------
     def command(self, t: float, pose: Pose, twist: FloatArray, pressed: State) -> FloatArray:
         """The wrench the operator applies now (about the body origin, world axes)."""
+        twist = np.asarray(twist, dtype=float)
         self._history.append((pose, twist, pressed))
         if self._delay_ticks:
             k = max(len(self._history) - 1 - self._delay_ticks, 0)
