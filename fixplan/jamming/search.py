@@ -243,7 +243,12 @@ def _certificate(cs: ContactSet, target: FloatArray, *, project: bool) -> FloatA
     return y / size
 
 
-def _limits(fixture: Fixture) -> tuple[float, float, str]:
+def hand_limits(fixture: Fixture) -> tuple[float, float, str]:
+    """The hand's force [N] and torque [N·m] limits, with the defaults the search uses without them.
+
+    Without ``[manipulator]`` limits: ``5 m |g|`` and that force times the part's bounding radius;
+    the note says so. The planner's executor and its verification use the same limits.
+    """
     wp = fixture.workpiece
     g = float(np.linalg.norm(fixture.gravity)) or 9.81
     F_max, T_max = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
@@ -316,7 +321,7 @@ def search_wrench(
     roles = _roles(cs, a_hat, 1e-9)
     wp = fixture.workpiece
     g = float(np.linalg.norm(fixture.gravity)) or 9.81
-    F_max, T_max, notes = _limits(fixture)
+    F_max, T_max, notes = hand_limits(fixture)
     w_g = fixture.gravity_wrench()
     target = None if min_margin_N is None else float(min_margin_N)
     clf_all = Classifier(cs, w_g, tolerances=fixture.tolerances)

@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 
 from fixplan.errors import InputError
 from fixplan.locating import contact_set
+from fixplan.planner.fine import twist_from_pose
 from fixplan.pose import Pose
 
 if TYPE_CHECKING:
@@ -161,17 +162,6 @@ def mass_speed(nu: FloatArray, M: FloatArray, m: float) -> float:
     return float(math.sqrt(max(float(nu @ M @ nu), 0.0) / m))
 
 
-def com_twist_between(a: Pose, b: Pose, com_body: FloatArray) -> FloatArray:
-    """The twist of the centre of mass that takes pose ``a`` to pose ``b`` in unit time (world axes)."""
-    from fixplan.pose import log_so3
-
-    dc = b.point_world_from_body(com_body) - a.point_world_from_body(com_body)
-    if a.dimension == 3:
-        return np.concatenate([dc, log_so3(b.R_world_body @ a.R_world_body.T)])
-    dth = (b.angle_rad - a.angle_rad + np.pi) % (2 * np.pi) - np.pi
-    return np.concatenate([dc, [dth]])
-
-
 def origin_motion(com_rate: FloatArray, com_world: FloatArray, origin_world: FloatArray) -> FloatArray:
     """A twist (rate) of the centre of mass re-expressed at the body origin."""
     d = com_world.shape[0]
@@ -236,7 +226,9 @@ class Executor:
         self._recover_why = ""
         self._history: list[tuple[Pose, FloatArray, State]] = []
         self._delay_ticks = int(round(self.noise.latency_s / tick_s))
-        self.F_max, self.T_max = self._limits()
+        from fixplan.jamming.search import hand_limits
+
+        self.F_max, self.T_max, _ = hand_limits(fixture)
         self.v_limit = max(s.speed_limit_factor * s.speed_mps, 1.0)
         # the part never needs to leave the fixture's neighbourhood
         self._home = fixture.start.p_world.copy()
@@ -255,12 +247,6 @@ class Executor:
         self._hold = None
         self._arrived = False
         self._recover_until = None
-
-    def _limits(self) -> tuple[float, float]:
-        m = self.fixture.manipulator
-        F = m.max_force_N if math.isfinite(m.max_force_N) else 5.0 * self.weight_N
-        T = m.max_torque_Nm if math.isfinite(m.max_torque_Nm) else F * self.fixture.workpiece.shape.bounding_radius
-        return F, T
 
     @property
     def done(self) -> bool:
@@ -575,12 +561,12 @@ class Executor:
         left = gap
         nu = direct
         if not self._use_direct and len(step.path) >= 2:
-            twists = [com_twist_between(pose, q, wp.com_body) for q in step.path]
+            twists = [twist_from_pose(pose, q, wp.com_body) for q in step.path]
             dist = [mass_speed(x, M, wp.mass_kg) for x in twists]
             j = int(np.argmin(dist))
             ahead = min(j + 1, len(step.path) - 1)
             seg = [
-                mass_speed(com_twist_between(a, b_, wp.com_body), M, wp.mass_kg)
+                mass_speed(twist_from_pose(a, b_, wp.com_body), M, wp.mass_kg)
                 for a, b_ in zip(step.path[ahead:-1], step.path[ahead + 1 :], strict=True)
             ]
             left_path = dist[ahead] + float(sum(seg))
@@ -691,7 +677,6 @@ __all__ = [
     "ExecutionSettings",
     "Executor",
     "Step",
-    "com_twist_between",
     "mass_speed",
     "origin_motion",
     "project_keeping",

@@ -38,9 +38,9 @@ from fixplan.planner.execute import (
     Executor,
     Replan,
     Step,
-    com_twist_between,
     mass_speed,
 )
+from fixplan.planner.fine import twist_from_pose
 from fixplan.pose import Pose, log_so3
 from fixplan.simulator import Simulator
 
@@ -352,7 +352,7 @@ def _path_length(fixture: Fixture, step: Step) -> float:
     total = 0.0
     for a, b in zip(step.path[:-1], step.path[1:], strict=True):
         M = mass_matrix(wp.mass_kg, wp.inertia_body, a.R_world_body)
-        total += mass_speed(com_twist_between(a, b, wp.com_body), M, wp.mass_kg)
+        total += mass_speed(twist_from_pose(a, b, wp.com_body), M, wp.mass_kg)
     return max(total, 0.01)
 
 
