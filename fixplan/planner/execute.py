@@ -99,6 +99,7 @@ class ExecutionSettings:
     max_replans: int = 4
     settle_s: float = 0.2  # at rest with every locator pressed this long: done
     recover_s: float = 0.15  # after a lost contact, press the part back this long before re-planning
+    smoothing_s: float = 0.02  # first-order lag on the applied push (0: none)
     hold_fraction: float = 0.25  # at the goal, each locator is pressed by this fraction of the weight
     speed_limit_factor: float = 25.0  # speed beyond this × the cruise speed (and ≥ 1 m/s) is divergence
 
@@ -210,6 +211,7 @@ class Executor:
         self.every = max(int(round(1.0 / (s.control_rate_hz * tick_s))), 1)
         self.wrench = np.zeros(self.ndof)  # held command (about the body origin, world axes)
         self._applied = np.zeros(self.ndof)
+        self._target = np.zeros(self.ndof)  # the policy's push before smoothing
         self._tick = 0
         self._candidate: State | None = None
         self._candidate_since = 0.0
@@ -328,7 +330,7 @@ class Executor:
                 self._recover_until = t + self.settings.recover_s
                 self._recover_why = why
                 self.wrench = self.hold_wrench(pose, sorted(current | P))
-                self._applied = self._with_noise(self.wrench)
+                self._target = self._with_noise(self.wrench)
                 self.log.event(t, "guard", why + ": pressing the part back into it")
                 return
         else:
@@ -357,7 +359,20 @@ class Executor:
 
     # -- the command ---------------------------------------------------------------------------
     def command(self, t: float, pose: Pose, twist: FloatArray, pressed: State) -> FloatArray:
-        """The wrench the operator applies now (about the body origin, world axes)."""
+        """The wrench the operator applies now (about the body origin, world axes).
+
+        The policy's push, smoothed with a first-order lag of ``smoothing_s``: force and moment
+        change together, as one push, instead of arriving through the coupling at different
+        rates (a tall part tipped when a sideways push arrived before its counter-moment).
+        """
+        self._command(t, pose, twist, pressed)
+        tau = self.settings.smoothing_s
+        alpha = 1.0 if tau <= 0 else min(self.tick_s / tau, 1.0)
+        self._applied = self._applied + alpha * (self._target - self._applied)
+        return self._applied
+
+    def _command(self, t: float, pose: Pose, twist: FloatArray, pressed: State) -> FloatArray:
+        """One tick of the policy: updates the target push ``_target``."""
         twist = np.asarray(twist, dtype=float)
         self._history.append((pose, twist, pressed))
         if self._delay_ticks:
@@ -432,7 +447,7 @@ class Executor:
             if arrived and not self._arrived:
                 self._arrived = True
                 self.wrench = self.hold_wrench(pose, [*step.established, step.target])
-                self._applied = self._with_noise(self.wrench)
+                self._target = self._with_noise(self.wrench)
                 return self._applied
             if not arrived:
                 self._arrived = False
@@ -446,7 +461,7 @@ class Executor:
                 self.wrench = self._hold
             else:
                 self._solve(t, pose, twist, M)
-            self._applied = self._with_noise(self.wrench)
+            self._target = self._with_noise(self.wrench)
         return self._applied
 
     def hold_wrench(self, pose: Pose, names: Sequence[str] | None = None) -> FloatArray:
