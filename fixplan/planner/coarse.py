@@ -115,10 +115,64 @@ def search(
                 f"--order leaves out {', '.join(sorted(missing))} (expected every locator not touching at the start)"
             )
     attempts: list[Attempt] = []
+
+    def evaluated(state: State, target: str, pose: Pose) -> tuple[float, Pose, Any] | None:
+        result = evaluate(pose, state, target)
+        _record(attempts, progress, state, target, result)
+        return (float(result.cost), result.end_pose, result) if result.success else None
+
+    def candidates(state: State) -> list[str]:
+        if order is not None:
+            return [order[len(state) - len(start_state)]]
+        return sorted(goal - state)
+
+    path = _dijkstra(start_state, goal, start_pose, evaluated, candidates)
+    if path is None:
+        return CoarsePlan(False, [], [], float("inf"), attempts, _no_sequence(attempts))
+    transitions = [result for _, _, result in path]
+    return _plan(start_state, path, transitions, attempts)
+
+
+def _record(
+    attempts: list[Attempt], progress: Callable[[Attempt], None] | None, state: State, target: str, result: Any
+) -> None:
+    attempt = Attempt(
+        _key(state), target, bool(result.success), float(result.cost) if result.success else float("inf"), result.reason
+    )
+    attempts.append(attempt)
+    if progress is not None:
+        progress(attempt)
+
+
+def _no_sequence(attempts: list[Attempt]) -> str:
+    failures = [a for a in attempts if not a.success]
+    reason = "no sequence of transitions reaches every locator"
+    if failures:
+        last = failures[-1]
+        reason += f"; e.g. adding {last.target} to {{{', '.join(last.established)}}} fails: {last.reason}"
+    return reason
+
+
+Weight = Callable[[State, str, Pose], "tuple[float, Pose, Any] | None"]
+
+
+def _dijkstra(
+    start_state: State,
+    goal: State,
+    start_pose: Pose,
+    weight: Weight,
+    candidates: Callable[[State], list[str]],
+) -> list[tuple[State, str, Any]] | None:
+    """Cheapest path through the lattice: ``(state, target, payload)`` per transition, or None.
+
+    ``weight(state, target, pose)`` gives a transition's cost, end pose and payload (None: no
+    such transition); a state's pose is the end pose of the cheapest transition that reached it.
+    Ties are broken by the sorted state names (deterministic).
+    """
     best: dict[State, float] = {start_state: 0.0}
-    came_from: dict[State, tuple[State, Any]] = {}
+    came_from: dict[State, tuple[State, str, Any]] = {}
     pose_at: dict[State, Pose] = {start_state: start_pose}
-    counter = itertools.count()  # deterministic tie-breaking
+    counter = itertools.count()
     queue: list[tuple[float, int, tuple[str, ...], State]] = [(0.0, next(counter), _key(start_state), start_state)]
     settled: set[State] = set()
     while queue:
@@ -128,48 +182,34 @@ def search(
         settled.add(state)
         if state == goal:
             break
-        if order is not None:
-            candidates = [order[len(state) - len(start_state)]]
-        else:
-            candidates = sorted(goal - state)
-        for target in candidates:
-            result = evaluate(pose_at[state], state, target)
-            attempt = Attempt(
-                _key(state),
-                target,
-                bool(result.success),
-                float(result.cost) if result.success else float("inf"),
-                result.reason,
-            )
-            attempts.append(attempt)
-            if progress is not None:
-                progress(attempt)
-            if not result.success:
+        for target in candidates(state):
+            w = weight(state, target, pose_at[state])
+            if w is None:
                 continue
             nxt = state | {target}
-            new_cost = cost + float(result.cost)
-            if nxt not in settled and new_cost < best.get(nxt, float("inf")):
-                best[nxt] = new_cost
-                came_from[nxt] = (state, result)
-                pose_at[nxt] = result.end_pose
-                heapq.heappush(queue, (new_cost, next(counter), _key(nxt), nxt))
+            if nxt not in settled and cost + w[0] < best.get(nxt, float("inf")):
+                best[nxt] = cost + w[0]
+                came_from[nxt] = (state, target, w[2])
+                pose_at[nxt] = w[1]
+                heapq.heappush(queue, (cost + w[0], next(counter), _key(nxt), nxt))
     if goal not in settled:
-        failures = [a for a in attempts if not a.success]
-        reason = "no sequence of transitions reaches every locator"
-        if failures:
-            last = failures[-1]
-            reason += f"; e.g. adding {last.target} to {{{', '.join(last.established)}}} fails: {last.reason}"
-        return CoarsePlan(False, [], [], float("inf"), attempts, reason)
-    states = [goal]
-    transitions = []
-    while states[-1] != start_state:
-        prev, result = came_from[states[-1]]
-        transitions.append(result)
-        states.append(prev)
-    states.reverse()
-    transitions.reverse()
+        return None
+    path = []
+    node = goal
+    while node != start_state:
+        prev, target, payload = came_from[node]
+        path.append((prev, target, payload))
+        node = prev
+    path.reverse()
+    return path
+
+
+def _plan(
+    start_state: State, path: list[tuple[State, str, Any]], transitions: list[Any], attempts: list[Attempt]
+) -> CoarsePlan:
+    states = [start_state] + [s | {t} for s, t, _ in path]
     sequence = [_key(s) for s in states if s]  # the free state is not part of the sequence
-    return CoarsePlan(True, sequence, transitions, best[goal], attempts, "")
+    return CoarsePlan(True, sequence, transitions, float(sum(float(t.cost) for t in transitions)), attempts, "")
 
 
 def _lazy_search(
@@ -189,81 +229,35 @@ def _lazy_search(
     done: dict[tuple[State, str], Any] = {}  # evaluated transitions
     guessed: dict[tuple[State, str], tuple[float, Pose] | None] = {}
 
-    def weight(state: State, target: str, pose: Pose) -> tuple[float, Pose] | None:
+    def weight(state: State, target: str, pose: Pose) -> tuple[float, Pose, Any] | None:
         key = (state, target)
         if key in done:
             r = done[key]
-            return (float(r.cost), r.end_pose) if r.success else None
+            return (float(r.cost), r.end_pose, None) if r.success else None
         if key not in guessed:
             guessed[key] = estimate(pose, state, target)
-        return guessed[key]
+        g = guessed[key]
+        return None if g is None else (g[0], g[1], None)
 
     for _ in range(4 * 2 ** len(goal)):  # each round evaluates at least one transition
         # Dijkstra on evaluated costs where known, estimates elsewhere
-        best: dict[State, float] = {start_state: 0.0}
-        came_from: dict[State, tuple[State, str]] = {}
-        pose_at: dict[State, Pose] = {start_state: start_pose}
-        counter = itertools.count()
-        queue: list[tuple[float, int, tuple[str, ...], State]] = [(0.0, next(counter), _key(start_state), start_state)]
-        settled: set[State] = set()
-        while queue:
-            cost, _, _, state = heapq.heappop(queue)
-            if state in settled:
-                continue
-            settled.add(state)
-            if state == goal:
-                break
-            for target in sorted(goal - state):
-                w = weight(state, target, pose_at[state])
-                if w is None:
-                    continue
-                nxt = state | {target}
-                if nxt not in settled and cost + w[0] < best.get(nxt, float("inf")):
-                    best[nxt] = cost + w[0]
-                    came_from[nxt] = (state, target)
-                    pose_at[nxt] = w[1]
-                    heapq.heappush(queue, (cost + w[0], next(counter), _key(nxt), nxt))
-        if goal not in settled:
-            failures = [a for a in attempts if not a.success]
-            reason = "no sequence of transitions reaches every locator"
-            if failures:
-                last = failures[-1]
-                reason += f"; e.g. adding {last.target} to {{{', '.join(last.established)}}} fails: {last.reason}"
-            return CoarsePlan(False, [], [], float("inf"), attempts, reason)
-        path: list[tuple[State, str]] = []
-        node = goal
-        while node != start_state:
-            prev, target = came_from[node]
-            path.append((prev, target))
-            node = prev
-        path.reverse()
+        path = _dijkstra(start_state, goal, start_pose, weight, lambda state: sorted(goal - state))
+        if path is None:
+            return CoarsePlan(False, [], [], float("inf"), attempts, _no_sequence(attempts))
         # evaluate the path's transitions in order, from where the part really is
         pose = start_pose
         complete = True
-        for state, target in path:
+        for state, target, _ in path:
             key = (state, target)
             if key not in done:
                 result = evaluate(pose, state, target)
                 done[key] = result
-                attempt = Attempt(
-                    _key(state), target, bool(result.success),
-                    float(result.cost) if result.success else float("inf"), result.reason,
-                )  # fmt: skip
-                attempts.append(attempt)
-                if progress is not None:
-                    progress(attempt)
-                if not result.success:
-                    complete = False
-                    break
+                _record(attempts, progress, state, target, result)
                 guess = guessed.get(key)
-                if guess is not None and float(result.cost) > 1.5 * guess[0] + 1e-9:
-                    complete = False  # dearer than guessed: another sequence may now be cheaper
-                    pose = result.end_pose
+                if not result.success or (guess is not None and float(result.cost) > 1.5 * guess[0] + 1e-9):
+                    complete = False  # failed, or dearer than guessed: another sequence may now be better
                     break
             pose = done[key].end_pose
         if complete:
-            transitions = [done[k] for k in path]
-            states = [start_state] + [s | {t} for s, t in path]
-            sequence = [_key(s) for s in states if s]
-            return CoarsePlan(True, sequence, transitions, float(sum(float(t.cost) for t in transitions)), attempts, "")
+            return _plan(start_state, path, [done[(s, t)] for s, t, _ in path], attempts)
     return CoarsePlan(False, [], [], float("inf"), attempts, "the lazy search did not settle (too many rounds)")
