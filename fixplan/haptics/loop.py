@@ -136,17 +136,16 @@ class HapticLoop:
             x_w, v_w = self.workpiece_coordinates()
             w_c = self._K * (x_d - x_w) + self._B * (v_d - v_w)
         if self.push_limits is not None:
-            w_c = self._saturate(w_c)
+            w_c = self._saturate(w_c, *self.push_limits)
         self.sim.step(w_c)
         felt = self.device.set_force_and_torque(-w_c)
         compute = time.perf_counter() - t0
         self.device.advance(self.coupling.period_s, operator_wrench)
         return w_c, felt, compute
 
-    def _saturate(self, w: FloatArray) -> FloatArray:
-        assert self.push_limits is not None
+    def _saturate(self, w: FloatArray, F_max: float, T_max: float) -> FloatArray:
+        """``w`` with its force and moment scaled down to the hand's limits (counted when it was)."""
         d = self.sim.dimension
-        F_max, T_max = self.push_limits
         F = float(np.linalg.norm(w[:d]))
         T = float(np.linalg.norm(w[d:]))
         if F <= F_max and T <= T_max:
