@@ -38,6 +38,7 @@ target and the suggested push.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -226,8 +227,8 @@ class Executor:
         self._arrived = False  # the current target touches: holding until the state is confirmed
         self._recover_until: float | None = None  # pressing a lost contact back until then
         self._recover_why = ""
-        self._history: list[tuple[Pose, FloatArray, State]] = []
         self._delay_ticks = int(round(self.noise.latency_s / tick_s))
+        self._history: deque[tuple[Pose, FloatArray, State]] = deque(maxlen=self._delay_ticks + 1)
         from fixplan.jamming.search import hand_limits
 
         self.F_max, self.T_max, _ = hand_limits(fixture)
@@ -374,14 +375,10 @@ class Executor:
     def _command(self, t: float, pose: Pose, twist: FloatArray, pressed: State) -> FloatArray:
         """One tick of the policy: updates the target push ``_target``."""
         twist = np.asarray(twist, dtype=float)
-        self._history.append((pose, twist, pressed))
         if self._delay_ticks:
-            k = max(len(self._history) - 1 - self._delay_ticks, 0)
-            pose, twist, pressed = self._history[k]
-            if len(self._history) > self._delay_ticks + 2:
-                self._history.pop(0)
-        else:
-            self._history.clear()
+            # the operator reacts to what it saw latency_s ago (or the oldest observation it has)
+            self._history.append((pose, twist, pressed))
+            pose, twist, pressed = self._history[0]
         tick = self._tick
         self._tick += 1
         if self.done:

@@ -38,6 +38,7 @@ from fixplan.planner.execute import (
     Executor,
     Replan,
     Step,
+    _fmt,
     mass_speed,
 )
 from fixplan.planner.fine import twist_from_pose
@@ -158,29 +159,6 @@ def pose_coordinates(pose: Pose, R0: FloatArray) -> FloatArray:
     return np.array([pose.p_world[0], pose.p_world[1], pose.angle_rad])
 
 
-def _phase(ends: FloatArray, t: float) -> str:
-    i = int(np.searchsorted(ends, t, side="right"))
-    return f"transition {i + 1}" if i < len(ends) else "settling after the last transition"
-
-
-def compress_states(samples: Sequence[tuple[float, frozenset[str]]], dwell_s: float) -> list[tuple[str, ...]]:
-    """The sequence of contact states held for at least ``dwell_s`` (chatter removed)."""
-    out: list[tuple[str, ...]] = []
-    i = 0
-    n = len(samples)
-    while i < n:
-        t0, s = samples[i]
-        j = i
-        while j + 1 < n and samples[j + 1][1] == s:
-            j += 1
-        t1 = samples[j][0]
-        key = tuple(sorted(s))
-        if t1 - t0 >= dwell_s - 1e-12 and key and (not out or out[-1] != key):
-            out.append(key)
-        i = j + 1
-    return out
-
-
 def verify(
     fixture: Fixture,
     start_state: frozenset[str],
@@ -283,7 +261,7 @@ def verify(
         executor._fail(
             sim.time_s,
             f"timed out after {sim.time_s:.2f} s in transition {executor.index + 1} "
-            f"({_fmt_state(executor.states[min(executor.index, len(executor.states) - 1)])}"
+            f"({_fmt(executor.states[min(executor.index, len(executor.states) - 1)])}"
             + (f" + {executor.steps[executor.index].target}" if executor.index < len(executor.steps) else "")
             + ")",
             "timeout",
@@ -354,7 +332,3 @@ def _path_length(fixture: Fixture, step: Step) -> float:
         M = mass_matrix(wp.mass_kg, wp.inertia_body, a.R_world_body)
         total += mass_speed(twist_from_pose(a, b, wp.com_body), M, wp.mass_kg)
     return max(total, 0.01)
-
-
-def _fmt_state(state: frozenset[str]) -> str:
-    return "{" + ", ".join(sorted(state)) + "}" if state else "free"
