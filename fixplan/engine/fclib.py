@@ -116,84 +116,191 @@ class FclibResult:
     extras: dict
 
 
-def _text(group: Any, name: str) -> str:
+_MAX_DIM = 2**31 - 1  # FCLib stores indices as int32
+
+
+def _node(group: Any, name: str, where: str) -> Any:
+    """``group[name]``, or an :class:`InputError` naming the missing HDF5 path."""
     if name not in group:
-        return ""
-    value = group[name][()]
-    if isinstance(value, bytes):
-        return value.decode("utf-8", "replace").strip()
-    return str(value).strip()
+        raise InputError(f"{where}/{name}: missing")
+    return group[name]
+
+
+def _dataset(group: Any, name: str, where: str) -> Any:
+    import h5py
+
+    node = _node(group, name, where)
+    if not isinstance(node, h5py.Dataset):
+        raise InputError(f"{where}/{name}: expected a dataset, found a group")
+    return node
+
+
+def _subgroup(group: Any, name: str, where: str, what: str) -> Any:
+    import h5py
+
+    node = _node(group, name, where)
+    if not isinstance(node, h5py.Group):
+        raise InputError(f"{where}/{name}: expected {what} (an HDF5 group), found a dataset")
+    return node
+
+
+def _numbers(group: Any, name: str, where: str, *, integer: bool) -> np.ndarray:
+    """A dataset's values as a flat array, checked to be numeric and finite.
+
+    ``integer``: the values must be integers (an integer dtype, or floats that are integral).
+    Strings, compound types, complex numbers, NaN and inf are refused with the HDF5 path.
+    """
+    ds = _dataset(group, name, where)
+    path = f"{where}/{name}"
+    kind = ds.dtype.kind
+    if kind not in "iuf" or ds.dtype.subdtype is not None:
+        expected = "integers" if integer else "real numbers"
+        raise InputError(f"{path}: expected {expected}, got HDF5 type {ds.dtype}")
+    try:
+        values = np.asarray(ds[()]).reshape(-1)
+    except (OSError, ValueError, TypeError) as exc:
+        raise InputError(f"{path}: unreadable ({exc})") from exc
+    if kind == "f":
+        if not np.all(np.isfinite(values)):
+            raise InputError(f"{path}: expected finite numbers, found NaN or inf")
+        if integer:
+            if np.any(values != np.round(values)) or np.any(np.abs(values) > _MAX_DIM):
+                raise InputError(f"{path}: expected integers, found non-integral values")
+            return values.astype(np.int64)
+        return values.astype(np.float64)
+    if integer:
+        if values.size and (int(values.max()) > _MAX_DIM or int(values.min()) < -_MAX_DIM):
+            raise InputError(f"{path}: integers out of the int32 range")
+        return values.astype(np.int64)
+    return values.astype(np.float64)
 
 
 def _scalar_int(group: Any, name: str, where: str) -> int:
-    if name not in group:
-        raise InputError(f"{where}: missing '{name}' (not an FCLib matrix)")
-    return int(np.asarray(group[name][()]).reshape(-1)[0])
+    values = _numbers(group, name, where, integer=True)
+    if values.shape[0] != 1:
+        raise InputError(f"{where}/{name}: expected one integer, got {values.shape[0]} values")
+    return int(values[0])
 
 
-def read_matrix(group: Any, where: str) -> sp.csr_matrix:
-    """Read an FCLib matrix group (CSC, CSR or triplet) as a CSR matrix.
+def _check_indices(values: np.ndarray, bound: int, path: str, what: str) -> None:
+    if values.size and (int(values.min()) < 0 or int(values.max()) >= bound):
+        bad = int(values.min()) if int(values.min()) < 0 else int(values.max())
+        raise InputError(f"{path}: {what} index {bad} outside [0, {bound})")
+
+
+def _check_pointers(p: np.ndarray, n_entries: int, path: str) -> int:
+    """Compressed pointers: start at 0, never decrease, end within the stored entries."""
+    if p[0] != 0:
+        raise InputError(f"{path}: pointers must start at 0, got {int(p[0])}")
+    steps = np.diff(p)
+    if np.any(steps < 0):
+        k = int(np.argmax(steps < 0))
+        raise InputError(f"{path}: pointers must not decrease, got p[{k}]={int(p[k])} > p[{k + 1}]={int(p[k + 1])}")
+    nnz = int(p[-1])
+    if nnz > n_entries:
+        raise InputError(f"{path}: last pointer {nnz} exceeds the {n_entries} stored entries")
+    return nnz
+
+
+def _matrix_group(node: Any, where: str) -> Any:
+    import h5py
+
+    if not isinstance(node, h5py.Group):
+        raise InputError(f"{where}: expected an FCLib matrix group (m, n, nz, p, i, x), found a dense dataset")
+    return node
+
+
+def read_matrix(group: Any, where: str, shape: tuple[int, int] | None = None) -> sp.csr_matrix:
+    """Read and validate an FCLib matrix group (CSC, CSR or triplet) as a CSR matrix.
+
+    Every array is checked before SciPy builds the matrix: integer ``m``, ``n``, ``nz``,
+    ``p``, ``i``; finite real ``x``; pointers starting at 0, non-decreasing, ending within the
+    stored entries; every index inside the shape. (SciPy's own check skips index bounds, and
+    an out-of-range index in a compiled loop reads or writes outside its arrays.)
 
     Parameters
     ----------
     group : h5py.Group
         The matrix group (holding ``m``, ``n``, ``nz``, ``p``, ``i``, ``x``).
     where : str
-        Name used in error messages, e.g. ``"file.hdf5:/fclib_global/H"``.
+        Its name in error messages, e.g. ``"file.hdf5:/fclib_global/H"``.
+    shape : tuple of int, optional
+        The shape the caller expects (known from stored vectors): checked before any array
+        of that size is allocated.
 
     Returns
     -------
     scipy.sparse.csr_matrix
-        The matrix.
+        The matrix (duplicate triplets are summed).
 
     Raises
     ------
     InputError
-        When a field is missing or the indices do not fit the shape.
+        Naming the HDF5 path of the first bad item.
     """
+    group = _matrix_group(group, where)
     m = _scalar_int(group, "m", where)
     n = _scalar_int(group, "n", where)
+    if m < 0 or n < 0:
+        raise InputError(f"{where}/m: expected a shape ≥ 0, got ({m}, {n})")
+    if shape is not None and (m, n) != tuple(shape):
+        raise InputError(f"{where}/m: expected shape {shape[0]}×{shape[1]} to match the vectors, got {m}×{n}")
     nz = _scalar_int(group, "nz", where)
-    for name in ("p", "i", "x"):
-        if name not in group:
-            raise InputError(f"{where}: missing '{name}' (not an FCLib matrix)")
-    p = np.asarray(group["p"][()], dtype=np.int64).reshape(-1)
-    i = np.asarray(group["i"][()], dtype=np.int64).reshape(-1)
-    x = np.asarray(group["x"][()], dtype=float).reshape(-1)
-    try:
-        if nz >= 0:
-            p, i, x = p[:nz], i[:nz], x[:nz]
-            if len(p) != nz or len(i) != nz or len(x) != nz:
-                raise InputError(f"{where}: triplet arrays shorter than nz={nz}")
-            fits_csparse = nz == 0 or (i.max() < m and p.max() < n and min(i.min(), p.min()) >= 0)
-            fits_header = nz == 0 or (p.max() < m and i.max() < n and min(i.min(), p.min()) >= 0)
-            if fits_csparse:
-                mat = sp.coo_matrix((x, (i, p)), shape=(m, n))
-            elif fits_header:
-                mat = sp.coo_matrix((x, (p, i)), shape=(m, n))
-            else:
-                raise InputError(f"{where}: triplet indices exceed the shape ({m}, {n})")
-            return sp.csr_matrix(mat)
-        if nz == -1:
-            if len(p) != n + 1:
-                raise InputError(f"{where}: CSC needs {n + 1} column pointers, got {len(p)}")
-            return sp.csr_matrix(sp.csc_matrix((x[: p[-1]], i[: p[-1]], p), shape=(m, n)))
-        if nz == -2:
-            if len(p) != m + 1:
-                raise InputError(f"{where}: CSR needs {m + 1} row pointers, got {len(p)}")
-            return sp.csr_matrix((x[: p[-1]], i[: p[-1]], p), shape=(m, n))
-    except ValueError as exc:
-        raise InputError(f"{where}: inconsistent sparse matrix ({exc})") from exc
-    raise InputError(f"{where}: unknown sparse layout nz={nz} (expected -1, -2 or ≥ 0)")
+    p = _numbers(group, "p", where, integer=True)
+    i = _numbers(group, "i", where, integer=True)
+    x = _numbers(group, "x", where, integer=False)
+    if nz >= 0:
+        for name, arr in (("p", p), ("i", i), ("x", x)):
+            if arr.shape[0] < nz:
+                raise InputError(f"{where}/{name}: expected nz={nz} triplet entries, got {arr.shape[0]}")
+        p, i, x = p[:nz], i[:nz], x[:nz]
+        # CSparse/Siconos: i rows, p columns; FCLib's header: p rows, i columns (module docstring)
+        if nz == 0 or (i.min() >= 0 and p.min() >= 0 and i.max() < m and p.max() < n):
+            rows, cols = i, p
+        elif p.max() < m and i.max() < n and min(i.min(), p.min()) >= 0:
+            rows, cols = p, i
+        else:
+            _check_indices(i, m, f"{where}/i", "row")
+            _check_indices(p, n, f"{where}/p", "column")
+            raise InputError(f"{where}: triplet indices exceed the shape ({m}, {n})")  # pragma: no cover
+        return sp.csr_matrix(sp.coo_matrix((x, (rows, cols)), shape=(m, n)))
+    if nz not in (-1, -2):
+        raise InputError(f"{where}/nz: unknown sparse layout nz={nz} (expected -1 CSC, -2 CSR or ≥ 0 triplets)")
+    outer, inner = (n, m) if nz == -1 else (m, n)
+    if p.shape[0] != outer + 1:
+        what = "column" if nz == -1 else "row"
+        raise InputError(f"{where}/p: expected {outer + 1} {what} pointers, got {p.shape[0]}")
+    nnz = _check_pointers(p, min(i.shape[0], x.shape[0]), f"{where}/p")
+    i, x = i[:nnz], x[:nnz]
+    _check_indices(i, inner, f"{where}/i", "row" if nz == -1 else "column")
+    if nz == -1:
+        return sp.csr_matrix(sp.csc_matrix((x, i, p), shape=(m, n)))
+    return sp.csr_matrix((x, i, p), shape=(m, n))
 
 
-def _vector(group: Any, name: str, size: int, where: str) -> np.ndarray:
-    if name not in group:
-        raise InputError(f"{where}: missing vector '{name}'")
-    v = np.asarray(group[name][()], dtype=float).reshape(-1)
-    if v.shape[0] != size:
-        raise InputError(f"{where}: expected '{name}' with {size} entries, got {v.shape[0]}")
+def _vector(group: Any, name: str, size: int | None, where: str) -> np.ndarray:
+    v = _numbers(group, name, where, integer=False)
+    if size is not None and v.shape[0] != size:
+        raise InputError(f"{where}/{name}: expected '{name}' with {size} entries, got {v.shape[0]}")
     return v
+
+
+def _text(group: Any, name: str) -> str:
+    import h5py
+
+    if not isinstance(group, h5py.Group) or name not in group:
+        return ""
+    node = group[name]
+    if not isinstance(node, h5py.Dataset) or node.dtype.kind not in "SUO" or node.size != 1:
+        return ""
+    try:
+        value = node[()]
+    except (OSError, ValueError, TypeError):
+        return ""
+    value = np.asarray(value).reshape(-1)[0]
+    if isinstance(value, bytes):
+        return value.decode("utf-8", "replace").strip()
+    return str(value).strip()
 
 
 def _solve_mass(M: sp.csr_matrix, rhs: sp.spmatrix | np.ndarray, where: str) -> Any:
@@ -217,8 +324,26 @@ def _solve_mass(M: sp.csr_matrix, rhs: sp.spmatrix | np.ndarray, where: str) -> 
     return lu.solve(np.asarray(rhs))
 
 
+def _check_delassus(W: sp.csr_matrix, where: str) -> None:
+    """Refuse a ``W`` with a negative diagonal entry: no ``J M⁻¹ Jᵀ`` has one (beyond rounding)."""
+    d = W.diagonal()
+    if d.size == 0:
+        return
+    floor = -1e-10 * max(float(np.max(np.abs(d))), np.finfo(float).tiny)
+    if np.any(d < floor):
+        k = int(np.argmin(d))
+        raise InputError(
+            f"{where}: diagonal entry W[{k},{k}] = {d[k]:.3g} < 0, so W is not positive semidefinite "
+            "(a Delassus operator J M⁻¹ Jᵀ never has a negative diagonal)"
+        )
+
+
 def read_fclib(path: str | Path) -> FclibProblem:
-    """Read an FCLib HDF5 file (local or global problem) as a local problem.
+    """Read and validate an FCLib HDF5 file (local or global problem) as a local problem.
+
+    Every array is checked (type, shape, finiteness, index bounds, pointer order, sizes that
+    agree with each other) before anything is built from it; a bad item is named by its HDF5
+    path, e.g. ``file.hdf5:/fclib_local/W/p: pointers must not decrease, ...``.
 
     Parameters
     ----------
@@ -233,7 +358,8 @@ def read_fclib(path: str | Path) -> FclibProblem:
     Raises
     ------
     InputError
-        Missing file, not HDF5, not FCLib, mixed/equality-constrained problems, bad shapes.
+        Missing file, not HDF5, not FCLib, mixed/equality-constrained problems, bad arrays, a
+        ``W`` with a negative diagonal entry, a singular mass matrix.
     """
     import h5py  # optional at import time: only the FCLib reader needs it
 
@@ -246,51 +372,50 @@ def read_fclib(path: str | Path) -> FclibProblem:
         raise InputError(f"{path}: not an HDF5 file ({exc.__class__.__name__})") from exc
     with fh:
         if "fclib_local" in fh:
-            kind, root = "local", fh["fclib_local"]
+            kind = "local"
         elif "fclib_global" in fh:
-            kind, root = "global", fh["fclib_global"]
+            kind = "global"
         else:
             raise InputError(f"{path}: not an FCLib problem (no /fclib_local or /fclib_global)")
+        root = _subgroup(fh, f"fclib_{kind}", f"{path}:", "the problem")
         where = f"{path}:/fclib_{kind}"
         spacedim = _scalar_int(root, "spacedim", where)
         if spacedim not in (2, 3):
-            raise InputError(f"{where}: spacedim must be 2 or 3, got {spacedim}")
-        if "vectors" not in root:
-            raise InputError(f"{where}: missing group 'vectors'")
-        vectors = root["vectors"]
-        info = root["info"] if "info" in root else {}
+            raise InputError(f"{where}/spacedim: spacedim must be 2 or 3, got {spacedim}")
+        vectors = _subgroup(root, "vectors", where, "the vectors")
+        vwhere = f"{where}/vectors"
+        info = root["info"] if "info" in root else None
         title, description = _text(info, "title"), _text(info, "description")
         if kind == "local":
             if "V" in root or "R" in root:
                 raise InputError(f"{where}: mixed problems (V, R) are not supported")
-            if "W" not in root:
-                raise InputError(f"{where}: missing matrix 'W'")
-            W = read_matrix(root["W"], f"{where}/W")
-            m = W.shape[0]
-            if W.shape != (m, m) or m % spacedim:
-                raise InputError(f"{where}: W must be square with rows divisible by {spacedim}")
-            q = _vector(vectors, "q", m, where)
+            W_group = _matrix_group(_node(root, "W", where), f"{where}/W")
+            m = _scalar_int(W_group, "m", f"{where}/W")
+            if m < 0 or m % spacedim:
+                raise InputError(f"{where}/W/m: expected a multiple of spacedim={spacedim} rows, got {m}")
+            q = _vector(vectors, "q", m, vwhere)
+            mu = _vector(vectors, "mu", m // spacedim, vwhere)
+            W = read_matrix(W_group, f"{where}/W", shape=(m, m))
         else:
             if "G" in root:
                 raise InputError(f"{where}: equality constraints (G, b) are not supported")
-            for name in ("M", "H"):
-                if name not in root:
-                    raise InputError(f"{where}: missing matrix '{name}'")
-            M = read_matrix(root["M"], f"{where}/M")
-            H = read_matrix(root["H"], f"{where}/H")
-            n_dof, m = H.shape
-            if M.shape != (n_dof, n_dof) or m % spacedim:
-                raise InputError(
-                    f"{where}: expected M {n_dof}×{n_dof} and H columns divisible by "
-                    f"{spacedim}, got M {M.shape}, H {H.shape}"
-                )
-            f = _vector(vectors, "f", n_dof, where)
-            w = _vector(vectors, "w", m, where)
-            Minv_H = _solve_mass(M, H.tocsc(), where)
-            Minv_f = _solve_mass(M, f, where)
+            f = _vector(vectors, "f", None, vwhere)
+            w = _vector(vectors, "w", None, vwhere)
+            n_dof, m = f.shape[0], w.shape[0]
+            if m % spacedim:
+                raise InputError(f"{vwhere}/w: expected a multiple of spacedim={spacedim} entries, got {m}")
+            mu = _vector(vectors, "mu", m // spacedim, vwhere)
+            M = read_matrix(_node(root, "M", where), f"{where}/M", shape=(n_dof, n_dof))
+            H = read_matrix(_node(root, "H", where), f"{where}/H", shape=(n_dof, m))
+            Minv_H = _solve_mass(M, H.tocsc(), f"{where}/M")
+            Minv_f = _solve_mass(M, f, f"{where}/M")
             W = sp.csr_matrix(H.T @ Minv_H)
             q = np.asarray(H.T @ Minv_f).reshape(-1) + w
-        mu = _vector(vectors, "mu", m // spacedim, where)
+            if not (np.all(np.isfinite(W.data)) and np.all(np.isfinite(q))):
+                raise InputError(f"{where}/M: condensing with M⁻¹ overflowed (M is near singular)")
+        if np.any(mu < 0):
+            raise InputError(f"{vwhere}/mu: expected friction coefficients ≥ 0, got {float(mu.min()):g}")
+        _check_delassus(W, f"{where}/W" if kind == "local" else f"{where}/M")
     problem = build_problem(W, q, mu, dims=spacedim)
     return FclibProblem(problem, kind, spacedim, title, description, str(path))
 
