@@ -14,6 +14,17 @@ class FixplanError(Exception):
     """Base class of every error fixplan raises on purpose."""
 
 
+def one_line(text: str) -> str:
+    r"""``text`` with every non-printable character escaped (``\n``, ``\x1b``): one line, no terminal codes.
+
+    File names, TOML keys and values come from users; a newline or an ANSI escape in them must
+    not break the one-line ``FILE: key: message`` form or colour a terminal.
+    """
+    if text.isprintable():
+        return text
+    return "".join(ch if ch.isprintable() else repr(ch)[1:-1] for ch in text)
+
+
 @dataclass(frozen=True)
 class Issue:
     """One problem found in a fixture file.
@@ -31,7 +42,7 @@ class Issue:
 
     def format(self, source: str) -> str:
         """The one-line form ``FILE: key: message`` used by every command."""
-        return f"{source}: {self.key}: {self.message}"
+        return one_line(f"{source}: {self.key}: {self.message}")
 
 
 class FixtureError(FixplanError):
@@ -49,6 +60,18 @@ class FixtureError(FixplanError):
 
 class InputError(FixplanError):
     """A command-line or API argument is malformed (a wrench, a contact name, a range)."""
+
+
+class InputFileError(InputError):
+    """An input file other than a fixture (a wrench CSV) has problems; carries every one.
+
+    Issues are keyed by place (``line 3``) and print as ``FILE: line 3: message``.
+    """
+
+    def __init__(self, source: str, issues: list[Issue]):
+        self.source = source
+        self.issues = list(issues)
+        super().__init__("\n".join(issue.format(source) for issue in self.issues))
 
 
 class InfeasibleError(FixplanError):

@@ -13,7 +13,6 @@ that contact names exist.
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -117,8 +116,9 @@ def _names(r: Reader, entry: dict, key: str, path: str, known: list[str], requir
 
 def read_toml(path: Path) -> dict[str, Any] | None:
     """The parsed document, or None when it cannot be read or parsed (the loader says why)."""
+    from fixplan.fixture import parse_toml, read_fixture_text
+
     try:
-        with path.open("rb") as fh:
-            return tomllib.load(fh)
-    except (OSError, tomllib.TOMLDecodeError):
+        return parse_toml(read_fixture_text(path), str(path))
+    except FixtureError:
         return None

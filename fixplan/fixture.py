@@ -10,6 +10,8 @@ Keys added to the spec (documented in the README): none yet besides what the spe
 
 from __future__ import annotations
 
+import re
+import sys
 import tomllib
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -19,10 +21,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan import limits
 from fixplan.errors import FixtureError, InfeasibleError, Issue
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
 from fixplan.pose import Pose
-from fixplan.schema import Reader
+from fixplan.schema import Reader, shorten
 from fixplan.tolerances import DEFAULT, Tolerances
 
 FloatArray = NDArray[np.float64]
@@ -35,6 +38,11 @@ FACES = {
     "cylinder": ("+z", "-z", "side"),
 }
 _DATA = Path(__file__).resolve().parent / "data"
+# Locator and contact names appear in one-line messages, CSV headers and comma-separated --contacts
+NAME_PATTERN = re.compile(rf"[\w+\-]{{1,{limits.MAX_NAME_LENGTH}}}")
+NAME_RULE = f"a name of 1 to {limits.MAX_NAME_LENGTH} letters, digits, '_', '-' or '+' (no spaces, commas, dots or control characters)"
+_SIZE = limits.SIZE
+_VERTEX = limits.Range("a vertex coordinate", "m", -limits.LENGTH_MAX_M, limits.LENGTH_MAX_M)
 
 
 def default_fixture_path() -> Path:
@@ -108,6 +116,7 @@ class Fixture:
     start: Pose
     goal_given: Pose | None = None
     tolerances: Tolerances = field(default=DEFAULT)
+    warnings: tuple[Issue, ...] = ()  # plausibility warnings (not errors): `validate` prints them
 
     @property
     def ndof(self) -> int:
@@ -150,27 +159,46 @@ class Fixture:
 def load(path: str | Path, tolerances: Tolerances = DEFAULT) -> Fixture:
     """Read and validate a fixture file; raise :class:`FixtureError` listing every problem."""
     path = Path(path)
-    source = str(path)
+    return loads(read_fixture_text(path), source=str(path), base_dir=path.parent, tolerances=tolerances)
+
+
+def read_fixture_text(path: Path) -> str:
+    """The text of a fixture file: a regular UTF-8 file within the size limit, else :class:`FixtureError`."""
+    from fixplan.files import UnreadableFile, read_user_text
+
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FixtureError(source, [Issue("<file>", "cannot read: no such file")]) from None
-    except IsADirectoryError:
-        raise FixtureError(source, [Issue("<file>", "cannot read: is a directory (expected a .toml file)")]) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FixtureError(source, [Issue("<file>", f"cannot read: {exc}")]) from None
-    return loads(text, source=source, base_dir=path.parent, tolerances=tolerances)
+        return read_user_text(path, expected="a .toml fixture file")
+    except UnreadableFile as exc:
+        raise FixtureError(str(path), [Issue("<file>", f"cannot read: {exc.reason}")]) from None
+
+
+def parse_toml(text: str, source: str) -> dict[str, Any]:
+    """The TOML document, or :class:`FixtureError` keyed ``<toml>`` saying what is wrong."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise FixtureError(source, [Issue("<toml>", f"invalid TOML: {exc}")]) from None
+    except RecursionError:
+        raise FixtureError(
+            source, [Issue("<toml>", "invalid TOML: arrays or tables nested too deeply (expected a fixture file)")]
+        ) from None
+    except ValueError:  # an integer beyond Python's digit limit for int("...")
+        raise FixtureError(
+            source,
+            [
+                Issue(
+                    "<toml>",
+                    f"invalid TOML: an integer of more than {sys.get_int_max_str_digits()} digits (expected numbers of ordinary size)",
+                )
+            ],
+        ) from None
 
 
 def loads(
     text: str, source: str = "<string>", base_dir: Path | None = None, tolerances: Tolerances = DEFAULT
 ) -> Fixture:
     """Validate fixture TOML text (see :func:`load`)."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise FixtureError(source, [Issue("<toml>", f"invalid TOML: {exc}")]) from None
-    return _Builder(data, source, base_dir or Path("."), tolerances).build()
+    return _Builder(parse_toml(text, source), source, base_dir or Path("."), tolerances).build()
 
 
 class _Builder:
@@ -182,6 +210,7 @@ class _Builder:
         self.base_dir = base_dir
         self.tol = tol
         self.r = Reader()
+        self.warnings: list[Issue] = []
 
     def fail_if_issues(self) -> None:
         if self.r.issues:
@@ -195,6 +224,9 @@ class _Builder:
         scene = r.table(data, "scene", "scene", required=True) or {}
         r.unknown_keys(scene, ("name", "dimension", "gravity"), "scene")
         name = r.string(scene, "name", "scene.name", required=True) or "?"
+        if not name.isprintable() or len(name) > 200:
+            r.error("scene.name", "expected a printable name of at most 200 characters (no newlines or control codes)")
+            name = "?"
         dim = (
             r.integer(scene, "dimension", "scene.dimension", required=False, allowed=(2, 3))
             if "dimension" in scene
@@ -204,8 +236,11 @@ class _Builder:
             # Without a valid dimension nothing else can be checked meaningfully.
             raise FixtureError(self.source, r.issues)
         default_g = [0.0, 0.0, -9.81] if dim == 3 else [0.0, -9.81]
-        gravity = r.vector(scene, "gravity", "scene.gravity", dim, default=default_g, dimension_hint=dim)
+        gravity = r.vector(
+            scene, "gravity", "scene.gravity", dim, default=default_g, dimension_hint=dim, bounds=limits.GRAVITY
+        )
 
+        self.check_entry_count()
         wp_table = r.table(data, "workpiece", "workpiece", required=True) or {}
         workpiece, start, goal = self.workpiece(wp_table, dim)
         locators = self.locators(dim, workpiece)
@@ -234,7 +269,23 @@ class _Builder:
         )
         self.check_geometry(fixture)
         self.fail_if_issues()
+        object.__setattr__(fixture, "warnings", tuple(self.warnings))
         return fixture
+
+    def check_entry_count(self) -> None:
+        """At most :data:`~fixplan.limits.MAX_ENTRIES` locators and contacts, refused before any is read."""
+        count = sum(len(v) for k in ("locator", "contact") if isinstance(v := self.data.get(k), list))
+        if count > limits.MAX_ENTRIES:
+            raise FixtureError(
+                self.source,
+                [
+                    Issue(
+                        "locator",
+                        f"{count} [[locator]] and [[contact]] entries (expected at most {limits.MAX_ENTRIES}; "
+                        "a fixture needs 6 in 3D, 3 in 2D)",
+                    )
+                ],
+            )
 
     # -- workpiece ---------------------------------------------------------------------------
     def workpiece(self, t: dict, dim: int) -> tuple[Workpiece | None, Pose | None, Pose | None]:
@@ -257,23 +308,29 @@ class _Builder:
         shape: Shape | None = None
         used = {"shape", "mass", "inertia", "start", "goal"}
         if kind == "box":
-            size = r.vector(t, "size", "workpiece.size", 3, required=True, dimension_hint=3)
+            size = r.vector(t, "size", "workpiece.size", 3, required=True, dimension_hint=3, bounds=_SIZE)
             used.add("size")
             if size is not None and self.positive_all(size, "workpiece.size", "edge lengths > 0"):
                 shape = Box(tuple(size))  # type: ignore[arg-type]
         elif kind == "rectangle":
-            size = r.vector(t, "size", "workpiece.size", 2, required=True, dimension_hint=2)
+            size = r.vector(t, "size", "workpiece.size", 2, required=True, dimension_hint=2, bounds=_SIZE)
             used.add("size")
             if size is not None and self.positive_all(size, "workpiece.size", "side lengths > 0"):
                 shape = Rectangle(tuple(size))  # type: ignore[arg-type]
         elif kind in ("sphere", "disk"):
-            radius = r.number(t, "radius", "workpiece.radius", required=True, exclusive_minimum=0.0, what="a radius")
+            radius = r.number(
+                t, "radius", "workpiece.radius", required=True, exclusive_minimum=0.0, bounds=_SIZE, what="a radius"
+            )
             used.add("radius")
             if radius is not None:
                 shape = Sphere(radius) if kind == "sphere" else Disk(radius)
         elif kind == "cylinder":
-            radius = r.number(t, "radius", "workpiece.radius", required=True, exclusive_minimum=0.0, what="a radius")
-            length = r.number(t, "length", "workpiece.length", required=True, exclusive_minimum=0.0, what="a length")
+            radius = r.number(
+                t, "radius", "workpiece.radius", required=True, exclusive_minimum=0.0, bounds=_SIZE, what="a radius"
+            )
+            length = r.number(
+                t, "length", "workpiece.length", required=True, exclusive_minimum=0.0, bounds=_SIZE, what="a length"
+            )
             used |= {"radius", "length"}
             if radius is not None and length is not None:
                 shape = Cylinder(radius, length)
@@ -287,14 +344,57 @@ class _Builder:
             for key in t:
                 if key not in used and key in allowed:
                     r.error(f"workpiece.{key}", f"not used by shape {kind!r} (remove it)")
-        mass = r.number(t, "mass", "workpiece.mass", required=True, exclusive_minimum=0.0, what="a mass [kg]")
+        mass = r.number(
+            t, "mass", "workpiece.mass", required=True, exclusive_minimum=0.0, bounds=limits.MASS, what="a mass [kg]"
+        )
         inertia = self.inertia(t, dim)
         start = self.pose(t, "start", dim, required=False) or Pose.identity(dim)
         goal = self.pose(t, "goal", dim, required=False)
         if shape is None or mass is None:
             return None, start, goal
+        if inertia is not None and not self.check_inertia(inertia, shape, mass):
+            return None, start, goal
         I_b = inertia if inertia is not None else shape.inertia_body(mass)
+        self.check_density(shape, mass, dim)
         return Workpiece(shape, mass, I_b, shape.com_body), start, goal
+
+    def check_inertia(self, inertia: FloatArray, shape: Shape, mass: float) -> bool:
+        """A given inertia within what a rigid body of this shape and mass can have (see :mod:`fixplan.limits`)."""
+        uniform = np.diag(shape.inertia_body(mass))
+        radius = shape.bounding_radius + float(np.linalg.norm(shape.com_body))
+        high = mass * radius**2  # no point of the part is farther than R from its centre of mass
+        for i, moment in enumerate(np.diag(inertia)):
+            low = limits.INERTIA_MIN_OF_UNIFORM * float(uniform[i])
+            if not low <= moment <= high:
+                axis = "xyz"[i] if inertia.shape[0] == 3 else "z"
+                self.r.error(
+                    "workpiece.inertia",
+                    f"I{axis}{axis} = {moment:g} kg·m² is impossible for this {shape.name} of {mass:g} kg "
+                    f"(expected a moment in [{low:.3g}, {high:.3g}] kg·m²: from 10⁻³ of uniform density to m·R²)",
+                )
+                return False
+        return True
+
+    def check_density(self, shape: Shape, mass: float, dim: int) -> None:
+        """Warn (not an error) when the density is far outside solids: is the file in millimetres or grams."""
+        if isinstance(shape, Box):
+            volume = float(np.prod(shape.size))
+        elif isinstance(shape, Sphere):
+            volume = 4.0 / 3.0 * np.pi * shape.radius**3
+        elif isinstance(shape, Cylinder):
+            volume = np.pi * shape.radius**2 * shape.length
+        else:  # 2D: a mass per unit depth has no density to judge
+            return
+        rho = mass / volume
+        lo, hi = limits.DENSITY_WARN_KGPM3
+        if not lo <= rho <= hi:
+            self.warnings.append(
+                Issue(
+                    "workpiece.mass",
+                    f"warning: the part's density is {rho:.3g} kg/m³, far outside solids ({lo:g} to {hi:g} kg/m³); "
+                    "units are metres and kilograms (is the file in millimetres or grams?)",
+                )
+            )
 
     def positive_all(self, values: list[float], path: str, what: str) -> bool:
         bad = [i for i, v in enumerate(values) if v <= 0]
@@ -313,7 +413,9 @@ class _Builder:
             return None
         verts = []
         for i, _ in enumerate(raw):
-            v = r.vector({"v": raw[i]}, "v", f"workpiece.vertices[{i}]", 2, required=True, dimension_hint=2)
+            v = r.vector(
+                {"v": raw[i]}, "v", f"workpiece.vertices[{i}]", 2, required=True, dimension_hint=2, bounds=_VERTEX
+            )
             if v is None:
                 return None
             verts.append(v)
@@ -330,6 +432,10 @@ class _Builder:
             r.error(
                 "workpiece.vertices", "polygon is not strictly convex (expected a convex polygon, counter-clockwise)"
             )
+            return None
+        extent = float(np.min(V.max(axis=0) - V.min(axis=0)))
+        if extent < _SIZE.low:
+            r.error("workpiece.vertices", f"the polygon is {extent:.3g} m across (expected a width {_SIZE.expected()})")
             return None
         return Polygon(tuple((float(v[0]), float(v[1])) for v in verts))
 
@@ -365,22 +471,29 @@ class _Builder:
             return None
         if dim == 3:
             r.unknown_keys(tab, ("position", "rpy_deg"), path)
-            pos = r.vector(tab, "position", f"{path}.position", 3, required=True, dimension_hint=3)
-            rpy = r.vector(tab, "rpy_deg", f"{path}.rpy_deg", 3, default=[0.0, 0.0, 0.0], dimension_hint=3)
+            pos = r.vector(
+                tab, "position", f"{path}.position", 3, required=True, dimension_hint=3, bounds=limits.COORDINATE
+            )
+            rpy = r.vector(
+                tab, "rpy_deg", f"{path}.rpy_deg", 3, default=[0.0, 0.0, 0.0], dimension_hint=3, bounds=limits.ANGLE
+            )
             if pos is None or rpy is None:
                 return None
             return Pose.from_rpy_deg(pos, rpy)
         r.unknown_keys(tab, ("position", "angle_deg"), path)
-        pos = r.vector(tab, "position", f"{path}.position", 2, required=True, dimension_hint=2)
-        ang = r.number(tab, "angle_deg", f"{path}.angle_deg", default=0.0, what="an angle [deg]")
+        pos = r.vector(
+            tab, "position", f"{path}.position", 2, required=True, dimension_hint=2, bounds=limits.COORDINATE
+        )
+        ang = r.number(tab, "angle_deg", f"{path}.angle_deg", default=0.0, bounds=limits.ANGLE, what="an angle [deg]")
         if pos is None or ang is None:
             return None
         return Pose.from_angle_deg(pos, ang)
 
     # -- locators and contacts ------------------------------------------------------------------
     def _entry_path(self, kind: str, entry: dict, index: int, seen: set[str]) -> tuple[str, str | None]:
+        """``locator.NAME`` for an entry with a valid name (even a duplicate), else ``locator[INDEX]``."""
         name = entry.get("name")
-        if isinstance(name, str) and name.strip() and name not in seen:
+        if isinstance(name, str) and NAME_PATTERN.fullmatch(name):
             return f"{kind}.{name}", name
         return f"{kind}[{index}]", None
 
@@ -392,10 +505,26 @@ class _Builder:
             path, _ = self._entry_path("locator", entry, i, seen)
             r.unknown_keys(entry, ("name", "position", "radius", "friction", "torsion", "face"), path)
             name = self._name(entry, path, seen)
-            pos = r.vector(entry, "position", f"{path}.position", dim, required=True, dimension_hint=dim)
-            radius = r.number(entry, "radius", f"{path}.radius", default=0.0, minimum=0.0, what="a tip radius [m]")
+            pos = r.vector(
+                entry, "position", f"{path}.position", dim, required=True, dimension_hint=dim, bounds=limits.COORDINATE
+            )
+            radius = r.number(
+                entry,
+                "radius",
+                f"{path}.radius",
+                default=0.0,
+                minimum=0.0,
+                bounds=limits.TIP_RADIUS,
+                what="a tip radius [m]",
+            )
             mu = r.number(
-                entry, "friction", f"{path}.friction", required=True, minimum=0.0, what="a friction coefficient"
+                entry,
+                "friction",
+                f"{path}.friction",
+                required=True,
+                minimum=0.0,
+                bounds=limits.FRICTION,
+                what="a friction coefficient",
             )
             torsion = self._torsion(entry, path, dim)
             face = None
@@ -419,8 +548,8 @@ class _Builder:
         if not isinstance(name, str) or not name.strip():
             self.r.error(f"{path}.name", "expected a non-empty string")
             return None
-        if "," in name or name != name.strip():
-            self.r.error(f"{path}.name", f"got {name!r} (expected a name without commas or surrounding spaces)")
+        if not NAME_PATTERN.fullmatch(name):
+            self.r.error(f"{path}.name", f"got {shorten(name)} (expected {NAME_RULE})")
             return None
         if name in seen:
             self.r.error(f"{path}.name", f"{name!r} is used twice (expected unique names)")
@@ -439,7 +568,9 @@ class _Builder:
         if dim == 2:
             self.r.error(f"{path}.torsion", "torsional friction is 3D only (remove it in a 2D scene)")
             return None
-        return self.r.number(entry, "torsion", f"{path}.torsion", minimum=0.0, what="a torsional radius [m]")
+        return self.r.number(
+            entry, "torsion", f"{path}.torsion", minimum=0.0, bounds=limits.TORSION, what="a torsional radius [m]"
+        )
 
     def explicit_contacts(self, dim: int) -> list[ExplicitContact]:
         r = self.r
@@ -449,13 +580,25 @@ class _Builder:
             path, _ = self._entry_path("contact", entry, i, seen)
             r.unknown_keys(entry, ("name", "point", "normal", "friction", "torsion"), path)
             name = self._name(entry, path, seen)
-            point = r.vector(entry, "point", f"{path}.point", dim, required=True, dimension_hint=dim)
+            point = r.vector(
+                entry, "point", f"{path}.point", dim, required=True, dimension_hint=dim, bounds=limits.COORDINATE
+            )
             normal = r.vector(entry, "normal", f"{path}.normal", dim, required=True, dimension_hint=dim)
-            if normal is not None and np.linalg.norm(normal) <= 1e-12:
-                r.error(f"{path}.normal", "got a zero vector (expected a direction)")
-                normal = None
+            if normal is not None:
+                scale = float(np.max(np.abs(normal)))  # normalised in two steps: [1e300, 1e300] does not overflow
+                if scale <= 1e-12 or not np.isfinite(np.linalg.norm(np.array(normal) / scale)):
+                    r.error(f"{path}.normal", "got a zero vector (expected a direction)")
+                    normal = None
+                else:
+                    normal = list(np.array(normal) / scale)
             mu = r.number(
-                entry, "friction", f"{path}.friction", required=True, minimum=0.0, what="a friction coefficient"
+                entry,
+                "friction",
+                f"{path}.friction",
+                required=True,
+                minimum=0.0,
+                bounds=limits.FRICTION,
+                what="a friction coefficient",
             )
             torsion = self._torsion(entry, path, dim)
             if name is None or point is None or normal is None or mu is None or torsion is None:
@@ -527,10 +670,18 @@ class _Builder:
         for i, a in enumerate(locs):
             for b in locs[i + 1 :]:
                 dist = float(np.linalg.norm(a.p_world - b.p_world))
-                if dist < max(1e-9, a.radius_m + b.radius_m):
+                reach = a.radius_m + b.radius_m
+                if reach == 0.0 and dist < tol.touch_m:
                     r.error(
                         f"locator.{b.name}.position",
-                        f"{b.name} and {a.name} are at one place (tips {dist:.3g} m apart; expected ≥ {a.radius_m + b.radius_m:g} m)",
+                        f"{b.name} and {a.name} are at one place ({dist:.3g} m apart; expected point locators "
+                        f"at least {tol.touch_m:g} m apart)",
+                    )
+                elif reach > 0.0 and dist < reach:
+                    r.error(
+                        f"locator.{b.name}.position",
+                        f"{b.name} and {a.name} are at one place: their tips overlap (centres {dist:.3g} m apart; "
+                        f"expected ≥ {reach:g} m, the sum of the tip radii)",
                     )
         wp = fixture.workpiece
         for loc in locs:

@@ -13,15 +13,20 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from fixplan.errors import Issue
+from fixplan.limits import Range
+
+_SHOWN_CHARS = 40  # a value quoted in a message is cut to this many characters
 
 
 def _kind(value: Any) -> str:
     if isinstance(value, bool):
         return "a boolean"
+    if isinstance(value, int) and abs(value) >= 10**_SHOWN_CHARS:
+        return f"an integer of {len(str(abs(value)))} digits"
     if isinstance(value, int | float):
         return f"the number {value!r}"
     if isinstance(value, str):
-        return f"the string {value!r}"
+        return f"the string {shorten(value)}"
     if isinstance(value, list):
         return f"a list of {len(value)}"
     if isinstance(value, dict):
@@ -29,8 +34,22 @@ def _kind(value: Any) -> str:
     return type(value).__name__
 
 
+def shorten(text: str) -> str:
+    """``repr(text)`` (escapes keep a message on one line), cut to a readable length."""
+    shown = repr(text)
+    return shown if len(shown) <= _SHOWN_CHARS else shown[: _SHOWN_CHARS - 1] + "…"
+
+
 def _is_number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _as_float(value: int | float) -> float | None:
+    """``float(value)``, or None for an integer too large for a float (``10**400``)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return None
 
 
 class Reader:
@@ -82,17 +101,21 @@ class Reader:
         minimum: float | None = None,
         exclusive_minimum: float | None = None,
         maximum: float | None = None,
+        bounds: Range | None = None,
         what: str = "a number",
     ) -> float | None:
         if name not in table:
             if required:
                 self.error(path, f"missing (expected {what})")
             return default
-        value = table[name]
-        if not _is_number(value):
-            self.error(path, f"got {_kind(value)} (expected {what})")
+        raw = table[name]
+        if not _is_number(raw):
+            self.error(path, f"got {_kind(raw)} (expected {what})")
             return None
-        value = float(value)
+        value = _as_float(raw)
+        if value is None:
+            self.error(path, f"got {_kind(raw)}, too large for a float (expected {_expected(what, bounds)})")
+            return None
         if not math.isfinite(value):
             self.error(path, f"got {value} (expected a finite number)")
             return None
@@ -104,6 +127,9 @@ class Reader:
             return None
         if maximum is not None and value > maximum:
             self.error(path, f"got {value:g} (expected {what} ≤ {maximum:g})")
+            return None
+        if bounds is not None and not bounds.contains(value):
+            self.error(path, f"got {value:g} (expected {bounds.expected()})")
             return None
         return value
 
@@ -140,7 +166,7 @@ class Reader:
             self.error(path, f"got {_kind(value)} (expected a non-empty string)")
             return None
         if choices is not None and value not in choices:
-            self.error(path, f"got {value!r} (expected one of: {', '.join(choices)})")
+            self.error(path, f"got {shorten(value)} (expected one of: {', '.join(choices)})")
             return None
         return value
 
@@ -155,6 +181,7 @@ class Reader:
         default: list[float] | None = None,
         what: str = "numbers",
         dimension_hint: int | None = None,
+        bounds: Range | None = None,
     ) -> list[float] | None:
         if name not in table:
             if required:
@@ -168,11 +195,26 @@ class Reader:
             hint = f" for a {dimension_hint}D scene" if dimension_hint else ""
             self.error(path, f"got {len(value)} numbers (expected {length}{hint})")
             return None
+        out = []
         for i, x in enumerate(value):
             if not _is_number(x):
                 self.error(f"{path}[{i}]", f"got {_kind(x)} (expected a number)")
                 return None
-            if not math.isfinite(float(x)):
+            v = _as_float(x)
+            if v is None:
+                self.error(
+                    f"{path}[{i}]", f"got {_kind(x)}, too large for a float (expected {_expected('a number', bounds)})"
+                )
+                return None
+            if not math.isfinite(v):
                 self.error(f"{path}[{i}]", f"got {x} (expected a finite number)")
                 return None
-        return [float(x) for x in value]
+            if bounds is not None and not bounds.contains(v):
+                self.error(f"{path}[{i}]", f"got {v:g} (expected {bounds.expected()})")
+                return None
+            out.append(v)
+        return out
+
+
+def _expected(what: str, bounds: Range | None) -> str:
+    return what if bounds is None else bounds.expected()

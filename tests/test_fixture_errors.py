@@ -101,7 +101,7 @@ CASES = [
     (
         "duplicate-name",
         GOOD + '[[locator]]\nname = "B1"\nposition = [0.15, 0.03, -0.001]\nradius = 0.001\nfriction = 0.3\n',
-        "locator[1].name",
+        "locator.B1.name",  # entries are addressed by name whenever they have a valid one
         "used twice",
     ),
     ("bad-toml", GOOD.replace("mass = 2.0", "mass = = 2.0"), "<toml>", "invalid TOML"),

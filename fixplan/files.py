@@ -1,0 +1,168 @@
+"""Users' files: reading input text safely, and checking output paths before anything is written.
+
+Inputs: only regular files are opened (a named pipe would block forever, a device never ends),
+at most :data:`~fixplan.limits.MAX_FILE_BYTES`, and decoded as UTF-8 with a message that names
+what the file seems to be (HDF5, UTF-16, binary) instead of a ``UnicodeDecodeError``.
+
+Outputs: a path is writable when nothing is there, or a regular file is there and the user said
+``--force``. A path that is a directory, a device (``/dev/full``), a pipe or a dangling symbolic
+link is refused (the link would create a file outside the folder the user named), and several
+outputs of one command must be distinct files. Write errors name the path and the reason.
+"""
+
+from __future__ import annotations
+
+import codecs
+import errno
+import os
+import stat
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TypeVar
+
+from fixplan.errors import InputError
+from fixplan.limits import MAX_FILE_BYTES
+
+T = TypeVar("T")
+
+
+class UnreadableFile(InputError):
+    """An input file cannot be read as text; ``reason`` says why in words for a message."""
+
+    def __init__(self, path: Path, reason: str):
+        self.path = path
+        self.reason = reason
+        super().__init__(f"{path}: cannot read: {reason}")
+
+
+def read_user_text(path: Path, *, expected: str, max_bytes: int = MAX_FILE_BYTES) -> str:
+    """The text of a user's input file, or :class:`UnreadableFile` with a one-line reason.
+
+    Parameters
+    ----------
+    expected : str
+        What the file should be, for messages: ``"a .toml fixture file"``.
+    """
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise UnreadableFile(path, "no such file") from None
+    except OSError as exc:
+        raise UnreadableFile(path, exc.strerror or str(exc)) from None
+    if stat.S_ISDIR(info.st_mode):
+        raise UnreadableFile(path, f"is a directory (expected {expected})")
+    if not stat.S_ISREG(info.st_mode):
+        raise UnreadableFile(path, f"is not a regular file but {_file_kind(info.st_mode)} (expected {expected})")
+    if info.st_size > max_bytes:
+        raise UnreadableFile(
+            path, f"is {info.st_size} bytes, larger than the limit of {max_bytes} bytes (expected {expected})"
+        )
+    try:
+        # O_NONBLOCK: should the file have been swapped for a pipe since stat, open does not block
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with os.fdopen(fd, "rb") as fh:
+            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+                raise UnreadableFile(path, f"is not a regular file (expected {expected})")
+            data = fh.read(max_bytes + 1)
+    except OSError as exc:
+        raise UnreadableFile(path, exc.strerror or str(exc)) from None
+    if len(data) > max_bytes:
+        raise UnreadableFile(path, f"is larger than the limit of {max_bytes} bytes (expected {expected})")
+    return decode_text(path, data, expected=expected)
+
+
+def decode_text(path: Path, data: bytes, *, expected: str) -> str:
+    """``data`` decoded as UTF-8 (a UTF-8 byte-order mark is dropped), or :class:`UnreadableFile`."""
+    if data.startswith(b"\x89HDF\r\n\x1a\n"):
+        raise UnreadableFile(path, f"is an HDF5 file (expected {expected}; FCLib problems are read by 'fixplan fclib')")
+    if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)) or (
+        len(data) >= 4 and (data[1::2][:2] == b"\0\0" or data[0::2][:2] == b"\0\0")
+    ):
+        raise UnreadableFile(path, f"is UTF-16 text (expected {expected} in UTF-8: save it as UTF-8)")
+    if b"\0" in data:
+        raise UnreadableFile(path, f"is a binary file (expected {expected})")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise UnreadableFile(
+            path, f"is not UTF-8 text: byte 0x{data[exc.start]:02x} on line {line} (expected {expected} in UTF-8)"
+        ) from None
+    return text.removeprefix("\ufeff")
+
+
+def _file_kind(mode: int) -> str:
+    if stat.S_ISFIFO(mode):
+        return "a named pipe"
+    if stat.S_ISCHR(mode):
+        return "a character device"
+    if stat.S_ISBLK(mode):
+        return "a block device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "a special file"
+
+
+def check_output(path: Path, force: bool, *, option: str = "--out") -> Path:
+    """Refuse an output path that would lose a user's file or write where they did not ask.
+
+    Returns ``path``; creates its missing parent folders. Nothing is written here.
+    """
+    if path.is_symlink() and not path.exists():
+        raise InputError(
+            f"{option} {path} is a dangling symbolic link to {os.readlink(path)} "
+            "(writing would create a file elsewhere; remove the link or choose another path)"
+        )
+    if path.exists():
+        info = os.stat(path)
+        if stat.S_ISDIR(info.st_mode):
+            raise InputError(f"{option} {path} is a directory (expected a file path)")
+        if not stat.S_ISREG(info.st_mode):
+            raise InputError(
+                f"{option} {path} is {_file_kind(info.st_mode)}, not a regular file (expected a file path)"
+            )
+        if not force:
+            raise InputError(f"{path} exists (use --force to overwrite it)")
+    parent = path.parent
+    if parent.is_symlink() and not parent.exists():
+        raise InputError(f"{option} {path}: the folder {parent} is a dangling symbolic link")
+    if parent.exists() and not parent.is_dir():
+        raise InputError(f"{option} {path}: {parent} is not a directory")
+    if not parent.exists():
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise InputError(f"{option} {path}: cannot create the folder {parent}: {exc.strerror or exc}") from None
+    return path
+
+
+def check_distinct(outputs: Sequence[tuple[str, Path | None]]) -> None:
+    """Refuse two outputs of one command that are the same file (one would replace the other)."""
+    seen: dict[Path, str] = {}
+    for option, path in outputs:
+        if path is None:
+            continue
+        key = Path(os.path.abspath(path))
+        try:
+            key = key.resolve()
+        except OSError:  # pragma: no cover - a loop of links: compare as written
+            pass
+        if key in seen:
+            raise InputError(f"{option} {path} is the same file as {seen[key]} (expected distinct output files)")
+        seen[key] = f"{option} {path}"
+
+
+def write_output(path: Path, write: Callable[[Path], T]) -> T:
+    """Run ``write(path)``; turn a failure (disk full, permission) into one line naming the path."""
+    try:
+        return write(path)
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        if exc.errno == errno.ENOSPC:
+            reason = "no space left on the device"
+        raise InputError(f"cannot write {path}: {reason}") from None
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` as UTF-8 (see :func:`write_output`)."""
+    write_output(path, lambda p: p.write_text(text, encoding="utf-8"))

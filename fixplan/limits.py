@@ -1,0 +1,106 @@
+"""Valid ranges of every quantity fixplan reads, from the physics and the solvers' scaling.
+
+A fixture or a command line with a value outside its range is refused with the key and the
+range (``workpiece.mass: got 1e-300 (expected a mass [kg] in [1e-06, 1e+04])``). Inside the
+ranges every command either gives finite results or says why not. The ranges are documented in
+``docs/limits.md``; keep that page and this table in step (``tests/test_limits.py`` checks it).
+
+Why these numbers:
+
+* lengths: a workpiece from 0.1 mm to 100 m. The touch and penetration tolerances are 1 µm
+  (:mod:`fixplan.tolerances`), so a part must be much larger than that; 100 m is beyond any
+  fixture and keeps a file written in millimetres (a "200 m box") from passing.
+* coordinates within 1 km of the origin: float64 then resolves 10⁻¹³ m, far below 1 µm.
+* mass 1 mg to 10 t, gravity within 100 m/s² (10 g) per axis, wrenches within 10⁶ N and
+  10⁶ N·m: the cone programs and the contact solver work in ratios of applied to weight
+  forces, and these bounds keep those ratios within ~10¹⁵, where float64 still has digits.
+* friction ≤ 10 (measured coefficients are below ~4); tip and torsional radii ≤ 1 m.
+* angles within ±360°; time steps 1 µs to 1 s; solver tolerances 10⁻¹⁴ to 1.
+* inertia moments between 10⁻³ of the shape's uniform-density moment and m·R² (R: the shape's
+  farthest point from the centre of mass), a bound no rigid body can exceed.
+* at most 100 locators and contacts in a file, at most 1 MiB per input file, at most 10⁷
+  simulation steps per run without ``--force``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Range:
+    """A closed interval ``[low, high]`` of a quantity, with what it is and its unit."""
+
+    what: str  # "a mass"
+    unit: str  # "kg" ("" for a pure number)
+    low: float
+    high: float
+
+    def contains(self, value: float) -> bool:
+        return math.isfinite(value) and self.low <= value <= self.high
+
+    def expected(self) -> str:
+        """``a mass [kg] in [1e-06, 1e+04]``: the words a message puts after "expected"."""
+        unit = f" [{self.unit}]" if self.unit else ""
+        return f"{self.what}{unit} in [{self.low:g}, {self.high:g}]"
+
+
+LENGTH_MAX_M = 100.0
+COORDINATE_MAX_M = 1000.0
+FORCE_MAX_N = 1e6
+TORQUE_MAX_NM = 1e6
+
+MASS = Range("a mass", "kg", 1e-6, 1e4)
+SIZE = Range("a length", "m", 1e-4, LENGTH_MAX_M)
+COORDINATE = Range("a coordinate", "m", -COORDINATE_MAX_M, COORDINATE_MAX_M)
+GRAVITY = Range("a gravity component", "m/s²", -100.0, 100.0)
+ANGLE = Range("an angle", "deg", -360.0, 360.0)
+TIP_RADIUS = Range("a tip radius", "m", 0.0, 1.0)
+TORSION = Range("a torsional radius", "m", 0.0, 1.0)
+FRICTION = Range("a friction coefficient", "", 0.0, 10.0)
+NORMAL = Range("a normal component", "", -1e300, 1e300)  # any finite direction; normalised on load
+MAX_FORCE = Range("a force", "N", 1e-6, FORCE_MAX_N)
+MAX_TORQUE = Range("a torque", "N·m", 1e-9, TORQUE_MAX_NM)
+TIMESTEP = Range("a time step", "s", 1e-6, 1.0)
+RESTITUTION = Range("a restitution coefficient", "", 0.0, 1.0)
+SOLVER_TOLERANCE = Range("a solver tolerance", "", 1e-14, 1.0)
+WRENCH_FORCE = Range("a force component", "N", -FORCE_MAX_N, FORCE_MAX_N)
+WRENCH_TORQUE = Range("a moment component", "N·m", -TORQUE_MAX_NM, TORQUE_MAX_NM)
+ACCELERATION = Range("an acceleration component", "m/s² or rad/s²", -1e3, 1e3)
+DURATION = Range("a duration", "s", 0.0, 1e6)
+
+INERTIA_MIN_OF_UNIFORM = 1e-3  # least given moment, as a fraction of the uniform-density moment
+MAX_ENTRIES = 100  # [[locator]] plus [[contact]] entries in one file
+MAX_FILE_BYTES = 1 << 20  # any input file fixplan reads as text (fixture, wrench CSV, plan JSON)
+MAX_SIM_STEPS = 10_000_000  # simulation steps of one `fixplan simulate` run without --force
+MAX_NAME_LENGTH = 64
+
+# plausible densities of a solid part [kg/m³]: outside, validate warns (a file in millimetres?)
+DENSITY_WARN_KGPM3 = (5.0, 5e4)
+
+ALL: dict[str, Range] = {
+    "workpiece.mass": MASS,
+    "workpiece.size, radius, length, vertices (extent)": SIZE,
+    "positions, points, start/goal position, --at": COORDINATE,
+    "scene.gravity (each component)": GRAVITY,
+    "rpy_deg, angle_deg": ANGLE,
+    "locator.radius": TIP_RADIUS,
+    "torsion": TORSION,
+    "friction": FRICTION,
+    "manipulator.max_force": MAX_FORCE,
+    "manipulator.max_torque": MAX_TORQUE,
+    "simulation.timestep, --dt": TIMESTEP,
+    "simulation.restitution": RESTITUTION,
+    "simulation.tolerance, --tolerance": SOLVER_TOLERANCE,
+    "--wrench, --wrenches forces": WRENCH_FORCE,
+    "--wrench, --wrenches moments": WRENCH_TORQUE,
+    "--motion": ACCELERATION,
+    "--duration": DURATION,
+}
+
+
+def wrench_ranges(ndof: int) -> list[Range]:
+    """The range of each wrench component: ``Fx,Fy,Fz,Tx,Ty,Tz`` (3D) or ``Fx,Fy,Mz`` (2D)."""
+    forces = 3 if ndof == 6 else 2
+    return [WRENCH_FORCE] * forces + [WRENCH_TORQUE] * (ndof - forces)
