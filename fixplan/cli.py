@@ -17,7 +17,9 @@ from typing import Annotated, Any
 import numpy as np
 import typer
 
-from fixplan.errors import FixplanError, FixtureError, InputError
+from fixplan import limits
+from fixplan.errors import FixplanError, FixtureError, InputError, InputFileError, SolverError, one_line
+from fixplan.files import check_distinct, check_output, write_output, write_text
 
 try:  # typer ≥ 0.20 vendors click; older typer depends on it
     from typer._click import exceptions as click_exc
@@ -55,7 +57,27 @@ PoseOpt = Annotated[str, typer.Option("--pose", help="Analyse the part at its 's
 
 
 def _err(message: str) -> None:
-    typer.echo(f"fixplan: {message}", err=True)
+    typer.echo(one_line(f"fixplan: {message}"), err=True)
+
+
+def _version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            typer.echo(f"fixplan {version('fixplan')}")
+        except PackageNotFoundError:  # pragma: no cover - running from a source tree without install
+            typer.echo("fixplan (version unknown: not installed)")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool, typer.Option("--version", help="Print the version and exit.", callback=_version, is_eager=True)
+    ] = False,
+) -> None:
+    """Plan how a workpiece is loaded into a fixture without jamming."""
 
 
 def _load(path: Path | None):
@@ -64,24 +86,44 @@ def _load(path: Path | None):
     return load(path if path is not None else default_fixture_path())
 
 
-def _numbers(text: str, what: str, n: int | None = None) -> np.ndarray:
+def _numbers(
+    text: str, what: str, n: int | None = None, ranges: list[limits.Range] | limits.Range | None = None
+) -> np.ndarray:
+    """Comma-separated finite numbers, ``n`` of them, each inside its range (when given)."""
+    shown = _shown(text)
     try:
         values = np.array([float(x) for x in text.split(",")], dtype=float)
     except ValueError:
-        raise InputError(f"{what} must be comma-separated numbers, got {text!r}") from None
+        raise InputError(f"{what} must be comma-separated numbers, got {shown}") from None
     if n is not None and values.shape[0] != n:
-        raise InputError(f"{what} expects {n} numbers, got {values.shape[0]} in {text!r}")
+        raise InputError(f"{what} expects {n} numbers, got {values.shape[0]} in {shown}")
     if not np.all(np.isfinite(values)):
-        raise InputError(f"{what} must be finite numbers, got {text!r}")
+        raise InputError(f"{what} must be finite numbers, got {shown}")
+    if ranges is not None:
+        per = ranges if isinstance(ranges, list) else [ranges] * len(values)
+        for i, (x, rng) in enumerate(zip(values, per, strict=False)):
+            if not rng.contains(float(x)):
+                raise InputError(f"{what}: number {i + 1} is {x:g} (expected {rng.expected()})")
     return values
 
 
-def _names(text: str | None) -> list[str] | None:
+def _shown(text: str) -> str:
+    """A user's text quoted in a message: escaped, and cut when long."""
+    from fixplan.schema import shorten
+
+    return shorten(text)
+
+
+def _wrench(text: str, what: str, ndof: int) -> np.ndarray:
+    return _numbers(text, what, ndof, limits.wrench_ranges(ndof))
+
+
+def _names(text: str | None, option: str = "--contacts") -> list[str] | None:
     if text is None:
         return None
     names = [s.strip() for s in text.split(",") if s.strip()]
     if not names:
-        raise InputError("--contacts is empty (expected comma-separated contact names)")
+        raise InputError(f"{option} is empty (expected comma-separated locator names)")
     return names
 
 
@@ -95,21 +137,43 @@ def _pose(fixture, pose: str):
     return pose
 
 
-def _writable(path: Path, force: bool) -> Path:
-    if path.exists() and not force:
-        raise InputError(f"{path} exists (use --force to overwrite it)")
-    if path.parent and not path.parent.exists():
-        path.parent.mkdir(parents=True, exist_ok=True)
-    return path
+def _writable(path: Path, force: bool, option: str = "--out") -> Path:
+    return check_output(path, force, option=option)
+
+
+def _json_text(obj: dict[str, Any], *, compact: bool = False) -> str:
+    """Strict JSON (no NaN or Infinity); a non-finite number is named by its place and refused."""
+    try:
+        if compact:
+            return json.dumps(obj, separators=(",", ":"), allow_nan=False, default=_json_default)
+        return json.dumps(obj, indent=2, allow_nan=False, default=_json_default)
+    except ValueError:
+        where = _nonfinite_path(obj, "") or "?"
+        raise SolverError(
+            f"the result has a non-finite number at {where} (a numerical failure inside the valid ranges; "
+            "please report it with the input)"
+        ) from None
+
+
+def _nonfinite_path(obj: Any, path: str) -> str | None:
+    if isinstance(obj, np.ndarray):
+        obj = obj.tolist()
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            if (found := _nonfinite_path(v, f"{path}.{k}" if path else str(k))) is not None:
+                return found
+    elif isinstance(obj, list | tuple):
+        for i, v in enumerate(obj):
+            if (found := _nonfinite_path(v, f"{path}[{i}]")) is not None:
+                return found
+    elif isinstance(obj, float | np.floating) and not math.isfinite(float(obj)):
+        return path
+    return None
 
 
 def _emit_json(obj: dict[str, Any], *, compact: bool = False) -> None:
     """One JSON object on stdout: indented for people, compact for large batches."""
-    if compact:
-        text = json.dumps(obj, separators=(",", ":"), allow_nan=False, default=_json_default)
-    else:
-        text = json.dumps(obj, indent=2, allow_nan=False, default=_json_default)
-    sys.stdout.write(text + "\n")
+    sys.stdout.write(_json_text(obj, compact=compact) + "\n")
 
 
 def _json_default(x: Any) -> Any:
@@ -123,13 +187,22 @@ def _json_default(x: Any) -> Any:
 @app.command()
 def validate(
     files: Annotated[list[Path], typer.Argument(help="Fixture files (or expected-verdict tables) to check.")],
+    verbose: Annotated[
+        bool,
+        typer.Option(
+            "--verbose",
+            "-v",
+            help="Also show the goal pose, each locator's gap at the start, and whether the locators determine the pose.",
+        ),
+    ] = False,
 ) -> None:
-    """Check fixture files; print one line per problem (FILE: key: message) and exit 2 if any."""
-    import numpy as np
+    """Check fixture files; print one line per problem (FILE: key: message) and exit 2 if any.
 
+    Warnings (an under-determined fixture, an implausible density) print on stderr as
+    FILE: key: warning: ... and do not change the exit status.
+    """
     from fixplan.expectations import check_expectations, looks_like_expectations, read_toml
     from fixplan.fixture import load
-    from fixplan.locating import contact_set
 
     bad = False
     for path in files:
@@ -140,7 +213,11 @@ def validate(
                 typer.echo(issue.format(str(path)), err=True)
             bad |= bool(issues)
             if not issues:
-                typer.echo(f"{path}: ok (expected verdicts: " + ", ".join(f"{n} {k}" for k, n in counts.items()) + ")")
+                typer.echo(
+                    one_line(
+                        f"{path}: ok (expected verdicts: " + ", ".join(f"{n} {k}" for k, n in counts.items()) + ")"
+                    )
+                )
             continue
         try:
             fixture = load(path)
@@ -149,21 +226,69 @@ def validate(
             for issue in exc.issues:
                 typer.echo(issue.format(str(path)), err=True)
             continue
-        kind = f"{fixture.dimension}D {fixture.workpiece.shape.name}, {len(fixture.locators)} locators"
-        kind += f", {len(fixture.contacts)} contacts"
-        note = ""
-        if fixture.is_full:
-            note = ", goal " + ("given and checked" if fixture.goal_given is not None else "computed")
-            cs = contact_set(fixture, "goal", [loc.name for loc in fixture.locators])
-            rank = int(np.linalg.matrix_rank(cs.G, tol=1e-9))
-            if rank < fixture.ndof:
-                note += f"; warning: the locators do not determine the pose (rank G = {rank} < {fixture.ndof})"
-        typer.echo(f"{path}: ok ({kind}{note})")
+        summary = _fixture_summary(fixture)
+        for issue in summary["warnings"]:
+            typer.echo(issue.format(str(path)), err=True)
+        typer.echo(one_line(f"{path}: ok ({summary['kind']}{summary['note']})"))
+        if verbose:
+            for line in summary["details"]:
+                typer.echo(one_line(f"  {line}"))
     if bad:
         raise typer.Exit(2)
 
 
-def _classify_table(fixture, results, names) -> None:
+def _fixture_summary(fixture) -> dict[str, Any]:  # type: ignore[no-untyped-def]
+    """What validate says about a loaded fixture: kind, note, warnings, and the --verbose details."""
+    from fixplan.errors import Issue
+    from fixplan.locating import contact_set, locator_contact
+    from fixplan.pose import rpy_from_matrix
+
+    d = fixture.dimension
+    kind = f"{d}D {fixture.workpiece.shape.name}, {len(fixture.locators)} locators, {len(fixture.contacts)} contacts"
+    warnings = list(fixture.warnings)
+    details: list[str] = []
+    note = ""
+
+    def pose_text(pose) -> str:  # type: ignore[no-untyped-def]
+        pos = ", ".join(f"{x:.6g}" for x in pose.p_world)
+        if d == 3:
+            rpy = ", ".join(f"{x:.4g}" for x in np.degrees(rpy_from_matrix(pose.R_world_body)))
+            return f"position [{pos}] m, rpy [{rpy}] deg"
+        return f"position [{pos}] m, angle {np.degrees(pose.angle_rad):.4g} deg"
+
+    details.append(f"start: {pose_text(fixture.start)}")
+    for loc in fixture.locators:
+        gap = locator_contact(fixture.workpiece, fixture.start, loc).gap_m
+        touching = "touching" if gap <= fixture.tolerances.touch_m else "open"
+        details.append(f"  {loc.name}: gap {gap:.3g} m at the start ({touching})")
+    if fixture.is_full:
+        note = ", goal " + ("given and checked" if fixture.goal_given is not None else "computed")
+        cs = contact_set(fixture, "goal", [loc.name for loc in fixture.locators])
+        rank = int(np.linalg.matrix_rank(cs.G, tol=1e-9))
+        determined = rank >= fixture.ndof
+        details.append(f"goal ({'given' if fixture.goal_given is not None else 'computed'}): {pose_text(fixture.goal)}")
+        details.append(
+            f"rank of G at the goal: {rank} of {fixture.ndof}: "
+            + ("the locators determine the pose" if determined else "the locators do NOT determine the pose")
+        )
+        if not determined:
+            warnings.append(
+                Issue(
+                    "locator",
+                    f"warning: the locators do not determine the pose (rank G = {rank} < {fixture.ndof}): "
+                    "the part can move while touching every locator",
+                )
+            )
+    else:
+        need = 6 if d == 3 else 3
+        details.append(f"no goal: {len(fixture.locators)} locators, a full fixture has {need} (analysis only)")
+    return {"kind": kind, "note": note, "warnings": warnings, "details": details}
+
+
+CLASSIFY_TABLE_ROWS = 50  # above this many wrenches, classify prints counts per mode instead of every row
+
+
+def _classify_table(fixture, results, names) -> None:  # type: ignore[no-untyped-def]
     from rich.console import Console
     from rich.table import Table
 
@@ -177,6 +302,36 @@ def _classify_table(fixture, results, names) -> None:
         margin = f"{r.margin:.3g}" if math.isfinite(r.margin) else "-"
         table.add_row(str(i), ",".join(f"{x:g}" for x in r.wrench), r.mode, margin, r.certificate)
     Console().print(table)
+
+
+def _classify_summary(fixture, results, names, out: Path | None) -> None:  # type: ignore[no-untyped-def]
+    """Counts per mode for a long list of wrenches (the rows go to --out)."""
+    from collections import Counter
+
+    counts = Counter(r.mode for r in results)
+    typer.echo(one_line(f"{fixture.name}: {len(results)} wrenches on contacts {', '.join(names)}"))
+    for mode, k in counts.most_common():
+        typer.echo(f"  {mode:13s} {k:6d}  ({100 * k / len(results):.1f} %)")
+    if out is None:
+        typer.echo(
+            f"(more than {CLASSIFY_TABLE_ROWS} wrenches: counts per mode only; --out FILE.csv writes one row per wrench)"
+        )
+
+
+def _write_classify_csv(path: Path, results: list[dict[str, Any]], ndof: int) -> None:
+    import csv
+
+    axes = AXES_3D if ndof == 6 else AXES_2D
+
+    def write(p: Path) -> None:
+        with open(p, "w", newline="", encoding="utf-8") as fh:
+            out = csv.writer(fh)
+            out.writerow(["index", *axes, "mode", "margin", "certificate"])
+            for i, r in enumerate(results, 1):
+                margin = "" if r["margin"] is None else f"{r['margin']:.6g}"
+                out.writerow([i, *(f"{x:.12g}" for x in r["wrench"]), r["mode"], margin, r["certificate"]])
+
+    write_output(path, write)
 
 
 @app.command()
@@ -193,9 +348,17 @@ def classify(
     backend: Annotated[
         str, typer.Option("--backend", help="clarabel (fast matrix path) or cvxpy (reference model).")
     ] = "clarabel",
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="Write one CSV row per wrench: index, wrench, mode, margin, certificate."),
+    ] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite --out if it exists.")] = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Classify pushes: held, jammed, separates, slides, pivots, rolls or indeterminate."""
+    """Classify pushes: held, jammed, separates, slides, pivots, rolls or indeterminate.
+
+    More than 50 wrenches print as counts per mode (the rows go to --out or --json).
+    """
     from fixplan.jamming import classify as run
     from fixplan.locating import contact_set
 
@@ -204,43 +367,78 @@ def classify(
         raise InputError("give exactly one of --wrench or --wrenches")
     n = fixture.ndof
     if wrench is not None:
-        W = _numbers(wrench, "--wrench", n)[None, :]
+        W = _wrench(wrench, "--wrench", n)[None, :]
     else:
         W = _read_wrench_csv(wrenches, n)  # type: ignore[arg-type]
-    at_p = None if at is None else _numbers(at, "--at", fixture.dimension)
+    at_p = None if at is None else _numbers(at, "--at", fixture.dimension, limits.COORDINATE)
     p = _pose(fixture, pose)
     names = _names(contacts)
+    target = None if out is None else _writable(out, force)
+    if target is not None and wrenches is not None:
+        check_distinct([("--wrenches", wrenches), ("--out", target)])
     cs = contact_set(fixture, p, names)
+    if len(cs) == 0:
+        from fixplan.locating import locator_gaps
+
+        where = fixture.start if p == "start" else fixture.goal
+        gaps = locator_gaps(fixture.workpiece, where, fixture.locators)
+        nearest = ""
+        if len(gaps):
+            k = int(np.argmin(gaps))
+            nearest = f"; the nearest is {fixture.locators[k].name}, {gaps[k]:.3g} m away"
+        raise InputError(
+            f"{fixture.source}: no contacts to analyse at the {pose} pose: no locator touches the workpiece"
+            f"{nearest} (name hypothetical contacts with --contacts)"
+        )
     for c in cs.contacts:
         if c.kind == "locator" and c.gap_m > fixture.tolerances.touch_m:
             _err(f"warning: {c.name} does not touch at the {pose} pose (gap {c.gap_m:.3g} m); analysed as if it did")
     results = run(fixture, W, names, at_p, pose=p, backend=backend, as_json=json_out)
+    if target is not None:
+        rows: list[dict[str, Any]] = [r if isinstance(r, dict) else r.to_json() for r in results]
+        _write_classify_csv(target, rows, n)
     if json_out:
         _emit_json(
             {"file": fixture.source, "pose": pose, "contacts": cs.names, "results": results},
             compact=len(results) > 100,
         )
     else:
-        _classify_table(fixture, results, cs.names)
+        if len(results) > CLASSIFY_TABLE_ROWS:
+            _classify_summary(fixture, results, cs.names, target)
+        else:
+            _classify_table(fixture, results, cs.names)
+        if target is not None:
+            typer.echo(f"wrote {target}")
 
 
 def _read_wrench_csv(path: Path, n: int) -> np.ndarray:
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    """Wrenches from a CSV file, one per line; every bad line is reported (FILE: line K: ...)."""
+    from fixplan.errors import Issue
+    from fixplan.files import read_user_text
+
+    text = read_user_text(path, expected=f"a CSV file of wrenches, {n} numbers per line")
     rows = []
+    issues: list[Issue] = []
+    ranges = limits.wrench_ranges(n)
+    seen_data = False
     for lineno, line in enumerate(text.splitlines(), 1):
         line = line.strip()
         if not line or line.startswith("#"):
             continue
         try:
-            rows.append(_numbers(line, f"{path}:{lineno}", n))
-        except InputError:
+            rows.append(_numbers(line, "wrench", n, ranges))
+        except InputError as exc:
             # a header line is allowed as the first non-empty line
-            if not rows and not any(ch.isdigit() for ch in line.replace("Fx", "")):
+            if not seen_data and not any(ch.isdigit() for ch in line.replace("Fx", "")):
+                seen_data = True
                 continue
-            raise
+            issues.append(Issue(f"line {lineno}", str(exc)))
+        seen_data = True
+        if len(issues) >= 100:
+            issues.append(Issue("...", "more bad lines not shown (stopped after 100)"))
+            break
+    if issues:
+        raise InputFileError(str(path), issues)
     if not rows:
         raise InputError(f"{path}: no wrenches (expected one wrench of {n} numbers per line)")
     return np.array(rows)
@@ -281,8 +479,8 @@ def search(
     fixture = _load(file)
     if not motion:
         raise InputError("--motion is required (the desired acceleration, e.g. 0.1,0,0,0,0,0)")
-    m = _numbers(motion, "--motion", fixture.ndof)
-    at_p = None if at is None else _numbers(at, "--at", fixture.dimension)
+    m = _numbers(motion, "--motion", fixture.ndof, limits.ACCELERATION)
+    at_p = None if at is None else _numbers(at, "--at", fixture.dimension, limits.COORDINATE)
     if objective not in ("margin", "effort"):
         raise InputError(f"--objective must be margin or effort, got {objective!r}")
     if min_margin is not None and not (min_margin >= 0.0 and math.isfinite(min_margin)):
@@ -313,8 +511,14 @@ AXES_2D = ("Fx", "Fy", "Mz")
 def map_(
     file: FileArg = None,
     axes: Annotated[
-        str, typer.Option("--axes", help="Two wrench components, e.g. Fx,Mz (3D names Fx..Tz; 2D Fx,Fy,Mz).")
-    ] = "Fx,Tz",
+        str | None,
+        typer.Option(
+            "--axes",
+            help="Two wrench components: 3D Fx,Fy,Fz,Tx,Ty,Tz (Mx,My,Mz also name the moments); 2D Fx,Fy,Mz. "
+            "Default: Fx,Tz in 3D, Fx,Mz in 2D.",
+            show_default=False,
+        ),
+    ] = None,
     range_: Annotated[str, typer.Option("--range", help="min:max for each axis, e.g. -20:20,-2:2.")] = "-10:10,-1:1",
     n: Annotated[int, typer.Option("--n", help="Grid points per axis.", min=2, max=1000)] = 100,
     wrench: Annotated[
@@ -324,7 +528,10 @@ def map_(
     at: AtOpt = None,
     pose: PoseOpt = "start",
     out: Annotated[
-        Path, typer.Option("--out", help="PNG to write; a CSV with the same stem is written beside it.")
+        Path,
+        typer.Option(
+            "--out", help="Image to write (.png, .svg or .pdf); a CSV with the same stem is written beside it."
+        ),
     ] = Path("map.png"),
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
     json_out: JsonOpt = False,
@@ -334,20 +541,32 @@ def map_(
 
     fixture = _load(file)
     names_all = AXES_3D if fixture.dimension == 3 else AXES_2D
-    ax = [a.strip() for a in axes.split(",")]
+    aliases = {"Mx": "Tx", "My": "Ty", "Mz": "Tz"} if fixture.dimension == 3 else {"Tz": "Mz"}
+    if axes is None:
+        axes = "Fx,Tz" if fixture.dimension == 3 else "Fx,Mz"
+    ax = [aliases.get(a.strip(), a.strip()) for a in axes.split(",")]
     if len(ax) != 2 or any(a not in names_all for a in ax) or ax[0] == ax[1]:
-        raise InputError(f"--axes expects two different names from {','.join(names_all)}, got {axes!r}")
+        raise InputError(
+            f"--axes expects two different names from {','.join(names_all)} for a {fixture.dimension}D fixture, "
+            f"got {_shown(axes)}"
+        )
     parts = range_.split(",")
     if len(parts) != 2:
-        raise InputError(f"--range expects min:max,min:max, got {range_!r}")
+        raise InputError(f"--range expects min:max,min:max, got {_shown(range_)}")
     bounds = []
-    for part in parts:
-        lo_hi = _numbers(part.replace(":", ","), "--range", 2)
+    for part, name in zip(parts, ax, strict=True):
+        rng = limits.wrench_ranges(fixture.ndof)[names_all.index(name)]
+        lo_hi = _numbers(part.replace(":", ","), f"--range of {name}", 2, rng)
         if lo_hi[0] >= lo_hi[1]:
-            raise InputError(f"--range {part!r}: min must be below max")
+            raise InputError(f"--range {_shown(part)}: min must be below max")
         bounds.append((float(lo_hi[0]), float(lo_hi[1])))
-    base = np.zeros(fixture.ndof) if wrench is None else _numbers(wrench, "--wrench", fixture.ndof)
-    at_p = None if at is None else _numbers(at, "--at", fixture.dimension)
+    base = np.zeros(fixture.ndof) if wrench is None else _wrench(wrench, "--wrench", fixture.ndof)
+    at_p = None if at is None else _numbers(at, "--at", fixture.dimension, limits.COORDINATE)
+    if out.suffix.lower() not in (".png", ".svg", ".pdf"):
+        raise InputError(
+            f"--out {out}: expected an image file ending in .png, .svg or .pdf (the CSV is written beside it "
+            "with the same stem)"
+        )
     png = _writable(out, force)
     csv_path = _writable(out.with_suffix(".csv"), force)
     result = jamming_map(
@@ -362,11 +581,13 @@ def map_(
         progress=not json_out,
         axis_names=(ax[0], ax[1]),
     )
-    save_map(result, png, csv_path)
+    write_output(png, lambda p: save_map(result, p, csv_path))
     counts = result.counts()
     summary: dict[str, Any] = {
         "png": str(png),
         "csv": str(csv_path),
+        "axes": ax,
+        "base_wrench": base,
         "counts": counts,
         "time_s": result.time_s,
         "per_classification_s": result.time_s / result.modes.size,
@@ -374,6 +595,8 @@ def map_(
     if json_out:
         _emit_json(summary)
     else:
+        if wrench is not None:
+            typer.echo(f"base wrench {','.join(f'{x:g}' for x in base)} (the components other than {ax[0]}, {ax[1]})")
         typer.echo(
             f"wrote {png} and {csv_path}: {result.modes.size} pushes in {result.time_s:.2f} s; "
             + ", ".join(f"{k} {v}" for k, v in counts.items())
@@ -394,23 +617,39 @@ def simulate(
     pose: PoseOpt = "start",
     out: Annotated[Path | None, typer.Option("--out", help="Write the trajectory as CSV.")] = None,
     every: Annotated[int, typer.Option("--every", help="Record every N-th step in --out.", min=1)] = 1,
-    force: Annotated[bool, typer.Option("--force", help="Overwrite --out if it exists.")] = False,
+    force: Annotated[
+        bool,
+        typer.Option("--force", help="Overwrite --out if it exists; run more than 10^7 steps."),
+    ] = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Simulate the workpiece among its locators (Moreau–Jean, exact Coulomb and soft-finger friction)."""
+    """Simulate the workpiece among its locators (Moreau–Jean, exact Coulomb and soft-finger friction).
+
+    A run longer than 10^7 steps (--duration / --dt) is refused unless --force.
+    """
     from fixplan.simulator import Simulator
 
     fixture = _load(file)
-    if not (duration >= 0 and np.isfinite(duration)):
-        raise InputError(f"--duration must be a non-negative number of seconds, got {duration}")
-    if dt is not None and not (dt > 0 and np.isfinite(dt)):
-        raise InputError(f"--dt must be a positive number of seconds, got {dt}")
-    w = None if wrench is None else _numbers(wrench, "--wrench", fixture.ndof)
+    if not limits.DURATION.contains(duration):
+        raise InputError(f"--duration is {duration:g} (expected {limits.DURATION.expected()})")
+    if dt is not None and not limits.TIMESTEP.contains(dt):
+        raise InputError(f"--dt is {dt:g} (expected {limits.TIMESTEP.expected()})")
+    if tolerance is not None and not limits.SOLVER_TOLERANCE.contains(tolerance):
+        raise InputError(f"--tolerance is {tolerance:g} (expected {limits.SOLVER_TOLERANCE.expected()})")
+    h = dt if dt is not None else fixture.simulation.timestep_s
+    if duration > 0 and h > duration:
+        raise InputError(f"--dt {h:g} s is longer than --duration {duration:g} s (expected a time step ≤ the duration)")
+    n_steps = int(round(duration / h))
+    if n_steps > limits.MAX_SIM_STEPS and not force:
+        raise InputError(
+            f"--duration {duration:g} s at a time step of {h:g} s is {n_steps:.3g} steps, more than the limit of "
+            f"{limits.MAX_SIM_STEPS:.0e} (use --force to run it anyway)"
+        )
+    w = None if wrench is None else _wrench(wrench, "--wrench", fixture.ndof)
     target = None if out is None else _writable(out, force)
     sim = Simulator(fixture, dt=dt, tolerance=tolerance)
     if _pose(fixture, pose) == "goal":
         sim.set_state(fixture.goal)
-    n_steps = int(round(duration / sim.dt))
     bar = None
     callback = None
     if n_steps >= 20000 and not json_out:
@@ -430,7 +669,7 @@ def simulate(
         if bar is not None:
             bar.stop()
     if target is not None:
-        traj.to_csv(target)
+        write_output(target, traj.to_csv)
     twist = sim.twist
     d = fixture.dimension
     result: dict[str, Any] = {
@@ -603,13 +842,23 @@ def solve(
         )  # fmt: skip
     fixture = _load(file)
     figure = None if report is None else figure_path(report)
-    # every output is checked before any is created (or any work done)
-    for path in (out, report, figure):
-        if path is not None and path.exists() and not force:
-            raise InputError(f"{path} exists (use --force to overwrite it)")
-    target = None if out is None else _writable(out, force)
-    report_path = None if report is None else _writable(report, force)
-    names = _names(order)
+    # every output is checked before any is created (or any work done), and no two are one file
+    check_distinct([("--out", out), ("--report", report), ("the report's figure", figure)])
+    for option, path in (("--out", out), ("--report", report), ("the report's figure", figure)):
+        if path is not None:
+            _writable(path, force, option)
+    target, report_path = out, report
+    names = _names(order, "--order")
+    if fixture.is_full:
+        from fixplan.locating import contact_set
+
+        cs = contact_set(fixture, "goal", [loc.name for loc in fixture.locators])
+        rank = int(np.linalg.matrix_rank(cs.G, tol=1e-9))
+        if rank < fixture.ndof:
+            _err(
+                f"warning: {fixture.source}: the locators do not determine the pose (rank G = {rank} < "
+                f"{fixture.ndof}): a plan loads the part against them, but it can still move while touching all"
+            )
     progress = None
     if not json_out:
 
@@ -635,16 +884,16 @@ def solve(
     if perturbation is not None:
         payload["perturbation"] = perturbation
     if target is not None:
-        target.write_text(json.dumps(payload, indent=2, default=_json_default, allow_nan=False) + "\n")
+        write_text(target, _json_text(payload) + "\n")
     written = [] if target is None else [target]
     if report_path is not None:
         figures = []
         if figure is not None and result.status != "infeasible":
             # the figure first, so the report never links to a missing file
-            save_plan_figure(result, fixture, figure)
+            write_output(figure, lambda p: save_plan_figure(result, fixture, p))
             figures.append(figure.name)  # beside the report: a relative link
             written.append(figure)
-        report_path.write_text(report_markdown(result, fixture, figures=figures))
+        write_text(report_path, report_markdown(result, fixture, figures=figures))
         written.append(report_path)
     if json_out:
         _emit_json(payload)
@@ -830,7 +1079,7 @@ def view(
     target = _writable(out, force)
     replay = rest_replay(fixture) if plan is None else read_plan(plan, fixture)
     fig = scene_figure(fixture, replay, max_frames=frames)
-    size = write_scene(fig, target)
+    size = write_output(target, lambda p: write_scene(fig, p))
     info = scene_info(fig)
     if json_out:
         _emit_json(
@@ -920,7 +1169,7 @@ def generate(
         _writable(target, force)
     fixtures = run(family, count, seed)
     for target, fx in zip(targets, fixtures, strict=True):
-        target.write_text(fx.toml_text, encoding="utf-8")
+        write_text(target, fx.toml_text)
     if json_out:
         files = [
             {"name": fx.name, "path": str(t), "params": fx.params} for t, fx in zip(targets, fixtures, strict=True)
@@ -932,9 +1181,18 @@ def generate(
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the app and turn every expected failure into one line and exit 2."""
+    import warnings
+
+    args = sys.argv[1:] if argv is None else list(argv)
+    if not args:  # bare `fixplan`: the help, on stdout, as `fixplan --help` prints it
+        args = ["--help"]
     try:
-        rv = app(args=argv, standalone_mode=False)
-    except FixtureError as exc:
+        # numpy's RuntimeWarnings (overflow, invalid value) are not messages for users: results are
+        # checked for finiteness where they leave fixplan (strict JSON, the solvers' own checks)
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore", RuntimeWarning)
+            rv = app(args=args, standalone_mode=False)
+    except (FixtureError, InputFileError) as exc:
         for issue in exc.issues:
             typer.echo(issue.format(exc.source), err=True)
         return 2
@@ -960,6 +1218,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         _err("interrupted")
         return 130
+    except RecursionError:
+        _err("input nested too deeply (refused)")
+        return 2
     except Exception as exc:  # noqa: BLE001 - a bug in fixplan, not bad input: one line, exit 3
         import os
 

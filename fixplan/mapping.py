@@ -41,6 +41,7 @@ class JammingMap:
     margins: NDArray[np.float64]
     title: str
     time_s: float
+    base: tuple[float, ...] = ()  # the other wrench components (about the body origin), as given
 
     def counts(self) -> dict[str, int]:
         return {m: int((self.modes == m).sum()) for m in MODES if (self.modes == m).any()}
@@ -94,7 +95,19 @@ def jamming_map(
     margins = np.array([r.margin for r in results]).reshape(n, n)
     elapsed = time.perf_counter() - t0
     title = f"{fixture.name}: contacts {', '.join(cs.names)}"
-    return JammingMap(axis_names, xs, ys, modes.astype(str), margins, title, elapsed)
+    others = [k for k in range(fixture.ndof) if k not in components]
+    if np.any(base[others] != 0.0):
+        names = WRENCH_AXES[fixture.dimension]
+        title += "\nother components: " + ", ".join(f"{names[k]} = {base[k]:g} {axis_unit(names[k])}" for k in others)
+    return JammingMap(axis_names, xs, ys, modes.astype(str), margins, title, elapsed, tuple(float(x) for x in base))
+
+
+WRENCH_AXES = {3: ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz"), 2: ("Fx", "Fy", "Mz")}
+
+
+def axis_unit(name: str) -> str:
+    """``N`` for a force component (``Fx``), ``N·m`` for a moment (``Tz``, ``Mz``)."""
+    return "N" if name.startswith("F") else "N·m"
 
 
 def save_map(result: JammingMap, png: Path, csv_path: Path | None = None) -> None:
@@ -119,8 +132,8 @@ def save_map(result: JammingMap, png: Path, csv_path: Path | None = None) -> Non
         vmax=len(MODES) - 0.5,
         interpolation="nearest",
     )
-    ax.set_xlabel(result.axis_names[0])
-    ax.set_ylabel(result.axis_names[1])
+    ax.set_xlabel(f"{result.axis_names[0]} [{axis_unit(result.axis_names[0])}]")
+    ax.set_ylabel(f"{result.axis_names[1]} [{axis_unit(result.axis_names[1])}]")
     ax.set_title(result.title, fontsize=9)
     present = [m for m in MODES if (result.modes == m).any()]
     ax.legend(

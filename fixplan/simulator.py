@@ -382,6 +382,7 @@ class Simulator:
         done = 0
         wall = 0.0
         status = kernels.STATUS_OK
+        last_err, last_it = 0.0, 0  # a run of 0 steps solved nothing
         while done < n_steps:
             n = min(chunk, n_steps - done)
             t0 = time.perf_counter()

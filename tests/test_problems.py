@@ -106,8 +106,16 @@ def test_validate_cli_accepts_every_problem() -> None:
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     lines = {line.split(":")[0]: line for line in proc.stdout.splitlines()}
-    assert "rank G = 5 < 6" in lines[str(PROBLEMS / "box-bad-design.toml")]
+    warnings = {line.split(":")[0]: line for line in proc.stderr.splitlines()}
+    bad_design = str(PROBLEMS / "box-bad-design.toml")
+    # the warning is a line of its own (FILE: key: warning: ...), not hidden inside the ok line
+    assert lines[bad_design].startswith(f"{bad_design}: ok (")
+    assert warnings[bad_design] == (
+        f"{bad_design}: locator: warning: the locators do not determine the pose (rank G = 5 < 6): "
+        "the part can move while touching every locator"
+    )
     assert "warning" not in lines[str(PROBLEMS / "box-3-2-1.toml")]
+    assert set(warnings) == {bad_design}, proc.stderr
     assert "expected verdicts" in lines[str(EXPECTED)]
 
 
