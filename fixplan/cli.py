@@ -1095,17 +1095,35 @@ def fclib(
     file: Annotated[Path, typer.Argument(help="An FCLib HDF5 problem (local or global, 3D or 2D).")],
     tol: Annotated[float, typer.Option("--tol", help="Target FCLib residual (natural map, relative).")] = 1e-8,
     max_iter: Annotated[
-        int | None, typer.Option("--max-iter", help="Iteration cap (sweeps for nsgs, rounds for socp/auto).", min=1)
+        int | None,
+        typer.Option(
+            "--max-iter",
+            help="Iteration cap (sweeps for nsgs, rounds for socp/prox, steps for nsn; for auto: of every stage).",
+            min=1,
+        ),
     ] = None,
-    solver: Annotated[str, typer.Option("--solver", help="auto, nsgs, nsgs-numpy or socp.")] = "auto",
+    time_limit: Annotated[
+        float,
+        typer.Option(
+            "--time-limit",
+            help="Seconds for reading and solving; at the limit the best answer so far is printed (exit 1).",
+        ),
+    ] = 60.0,
+    solver: Annotated[str, typer.Option("--solver", help="auto, nsgs, socp, nsn, prox or nsgs-numpy.")] = "auto",
     json_out: JsonOpt = False,
 ) -> None:
-    """Solve an FCLib frictional-contact problem; exit 0 converged, 1 not converged, 2 bad input."""
+    """Solve an FCLib frictional-contact problem; exit 0 converged, 1 not converged, 2 bad input.
+
+    auto runs NSGS, then the SOCP fixed point, nonsmooth Newton and PROX, each when the one before
+    stalls, and answers with the best reaction found, always within --time-limit.
+    """
     from fixplan.engine.fclib import solve_fclib_file
 
     if not (tol > 0 and np.isfinite(tol)):
         raise InputError(f"--tol must be a positive number, got {tol}")
-    result = solve_fclib_file(file, tol=tol, max_iter=max_iter, solver=solver)
+    if not time_limit > 0:
+        raise InputError(f"--time-limit must be a positive number of seconds, got {time_limit}")
+    result = solve_fclib_file(file, tol=tol, max_iter=max_iter, solver=solver, time_limit=time_limit)
     if json_out:
         _emit_json(
             {
@@ -1117,6 +1135,8 @@ def fclib(
                 "iterations": int(result.iterations),
                 "converged": bool(result.converged),
                 "time_s": float(result.time_s),
+                "reason": result.extras.get("reason", ""),
+                "stages": list(result.stages),
                 "reaction": [float(x) for x in result.reaction],
                 "velocity": [float(x) for x in result.velocity],
             },
@@ -1128,6 +1148,13 @@ def fclib(
             f"{file}: {result.kind} problem, {result.n_contacts} contacts; {result.solver}: error {result.error:.3g} "
             f"after {result.iterations} iterations in {result.time_s * 1e3:.1f} ms ({verdict}, tol {tol:g})"
         )
+        for stage in result.stages:
+            typer.echo(
+                f"  {stage['method']}: {stage['start_error']:.3g} -> {stage['error']:.3g} in {stage['iterations']} "
+                f"iterations, {stage['time_s'] * 1e3:.1f} ms ({stage['status']})"
+            )
+        if not result.converged:
+            typer.echo(f"  best answer kept: {result.extras.get('reason', '')}")
     if not result.converged:
         raise typer.Exit(1)
 

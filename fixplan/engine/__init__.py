@@ -1,4 +1,4 @@
-"""Contact engine: exact one-contact solvers, NSGS, the robust SOCP solver, FCLib I/O.
+"""Contact engine: exact one-contact solvers, NSGS, SOCP, Newton and PROX solvers, FCLib I/O.
 
 Solvers share one signature, ``solver(problem, r0=None, tol=..., max_iter=...) ->
 ContactSolution``, and are looked up by name in :data:`SOLVERS` (imported lazily, so
@@ -6,7 +6,11 @@ ContactSolution``, and are looked up by name in :data:`SOLVERS` (imported lazily
 
 - ``"nsgs"``: compiled nonsmooth Gauss–Seidel (``max_iter`` = sweeps);
 - ``"socp"``: successive SOCPs (Clarabel) with NSGS polishing (``max_iter`` = rounds);
-- ``"auto"``: 100 NSGS sweeps, then ``"socp"`` if needed (``max_iter`` = SOCP rounds);
+- ``"nsn"``: nonsmooth (semismooth) Newton on the natural map with a line search, Siconos'
+  name (``max_iter`` = steps);
+- ``"prox"``: proximal point method with Newton inner solves (``max_iter`` = rounds);
+- ``"auto"``: NSGS → SOCP fixed point → NSN → PROX, switching on stagnation, within a time
+  limit (default 60 s; ``max_iter`` caps every stage), see :mod:`fixplan.engine.auto`;
 - ``"nsgs-numpy"``: the plain NumPy reference sweep (slow; for checking).
 
 Example
@@ -30,6 +34,8 @@ SOLVERS: dict[str, tuple[str, str]] = {
     "auto": ("fixplan.engine.socp", "solve_auto"),
     "nsgs": ("fixplan.engine.nsgs", "solve_nsgs"),
     "nsgs-numpy": ("fixplan.engine.nsgs", "solve_nsgs_reference"),
+    "nsn": ("fixplan.engine.newton", "solve_newton"),
+    "prox": ("fixplan.engine.newton", "solve_prox"),
     "socp": ("fixplan.engine.socp", "solve_socp"),
 }
 """Solver registry: name → (module, function), imported on first use."""
@@ -43,6 +49,8 @@ _LAZY = {
     "solve_nsgs_reference": ("fixplan.engine.nsgs", "solve_nsgs_reference"),
     "solve_socp": ("fixplan.engine.socp", "solve_socp"),
     "solve_auto": ("fixplan.engine.socp", "solve_auto"),
+    "solve_newton": ("fixplan.engine.newton", "solve_newton"),
+    "solve_prox": ("fixplan.engine.newton", "solve_prox"),
     "FclibProblem": ("fixplan.engine.fclib", "FclibProblem"),
     "FclibResult": ("fixplan.engine.fclib", "FclibResult"),
     "read_fclib": ("fixplan.engine.fclib", "read_fclib"),

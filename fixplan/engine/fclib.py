@@ -27,6 +27,7 @@ Contact vectors are ordered ``(normal, tangent1, tangent2)`` per contact, as in 
 
 from __future__ import annotations
 
+import inspect
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from fixplan.engine.budget import DEFAULT_TIME_LIMIT_S, Budget
 from fixplan.engine.nsgs import DEFAULT_TOL, ContactProblem, build_problem
 from fixplan.errors import InputError
 
@@ -100,7 +102,10 @@ class FclibResult:
     path : str
         The file.
     extras : dict
-        Solver details (status, history, read time).
+        Solver details (status, history, read time, ``reason`` when not converged).
+    stages : tuple of dict
+        For ``auto``: one entry per stage run (``method``, ``iterations``, ``start_error``,
+        ``error``, ``time_s``, ``status``), in order; empty for the other solvers.
     """
 
     reaction: np.ndarray
@@ -114,6 +119,7 @@ class FclibResult:
     kind: str
     path: str
     extras: dict
+    stages: tuple = ()
 
 
 _MAX_DIM = 2**31 - 1  # FCLib stores indices as int32
@@ -420,13 +426,19 @@ def read_fclib(path: str | Path) -> FclibProblem:
     return FclibProblem(problem, kind, spacedim, title, description, str(path))
 
 
-def _warm_up(solve: Any, dims: np.ndarray) -> None:
-    """Run the solver once on a one-contact problem so compile time is not counted as solve time."""
-    from fixplan.engine.nsgs import build_problem
+def _warm_up(dims: np.ndarray) -> None:
+    """Compile the numba kernels (NSGS, NSN) on a one-contact problem, outside the timed solve.
+
+    The kernels are cached on disk (``cache=True``), so this costs milliseconds after the first
+    run on a machine.
+    """
+    from fixplan.engine.newton import solve_newton
+    from fixplan.engine.nsgs import build_problem, solve_nsgs
 
     d = int(np.max(dims)) if len(dims) else 3
     tiny = build_problem(np.eye(d), -np.ones(d) * 0.1, np.array([0.3]), dims=d)
-    solve(tiny, tol=1e-8)
+    solve_nsgs(tiny, tol=1e-8, max_iter=3)
+    solve_newton(tiny, tol=1e-8, max_iter=3)
 
 
 def solve_fclib_file(
@@ -434,8 +446,9 @@ def solve_fclib_file(
     tol: float = DEFAULT_TOL,
     max_iter: int | None = None,
     solver: str = "auto",
+    time_limit: float | None = DEFAULT_TIME_LIMIT_S,
 ) -> FclibResult:
-    """Read an FCLib file and solve it.
+    """Read an FCLib file and solve it, within a time limit.
 
     Parameters
     ----------
@@ -444,30 +457,39 @@ def solve_fclib_file(
     tol : float
         Target FCLib residual.
     max_iter : int, optional
-        Iteration cap for the chosen solver (its own default when ``None``).
+        Iteration cap for the chosen solver (its own default when ``None``); for ``"auto"`` it
+        caps every stage.
     solver : str
-        A name from :data:`fixplan.engine.SOLVERS` (``"auto"``, ``"nsgs"``, ``"newton"``, ...).
+        A name from :data:`fixplan.engine.SOLVERS` (``"auto"``, ``"nsgs"``, ``"nsn"``,
+        ``"prox"``, ``"socp"``, ...).
+    time_limit : float, optional
+        Bound on reading plus solving [s] (default 60 s; ``None``: none). At the limit the best
+        iterate found so far is returned with ``converged = False``. (``"nsgs-numpy"``, the slow
+        reference, takes no time limit.)
 
     Returns
     -------
     FclibResult
-        The answer and its residual.
+        The answer and its residual; ``stages`` lists what ``auto`` ran.
 
     Raises
     ------
     InputError
-        Bad file (see :func:`read_fclib`) or unknown solver name.
+        Bad file (see :func:`read_fclib`), unknown solver name, bad limits.
     """
     from fixplan.engine import get_solver
 
     solve = get_solver(solver)  # unknown names fail before the file is read
+    budget = Budget.start(time_limit)
     t_read = time.perf_counter()
     fc = read_fclib(path)
     read_s = time.perf_counter() - t_read
     kwargs: dict[str, Any] = {"tol": tol}
     if max_iter is not None:
         kwargs["max_iter"] = int(max_iter)
-    _warm_up(solve, fc.problem.dims)
+    _warm_up(fc.problem.dims)
+    if "time_limit" in inspect.signature(solve).parameters:
+        kwargs["time_limit"] = budget.limit_s()
     sol = solve(fc.problem, **kwargs)
     extras = dict(sol.extras)
     extras["read_s"] = read_s
@@ -484,4 +506,5 @@ def solve_fclib_file(
         kind=fc.kind,
         path=str(path),
         extras=extras,
+        stages=tuple(extras.get("stages", ())) if solver == "auto" else (),
     )

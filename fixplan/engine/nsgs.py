@@ -35,6 +35,7 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
+from fixplan.engine.budget import CHUNK_S, Budget
 from fixplan.engine.local import (
     FAILED,
     WORKSPACE_SIZE,
@@ -63,11 +64,18 @@ _HISTORY_CAP = 100_000  # errors recorded per run (the sweeps themselves are not
 STATUS_CONVERGED = 0
 STATUS_MAX_ITER = 1
 STATUS_NAN = 2
+STATUS_TIME_LIMIT = 3
+STATUS_STALLED = 4
 _STATUS_TEXT = {
     STATUS_CONVERGED: "converged",
     STATUS_MAX_ITER: "max_iter reached before tol",
-    STATUS_NAN: "a non-finite value appeared; returned the last finite iterate",
+    STATUS_NAN: "a non-finite value appeared; returned the best finite iterate",
+    STATUS_TIME_LIMIT: "time limit reached before tol",
+    STATUS_STALLED: "stalled: the residual stopped improving",
 }
+DEFAULT_STALL_RATIO = 0.9
+"""A run stalls when its best residual did not drop below this fraction of the best residual
+``window`` iterations earlier (a 10 % gain per window)."""
 
 
 # --------------------------------------------------------------------------- the problem
@@ -443,26 +451,25 @@ def _all_finite(x):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def nsgs_kernel(indptr, indices, data, q, mu, offsets, dims, r, tol, max_iter, omega, history):
-    """NSGS sweeps until the FCLib residual is ``≤ tol`` (``max_iter`` caps the sweeps).
+def nsgs_kernel(indptr, indices, data, q, mu, offsets, dims, diag, r, tol, max_iter, omega, history, best_r, best):
+    """At most ``max_iter`` NSGS sweeps on ``r``, stopping when the FCLib residual is ``≤ tol``.
 
-    Returns ``(iterations, error, status, local_failures)``; ``r`` is updated in place and
-    ``history[k]`` receives the error after sweep ``k + 1`` (while ``k < len(history)``).
-    ``status``: 0 converged, 1 cap reached, 2 non-finite value (``r`` is then restored to the
-    last finite iterate).
+    One chunk of a solve: the caller checks its deadline between chunks. ``diag`` are the
+    diagonal blocks (:func:`diagonal_blocks`). ``history[k]`` receives the error after sweep
+    ``k + 1`` (while ``k < len(history)``). ``best_r`` and ``best[0]`` hold the lowest-residual
+    iterate seen so far and its error; they are updated in place whenever a sweep beats them.
+
+    Returns ``(iterations, error, status, local_failures)`` with ``error`` the residual of the
+    last iterate; ``status``: 0 converged, 1 cap reached, 2 non-finite value (``r`` is then
+    restored to the last finite iterate).
     """
-    diag = diagonal_blocks(indptr, indices, data, offsets, dims)
     m = q.shape[0]
     u = np.empty(m)
-    r_prev = r.copy()
-    err = error_kernel(indptr, indices, data, q, mu, offsets, dims, r, u)
-    if not math.isfinite(err):
-        return 0, err, 2, 0
-    if err <= tol:
-        return 0, err, 0, 0
+    r_prev = np.empty(m)
     failures = 0
     it = 0
     status = 1
+    err = math.inf
     while it < max_iter:
         r_prev[:] = r
         failures += sweep_kernel(indptr, indices, data, q, mu, offsets, dims, diag, r, omega)
@@ -475,6 +482,9 @@ def nsgs_kernel(indptr, indices, data, q, mu, offsets, dims, r, tol, max_iter, o
         err = err_new
         if it - 1 < history.shape[0]:
             history[it - 1] = err
+        if err < best[0]:
+            best[0] = err
+            best_r[:] = r
         if err <= tol:
             status = 0
             break
@@ -550,9 +560,11 @@ def _finish(
         u = np.nan_to_num(u, nan=np.inf)
     converged = status == STATUS_CONVERGED
     if status == STATUS_NAN:
-        extras["reason"] = "NaN/inf during the sweep; reaction is the last finite iterate"
+        extras["reason"] = "NaN/inf during the sweep; reaction is the best finite iterate"
     elif not converged:
-        extras["reason"] = f"error {error:.3g} > tol after {iterations} iterations"
+        extras["reason"] = (
+            f"{_STATUS_TEXT.get(status, 'not converged')}: error {error:.3g} > tol after {iterations} iterations"
+        )
     r.setflags(write=False)
     u.setflags(write=False)
     return ContactSolution(
@@ -568,12 +580,115 @@ def _finish(
     )
 
 
+@dataclass
+class NsgsRun:
+    """Outcome of :func:`run_nsgs` (the kernels' arrays, in scaled variables)."""
+
+    best_r: np.ndarray
+    best_err: float
+    iterations: int
+    status: int
+    failures: int
+    history: np.ndarray
+
+
+def run_nsgs(
+    arrays: tuple[np.ndarray, ...],
+    r: np.ndarray,
+    err: float,
+    tol: float,
+    max_iter: int,
+    omega: float,
+    budget: Budget,
+    stall_window: int | None = None,
+    stall_ratio: float = DEFAULT_STALL_RATIO,
+    diag: np.ndarray | None = None,
+) -> NsgsRun:
+    """NSGS sweeps from ``r`` (residual ``err``) in compiled chunks, within ``budget``.
+
+    Chunks are sized to take about :data:`~fixplan.engine.budget.CHUNK_S`; between chunks the
+    deadline is checked and, with ``stall_window``, stagnation: the run stops (status
+    ``STATUS_STALLED``) when the best residual after ``k`` sweeps is above ``stall_ratio`` times
+    the best after ``k − stall_window`` sweeps.
+
+    Parameters
+    ----------
+    arrays : tuple
+        :func:`kernel_arrays` of the problem.
+    r : ndarray
+        Start (scaled variables); overwritten by the last iterate.
+    err : float
+        Residual of ``r``.
+    tol, max_iter, omega
+        As :func:`solve_nsgs`.
+    budget : Budget
+        Deadline.
+    stall_window : int, optional
+        Sweeps over which progress is judged (``None``: never stop for stagnation).
+    stall_ratio : float
+        Required gain per window.
+    diag : ndarray, optional
+        :func:`diagonal_blocks` (computed when not given).
+
+    Returns
+    -------
+    NsgsRun
+        The best iterate (lowest residual; ``r`` itself when no sweep improved on it).
+    """
+    indptr, indices, data, q, mu, offsets, dims = arrays
+    if diag is None:
+        diag = diagonal_blocks(indptr, indices, data, offsets, dims)
+    best_r = r.copy()
+    best = np.array([err if math.isfinite(err) else math.inf])
+    history = np.full(min(max(int(max_iter), 1), _HISTORY_CAP), np.nan)
+    status = STATUS_CONVERGED if err <= tol else STATUS_MAX_ITER
+    done = 0
+    failures = 0
+    chunk = 1
+    marks: list[tuple[int, float]] = [(0, float(best[0]))]  # (sweeps, best error) after each chunk
+    while status != STATUS_CONVERGED and done < max_iter:
+        if budget.expired():
+            status = STATUS_TIME_LIMIT
+            break
+        n = min(chunk, int(max_iter) - done)
+        if stall_window:
+            n = min(n, max(stall_window // 2, 1))
+        t0 = time.perf_counter()
+        hist = history[done:] if done < history.shape[0] else history[:0]
+        it, _, st, fails = nsgs_kernel(  # type: ignore[call-arg]  # numba dispatcher
+            indptr, indices, data, q, mu, offsets, dims, diag, r, float(tol), n, float(omega), hist, best_r, best
+        )
+        elapsed = time.perf_counter() - t0
+        done += it
+        failures += fails
+        if st == STATUS_CONVERGED:
+            status = STATUS_CONVERGED
+            break
+        if st == STATUS_NAN:
+            status = STATUS_NAN
+            break
+        # next chunk: about CHUNK_S of work, at most 4× the last one
+        per_sweep = elapsed / max(it, 1)
+        chunk = int(max(1, min(4 * n, CHUNK_S / max(per_sweep, 1e-9))))
+        marks.append((done, float(best[0])))
+        if stall_window and done >= stall_window:
+            then = [b for k, b in marks if k <= done - stall_window]
+            if then and best[0] > stall_ratio * then[-1]:
+                status = STATUS_STALLED
+                break
+    if status == STATUS_MAX_ITER and done < max_iter:  # pragma: no cover - loop exits otherwise
+        status = STATUS_TIME_LIMIT
+    return NsgsRun(best_r, float(best[0]), done, status, failures, history[: min(done, history.shape[0])].copy())
+
+
 def solve_nsgs(
     problem: ContactProblem,
     r0: Any = None,
     tol: float = DEFAULT_TOL,
     max_iter: int = DEFAULT_MAX_ITER,
     omega: float = DEFAULT_OMEGA,
+    time_limit: float | None = None,
+    stall_window: int | None = None,
 ) -> ContactSolution:
     """Solve ``u = W r + q`` with the contact laws by compiled nonsmooth Gauss–Seidel.
 
@@ -589,29 +704,41 @@ def solve_nsgs(
         Cap on sweeps.
     omega : float
         Sweep relaxation ``0 < ω < 2``.
+    time_limit : float, optional
+        Wall-clock limit [s] (checked between chunks of sweeps; ``None``: no limit).
+    stall_window : int, optional
+        Stop when the best residual gained less than 10 % over this many sweeps.
 
     Returns
     -------
     ContactSolution
-        ``converged`` is ``False`` (with ``extras["reason"]``) when the cap was hit or a
-        non-finite value appeared; the reaction returned is then the last finite iterate.
+        The best iterate seen (lowest residual, not necessarily the last). ``converged`` is
+        ``False`` (with ``extras["reason"]``) when the cap, the time limit or stagnation
+        stopped the sweeps, or a non-finite value appeared.
     """
     _check_settings(tol, max_iter, omega)
+    budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     arrays = kernel_arrays(problem)
     r = _initial_scaled(problem, r0)
-    history = np.full(min(max(int(max_iter), 1), _HISTORY_CAP), np.nan)
-    it, err, status, failures = nsgs_kernel(  # type: ignore[call-arg]  # numba dispatcher
-        *arrays, r, float(tol), int(max_iter), float(omega), history
-    )
+    u = np.empty(problem.size)
+    err = error_kernel(*arrays, r, u)  # type: ignore[call-arg]  # numba dispatcher
+    if not math.isfinite(err):  # the warm start overflows: report it rather than sweep from it
+        run = NsgsRun(r, math.inf, 0, STATUS_NAN, 0, np.zeros(0))
+    else:
+        run = run_nsgs(arrays, r, err, tol, max_iter, omega, budget, stall_window)
     extras = {
-        "history": history[: min(it, history.shape[0])].copy(),
+        "history": run.history,
         "omega": float(omega),
         "tol": float(tol),
         "max_iter": int(max_iter),
-        "local_failures": int(failures),
+        "time_limit": time_limit,
+        "local_failures": int(run.failures),
     }
-    return _finish(problem, r, err, it, status, t0, "nsgs", extras)
+    status = run.status
+    if status == STATUS_NAN and math.isfinite(run.best_err) and run.best_err <= tol:
+        status = STATUS_CONVERGED
+    return _finish(problem, run.best_r, run.best_err, run.iterations, status, t0, "nsgs", extras)
 
 
 def solve_nsgs_reference(

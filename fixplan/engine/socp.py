@@ -1,8 +1,8 @@
 """Robust contact solver: successive SOCPs (Clarabel) alternated with NSGS polishing.
 
 For problems where NSGS stalls (rank-deficient ``W`` from redundant contacts, tall stacks,
-large mass ratios) this solver reaches the tolerance; :func:`fixplan.engine.solve` with
-``solver="auto"`` falls back on it when NSGS does not converge quickly.
+large mass ratios) this solver reaches the tolerance; ``solver="auto"``
+(:mod:`fixplan.engine.auto`) runs its pure fixed point (no polish) as the stage after NSGS.
 
 Method
 ------
@@ -17,8 +17,10 @@ Updating ``s`` from the new ``u`` and solving again is a fixed-point iteration o
 round is one SOCP then a short NSGS polish (``polish_sweeps`` sweeps) from the current ``r``:
 NSGS converges fast close to the solution, and when it stalls the next SOCP restarts from its
 result. The iteration is monotone: an SOCP iterate is kept only if it lowers the residual, and
-when it does not, the polish budget of the following rounds is multiplied by 4. ``max_iter``
-caps the rounds.
+when it does not, the polish budget of the following rounds is multiplied by 4 (up to
+``MAX_POLISH_SWEEPS``: the uncapped growth once ran for minutes). ``max_iter`` caps the
+rounds, ``time_limit`` the wall time (Clarabel's own limit, and checks between rounds and
+between chunks of polishing sweeps); the best iterate is returned.
 ``W_sym = (W + Wᵀ)/2``: a non-symmetric ``W`` (one FCLib file has a relative asymmetry of
 1.3e-3) only slows the fixed point; the NSGS polish and the residual use the true ``W``.
 Cones are exact (``μ = 0``: ``r_n ≥ 0``, ``r_t = 0``); soft-finger contacts are solved in the
@@ -66,19 +68,24 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from fixplan.engine.auto import solve_auto as solve_auto  # the registry's "auto" (re-exported)
+from fixplan.engine.budget import Budget
 from fixplan.engine.nsgs import (
+    DEFAULT_STALL_RATIO,
     DEFAULT_TOL,
     STATUS_CONVERGED,
     STATUS_MAX_ITER,
-    STATUS_NAN,
+    STATUS_STALLED,
+    STATUS_TIME_LIMIT,
     ContactProblem,
     ContactSolution,
     _check_settings,
     _finish,
     _initial_scaled,
+    diagonal_blocks,
     error_kernel,
     kernel_arrays,
-    nsgs_kernel,
+    run_nsgs,
 )
 from fixplan.errors import SolverError
 
@@ -90,12 +97,6 @@ DEFAULT_POLISH_SWEEPS = 50
 Measured total time over the 4 FCLib files and 24 stacks of the module docstring (all reach
 1e-8 with every setting but 20): 20 → 8.4 s (fails none, but many rounds), 50 → 1.3 s,
 200 → 1.8 s, 500 → 2.2 s."""
-AUTO_NSGS_SWEEPS = 100
-"""Sweeps NSGS gets in ``solve_auto`` before the SOCP stage takes over.
-
-Measured on the same 28 problems: 100 → 1.4 s total, 300 → 1.6 s, 1 000 → 2.3 s,
-3 000 → 3.8 s (all solved); 100 sweeps settle the easy problems (microseconds for a fixture's
-few contacts) without paying Clarabel's setup."""
 IPM_TOL = 1e-12
 """Clarabel gap/feasibility tolerance of each SOCP (relative)."""
 
@@ -187,12 +188,31 @@ def _offsets_s(u: np.ndarray, problem: ContactProblem) -> np.ndarray:
     return s
 
 
+MAX_POLISH_SWEEPS = 20_000
+"""Ceiling of the growing polish budget (``polish_sweeps · 4ᵏ``) of one round."""
+
+
+def _clarabel_solve(step: SocpStep, cost: np.ndarray, settings: Any, rounds: int, err: float) -> Any:
+    import clarabel
+
+    b = np.zeros(step.A.shape[0])
+    try:
+        return clarabel.DefaultSolver(step.P, cost, step.A, b, step.cones, settings).solve()
+    except Exception as exc:  # noqa: BLE001 - any backend failure becomes ours
+        raise SolverError(
+            f"Clarabel failed in SOCP round {rounds}: {exc}",
+            extras={"round": rounds, "error": err},
+        ) from exc
+
+
 def solve_socp(
     problem: ContactProblem,
     r0: Any = None,
     tol: float = DEFAULT_TOL,
     max_iter: int = DEFAULT_MAX_ROUNDS,
     polish_sweeps: int = DEFAULT_POLISH_SWEEPS,
+    time_limit: float | None = None,
+    stall_window: int | None = None,
 ) -> ContactSolution:
     """Solve ``u = W r + q`` with the contact laws by successive SOCPs and NSGS polishing.
 
@@ -205,15 +225,22 @@ def solve_socp(
     tol : float
         Stop when the FCLib residual is ``≤ tol``.
     max_iter : int
-        Cap on rounds (one SOCP + at most ``polish_sweeps`` NSGS sweeps each).
+        Cap on rounds (one SOCP + a polish of at most :data:`MAX_POLISH_SWEEPS` sweeps each).
     polish_sweeps : int
-        NSGS sweeps after each SOCP that did not reach ``tol`` (0: pure fixed point).
+        NSGS sweeps after each SOCP that did not reach ``tol`` (0: pure fixed point); ×4 each
+        time an SOCP fails to improve, up to :data:`MAX_POLISH_SWEEPS`.
+    time_limit : float, optional
+        Wall-clock limit [s]: passed to Clarabel, checked before every SOCP and between chunks
+        of polishing sweeps.
+    stall_window : int, optional
+        Stop when the best residual gained less than 10 % over this many rounds.
 
     Returns
     -------
     ContactSolution
-        ``iterations`` counts rounds; ``extras`` holds ``ipm_iterations``, ``nsgs_sweeps``,
-        ``history`` (error after each SOCP and after each polish) and ``asymmetry``.
+        The best iterate; ``iterations`` counts rounds; ``extras`` holds ``ipm_iterations``,
+        ``nsgs_sweeps``, ``history`` (error after each SOCP and after each polish) and
+        ``asymmetry``.
 
     Raises
     ------
@@ -223,71 +250,70 @@ def solve_socp(
     _check_settings(tol, max_iter, 1.0)
     if polish_sweeps < 0:
         raise SolverError(f"expected polish_sweeps ≥ 0, got {polish_sweeps}")
-    import clarabel
-
+    budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     arrays = kernel_arrays(problem)
-    indptr, indices, data, qt, mu, offsets, dims = arrays
     r = _initial_scaled(problem, r0)
     u = np.empty(problem.size)
-    err = error_kernel(indptr, indices, data, qt, mu, offsets, dims, r, u)
+    err = error_kernel(*arrays, r, u)  # type: ignore[call-arg]  # numba dispatcher
+    if not math.isfinite(err):
+        err = math.inf
     step = build_socp_step(problem)
     settings = _settings()
-    b = np.zeros(problem.size)
+    diag = diagonal_blocks(*arrays[:3], arrays[5], arrays[6])  # type: ignore[call-arg]  # numba dispatcher
     history: list[float] = []
-    stages: list[str] = []
+    steps: list[str] = []
     ipm_total = 0
     sweeps_total = 0
     ipm_status: list[str] = []
     status = STATUS_CONVERGED if err <= tol else STATUS_MAX_ITER
     rounds = 0
     polish = int(polish_sweeps)
+    marks = [err]
     while status != STATUS_CONVERGED and rounds < max_iter:
+        if budget.expired():
+            status = STATUS_TIME_LIMIT
+            break
         rounds += 1
-        cost = qt + _offsets_s(u, problem)
-        try:
-            result = clarabel.DefaultSolver(step.P, cost, step.A, b, step.cones, settings).solve()
-        except Exception as exc:  # noqa: BLE001 - any backend failure becomes ours
-            raise SolverError(
-                f"Clarabel failed in SOCP round {rounds}: {exc}",
-                extras={"round": rounds, "error": err},
-            ) from exc
+        limit = budget.limit_s()
+        settings.time_limit = math.inf if limit is None else limit
+        result = _clarabel_solve(step, arrays[3] + _offsets_s(u, problem), settings, rounds, err)
         ipm_total += int(result.iterations)
         ipm_status.append(str(result.status))
         x = np.asarray(result.x, dtype=float)
         err_new = math.inf
-        if np.all(np.isfinite(x)):
+        if x.shape == r.shape and np.all(np.isfinite(x)):
             u_new = np.empty_like(u)
-            err_new = error_kernel(indptr, indices, data, qt, mu, offsets, dims, x, u_new)
+            err_new = error_kernel(*arrays, x, u_new)  # type: ignore[call-arg]  # numba dispatcher
             history.append(err_new)
-            stages.append("socp")
+            steps.append("socp")
         if err_new < err:
             r, u, err = x, u_new, err_new
         else:
             # the fixed point does not improve on the polished iterate: polish longer
-            polish = 4 * polish
+            polish = min(4 * polish, MAX_POLISH_SWEEPS)
         if err <= tol:
             status = STATUS_CONVERGED
             break
-        if polish:
-            hist = np.full(polish, np.nan)
-            r_try = r.copy()
-            it, err_p, st, _ = nsgs_kernel(  # type: ignore[call-arg]  # numba dispatcher
-                *arrays, r_try, float(tol), polish, 1.0, hist
-            )
-            sweeps_total += it
-            if st != STATUS_NAN and err_p <= err:
-                r = r_try
-                err = error_kernel(indptr, indices, data, qt, mu, offsets, dims, r, u)
+        if polish and not budget.expired():
+            run = run_nsgs(arrays, r.copy(), err, tol, polish, 1.0, budget, diag=diag)
+            sweeps_total += run.iterations
+            if run.best_err < err:
+                r = run.best_r
+                err = error_kernel(*arrays, r, u)  # type: ignore[call-arg]  # numba dispatcher
             history.append(err)
-            stages.append("nsgs")
+            steps.append("nsgs")
             if err <= tol:
                 status = STATUS_CONVERGED
-    if not np.all(np.isfinite(r)):  # cannot happen (only finite iterates are kept); be sure
-        status = STATUS_NAN
+        marks.append(err)
+        if stall_window and len(marks) > stall_window and err > DEFAULT_STALL_RATIO * marks[-1 - stall_window]:
+            status = STATUS_STALLED
+            break
+    if status == STATUS_MAX_ITER and rounds < max_iter:
+        status = STATUS_TIME_LIMIT
     extras = {
         "history": np.array(history),
-        "stages": stages,
+        "steps": steps,
         "ipm_iterations": ipm_total,
         "ipm_status": ipm_status,
         "nsgs_sweeps": sweeps_total,
@@ -295,58 +321,6 @@ def solve_socp(
         "asymmetry": step.asymmetry,
         "tol": float(tol),
         "max_iter": int(max_iter),
+        "time_limit": time_limit,
     }
     return _finish(problem, r, err, rounds, status, t0, "socp", extras)
-
-
-def solve_auto(
-    problem: ContactProblem,
-    r0: Any = None,
-    tol: float = DEFAULT_TOL,
-    max_iter: int = DEFAULT_MAX_ROUNDS,
-    nsgs_sweeps: int = AUTO_NSGS_SWEEPS,
-) -> ContactSolution:
-    """NSGS for ``nsgs_sweeps`` sweeps; if that does not reach ``tol``, :func:`solve_socp`.
-
-    Parameters
-    ----------
-    problem : ContactProblem
-        The contact problem.
-    r0 : array_like, optional
-        Warm start for the NSGS stage.
-    tol : float
-        Target FCLib residual.
-    max_iter : int
-        Cap on SOCP rounds of the second stage.
-    nsgs_sweeps : int
-        Sweeps of the first stage.
-
-    Returns
-    -------
-    ContactSolution
-        ``solver`` is ``"auto(nsgs)"`` or ``"auto(nsgs+socp)"``; ``iterations`` is the NSGS
-        sweeps of stage 1 plus the SOCP rounds of stage 2 (``extras`` has the breakdown);
-        ``time_s`` covers both stages.
-    """
-    from dataclasses import replace
-
-    from fixplan.engine.nsgs import solve_nsgs
-
-    t0 = time.perf_counter()
-    first = solve_nsgs(problem, r0=r0, tol=tol, max_iter=nsgs_sweeps)
-    if first.converged:
-        extras = dict(first.extras, stage1_sweeps=first.iterations)
-        return replace(first, solver="auto(nsgs)", extras=extras, time_s=time.perf_counter() - t0)
-    # monotone: starts from the NSGS iterate and only accepts improvements
-    second = solve_socp(problem, r0=first.reaction, tol=tol, max_iter=max_iter)
-    extras = dict(second.extras)
-    extras["stage1_sweeps"] = first.iterations
-    extras["stage1_error"] = first.error
-    extras["socp_rounds"] = second.iterations
-    return replace(
-        second,
-        solver="auto(nsgs+socp)",
-        iterations=first.iterations + second.iterations,
-        time_s=time.perf_counter() - t0,
-        extras=extras,
-    )

@@ -144,7 +144,7 @@ def test_bad_files_raise_one_clear_line(tmp_path):
 
 
 def test_unknown_solver_is_rejected_before_reading(tmp_path):
-    with pytest.raises(InputError, match="known solvers: auto, nsgs, nsgs-numpy, socp"):
+    with pytest.raises(InputError, match="known solvers: auto, nsgs, nsgs-numpy, nsn, prox, socp"):
         solve_fclib_file(tmp_path / "missing.hdf5", solver="lemke")
 
 
@@ -152,7 +152,7 @@ def test_unknown_solver_is_rejected_before_reading(tmp_path):
 
 
 @pytest.mark.parametrize("name", REAL_PROBLEMS)
-@pytest.mark.parametrize("solver", ["auto", "nsgs", "socp"])
+@pytest.mark.parametrize("solver", ["auto", "nsgs", "socp", "nsn", "prox"])
 def test_real_fclib_problem_reaches_1e_8(fclib_dir, name, solver):
     path = fclib_dir / name
     res = solve_fclib_file(path, tol=1e-8, solver=solver)
