@@ -143,6 +143,84 @@ def _run_stage(
     return solve(problem, r0=r0, tol=tol, max_iter=max_iter, time_limit=limit, stall_window=plan.stall_window)
 
 
+def immobile_contact_violation(problem: ContactProblem) -> str | None:
+    """Why the problem has no solution, when a contact cannot move and its free velocity breaks the law.
+
+    A contact whose rows of ``W`` are all zero keeps ``u_j = q_j`` whatever the impulses. Then
+    ``r_j = 0`` is its only hope, which needs ``q_j`` in the dual cone
+    (``q_n ≥ μ ‖q_t‖``). Otherwise no ``r`` solves the problem, yet the FCLib residual,
+    relative to ``‖r‖``, can be driven towards 0 by letting ``r_j`` grow without bound: this
+    check refuses that made-up convergence up front.
+
+    Parameters
+    ----------
+    problem : ContactProblem
+        The problem.
+
+    Returns
+    -------
+    str or None
+        The reason, or ``None`` when no immobile contact is violated.
+    """
+    W, q = problem.scaled()
+    row_norm = np.asarray(abs(W).sum(axis=1)).reshape(-1)
+    for j in range(problem.n_contacts):
+        o, d = int(problem.offsets[j]), int(problem.dims[j])
+        if np.any(row_norm[o : o + d] > 0):
+            continue
+        qn, qt = float(q[o]), float(np.linalg.norm(q[o + 1 : o + d]))
+        if qn < float(problem.mu[j]) * qt:
+            return (
+                f"no solution: contact {j} cannot move (its rows of W are zero) and its free velocity "
+                f"breaks the contact law (q_n = {qn:.3g} < μ‖q_t‖ = {float(problem.mu[j]) * qt:.3g})"
+            )
+    return None
+
+
+RUNAWAY_RATIO = 1e6
+"""An answer with ``‖r‖ · W_nn > RUNAWAY_RATIO · ‖q‖`` is a runaway, not a solution.
+
+``‖q‖ / W_nn`` (median positive normal diagonal entry of ``W``) is the natural scale of the impulses;
+on the 49 FCLib/Siconos problems of the benchmark the solutions have ``‖r‖ W_nn / ‖q‖ ≤ 11``."""
+
+
+def runaway_reason(problem: ContactProblem, reaction: np.ndarray) -> str | None:
+    """Why ``reaction`` is not a credible answer although its relative residual may be small.
+
+    The FCLib residual is relative to ``max(‖q‖, ‖r‖, ‖u‖)``: on a singular or indefinite
+    ``W`` a solver can let ``r`` grow along a direction that ``W`` does not resist and the
+    residual shrinks like ``1/‖r‖`` without any solution nearby.
+
+    Parameters
+    ----------
+    problem : ContactProblem
+        The problem.
+    reaction : ndarray
+        The answer.
+
+    Returns
+    -------
+    str or None
+        The reason when ``‖r‖`` exceeds :data:`RUNAWAY_RATIO` times its natural scale.
+    """
+    d = problem.W.diagonal()
+    positive = d[problem.offsets][d[problem.offsets] > 0] if problem.n_contacts else d[:0]
+    if not positive.size:  # no normal mobility at all: the tangential diagonal sets the scale
+        positive = d[d > 0]
+    if not positive.size:
+        return None
+    scale = float(np.median(positive))
+    r_norm = float(np.linalg.norm(reaction))
+    q_norm = float(np.linalg.norm(problem.q))
+    if r_norm * scale > RUNAWAY_RATIO * max(q_norm, np.finfo(float).tiny):
+        return (
+            f"the impulses ran away (‖r‖ = {r_norm:.3g}, over {RUNAWAY_RATIO:.0e} × the scale ‖q‖/W_nn = "
+            f"{q_norm / scale:.3g}): W is singular or indefinite along them and the small relative residual "
+            "is no evidence of a solution"
+        )
+    return None
+
+
 def solve_auto(
     problem: ContactProblem,
     r0: Any = None,
@@ -174,7 +252,9 @@ def solve_auto(
         The best iterate of all stages. ``solver`` is ``"auto(" + "+".join(stages run) + ")"``
         (``"auto(nsgs)"`` when NSGS sufficed); ``iterations`` sums the stages' iterations;
         ``extras["stages"]`` has one :meth:`StageRecord.as_dict` per stage run and
-        ``extras["reason"]`` says why the solve ended unconverged.
+        ``extras["reason"]`` says why the solve ended unconverged (no stage runs when
+        :func:`immobile_contact_violation` finds the problem unsolvable; an answer that
+        :func:`runaway_reason` rejects is not converged whatever its residual).
     """
     _check_settings(tol, 0 if max_iter is None else max_iter, 1.0)
     check_time_limit(time_limit)
@@ -187,7 +267,8 @@ def solve_auto(
     best_r = problem.row_scale * r_scaled
     best: ContactSolution | None = None
     records: list[StageRecord] = []
-    for k, plan in enumerate(stages):
+    impossible = immobile_contact_violation(problem)
+    for k, plan in enumerate(() if impossible else stages):
         if best_error <= tol and records:
             break
         if budget.expired():
@@ -214,7 +295,8 @@ def solve_auto(
         from fixplan.engine.nsgs import solve_nsgs
 
         best = solve_nsgs(problem, r0=r0, tol=tol, max_iter=0)
-    converged = best.error <= tol
+    runaway = runaway_reason(problem, np.asarray(best.reaction))
+    converged = best.error <= tol and runaway is None
     extras = dict(best.extras)
     extras["stages"] = [rec.as_dict() for rec in records]
     extras["tol"] = float(tol)
@@ -225,14 +307,18 @@ def solve_auto(
         extras["status"] = "converged"
         extras.pop("reason", None)
     else:
-        if budget.expired():
+        if impossible:
+            why = impossible
+        elif runaway:
+            why = runaway
+        elif budget.expired():
             why = f"time limit {time_limit:g} s reached"
         elif len(records) == len(stages):
             why = "every stage stopped (" + ", ".join(f"{r.method}: {r.status}" for r in records) + ")"
         else:
             why = "stopped"
         extras["status"] = why
-        extras["reason"] = f"{why}; best error {best.error:.3g} > tol {tol:g} (from {best.solver})"
+        extras["reason"] = f"{why}; best error {best.error:.3g}, tol {tol:g} (from {best.solver})"
     return replace(
         best,
         solver="auto(" + "+".join(rec.method for rec in records) + ")",
