@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test bench lint gallery clean
+.PHONY: install demo test fuzz bench lint gallery clean
 
 install: $(STAMP)
 
@@ -30,6 +30,11 @@ demo: install
 test: install
 	$(BIN)/python -m pytest -q tests
 	FIXPLAN_SHORT=1 MPLBACKEND=Agg $(BIN)/python -m pytest -q --nbmake notebooks
+
+# The fuzz suite's long budget (tests/fuzz; `make test` runs a short derandomized one): 20x the
+# examples with fresh seeds; FIXPLAN_FUZZ_SCALE=100 for a longer hunt. Failures found are kept in .hypothesis/.
+fuzz: install
+	FIXPLAN_FUZZ=long MPLBACKEND=Agg $(BIN)/python -m pytest -q -p no:cacheprovider tests/fuzz --hypothesis-show-statistics
 
 bench: install
 	$(BIN)/python benchmarks/run.py

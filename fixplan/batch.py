@@ -68,12 +68,10 @@ def solve_batch(
 ) -> list[dict[str, Any]]:
     """Solve every file (``options`` as :func:`fixplan.planner.solve.solve` takes them), in file order."""
     from fixplan.cluster import dask_client, run_tasks
+    from fixplan.files import read_user_text
 
     items = []
     for path in files:
-        try:
-            items.append((str(path), path.read_text(encoding="utf-8")))
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(f"{path}: cannot read ({exc})") from None
+        items.append((str(path), read_user_text(path, expected="a .toml fixture file")))
     with dask_client(scheduler, tasks=len(items)) as client:
         return run_tasks(client, solve_text, items, options, progress=progress, name="fixplan-solve")

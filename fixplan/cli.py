@@ -373,9 +373,8 @@ def classify(
     at_p = None if at is None else _numbers(at, "--at", fixture.dimension, limits.COORDINATE)
     p = _pose(fixture, pose)
     names = _names(contacts)
+    check_distinct([("FILE", file), ("--wrenches", wrenches), ("--out", out)])
     target = None if out is None else _writable(out, force)
-    if target is not None and wrenches is not None:
-        check_distinct([("--wrenches", wrenches), ("--out", target)])
     cs = contact_set(fixture, p, names)
     if len(cs) == 0:
         from fixplan.locating import locator_gaps
@@ -567,8 +566,9 @@ def map_(
             f"--out {out}: expected an image file ending in .png, .svg or .pdf (the CSV is written beside it "
             "with the same stem)"
         )
+    check_distinct([("FILE", file), ("--out", out), ("the CSV beside --out", out.with_suffix(".csv"))])
     png = _writable(out, force)
-    csv_path = _writable(out.with_suffix(".csv"), force)
+    csv_path = _writable(out.with_suffix(".csv"), force, "the CSV beside --out")
     result = jamming_map(
         fixture,
         (names_all.index(ax[0]), names_all.index(ax[1])),
@@ -646,6 +646,7 @@ def simulate(
             f"{limits.MAX_SIM_STEPS:.0e} (use --force to run it anyway)"
         )
     w = None if wrench is None else _wrench(wrench, "--wrench", fixture.ndof)
+    check_distinct([("FILE", file), ("--out", out)])
     target = None if out is None else _writable(out, force)
     sim = Simulator(fixture, dt=dt, tolerance=tolerance)
     if _pose(fixture, pose) == "goal":
@@ -843,7 +844,7 @@ def solve(
     fixture = _load(file)
     figure = None if report is None else figure_path(report)
     # every output is checked before any is created (or any work done), and no two are one file
-    check_distinct([("--out", out), ("--report", report), ("the report's figure", figure)])
+    check_distinct([("FILE", file), ("--out", out), ("--report", report), ("the report's figure", figure)])
     for option, path in (("--out", out), ("--report", report), ("the report's figure", figure)):
         if path is not None:
             _writable(path, force, option)
@@ -932,6 +933,8 @@ def _print_plan(result, payload: dict[str, Any], fixture) -> None:  # type: igno
                 f"{tr['time_s']:.2f}",
             )
         Console().print(table)
+    if not payload["transitions"] and result.status != "infeasible":
+        typer.echo(f"{fixture.name}: the part starts located (every locator touches): there is nothing to plan")
     typer.echo(f"status: {result.status}" + (f" — {result.reason}" if result.reason else ""))
     v = result.verification
     if v is not None:
@@ -950,7 +953,10 @@ def _print_plan(result, payload: dict[str, Any], fixture) -> None:  # type: igno
         if v.max_push_force_N is not None:
             parts.append(f"push on the part ≤ {v.max_push_force_N:.3g} N, {v.max_push_torque_Nm:.3g} N·m")
         if v.tick_mean_us is not None:
-            parts.append(f"tick compute mean {v.tick_mean_us:.0f} µs, {v.deadline_misses} ticks over the 1 ms period")
+            parts.append(
+                f"tick compute mean {v.tick_mean_us:.0f} µs; {v.deadline_misses} ticks took longer than the 1 ms "
+                "period to compute on this machine (simulated time does not slip, so this measures speed, not the verdict)"
+            )
         typer.echo("; ".join(parts))
     typer.echo(f"time: {result.timings.get('total_s', 0.0):.2f} s")
 
@@ -1076,6 +1082,7 @@ def view(
     from fixplan.view import read_plan, rest_replay, scene_figure, scene_info, write_scene
 
     fixture = _load(file)
+    check_distinct([("FILE", file), ("--plan", plan), ("--out", out)])
     target = _writable(out, force)
     replay = rest_replay(fixture) if plan is None else read_plan(plan, fixture)
     fig = scene_figure(fixture, replay, max_frames=frames)
@@ -1218,7 +1225,7 @@ def main(argv: list[str] | None = None) -> int:
         # checked for finiteness where they leave fixplan (strict JSON, the solvers' own checks)
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore", RuntimeWarning)
-            rv = app(args=args, standalone_mode=False)
+            rv = app(args=args, prog_name="fixplan", standalone_mode=False)
     except (FixtureError, InputFileError) as exc:
         for issue in exc.issues:
             typer.echo(issue.format(exc.source), err=True)

@@ -137,7 +137,10 @@ def check_output(path: Path, force: bool, *, option: str = "--out") -> Path:
 
 
 def check_distinct(outputs: Sequence[tuple[str, Path | None]]) -> None:
-    """Refuse two outputs of one command that are the same file (one would replace the other)."""
+    """Refuse two paths of one command that are the same file: an output would replace an input or another output.
+
+    ``outputs`` lists ``(option, path)`` pairs, inputs first; ``None`` paths are skipped.
+    """
     seen: dict[Path, str] = {}
     for option, path in outputs:
         if path is None:
@@ -148,7 +151,9 @@ def check_distinct(outputs: Sequence[tuple[str, Path | None]]) -> None:
         except OSError:  # pragma: no cover - a loop of links: compare as written
             pass
         if key in seen:
-            raise InputError(f"{option} {path} is the same file as {seen[key]} (expected distinct output files)")
+            raise InputError(
+                f"{option} {path} is the same file as {seen[key]} (an output must not replace an input or another output)"
+            )
         seen[key] = f"{option} {path}"
 
 

@@ -614,7 +614,13 @@ class _Builder:
             return Manipulator()
         r.unknown_keys(t, ("max_force", "max_torque"), "manipulator")
         f = r.number(
-            t, "max_force", "manipulator.max_force", default=float("inf"), exclusive_minimum=0.0, what="a force [N]"
+            t,
+            "max_force",
+            "manipulator.max_force",
+            default=float("inf"),
+            exclusive_minimum=0.0,
+            bounds=limits.MAX_FORCE,
+            what="a force [N]",
         )
         m = r.number(
             t,
@@ -622,6 +628,7 @@ class _Builder:
             "manipulator.max_torque",
             default=float("inf"),
             exclusive_minimum=0.0,
+            bounds=limits.MAX_TORQUE,
             what="a torque [N·m]",
         )
         return Manipulator(f if f is not None else float("inf"), m if m is not None else float("inf"))
@@ -639,6 +646,7 @@ class _Builder:
             default=1e-3,
             exclusive_minimum=0.0,
             maximum=1.0,
+            bounds=limits.TIMESTEP,
             what="a time step [s]",
         )
         e = r.number(
@@ -648,6 +656,7 @@ class _Builder:
             default=0.0,
             minimum=0.0,
             maximum=1.0,
+            bounds=limits.RESTITUTION,
             what="a restitution coefficient",
         )
         tol = r.number(
@@ -657,6 +666,7 @@ class _Builder:
             default=1e-8,
             exclusive_minimum=0.0,
             maximum=1.0,
+            bounds=limits.SOLVER_TOLERANCE,
             what="a solver tolerance",
         )
         return SimulationSettings(h or 1e-3, e or 0.0, tol or 1e-8)
@@ -712,7 +722,7 @@ class _Builder:
             if not result.converged:
                 r.error(
                     "locator",
-                    f"no pose touches all {len(locs)} locators (largest gap {result.max_gap_m:.3g} m after {result.iterations} iterations)",
+                    f"no pose touches all {len(locs)} locators (largest gap {result.max_gap_m:.3g} m after {result.iterations} iteration{'s' if result.iterations != 1 else ''})",
                 )
                 return
             goal = result.pose

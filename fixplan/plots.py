@@ -48,6 +48,10 @@ Intervals = dict[str, list[tuple[float, float]]]
 GAP_LINTHRESH_M = 1e-6  # symlog: linear within ±1 µm (the touch tolerance)
 
 
+# a plan's status as words for a title ("plan planned" read as a typo)
+_STATUS_WORDS = {"planned": "plan found", "unverified": "plan unverified", "infeasible": "no plan (infeasible)"}
+
+
 def figure_path(report: Path) -> Path:
     """The PNG written beside a report: ``plan.md`` → ``plan.png``."""
     png = report.with_suffix(".png")
@@ -222,7 +226,7 @@ def plan_figure(result: PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> 
     if trace is not None:
         v = result.verification
         verdict = "passed" if v is not None and v.passed else "failed"
-        title = f"{fixture.name}: plan {result.status}, verification {verdict} (simulated haptic loop, 1 kHz)"
+        title = f"{fixture.name}: {_STATUS_WORDS.get(result.status, result.status)}, verification {verdict} (simulated haptic loop, 1 kHz)"
         ax = axes["normal_forces"]
         for i, name in enumerate(trace.names):
             ax.plot(trace.time_s, trace.normal_forces_N[:, i], color=colors.get(name), label=name, linewidth=1.2)
@@ -234,7 +238,9 @@ def plan_figure(result: PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> 
         ax.set_ylabel("gap [m]")
     else:
         why = "not run" if result.verification is None else "no trace"
-        title = f"{fixture.name}: plan {result.status} (verification {why}: the plan's knots)"
+        title = (
+            f"{fixture.name}: {_STATUS_WORDS.get(result.status, result.status)} (verification {why}: the plan's knots)"
+        )
         ax = axes["gaps"]
         t_knots, g_knots = _knot_gaps(result, fixture)
         for i, name in enumerate(names):

@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -31,6 +31,13 @@ from fixplan.pose import Pose, quaternion_wxyz_from_matrix, rot2
 
 FloatArray = NDArray[np.float64]
 WrenchInput = ArrayLike | Callable[[float, "Simulator"], ArrayLike] | None
+
+
+class State(NamedTuple):
+    """The workpiece's state: a ``(pose, twist)`` tuple with named fields."""
+
+    pose: Pose  # T_world_body
+    twist: FloatArray  # (v, ω) of the centre of mass, world axes
 
 
 @dataclass(frozen=True)
@@ -214,8 +221,9 @@ class Simulator:
         return np.concatenate([self._v, w])
 
     @property
-    def state(self) -> tuple[Pose, FloatArray]:
-        return self.pose, self.twist
+    def state(self) -> State:
+        """``(pose, twist)``, also readable as ``.pose`` and ``.twist``."""
+        return State(self.pose, self.twist)
 
     @property
     def com_world(self) -> FloatArray:

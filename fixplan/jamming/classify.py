@@ -336,7 +336,8 @@ class Classifier:
                 margin * scale,
                 opening.forces,
                 "opening-witness",
-                f"{opened} opens while the other contacts slide or stick: a motion consistent with every contact law (none keeping every contact was found)",
+                f"{opened} {'opens' if len(opening.opened) == 1 else 'open'} while the other contacts slide or stick: "
+                "a motion consistent with every contact law (none keeping every contact was found)",
                 opening.acceleration * scale,
                 **residuals,
             )

@@ -1,0 +1,132 @@
+"""The README's examples against the code (issue 12 §5: the README had drifted from it).
+
+- the ``classify --json`` example's numbers are what the command prints (rounded as shown);
+- the Python API block runs (the two ``fixplan.solve`` lines are checked by signature only: a
+  plan takes seconds and ``tests/test_solve.py`` runs one);
+- ``sim.state`` has ``.pose`` and ``.twist``; the certificate table names every certificate the
+  classifier can return, ``zero-wrench`` included;
+- the FCLib sample in ``examples/`` solves, and its normal impulses carry the weight.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fixplan
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+
+
+def fixplan_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+    )
+
+
+def _blocks(lang: str) -> list[str]:
+    return re.findall(rf"```{lang}\n(.*?)```", README, flags=re.S)
+
+
+def _assert_numbers_match(shown, actual, path: str = "") -> None:
+    """Every number the README shows is the code's to the digits shown (``"..."`` stands for anything)."""
+    if shown == "...":
+        return
+    if isinstance(shown, dict):
+        for k, v in shown.items():
+            assert k in actual, f"README shows {path}.{k}, the code has no such field"
+            _assert_numbers_match(v, actual[k], f"{path}.{k}")
+    elif isinstance(shown, list):
+        assert len(shown) == len(actual), path
+        for i, (a, b) in enumerate(zip(shown, actual, strict=True)):
+            _assert_numbers_match(a, b, f"{path}[{i}]")
+    elif isinstance(shown, bool) or isinstance(shown, str):
+        assert shown == actual, path
+    elif isinstance(shown, int | float):
+        assert actual == pytest.approx(shown, rel=1e-3, abs=1e-9 if shown == 0 else 0.0), path
+    else:  # pragma: no cover
+        raise AssertionError(f"unexpected {type(shown)} at {path}")
+
+
+def test_classify_json_example_is_what_the_code_prints() -> None:
+    block = next(b for b in _blocks("json") if '"certificate": "sliding-witness"' in b)
+    shown = json.loads(block)
+    proc = fixplan_cli("classify", "--wrench", "6,0,0,0,0,0", "--json")
+    assert proc.returncode == 0, proc.stderr
+    actual = json.loads(proc.stdout)
+    assert shown["contacts"] == actual["contacts"]
+    result, got = shown["results"][0], actual["results"][0]
+    for key in ("residuals", "solve_time_s"):  # solver-dependent to the last digits: shape only
+        assert set(result[key] if isinstance(result[key], dict) else {}) <= set(
+            got[key] if isinstance(got[key], dict) else {}
+        )
+    result = {k: v for k, v in result.items() if k not in ("residuals", "solve_time_s")}
+    _assert_numbers_match(result, got, "results[0]")
+    assert got["residuals"]["normal_balance"] == pytest.approx(
+        shown["results"][0]["residuals"]["normal_balance"], rel=1e-3
+    )
+    assert got["residuals"]["balance"] == pytest.approx(shown["results"][0]["residuals"]["balance"], rel=1e-3)
+
+
+def test_python_api_block_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    block = next(b for b in _blocks("python") if "fixplan.load(" in b)
+    lines = block.splitlines()
+    solve_lines = [line for line in lines if "fixplan.solve(" in line]
+    assert len(solve_lines) == 2
+    signature = inspect.signature(fixplan.solve)
+    for line in solve_lines:
+        call = line.split("#")[0].split("=", 1)[1].strip()
+        kwargs = dict(re.findall(r"(\w+)=([^,)]+)", call))
+        signature.bind(object(), **kwargs)  # the keywords the README uses exist
+    uses_plan = re.compile(r"^\s*plan\b|\bplan\.")
+    runnable = "\n".join(line for line in lines if not uses_plan.search(line.split("#")[0]))
+    monkeypatch.chdir(ROOT)
+    namespace: dict = {}
+    exec(compile(runnable, "README.md", "exec"), namespace)  # noqa: S102 - the README's own example
+    res, sim = namespace["res"], namespace["sim"]
+    # pushing the located box away from E1 (+x): no force keeps every contact, and no motion is given
+    assert (res[0].mode, res[0].certificate, res[0].acceleration) == ("separates", "no-maintained-motion", None)
+    state = sim.state
+    assert state.pose is state[0] and np.array_equal(state.twist, state[1]) and state.twist.shape == (6,)
+    from fixplan.planner.solve import PlanResult
+
+    names = {f.name for f in dataclasses.fields(PlanResult)} | {n for n in dir(PlanResult) if not n.startswith("_")}
+    for field in re.findall(r"\bplan\.(\w+)", block):  # plan.verification, plan.friction_robustness, ...
+        assert field in names, f"the README reads plan.{field}; PlanResult has no such field"
+
+
+def test_certificate_table_is_complete() -> None:
+    source = (ROOT / "fixplan" / "jamming" / "classify.py").read_text(encoding="utf-8")
+    # result("mode", margin, forces, "certificate", ...): the fourth argument of every result call
+    certificates = set(re.findall(r'result\(\s*"\w+",\s*[^,]+,\s*[^,]+,\s*"([\w-]+)"', source))
+    assert {"zero-wrench", "normal-balance", "sliding-witness", "opening-witness"} <= certificates, certificates
+    table = README[README.index("| mode | meaning | certificate |") :].split("\n\n")[0]
+    missing = [c for c in certificates if f"`{c}`" not in table]
+    assert not missing, f"certificates missing from the README's table: {missing}"
+
+
+def test_fclib_sample_solves_and_carries_the_weight() -> None:
+    sample = ROOT / "examples" / "box-3-contacts.hdf5"
+    assert f"fixplan fclib examples/{sample.name}" in (ROOT / "examples" / "README.md").read_text(encoding="utf-8")
+    proc = fixplan_cli("fclib", str(sample), "--json")
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["kind"] == "local" and out["contacts"] == 3 and out["converged"]
+    r = np.array(out["reaction"]).reshape(3, 3)
+    fx = fixplan.load(fixplan.fixture.default_fixture_path())
+    assert r[:, 0].sum() == pytest.approx(fx.workpiece.mass_kg * 9.81 * 1e-3, rel=1e-6)  # m g h [N·s]
+    assert np.all(r[:, 0] > 0)
+    assert np.max(np.abs(out["velocity"])) < 1e-8  # held: no contact velocity
