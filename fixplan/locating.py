@@ -119,12 +119,20 @@ def solve_goal(
     pose = start
     scale = max(workpiece.shape.bounding_radius, 1e-9)
 
+    def gaps_at(p: Pose) -> FloatArray:
+        return np.array([locator_contact(workpiece, p, loc).gap_m for loc in locators])
+
     def residual(p: Pose) -> tuple[FloatArray, FloatArray]:
         contacts = [locator_contact(workpiece, p, loc) for loc in locators]
         gaps = np.array([c.gap_m for c in contacts])
-        c_w = com_world(p, workpiece.com_body)
-        G = np.array([c.jacobian(c_w)[0] for c in contacts])
-        return gaps, G
+        # the normal rows [n, r × n] of the contact Jacobians (written out: np.cross per row is slow)
+        n = np.array([c.normal_world for c in contacts]).reshape(len(contacts), -1)
+        r = np.array([c.point_world for c in contacts]).reshape(len(contacts), -1) - com_world(p, workpiece.com_body)
+        if n.shape[1] == 2:
+            moment = (r[:, 0] * n[:, 1] - r[:, 1] * n[:, 0])[:, None]
+        else:
+            moment = np.cross(r, n)
+        return gaps, np.hstack([n, moment])
 
     gaps, G = residual(pose)
     it = 0
@@ -142,11 +150,17 @@ def solve_goal(
         alpha = 1.0
         while True:
             trial = pose.retract(alpha * step, workpiece.com_body)
-            g_trial, G_trial = residual(trial)
+            g_trial = gaps_at(trial)
             if float(g_trial @ g_trial) < f0 or alpha < 1e-6:
                 break
             alpha /= 2.0
-        pose, gaps, G = trial, g_trial, G_trial
+        f1 = float(g_trial @ g_trial)
+        if not f1 < f0:
+            break  # no step decreases the gaps: a least-squares minimum, not a pose touching every locator
+        pose = trial
+        gaps, G = residual(pose)
+        if f1 > (1.0 - 1e-6) * f0 and f1 > tol_m**2:
+            break  # stalled at a least-squares minimum (more locators than the pose can satisfy)
     max_gap = float(np.max(np.abs(gaps))) if len(gaps) else 0.0
     rank = int(np.linalg.matrix_rank(G, tol=1e-9)) if len(gaps) else 0
     return GoalResult(pose, max_gap, it, rank, converged=max_gap <= max(tol_m, 1e-10))

@@ -346,3 +346,19 @@ def test_map_axes_defaults_aliases_and_units(capsys, tmp_path: Path) -> None:
     from fixplan.mapping import axis_unit
 
     assert (axis_unit("Fx"), axis_unit("Tz"), axis_unit("Mz")) == ("N", "N·m", "N·m")
+
+
+def test_validation_at_the_cap_is_fast(capsys, tmp_path: Path) -> None:
+    """100 locators (the cap), most of them off the part: the goal solver stops at its least-squares minimum."""
+    head = BOX.split("[[locator]]")[0]
+    rows = [
+        f'[[locator]]\nname = "L{i}"\nposition = [{0.002 * (i % 50):.3f}, {0.01 * (i // 50):.3f}, -0.0{i % 7}]\n'
+        "friction = 0.2\n"
+        for i in range(limits.MAX_ENTRIES)
+    ]
+    path = tmp_path / "cap.toml"
+    path.write_text(head + "\n".join(rows))
+    t0 = time.perf_counter()
+    code, _, err = run(capsys, "validate", path)
+    assert time.perf_counter() - t0 < 15  # was 60 s for 50 locators: 20 line-search halvings x 100 iterations
+    assert code == 2 and f"{path}: locator: no pose touches all 100 locators (largest gap " in err
