@@ -23,7 +23,7 @@ share of the time left when it starts (the last one all of it), and the time lim
 inside every stage (see :mod:`fixplan.engine.budget`).
 
 Why this order (measured on the 33 shared FCLib problems and 16 more of Siconos' test
-problems, see ``benchmarks/bench_fclib.py``): NSGS alone reaches 1e-8 on 40 of 49, in
+problems, see ``benchmarks/bench_fclib.py``): NSGS alone reaches 1e-8 on 43 of 49, in
 microseconds to a second when it does; where it stalls the SOCP fixed point costs a few
 interior-point solves and unlocks redundant stacks (BoxesStack1: 2.6e-5 → 8.7e-9); Newton from
 the best iterate then converges in 2–25 steps on all but the singular cases, which PROX solves.
@@ -316,7 +316,7 @@ def solve_auto(
         elif runaway:
             why = runaway
         elif budget.expired():
-            why = f"time limit {time_limit:g} s reached"
+            why = f"time limit reached after {time.perf_counter() - t0:.3g} s"
         elif len(records) == len(stages):
             why = "every stage stopped (" + ", ".join(f"{r.method}: {r.status}" for r in records) + ")"
         else:
