@@ -175,3 +175,58 @@ def test_the_search_check_uses_the_kept_contacts():
     )
     again = Classifier(kept, fx.gravity_wrench()).classify(cs.wrench_about_com(res.wrench))
     assert again.mode == res.check.mode == "slides"
+
+
+# ---------------------------------------------------------------- C: a part that already slides
+def test_a_sliding_part_gets_friction_against_its_velocity_not_its_acceleration():
+    """The default box slides along +x on B1-B3 at 5 cm/s; the push asks for 0.5 m/s² along +y.
+
+    Coulomb friction opposes the slip velocity: λ_i = N_i (−μ x̂ + ẑ). The dynamics then give the
+    push in closed form: F_x = μ N (cancel friction, no x-acceleration), F_y = m s a, with
+    N = m g − F_z. From rest the same motion would have friction along −ŷ: F_x = 0 and
+    F_y = m s a + μ N.
+    """
+    fx = fixplan.load(fixplan.default_fixture_path())
+    m, mu = 2.0, 0.25
+    v = np.array([0.05, 0, 0, 0, 0, 0])
+    moving = search_wrench(fx, [0, 0.5, 0, 0, 0, 0], objective="effort", slip_twist=v)
+    rest = search_wrench(fx, [0, 0.5, 0, 0, 0, 0], objective="effort")
+    assert moving.found and rest.found, (moving.reason, rest.reason)
+    assert set(moving.contact_roles.values()) == {"sliding"}
+    w_m = _com(fx, "start", moving.wrench)
+    N_m = m * G - w_m[2]
+    assert N_m > 0
+    assert w_m[0] == pytest.approx(mu * N_m, rel=1e-6)  # friction against the slip, cancelled
+    assert w_m[1] >= m * 0.5 * (1 - 1e-6)  # s ≥ 1, and no friction along y
+    w_r = _com(fx, "start", rest.wrench)
+    N_r = m * G - w_r[2]
+    a_r = float(rest.check.acceleration[1])
+    assert abs(w_r[0]) <= 1e-6 * N_r  # nothing along x
+    assert w_r[1] == pytest.approx(m * a_r + mu * N_r, rel=1e-6)  # friction against the acceleration
+
+
+def test_the_engine_moves_the_sliding_part_as_the_slip_aware_push_asks():
+    """One engine tick from the sliding state: with the slip-aware push the x-velocity holds
+    (friction cancelled) and the part accelerates along +y; the push computed for a part at rest
+    lets friction brake it along x at μ N / m."""
+    from fixplan.simulator import Simulator
+
+    fx = fixplan.load(fixplan.default_fixture_path())
+    m, mu = 2.0, 0.25
+    v = np.array([0.05, 0, 0, 0, 0, 0])
+    start = fx.start
+    acc = {}
+    for label, kwargs in (("moving", {"slip_twist": v}), ("rest", {})):
+        res = search_wrench(fx, [0, 0.5, 0, 0, 0, 0], objective="effort", **kwargs)
+        sim = Simulator(fx)
+        sim.set_state(start, v)
+        sim.step(res.wrench)
+        acc[label] = (sim.twist - v) / sim.dt
+        N = m * G - _com(fx, "start", res.wrench)[2]
+        if label == "moving":
+            # friction cancelled along x (to 1 %: the slip turns a little within the 1 ms tick)
+            assert abs(acc[label][0]) <= 1e-2 * mu * N / m
+            assert acc[label][1] >= 0.5 * (1 - 1e-3)
+        else:
+            # braked by friction (the slip turns a little toward +y within the tick: 5 %)
+            assert acc[label][0] == pytest.approx(-mu * N / m, rel=5e-2)

@@ -72,6 +72,7 @@ FloatArray = NDArray[np.float64]
 JAM_MARGIN_REL = 1e-3  # default least relative distance of the wrench found from static balance
 _TARGET_REL = 1e-6  # a margin target counts as met within this relative shortfall (solver accuracy)
 _MOVING = ("slides", "pivots", "rolls")
+SLIP_REL = 0.05  # a kept contact slipping at ≥ 5 % of the part's speed slides against its slip
 
 
 def floor_sig(x: float, digits: int = 4) -> str:
@@ -167,24 +168,61 @@ def twist_at_com(cs: ContactSet, twist: FloatArray, about_world: FloatArray) -> 
     return np.array([twist[0] - twist[2] * off[1], twist[1] + twist[2] * off[0], twist[2]])
 
 
-def _roles(cs: ContactSet, a_hat: FloatArray, tol: float) -> dict[str, str]:
+def _finite_twist(fixture: Fixture, x: ArrayLike, what: str) -> FloatArray:
+    a = np.asarray(x, dtype=float)
+    if a.shape != (fixture.ndof,) or not np.all(np.isfinite(a)):
+        raise InputError(f"{what} expects {fixture.ndof} finite numbers, got {list(np.atleast_1d(a))}")
+    return a
+
+
+def _tangential_slip(c: Any, u: FloatArray) -> FloatArray:
+    """The tangential slip of a contact's relative twist ``u``, torsion scaled to metres (soft fingers)."""
+    if c.dimension == 3:
+        return np.array([u[1], u[2], c.torsion_m * u[3]]) if c.soft else u[1:3]
+    return u[1:2]
+
+
+def _roles(
+    cs: ContactSet, a_hat: FloatArray, tol: float, slip: FloatArray | None = None
+) -> tuple[dict[str, str], dict[str, FloatArray]]:
+    """Each contact's role under the motion ``a_hat`` and, for sliding ones, the unit slip direction.
+
+    Without ``slip`` a kept contact slides when ``a_hat`` makes it slip (a part at rest starting to
+    move: friction opposes the acceleration). With ``slip`` (a twist of the centre of mass: the
+    velocity the part has, plus what the push adds within a control period) a kept contact whose
+    slip under ``slip`` is at least ``SLIP_REL`` of the twist's speed slides *against that slip*:
+    Coulomb friction opposes the velocity, not the acceleration asked for. Opening or closing is
+    always judged from ``a_hat``.
+    """
     scale = float(np.linalg.norm(a_hat[: cs.dimension])) + float(np.linalg.norm(a_hat[cs.dimension :])) * cs.max_lever_m
+    v_scale = 0.0
+    if slip is not None:
+        v_scale = (
+            float(np.linalg.norm(slip[: cs.dimension])) + float(np.linalg.norm(slip[cs.dimension :])) * cs.max_lever_m
+        )
     roles: dict[str, str] = {}
+    directions: dict[str, FloatArray] = {}
     for c, off in zip(cs.contacts, cs.offsets, strict=True):
-        u = cs.J[off : off + c.size] @ a_hat
+        Ji = cs.J[off : off + c.size]
+        u = Ji @ a_hat
         if u[0] < -tol * scale:
             raise InputError(
                 f"the motion pushes the workpiece into contact {c.name} (normal rate {u[0]:.3g}); expected a motion that keeps or opens it"
             )
         if u[0] > tol * scale:
             roles[c.name] = "opening"
-        elif float(np.linalg.norm(u[1:3] if c.dimension == 3 else u[1:2])) > tol * scale or (
-            c.soft and abs(u[3]) * c.torsion_m > tol * scale
-        ):
+            continue
+        t_v = _tangential_slip(c, Ji @ slip) if slip is not None and v_scale > 0 else None
+        t_a = _tangential_slip(c, u)
+        if t_v is not None and float(np.linalg.norm(t_v)) > SLIP_REL * v_scale:
             roles[c.name] = "sliding"
+            directions[c.name] = t_v / float(np.linalg.norm(t_v))
+        elif float(np.linalg.norm(t_a)) > tol * scale:
+            roles[c.name] = "sliding"
+            directions[c.name] = t_a / float(np.linalg.norm(t_a))
         else:
             roles[c.name] = "sticking"
-    return roles
+    return roles, directions
 
 
 def _polar_rows(cs: ContactSet) -> tuple[FloatArray, tuple[tuple[str, int], ...]]:
@@ -274,6 +312,7 @@ def search_wrench(
     jam_margin_rel: float = JAM_MARGIN_REL,
     friction_margin: float = 0.0,
     max_accel_factor: float = math.inf,
+    slip_twist: ArrayLike | None = None,
 ) -> WrenchSearch:
     """The applied wrench that moves the part with acceleration ≥ ``motion``, without jamming.
 
@@ -299,6 +338,13 @@ def search_wrench(
     ``μ / (1 + δ)`` (they stick even with the least friction). The checks use the nominal μ.
     ``max_accel_factor`` bounds the acceleration along ``motion`` at that many times the
     requested one (a feedback controller asks for *this* acceleration, not at least it).
+
+    ``slip_twist`` (same point and axes as ``motion``, [m/s, rad/s]) is for a part that already
+    moves: sliding friction opposes the slip of this twist — pass the velocity the part has plus
+    what the push adds within one control period — instead of the slip of ``motion`` (a part at
+    rest). A kept contact that slips under it at ≥ ``SLIP_REL`` of its speed slides against that
+    slip even where ``motion`` alone would keep it sticking. The jamming certificate is unchanged
+    (the wrench would also move the part from rest).
     """
     m = np.asarray(motion, dtype=float)
     if m.shape != (fixture.ndof,) or not np.all(np.isfinite(m)):
@@ -318,7 +364,8 @@ def search_wrench(
         raise InputError("no contacts to analyse (the workpiece touches no locator here; name contacts explicitly)")
     about = cs.body_origin_world if at is None else np.asarray(at, dtype=float)
     a_hat = twist_at_com(cs, m, about)
-    roles = _roles(cs, a_hat, 1e-9)
+    slip = None if slip_twist is None else twist_at_com(cs, _finite_twist(fixture, slip_twist, "slip_twist"), about)
+    roles, directions = _roles(cs, a_hat, 1e-9, slip)
     wp = fixture.workpiece
     g = float(np.linalg.norm(fixture.gravity)) or 9.81
     F_max, T_max, notes = hand_limits(fixture)
@@ -344,7 +391,14 @@ def search_wrench(
     if not max_accel_factor >= 1.0:
         raise InputError(f"max_accel_factor must be ≥ 1, got {max_accel_factor}")
     build = dict(
-        cs=cs_design, a_hat=a_hat, roles=roles, w_g=w_g, about=about, jam=jam_margin_rel, s_max=max_accel_factor
+        cs=cs_design,
+        a_hat=a_hat,
+        roles=roles,
+        directions=directions,
+        w_g=w_g,
+        about=about,
+        jam=jam_margin_rel,
+        s_max=max_accel_factor,
     )
     prog, meta = _build(**build, cert=y, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
     sol = ClarabelProgram(prog).solve(prog.b)
@@ -536,6 +590,7 @@ def _build(
     cs: ContactSet,
     a_hat: FloatArray,
     roles: dict[str, str],
+    directions: dict[str, FloatArray],
     w_g: FloatArray,
     about: FloatArray,
     F_max: float,
@@ -569,19 +624,16 @@ def _build(
     # sliding contact wrench columns J_iᵀ φ_i
     phis = []
     for i in slide:
-        c, off = cs.contacts[i], cs.offsets[i]
-        u = J[off : off + c.size] @ a_hat
+        c = cs.contacts[i]
+        dvec = directions[c.name]  # unit slip (torsion scaled to metres for soft fingers)
         phi = np.zeros(c.size)
         phi[0] = 1.0
         if c.friction > 0:
             if c.soft:
-                scaled = np.array([u[1], u[2], c.torsion_m * u[3]])
-                dvec = scaled / np.linalg.norm(scaled)
                 phi[1:3] = -c.friction * dvec[:2]
                 phi[3] = -c.friction * c.torsion_m * dvec[2]
             else:
-                t = u[1:3] if d == 3 else u[1:2]
-                phi[1 : 1 + t.shape[0]] = -c.friction * t / np.linalg.norm(t)
+                phi[1 : 1 + dvec.shape[0]] = -c.friction * dvec
         phis.append(phi)
     rows_A: list[FloatArray] = []
     rows_b: list[FloatArray] = []
