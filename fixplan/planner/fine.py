@@ -283,6 +283,50 @@ def feature_at(fixture: Fixture, locator: Locator, pose: Pose) -> Feature:
     )
 
 
+def _plane_features(fixture: Fixture) -> list[Feature]:
+    """Every face plane of a polyhedral workpiece (box, rectangle, polygon); [] for round shapes."""
+    from fixplan.geometry import Box, Polygon, Rectangle
+
+    shape = fixture.workpiece.shape
+    if isinstance(shape, Box | Rectangle):
+        axes = "xyz"[: shape.half.shape[0]]
+        return [_box_face(shape.half, sign + ax, sign + ax) for ax in axes for sign in "+-"]
+    if isinstance(shape, Polygon):
+        V, E, N = shape._edges()
+        out = []
+        for k in range(len(V)):
+            e = E[k] / float(E[k] @ E[k])
+            A = np.array([-e, e])
+            b = np.array([-float(e @ V[k]), 1.0 + float(e @ V[k])])
+            out.append(Feature("plane", f"edge{k}", N[k].copy(), float(N[k] @ V[k]), bounds_A=A, bounds_b=b))
+        return out
+    return []
+
+
+def clearance_feature(fixture: Fixture, locator: Locator, start: Pose, feature: Feature, wanted_m: float) -> Feature:
+    """The feature whose plane keeps ``locator`` clear along a path from ``start``.
+
+    A face plane's gap ``n·q − h − ρ`` is a lower bound of the true gap of a convex part, so
+    "plane gap ≥ c" keeps the locator clear — but only if the plane gap at the start is at least
+    ``c``: the goal's face of a locator that starts beside another face (a part turned 18° whose
+    side locator lies past the face's end) has a *negative* plane gap there, and the constraint
+    "no closer than at the start" would then let the part's corner run into the locator. Such a
+    locator is kept clear of the face that separates it best at the start (the largest plane gap).
+    """
+    if feature.kind != "plane":
+        return feature
+    q = start.point_body_from_world(locator.p_world)
+
+    def plane_gap(f: Feature) -> float:
+        assert f.normal is not None
+        return float(f.normal @ q) - f.offset - locator.radius_m
+
+    if plane_gap(feature) >= wanted_m - 1e-9:
+        return feature
+    best = max(_plane_features(fixture), key=plane_gap, default=feature)
+    return best if plane_gap(best) > plane_gap(feature) else feature
+
+
 # ---------------------------------------------------------------------------------------------
 # Poses from twists relative to the start
 # ---------------------------------------------------------------------------------------------
@@ -426,6 +470,9 @@ def plan_transition(
         except Exception:  # noqa: BLE001 - no goal: fall back to the start's features
             goal = None
     features = {n: feature_at(fixture, locs[n], start if (n in est or goal is None) else goal) for n in names}
+    for n in names:
+        if n not in est and n != target:
+            features[n] = clearance_feature(fixture, locs[n], start, features[n], min(clearance_m, start_gaps[n]))
 
     # --- scaling and the metric -------------------------------------------------------------
     L = max(wp.shape.bounding_radius, 1e-6)
