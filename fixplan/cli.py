@@ -60,6 +60,13 @@ def _err(message: str) -> None:
     typer.echo(one_line(f"fixplan: {message}"), err=True)
 
 
+def _console():  # type: ignore[no-untyped-def]
+    """A Rich console for tables: no markup, so a name like ``[/x]`` prints as written instead of failing."""
+    from rich.console import Console
+
+    return Console(markup=False, highlight=False, emoji=False)
+
+
 def _version(value: bool) -> None:
     if value:
         from importlib.metadata import PackageNotFoundError, version
@@ -289,7 +296,6 @@ CLASSIFY_TABLE_ROWS = 50  # above this many wrenches, classify prints counts per
 
 
 def _classify_table(fixture, results, names) -> None:  # type: ignore[no-untyped-def]
-    from rich.console import Console
     from rich.table import Table
 
     table = Table(title=f"{fixture.name}: contacts {', '.join(names)}")
@@ -301,7 +307,7 @@ def _classify_table(fixture, results, names) -> None:  # type: ignore[no-untyped
     for i, r in enumerate(results, 1):
         margin = f"{r.margin:.3g}" if math.isfinite(r.margin) else "-"
         table.add_row(str(i), ",".join(f"{x:g}" for x in r.wrench), r.mode, margin, r.certificate)
-    Console().print(table)
+    _console().print(table)
 
 
 def _classify_summary(fixture, results, names, out: Path | None) -> None:  # type: ignore[no-untyped-def]
@@ -912,7 +918,6 @@ def solve(
 
 
 def _print_plan(result, payload: dict[str, Any], fixture) -> None:  # type: ignore[no-untyped-def]
-    from rich.console import Console
     from rich.table import Table
 
     if payload["transitions"]:
@@ -932,7 +937,7 @@ def _print_plan(result, payload: dict[str, Any], fixture) -> None:  # type: igno
                 rob,
                 f"{tr['time_s']:.2f}",
             )
-        Console().print(table)
+        _console().print(table)
     if not payload["transitions"] and result.status != "infeasible":
         typer.echo(f"{fixture.name}: the part starts located (every locator touches): there is nothing to plan")
     typer.echo(f"status: {result.status}" + (f" — {result.reason}" if result.reason else ""))
@@ -963,7 +968,6 @@ def _print_plan(result, payload: dict[str, Any], fixture) -> None:  # type: igno
 
 def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | None, friction_margin: float,
                  scheduler: str | None, json_out: bool) -> None:  # fmt: skip
-    from rich.console import Console
     from rich.table import Table
 
     from fixplan.batch import fixture_files, solve_batch
@@ -983,7 +987,7 @@ def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | No
         for r in rows:
             seq = " → ".join("{" + ",".join(s) + "}" for s in r["sequence"]) or "-"
             table.add_row(Path(r["file"]).name, r["status"], seq, r["reason"] or "", f"{r['time_s']:.1f}")
-        Console().print(table)
+        _console().print(table)
         planned = sum(r["status"] == "planned" for r in rows)
         typer.echo(f"{planned} of {len(rows)} planned")
     if any(r["status"] != "planned" for r in rows):
@@ -1031,7 +1035,6 @@ def robust(
 def _print_robust(result, fixture, file: Path | None) -> None:  # type: ignore[no-untyped-def]
     import shlex
 
-    from rich.console import Console
     from rich.table import Table
 
     from fixplan.robust import group_failures
@@ -1053,7 +1056,7 @@ def _print_robust(result, fixture, file: Path | None) -> None:  # type: ignore[n
         table.add_column(col)
     for tr, cause, seeds in group_failures(result.failures):
         table.add_row("-" if tr is None else str(tr), cause, str(len(seeds)), ", ".join(map(str, seeds)))
-    Console().print(table)
+    _console().print(table)
     base = ["fixplan", "solve", *([] if file is None else [str(file)])]
     for f in result.failures:
         typer.echo(f"seed {f['seed']}: {f['cause']} — {f['reason']}")

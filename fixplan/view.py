@@ -130,6 +130,10 @@ def pose_from_json(obj: Any, dimension: int, where: str) -> Pose:
     return Pose(rot2(math.radians(angle)), position)
 
 
+# a plan's status as words ("plan planned" read as a typo)
+_STATUS_WORDS = {"planned": "plan found", "unverified": "plan unverified", "infeasible": "no plan (infeasible)"}
+
+
 def read_plan(path: Path, fixture: Fixture) -> Replay:
     """Read a plan JSON (``fixplan solve --out``) and check it belongs to ``fixture``.
 
@@ -202,7 +206,7 @@ def replay_from_plan(data: Any, fixture: Fixture, source: str = "plan") -> Repla
             None,
             (),
             None,
-            f"plan {status}{': ' + reason if reason else ''} (nothing to replay)",
+            f"{_STATUS_WORDS.get(status, f'plan {status}')}{': ' + reason if reason else ''} (nothing to replay)",
         )
         replay = _with_pressed_at_rest(replay, fixture)
     _check_starts_at(replay.poses[0], fixture, source)

@@ -362,3 +362,17 @@ def test_validation_at_the_cap_is_fast(capsys, tmp_path: Path) -> None:
     code, _, err = run(capsys, "validate", path)
     assert time.perf_counter() - t0 < 15  # was 60 s for 50 locators: 20 line-search halvings x 100 iterations
     assert code == 2 and f"{path}: locator: no pose touches all 100 locators (largest gap " in err
+
+
+@pytest.mark.parametrize("name", ["[/x] [bold]b", "a\nb"])
+def test_scene_names_print_as_written(capsys, tmp_path: Path, name: str) -> None:
+    """Rich markup in a scene name is text (it failed with MarkupError, exit 3); control characters are refused."""
+    path = tmp_path / "f.toml"
+    path.write_text(BOX.replace('name = "box-3-2-1"', f"name = {json.dumps(name)}"))
+    code, out, err = run(capsys, "classify", path, "--wrench", "0,0,0,0,0,0")
+    if name.isprintable():
+        assert code == 0 and f"{name}: contacts B1, B2, B3, S1, S2, E1" in out
+    else:
+        assert code == 2 and err == (
+            f"{path}: scene.name: expected a printable name of at most 200 characters (no newlines or control codes)\n"
+        )

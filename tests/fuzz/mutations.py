@@ -70,7 +70,7 @@ EXTREME_FLOATS = [
 EXTREME_INTS = [0, -1, 1, 2, 3, 7, 10**400, -(10**400), 2**63, -(2**63) - 1, 10**19]
 ODD_STRINGS = [
     "", " ", "B1", "B1\nB2", "\x1b[31mred\x1b[0m", "a,b", " P1 ", "x" * 500, "é", "\u202e", "nan", "1e400",
-    "box", "rectangle", "mesh", "+z", "side", "\t", "\0",
+    "box", "rectangle", "mesh", "+z", "side", "\t", "\0", "[/x]", "[bold]b", "%s{0}",
 ]  # fmt: skip
 
 

@@ -45,7 +45,7 @@ OUTPUTS = st.sampled_from(
      "@", "@new.txt", "@new.html", "/dev/full", "@map.CSV"]
 )  # fmt: skip
 TEXTS = st.one_of(
-    st.sampled_from(["", ",", "B1", "B1,B1", "NOPE", "S1,S2,E1", "start", "goal", "x\ny", "\x1b[2J"]),
+    st.sampled_from(["", ",", "B1", "B1,B1", "NOPE", "S1,S2,E1", "start", "goal", "x\ny", "\x1b[2J", "[/x]"]),
     st.text(max_size=12),
 )
 
