@@ -22,7 +22,12 @@ def test_default_fixture_plans_and_verifies(default_plan):
     assert r.sequence[0] == ("B1", "B2", "B3") and r.sequence[-1] == ("B1", "B2", "B3", "E1", "S1", "S2")
     assert all(len(b) == len(a) + 1 and set(a) < set(b) for a, b in zip(r.sequence, r.sequence[1:], strict=False))
     v = r.verification
-    assert v.passed and v.observed_sequence == r.sequence
+    # the loop loads it as planned, or with one re-plan where the side face lands flat (S1 and S2
+    # within a few ms of each other): the observed states grow one chain from the start to the goal
+    obs = v.observed_sequence
+    assert v.passed and obs[0] == r.sequence[0] and obs[-1] == r.sequence[-1]
+    assert all(set(a) < set(b) for a, b in zip(obs, obs[1:], strict=False))
+    assert v.execution is not None and v.execution.counts["replans"] <= 1
     assert max(abs(g) for g in v.final_gaps_m.values()) <= 1e-4
     assert v.max_penetration_m <= 1e-5
     for tr in r.transitions:

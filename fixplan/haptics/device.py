@@ -31,6 +31,14 @@ class DeviceSpecs:
     max_damping_Ns_per_m: float
     workspace_radius_m: float
     physical_damping_Ns_per_m: float  # b: the handle's own viscous damping
+    physical_damping_rot_Nms_per_rad: float | None = None  # rotation; None: 1 % of b
+
+    @property
+    def rotational_damping_Nms_per_rad(self) -> float:
+        """The handle's own rotational damping [N·m·s/rad] (1 % of ``b`` unless given)."""
+        if self.physical_damping_rot_Nms_per_rad is None:
+            return 1e-2 * self.physical_damping_Ns_per_m
+        return self.physical_damping_rot_Nms_per_rad
 
 
 class HapticDevice(ABC):
@@ -131,7 +139,7 @@ class SimulatedDevice(HapticDevice):
         """Integrate the handle for one tick under the operator's hand and the displayed wrench."""
         b = self._specs.physical_damping_Ns_per_m
         d = 2 if self.ndof == 3 else 3
-        damping = np.concatenate([np.full(d, b), np.full(self.ndof - d, b * 1e-2)])
+        damping = np.concatenate([np.full(d, b), np.full(self.ndof - d, self._specs.rotational_damping_Nms_per_rad)])
         f = np.asarray(operator_wrench, dtype=float) + self._displayed
         # semi-implicit: damping implicit for unconditional stability
         self._v = (self._v + dt * f / self._M) / (1.0 + dt * damping / self._M)

@@ -89,13 +89,13 @@ class HapticLoop:
                 f"or B = {coupling.B_lin:g} > {specs.max_damping_Ns_per_m:g} N·s/m"
             )
         # the coupling's passivity was checked against the damping it was told the handle has;
-        # the handle must really have at least that much (the simulated one: b, and b·1e-2 in rotation)
-        b_dev = specs.physical_damping_Ns_per_m
-        if coupling.device_damping > b_dev * (1 + 1e-12) or coupling.device_damping_rot > 1e-2 * b_dev * (1 + 1e-12):
+        # the handle must really have at least that much
+        b_dev, b_rot = specs.physical_damping_Ns_per_m, specs.rotational_damping_Nms_per_rad
+        if coupling.device_damping > b_dev * (1 + 1e-12) or coupling.device_damping_rot > b_rot * (1 + 1e-12):
             raise InputError(
                 f"the coupling was checked for passivity with device damping b = {coupling.device_damping:g} N·s/m "
                 f"(rotation {coupling.device_damping_rot:g}), but the device has {b_dev:g} N·s/m "
-                f"(rotation {1e-2 * b_dev:g}): expected at most the device's own damping"
+                f"(rotation {b_rot:g}): expected at most the device's own damping"
             )
         self.sim = sim
         self.device = device

@@ -159,6 +159,85 @@ def pose_coordinates(pose: Pose, R0: FloatArray) -> FloatArray:
     return np.array([pose.p_world[0], pose.p_world[1], pose.angle_rad])
 
 
+@dataclass(frozen=True)
+class HapticRig:
+    """The simulated load's hardware: device, virtual coupling, loop, and the operator's gains."""
+
+    loop: HapticLoop
+    K: FloatArray  # coupling stiffness per coordinate
+    kp: FloatArray  # operator PD on the handle, per coordinate
+    kd: FloatArray
+    damping: FloatArray  # the handle's own damping, per coordinate (the operator compensates it)
+
+    def operator_wrench(self, w: FloatArray, device: SimulatedDevice) -> FloatArray:
+        """The operator's hand on the handle so that the coupling transmits ``w`` to the part.
+
+        Feedforward ``w`` plus the handle's damping at the part's speed, and a PD that holds the
+        handle ``w / K`` ahead of the part.
+        """
+        x_w, v_w = self.loop.workpiece_coordinates()
+        return (
+            w
+            + self.damping * v_w
+            + self.kp * (x_w + w / self.K - device.position())
+            + self.kd * (v_w - device.velocity())
+        )
+
+
+def haptic_rig(fixture: Fixture, sim: Simulator, x0: FloatArray, F_max: float, T_max: float) -> HapticRig:
+    """Device, coupling and operator gains scaled to the part (see the comments for each choice)."""
+    ndof = fixture.ndof
+    # The coupling is scaled to the part: 1000 N/m per kg and 4800 N·m/rad per kg·m² of its
+    # largest principal inertia (2000 N/m and 40 N·m/rad for the 2 kg default box), so the
+    # part-on-coupling frequency is about 32 rad/s in translation and 69 rad/s in rotation for
+    # every part. Fixed gains made a 22 g plate's sampled spring unstable (ω·T > 2: it rocked
+    # between its base locators for ever) and a 30 kg box's coupling need a lead beyond the
+    # workspace. The simulated device gets the damping that keeps the coupling passive
+    # (b > K T/2 + B with a 1.5 margin; at least 8 N·s/m).
+    #
+    # The rig is the same in every coordinate once divided by the handle's inertia: the handle's
+    # rotational inertia, its own damping and the coupling's damping are the translational ones
+    # scaled by K_rot/K_lin. The push then reaches the part as one wrench, every component with the
+    # same time course. With a fixed 2e-4 kg·m² handle and 1 % of b in rotation the moment arrived
+    # about ten times faster than the force: a tall box got the counter-moment of a sideways push
+    # before the push itself and tipped off a base locator as every push began.
+    wp = fixture.workpiece
+    I_max = float(np.max(np.linalg.eigvalsh(np.atleast_2d(wp.inertia_body))))
+    K_lin, K_rot = 1000.0 * wp.mass_kg, 4800.0 * I_max
+    ratio = K_rot / K_lin  # [m²]: rotation's share of each translational quantity
+    B_lin = 1e-3 * K_lin
+    B_rot = B_lin * ratio
+    b = max(8.0, 1.5 * (K_lin * sim.dt / 2 + B_lin))
+    b_rot = b * ratio  # passive too: b_rot ≥ 1.5 (K_rot T/2 + B_rot)
+    m_dev = 0.2
+    i_dev = m_dev * ratio
+    # the device can display a little more than the hand may push (the coupling's transients)
+    specs = DeviceSpecs(
+        max_force_N=1.5 * F_max,
+        max_torque_Nm=1.5 * T_max,
+        max_stiffness_N_per_m=max(5000.0, 2.0 * K_lin),
+        max_damping_Ns_per_m=max(50.0, 2.0 * B_lin),
+        workspace_radius_m=0.5,
+        physical_damping_Ns_per_m=b,
+        physical_damping_rot_Nms_per_rad=b_rot,
+    )
+    dev = SimulatedDevice(ndof, mass_kg=m_dev, inertia_kgm2=i_dev, specs=specs, x0=x0)
+    coupling = VirtualCoupling(K_lin, B_lin, K_rot, B_rot, sim.dt, device_damping=b, device_damping_rot=b_rot)
+    loop = HapticLoop(sim, dev, coupling, push_limits=(F_max, T_max))
+    d = fixture.dimension
+    K = np.concatenate([np.full(d, coupling.K_lin), np.full(ndof - d, coupling.K_rot)])
+    # The operator (a person's arm, or a robot's force loop) holds the handle w/K ahead of the
+    # part with a stiff PD: natural frequency 120 rad/s (about 20 Hz, a robot force loop's
+    # bandwidth), damping ratio 0.9, gains scaled by the handle's mass and inertia. At 45 rad/s the
+    # lag of the transmitted push let 4 of 12 generated 3-2-1 boxes tip off a base locator when
+    # the push changed (10 of 12 verified at 120).
+    w_op = 120.0
+    kp = np.concatenate([np.full(d, m_dev * w_op**2), np.full(ndof - d, i_dev * w_op**2)])
+    kd = np.concatenate([np.full(d, 2 * 0.9 * w_op * m_dev), np.full(ndof - d, 2 * 0.9 * w_op * i_dev)])
+    damping = np.concatenate([np.full(d, b), np.full(ndof - d, b_rot)])
+    return HapticRig(loop, K, kp, kd, damping)
+
+
 def verify(
     fixture: Fixture,
     start_state: frozenset[str],
@@ -185,51 +264,15 @@ def verify(
     x0 = pose_coordinates(fixture.start, R0)
     executor = Executor(fixture, start_state, steps, settings, replan=replan, noise=noise, tick_s=sim.dt)
     F_max, T_max = executor.F_max, executor.T_max
-    # The coupling is scaled to the part: 1000 N/m per kg and 4800 N·m/rad per kg·m² of its
-    # largest principal inertia (2000 N/m and 40 N·m/rad for the 2 kg default box), so the
-    # part-on-coupling frequency is about 32 rad/s in translation and 69 rad/s in rotation for
-    # every part. Fixed gains made a 22 g plate's sampled spring unstable (ω·T > 2: it rocked
-    # between its base locators for ever) and a 30 kg box's coupling need a lead beyond the
-    # workspace. The simulated device gets the damping that keeps the coupling passive
-    # (b > K T/2 + |B| with a 1.5 margin; at least 8 N·s/m, rotation 1 % of it).
-    wp = fixture.workpiece
-    I_max = float(np.max(np.linalg.eigvalsh(np.atleast_2d(wp.inertia_body))))
-    K_lin, K_rot = 1000.0 * wp.mass_kg, 4800.0 * I_max
-    B_lin, B_rot = 1e-3 * K_lin, 5e-4 * K_rot
-    b = max(8.0, 1.5 * (K_lin * sim.dt / 2 + B_lin), 150.0 * (K_rot * sim.dt / 2 + B_rot))
-    # the device can display a little more than the hand may push (the coupling's transients)
-    specs = DeviceSpecs(
-        max_force_N=1.5 * F_max,
-        max_torque_Nm=1.5 * T_max,
-        max_stiffness_N_per_m=max(5000.0, 2.0 * K_lin),
-        max_damping_Ns_per_m=max(50.0, 2.0 * B_lin),
-        workspace_radius_m=0.5,
-        physical_damping_Ns_per_m=b,
-    )
-    dev = SimulatedDevice(ndof, mass_kg=0.2, inertia_kgm2=2e-4, specs=specs, x0=x0)
-    coupling = VirtualCoupling(K_lin, B_lin, K_rot, B_rot, sim.dt, device_damping=b, device_damping_rot=b * 1e-2)
-    loop = HapticLoop(sim, dev, coupling, push_limits=(F_max, T_max))
+    rig = haptic_rig(fixture, sim, x0, F_max, T_max)
+    loop = rig.loop
     d = fixture.dimension
-    K = np.concatenate([np.full(d, coupling.K_lin), np.full(ndof - d, coupling.K_rot)])
-    # operator PD gains per coordinate, scaled by the handle's mass and inertia so both have the
-    # same natural frequency and damping ratio at the 1 kHz tick
-    # The operator (a person's arm, or a robot's force loop) holds the handle w/K ahead of the
-    # part with a stiff PD: natural frequency 120 rad/s (about 20 Hz, a robot force loop's
-    # bandwidth), damping ratio 0.9. At 45 rad/s the lag of the transmitted push let 4 of 12
-    # generated 3-2-1 boxes tip off a base locator when the push changed (10 of 12 verified at 120).
-    m_dev, i_dev = 0.2, 2e-4
-    w_op = 120.0
-    kp = np.concatenate([np.full(d, m_dev * w_op**2), np.full(ndof - d, i_dev * w_op**2)])
-    kd = np.concatenate([np.full(d, 2 * 0.9 * w_op * m_dev), np.full(ndof - d, 2 * 0.9 * w_op * i_dev)])
-    damping = np.concatenate([np.full(d, b), np.full(ndof - d, b * 1e-2)])
     threshold = executor.threshold_N
     contact_gap_m = executor.settings.contact_gap_m
 
     def operator(tt: float, device: SimulatedDevice) -> FloatArray:
         pressed = frozenset(sim.in_contact(threshold, contact_gap_m))
-        w = executor.command(tt, sim.pose, sim.twist, pressed)
-        x_w, v_w = loop.workpiece_coordinates()
-        return w + damping * v_w + kp * (x_w + w / K - device.position()) + kd * (v_w - device.velocity())
+        return rig.operator_wrench(executor.command(tt, sim.pose, sim.twist, pressed), device)
 
     if time_limit_s is None:
         # generous: every transition at the slowest speed the executor keeps, plus settling
