@@ -488,8 +488,8 @@ def search(
     at_p = None if at is None else _numbers(at, "--at", fixture.dimension, limits.COORDINATE)
     if objective not in ("margin", "effort"):
         raise InputError(f"--objective must be margin or effort, got {objective!r}")
-    if min_margin is not None and not (min_margin >= 0.0 and math.isfinite(min_margin)):
-        raise InputError(f"--min-margin must be a non-negative number of newtons, got {min_margin}")
+    if min_margin is not None and not (0.0 <= min_margin <= limits.FORCE_MAX_N):
+        raise InputError(f"--min-margin is {min_margin:g} (expected a force [N] in [0, {limits.FORCE_MAX_N:g}])")
     result = search_wrench(
         fixture, m, _names(contacts), pose=_pose(fixture, pose), at=at_p, objective=objective, min_margin_N=min_margin
     )
@@ -789,7 +789,10 @@ def solve(
     margin: Annotated[
         float | None,
         typer.Option(
-            "--margin", help="Least normal force on the kept contacts [N] (default: the part's weight).", min=0.0
+            "--margin",
+            help="Least normal force on the kept contacts [N] (default: the part's weight).",
+            min=0.0,
+            max=limits.FORCE_MAX_N,
         ),
     ] = None,
     friction_margin: Annotated[

@@ -376,3 +376,10 @@ def test_scene_names_print_as_written(capsys, tmp_path: Path, name: str) -> None
         assert code == 2 and err == (
             f"{path}: scene.name: expected a printable name of at most 200 characters (no newlines or control codes)\n"
         )
+
+
+def test_margins_are_range_checked(capsys) -> None:
+    code, _, err = run(capsys, "search", "--motion", "0.1,0,0,0,0,0", "--min-margin", "1e300")
+    assert code == 2 and err == "fixplan: --min-margin is 1e+300 (expected a force [N] in [0, 1e+06])\n"
+    code, _, err = run(capsys, "solve", "--margin", "1e300", "--no-verify")
+    assert code == 2 and "--margin" in err and "1000000" in err and len(err.splitlines()) == 1

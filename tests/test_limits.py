@@ -144,6 +144,7 @@ def test_classify_at_the_edges_is_finite(tmp_path: Path, capsys, old: str, new: 
     assert code in (0, 2), err
     assert "internal error" not in err and "Traceback" not in err
     if code == 0:
+        assert err == ""  # no numpy RuntimeWarning lines, no warnings: every locator touches
         result = json.loads(out, parse_constant=lambda c: (_ for _ in ()).throw(ValueError(c)))["results"][0]
         assert result["mode"] in ("held", "jammed", "separates", "slides", "pivots", "rolls", "indeterminate")
         if wrench == "1e6,0,0,0,0,0":  # 10⁶ N sideways beats any friction on the base: the box moves
