@@ -1000,7 +1000,9 @@ def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | No
 @app.command()
 def robust(
     file: FileArg = None,
-    samples: Annotated[int, typer.Option("--samples", help="Perturbed worlds to verify the plan on.", min=1)] = 20,
+    samples: Annotated[
+        int, typer.Option("--samples", help="Perturbed worlds to verify the plan on (at most 10000).", min=1, max=10000)
+    ] = 20,
     seed: SeedOpt = 0,
     mu_spread: MuSpreadOpt = 0.2,
     pose_sigma: PoseSigmaOpt = "1e-3,1",
@@ -1175,7 +1177,9 @@ def fclib(
 @app.command()
 def generate(
     family: Annotated[str | None, typer.Argument(help="Fixture family (see --list).", show_default=False)] = None,
-    count: Annotated[int, typer.Option("--count", help="How many fixtures (index 0 .. N-1).", min=1)] = 10,
+    count: Annotated[
+        int, typer.Option("--count", help="How many fixtures (index 0 .. N-1), at most 10000.", min=1, max=10000)
+    ] = 10,
     seed: Annotated[
         int, typer.Option("--seed", help="Seed ≥ 0; fixture k of a seed is the same whatever --count.", min=0)
     ] = 0,
