@@ -227,6 +227,7 @@ class Executor:
         self._arrived = False  # the current target touches: holding until the state is confirmed
         self._recover_until: float | None = None  # pressing a lost contact back until then
         self._recover_why = ""
+        self._pressed_back_for = -1  # the transition in which a failed re-plan last pressed the part back
         self._delay_ticks = int(round(self.noise.latency_s / tick_s))
         self._history: deque[tuple[Pose, FloatArray, State]] = deque(maxlen=self._delay_ticks + 1)
         from fixplan.jamming.search import hand_limits
@@ -351,6 +352,22 @@ class Executor:
         self.log.counts["replans"] += 1
         result = self.replan(pose, state)
         if isinstance(result, str):
+            current = self.states[self.index]
+            if self._pressed_back_for != self.index and state != current and self.index < len(self.steps):
+                # no plan from where the part ended up: press it back into the state it left (and
+                # what it touches now) for longer, once per transition, then look again
+                self._pressed_back_for = self.index
+                press_s = 3.0 * self.settings.recover_s
+                self._recover_until = t + press_s
+                self._recover_why = f"{why}; re-planning from {_fmt(state)} failed: {result}"
+                self.wrench = self.hold_wrench(pose, sorted(current | state))
+                self._target = self._with_noise(self.wrench)
+                self.log.event(
+                    t,
+                    "guard",
+                    f"re-planning from {_fmt(state)} failed: pressing the part back into {_fmt(current | state)} for {press_s:g} s",
+                )
+                return
             self._fail(t, f"{why}; re-planning from {_fmt(state)} failed: {result}", "replan failed")
             return
         self._set_plan(state, result)
@@ -430,7 +447,7 @@ class Executor:
                 # pressing did not restore the state: re-plan from what is observed
                 self._recover_until = None
                 P = self._observed if self._observed is not None else frozenset()
-                self.log.event(t, "guard", f"{self._recover_why}; not restored after {self.settings.recover_s:g} s")
+                self.log.event(t, "guard", f"{self._recover_why}; not restored by pressing")
                 self._replan(t, pose, P, self._recover_why, "lost contact")
                 if self.done:
                     return self._applied
@@ -644,6 +661,10 @@ class Executor:
                 self._reject(t, why)
             return
         motion = origin_motion(a_com, com, pose.p_world)
+        # friction opposes the slip the part has (plus what this push adds before the next
+        # solve), not the acceleration asked for: a part turning while it slides would otherwise
+        # get a push computed for friction pointing elsewhere, and leave a kept contact
+        slip = origin_motion(twist + a_com / s.control_rate_hz, com, pose.p_world)
         try:
             res = search_wrench(
                 self.fixture,
@@ -654,6 +675,7 @@ class Executor:
                 min_margin_N=s.margin_N,
                 friction_margin=s.friction_margin * boost,
                 max_accel_factor=s.max_accel_factor,
+                slip_twist=slip,
             )
         except InputError as exc:
             self._reject(t, str(exc))
