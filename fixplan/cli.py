@@ -1105,6 +1105,11 @@ def view(
         typer.echo(f"wrote {target} ({size / 1e6:.1f} MB): {fixture.name}, {what}")
 
 
+def _count(n: int, noun: str) -> str:
+    """``1 contact``, ``3 contacts``."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
 @app.command()
 def fclib(
     file: Annotated[Path, typer.Argument(help="An FCLib HDF5 problem (local or global, 3D or 2D).")],
@@ -1160,13 +1165,14 @@ def fclib(
     else:
         verdict = "converged" if result.converged else "NOT converged"
         typer.echo(
-            f"{file}: {result.kind} problem, {result.n_contacts} contacts; {result.solver}: error {result.error:.3g} "
-            f"after {result.iterations} iterations in {result.time_s * 1e3:.1f} ms ({verdict}, tol {tol:g})"
+            f"{file}: {result.kind} problem, {_count(result.n_contacts, 'contact')}; {result.solver}: error "
+            f"{result.error:.3g} after {_count(result.iterations, 'iteration')} in {result.time_s * 1e3:.1f} ms "
+            f"({verdict}, tol {tol:g})"
         )
         for stage in result.stages:
             typer.echo(
-                f"  {stage['method']}: {stage['start_error']:.3g} -> {stage['error']:.3g} in {stage['iterations']} "
-                f"iterations, {stage['time_s'] * 1e3:.1f} ms ({stage['status']})"
+                f"  {stage['method']}: {stage['start_error']:.3g} -> {stage['error']:.3g} in "
+                f"{_count(stage['iterations'], 'iteration')}, {stage['time_s'] * 1e3:.1f} ms ({stage['status']})"
             )
         if not result.converged:
             typer.echo(f"  best answer kept: {result.extras.get('reason', '')}")
