@@ -216,13 +216,14 @@ def _plane_gap(feature, q_body, locator):
 
 
 def test_clearance_features_are_lower_bounds_that_keep_a_turned_part_clear(default):
-    """Face planes of a convex part are lower bounds of the true gap; the clearance feature must
-    also *separate* a locator that is clear at the start. On 300 seeded poses of the default box
-    (turned up to 30° about z, shifted up to 3 cm) every locator with a positive true gap gets a
-    feature whose plane gap is positive and at most the true gap; the goal's face alone has a
-    negative plane gap for some of them (a side locator beside the end face of a turned box), which
-    let a planned path run the part's corner into the locator before this choice was made."""
-    from fixplan.planner.fine import clearance_feature
+    """Face planes of a convex part are lower bounds of the true gap; the planes kept for a clear
+    locator must also *separate* it at the start. On 300 seeded poses of the default box (turned up
+    to 30° about z, shifted up to 3 cm) every locator with a positive true gap gets planes whose
+    larger gap is positive and at most the true gap, and their smooth maximum lies within
+    s log 2 below that. The goal's face alone has a negative plane gap for some of them (a side
+    locator beside the end face of a turned box), which let a planned path run the part's corner
+    into the locator."""
+    from fixplan.planner.fine import SMOOTH_MAX_M, clearance_features, smooth_max
 
     rng = np.random.default_rng(11)
     goal = default.goal
@@ -238,6 +239,11 @@ def test_clearance_features_are_lower_bounds_that_keep_a_turned_part_clear(defau
             q = pose.point_body_from_world(loc.p_world)
             goal_face = feature_at(default, loc, goal)
             negative_goal_face += _plane_gap(goal_face, q, loc) < 0
-            chosen = clearance_feature(default, loc, pose, goal_face, min(1e-3, true_gap))
-            assert 0.0 < _plane_gap(chosen, q, loc) <= true_gap + 1e-12, (yaw, shift, loc.name)
-    assert negative_goal_face > 0  # the case the choice exists for does occur
+            feats = clearance_features(default, loc, pose, goal_face)
+            assert feats[0] is goal_face and len(feats) <= 2
+            gaps_m = [_plane_gap(f, q, loc) for f in feats]
+            assert 0.0 < max(gaps_m) <= true_gap + 1e-12, (yaw, shift, loc.name)
+            if len(feats) == 2:
+                sm = float(smooth_max(np, gaps_m[0], gaps_m[1]))
+                assert max(gaps_m) - SMOOTH_MAX_M * np.log(2) - 1e-15 <= sm <= max(gaps_m) + 1e-15
+    assert negative_goal_face > 0  # the case the second plane exists for does occur

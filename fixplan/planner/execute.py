@@ -317,6 +317,10 @@ class Executor:
                 self.log.counts["recovered"] += 1
                 self.log.event(t, "recovered", f"back in {_fmt(P)}")
             return
+        if self._recover_until is not None and t < self._recover_until:
+            # pressing the part back: only the state it left (or a later planned one) ends the
+            # press early; anything else in between is the part settling under the press
+            return
         # a locator can only be lost once it has been seen in contact (at the start the push that
         # presses the part into its touching locators is still building up in the coupling)
         lost = sorted((current - P) & self._seen)

@@ -43,7 +43,10 @@ locator when the fixture is not full and the goal is undefined: the nearest one 
 - the lateral surface of a cylinder ``g = ‖q_xy‖ − r − ρ``; a sphere or disk ``g = ‖q‖ − r − ρ``.
 
 For a convex shape each of these is a lower bound of the true signed distance (the body lies
-inside the feature's half-space, cylinder or ball), so the clearance constraints are safe, and
+inside the feature's half-space, cylinder or ball), so the clearance constraints are safe — a
+locator whose goal face has a negative plane gap at the start (it lies beside another face) is
+kept clear of a smooth maximum with the face that separates it there
+(:func:`clearance_features`) — and
 it is exact where the closest point lies on the feature; established contacts and the target are
 therefore also kept on their feature (face bounds, edge segment, cylinder length). Every planned
 pose is checked afterwards with the exact :func:`~fixplan.locating.locator_contact` gaps; the
@@ -311,28 +314,39 @@ def _plane_features(fixture: Fixture) -> list[Feature]:
     return []
 
 
-def clearance_feature(fixture: Fixture, locator: Locator, start: Pose, feature: Feature, wanted_m: float) -> Feature:
-    """The feature whose plane keeps ``locator`` clear along a path from ``start``.
+SMOOTH_MAX_M = 1e-4  # length scale of the smooth maximum of two face planes' gaps [m]
+
+
+def clearance_features(fixture: Fixture, locator: Locator, start: Pose, feature: Feature) -> tuple[Feature, ...]:
+    """The face planes that keep ``locator`` clear along a path from ``start``.
 
     A face plane's gap ``n·q − h − ρ`` is a lower bound of the true gap of a convex part, so
-    "plane gap ≥ c" keeps the locator clear — but only if the plane gap at the start is at least
-    ``c``: the goal's face of a locator that starts beside another face (a part turned 18° whose
-    side locator lies past the face's end) has a *negative* plane gap there, and the constraint
-    "no closer than at the start" would then let the part's corner run into the locator. Such a
-    locator is kept clear of the face that separates it best at the start (the largest plane gap).
+    "plane gap ≥ c > 0" keeps the locator clear — if that can hold at the start. The goal's face of
+    a locator that starts beside another face (a part turned 18° whose side locator lies past the
+    face's end) has a *negative* plane gap there, the constraint "no closer than at the start" is
+    then vacuous, and planned paths ran the part's corner into the locator. Such a locator gets a
+    second plane, the face that separates it best at the start, and the clearance is asked of the
+    smooth maximum of the two (:func:`smooth_max`, itself ≤ the larger plane gap ≤ the true gap):
+    the part may still turn the goal's face in front of the locator. Keeping it clear of the second
+    face alone forbade that and left transitions with no path.
     """
     if feature.kind != "plane":
-        return feature
+        return (feature,)
     q = start.point_body_from_world(locator.p_world)
 
     def plane_gap(f: Feature) -> float:
         assert f.normal is not None
         return float(f.normal @ q) - f.offset - locator.radius_m
 
-    if plane_gap(feature) >= wanted_m - 1e-9:
-        return feature
+    if plane_gap(feature) > 0.0:
+        return (feature,)
     best = max(_plane_features(fixture), key=plane_gap, default=feature)
-    return best if plane_gap(best) > plane_gap(feature) else feature
+    return (feature, best) if plane_gap(best) > plane_gap(feature) else (feature,)
+
+
+def smooth_max(ca: Any, a: Any, b: Any, scale_m: float = SMOOTH_MAX_M) -> Any:
+    """``s log(eᵃᐟˢ + eᵇᐟˢ) − s log 2``: smooth, ≤ max(a, b), equal to it where a = b (stable form)."""
+    return ca.fmax(a, b) + scale_m * ca.log1p(ca.exp(-ca.fabs(a - b) / scale_m)) - scale_m * np.log(2.0)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -478,9 +492,12 @@ def plan_transition(
         except Exception:  # noqa: BLE001 - no goal: fall back to the start's features
             goal = None
     features = {n: feature_at(fixture, locs[n], start if (n in est or goal is None) else goal) for n in names}
+    second: dict[str, Feature] = {}  # a second face for locators beside the goal's face (see clearance_features)
     for n in names:
         if n not in est and n != target:
-            features[n] = clearance_feature(fixture, locs[n], start, features[n], min(clearance_m, start_gaps[n]))
+            extra = clearance_features(fixture, locs[n], start, features[n])[1:]
+            if extra:
+                second[n] = extra[0]
 
     # --- scaling and the metric -------------------------------------------------------------
     L = max(wp.shape.bounding_radius, 1e-6)
@@ -521,7 +538,11 @@ def plan_transition(
 
     def gap(k: int, name: str) -> Any:
         if (k, name) not in gaps:
-            gaps[k, name] = features[name].distance(ca, q_of(k, name)) - locs[name].radius_m
+            q = q_of(k, name)
+            dist = features[name].distance(ca, q)
+            if name in second:
+                dist = smooth_max(ca, dist, second[name].distance(ca, q))
+            gaps[k, name] = dist - locs[name].radius_m
         return gaps[k, name]
 
     # constraints are collected and handed to Opti as two vectors (one call each: scalar
