@@ -209,6 +209,12 @@ class Simulator:
         # a new state makes the previous step's impulses meaningless as a warm start
         self._P = np.zeros((len(self.names), 4))
         self._active = np.zeros(len(self.names), dtype=np.bool_)
+        if pose is not None:
+            # gaps at the new pose (until a step measures them): a report before any step is true
+            from fixplan.locating import locator_contact
+
+            wp = self.fixture.workpiece
+            self._gap = np.array([locator_contact(wp, self.pose, loc).gap_m for loc in self.fixture.locators])
 
     @property
     def pose(self) -> Pose:

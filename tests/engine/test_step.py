@@ -74,3 +74,18 @@ def test_compiled_run_records_the_last_step_and_true_solver_figures():
     assert traj.time_s == pytest.approx([0.0, 0.01, 0.015])
     assert sim.last.iterations >= 1 and sim.last.error > 0
     assert sim.time_s == pytest.approx(0.015)
+
+
+def test_contact_report_before_any_step_has_the_exact_gaps():
+    """`simulate --duration 0` printed every gap as 0 (the arrays before a step): a report is true
+    from the start. The default box rests on B1-B3 (gap 0) with S1, S2, E1 open by their start gaps."""
+    import fixplan
+    from fixplan.locating import locator_contact
+    from fixplan.simulator import Simulator
+
+    fx = fixplan.load(fixplan.default_fixture_path())
+    sim = Simulator(fx)
+    exact = {loc.name: locator_contact(fx.workpiece, fx.start, loc).gap_m for loc in fx.locators}
+    reported = {c.name: c.gap_m for c in sim.contacts()}
+    assert reported == pytest.approx(exact, abs=1e-15)
+    assert min(exact[n] for n in ("S1", "S2", "E1")) > 1e-3
