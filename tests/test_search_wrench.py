@@ -230,3 +230,29 @@ def test_the_engine_moves_the_sliding_part_as_the_slip_aware_push_asks():
         else:
             # braked by friction (the slip turns a little toward +y within the tick: 5 %)
             assert acc[label][0] == pytest.approx(-mu * N / m, rel=5e-2)
+
+
+def test_braking_a_sliding_part_is_the_dynamics_with_friction_against_the_slip():
+    """The default box slides along +x at 5 cm/s; brake at 0.5 m/s² (certify=False: the push a
+    braking operator makes is one friction would hold at rest). Along x: m a_x = F_x − μ N, so
+    F_x = μ N − m s 0.5 with s ∈ [1, 1.5] (max_accel_factor): a forward push smaller than friction.
+    One engine tick confirms the deceleration."""
+    from fixplan.simulator import Simulator
+
+    fx = fixplan.load(fixplan.default_fixture_path())
+    m, mu = 2.0, 0.25
+    v = np.array([0.05, 0, 0, 0, 0, 0])
+    res = search_wrench(
+        fx, [-0.5, 0, 0, 0, 0, 0], objective="effort", slip_twist=v, certify=False, max_accel_factor=1.5
+    )
+    assert res.found, res.reason
+    w = _com(fx, "start", res.wrench)
+    N = m * G - w[2]
+    s = -float(res.acceleration[0]) / 0.5
+    assert 1.0 - 1e-6 <= s <= 1.5 + 1e-6
+    assert w[0] == pytest.approx(mu * N - m * s * 0.5, rel=1e-6)
+    assert 0.0 < w[0] < mu * N  # forward, less than friction
+    sim = Simulator(fx)
+    sim.set_state(fx.start, v)
+    sim.step(res.wrench)
+    assert (sim.twist[0] - v[0]) / sim.dt == pytest.approx(-s * 0.5, rel=2e-2)

@@ -97,7 +97,7 @@ def test_verification_trace_balances_forces_at_rest(default_plan):
     tr = v.trace
     assert tr is not None and tr.names == tuple(loc.name for loc in fx.locators)
     assert np.allclose(np.diff(tr.time_s[:-1]), tr.every_s, atol=1e-9)  # every 10 ms, plus the last tick
-    assert 0 < tr.time_s[-1] - tr.time_s[-2] <= tr.every_s
+    assert 0 < tr.time_s[-1] - tr.time_s[-2] <= tr.every_s + 1e-9  # (float times: 0.801 − 0.791 > 0.01)
     assert tr.time_s[-1] == pytest.approx(v.duration_s, abs=1.5e-3)
     weight = fx.workpiece.mass_kg * np.asarray(fx.gravity)
     total = tr.forces_world_N[-1].sum(axis=0) + tr.coupling_wrench[-1, :3] + weight

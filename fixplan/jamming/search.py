@@ -313,6 +313,7 @@ def search_wrench(
     friction_margin: float = 0.0,
     max_accel_factor: float = math.inf,
     slip_twist: ArrayLike | None = None,
+    certify: bool = True,
 ) -> WrenchSearch:
     """The applied wrench that moves the part with acceleration ≥ ``motion``, without jamming.
 
@@ -345,6 +346,11 @@ def search_wrench(
     rest). A kept contact that slips under it at ≥ ``SLIP_REL`` of its speed slides against that
     slip even where ``motion`` alone would keep it sticking. The jamming certificate is unchanged
     (the wrench would also move the part from rest).
+
+    ``certify=False`` drops the not-jamming constraint: for braking a part that slides
+    (``motion`` against its velocity, ``slip_twist`` its velocity) the push that decelerates it as
+    asked is one friction would hold at rest, and that is what is wanted. ``found`` then means the
+    program solved.
     """
     m = np.asarray(motion, dtype=float)
     if m.shape != (fixture.ndof,) or not np.all(np.isfinite(m)):
@@ -381,8 +387,8 @@ def search_wrench(
             False, None, None, None, roles, {}, None, reason, binding or [], (F_max, T_max), margin_target_N=target
         )
 
-    y = _certificate(cs, a_hat, project=True)
-    if y is None or float(y @ cs.mass_matrix @ a_hat) <= 0.0:
+    y = _certificate(cs, a_hat, project=True) if certify else None
+    if certify and (y is None or float(y @ cs.mass_matrix @ a_hat) <= 0.0):
         return not_found(
             "every push that produces this motion can also be balanced by the contact forces (M a is a contact"
             " reaction): it jams"
@@ -421,7 +427,7 @@ def search_wrench(
     x, tau = sol.x, float(-sol.value)
     # a better certificate: the classifier's own dual direction for the wrench found (the
     # optimum above stays feasible with it, so τ cannot drop)
-    y2 = _certificate(cs, x[:n] + w_g, project=False)
+    y2 = _certificate(cs, x[:n] + w_g, project=False) if certify else None
     if y2 is not None:
         prog2, meta2 = _build(**build, cert=y2, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
         sol2 = ClarabelProgram(prog2).solve(prog2.b)
@@ -461,8 +467,10 @@ def search_wrench(
         check = Classifier(kept_cs, w_g, tolerances=fixture.tolerances).classify(w_com, w_user)
     confirmed, why_not = _confirm(cs, check, a_hat, roles)
     met = None if target is None else bool(tau_best >= target * (1 - _TARGET_REL))
-    if bal.balanced:
+    if bal.balanced and certify:
         reason = f"the wrench found is statically balanced ({bal.mode}): it would not move the part"
+    elif not certify:
+        reason = f"decelerates the sliding part as asked with every kept contact pressed by ≥ {floor_sig(tau)} N{notes}"
     else:
         reason = f"moves as asked with every kept contact pressed by ≥ {floor_sig(tau)} N{notes}"
         if met is False and tau_best is not None and target is not None:
@@ -470,7 +478,7 @@ def search_wrench(
         if not confirmed:
             reason += f" (not confirmed by the classifier: {why_not})"
     return WrenchSearch(
-        not bal.balanced,
+        (not bal.balanced) or not certify,
         w_user,
         tau,
         s * a_hat,
@@ -597,7 +605,7 @@ def _build(
     T_max: float,
     effort_margin_N: float | None = None,
     *,
-    cert: FloatArray,
+    cert: FloatArray | None,
     jam: float,
     s_max: float = math.inf,
 ) -> tuple[ConeProgram, dict]:
@@ -707,14 +715,15 @@ def _build(
         rows_A.append(np.vstack([row, -row]))
         rows_b.append(np.array([T_max, T_max]))
         cones.append(("nonneg", 2))
-    # not jamming: (ŷᵀ w_e / jam, C w_e) ∈ SOC, C = L⁻¹ (‖C x‖ = ‖x‖_{M⁻¹})
-    C = np.linalg.inv(np.linalg.cholesky(cs.mass_matrix))
-    A_j = np.zeros((n + 1, nx))
-    A_j[0, i_w : i_w + n] = -cert / jam
-    A_j[1:, i_w : i_w + n] = -C
-    rows_A.append(A_j)
-    rows_b.append(np.concatenate([[float(cert @ w_g) / jam], C @ w_g]))
-    cones.append(("soc", n + 1))
+    if cert is not None:
+        # not jamming: (ŷᵀ w_e / jam, C w_e) ∈ SOC, C = L⁻¹ (‖C x‖ = ‖x‖_{M⁻¹})
+        C = np.linalg.inv(np.linalg.cholesky(cs.mass_matrix))
+        A_j = np.zeros((n + 1, nx))
+        A_j[0, i_w : i_w + n] = -cert / jam
+        A_j[1:, i_w : i_w + n] = -C
+        rows_A.append(A_j)
+        rows_b.append(np.concatenate([[float(cert @ w_g) / jam], C @ w_g]))
+        cones.append(("soc", n + 1))
     c_vec = np.zeros(nx)
     if effort:
         # e ≥ ‖(F, T_c / L)‖ with the moment about the centre of mass (w is about the com)

@@ -648,14 +648,16 @@ class Executor:
             if step.kind == "slide" and step.established
             else 0.0
         )
+        wp = self.fixture.workpiece
+        com = pose.point_world_from_body(wp.com_body)
+        if brake > 0.0 and self._brake(t, pose, twist, nu_hat * a_cmd, com, step):
+            return
         if step.kind != "roll" or not step.established:
             a_cmd = max(a_cmd, floor)  # sliding and free motion: never command a jamming push
         elif abs(a_cmd) < floor:
             a_cmd = math.copysign(floor, a_cmd if a_cmd != 0 else 1.0)
         a_cmd *= boost if a_cmd > 0 else 1.0
         a_com = nu_hat * a_cmd
-        wp = self.fixture.workpiece
-        com = pose.point_world_from_body(wp.com_body)
         self.log.counts["solves"] += 1
         if not step.established:
             ok, w, why = _free_wrench(self.fixture, pose, a_com, M)
@@ -691,6 +693,39 @@ class Executor:
             self._accept(w)
         else:
             self._reject(t, res.reason)
+
+    def _brake(self, t: float, pose: Pose, twist: FloatArray, a_com: FloatArray, com: FloatArray, step: Step) -> bool:
+        """Slow a sliding part down with a push that balances what sliding friction does to it.
+
+        Friction keeps acting while the part slides, with its moment about the centre of mass (a
+        tall part sliding on its base is tipped by it); the static hold push has no such moment,
+        and blending toward it let tall boxes tip off a base locator as they braked. The push is
+        the dynamics of the deceleration ``a_com`` with friction against the slip, without the
+        not-jamming constraint (held at rest is what braking aims at). False when none is found.
+        """
+        from fixplan.jamming.search import search_wrench
+
+        s = self.settings
+        self.log.counts["solves"] += 1
+        try:
+            res = search_wrench(
+                self.fixture,
+                origin_motion(a_com, com, pose.p_world),
+                list(step.established),
+                pose=pose,
+                objective="effort",
+                min_margin_N=s.margin_N,
+                friction_margin=0.0,
+                max_accel_factor=s.max_accel_factor,
+                slip_twist=origin_motion(np.asarray(twist, dtype=float), com, pose.p_world),
+                certify=False,
+            )
+        except InputError:
+            return False
+        if not (res.found and res.wrench is not None):
+            return False
+        self._accept(np.asarray(res.wrench, dtype=float))
+        return True
 
     def _accept(self, w: FloatArray) -> None:
         self.wrench = np.asarray(w, dtype=float).copy()
