@@ -62,7 +62,6 @@ import scipy.sparse.linalg as spla
 from fixplan.engine.budget import Budget
 from fixplan.engine.local import project_cone_into
 from fixplan.engine.nsgs import (
-    DEFAULT_STALL_RATIO,
     DEFAULT_TOL,
     STATUS_CONVERGED,
     STATUS_MAX_ITER,
@@ -77,6 +76,7 @@ from fixplan.engine.nsgs import (
     _spmv,
     error_kernel,
     kernel_arrays,
+    stalled,
 )
 
 DEFAULT_MAX_STEPS = 100
@@ -343,7 +343,7 @@ def run_newton(
         if lam > LAMBDA_MAX:
             run.status, run.reason = STATUS_STALLED, f"no descent even with λ = {lam:.0e}"
             break
-        if stall_window and len(marks) > stall_window and run.best_err > DEFAULT_STALL_RATIO * marks[-1 - stall_window]:
+        if stalled(marks, run.best_err, stall_window):
             run.status = STATUS_STALLED
             break
     return run
@@ -479,7 +479,7 @@ def run_prox(
         if inner.status == STATUS_TIME_LIMIT:
             run.status = STATUS_TIME_LIMIT
             break
-        if stall_window and len(marks) > stall_window and run.best_err > DEFAULT_STALL_RATIO * marks[-1 - stall_window]:
+        if stalled(marks, run.best_err, stall_window):
             run.status = STATUS_STALLED
             break
     return run

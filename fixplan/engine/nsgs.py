@@ -74,6 +74,13 @@ _STATUS_TEXT = {
     STATUS_STALLED: "stalled: the residual stopped improving",
 }
 DEFAULT_STALL_RATIO = 0.9
+
+
+def stalled(marks: list[float], error: float, window: int | None, ratio: float = DEFAULT_STALL_RATIO) -> bool:
+    """Stagnation: ``error`` has not dropped below ``ratio`` × the mark ``window`` rounds back."""
+    return window is not None and 0 < window < len(marks) and error > ratio * marks[-1 - window]
+
+
 """A run stalls when its best residual did not drop below this fraction of the best residual
 ``window`` iterations earlier (a 10 % gain per window)."""
 

@@ -71,7 +71,6 @@ import scipy.sparse as sp
 from fixplan.engine.auto import solve_auto as solve_auto  # the registry's "auto" (re-exported)
 from fixplan.engine.budget import Budget
 from fixplan.engine.nsgs import (
-    DEFAULT_STALL_RATIO,
     DEFAULT_TOL,
     STATUS_CONVERGED,
     STATUS_MAX_ITER,
@@ -86,6 +85,7 @@ from fixplan.engine.nsgs import (
     error_kernel,
     kernel_arrays,
     run_nsgs,
+    stalled,
 )
 from fixplan.errors import SolverError
 
@@ -306,7 +306,7 @@ def solve_socp(
             if err <= tol:
                 status = STATUS_CONVERGED
         marks.append(err)
-        if stall_window and len(marks) > stall_window and err > DEFAULT_STALL_RATIO * marks[-1 - stall_window]:
+        if stalled(marks, err, stall_window):
             status = STATUS_STALLED
             break
     if status == STATUS_MAX_ITER and rounds < max_iter:

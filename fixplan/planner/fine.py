@@ -334,9 +334,8 @@ def clearance_features(fixture: Fixture, locator: Locator, start: Pose, feature:
         return (feature,)
     q = start.point_body_from_world(locator.p_world)
 
-    def plane_gap(f: Feature) -> float:
-        assert f.normal is not None
-        return float(f.normal @ q) - f.offset - locator.radius_m
+    def plane_gap(f: Feature) -> float:  # every feature here is a plane: its normal is set
+        return float(np.asarray(f.normal, dtype=float) @ q) - f.offset - locator.radius_m
 
     if plane_gap(feature) > 0.0:
         return (feature,)
