@@ -36,8 +36,13 @@ def tangent_basis(normal: ArrayLike) -> FloatArray:
     a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     t1 = a - (a @ n) * n
     t1 /= np.linalg.norm(t1)
-    t2 = np.cross(n, t1)
+    t2 = _skew(n) @ t1  # n × t1 (np.cross costs ~50 µs a call here: it is on the search's hot path)
     return np.stack([t1, t2])
+
+
+def _skew(v: FloatArray) -> FloatArray:
+    """The matrix ``[v]×`` with ``[v]× x = v × x``."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 @dataclass(frozen=True)
@@ -82,15 +87,13 @@ class Contact:
         if self.dimension == 2:
             t = self.tangents_world[0]
             return np.array([[n[0], n[1], cross2(r, n)], [t[0], t[1], cross2(r, t)]])
-        t1, t2 = self.tangents_world
-        rows = [
-            np.concatenate([n, np.cross(r, n)]),
-            np.concatenate([t1, np.cross(r, t1)]),
-            np.concatenate([t2, np.cross(r, t2)]),
-        ]
+        frame = np.vstack([n, self.tangents_world])  # rows n, t1, t2
+        J = np.zeros((self.size, 6))
+        J[:3, :3] = frame
+        J[:3, 3:] = frame @ _skew(r).T  # row x: (r × x)ᵀ = xᵀ [r]×ᵀ
         if self.soft:
-            rows.append(np.concatenate([np.zeros(3), n]))
-        return np.array(rows)
+            J[3, 3:] = n
+        return J
 
 
 @dataclass(frozen=True)
