@@ -247,3 +247,34 @@ def test_clearance_features_are_lower_bounds_that_keep_a_turned_part_clear(defau
                 sm = float(smooth_max(np, gaps_m[0], gaps_m[1]))
                 assert max(gaps_m) - SMOOTH_MAX_M * np.log(2) - 1e-15 <= sm <= max(gaps_m) + 1e-15
     assert negative_goal_face > 0  # the case the second plane exists for does occur
+
+
+def test_close_side_locators_need_the_smaller_clearance():
+    """Two side locators 11 mm apart: touching one with the other kept 1 mm away turns the part
+    by atan(1/11) ≈ 5.2°, and from there no path touches the end locator keeping that gap; the
+    planner's second clearance (0.1 mm) finds one (generated box-321 seed 101, fixture 25)."""
+    import math
+
+    from fixplan.generate import generate_one
+    from fixplan.planner.solve import CLEARANCES_M, Planner
+    from fixplan.fixture import loads
+
+    g = generate_one("box-321", 101, 25)
+    fx = loads(g.toml_text, source=g.name)
+    base = ["B1", "B2", "B3"]
+    first = plan_transition(fx, fx.start, base, "S2", knots=10)
+    assert first.success
+    end = first.poses[-1]
+    gap_s1 = locator_contact(fx.workpiece, end, fx.locator("S1")).gap_m
+    assert gap_s1 == pytest.approx(CLEARANCES_M[0], abs=1e-6)  # the clearance is what stops the turn
+    spacing = float(np.linalg.norm(fx.locator("S1").p_world[:2] - fx.locator("S2").p_world[:2]))
+    yaw = math.degrees(math.atan2(end.R_world_body[1, 0], end.R_world_body[0, 0]))
+    assert abs(yaw) == pytest.approx(math.degrees(math.atan(CLEARANCES_M[0] / spacing)), abs=0.3)
+    strict = plan_transition(fx, end, [*base, "S2"], "E1", knots=10, clearance_m=CLEARANCES_M[0])
+    assert not strict.success and strict.ipopt_status == "Infeasible_Problem_Detected"
+    relaxed = plan_transition(fx, end, [*base, "S2"], "E1", knots=10, clearance_m=CLEARANCES_M[1])
+    assert relaxed.success
+    others = [locator_contact(fx.workpiece, p, fx.locator("S1")).gap_m for p in relaxed.poses[1:]]
+    assert min(others) >= CLEARANCES_M[1] - 1e-7
+    plan = Planner(fx).plan_from(fx.start, frozenset(base))
+    assert plan.found, plan.reason

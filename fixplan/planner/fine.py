@@ -96,6 +96,7 @@ if TYPE_CHECKING:
 FloatArray = NDArray[np.float64]
 
 KINDS = ("roll", "slide")
+IPOPT_PATH_FOUND = ("Solve_Succeeded", "Solved_To_Acceptable_Level")  # IPOPT statuses that give a path
 
 
 # ---------------------------------------------------------------------------------------------
@@ -600,7 +601,7 @@ def plan_transition(
     stats = opti.stats()
     status = str(stats.get("return_status", "unknown"))
     iterations = int(stats.get("iter_count", 0))
-    ipopt_ok = status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    ipopt_ok = status in IPOPT_PATH_FOUND
     y_sol = np.asarray(y_val, dtype=float).reshape(nv, K)
     xi_sol = np.concatenate([np.zeros((nv, 1)), y_sol * scale[:, None]], axis=1)
     poses = [pose_from_twist(start, xi_sol[:, k], com_b) for k in range(K + 1)]

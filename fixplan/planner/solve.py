@@ -26,11 +26,17 @@ from fixplan.fixture import Fixture
 from fixplan.locating import contact_set, require_full, solve_goal
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
 from fixplan.planner.execute import ExecutionSettings, Step
-from fixplan.planner.fine import Transition, _segment_wrenches, plan_transition
+from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, _segment_wrenches, plan_transition
 from fixplan.planner.verify import Verification, verify
 from fixplan.pose import Pose
 
 ROBUST_GRID = (0.05, 0.1, 0.2, 0.3, 0.5)
+# Gaps kept at the other locators along a fine path [m], tried in turn when IPOPT finds no path:
+# a fixed 1 mm is an angle on a part whose locators sit close together (two side locators 11 mm
+# apart on a 44 mm face hold a part touching one of them ≥ 5° away from the other; the next
+# transition can then not touch the end locator without closing that gap): the smaller
+# clearance still keeps the path clear of every locator, with less room for the executor.
+CLEARANCES_M = (1e-3, 1e-4)
 
 
 @dataclass
@@ -273,11 +279,15 @@ class Planner:
             key = (tuple(sorted(state_)), target)
             if key not in cache:
                 t = time.perf_counter()
-                cache[key] = plan_transition(
-                    self.fixture, pose_, sorted(state_), target, knots=self.knots,
-                    acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
-                    margin_N=self.margin_N,
-                )  # fmt: skip
+                for clearance in CLEARANCES_M:
+                    tr = plan_transition(
+                        self.fixture, pose_, sorted(state_), target, knots=self.knots,
+                        acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
+                        margin_N=self.margin_N, clearance_m=clearance,
+                    )  # fmt: skip
+                    if tr.ipopt_status in IPOPT_PATH_FOUND:
+                        break  # a path: its wrenches decide, not the clearance
+                cache[key] = tr
                 self.fine_time_s += time.perf_counter() - t
             return cache[key]
 
