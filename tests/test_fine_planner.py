@@ -255,9 +255,9 @@ def test_close_side_locators_need_the_smaller_clearance():
     planner's second clearance (0.1 mm) finds one (generated box-321 seed 101, fixture 25)."""
     import math
 
+    from fixplan.fixture import loads
     from fixplan.generate import generate_one
     from fixplan.planner.solve import CLEARANCES_M, Planner
-    from fixplan.fixture import loads
 
     g = generate_one("box-321", 101, 25)
     fx = loads(g.toml_text, source=g.name)
