@@ -688,7 +688,7 @@ def simulate(
         "contacts": [c.to_json() for c in sim.contacts()],
         "solver": {
             "max_error": float(max(traj.error, default=0.0)),
-            "mean_iterations": float(np.mean(traj.iterations)) if traj.iterations else 0.0,
+            "mean_iterations": float(np.mean(traj.iterations)) if len(traj.iterations) else 0.0,
             "converged": bool(max(traj.error, default=0.0) <= sim.tolerance),
             "tolerance": sim.tolerance,
         },

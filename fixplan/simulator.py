@@ -73,32 +73,41 @@ class StepInfo:
         return tuple(n for n, a in zip(self.names, self.active_mask, strict=True) if a)
 
 
+def _empty(*shape: int) -> FloatArray:
+    return np.zeros(shape)
+
+
 @dataclass
 class Trajectory:
-    """Recorded samples of a run (one row per recorded step)."""
+    """Recorded samples of a run: arrays with one row per sample.
+
+    The first sample is the state the run started from, then one every ``record_every`` steps
+    and the last. ``error`` and ``iterations`` describe the steps that produced the samples after
+    the first (one entry fewer than ``time_s``).
+    """
 
     names: list[str]
     dimension: int
-    time_s: list[float] = field(default_factory=list)
-    position: list[FloatArray] = field(default_factory=list)  # body origin, world [m]
-    orientation: list[FloatArray] = field(default_factory=list)  # quaternion wxyz (3D) or [angle_rad] (2D)
-    velocity: list[FloatArray] = field(default_factory=list)  # (v, ω) of the centre of mass
-    normal_force: list[FloatArray] = field(default_factory=list)  # per locator [N]
-    gap: list[FloatArray] = field(default_factory=list)  # per locator [m]
-    error: list[float] = field(default_factory=list)
-    iterations: list[int] = field(default_factory=list)
+    time_s: FloatArray = field(default_factory=lambda: _empty(0))
+    position: FloatArray = field(default_factory=lambda: _empty(0, 3))  # body origin, world [m]
+    orientation: FloatArray = field(default_factory=lambda: _empty(0, 4))  # quaternion wxyz (3D) or [angle_rad] (2D)
+    velocity: FloatArray = field(default_factory=lambda: _empty(0, 6))  # (v, ω) of the centre of mass
+    normal_force: FloatArray = field(default_factory=lambda: _empty(0, 0))  # per locator [N]
+    gap: FloatArray = field(default_factory=lambda: _empty(0, 0))  # per locator [m]
+    error: FloatArray = field(default_factory=lambda: _empty(0))
+    iterations: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     max_penetration_m: float = 0.0
     wall_time_s: float = 0.0
     steps: int = 0
 
     def arrays(self) -> dict[str, FloatArray]:
         return {
-            "time": np.array(self.time_s),
-            "position": np.array(self.position),
-            "orientation": np.array(self.orientation),
-            "velocity": np.array(self.velocity),
-            "normal_force": np.array(self.normal_force),
-            "gap": np.array(self.gap),
+            "time": self.time_s,
+            "position": self.position,
+            "orientation": self.orientation,
+            "velocity": self.velocity,
+            "normal_force": self.normal_force,
+            "gap": self.gap,
         }
 
     def to_csv(self, path: Path) -> None:
@@ -110,14 +119,84 @@ class Trajectory:
         header = ["time", *pos, *ori, *vel]
         for n in self.names:
             header += [f"{n}_gap", f"{n}_normal_force"]
+        k = len(self.names)
+        per_locator = np.empty((len(self.time_s), 2 * k))
+        per_locator[:, 0::2] = self.gap
+        per_locator[:, 1::2] = self.normal_force
+        table = np.column_stack([self.time_s, self.position, self.orientation, self.velocity, per_locator])
         with open(path, "w", newline="") as fh:
             out = csv.writer(fh)
             out.writerow(header)
-            for i, t in enumerate(self.time_s):
-                row = [t, *self.position[i], *self.orientation[i], *self.velocity[i]]
-                for k in range(len(self.names)):
-                    row += [self.gap[i][k], self.normal_force[i][k]]
+            for row in table.tolist():
                 out.writerow([f"{x:.12g}" for x in row])
+
+
+class _Samples:
+    """Chunks of samples collected during a run, joined into a :class:`Trajectory` at the end."""
+
+    def __init__(self) -> None:
+        self.parts: dict[str, list[Any]] = {
+            k: [] for k in ("time", "position", "orientation", "velocity", "normal_force", "gap", "error", "iterations")
+        }
+
+    def add(self, **chunks: Any) -> None:
+        for k, v in chunks.items():
+            self.parts[k].append(v)
+
+    def trajectory(self, names: list[str], dimension: int, k: int) -> Trajectory:
+        n_ori = 4 if dimension == 3 else 1
+        n_nu = 6 if dimension == 3 else 3
+        shapes = {"position": (0, dimension), "orientation": (0, n_ori), "velocity": (0, n_nu),
+                  "normal_force": (0, k), "gap": (0, k), "time": (0,), "error": (0,), "iterations": (0,)}  # fmt: skip
+
+        def join(key: str) -> Any:
+            parts = self.parts[key]
+            dtype = np.int64 if key == "iterations" else float
+            if not parts:
+                return np.zeros(shapes[key], dtype=dtype)
+            return np.concatenate([np.asarray(x, dtype=dtype).reshape((-1, *shapes[key][1:])) for x in parts])
+
+        return Trajectory(
+            names, dimension, join("time"), join("position"), join("orientation"), join("velocity"),
+            join("normal_force"), join("gap"), join("error"), join("iterations"),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class WrenchSchedule:
+    """A piecewise-constant applied wrench: ``wrenches[k]`` from ``times_s[k]`` to ``times_s[k + 1]``.
+
+    The last row holds to the end of the run, the first also before ``times_s[0]``. Wrenches are
+    about the body origin, world axes (3D: 6 numbers, 2D: 3), added to gravity. A run under a
+    schedule is compiled end to end (:meth:`Simulator.run`); it is also a ``wrench(t, sim)``
+    callable, evaluated at each step's start time.
+    """
+
+    times_s: FloatArray
+    wrenches: FloatArray
+
+    def __post_init__(self) -> None:
+        t = np.array(self.times_s, dtype=float).reshape(-1)
+        w = np.array(self.wrenches, dtype=float)
+        if w.ndim == 1:
+            w = w[None, :]
+        if t.size == 0 or w.ndim != 2 or w.shape[0] != t.size or w.shape[1] not in (3, 6):
+            raise InputError(
+                f"a wrench schedule expects n times and n wrenches of 3 or 6 numbers, got {t.size} times and "
+                f"wrenches of shape {w.shape}"
+            )
+        if not (np.isfinite(t).all() and np.isfinite(w).all()):
+            raise InputError("a wrench schedule expects finite times and wrenches")
+        if np.any(np.diff(t) <= 0):
+            raise InputError(f"a wrench schedule expects increasing times, got {t.tolist()}")
+        t.setflags(write=False)
+        w.setflags(write=False)
+        object.__setattr__(self, "times_s", t)
+        object.__setattr__(self, "wrenches", w)
+
+    def __call__(self, t: float, sim: Simulator | None = None) -> FloatArray:
+        k = max(0, int(np.searchsorted(self.times_s, t, side="right")) - 1)
+        return self.wrenches[k]
 
 
 class Simulator:
@@ -188,7 +267,6 @@ class Simulator:
         self._gap = np.zeros(k)
         self._nw = np.zeros((k, self.dimension))
         self.last: StepInfo | None = None
-        self._state3 = np.zeros((4, 3, 3))
         self.max_penetration_m = 0.0
         self.set_state(fixture.start)
 
@@ -260,16 +338,12 @@ class Simulator:
         speed = math.sqrt(float(v @ v)) + w_norm * self._bound
         margin = self.margin_m + 2.0 * h * speed
         if self.dimension == 3:
-            st = self._state3
-            st[0] = self._R
-            st[1, 0], st[1, 1], st[1, 2] = self._p, self._v, self._w
             err, iters, status, failures, pen = kernels.step3_into(
-                st, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind, self._params, self._verts,
-                self._enorm, self._loc_p, self._loc_r, self._mu, self._tors, h, f, tau, self.restitution, margin,
-                self.tolerance, self.max_iterations, self._P, self._active, self._gap, self._u, self._nw, self._bound,
+                self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
+                self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu, self._tors, h, f, tau,
+                self.restitution, margin, self.tolerance, self.max_iterations, self._P, self._active, self._gap,
+                self._u, self._nw, self._bound,
             )  # fmt: skip
-            if status != kernels.STATUS_NONFINITE:
-                self._R, self._p, self._v, self._w = st[0].copy(), st[1, 0].copy(), st[1, 1].copy(), st[1, 2].copy()
         else:
             theta = math.atan2(self._R[1, 0], self._R[0, 0])
             out = kernels.step2(
@@ -360,120 +434,133 @@ class Simulator:
         record_every: int = 1,
         progress: Callable[[int], None] | None = None,
     ) -> Trajectory:
-        """Step for ``duration_s`` under a constant wrench or ``wrench(t, sim)``; record samples."""
+        """Step for ``duration_s`` under a wrench; record samples every ``record_every`` steps.
+
+        ``wrench``: ``None`` (gravity only), a constant wrench, a :class:`WrenchSchedule` (both
+        compiled end to end: no Python per step, 2D and 3D) or a callable ``wrench(t, sim)``,
+        which is evaluated from Python before every step.
+        """
         if not (duration_s >= 0 and math.isfinite(duration_s)):
             raise InputError(f"duration must be a non-negative number of seconds, got {duration_s}")
         n_steps = int(round(duration_s / self.dt))
-        if self.dimension == 3 and not callable(wrench):
-            return self._run_compiled(n_steps, wrench, record_every, progress)
-        traj = Trajectory(list(self.names), self.dimension)
+        every = max(1, int(record_every))
+        if callable(wrench) and not isinstance(wrench, WrenchSchedule):
+            return self._run_python(n_steps, wrench, every, progress)
+        return self._run_compiled(n_steps, self._schedule(wrench), every, progress)
+
+    def _schedule(self, wrench: ArrayLike | WrenchSchedule | None) -> tuple[FloatArray, FloatArray]:
+        """``(times, wrenches)`` for the compiled loops, checked against the dimension."""
+        n = 6 if self.dimension == 3 else 3
+        if wrench is None:
+            return np.zeros(1), np.zeros((1, n))
+        if isinstance(wrench, WrenchSchedule):
+            if wrench.wrenches.shape[1] != n:
+                raise InputError(f"wrench schedule expects {n} numbers per wrench, got {wrench.wrenches.shape[1]}")
+            return np.ascontiguousarray(wrench.times_s), np.ascontiguousarray(wrench.wrenches)
+        w = np.asarray(wrench, dtype=float)
+        if w.shape != (n,) or not np.isfinite(w).all():
+            raise InputError(f"wrench expects {n} finite numbers, got {np.asarray(wrench).tolist()}")
+        return np.zeros(1), w.reshape(1, n).copy()
+
+    def _run_python(
+        self, n_steps: int, wrench: Callable[[float, Simulator], ArrayLike], every: int,
+        progress: Callable[[int], None] | None,
+    ) -> Trajectory:  # fmt: skip
+        """A run under a Python callable: one :meth:`step` per step."""
+        samples = _Samples()
+        self._record(samples)
         t0 = time.perf_counter()
-        self._record(traj)
         for s in range(1, n_steps + 1):
-            w = wrench(self.time_s, self) if callable(wrench) else wrench
-            self.step(w)
-            if s % record_every == 0 or s == n_steps:
-                self._record(traj)
+            info = self.step(wrench(self.time_s, self))
+            if s % every == 0 or s == n_steps:
+                self._record(samples)
+                samples.add(error=[info.error], iterations=[info.iterations])
             if progress is not None and s % 1000 == 0:
                 progress(1000)
+        traj = samples.trajectory(list(self.names), self.dimension, len(self.names))
         traj.wall_time_s = time.perf_counter() - t0
         traj.steps = n_steps
         traj.max_penetration_m = self.max_penetration_m
         return traj
 
     def _run_compiled(
-        self, n_steps: int, wrench: ArrayLike | None, record_every: int, progress: Callable[[int], None] | None
-    ) -> Trajectory:
-        """A constant-wrench 3D run as compiled loops of up to 5000 steps (no Python per step)."""
-        every = max(1, record_every)
-        f, _ = self._external(wrench)
-        tau_origin = np.zeros(3) if wrench is None else np.asarray(wrench, dtype=float)[3:6]
-        traj = Trajectory(list(self.names), self.dimension)
-        self._record(traj)
-        traj.error.clear()
-        traj.iterations.clear()
+        self, n_steps: int, schedule: tuple[FloatArray, FloatArray], every: int,
+        progress: Callable[[int], None] | None,
+    ) -> Trajectory:  # fmt: skip
+        """A run as compiled loops of about 5000 steps (no Python per step)."""
+        times, table = schedule
+        gravity_f = self._mass * np.asarray(self.fixture.gravity, dtype=float)
+        samples = _Samples()
+        self._record(samples)
         chunk = max(every, (5000 // every) * every)
         done = 0
         wall = 0.0
         status = kernels.STATUS_OK
         last_err, last_it = 0.0, 0  # a run of 0 steps solved nothing
+        d = self.dimension
         while done < n_steps:
             n = min(chunk, n_steps - done)
             t0 = time.perf_counter()
-            out = kernels.run3(
-                n, every, self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv,
-                self._com_b, self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu,
-                self._tors, self.dt, f, tau_origin, self.restitution, self.margin_m, self._bound, self.tolerance,
-                self.max_iterations, self._P, self._active,
-            )  # fmt: skip
+            if d == 3:
+                out = kernels.run3(
+                    n, every, self.time_s, self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv,
+                    self._com_b, self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r,
+                    self._mu, self._tors, self.dt, gravity_f, times, table, self.restitution, self.margin_m,
+                    self._bound, self.tolerance, self.max_iterations, self._P, self._active, self._gap, self._u,
+                    self._nw,
+                )  # fmt: skip
+                rt, rp, rori, rnu, rfn, rgap, rerr, rit, t_end, k_done, status_k, pen, worst_k, l_err, l_it = out
+            else:
+                theta = math.atan2(self._R[1, 0], self._R[0, 0])
+                out2 = kernels.run2(
+                    n, every, self.time_s, theta, self._p, self._v, float(self._w), self._mass,
+                    float(self._Ib[0, 0]), self._com_b, self._kind, self._params, self._verts, self._enorm,
+                    self._loc_p, self._loc_r, self._mu, self.dt, gravity_f, times, table, self.restitution,
+                    self.margin_m, self._bound, self.tolerance, self.max_iterations, self._P, self._active,
+                )  # fmt: skip
+                (rt, rp, rori, rnu, rfn, rgap, rerr, rit, th, p2, v2, w2, P2, act2, gap2, u2, nw2,
+                 t_end, k_done, status_k, pen, worst_k, l_err, l_it) = out2  # fmt: skip
+                self._gap = gap2
+                if k_done > 0:
+                    self._R, self._p, self._v, self._w = rot2(th), p2, v2, float(w2)
+                    self._P, self._active, self._u, self._nw = P2, act2, u2, nw2
             wall += time.perf_counter() - t0
-            (
-                R,
-                p,
-                v,
-                w,
-                P,
-                active,
-                gap,
-                n_w,
-                u,
-                rp,
-                rR,
-                rnu,
-                rfn,
-                rgap,
-                rerr,
-                rit,
-                pen,
-                worst_k,
-                status_k,
-                last_err,
-                last_it,
-            ) = out
+            samples.add(time=rt, position=rp, orientation=rori, velocity=rnu, normal_force=rfn, gap=rgap,
+                        error=rerr, iterations=rit)  # fmt: skip
+            self.time_s = float(t_end)
+            self.steps += int(k_done)
+            done += int(k_done)
+            self.max_penetration_m = max(self.max_penetration_m, float(pen))
+            if k_done > 0:
+                last_err, last_it = l_err, l_it
             if status_k == kernels.STATUS_NONFINITE:
                 raise SolverError(
-                    f"a step produced a non-finite state between t = {self.time_s:.6g} s and {self.time_s + n * self.dt:.6g} s; the state before it was kept"
+                    f"step {self.steps} at t = {self.time_s:.6g} s produced a non-finite state; the state before it was kept"
                 )
             if status_k == kernels.STATUS_NOT_CONVERGED:
                 status = status_k
                 if self.strict:
                     raise SolverError(f"NSGS did not reach {self.tolerance:g} in some step (worst error {worst_k:.3g})")
-            self._R, self._p, self._v, self._w, self._P, self._active, self._gap = R, p, v, w, P, active, gap
-            self._nw, self._u = n_w, u
-            times = self.time_s + self.dt * np.minimum(every * np.arange(1, len(rp)), n)
-            traj.time_s += [float(t) for t in times]
-            traj.position += list(rp[1:])
-            traj.orientation += [quaternion_wxyz_from_matrix(Rk) for Rk in rR[1:]]
-            traj.velocity += list(rnu[1:])
-            traj.normal_force += list(rfn[1:])
-            traj.gap += list(rgap[1:])
-            traj.error += [float(e) for e in rerr[1:]]
-            traj.iterations += [int(i) for i in rit[1:]]
-            self.time_s += n * self.dt
-            self.steps += n
-            done += n
-            self.max_penetration_m = max(self.max_penetration_m, float(pen))
             if progress is not None:
                 progress(n)
+        traj = samples.trajectory(list(self.names), d, len(self.names))
         traj.max_penetration_m = self.max_penetration_m
         traj.wall_time_s = wall
         traj.steps = n_steps
-        self.last = StepInfo(
-            float(last_err), int(last_it), status == kernels.STATUS_OK, 0, float(self.max_penetration_m),
-            self._names_t, self._active.copy(),
-        )  # fmt: skip
+        if n_steps > 0:
+            self.last = StepInfo(
+                float(last_err), int(last_it), status == kernels.STATUS_OK, 0, float(self.max_penetration_m),
+                self._names_t, self._active.copy(),
+            )  # fmt: skip
         return traj
 
-    def _record(self, traj: Trajectory) -> None:
-        traj.time_s.append(self.time_s)
-        traj.position.append(self._p.copy())
+    def _record(self, samples: _Samples) -> None:
+        """The current state as one sample (the residual and sweeps are added by the caller)."""
         if self.dimension == 3:
-            traj.orientation.append(quaternion_wxyz_from_matrix(self._R))
+            ori = quaternion_wxyz_from_matrix(self._R)
         else:
-            traj.orientation.append(np.array([math.atan2(self._R[1, 0], self._R[0, 0])]))
-        traj.velocity.append(self.twist)
-        traj.normal_force.append(np.where(self._active, self._P[:, 0] / self.dt, 0.0))
-        traj.gap.append(self._gap.copy())
-        if self.last is not None:
-            traj.error.append(self.last.error)
-            traj.iterations.append(self.last.iterations)
+            ori = np.array([math.atan2(self._R[1, 0], self._R[0, 0])])
+        samples.add(
+            time=[self.time_s], position=self._p.copy(), orientation=ori, velocity=self.twist,
+            normal_force=np.where(self._active, self._P[:, 0] / self.dt, 0.0), gap=self._gap.copy(),
+        )  # fmt: skip

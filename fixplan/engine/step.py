@@ -37,8 +37,8 @@ import numpy as np
 from numba import njit
 
 from fixplan.engine.detect import project
-from fixplan.engine.local import FAILED, project_cone_into
-from fixplan.engine.nsgs import local_solve_into
+from fixplan.engine.local import FAILED, WORKSPACE_SIZE, project_cone_into
+from fixplan.engine.nsgs import local_solve_into, local_solve_ws
 
 STATUS_OK, STATUS_NOT_CONVERGED, STATUS_NONFINITE = 0, 1, 2
 
@@ -321,181 +321,6 @@ def _pgs_lcp(A, b, x, iterations):
 
 
 @njit(cache=True)
-def step3(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors,
-          h, f_ext, tau_ext, restitution, margin, tol, max_iter, P_warm, warm_active, bound_m):  # fmt: skip
-    """One 3D step. Returns the new state, impulses, diagnostics (see :class:`fixplan.simulator.Simulator`)."""
-    k = loc_p.shape[0]
-    c = p + mv(R, com_b)
-    gap = np.empty(k)
-    n_w = np.zeros((k, 3))
-    pt_w = np.zeros((k, 3))
-    active = np.zeros(k, dtype=np.bool_)
-    point = np.empty(3)
-    normal = np.empty(3)
-    for i in range(k):
-        pb = mtv(R, loc_p[i] - p)
-        dist = project(kind, params, verts, enorm, pb, point, normal)
-        gap[i] = dist - loc_r[i]
-        n_w[i] = -mv(R, normal)
-        pt_w[i] = p + mv(R, point)
-        active[i] = gap[i] <= margin
-    # free motion, angular-momentum form
-    v_free = v + h * f_ext / mass
-    L_free = mv(R, mv(Ib, mtv(R, w))) + h * tau_ext
-    w_pred = w.copy()
-    Rn = R
-    spinning = (w[0] != 0.0 or w[1] != 0.0 or w[2] != 0.0) or (L_free[0] != 0.0 or L_free[1] != 0.0 or L_free[2] != 0.0)
-    for _ in range(50 if spinning else 0):
-        Rn = mm(exp_so3(h * w_pred), R)
-        w_new = mv(Rn, mv(Ib_inv, mtv(Rn, L_free)))
-        dw = math.sqrt(np.sum((w_new - w_pred) ** 2))
-        w_pred = w_new
-        if dw <= 1e-15 * (1.0 + math.sqrt(np.sum(w_new * w_new))):
-            break
-    if spinning:
-        Rn = mm(exp_so3(h * w_pred), R)
-    Iinv = mmt(mm(Rn, Ib_inv), Rn)
-    # contact rows
-    nc = 0
-    m = 0
-    for i in range(k):
-        if active[i]:
-            nc += 1
-            m += 4 if tors[i] > 0.0 else 3
-    idx = np.empty(nc, dtype=np.int64)
-    offsets = np.empty(nc, dtype=np.int64)
-    sizes = np.empty(nc, dtype=np.int64)
-    mus = np.empty(nc)
-    J = np.zeros((m, 6))
-    row = 0
-    j = 0
-    for i in range(k):
-        if not active[i]:
-            continue
-        idx[j] = i
-        offsets[j] = row
-        sizes[j] = 4 if tors[i] > 0.0 else 3
-        mus[j] = mu[i]
-        n = n_w[i]
-        r = pt_w[i] - c
-        t1, t2 = tangents3(n)
-        for a, t in enumerate((n, t1, t2)):
-            J[row + a, 0:3] = t
-            J[row + a, 3] = r[1] * t[2] - r[2] * t[1]
-            J[row + a, 4] = r[2] * t[0] - r[0] * t[2]
-            J[row + a, 5] = r[0] * t[1] - r[1] * t[0]
-        if sizes[j] == 4:
-            J[row + 3, 3:6] = tors[i] * n
-        row += sizes[j]
-        j += 1
-    nu_free = np.concatenate((v_free, w_pred))
-    nu_old = np.concatenate((v, w))
-    MinvJt = np.empty((6, m))
-    inv_m = 1.0 / mass
-    for r_ in range(m):
-        for a in range(3):
-            MinvJt[a, r_] = J[r_, a] * inv_m
-            MinvJt[3 + a, r_] = Iinv[a, 0] * J[r_, 3] + Iinv[a, 1] * J[r_, 4] + Iinv[a, 2] * J[r_, 5]
-    W = np.empty((m, m))
-    for r_ in range(m):
-        for c_ in range(r_, m):
-            acc = 0.0
-            for a in range(6):
-                acc += J[r_, a] * MinvJt[a, c_]
-            W[r_, c_] = acc
-            W[c_, r_] = acc
-    q = mv(J, nu_free)
-    for jj in range(nc):
-        i = idx[jj]
-        o = offsets[jj]
-        un_old = np.dot(J[o], nu_old)
-        if restitution > 0.0 and un_old < 0.0 and gap[i] + h * un_old <= 0.0:
-            q[o] += restitution * un_old  # an impact within this step: Newton's law, u_n⁺ ≥ −e u_n⁻
-        elif gap[i] > 0.0:
-            q[o] += gap[i] / h  # may close, may not overshoot: g + h u_n ≥ 0
-        elif un_old < 0.0:
-            q[o] += restitution * un_old
-    P = np.zeros(m)
-    for jj in range(nc):
-        i = idx[jj]
-        if warm_active[i]:
-            for a in range(sizes[jj]):
-                P[offsets[jj] + a] = P_warm[i, a]
-    err, iters, converged, failures = nsgs_dense(W, q, mus, offsets, sizes, P, tol, max_iter)
-    dnu = mv(MinvJt, P)
-    v_new = v_free + dnu[0:3]
-    w_new = w_pred + dnu[3:6]
-    u = mv(W, P) + q
-    status = STATUS_OK if converged else STATUS_NOT_CONVERGED
-    if not (np.all(np.isfinite(v_new)) and np.all(np.isfinite(w_new)) and math.isfinite(err)):
-        status = STATUS_NONFINITE
-        return R, p, v, w, np.zeros((k, 4)), active, gap, np.zeros((k, 4)), n_w, pt_w, err, iters, status, failures, 0.0
-    c_new = c + h * v_new
-    R_new = mm(exp_so3(h * w_new), R)
-    # position post-stabilisation; a body that does not move keeps g + h u_n ≥ 0 exactly
-    pen = 0.0
-    deepest = 0.0
-    for i in range(k):
-        if active[i] and -gap[i] > deepest:
-            deepest = -gap[i]
-    moved = h * (math.sqrt(np.sum(v_new * v_new)) + math.sqrt(np.sum(w_new * w_new)) * bound_m)
-    for _ in range(3 if (moved > 1e-12 or deepest > 1e-12) else 0):
-        p_new = c_new - mv(R_new, com_b)
-        G = np.zeros((nc, 6))
-        g = np.zeros(nc)
-        worst = 0.0
-        for jj in range(nc):
-            i = idx[jj]
-            pb = mtv(R_new, loc_p[i] - p_new)
-            g[jj] = project(kind, params, verts, enorm, pb, point, normal) - loc_r[i]
-            nn = -mv(R_new, normal)
-            r = p_new + mv(R_new, point) - c_new
-            G[jj, 0:3] = nn
-            G[jj, 3] = r[1] * nn[2] - r[2] * nn[1]
-            G[jj, 4] = r[2] * nn[0] - r[0] * nn[2]
-            G[jj, 5] = r[0] * nn[1] - r[1] * nn[0]
-            worst = min(worst, g[jj])
-        pen = -worst
-        if worst >= -1e-12:
-            break
-        MinvGt = np.empty((6, nc))
-        for jj in range(nc):
-            MinvGt[0:3, jj] = G[jj, 0:3] / mass
-            MinvGt[3:6, jj] = mv(Iinv, G[jj, 3:6])
-        A = mm(G, MinvGt)
-        lam = np.zeros(nc)
-        _pgs_lcp(A, g, lam, 200)
-        d = mv(MinvGt, lam)
-        c_new = c_new + d[0:3]
-        R_new = mm(exp_so3(d[3:6]), R_new)
-    p_new = c_new - mv(R_new, com_b)
-    P_full = np.zeros((k, 4))
-    u_full = np.zeros((k, 4))
-    for jj in range(nc):
-        i = idx[jj]
-        for a in range(sizes[jj]):
-            P_full[i, a] = P[offsets[jj] + a]
-            u_full[i, a] = u[offsets[jj] + a]
-    return (
-        R_new,
-        p_new,
-        v_new,
-        w_new,
-        P_full,
-        active,
-        gap,
-        u_full,
-        n_w,
-        pt_w,
-        err,
-        iters,
-        status,
-        failures,
-        max(pen, deepest, 0.0),
-    )
-
-
-@njit(cache=True)
 def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r, mu,
           h, f_ext, tau_ext, restitution, margin, tol, max_iter, P_warm, warm_active, bound_m):  # fmt: skip
     """One planar step (ν = (vx, vy, ω)). Same outputs as :func:`step3` with 2-row contacts."""
@@ -654,58 +479,668 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
     )
 
 
-@njit(cache=True)
-def run3(n_steps, record_every, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r,
-         mu, tors, h, f_ext, tau_world, restitution, margin_m, bound, tol, max_iter, P, active):  # fmt: skip
-    """``n_steps`` of :func:`step3` under a constant wrench, compiled end to end.
+# ---------------------------------------------------------------------------------------------
+# 3D: one allocation-free step on a caller-owned workspace, and the compiled multi-step loop
+# ---------------------------------------------------------------------------------------------
+_SLIDE_NEWTON_ITER = 16
 
-    ``tau_world`` is the applied moment about the body origin; it is re-expressed about the
-    moving centre of mass every step. Returns the final state and the recorded samples.
+
+@njit(cache=True)
+def slide3_newton(A, alpha, mu, P):
+    """The sliding regime of a 3D contact by Newton on the slip angle, started from ``P``'s direction.
+
+    Sliding means ``u_n = 0``, ``P_t = −μ P_n s`` and ``u_t = g s`` with ``g > 0`` for a unit
+    ``s = (cos θ, sin θ)``. For a given ``θ`` the first condition gives
+    ``P_n = −α_n / (W_nn − μ W_nt·s)``, so the law is the scalar equation
+    ``f(θ) = u_t(θ) × s(θ) = 0`` (with ``g = u_t·s > 0``); ``f'(θ) = (du_t/dθ) × s + g`` is
+    exact. Started from the previous sweep's (or step's) slip direction, Newton reaches the root
+    to rounding in 2–4 steps, about a tenth of the general root find of :mod:`.local`. The
+    result is accepted only when the angle has converged (``|Δθ| ≤ 1e-14``), ``D``, ``P_n`` and
+    the slip ``g`` are clearly positive (``g > 1e-9‖α‖``, so a contact at the stick/slide
+    boundary goes to the general solver) and ``f`` is zero to rounding; otherwise ``False``
+    and the caller uses the general solver. No cone is linearized: the root is of the exact law.
+    """
+    an = alpha[0]
+    if not (an < 0.0) or not (mu > 1e-17):
+        return False
+    a = A[0, 0]
+    b0 = A[0, 1]
+    b1 = A[0, 2]
+    c0 = A[1, 0]
+    c1 = A[2, 0]
+    C00 = A[1, 1]
+    C01 = A[1, 2]
+    C10 = A[2, 1]
+    C11 = A[2, 2]
+    a1 = alpha[1]
+    a2 = alpha[2]
+    pt0, pt1 = P[1], P[2]
+    if pt0 != 0.0 or pt1 != 0.0:
+        th = math.atan2(-pt1, -pt0)  # u_t opposes P_t
+    elif a1 != 0.0 or a2 != 0.0:
+        th = math.atan2(a2, a1)
+    else:
+        return False
+    scale = abs(an) + abs(a1) + abs(a2)
+    converged = False
+    for _ in range(_SLIDE_NEWTON_ITER):
+        cs = math.cos(th)
+        sn = math.sin(th)
+        D = a - mu * (b0 * cs + b1 * sn)
+        if not (D > 0.0):
+            return False
+        Pn = -an / D
+        ct0 = C00 * cs + C01 * sn
+        ct1 = C10 * cs + C11 * sn
+        ut0 = c0 * Pn - mu * Pn * ct0 + a1
+        ut1 = c1 * Pn - mu * Pn * ct1 + a2
+        f = ut0 * sn - ut1 * cs
+        g = ut0 * cs + ut1 * sn
+        dD = -mu * (b1 * cs - b0 * sn)
+        dPn = an * dD / (D * D)
+        dut0 = (c0 - mu * ct0) * dPn - mu * Pn * (C01 * cs - C00 * sn)
+        dut1 = (c1 - mu * ct1) * dPn - mu * Pn * (C11 * cs - C10 * sn)
+        df = dut0 * sn - dut1 * cs + g
+        if not (df > 0.0) or not math.isfinite(df):
+            return False
+        step = f / df
+        th -= step
+        if abs(step) <= 1e-14:
+            converged = True
+            break
+    if not converged:
+        return False
+    cs = math.cos(th)
+    sn = math.sin(th)
+    D = a - mu * (b0 * cs + b1 * sn)
+    if not (D > 0.0):
+        return False
+    Pn = -an / D
+    ut0 = c0 * Pn - mu * Pn * (C00 * cs + C01 * sn) + a1
+    ut1 = c1 * Pn - mu * Pn * (C10 * cs + C11 * sn) + a2
+    f = ut0 * sn - ut1 * cs
+    g = ut0 * cs + ut1 * sn
+    if not (g > 1e-9 * scale) or not (abs(f) <= 1e-12 * (scale + abs(g))) or not (Pn > 0.0) or not math.isfinite(Pn):
+        return False
+    P[0] = Pn
+    P[1] = -mu * Pn * cs
+    P[2] = -mu * Pn * sn
+    return True
+
+
+@njit(cache=True)
+def workspace3(k):
+    """Scratch arrays for :func:`step3_ws` with ``k`` locators (allocated once per run)."""
+    m = 4 * k
+    return (
+        np.zeros(k),  # 0: gaps at the start of the step
+        np.zeros((k, 3)),  # 1: contact normals (world)
+        np.zeros((k, 3)),  # 2: contact points (world)
+        np.zeros(k, dtype=np.bool_),  # 3: active contacts
+        np.zeros((m, 6)),  # 4: J
+        np.zeros((6, m)),  # 5: M⁻¹Jᵀ
+        np.zeros((m, m)),  # 6: W
+        np.zeros(m),  # 7: q
+        np.zeros(m),  # 8: P (active rows)
+        np.zeros(m),  # 9: u (active rows)
+        np.zeros(k, dtype=np.int64),  # 10: locator of each active contact
+        np.zeros(k, dtype=np.int64),  # 11: row offsets
+        np.zeros(k, dtype=np.int64),  # 12: row counts
+        np.zeros(k),  # 13: μ of each active contact
+        np.zeros((k, 4, 4)),  # 14: diagonal blocks
+        np.zeros((k, 4, 4)),  # 15: their inverses
+        np.zeros(k, dtype=np.bool_),  # 16: block invertible
+        np.zeros((12, 3)),  # 17: 3-vectors
+        np.zeros((6, 3, 3)),  # 18: 3×3 matrices
+        np.zeros(WORKSPACE_SIZE + 16),  # 19: local solver scratch, α, P_j, cone scratch
+        np.zeros((k, 6)),  # 20: G (post-stabilisation)
+        np.zeros((6, k)),  # 21: M⁻¹Gᵀ
+        np.zeros((k, k)),  # 22: G M⁻¹ Gᵀ
+        np.zeros(k),  # 23: gaps at the new pose
+        np.zeros(k),  # 24: λ
+        np.zeros(6),  # 25: 6-vector
+    )
+
+
+@njit(cache=True)
+def _exp_so3_into(x, y, z, R):
+    th2 = x * x + y * y + z * z
+    th = math.sqrt(th2)
+    if th < 1e-8:
+        a, b = 1.0, 0.5
+    else:
+        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+    R[0, 0] = 1.0 - b * (y * y + z * z)
+    R[1, 1] = 1.0 - b * (x * x + z * z)
+    R[2, 2] = 1.0 - b * (x * x + y * y)
+    R[0, 1] = -a * z + b * x * y
+    R[1, 0] = a * z + b * x * y
+    R[0, 2] = a * y + b * x * z
+    R[2, 0] = -a * y + b * x * z
+    R[1, 2] = -a * x + b * y * z
+    R[2, 1] = a * x + b * y * z
+
+
+@njit(cache=True)
+def _mm3_into(A, B, out):
+    """``out = A @ B`` (3×3; ``out`` distinct from both); same sums as :func:`mm`."""
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = 0.0
+        for p in range(3):
+            a = A[i, p]
+            if a != 0.0:
+                for j in range(3):
+                    out[i, j] += a * B[p, j]
+
+
+@njit(cache=True)
+def _mv3_into(A, x, out):
+    for i in range(3):
+        acc = 0.0
+        for j in range(3):
+            acc += A[i, j] * x[j]
+        out[i] = acc
+
+
+@njit(cache=True)
+def _mtv3_into(A, x, out):
+    for j in range(3):
+        out[j] = 0.0
+    for i in range(3):
+        xi = x[i]
+        for j in range(3):
+            out[j] += A[i, j] * xi
+
+
+@njit(cache=True)
+def _pgs_lcp_n(A, b, x, n, iterations):
+    """:func:`_pgs_lcp` on the leading ``n`` rows of caller-owned buffers."""
+    for _ in range(iterations):
+        change = 0.0
+        for i in range(n):
+            if A[i, i] <= 0.0:
+                continue
+            s = b[i]
+            for j in range(n):
+                s += A[i, j] * x[j]
+            new = max(0.0, x[i] - s / A[i, i])
+            change = max(change, abs(new - x[i]))
+            x[i] = new
+        if change <= 1e-16:
+            break
+
+
+@njit(cache=True)
+def _fclib_error_n(q, mu, offsets, sizes, nc, m, P, u, x, pr):
+    """:func:`fclib_error_ws` on the leading ``nc`` contacts / ``m`` rows of workspace buffers."""
+    total = 0.0
+    for j in range(nc):
+        o, d = offsets[j], sizes[j]
+        nt = 0.0
+        for a in range(1, d):
+            nt += u[o + a] * u[o + a]
+        nt = math.sqrt(nt)
+        x[0] = P[o] - (u[o] + mu[j] * nt)
+        for a in range(1, d):
+            x[a] = P[o + a] - u[o + a]
+        project_cone_into(x[:d], mu[j], pr[:d])
+        for a in range(d):
+            diff = P[o + a] - pr[a]
+            total += diff * diff
+    sq = 0.0
+    sp = 0.0
+    su = 0.0
+    for r in range(m):
+        sq += q[r] * q[r]
+        sp += P[r] * P[r]
+        su += u[r] * u[r]
+    scale = max(math.sqrt(sq), max(math.sqrt(sp), math.sqrt(su)))
+    return math.sqrt(total) / scale if scale > 0.0 else math.sqrt(total)
+
+
+@njit(cache=True)
+def nsgs_ws(W, q, mu, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has_inv, u, scratch):
+    """:func:`nsgs_dense` on workspace buffers (leading ``nc`` contacts, ``m`` rows): no allocation.
+
+    A 3D contact whose closed-form open/stick test fails first tries :func:`slide3_newton` from
+    its current impulse, then the general exact solver of :mod:`.local`.
+    """
+    err = math.inf
+    failures = 0
+    if m == 0:
+        return 0.0, 0, True, 0
+    ws = scratch[0:WORKSPACE_SIZE]
+    alpha = scratch[WORKSPACE_SIZE : WORKSPACE_SIZE + 4]
+    Pj = scratch[WORKSPACE_SIZE + 4 : WORKSPACE_SIZE + 8]
+    xbuf = scratch[WORKSPACE_SIZE + 8 : WORKSPACE_SIZE + 12]
+    prbuf = scratch[WORKSPACE_SIZE + 12 : WORKSPACE_SIZE + 16]
+    for j in range(nc):
+        o, d = offsets[j], sizes[j]
+        for a in range(d):
+            for b in range(d):
+                diag[j, a, b] = W[o + a, o + b]
+        has_inv[j] = _invert_small(diag[j, :d, :d], inv[j, :d, :d])
+    it = 0
+    for it in range(1, max_iter + 1):
+        failures = 0
+        for j in range(nc):
+            o, d = offsets[j], sizes[j]
+            for a in range(d):
+                s = q[o + a]
+                for c in range(m):
+                    if c < o or c >= o + d:
+                        s += W[o + a, c] * P[c]
+                alpha[a] = s
+            if not _fast_local(alpha, mu[j], d, inv[j], has_inv[j], Pj):
+                for a in range(d):
+                    Pj[a] = P[o + a]
+                if not (d == 3 and slide3_newton(diag[j, :3, :3], alpha[:3], mu[j], Pj[:3])):
+                    st, _ = local_solve_ws(diag[j, :d, :d], alpha[:d], mu[j], d, Pj[:d], ws)
+                    if st == FAILED:
+                        failures += 1
+            for a in range(d):
+                P[o + a] = Pj[a]
+        for r in range(m):
+            s = q[r]
+            for c in range(m):
+                s += W[r, c] * P[c]
+            u[r] = s
+        err = _fclib_error_n(q, mu, offsets, sizes, nc, m, P, u, xbuf, prbuf)
+        if not math.isfinite(err):
+            return err, it, False, failures
+        if err <= tol:
+            return err, it, True, failures
+    return err, it, False, failures
+
+
+@njit(cache=True)
+def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors,
+             h, f_ext, tau_ext, restitution, margin, tol, max_iter, P_full, active_full, gap_full, u_full,
+             n_full, bound_m, ws):  # fmt: skip
+    """One 3D step on caller-owned buffers (the algorithm of the module docstring, no allocation).
+
+    ``R, p, v, w`` (the state), ``P_full`` and ``active_full`` (the warm start: impulses per
+    locator, and which were active) are updated in place, ``gap_full`` (start-of-step gaps),
+    ``u_full`` (contact velocities) and ``n_full`` (normals) are written. After a non-finite
+    result only ``gap_full`` is written and the state is kept. ``ws`` is :func:`workspace3`.
+    Returns ``(error, iterations, status, failed local solves, penetration)``.
+    """
+    (gap, n_w, pt_w, active, J, MinvJt, W, q, P, u, idx, offsets, sizes, mus, diag, inv, has_inv,
+     V, Ms, scratch, G, MinvGt, A, g, lam, six) = ws  # fmt: skip
+    k = loc_p.shape[0]
+    c = V[0]
+    pb = V[1]
+    point = V[2]
+    normal = V[3]
+    tmp = V[4]
+    tmp2 = V[5]
+    v_free = V[6]
+    L_free = V[7]
+    w_pred = V[8]
+    w_new = V[9]
+    v_new = V[10]
+    c_new = V[11]
+    Rn = Ms[0]
+    Ex = Ms[1]
+    Iinv = Ms[2]
+    RI = Ms[3]
+    R_new = Ms[4]
+    _mv3_into(R, com_b, tmp)
+    for a in range(3):
+        c[a] = p[a] + tmp[a]
+    for i in range(k):
+        for a in range(3):
+            tmp[a] = loc_p[i, a] - p[a]
+        _mtv3_into(R, tmp, pb)
+        dist = project(kind, params, verts, enorm, pb, point, normal)
+        gap[i] = dist - loc_r[i]
+        _mv3_into(R, normal, tmp)
+        _mv3_into(R, point, tmp2)
+        for a in range(3):
+            n_w[i, a] = -tmp[a]
+            pt_w[i, a] = p[a] + tmp2[a]
+        active[i] = gap[i] <= margin
+    # free motion, angular-momentum form
+    for a in range(3):
+        v_free[a] = v[a] + h * f_ext[a] / mass
+    _mtv3_into(R, w, tmp)
+    _mv3_into(Ib, tmp, tmp2)
+    _mv3_into(R, tmp2, L_free)
+    for a in range(3):
+        L_free[a] += h * tau_ext[a]
+        w_pred[a] = w[a]
+    spinning = (w[0] != 0.0 or w[1] != 0.0 or w[2] != 0.0) or (L_free[0] != 0.0 or L_free[1] != 0.0 or L_free[2] != 0.0)
+    for a in range(3):
+        for b in range(3):
+            Rn[a, b] = R[a, b]
+    for _ in range(50 if spinning else 0):
+        _exp_so3_into(h * w_pred[0], h * w_pred[1], h * w_pred[2], Ex)
+        _mm3_into(Ex, R, Rn)
+        _mtv3_into(Rn, L_free, tmp)
+        _mv3_into(Ib_inv, tmp, tmp2)
+        _mv3_into(Rn, tmp2, w_new)
+        dw = 0.0
+        nn = 0.0
+        for a in range(3):
+            dw += (w_new[a] - w_pred[a]) ** 2
+            nn += w_new[a] * w_new[a]
+            w_pred[a] = w_new[a]
+        if math.sqrt(dw) <= 1e-15 * (1.0 + math.sqrt(nn)):
+            break
+    if spinning:
+        _exp_so3_into(h * w_pred[0], h * w_pred[1], h * w_pred[2], Ex)
+        _mm3_into(Ex, R, Rn)
+    _mm3_into(Rn, Ib_inv, RI)
+    for i in range(3):
+        for j in range(3):
+            acc = 0.0
+            for t in range(3):
+                acc += RI[i, t] * Rn[j, t]
+            Iinv[i, j] = acc
+    # contact rows
+    nc = 0
+    m = 0
+    for i in range(k):
+        if active[i]:
+            idx[nc] = i
+            offsets[nc] = m
+            sizes[nc] = 4 if tors[i] > 0.0 else 3
+            mus[nc] = mu[i]
+            m += sizes[nc]
+            nc += 1
+    for jj in range(nc):
+        i = idx[jj]
+        row = offsets[jj]
+        n0, n1, n2 = n_w[i, 0], n_w[i, 1], n_w[i, 2]
+        r0, r1, r2 = pt_w[i, 0] - c[0], pt_w[i, 1] - c[1], pt_w[i, 2] - c[2]
+        # tangents: the choice of tangents3 / fixplan.kinematics.tangent_basis
+        if abs(n0) < 0.9:
+            e0, e1, e2 = 1.0, 0.0, 0.0
+        else:
+            e0, e1, e2 = 0.0, 1.0, 0.0
+        dot = e0 * n0 + e1 * n1 + e2 * n2
+        s0, s1, s2 = e0 - dot * n0, e1 - dot * n1, e2 - dot * n2
+        nrm = math.sqrt(s0**2 + s1**2 + s2**2)
+        s0, s1, s2 = s0 / nrm, s1 / nrm, s2 / nrm
+        for a in range(3):
+            if a == 0:
+                t0, t1, t2 = n0, n1, n2
+            elif a == 1:
+                t0, t1, t2 = s0, s1, s2
+            else:
+                t0, t1, t2 = n1 * s2 - n2 * s1, n2 * s0 - n0 * s2, n0 * s1 - n1 * s0
+            J[row + a, 0] = t0
+            J[row + a, 1] = t1
+            J[row + a, 2] = t2
+            J[row + a, 3] = r1 * t2 - r2 * t1
+            J[row + a, 4] = r2 * t0 - r0 * t2
+            J[row + a, 5] = r0 * t1 - r1 * t0
+        if sizes[jj] == 4:
+            J[row + 3, 0] = 0.0
+            J[row + 3, 1] = 0.0
+            J[row + 3, 2] = 0.0
+            J[row + 3, 3] = tors[i] * n0
+            J[row + 3, 4] = tors[i] * n1
+            J[row + 3, 5] = tors[i] * n2
+    inv_m = 1.0 / mass
+    for r_ in range(m):
+        for a in range(3):
+            MinvJt[a, r_] = J[r_, a] * inv_m
+            MinvJt[3 + a, r_] = Iinv[a, 0] * J[r_, 3] + Iinv[a, 1] * J[r_, 4] + Iinv[a, 2] * J[r_, 5]
+    for r_ in range(m):
+        for c_ in range(r_, m):
+            acc = 0.0
+            for a in range(6):
+                acc += J[r_, a] * MinvJt[a, c_]
+            W[r_, c_] = acc
+            W[c_, r_] = acc
+    for r_ in range(m):
+        acc = 0.0
+        for a in range(3):
+            acc += J[r_, a] * v_free[a]
+        for a in range(3):
+            acc += J[r_, 3 + a] * w_pred[a]
+        q[r_] = acc
+    for jj in range(nc):
+        i = idx[jj]
+        o = offsets[jj]
+        un_old = 0.0
+        for a in range(3):
+            un_old += J[o, a] * v[a]
+        for a in range(3):
+            un_old += J[o, 3 + a] * w[a]
+        if restitution > 0.0 and un_old < 0.0 and gap[i] + h * un_old <= 0.0:
+            q[o] += restitution * un_old  # an impact within this step: Newton's law, u_n⁺ ≥ −e u_n⁻
+        elif gap[i] > 0.0:
+            q[o] += gap[i] / h  # may close, may not overshoot: g + h u_n ≥ 0
+        elif un_old < 0.0:
+            q[o] += restitution * un_old
+    for r_ in range(m):
+        P[r_] = 0.0
+    for jj in range(nc):
+        i = idx[jj]
+        if active_full[i]:
+            for a in range(sizes[jj]):
+                P[offsets[jj] + a] = P_full[i, a]
+    err, iters, converged, failures = nsgs_ws(
+        W, q, mus, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has_inv, u, scratch
+    )
+    finite = math.isfinite(err)
+    for a in range(6):
+        acc = 0.0
+        for r_ in range(m):
+            acc += MinvJt[a, r_] * P[r_]
+        six[a] = acc
+    for a in range(3):
+        v_new[a] = v_free[a] + six[a]
+        w_new[a] = w_pred[a] + six[3 + a]
+        finite = finite and math.isfinite(v_new[a]) and math.isfinite(w_new[a])
+    for i in range(k):
+        gap_full[i] = gap[i]
+    if not finite:
+        return err, iters, STATUS_NONFINITE, failures, 0.0
+    status = STATUS_OK if converged else STATUS_NOT_CONVERGED
+    for a in range(3):
+        c_new[a] = c[a] + h * v_new[a]
+    _exp_so3_into(h * w_new[0], h * w_new[1], h * w_new[2], Ex)
+    _mm3_into(Ex, R, R_new)
+    # position post-stabilisation; a body that does not move keeps g + h u_n ≥ 0 exactly
+    pen = 0.0
+    deepest = 0.0
+    for i in range(k):
+        if active[i] and -gap[i] > deepest:
+            deepest = -gap[i]
+    sv = 0.0
+    sw = 0.0
+    for a in range(3):
+        sv += v_new[a] * v_new[a]
+        sw += w_new[a] * w_new[a]
+    moved = h * (math.sqrt(sv) + math.sqrt(sw) * bound_m)
+    p_new = tmp2
+    for _ in range(3 if (moved > 1e-12 or deepest > 1e-12) else 0):
+        _mv3_into(R_new, com_b, tmp)
+        for a in range(3):
+            p_new[a] = c_new[a] - tmp[a]
+        worst = 0.0
+        for jj in range(nc):
+            i = idx[jj]
+            for a in range(3):
+                tmp[a] = loc_p[i, a] - p_new[a]
+            _mtv3_into(R_new, tmp, pb)
+            g[jj] = project(kind, params, verts, enorm, pb, point, normal) - loc_r[i]
+            _mv3_into(R_new, normal, tmp)
+            nn0, nn1, nn2 = -tmp[0], -tmp[1], -tmp[2]
+            _mv3_into(R_new, point, tmp)
+            r0 = p_new[0] + tmp[0] - c_new[0]
+            r1 = p_new[1] + tmp[1] - c_new[1]
+            r2 = p_new[2] + tmp[2] - c_new[2]
+            G[jj, 0] = nn0
+            G[jj, 1] = nn1
+            G[jj, 2] = nn2
+            G[jj, 3] = r1 * nn2 - r2 * nn1
+            G[jj, 4] = r2 * nn0 - r0 * nn2
+            G[jj, 5] = r0 * nn1 - r1 * nn0
+            worst = min(worst, g[jj])
+        pen = -worst
+        if worst >= -1e-12:
+            break
+        for jj in range(nc):
+            for a in range(3):
+                MinvGt[a, jj] = G[jj, a] / mass
+            for a in range(3):
+                MinvGt[3 + a, jj] = Iinv[a, 0] * G[jj, 3] + Iinv[a, 1] * G[jj, 4] + Iinv[a, 2] * G[jj, 5]
+        for i in range(nc):
+            for j in range(nc):
+                acc = 0.0
+                for a in range(6):
+                    acc += G[i, a] * MinvGt[a, j]
+                A[i, j] = acc
+            lam[i] = 0.0
+        _pgs_lcp_n(A, g, lam, nc, 200)
+        for a in range(6):
+            acc = 0.0
+            for jj in range(nc):
+                acc += MinvGt[a, jj] * lam[jj]
+            six[a] = acc
+        for a in range(3):
+            c_new[a] += six[a]
+        _exp_so3_into(six[3], six[4], six[5], Ex)
+        _mm3_into(Ex, R_new, Rn)
+        for a in range(3):
+            for b in range(3):
+                R_new[a, b] = Rn[a, b]
+    # commit
+    _mv3_into(R_new, com_b, tmp)
+    for a in range(3):
+        p[a] = c_new[a] - tmp[a]
+        v[a] = v_new[a]
+        w[a] = w_new[a]
+        for b in range(3):
+            R[a, b] = R_new[a, b]
+    for i in range(k):
+        active_full[i] = active[i]
+        for a in range(4):
+            P_full[i, a] = 0.0
+            u_full[i, a] = 0.0
+        for a in range(3):
+            n_full[i, a] = n_w[i, a]
+    for jj in range(nc):
+        i = idx[jj]
+        for a in range(sizes[jj]):
+            P_full[i, a] = P[offsets[jj] + a]
+            u_full[i, a] = u[offsets[jj] + a]
+    return err, iters, status, failures, max(pen, deepest, 0.0)
+
+
+@njit(cache=True)
+def _quat_into(R, out):
+    """Unit quaternion ``(w, x, y, z)``, ``w ≥ 0`` (as :func:`fixplan.pose.quaternion_wxyz_from_matrix`)."""
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    if tr > 0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        out[0] = 0.25 * s
+        out[1] = (R[2, 1] - R[1, 2]) / s
+        out[2] = (R[0, 2] - R[2, 0]) / s
+        out[3] = (R[1, 0] - R[0, 1]) / s
+    else:
+        i = 0
+        if R[1, 1] > R[i, i]:
+            i = 1
+        if R[2, 2] > R[i, i]:
+            i = 2
+        j, m = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(1.0 + R[i, i] - R[j, j] - R[m, m])
+        out[0] = (R[m, j] - R[j, m]) / s
+        out[1 + i] = 0.25 * s
+        out[1 + j] = (R[j, i] + R[i, j]) / s
+        out[1 + m] = (R[m, i] + R[i, m]) / s
+    nq = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2 + out[3] ** 2)
+    sgn = 1.0 if out[0] / nq >= 0 else -1.0
+    for a in range(4):
+        out[a] = sgn * out[a] / nq
+
+
+@njit(cache=True)
+def _schedule_index(times, t, k):
+    """Index of the wrench in force at ``t``: the last ``times[k] ≤ t`` (0 before the first)."""
+    while k + 1 < times.shape[0] and times[k + 1] <= t:
+        k += 1
+    return k
+
+
+@njit(cache=True)
+def run3(n_steps, record_every, t_start, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p,
+         loc_r, mu, tors, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter,
+         P, active, gap, u, n_w):  # fmt: skip
+    """``n_steps`` of :func:`step3_ws` under a wrench schedule, compiled end to end.
+
+    ``wrenches[k]`` (force, moment about the body origin; world axes) acts from ``times[k]``
+    to ``times[k + 1]`` (a constant wrench: one row); ``gravity_f`` = m g acts at the centre of
+    mass. The wrench is evaluated at each step's start time ``t`` (accumulated ``t += h``, as
+    :meth:`fixplan.simulator.Simulator.step` does) and its moment re-expressed about the moving
+    centre of mass, as :meth:`Simulator.step` does. The state and warm start (``R, p, v, w, P,
+    active``) and the last step's ``gap, u, n_w`` are updated in place; returns the samples
+    taken every ``record_every`` steps and at the last (time, position, quaternion, twist,
+    normal forces, gaps, residual, sweeps) and ``(t, steps done, status, max penetration,
+    worst residual, last residual, last sweeps)``.
     """
     k = loc_p.shape[0]
-    n_rec = n_steps // record_every + 2
+    ws = workspace3(k)
+    n_rec = n_steps // record_every + 1
+    rec_t = np.zeros(n_rec)
     rec_p = np.zeros((n_rec, 3))
-    rec_R = np.zeros((n_rec, 3, 3))
+    rec_q = np.zeros((n_rec, 4))
     rec_nu = np.zeros((n_rec, 6))
     rec_fn = np.zeros((n_rec, k))
     rec_gap = np.zeros((n_rec, k))
     rec_err = np.zeros(n_rec)
     rec_it = np.zeros(n_rec, dtype=np.int64)
-    rec_p[0] = p
-    rec_R[0] = R
-    rec_nu[0, 0:3] = v
-    rec_nu[0, 3:6] = w
-    r = 1
+    f_ext = np.zeros(3)
+    tau = np.zeros(3)
+    off = np.zeros(3)
+    r = 0
+    t = t_start
     max_pen = 0.0
     status = STATUS_OK
     worst_err = 0.0
-    gap = np.zeros(k)
-    n_last = np.zeros((k, 3))
-    u_last = np.zeros((k, 4))
     last_err, last_it = 0.0, 0
+    done = 0
+    ks = 0
     for s in range(1, n_steps + 1):
-        c = p + mv(R, com_b)
-        off = p - c
-        tau = tau_world + np.array([off[1] * f_ext[2] - off[2] * f_ext[1], off[2] * f_ext[0] - off[0] * f_ext[2],
-                                    off[0] * f_ext[1] - off[1] * f_ext[0]])  # fmt: skip
-        speed = math.sqrt(np.sum(v * v)) + math.sqrt(np.sum(w * w)) * bound
+        ks = _schedule_index(times, t, ks)
+        _mv3_into(R, com_b, off)
+        for a in range(3):
+            off[a] = -off[a]  # body origin relative to the centre of mass
+        F0, F1, F2 = wrenches[ks, 0], wrenches[ks, 1], wrenches[ks, 2]
+        f_ext[0] = gravity_f[0] + F0
+        f_ext[1] = gravity_f[1] + F1
+        f_ext[2] = gravity_f[2] + F2
+        tau[0] = wrenches[ks, 3] + (off[1] * F2 - off[2] * F1)
+        tau[1] = wrenches[ks, 4] + (off[2] * F0 - off[0] * F2)
+        tau[2] = wrenches[ks, 5] + (off[0] * F1 - off[1] * F0)
+        speed = (
+            math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+            + math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) * bound
+        )
         margin = margin_m + 2.0 * h * speed
-        R2, p2, v2, w2, P2, active2, gap, u, n_w, pt_w, err, iters, st, failures, pen = step3(
+        err, iters, st, failures, pen = step3_ws(
             R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors,
-            h, f_ext, tau, restitution, margin, tol, max_iter, P, active, bound)  # fmt: skip
+            h, f_ext, tau, restitution, margin, tol, max_iter, P, active, gap, u, n_w, bound, ws)  # fmt: skip
         if st == STATUS_NONFINITE:
             status = st
             break
         if st == STATUS_NOT_CONVERGED:
             status = st
-        R, p, v, w, P, active = R2, p2, v2, w2, P2, active2
-        n_last, u_last = n_w, u
+        t += h
+        done = s
         max_pen = max(max_pen, pen)
         worst_err = max(worst_err, err)
         last_err, last_it = err, iters
         if (s % record_every == 0 or s == n_steps) and r < n_rec:
+            rec_t[r] = t
             rec_p[r] = p
-            rec_R[r] = R
+            _quat_into(R, rec_q[r])
             rec_nu[r, 0:3] = v
             rec_nu[r, 3:6] = w
             for i in range(k):
@@ -714,33 +1149,89 @@ def run3(n_steps, record_every, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, param
             rec_err[r] = err
             rec_it[r] = iters
             r += 1
-    return (R, p, v, w, P, active, gap, n_last, u_last, rec_p[:r], rec_R[:r], rec_nu[:r], rec_fn[:r], rec_gap[:r],
-            rec_err[:r], rec_it[:r], max_pen, worst_err, status, last_err, last_it)  # fmt: skip
+    return (rec_t[:r], rec_p[:r], rec_q[:r], rec_nu[:r], rec_fn[:r], rec_gap[:r], rec_err[:r], rec_it[:r],
+            t, done, status, max_pen, worst_err, last_err, last_it)  # fmt: skip
 
 
 @njit(cache=True)
-def step3_into(state, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, h, f_ext,
+def step3_into(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, h, f_ext,
                tau_ext, restitution, margin, tol, max_iter, P, active, gap, u, n_w, bound):  # fmt: skip
-    """:func:`step3` writing into caller-owned buffers (cheap to call from Python).
+    """One :func:`step3_ws` for Python callers (:meth:`Simulator.step`), with its own workspace.
 
-    ``state`` is a (4, 3, 3) buffer: ``state[0]`` = R, ``state[1, 0]`` = p, ``state[1, 1]`` = v,
-    ``state[1, 2]`` = ω. Returns (error, iterations, status, failures, penetration).
+    Same in-place contract and returns as :func:`step3_ws`.
     """
-    R = state[0].copy()
-    p = state[1, 0].copy()
-    v = state[1, 1].copy()
-    w = state[1, 2].copy()
-    out = step3(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, h,
-                f_ext, tau_ext, restitution, margin, tol, max_iter, P.copy(), active.copy(), bound)  # fmt: skip
-    R2, p2, v2, w2, P2, act2, gap2, u2, nw2, _pt, err, iters, status, failures, pen = out
-    if status != STATUS_NONFINITE:
-        state[0] = R2
-        state[1, 0] = p2
-        state[1, 1] = v2
-        state[1, 2] = w2
-        P[:] = P2
-        active[:] = act2
-        u[:] = u2
-        n_w[:] = nw2
-    gap[:] = gap2
-    return err, iters, status, failures, pen
+    ws = workspace3(loc_p.shape[0])
+    return step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, h,
+                    f_ext, tau_ext, restitution, margin, tol, max_iter, P, active, gap, u, n_w, bound, ws)  # fmt: skip
+
+
+@njit(cache=True)
+def run2(n_steps, record_every, t_start, theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r,
+         mu, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, P, active):  # fmt: skip
+    """``n_steps`` of :func:`step2` under a wrench schedule ``(Fx, Fy, Mz)`` about the body origin.
+
+    The planar counterpart of :func:`run3` (same schedule, margin and recording rules). Returns
+    the samples, then ``(θ, p, v, ω, P, active, gap, u, n_w, t, steps done, status, max
+    penetration, worst residual, last residual, last sweeps)``.
+    """
+    k = loc_p.shape[0]
+    n_rec = n_steps // record_every + 1
+    rec_t = np.zeros(n_rec)
+    rec_p = np.zeros((n_rec, 2))
+    rec_th = np.zeros((n_rec, 1))
+    rec_nu = np.zeros((n_rec, 3))
+    rec_fn = np.zeros((n_rec, k))
+    rec_gap = np.zeros((n_rec, k))
+    rec_err = np.zeros(n_rec)
+    rec_it = np.zeros(n_rec, dtype=np.int64)
+    f_ext = np.zeros(2)
+    gap = np.zeros(k)
+    u = np.zeros((k, 4))
+    n_w = np.zeros((k, 2))
+    r = 0
+    t = t_start
+    max_pen = 0.0
+    status = STATUS_OK
+    worst_err = 0.0
+    last_err, last_it = 0.0, 0
+    done = 0
+    ks = 0
+    for s in range(1, n_steps + 1):
+        ks = _schedule_index(times, t, ks)
+        cs, sn = math.cos(theta), math.sin(theta)
+        o0 = -(cs * com_b[0] - sn * com_b[1])
+        o1 = -(sn * com_b[0] + cs * com_b[1])
+        F0, F1 = wrenches[ks, 0], wrenches[ks, 1]
+        f_ext[0] = gravity_f[0] + F0
+        f_ext[1] = gravity_f[1] + F1
+        tau = wrenches[ks, 2] + o0 * F1 - o1 * F0
+        speed = math.sqrt(v[0] * v[0] + v[1] * v[1]) + abs(w) * bound
+        margin = margin_m + 2.0 * h * speed
+        out = step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r, mu,
+                    h, f_ext, tau, restitution, margin, tol, max_iter, P, active, bound)  # fmt: skip
+        th2, p2, v2, w2, P2, act2, gap, u2, nw2, _pt, err, iters, st, failures, pen = out
+        if st == STATUS_NONFINITE:
+            status = st
+            break
+        if st == STATUS_NOT_CONVERGED:
+            status = st
+        theta, p, v, w, P, active, u, n_w = th2, p2, v2, w2, P2, act2, u2, nw2
+        t += h
+        done = s
+        max_pen = max(max_pen, pen)
+        worst_err = max(worst_err, err)
+        last_err, last_it = err, iters
+        if (s % record_every == 0 or s == n_steps) and r < n_rec:
+            rec_t[r] = t
+            rec_p[r] = p
+            rec_th[r, 0] = theta
+            rec_nu[r, 0:2] = v
+            rec_nu[r, 2] = w
+            for i in range(k):
+                rec_fn[r, i] = P[i, 0] / h if active[i] else 0.0
+                rec_gap[r, i] = gap[i]
+            rec_err[r] = err
+            rec_it[r] = iters
+            r += 1
+    return (rec_t[:r], rec_p[:r], rec_th[:r], rec_nu[:r], rec_fn[:r], rec_gap[:r], rec_err[:r], rec_it[:r],
+            theta, p, v, w, P, active, gap, u, n_w, t, done, status, max_pen, worst_err, last_err, last_it)  # fmt: skip
