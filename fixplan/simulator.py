@@ -287,6 +287,8 @@ class Simulator:
         # a new state makes the previous step's impulses meaningless as a warm start
         self._P = np.zeros((len(self.names), 4))
         self._active = np.zeros(len(self.names), dtype=np.bool_)
+        self._P_prev = np.zeros((len(self.names), 4))  # the step before (3D: extrapolated warm start)
+        self._active_prev = np.zeros(len(self.names), dtype=np.bool_)
         if pose is not None:
             # gaps at the new pose (until a step measures them): a report before any step is true
             from fixplan.locating import locator_contact
@@ -341,8 +343,8 @@ class Simulator:
             err, iters, status, failures, pen = kernels.step3_into(
                 self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
                 self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu, self._tors, h, f, tau,
-                self.restitution, margin, self.tolerance, self.max_iterations, self._P, self._active, self._gap,
-                self._u, self._nw, self._bound,
+                self.restitution, margin, self.tolerance, self.max_iterations, self._P, self._active, self._P_prev,
+                self._active_prev, self._gap, self._u, self._nw, self._bound,
             )  # fmt: skip
         else:
             theta = math.atan2(self._R[1, 0], self._R[0, 0])
@@ -506,8 +508,8 @@ class Simulator:
                     n, every, self.time_s, self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv,
                     self._com_b, self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r,
                     self._mu, self._tors, self.dt, gravity_f, times, table, self.restitution, self.margin_m,
-                    self._bound, self.tolerance, self.max_iterations, self._P, self._active, self._gap, self._u,
-                    self._nw,
+                    self._bound, self.tolerance, self.max_iterations, self._P, self._active, self._P_prev,
+                    self._active_prev, self._gap, self._u, self._nw,
                 )  # fmt: skip
                 rt, rp, rori, rnu, rfn, rgap, rerr, rit, t_end, k_done, status_k, pen, worst_k, l_err, l_it = out
             else:

@@ -483,6 +483,7 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
 # 3D: one allocation-free step on a caller-owned workspace, and the compiled multi-step loop
 # ---------------------------------------------------------------------------------------------
 _SLIDE_NEWTON_ITER = 16
+_SLIP_WARM = 1e-7  # [m/s] slip above which a contact's warm start is extrapolated (the 'sliding' of contacts())
 
 
 @njit(cache=True)
@@ -756,12 +757,13 @@ def nsgs_ws(W, q, mu, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has_in
 
 @njit(cache=True)
 def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors,
-             h, f_ext, tau_ext, restitution, margin, tol, max_iter, P_full, active_full, gap_full, u_full,
-             n_full, bound_m, ws):  # fmt: skip
+             h, f_ext, tau_ext, restitution, margin, tol, max_iter, P_full, active_full, P_prev, active_prev,
+             gap_full, u_full, n_full, bound_m, ws):  # fmt: skip
     """One 3D step on caller-owned buffers (the algorithm of the module docstring, no allocation).
 
     ``R, p, v, w`` (the state), ``P_full`` and ``active_full`` (the warm start: impulses per
-    locator, and which were active) are updated in place, ``gap_full`` (start-of-step gaps),
+    locator, and which were active) and ``P_prev``, ``active_prev`` (the same one step earlier)
+    are updated in place, ``gap_full`` (start-of-step gaps),
     ``u_full`` (contact velocities) and ``n_full`` (normals) are written. After a non-finite
     result only ``gap_full`` is written and the state is kept. ``ws`` is :func:`workspace3`.
     Returns ``(error, iterations, status, failed local solves, penetration)``.
@@ -920,9 +922,18 @@ def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, lo
         P[r_] = 0.0
     for jj in range(nc):
         i = idx[jj]
-        if active_full[i]:
-            for a in range(sizes[jj]):
-                P[offsets[jj] + a] = P_full[i, a]
+        o, d = offsets[jj], sizes[jj]
+        if active_full[i] and active_prev[i] and u_full[i, 1] ** 2 + u_full[i, 2] ** 2 > _SLIP_WARM**2:
+            # sliding in the last step and active in the two before: start from the linear
+            # extrapolation of its impulse, kept in the cone (a sliding contact's impulse drifts
+            # as its lever arm moves; a sticking one keeps its impulse, and extrapolating it
+            # would move a statically indeterminate set along its null space)
+            for a in range(d):
+                P[o + a] = 2.0 * P_full[i, a] - P_prev[i, a]
+            project_cone_into(P[o : o + d], mus[jj], P[o : o + d])
+        elif active_full[i]:
+            for a in range(d):
+                P[o + a] = P_full[i, a]
     err, iters, converged, failures = nsgs_ws(
         W, q, mus, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has_inv, u, scratch
     )
@@ -1019,8 +1030,10 @@ def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, lo
         for b in range(3):
             R[a, b] = R_new[a, b]
     for i in range(k):
+        active_prev[i] = active_full[i]
         active_full[i] = active[i]
         for a in range(4):
+            P_prev[i, a] = P_full[i, a]
             P_full[i, a] = 0.0
             u_full[i, a] = 0.0
         for a in range(3):
@@ -1072,7 +1085,7 @@ def _schedule_index(times, t, k):
 @njit(cache=True)
 def run3(n_steps, record_every, t_start, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p,
          loc_r, mu, tors, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter,
-         P, active, gap, u, n_w):  # fmt: skip
+         P, active, P_prev, active_prev, gap, u, n_w):  # fmt: skip
     """``n_steps`` of :func:`step3_ws` under a wrench schedule, compiled end to end.
 
     ``wrenches[k]`` (force, moment about the body origin; world axes) acts from ``times[k]``
@@ -1126,7 +1139,7 @@ def run3(n_steps, record_every, t_start, R, p, v, w, mass, Ib, Ib_inv, com_b, ki
         margin = margin_m + 2.0 * h * speed
         err, iters, st, failures, pen = step3_ws(
             R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors,
-            h, f_ext, tau, restitution, margin, tol, max_iter, P, active, gap, u, n_w, bound, ws)  # fmt: skip
+            h, f_ext, tau, restitution, margin, tol, max_iter, P, active, P_prev, active_prev, gap, u, n_w, bound, ws)  # fmt: skip
         if st == STATUS_NONFINITE:
             status = st
             break
@@ -1155,14 +1168,14 @@ def run3(n_steps, record_every, t_start, R, p, v, w, mass, Ib, Ib_inv, com_b, ki
 
 @njit(cache=True)
 def step3_into(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, h, f_ext,
-               tau_ext, restitution, margin, tol, max_iter, P, active, gap, u, n_w, bound):  # fmt: skip
+               tau_ext, restitution, margin, tol, max_iter, P, active, P_prev, active_prev, gap, u, n_w, bound):  # fmt: skip
     """One :func:`step3_ws` for Python callers (:meth:`Simulator.step`), with its own workspace.
 
     Same in-place contract and returns as :func:`step3_ws`.
     """
     ws = workspace3(loc_p.shape[0])
     return step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, h,
-                    f_ext, tau_ext, restitution, margin, tol, max_iter, P, active, gap, u, n_w, bound, ws)  # fmt: skip
+                    f_ext, tau_ext, restitution, margin, tol, max_iter, P, active, P_prev, active_prev, gap, u, n_w, bound, ws)  # fmt: skip
 
 
 @njit(cache=True)
