@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test fuzz bench lint gallery clean
+.PHONY: install precompile demo test fuzz bench lint gallery clean
 
 install: $(STAMP)
 
@@ -19,7 +19,14 @@ $(STAMP): pyproject.toml
 	  if [ "$$(id -u)" = 0 ]; then SUDO=; elif command -v sudo >/dev/null; then SUDO=sudo; \
 	  else echo "make install: chromium missing and not root (browser tests will skip)" >&2; exit 0; fi; \
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends chromium >/dev/null; }
+	@# Compile the numba kernels into their on-disk cache now (about 2 minutes), so that the first
+	@# command after installing starts warm; not fatal: a failure only means that run compiles.
+	$(BIN)/python -m fixplan.engine.precompile --quiet || echo "make install: precompile failed (the first run will compile)" >&2
 	touch $(STAMP)
+
+# Refill numba's cache after editing a kernel (make install does it once).
+precompile: install
+	$(BIN)/python -m fixplan.engine.precompile
 
 demo: install
 	$(BIN)/fixplan validate fixplan/data/default.toml
