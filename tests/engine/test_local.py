@@ -198,3 +198,36 @@ def test_singular_blocks_never_give_nan(rng, d):
                 assert law_violation(W, alpha, mu, P, 0.1 if d == 4 else None) <= LAW_TOL
             else:  # the fallback is one of the safe candidates: open or normal-only
                 assert np.all(P[1:] == 0.0) and P[0] >= 0.0
+
+
+@pytest.mark.parametrize("cond", [None, 1e4])
+def test_warm_started_slide_newton_agrees_with_the_general_solver(rng, cond):
+    """The engine's sliding shortcut (Newton on the slip direction from a nearby impulse) gives
+    the general solver's impulse when it answers, declines a sticking or open contact, and
+    answers most sliding ones."""
+    from fixplan.engine.step import slide3_newton
+
+    answered = slides = 0
+    for trial in range(600):
+        W = random_spd(rng, 3, cond)
+        if trial % 3 == 0:  # a nonsymmetric block with positive definite symmetric part
+            W = W + 0.2 * (lambda S: S - S.T)(rng.standard_normal((3, 3))) * np.abs(W).max()
+        alpha = rng.standard_normal(3) * 10.0 ** rng.uniform(-3, 3)
+        mu = [0.3, 1.0, rng.uniform(0.05, 2.0)][trial % 3]
+        P_ref, status, _ = solve_coulomb_3d(W, alpha, mu)
+        slides += status == SLIDE
+        # start: the reference impulse turned by up to ~0.3 rad (a previous sweep's), or a random one
+        turn = rng.normal(scale=0.1)
+        c, s = np.cos(turn), np.sin(turn)
+        start = np.array([1.0, c * P_ref[1] - s * P_ref[2], s * P_ref[1] + c * P_ref[2]])
+        if trial % 5 == 0 or not np.any(start[1:]):
+            start = rng.standard_normal(3)
+        P = start.copy()
+        if slide3_newton(W, alpha, mu, P):
+            answered += 1
+            assert status == SLIDE, (W, alpha, mu, status)
+            assert np.allclose(P, P_ref, rtol=1e-10, atol=1e-12 * np.abs(P_ref).max()), (P, P_ref)
+            assert law_violation(W, alpha, mu, P) <= LAW_TOL
+        else:
+            assert np.array_equal(P, start)  # declined: P untouched
+    assert slides > 100 and answered >= 0.7 * slides
