@@ -1,0 +1,104 @@
+"""Open the ``fixplan haptic`` page in headless Chromium (the browser test, the gallery, the benchmark).
+
+Like :mod:`fixplan._browser` for ``fixplan view``: Playwright drives Debian's ``chromium``; any
+request to a host other than the page's own (127.0.0.1) is blocked and recorded.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlsplit
+
+from fixplan.errors import FixplanError
+
+
+@dataclass
+class LivePageReport:
+    """What the page did while it was open."""
+
+    console_errors: list[str] = field(default_factory=list)
+    page_errors: list[str] = field(default_factory=list)
+    blocked_requests: list[str] = field(default_factory=list)
+    requests: list[str] = field(default_factory=list)
+    canvases: int = 0
+    text: str = ""
+    screenshot: Path | None = None
+
+    @property
+    def errors(self) -> list[str]:
+        return (
+            [f"console: {m}" for m in self.console_errors]
+            + [f"page error: {m}" for m in self.page_errors]
+            + [f"fetch attempted: {u}" for u in self.blocked_requests]
+        )
+
+
+def open_live_page(
+    url: str,
+    screenshot: Path | None = None,
+    *,
+    width: int = 1100,
+    height: int = 700,
+    wait_text: str | None = "verdict",
+    hold_s: float = 2.0,
+    timeout_s: float = 60.0,
+) -> LivePageReport:
+    """Open ``url``, wait for the viser canvas (and ``wait_text`` in the panel), keep it open ``hold_s``."""
+    from fixplan._browser import CHROMIUM, CHROMIUM_ARGS, browser_available
+
+    why = browser_available()
+    if why is not None:
+        raise FixplanError(f"cannot open {url}: {why}")
+    from playwright.sync_api import Error as PlaywrightError
+    from playwright.sync_api import sync_playwright
+
+    report = LivePageReport()
+    own = urlsplit(url).hostname
+
+    def route(r: Any) -> None:
+        u = r.request.url
+        report.requests.append(u)
+        host = urlsplit(u).hostname
+        if u.startswith(("data:", "blob:")) or host == own:
+            r.continue_()
+        else:
+            report.blocked_requests.append(u)
+            r.abort()
+
+    def on_console(msg: Any) -> None:
+        if msg.type == "error":
+            report.console_errors.append(msg.text)
+
+    try:
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(
+                executable_path=str(CHROMIUM),
+                args=[*CHROMIUM_ARGS, "--use-gl=swiftshader", "--enable-unsafe-swiftshader"],
+                headless=True,
+            )
+            try:
+                page = browser.new_page(viewport={"width": width, "height": height})
+                page.on("console", on_console)
+                page.on("pageerror", lambda exc: report.page_errors.append(str(exc)))
+                page.route("**/*", route)
+                page.goto(url, wait_until="load", timeout=timeout_s * 1e3)
+                page.wait_for_selector("canvas", timeout=timeout_s * 1e3)
+                if wait_text:
+                    page.wait_for_function(f"document.body.innerText.includes({wait_text!r})", timeout=timeout_s * 1e3)
+                end = time.perf_counter() + hold_s
+                while time.perf_counter() < end:
+                    page.wait_for_timeout(100)
+                report.canvases = int(page.evaluate("document.querySelectorAll('canvas').length"))
+                report.text = str(page.evaluate("document.body.innerText"))
+                if screenshot is not None:
+                    Path(screenshot).parent.mkdir(parents=True, exist_ok=True)
+                    page.screenshot(path=str(screenshot), full_page=False)
+                    report.screenshot = Path(screenshot)
+            finally:
+                browser.close()
+    except PlaywrightError as exc:
+        raise FixplanError(f"{url}: the browser failed: {str(exc).splitlines()[0]}") from exc
+    return report

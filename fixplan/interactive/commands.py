@@ -1,0 +1,226 @@
+"""What ``fixplan haptic``, ``fixplan device-sim`` and ``fixplan verify`` do (``cli.py`` registers them)."""
+
+from __future__ import annotations
+
+import json
+import math
+import secrets
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fixplan.errors import InputError
+
+
+def _echo(text: str) -> None:
+    sys.stderr.write(text + "\n")
+    sys.stderr.flush()
+
+
+def parse_until(text: str | None) -> tuple[bool, float | None]:
+    """``goal`` → (True, None); ``SECONDS`` → (False, seconds); None → run until stopped."""
+    if text is None:
+        return False, None
+    t = text.strip().lower()
+    if t == "goal":
+        return True, None
+    try:
+        s = float(t)
+    except ValueError:
+        raise InputError(f"--until expects 'goal' or a number of seconds, got {text!r}") from None
+    if not (math.isfinite(s) and 0 < s <= 86400):
+        raise InputError(f"--until SECONDS must be within (0, 86400], got {text!r}")
+    return False, s
+
+
+def check_host(host: str, token: str | None) -> str | None:
+    """The token a non-loopback bind needs (generated when not given); None on 127.0.0.1."""
+    if host in ("127.0.0.1", "localhost", "::1"):
+        return token
+    if token is None:
+        token = secrets.token_urlsafe(16)
+        _echo(f"fixplan haptic: --host {host} without --token: generated token {token}")
+    elif len(token) < 8 or not token.isprintable() or any(c in token for c in " ;=&?#/"):
+        raise InputError("--token must be at least 8 printable characters without spaces or ; = & ? # /")
+    return token
+
+
+def run_haptic(
+    file: Path | None,
+    *,
+    device: str,
+    port: int,
+    record: Path | None,
+    force: bool,
+    no_browser: bool,
+    host: str,
+    token: str | None,
+    until: str | None,
+    json_out: bool,
+    clock: str = "wall",
+) -> int:
+    """Run a session; 0 when the goal was reached, 1 otherwise."""
+    from fixplan.cli import _load
+    from fixplan.files import check_distinct, check_output
+    from fixplan.interactive.handles import GizmoHandle, Handle, SpaceMouseHandle, UdpHandle, parse_device
+
+    kind, udp_port = parse_device(device)
+    until_goal, seconds = parse_until(until)
+    if not (0 <= port <= 65535):
+        raise InputError(f"--port must be 0..65535, got {port}")
+    token = check_host(host, token)
+    fixture = _load(file)
+    if record is not None:
+        check_distinct([("FILE", file), ("--record", record)])
+        check_output(record, force, option="--record")
+    from fixplan.interactive.session import HapticSession
+    from fixplan.planner.verify import pose_coordinates
+
+    x0 = pose_coordinates(fixture.start, fixture.start.R_world_body)
+    handle: Handle
+    if kind == "udp":
+        assert udp_port is not None  # noqa: S101 - parse_device gives udp a port
+        handle = UdpHandle("127.0.0.1" if host in ("localhost",) else host, udp_port, fixture.ndof)
+    elif kind == "spacemouse":
+        handle = SpaceMouseHandle(x0)
+    else:
+        handle = GizmoHandle(x0, period_s=fixture.simulation.timestep_s)
+    try:
+        session = HapticSession(fixture, handle, until_goal=until_goal, duration_s=seconds, clock=clock)
+    except Exception:
+        handle.close()
+        raise
+    from fixplan.interactive.app import HapticApp
+
+    app = HapticApp(session, host=host, port=port, token=token)
+    try:
+        url = app.start()
+        where = f"udp:{handle.port}" if isinstance(handle, UdpHandle) else kind
+        _echo(f"fixplan haptic: {url} ({fixture.name}, device {where}; Ctrl-C ends the session)")
+        if not no_browser:
+            import webbrowser
+
+            webbrowser.open(url)
+        session.start()
+        try:
+            while not session.wait(0.1):
+                pass
+        except KeyboardInterrupt:
+            _echo("fixplan haptic: interrupted: ending the session")
+        session.stop()
+        result = session.result()
+    finally:
+        app.stop()
+        handle.close()
+    payload: dict[str, Any] = {
+        "status": result.status,
+        "reason": result.reason,
+        "duration_s": result.duration_s,
+        "sequence": [list(s) for _, s in result.states if s != ("reset",)],
+        "loop": result.stats.to_json(),
+        "bridge": result.bridge,
+    }
+    if record is not None:
+        from fixplan.files import write_text
+        from fixplan.interactive.record import plan_json
+
+        write_text(record, json.dumps(plan_json(result, fixture), allow_nan=False) + "\n")
+        payload["record"] = str(record)
+    if json_out:
+        sys.stdout.write(json.dumps(payload, indent=2, allow_nan=False) + "\n")
+    else:
+        s = result.stats
+        _echo(f"status: {result.status} — {result.reason}")
+        _echo(
+            f"loop: {s.ticks} ticks, tick mean {s.tick_mean_us:.0f} µs, p99 {s.tick_p99_us:.0f} µs, "
+            f"{s.deadline_misses} deadline misses"
+            + (
+                f"; bridge: {result.bridge['accepted']} poses, {result.bridge['malformed']} malformed, "
+                f"{result.bridge['out_of_order']} out of order"
+                if result.bridge
+                else ""
+            )
+        )
+        if record is not None:
+            _echo(f"wrote {record}")
+    return 0 if result.reached else 1
+
+
+def run_device_sim(
+    *,
+    host: str,
+    port: int,
+    noise: float,
+    delay_ms: float,
+    duration: float | None,
+    push: str | None,
+    seed: int,
+    json_out: bool,
+    lockstep: bool = False,
+) -> int:
+    """The simulated device; 0 when fixplan reported the goal."""
+    from fixplan.interactive.device_sim import DeviceSim
+
+    w = None
+    if push is not None:
+        try:
+            w = np.array([float(x) for x in push.split(",")], dtype=float)
+        except ValueError:
+            raise InputError(f"--push must be comma-separated numbers, got {push!r}") from None
+        if not np.all(np.isfinite(w)) or w.shape[0] not in (3, 6):
+            raise InputError(f"--push expects 3 (2D) or 6 (3D) finite numbers, got {push!r}")
+    sim = DeviceSim(
+        host, port, noise=noise, delay_ms=delay_ms, duration_s=duration, push=w, seed=seed, lockstep=lockstep
+    )
+    try:
+        cfg = sim.connect()
+        if w is not None and w.shape[0] != int(cfg["ndof"]):
+            raise InputError(f"--push has {w.shape[0]} numbers, the scene has {cfg['ndof']} coordinates")
+        if not json_out:
+            _echo(f"device-sim: connected to {host}:{port} ({cfg['ndof']} coordinates, {1 / cfg['period_s']:.0f} Hz)")
+        res = sim.run()
+    finally:
+        sim.close()
+    if json_out:
+        sys.stdout.write(json.dumps(res.to_json(), indent=2) + "\n")
+    else:
+        _echo(
+            f"device-sim: {res.sent} poses sent, {res.received} answers, round trip mean {res.rtt_mean_ms:.3f} ms, "
+            f"p99 {res.rtt_p99_ms:.3f} ms; {'goal reached' if res.goal else 'goal not reached'}"
+        )
+    return 0 if res.goal else 1
+
+
+def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
+    """Re-run a plan file in the haptic loop; 0 when it passes."""
+    from fixplan.cli import _load
+    from fixplan.files import read_user_text
+    from fixplan.interactive.record import verify_plan_file
+
+    text = read_user_text(plan, expected="a plan JSON ('fixplan solve --out' or 'fixplan haptic --record')")  # ≤ 1 MiB
+    try:
+        data = json.loads(text)
+    except RecursionError:
+        raise InputError(f"{plan}: not a fixplan plan (JSON nested too deeply)") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{plan}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{plan}: not a fixplan plan (expected a JSON object)")
+    if fixture_path is None and isinstance(data.get("fixture"), str) and Path(data["fixture"]).is_file():
+        fixture_path = Path(data["fixture"])
+    fixture = _load(fixture_path)
+    v = verify_plan_file(fixture, data, source=str(plan))
+    if json_out:
+        out = v.to_json()
+        out.pop("trace", None)
+        sys.stdout.write(json.dumps(out, indent=2, allow_nan=False, default=float) + "\n")
+    else:
+        kind = "recorded pushes" if data.get("source") == "haptic session" else "plan"
+        seq = " → ".join("{" + ", ".join(s) + "}" for s in v.observed_sequence) or "(none)"
+        print(
+            f"{plan}: {'passed' if v.passed else 'FAILED'} ({kind} re-run in the loop, {v.duration_s:.2f} s) — {v.reason}"
+        )
+        print(f"observed states: {seq}; max penetration {v.max_penetration_m:.2e} m")
+    return 0 if v.passed else 1

@@ -1,0 +1,940 @@
+"""An interactive haptic session: a person's device drives the part through the virtual coupling.
+
+The loop (its own thread, one tick per engine step, 1 kHz for the bundled fixtures):
+
+1. read the device handle (:mod:`.handles`: the viser gizmo, the UDP bridge, a SpaceMouse) or,
+   in *auto*, the simulated device the planner's executor drives (:func:`~fixplan.planner.verify.haptic_rig`'s
+   operator);
+2. the coupling wrench ``w_c = K (x_d − x_w) + B (ẋ_d − ẋ_w)`` on the part, saturated at the
+   hand's limits (the gains are ``haptic_rig``'s: scaled to the part, passive for the handle's
+   damping; the mouse's stiffness slider scales ``K`` within the passivity bound);
+3. the engine steps the part under ``w_c`` and gravity;
+4. the device displays the felt wrench ``−w_c`` (saturated at its limits); the bridge's answer
+   carries the part's state and the guidance;
+5. the contact state (locators pressing or within ``contact_gap_m``, debounced) and the goal
+   (every locator in contact, at rest for ``settle_s``) are observed; every ``trace_every`` ticks
+   the contacts are sampled for the recording and a :class:`Snapshot` is published for the display.
+
+The guidance (:class:`Guide`: the planner's contact-state executor, re-solving the non-jamming
+push at the observed state, and ``classify`` of the push the part receives) runs in a second
+thread and never blocks the loop; or, with ``synchronous=True`` (tests, reproducible runs), inside
+the loop every ``trace_every`` ticks without a wall clock.
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fixplan.errors import InputError, SolverError
+from fixplan.fixture import Fixture
+from fixplan.haptics import SimulatedDevice
+from fixplan.haptics.coupling import check_passivity
+from fixplan.interactive import _kernels, protocol
+from fixplan.interactive.handles import Handle, UdpHandle
+from fixplan.pose import Pose, exp_so3, rot2
+from fixplan.simulator import Simulator
+
+FloatArray = NDArray[np.float64]
+
+GUIDE_PERIOD_S = 0.02  # the guidance process re-solves the push at most at 50 Hz (each solve takes 5–15 ms)
+MODES = ("held", "jammed", "separates", "slides", "pivots", "rolls", "indeterminate", "free")
+
+
+@dataclass(frozen=True)
+class Guidance:
+    """The planner's advice at one instant, and the verdict of the push the part receives."""
+
+    time_s: float = 0.0
+    target: str | None = None  # the next locator to press
+    transition: int | None = None
+    motion: str = "plan"  # "free" | "slide" | "roll" | "hold" | "plan" (planning) | "none"
+    push: FloatArray | None = None  # suggested non-jamming push on the part (about the body origin, world axes)
+    verdict: str | None = None  # classify's mode of the current push (None: not yet known)
+    margin: float | None = None
+    verdict_push: FloatArray | None = None  # the push that was classified
+    note: str = ""  # planner status in words
+
+
+@dataclass(frozen=True)
+class LoopStats:
+    """Timing of the haptic loop so far."""
+
+    ticks: int
+    tick_mean_us: float
+    tick_p99_us: float
+    tick_max_us: float
+    deadline_misses: int  # ticks that ended after their deadline (real time) or computed longer than a period
+    late_p99_us: float  # how late ticks started, 99th percentile (real time)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "ticks": self.ticks, "tick_mean_us": self.tick_mean_us, "tick_p99_us": self.tick_p99_us,
+            "tick_max_us": self.tick_max_us, "deadline_misses": self.deadline_misses, "late_p99_us": self.late_p99_us,
+        }  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """What the display shows: the loop's state every ``trace_every`` ticks."""
+
+    time_s: float
+    pose: Pose
+    twist: FloatArray  # of the centre of mass, world axes
+    device_pose: Pose  # the proxy: the device coordinates as a pose of the part
+    coupling_wrench: FloatArray  # on the part
+    felt_wrench: FloatArray  # displayed on the device
+    pressed: tuple[str, ...]
+    normal_forces_N: FloatArray  # (n,)
+    forces_world_N: FloatArray  # (n, d)
+    speed_mps: float
+    at_goal: bool
+    jammed: bool
+    auto: bool
+    stats: LoopStats
+    guidance: Guidance
+    bridge: dict[str, Any] | None
+    ended: bool
+
+
+@dataclass
+class Trace:
+    """The session sampled every ``every`` ticks (arrays grown as lists)."""
+
+    time_s: list[float] = field(default_factory=list)
+    poses: list[Pose] = field(default_factory=list)
+    device_x: list[FloatArray] = field(default_factory=list)  # device coordinates
+    gaps_m: list[FloatArray] = field(default_factory=list)
+    normal_forces_N: list[FloatArray] = field(default_factory=list)
+    forces_world_N: list[FloatArray] = field(default_factory=list)
+    coupling_wrench: list[FloatArray] = field(default_factory=list)  # mean over the samples' ticks
+    felt_wrench: list[FloatArray] = field(default_factory=list)
+    pressed: list[tuple[str, ...]] = field(default_factory=list)
+    suggested: list[FloatArray | None] = field(default_factory=list)
+    verdict: list[str | None] = field(default_factory=list)
+    auto: list[bool] = field(default_factory=list)
+
+
+@dataclass
+class SessionResult:
+    """How a session ended, with everything the recording needs."""
+
+    status: str  # "reached" | "jammed" | "short" | "diverged"
+    reason: str
+    where: dict[str, Any]
+    duration_s: float
+    names: tuple[str, ...]
+    every_s: float
+    trace: Trace
+    states: list[tuple[float, tuple[str, ...]]]  # (time, debounced contact state) as observed, in order
+    stats: LoopStats
+    bridge: dict[str, Any] | None
+    device: str
+    max_penetration_m: float
+    final_gaps_m: dict[str, float]
+    saturated_ticks: int
+    felt_equals_coupling_max_N: float  # max |felt + coupling| over the ticks the device did not saturate
+
+    @property
+    def reached(self) -> bool:
+        return self.status == "reached"
+
+
+def pose_from_coordinates(x: FloatArray, R0: FloatArray, dimension: int) -> Pose:
+    """The pose whose device coordinates are ``x`` (inverse of ``verify.pose_coordinates``)."""
+    if dimension == 3:
+        return Pose(exp_so3(x[3:6]) @ R0, np.array(x[:3], dtype=float))
+    return Pose(rot2(float(x[2])), np.array(x[:2], dtype=float))
+
+
+class Guide:
+    """The planner's executor as guidance, and the jamming verdict of the current push."""
+
+    def __init__(self, fixture: Fixture, start_state: frozenset[str], *, tick_s: float, verdict_every_s: float = 0.04):
+        self.fixture = fixture
+        self.tick_s = tick_s
+        self.verdict_every_s = verdict_every_s
+        self.start_state = start_state
+        self._planner: Any = None
+        self._executor: Any = None
+        self._next_verdict = 0.0
+        self._next_replan = 0.0
+        self.note = "planning"
+        self.verdict: str | None = None
+        self.margin: float | None = None
+        self.verdict_push: FloatArray | None = None
+        self.solves = 0
+        self.plans = 0
+
+    def _plan(self, pose: Pose, state: frozenset[str], t: float) -> None:
+        from fixplan.planner.execute import Executor
+        from fixplan.planner.solve import Planner, plan_steps
+
+        if self._planner is None:
+            self._planner = Planner(self.fixture)
+        self.plans += 1
+        if not self.plans - 1 and pose.distance_to(self.fixture.start)[0] < 1e-9:
+            coarse = self._planner.plan_from(pose, state)
+            steps: Any = plan_steps(coarse.transitions) if coarse.found else coarse.reason
+        else:
+            steps = self._planner.replan(pose, state)
+        if isinstance(steps, str):
+            self._executor = None
+            self.note = f"no plan from {{{', '.join(sorted(state))}}}: {steps}"
+            self._next_replan = t + 1.0
+            return
+        self._executor = Executor(self.fixture, state, steps, replan=self._planner.replan, tick_s=self.tick_s)
+        self.note = "following the plan" if steps else "every locator touches: hold"
+
+    def update(self, snap: Snapshot, push_now: FloatArray) -> Guidance:
+        """One guidance step at the snapshot's state; ``push_now`` is what the part receives."""
+        t = snap.time_s
+        state = frozenset(snap.pressed)
+        ex = self._executor
+        if ex is not None and ex.done and ex.log.outcome == "failed" and t >= self._next_replan:
+            self.note = f"re-planning: {ex.log.reason}"
+            ex = self._executor = None
+        if ex is None and t >= self._next_replan:
+            try:
+                self._plan(snap.pose, state, t)
+            except Exception as exc:  # noqa: BLE001 - guidance must not stop the session
+                self._executor = None
+                self.note = f"planner failed: {type(exc).__name__}: {exc}"
+                self._next_replan = t + 1.0
+            ex = self._executor
+        push = None
+        target = transition = None
+        motion = "none"
+        if ex is not None:
+            push = np.array(ex.command(t, snap.pose, snap.twist, state), dtype=float)
+            self.solves += 1
+            g = ex.guidance()
+            target, transition, motion = g["target"], g["transition"], g["motion"]
+            if ex.done and ex.log.outcome == "reached":
+                motion = "hold"
+        if t >= self._next_verdict:
+            self._next_verdict = t + self.verdict_every_s
+            self._classify(snap, push_now)
+        return Guidance(t, target, transition, motion, push, self.verdict, self.margin, self.verdict_push, self.note)
+
+    def _classify(self, snap: Snapshot, push_now: FloatArray) -> None:
+        from fixplan.jamming import classify
+
+        names = sorted(snap.pressed)
+        self.verdict_push = push_now.copy()
+        if not names:
+            self.verdict, self.margin = "free", None
+            return
+        try:
+            c = classify(self.fixture, push_now, names, pose=snap.pose, jobs=1)[0]
+        except Exception:  # noqa: BLE001 - a verdict is advice; an unclassifiable push is shown as unknown
+            self.verdict, self.margin = "indeterminate", None
+            return
+        self.verdict = c.mode
+        self.margin = float(c.margin) if c.margin is not None and math.isfinite(c.margin) else None
+
+
+def _guide_worker(conn: Any, fixture: Fixture, start_state: frozenset[str], tick_s: float) -> None:
+    """The guidance process: answers each snapshot with a :class:`Guidance` (see :class:`RemoteGuide`)."""
+    import os
+
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    guide = Guide(fixture, start_state, tick_s=tick_s)
+    while True:
+        try:
+            msg = conn.recv()
+        except (EOFError, OSError):
+            return
+        if msg is None:
+            return
+        snap, push_now = msg
+        try:
+            conn.send(guide.update(snap, push_now))
+        except (BrokenPipeError, OSError):
+            return
+
+
+class RemoteGuide:
+    """:class:`Guide` in its own process, so that the loop thread never waits for the planner.
+
+    The planner's solvers (CasADi, Clarabel) hold the GIL for milliseconds; in a thread they stalled
+    the 1 kHz loop for the length of every solve. :meth:`update` sends the snapshot and waits for the
+    answer (the waiting thread releases the GIL).
+    """
+
+    def __init__(self, fixture: Fixture, start_state: frozenset[str], *, tick_s: float):
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")
+        self.tick_s = tick_s
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(
+            target=_guide_worker, args=(child, fixture, start_state, tick_s), name="fixplan-guidance", daemon=True
+        )
+        self._proc.start()
+        child.close()
+        self.note = "planning"
+
+    def update(self, snap: Snapshot, push_now: FloatArray) -> Guidance:
+        self._conn.send((snap, push_now))
+        while not self._conn.poll(0.5):
+            if not self._proc.is_alive():
+                raise InputError("the guidance process ended")
+        out: Guidance = self._conn.recv()
+        return out
+
+    def close(self) -> None:
+        try:
+            self._conn.send(None)
+        except (BrokenPipeError, OSError):
+            pass
+        self._proc.join(timeout=5.0)
+        if self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join(timeout=2.0)
+        self._conn.close()
+
+
+class HapticSession:
+    """The interactive loop around one fixture (see the module's docstring)."""
+
+    def __init__(
+        self,
+        fixture: Fixture,
+        handle: Handle | None,
+        *,
+        until_goal: bool = True,
+        duration_s: float | None = None,
+        realtime: bool = True,
+        synchronous: bool = False,
+        guidance: bool = True,
+        auto: bool = False,
+        trace_every: int = 10,
+        clock: str = "wall",
+        settle_s: float = 0.2,
+        max_sweeps: int = 40,
+    ):
+        from fixplan.jamming.search import hand_limits
+        from fixplan.locating import contact_set, require_full
+        from fixplan.planner.execute import ExecutionSettings
+        from fixplan.planner.verify import haptic_rig, pose_coordinates
+
+        require_full(fixture, "a haptic session")
+        if clock not in ("wall", "device"):
+            raise InputError(f"--clock must be 'wall' or 'device', got {clock!r}")
+        if clock == "device" and not isinstance(handle, UdpHandle):
+            raise InputError("--clock device needs --device udp[:PORT] (the device's poses drive the loop)")
+        self.clock = clock
+        if clock == "device":
+            # one tick per pose, no wall clock: the guidance runs inside the loop (reproducible)
+            realtime, synchronous = False, True
+            assert isinstance(handle, UdpHandle)  # noqa: S101 - checked above
+            handle.one_per_read = True
+        if duration_s is not None and not (duration_s > 0 and math.isfinite(duration_s)):
+            raise InputError(f"session duration must be a positive number of seconds, got {duration_s}")
+        self.fixture = fixture
+        self.handle = handle
+        self.names = tuple(loc.name for loc in fixture.locators)
+        self.sim = Simulator(fixture, tolerance=1e-6, max_iterations=max_sweeps)
+        self.period_s = self.sim.dt
+        self.dimension = fixture.dimension
+        self.ndof = fixture.ndof
+        self.R0 = fixture.start.R_world_body.copy()
+        self.x0 = pose_coordinates(fixture.start, self.R0)
+        self.F_max, self.T_max, _ = hand_limits(fixture)
+        self.rig = haptic_rig(fixture, self.sim, self.x0, self.F_max, self.T_max)
+        c = self.rig.loop.coupling
+        d = self.dimension
+        self.K = self.rig.K.copy()
+        self.B = np.concatenate([np.full(d, c.B_lin), np.full(self.ndof - d, c.B_rot)])
+        self.device_damping = self.rig.damping.copy()
+        specs = self.rig.loop.device.specs
+        self.device_limits = (specs.max_force_N, specs.max_torque_Nm)
+        self._stiffness_scale = 1.0
+        self.stiffness_scale_max = self._passive_scale_max()
+        settings = ExecutionSettings()
+        wp = fixture.workpiece
+        self.weight_N = wp.mass_kg * (float(np.linalg.norm(fixture.gravity)) or 9.81)
+        self.threshold_N = max(settings.press_fraction * self.weight_N, 1e-6)
+        self.contact_gap_m = settings.contact_gap_m
+        self.dwell_s = settings.dwell_s
+        self.rest_speed_mps = settings.stall_speed_mps * 10
+        self.settle_s = settle_s
+        self._r_gyr = math.sqrt(float(np.max(np.linalg.eigvalsh(np.atleast_2d(wp.inertia_body)))) / wp.mass_kg)
+        self.until_goal = until_goal
+        self.duration_s = duration_s
+        self.realtime = realtime
+        self.synchronous = synchronous
+        self.trace_every = max(int(trace_every), 1)
+        touching = contact_set(fixture, "start")
+        self.start_state = frozenset(x.name for x in touching.contacts if x.kind == "locator")
+        self._guidance_on = guidance
+        self.guide: Guide | RemoteGuide | None = None
+        if guidance and synchronous:
+            self.guide = Guide(fixture, self.start_state, tick_s=self.trace_every * self.period_s)
+        self._auto = bool(auto) or handle is None
+        self._auto_dev: SimulatedDevice | None = None
+        self._new_auto_device(self.x0, np.zeros(self.ndof))
+        self._x_d = self.x0.copy()
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._ended = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._guide_thread: threading.Thread | None = None
+        self._reset_requested = False
+        self._restart_guide = False
+        self._coords: tuple[FloatArray, FloatArray] | None = None
+        if isinstance(handle, UdpHandle) and not handle.config:
+            handle.config = self.bridge_config()
+        self._init_state()
+
+    # -- state ---------------------------------------------------------------------------------
+    def _init_state(self) -> None:
+        n = len(self.names)
+        self.trace = Trace()
+        self.states: list[tuple[float, tuple[str, ...]]] = []
+        self._observed: frozenset[str] | None = None
+        self._candidate: frozenset[str] | None = None
+        self._candidate_since = 0.0
+        self._settled_since: float | None = None
+        self.goal_reached_at: float | None = None
+        self._jammed_since: float | None = None
+        self.jammed_where: dict[str, Any] | None = None
+        self._compute: list[float] = []
+        self._compute_sum = 0.0
+        self._compute_max = 0.0
+        self._stats_cache: LoopStats | None = None
+        self._late: list[float] = []
+        self._misses = 0
+        self._acc_w = np.zeros(self.ndof)
+        self._acc_f = np.zeros(self.ndof)
+        self._acc_n = 0
+        self._push_recent = np.zeros(self.ndof)
+        self.saturated_ticks = 0
+        self.felt_error_max = 0.0
+        self.guidance = Guidance()
+        self.status: str | None = None
+        self.reason = ""
+        self._zeros_n = np.zeros(n)
+        self.snapshot: Snapshot | None = None
+        self._publish(np.zeros(self.ndof), np.zeros(self.ndof), tuple(sorted(self.start_state)), force=True)
+
+    def _new_auto_device(self, x: FloatArray, v: FloatArray) -> None:
+        old = self.rig.loop.device
+        dev = SimulatedDevice(
+            self.ndof,
+            mass_kg=float(old._M[0]),
+            inertia_kgm2=float(old._M[-1]),
+            specs=old.specs,
+            x0=x,
+        )
+        dev._v = np.array(v, dtype=float)
+        dev.open()
+        self._auto_dev = dev
+
+    def _passive_scale_max(self) -> float:
+        """The largest stiffness scale for which the coupling stays passive with the handle's damping."""
+        T = self.period_s
+        scales = [(b - abs(B)) / (K * T / 2.0) for K, B, b in zip(self.K, self.B, self.device_damping, strict=True)]
+        return float(min(scales)) * 0.99
+
+    @property
+    def stiffness_scale(self) -> float:
+        return self._stiffness_scale
+
+    def set_stiffness_scale(self, scale: float) -> float:
+        """Scale the coupling stiffness; refused beyond the passivity bound ``b > K T/2 + |B|``."""
+        if not (scale > 0 and math.isfinite(scale)):
+            raise InputError(f"stiffness scale must be positive, got {scale}")
+        for K, B, b in zip(self.K, self.B, self.device_damping, strict=True):
+            check_passivity(K * scale, B, self.period_s, b)
+        self._stiffness_scale = float(scale)
+        return self._stiffness_scale
+
+    @property
+    def auto(self) -> bool:
+        return self._auto
+
+    def set_auto(self, on: bool) -> None:
+        """Let the planner's executor drive (the simulated device starts where the handle is)."""
+        if on and not self._auto:
+            x_w, v_w = self.rig.loop.workpiece_coordinates()
+            self._new_auto_device(self._x_d.copy(), v_w)
+        if not on and self.handle is None:
+            return  # no device: auto is the only driver
+        self._auto = bool(on)
+
+    def request_reset(self) -> None:
+        """Put the part back at its start pose, at rest (done by the loop thread at its next tick)."""
+        self._reset_requested = True
+
+    def _reset(self) -> None:
+        self.sim.set_state(self.fixture.start, None)
+        self._coords = None
+        self._new_auto_device(self.x0, np.zeros(self.ndof))
+        self._observed = self._candidate = None
+        self._settled_since = self._jammed_since = None
+        self.goal_reached_at = None
+        if isinstance(self.guide, Guide):
+            self.guide = Guide(self.fixture, self.start_state, tick_s=self.guide.tick_s)
+        elif isinstance(self.guide, RemoteGuide):
+            self._restart_guide = True
+        self.states.append((self.sim.time_s, ("reset",)))
+
+    # -- the loop ------------------------------------------------------------------------------
+    def _answer(self, felt: FloatArray, x_w: FloatArray, v_w: FloatArray) -> Any:
+        g = self.guidance
+        flags = (protocol.FLAG_GOAL if self.goal_reached_at is not None else 0) | (
+            protocol.FLAG_JAMMED if self._jammed_flag() else 0
+        )
+        flags |= protocol.FLAG_AUTO if self._auto else 0
+        flags |= protocol.FLAG_ENDED if self.status is not None else 0
+        target = self.names.index(g.target) if g.target in self.names else -1
+        verdict = MODES.index(g.verdict) if g.verdict in MODES else protocol.VERDICT_UNKNOWN
+        push = g.push if g.push is not None else np.zeros(self.ndof)
+        echo = self.handle.last_pose.seq if isinstance(self.handle, UdpHandle) and self.handle.last_pose else 0
+        t_session = self.sim.time_s
+
+        def build(seq: int, t_echo: float) -> protocol.ForcePacket:
+            return protocol.ForcePacket(
+                seq, echo, t_echo, t_session, flags, felt, x_w, v_w, target, g.transition or 0, verdict,
+                float("nan") if g.margin is None else g.margin, push, self.ndof,
+            )  # fmt: skip
+
+        return build
+
+    def _jammed_flag(self) -> bool:
+        return self._jammed_since is not None and self.sim.time_s - self._jammed_since >= 0.3
+
+    def _saturate(self, w: FloatArray, F_max: float, T_max: float) -> tuple[FloatArray, bool]:
+        d = self.dimension
+        F = float(np.linalg.norm(w[:d]))
+        T = float(np.linalg.norm(w[d:]))
+        if F <= F_max and T <= T_max:
+            return w, False
+        out = np.array(w, dtype=float)
+        if F > F_max:
+            out[:d] *= F_max / F
+        if T > T_max:
+            out[d:] *= T_max / T
+        return out, True
+
+    def tick(self, wall_s: float) -> None:
+        """One period of the loop (steps 1–5 of the module's docstring)."""
+        if self._reset_requested:
+            self._reset_requested = False
+            self._reset()
+        sim = self.sim
+        if self._coords is None:
+            self._coords = self.coordinates()
+        x_w, v_w = self._coords
+        reading = None if self.handle is None else self.handle.read(wall_s)
+        if self.clock == "device" and not getattr(self.handle, "fresh", False):
+            return  # no new pose (a HELLO, a dropped datagram): the device's clock has not ticked
+        if self._auto:
+            dev = self._auto_dev
+            assert dev is not None  # noqa: S101 - set in __init__
+            x_d, v_d = dev.position(), dev.velocity()
+            K = self.K
+        elif reading is None:
+            x_d, v_d = x_w, v_w  # no device input: the coupling goes limp
+            K = self.K
+        else:
+            x_d, v_d = reading
+            K = self.K * self._stiffness_scale
+        self._x_d = x_d
+        w_c, saturated = self._saturate(K * (x_d - x_w) + self.B * (v_d - v_w), self.F_max, self.T_max)
+        if saturated:
+            self.saturated_ticks += 1
+        sim.step(w_c)
+        felt, shown_saturated = self._saturate(-w_c, *self.device_limits)
+        if not shown_saturated:
+            self.felt_error_max = max(self.felt_error_max, float(np.max(np.abs(felt + w_c))))
+        if self._auto:
+            dev = self._auto_dev
+            assert dev is not None  # noqa: S101
+            dev.set_force_and_torque(felt)
+            push = self.guidance.push if self.guidance.push is not None else np.zeros(self.ndof)
+            dev.advance(self.period_s, self.rig.operator_wrench(push, dev))
+        self._coords = self.coordinates()
+        self._push_recent += 0.1 * (w_c - self._push_recent)
+        self._acc_w += w_c
+        self._acc_f += felt
+        self._acc_n += 1
+        self._observe(sim.time_s)
+        if sim.steps % self.trace_every == 0:
+            self._sample(w_c, felt)
+            if self.synchronous and self.guide is not None and self.snapshot is not None:
+                self._run_guide(self.snapshot)
+        if self.duration_s is not None and sim.time_s >= self.duration_s - 1e-9:
+            self._end(None)
+        elif self.until_goal and self.goal_reached_at is not None:
+            self._end(None)
+        if self.handle is not None:  # the answer carries the goal and end flags of this tick
+            x_new, v_new = self._coords
+            self.handle.display(felt, self._answer(felt, x_new, v_new))
+
+    def coordinates(self) -> tuple[FloatArray, FloatArray]:
+        """The part's device coordinates and rates (what ``HapticLoop.workpiece_coordinates`` gives, compiled)."""
+        sim = self.sim
+        pose, twist = sim.pose, sim.twist
+        if self.dimension == 3:
+            return _kernels.coordinates3(pose.R_world_body, pose.p_world, sim.com_world, twist, self.R0)
+        return self.rig.loop.workpiece_coordinates()
+
+    def _speed(self) -> float:
+        tw = self.sim.twist
+        d = self.dimension
+        v = float(np.linalg.norm(tw[:d]))
+        w = float(np.linalg.norm(tw[d:]))
+        return math.hypot(v, w * self._r_gyr)
+
+    def _observe(self, t: float) -> None:
+        pressed = frozenset(self.sim.in_contact(self.threshold_N, self.contact_gap_m))
+        if pressed != self._observed:
+            if pressed != self._candidate:
+                self._candidate, self._candidate_since = pressed, t
+            elif t - self._candidate_since + 1e-12 >= self.dwell_s:
+                self._observed = pressed
+                self._candidate = None
+                self.states.append((t, tuple(sorted(pressed))))
+        else:
+            self._candidate = None
+        at_rest = self._speed() < self.rest_speed_mps
+        if self._observed == frozenset(self.names) and at_rest:
+            if self._settled_since is None:
+                self._settled_since = t
+            elif t - self._settled_since >= self.settle_s and self.goal_reached_at is None:
+                self.goal_reached_at = t
+        else:
+            self._settled_since = None
+            if self._observed != frozenset(self.names):
+                self.goal_reached_at = None
+        g = self.guidance
+        if (
+            g.verdict == "jammed"
+            and at_rest
+            and self._observed != frozenset(self.names)
+            and self._push_norm(self._push_recent) > 1e-3 * self.weight_N
+        ):
+            if self._jammed_since is None:
+                self._jammed_since = t
+            if self._jammed_flag():
+                pose = self.sim.pose
+                self.jammed_where = {
+                    "time_s": t,
+                    "state": sorted(self._observed or ()),
+                    "pose": pose.to_json(),
+                    "push": [float(x) for x in (g.verdict_push if g.verdict_push is not None else self._push_recent)],
+                    "margin": g.margin,
+                }
+        else:
+            self._jammed_since = None
+
+    def _push_norm(self, w: FloatArray) -> float:
+        return float(np.linalg.norm(w[: self.dimension]))
+
+    def _sample(self, w_c: FloatArray, felt: FloatArray) -> None:
+        sim = self.sim
+        reports = sim.contacts()
+        tr = self.trace
+        n = max(self._acc_n, 1)
+        w_mean = self._acc_w / n
+        f_mean = self._acc_f / n
+        self._acc_w = np.zeros(self.ndof)
+        self._acc_f = np.zeros(self.ndof)
+        self._acc_n = 0
+        pose = sim.pose
+        tr.time_s.append(sim.time_s)
+        tr.poses.append(pose)
+        tr.device_x.append(np.array(self._x_d, dtype=float))
+        tr.gaps_m.append(np.array([r.gap_m for r in reports]))
+        normals = np.array([r.normal_force_N for r in reports])
+        forces = np.array([r.force_world for r in reports]).reshape(len(reports), self.dimension)
+        tr.normal_forces_N.append(normals)
+        tr.forces_world_N.append(forces)
+        tr.coupling_wrench.append(w_mean)
+        tr.felt_wrench.append(f_mean)
+        # before the first debounced observation: the locators touching at the start
+        pressed = tuple(sorted(self._observed if self._observed is not None else self.start_state))
+        tr.pressed.append(pressed)
+        g = self.guidance
+        tr.suggested.append(None if g.push is None else g.push.copy())
+        tr.verdict.append(g.verdict)
+        tr.auto.append(self._auto)
+        self._publish(w_c, felt, pressed, normals=normals, forces=forces)
+
+    def _publish(
+        self,
+        w_c: FloatArray,
+        felt: FloatArray,
+        pressed: tuple[str, ...],
+        *,
+        normals: FloatArray | None = None,
+        forces: FloatArray | None = None,
+        force: bool = False,
+    ) -> None:
+        pose = self.sim.pose
+        snap = Snapshot(
+            time_s=self.sim.time_s,
+            pose=pose,
+            twist=self.sim.twist,
+            device_pose=pose_from_coordinates(np.asarray(self._x_d, dtype=float), self.R0, self.dimension),
+            coupling_wrench=np.array(w_c, dtype=float),
+            felt_wrench=np.array(felt, dtype=float),
+            pressed=pressed,
+            normal_forces_N=self._zeros_n if normals is None else normals,
+            forces_world_N=np.zeros((len(self.names), self.dimension)) if forces is None else forces,
+            speed_mps=self._speed(),
+            at_goal=self.goal_reached_at is not None,
+            jammed=self._jammed_flag(),
+            auto=self._auto,
+            stats=self.stats(),
+            guidance=self.guidance,
+            bridge=self.handle.stats.to_json() if isinstance(self.handle, UdpHandle) else None,
+            ended=self.status is not None,
+        )
+        self.snapshot = snap
+
+    def _run_guide(self, snap: Snapshot) -> None:
+        guide = self.guide
+        if guide is None:
+            return
+        try:
+            self.guidance = guide.update(snap, self._push_recent.copy())
+        except InputError as exc:  # the guidance process is gone: the session goes on without advice
+            self.guide = None
+            self.guidance = Guidance(snap.time_s, motion="none", note=f"no guidance: {exc}")
+
+    def stats(self) -> LoopStats:
+        """Tick timing so far: mean and misses over every tick, p99 over the last 2000 (cached for 0.25 s)."""
+        n = len(self._compute)
+        if not n:
+            return LoopStats(0, 0.0, 0.0, 0.0, 0, 0.0)
+        cached = self._stats_cache
+        if cached is not None and n - cached.ticks < 250 and self.status is None:
+            return cached
+        recent = np.asarray(self._compute[-2000:]) * 1e6
+        late = np.asarray(self._late[-2000:]) * 1e6 if self._late else np.zeros(1)
+        out = LoopStats(
+            ticks=n,
+            tick_mean_us=float(self._compute_sum / n * 1e6),
+            tick_p99_us=float(np.percentile(recent, 99)),
+            tick_max_us=float(self._compute_max * 1e6),
+            deadline_misses=self._misses,
+            late_p99_us=float(np.percentile(late, 99)),
+        )
+        self._stats_cache = out
+        return out
+
+    def final_stats(self) -> LoopStats:
+        """Like :meth:`stats`, p99 over every tick."""
+        n = len(self._compute)
+        if not n:
+            return LoopStats(0, 0.0, 0.0, 0.0, 0, 0.0)
+        a = np.asarray(self._compute) * 1e6
+        late = np.asarray(self._late) * 1e6 if self._late else np.zeros(1)
+        return LoopStats(n, float(a.mean()), float(np.percentile(a, 99)), float(a.max()), self._misses,
+                         float(np.percentile(late, 99)))  # fmt: skip
+
+    def _end(self, why: str | None) -> None:
+        if self.status is not None:
+            return
+        t = self.sim.time_s
+        if why is not None:
+            self.status, self.reason = "diverged", why
+        elif self.goal_reached_at is not None:
+            self.status = "reached"
+            self.reason = f"every locator pressed, at rest at t = {self.goal_reached_at:.3f} s"
+        elif self.jammed_where is not None and self._jammed_flag():
+            j = self.jammed_where
+            self.status = "jammed"
+            self.reason = (
+                f"jammed at t = {j['time_s']:.3f} s in {{{', '.join(j['state'])}}}: the push "
+                f"({', '.join(f'{x:.3g}' for x in j['push'])}) is held by friction (margin {j['margin']})"
+            )
+        else:
+            missing = sorted(set(self.names) - set(self._observed or ()))
+            self.status = "short"
+            self.reason = (
+                f"ended at t = {t:.3f} s short of the goal in {{{', '.join(sorted(self._observed or ()))}}}"
+                + (f": {', '.join(missing)} not in contact" if missing else ": not yet at rest")
+            )
+        self._ended.set()
+
+    def _loop(self) -> None:
+        T = self.period_s
+        old_interval = sys.getswitchinterval()
+        sys.setswitchinterval(min(old_interval, 2e-4))  # the display thread gives the GIL back quickly
+        gc.collect()
+        gc.freeze()  # long-lived objects out of the collector's way: collections stay short
+        try:
+            next_t = time.perf_counter()
+            while not self._stop.is_set() and self.status is None:
+                if self.realtime:
+                    next_t += T
+                    now = time.perf_counter()
+                    if next_t - now > 2e-4:
+                        time.sleep(next_t - now - 1.5e-4)
+                    while (now := time.perf_counter()) < next_t:
+                        pass
+                    if now - next_t > 50 * T:  # fell far behind (the process was stopped): start afresh
+                        next_t = now
+                    start = now
+                else:
+                    if self.clock == "device" and not self.handle.wait_readable(0.1):  # type: ignore[union-attr]
+                        continue
+                    start = time.perf_counter()
+                try:
+                    self.tick(start)
+                except SolverError as exc:
+                    self._end(f"the simulation diverged at t = {self.sim.time_s:.3f} s: {exc}")
+                end = time.perf_counter()
+                self._compute.append(end - start)
+                self._compute_sum += end - start
+                self._compute_max = max(self._compute_max, end - start)
+                if self.realtime:
+                    self._late.append(start - next_t)
+                    if end - next_t > T:
+                        self._misses += 1
+                elif end - start > T:
+                    self._misses += 1
+            if self.status is None:
+                self._end(None)
+                if self.handle is not None and self.snapshot is not None:  # tell the device it ended
+                    x_w, v_w = self.coordinates()
+                    self.handle.display(self.snapshot.felt_wrench, self._answer(self.snapshot.felt_wrench, x_w, v_w))
+            self._publish(self.snapshot.coupling_wrench if self.snapshot else np.zeros(self.ndof),
+                          self.snapshot.felt_wrench if self.snapshot else np.zeros(self.ndof),
+                          tuple(sorted(self._observed or ())))  # fmt: skip
+        finally:
+            gc.unfreeze()
+            sys.setswitchinterval(old_interval)
+            self._ended.set()
+
+    def _guide_loop(self) -> None:
+        last: Snapshot | None = None
+        next_t = time.perf_counter()
+        while not self._ended.is_set():
+            wait = next_t - time.perf_counter()
+            if wait > 0 and self._ended.wait(wait):
+                return
+            next_t = max(next_t + GUIDE_PERIOD_S, time.perf_counter())
+            if self._restart_guide and isinstance(self.guide, RemoteGuide):
+                self._restart_guide = False
+                self.guide.close()
+                self.guide = RemoteGuide(self.fixture, self.start_state, tick_s=self.guide.tick_s)
+            snap = self.snapshot
+            if snap is None or snap is last:
+                time.sleep(0.002)
+                continue
+            last = snap
+            self._run_guide(snap)
+
+    def _warm_up(self) -> None:
+        """Load the engine's compiled kernels on a scratch copy, so that no tick pays for it."""
+        import copy
+
+        scratch = copy.deepcopy(self.sim)
+        scratch.step(np.zeros(self.ndof))
+        scratch.contacts()
+        scratch.in_contact(self.threshold_N, self.contact_gap_m)
+        self.coordinates()
+
+    def start(self) -> HapticSession:
+        """Start the loop (and the guidance) in their own threads."""
+        self._warm_up()
+        if self._guidance_on and not self.synchronous and self.guide is None:
+            self.guide = RemoteGuide(self.fixture, self.start_state, tick_s=GUIDE_PERIOD_S)
+        if self.synchronous and self.guide is not None and self.snapshot is not None:
+            self._run_guide(self.snapshot)  # plan before the first tick
+        self._thread = threading.Thread(target=self._loop, name="fixplan-haptic-loop", daemon=True)
+        self._thread.start()
+        if self.guide is not None and not self.synchronous:
+            self._guide_thread = threading.Thread(target=self._guide_loop, name="fixplan-guidance", daemon=True)
+            self._guide_thread.start()
+        return self
+
+    def wait(self, timeout_s: float | None = None) -> bool:
+        """Block until the session ends (True) or ``timeout_s`` passes (False)."""
+        return self._ended.wait(timeout_s)
+
+    def stop(self) -> None:
+        """End the session at the next tick (the status says how far it got)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        if self._guide_thread is not None:
+            self._guide_thread.join(timeout=30.0)
+        if isinstance(self.guide, RemoteGuide):
+            self.guide.close()
+
+    def run(self) -> SessionResult:
+        """Start, wait for the end (goal or time), stop, and return the result."""
+        self.start()
+        try:
+            while not self.wait(0.1):
+                pass
+        finally:
+            self.stop()
+            if self.handle is not None:
+                self.handle.close()
+        return self.result()
+
+    def result(self) -> SessionResult:
+        if self.status is None:
+            self._end(None)
+        where: dict[str, Any] = {
+            "time_s": self.sim.time_s,
+            "state": sorted(self._observed or ()),
+            "pose": self.sim.pose.to_json(),
+        }
+        if self.status == "jammed" and self.jammed_where is not None:
+            where = dict(self.jammed_where)
+        gaps = {c.name: float(c.gap_m) for c in self.sim.contacts()}
+        return SessionResult(
+            status=str(self.status),
+            reason=self.reason,
+            where=where,
+            duration_s=self.sim.time_s,
+            names=self.names,
+            every_s=self.trace_every * self.period_s,
+            trace=self.trace,
+            states=list(self.states),
+            stats=self.final_stats(),
+            bridge=self.handle.stats.to_json() if isinstance(self.handle, UdpHandle) else None,
+            device="auto" if self.handle is None else self.handle.kind,
+            max_penetration_m=self.sim.max_penetration_m,
+            final_gaps_m=gaps,
+            saturated_ticks=self.saturated_ticks,
+            felt_equals_coupling_max_N=self.felt_error_max,
+        )
+
+    def bridge_config(self) -> dict[str, Any]:
+        """The CONFIG a UDP device receives after its HELLO."""
+        dev = self.rig.loop.device
+        return {
+            "protocol": 1,
+            "ndof": self.ndof,
+            "dimension": self.dimension,
+            "period_s": self.period_s,
+            "K": [float(x) for x in self.K],
+            "B": [float(x) for x in self.B],
+            "device_damping": [float(x) for x in self.device_damping],
+            "device_mass": [float(x) for x in dev._M],
+            "operator_kp": [float(x) for x in self.rig.kp],
+            "operator_kd": [float(x) for x in self.rig.kd],
+            "x0": [float(x) for x in self.x0],
+            "F_max_N": self.F_max,
+            "T_max_Nm": self.T_max,
+            "names": list(self.names),
+            "mode_names": list(MODES),
+        }
