@@ -274,3 +274,63 @@ def test_the_rig_transmits_the_push_as_one_wrench(name):
     share = W / w  # (T, 6): every column the same s(t)
     assert np.max(np.abs(share - share[:, [2]])) <= 1e-6
     assert share[5, 2] > 0.01 and share[-1, 2] == pytest.approx(1.0, abs=0.05)
+
+
+# -- speed near the target ----------------------------------------------------------------------------
+def _toward(fx, name, speed):
+    """The COM twist translating the part straight at locator ``name`` at ``speed`` [m/s]."""
+    c = fixplan.contact_set(fx, "start", [name]).contacts[0]
+    return np.concatenate([-c.normal_world * speed, np.zeros(3)]), float(c.gap_m)
+
+
+def test_a_part_too_fast_for_its_target_is_slowed_against_its_own_motion():
+    """The slow-down: none within the braking profile; beyond it, the deceleration opposes the
+    twist, keeps the base contacts, and closes the excess in ``speed_time_s`` (capped at
+    ``accel_mps2``)."""
+    fx, ex = _box_executor()
+    s, step = ex.settings, ex.steps[0]
+    M = ex._mass_matrix(fx.start)
+    m = fx.workpiece.mass_kg
+    lag = 1.0 / s.control_rate_hz + s.smoothing_s
+    slow, gap = _toward(fx, "S2", 0.01)
+    allowed = max(s.min_speed_mps, np.sqrt(2 * s.brake_mps2 * (gap - 0.01 * lag)))
+    assert 0.01 < 1.5 * allowed  # within the profile: nothing to do
+    assert ex._slowdown(fx.start, slow, slow, M, step) is None
+    fast, _ = _toward(fx, "S2", 0.1)
+    fast[2] = 1e-9  # a normal velocity at noise level must not read as lifting off
+    a = ex._slowdown(fx.start, fast, fast, M, step)
+    assert a is not None
+    base = fixplan.contact_set(fx, "start", ["B1", "B2", "B3"])
+    assert np.abs(base.G @ a).max() <= 1e-12
+    cos = float(a @ M @ -fast) / np.sqrt(float(a @ M @ a) * float(fast @ M @ fast))
+    assert cos == pytest.approx(1.0, abs=1e-9)
+    allowed = max(s.min_speed_mps, np.sqrt(2 * s.brake_mps2 * max(gap - 0.1 * lag, 0.0)))
+    ratio = max(0.1 / (1.5 * allowed), 0.1 / (1.5 * s.speed_mps))
+    expected = min(0.1 * (1 - 1 / ratio) / s.speed_time_s, s.accel_mps2)
+    assert np.sqrt(float(a @ M @ a) / m) == pytest.approx(expected, rel=1e-6)
+
+
+def test_the_desired_motion_always_closes_the_targets_gap():
+    """A guide path that leads away from the target (the part is off it) is not followed: the
+    executor's motion closes the target's gap and keeps the established contacts."""
+    fx, _ = _box_executor()
+    base = ("B1", "B2", "B3")
+    twist_away, _ = _toward(fx, "S2", -0.005)  # 5 mm away from S2
+    away = fx.start.retract(twist_away, fx.workpiece.com_body)
+    step = Step(base, "S2", "slide", (fx.start, away, away))
+    ex = Executor(fx, frozenset(base), [step])
+    nu, _ = ex.direction(fx.start, step)
+    cs = fixplan.contact_set(fx, "start", [*base, "S2"])
+    assert float(cs.G[-1] @ nu) < 0.0  # closes the gap (G ν is the rate the gap opens)
+    assert np.abs(cs.G[:3] @ nu).max() <= 1e-12
+    toward = Step(base, "S2", "slide", (fx.start, fx.start.retract(-twist_away, fx.workpiece.com_body)))
+    nu2, _ = ex.direction(fx.start, toward)
+    assert float(cs.G[-1] @ nu2) < 0.0
+
+
+def test_the_measured_acceleration_is_the_twists_rate_between_solves():
+    fx, ex = _box_executor()
+    tw0, tw1 = np.zeros(6), np.array([0.01, -0.02, 0.0, 0.0, 0.0, 0.3])
+    assert not np.any(ex._measured_accel(0.0, tw0))
+    assert np.allclose(ex._measured_accel(0.005, tw1), (tw1 - tw0) / 0.005)
+    assert not np.any(ex._measured_accel(1.0, tw0))  # after a gap: no estimate

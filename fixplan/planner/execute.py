@@ -228,6 +228,7 @@ class Executor:
         self._recover_until: float | None = None  # pressing a lost contact back until then
         self._recover_why = ""
         self._pressed_back_for = -1  # the transition in which a failed re-plan last pressed the part back
+        self._prev_solve: tuple[float, FloatArray] | None = None  # (time, twist) at the last solve
         self._delay_ticks = int(round(self.noise.latency_s / tick_s))
         self._history: deque[tuple[Pose, FloatArray, State]] = deque(maxlen=self._delay_ticks + 1)
         from fixplan.jamming.search import hand_limits
@@ -609,6 +610,12 @@ class Executor:
                 nu = to + 0.5 * direct * (mass_speed(to, M, wp.mass_kg) / max(mass_speed(direct, M, wp.mass_kg), 1e-15))
                 left = max(left_path, gap)
         nu = project_keeping(nu, est_cs_rows, M_inv)
+        if nu is not direct and float(cs.G[-1] @ nu) >= 0.0:
+            # the guide leads away from the target (the part is off the path, e.g. a perturbed
+            # world rolls it along another curve, and the knot ahead lies behind it on the
+            # constraint surface): a transition's motion closes its target's gap, so go direct.
+            # Following the guide here rocked a plate back and forth on one locator for 4.5 s
+            nu = project_keeping(direct, est_cs_rows, M_inv)
         size = mass_speed(nu, M, wp.mass_kg)
         if size <= 1e-15:
             return np.zeros(self.ndof), left
@@ -629,7 +636,12 @@ class Executor:
             self._last_reason = "no motion keeps the established contacts and closes the target's gap"
             return
         boost = 1.0 + self._retry
-        v_along = float(twist @ M @ nu_hat) / self.mass
+        # the speed the part will have when this push acts: the push reaches it one control
+        # period plus the smoothing later, and it keeps accelerating as measured until then
+        # (without this the loop overshot the cruise speed by the lag × the acceleration: a heavy
+        # box reached 69 mm/s against 40 and its impact on the last locator tipped it)
+        twist_ahead = twist + self._measured_accel(t, twist) * self._lag_s
+        v_along = float(twist_ahead @ M @ nu_hat) / self.mass
         # cruise, then brake at brake_mps2 so that contact is made at about min_speed_mps
         v_des = max(s.min_speed_mps, min(s.speed_mps, math.sqrt(2.0 * s.brake_mps2 * max(left, 0.0))))
         # below the desired speed: speed up; up to 1.5× it: coast (the least push that keeps the
@@ -650,6 +662,14 @@ class Executor:
         )
         wp = self.fixture.workpiece
         com = pose.point_world_from_body(wp.com_body)
+        if step.kind == "slide" and step.established:
+            # the part itself too fast, whatever the direction asked: its approach to the target
+            # (what the impact unloads other contacts with) or its speed. A push toward a turn the
+            # base's friction resists leaves the speed along the asked motion low while the part
+            # translates ever faster (a tall box met its end locator at 6 cm/s: B1 lifted)
+            a_slow = self._slowdown(pose, twist, twist_ahead, M, step)
+            if a_slow is not None and self._brake(t, pose, twist, a_slow, com, step):
+                return
         if brake > 0.0 and self._brake(t, pose, twist, nu_hat * a_cmd, com, step):
             return
         if step.kind != "roll" or not step.established:
@@ -693,6 +713,54 @@ class Executor:
             self._accept(w)
         else:
             self._reject(t, res.reason)
+
+    @property
+    def _lag_s(self) -> float:
+        """How long after an observation a new push acts on the part: a control period plus the smoothing."""
+        return 1.0 / self.settings.control_rate_hz + self.settings.smoothing_s
+
+    def _measured_accel(self, t: float, twist: FloatArray) -> FloatArray:
+        """The twist's rate between the last two solves (zero at the first, after a gap, or at rest)."""
+        prev, self._prev_solve = self._prev_solve, (t, twist.copy())
+        if prev is None:
+            return np.zeros_like(twist)
+        dt = t - prev[0]
+        if not (0.0 < dt <= 2.5 / self.settings.control_rate_hz):
+            return np.zeros_like(twist)
+        return (twist - prev[1]) / dt
+
+    def _slowdown(
+        self, pose: Pose, twist: FloatArray, twist_ahead: FloatArray, M: FloatArray, step: Step
+    ) -> FloatArray | None:
+        """The deceleration of the part's own motion when it is too fast, else None.
+
+        Too fast: the target's gap closes faster than ``1.5 √(2 a_b g)`` (the braking profile,
+        with ``g`` what is left after the distance covered before a new push acts: one control
+        period plus the push's smoothing), and never below ``1.5 min_speed_mps``; or the
+        mass-weighted speed exceeds 1.5 × the cruise speed; both speeds as they will be when the
+        push acts (``twist_ahead``: the measured acceleration continued). The deceleration opposes the twist
+        and brings the speed back within the limit in about ``speed_time_s``, keeping the
+        established contacts.
+        """
+        s = self.settings
+        speed = mass_speed(twist, M, self.mass)
+        if speed <= s.min_speed_mps:
+            return None
+        target = contact_set(self.fixture, pose, [step.target])
+        gap = max(float(target.contacts[0].gap_m), 0.0)
+        closing = -float(target.G[0] @ twist)  # m/s at which the target's gap closes
+        closing_ahead = -float(target.G[0] @ twist_ahead)
+        allowed = max(s.min_speed_mps, math.sqrt(2.0 * s.brake_mps2 * max(gap - max(closing, 0.0) * self._lag_s, 0.0)))
+        ratio = max(closing_ahead / (1.5 * allowed), mass_speed(twist_ahead, M, self.mass) / (1.5 * s.speed_mps))
+        if ratio <= 1.0:
+            return None
+        a = min(speed * (1.0 - 1.0 / ratio) / s.speed_time_s, s.accel_mps2)
+        # against the twist, on the motions that keep the established contacts (the twist's
+        # normal part is numerical noise: left in, it reads as a push that lifts the part off)
+        est = contact_set(self.fixture, pose, list(step.established))
+        back = project_keeping(-np.asarray(twist, dtype=float), est.G, est.M_inv)
+        size = mass_speed(back, M, self.mass)
+        return None if size <= 1e-15 else back * (a / size)
 
     def _brake(self, t: float, pose: Pose, twist: FloatArray, a_com: FloatArray, com: FloatArray, step: Step) -> bool:
         """Slow a sliding part down with a push that balances what sliding friction does to it.
