@@ -1280,13 +1280,14 @@ def device_sim(
     lockstep: Annotated[
         bool, typer.Option("--lockstep", help="One period per answer, no wall clock (with 'haptic --clock device').")
     ] = False,
+    wait: Annotated[float, typer.Option("--wait", help="Seconds to wait for 'fixplan haptic' to answer.")] = 60.0,
     json_out: JsonOpt = False,
 ) -> None:
     """A simulated haptic device with a human-like operator, over the UDP bridge (exit 0 when fixplan reports the goal)."""
     from fixplan.interactive.commands import run_device_sim
 
     code = run_device_sim(host=host, port=port, noise=noise, delay_ms=delay_ms, duration=duration, push=push,
-                          seed=seed, json_out=json_out, lockstep=lockstep)  # fmt: skip
+                          seed=seed, json_out=json_out, lockstep=lockstep, wait_s=wait)  # fmt: skip
     if code:
         raise typer.Exit(code)
 

@@ -18,7 +18,9 @@ other than 127.0.0.1), viser listens on 127.0.0.1 only and :mod:`.gate` is what 
 
 from __future__ import annotations
 
+import contextlib
 import math
+import sys
 import threading
 import time
 from typing import Any
@@ -147,10 +149,12 @@ class HapticApp:
             raise InputError("fixplan haptic needs viser: pip install viser") from None
         inner_host = "127.0.0.1" if self.token is not None else self.host
         inner_port = 0 if self.token is not None else self.port
-        self.server = viser.ViserServer(host=inner_host, port=inner_port, label="fixplan haptic", verbose=False)
+        with contextlib.redirect_stdout(sys.stderr):  # viser's banner: stdout is for --json
+            self.server = viser.ViserServer(host=inner_host, port=inner_port, label="fixplan haptic", verbose=False)
         bound = int(self.server.get_port())
         if self.token is None and self.port not in (0, bound):
-            self.server.stop()
+            with contextlib.redirect_stdout(sys.stderr):
+                self.server.stop()
             raise InputError(f"--port {self.port} is in use (choose another, or 0 for any free port)")
         url_port = bound
         if self.token is not None:
@@ -213,7 +217,7 @@ class HapticApp:
         # the camera looks at the fixture from the front, above
         c = np.mean([_xyz(loc.p_world) for loc in fx.locators], axis=0)
         self.server.initial_camera.look_at = c
-        self.server.initial_camera.position = c + np.array([2.5, -3.5, 2.5]) * self.bound * 1.4
+        self.server.initial_camera.position = c + np.array([1.3, -2.0, 1.4]) * self.bound * 1.4
 
     def _build_panel(self) -> None:
         s = self.session
@@ -346,14 +350,14 @@ class HapticApp:
         d = s.dimension
         g = snap.guidance
         if snap.at_goal:
-            verdict = "✅ **goal**: every locator pressed, at rest"
+            verdict = "<span style='color:#2ca02c'>**GOAL**</span>: every locator pressed, at rest"
         elif snap.jammed:
-            verdict = "<span style='color:#d62728'>⚠ **JAMMED**</span>: friction holds the part against this push — push another way"
+            verdict = "<span style='color:#d62728'>**JAMMED**</span>: friction holds the part against this push — push another way"
         elif g.verdict is None:
             verdict = "**verdict**: –"
         else:
             margin = "" if g.margin is None else f", margin {g.margin:.3g}"
-            word = "⚠ **jammed**" if g.verdict == "jammed" else f"**{g.verdict}**"
+            word = "<span style='color:#d62728'>**jammed**</span>" if g.verdict == "jammed" else f"**{g.verdict}**"
             verdict = f"verdict of the current push: {word}{margin}"
         self.verdict_md.content = verdict
         if g.target is not None:
@@ -388,4 +392,5 @@ class HapticApp:
         if self.gate is not None:
             self.gate.stop()
         if self.server is not None:
-            self.server.stop()
+            with contextlib.redirect_stdout(sys.stderr):
+                self.server.stop()

@@ -42,7 +42,7 @@ def open_live_page(
     *,
     width: int = 1100,
     height: int = 700,
-    wait_text: str | None = "verdict",
+    wait_text: str | None = "felt force",
     hold_s: float = 2.0,
     timeout_s: float = 60.0,
 ) -> LivePageReport:

@@ -159,6 +159,7 @@ def run_device_sim(
     seed: int,
     json_out: bool,
     lockstep: bool = False,
+    wait_s: float = 60.0,
 ) -> int:
     """The simulated device; 0 when fixplan reported the goal."""
     from fixplan.interactive.device_sim import DeviceSim
@@ -171,9 +172,10 @@ def run_device_sim(
             raise InputError(f"--push must be comma-separated numbers, got {push!r}") from None
         if not np.all(np.isfinite(w)) or w.shape[0] not in (3, 6):
             raise InputError(f"--push expects 3 (2D) or 6 (3D) finite numbers, got {push!r}")
-    sim = DeviceSim(
-        host, port, noise=noise, delay_ms=delay_ms, duration_s=duration, push=w, seed=seed, lockstep=lockstep
-    )
+    if not (math.isfinite(wait_s) and 0 < wait_s <= 3600):
+        raise InputError(f"--wait must be within (0, 3600] s, got {wait_s}")
+    sim = DeviceSim(host, port, noise=noise, delay_ms=delay_ms, duration_s=duration, push=w, seed=seed,
+                    lockstep=lockstep, connect_timeout_s=wait_s)  # fmt: skip
     try:
         cfg = sim.connect()
         if w is not None and w.shape[0] != int(cfg["ndof"]):

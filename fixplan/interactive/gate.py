@@ -103,6 +103,7 @@ class TokenGate:
 
         async def handler(ws: Any) -> None:
             from websockets.asyncio.client import connect
+            from websockets.exceptions import ConnectionClosed
 
             protocols = [ws.subprotocol] if ws.subprotocol else None
             self.relayed += 1
@@ -110,8 +111,11 @@ class TokenGate:
                                compression=None) as inner:  # fmt: skip
 
                 async def pump(a: Any, b: Any) -> None:
-                    async for msg in a:
-                        await b.send(msg)
+                    try:
+                        async for msg in a:
+                            await b.send(msg)
+                    except ConnectionClosed:
+                        pass  # either side left: the other is closed below
 
                 tasks = [asyncio.ensure_future(pump(ws, inner)), asyncio.ensure_future(pump(inner, ws))]
                 _, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)

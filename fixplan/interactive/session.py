@@ -527,8 +527,8 @@ class HapticSession:
             out[d:] *= T_max / T
         return out, True
 
-    def tick(self, wall_s: float) -> None:
-        """One period of the loop (steps 1–5 of the module's docstring)."""
+    def tick(self, wall_s: float) -> bool:
+        """One period of the loop (steps 1–5 of the module's docstring); False when the device clock did not tick."""
         if self._reset_requested:
             self._reset_requested = False
             self._reset()
@@ -538,7 +538,7 @@ class HapticSession:
         x_w, v_w = self._coords
         reading = None if self.handle is None else self.handle.read(wall_s)
         if self.clock == "device" and not getattr(self.handle, "fresh", False):
-            return  # no new pose (a HELLO, a dropped datagram): the device's clock has not ticked
+            return False  # no new pose (a HELLO, a dropped datagram): the device's clock has not ticked
         if self._auto:
             dev = self._auto_dev
             assert dev is not None  # noqa: S101 - set in __init__
@@ -581,6 +581,7 @@ class HapticSession:
         if self.handle is not None:  # the answer carries the goal and end flags of this tick
             x_new, v_new = self._coords
             self.handle.display(felt, self._answer(felt, x_new, v_new))
+        return True
 
     def coordinates(self) -> tuple[FloatArray, FloatArray]:
         """The part's device coordinates and rates (what ``HapticLoop.workpiece_coordinates`` gives, compiled)."""
@@ -794,7 +795,8 @@ class HapticSession:
                         continue
                     start = time.perf_counter()
                 try:
-                    self.tick(start)
+                    if not self.tick(start):
+                        continue
                 except SolverError as exc:
                     self._end(f"the simulation diverged at t = {self.sim.time_s:.3f} s: {exc}")
                 end = time.perf_counter()
@@ -812,9 +814,10 @@ class HapticSession:
                 if self.handle is not None and self.snapshot is not None:  # tell the device it ended
                     x_w, v_w = self.coordinates()
                     self.handle.display(self.snapshot.felt_wrench, self._answer(self.snapshot.felt_wrench, x_w, v_w))
-            self._publish(self.snapshot.coupling_wrench if self.snapshot else np.zeros(self.ndof),
-                          self.snapshot.felt_wrench if self.snapshot else np.zeros(self.ndof),
-                          tuple(sorted(self._observed or ())))  # fmt: skip
+            last = self.snapshot
+            if last is not None:  # the final state, with the last contact forces, flagged as ended
+                self._publish(last.coupling_wrench, last.felt_wrench, last.pressed, normals=last.normal_forces_N,
+                              forces=last.forces_world_N)  # fmt: skip
         finally:
             gc.unfreeze()
             sys.setswitchinterval(old_interval)
