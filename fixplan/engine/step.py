@@ -36,7 +36,7 @@ import math
 import numpy as np
 from numba import njit
 
-from fixplan.engine.detect import project
+from fixplan.engine.detect import BOX, project
 from fixplan.engine.local import FAILED, WORKSPACE_SIZE, project_cone_into
 from fixplan.engine.nsgs import local_solve_into, local_solve_ws
 
@@ -743,6 +743,78 @@ def nsgs_ws(W, q, mu, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has_in
 
 
 @njit(cache=True)
+def _box3(p0, p1, p2, h0, h1, h2):
+    """:func:`fixplan.engine.detect.project` for a 3D box in scalars (same arithmetic, no arrays).
+
+    Returns ``(distance, point, normal)`` as 7 numbers (body frame).
+    """
+    q0 = abs(p0) - h0
+    q1 = abs(p1) - h1
+    q2 = abs(p2) - h2
+    out2 = 0.0
+    if q0 > 0.0:
+        out2 += q0 * q0
+    if q1 > 0.0:
+        out2 += q1 * q1
+    if q2 > 0.0:
+        out2 += q2 * q2
+    scale = max(h0, max(h1, h2))
+    n_out = math.sqrt(out2)
+    s0 = 1.0 if p0 >= 0.0 else -1.0
+    s1 = 1.0 if p1 >= 0.0 else -1.0
+    s2 = 1.0 if p2 >= 0.0 else -1.0
+    if n_out > 1e-12 * scale:
+        return (
+            n_out,
+            min(max(p0, -h0), h0),
+            min(max(p1, -h1), h1),
+            min(max(p2, -h2), h2),
+            s0 * q0 / n_out if q0 > 0.0 else 0.0,
+            s1 * q1 / n_out if q1 > 0.0 else 0.0,
+            s2 * q2 / n_out if q2 > 0.0 else 0.0,
+        )
+    # inside (or on the surface): the face of the largest q (the first one on ties)
+    if q0 >= q1 and q0 >= q2:
+        return q0, s0 * h0, p1, p2, s0, 0.0, 0.0
+    if q1 >= q2:
+        return q1, p0, s1 * h1, p2, 0.0, s1, 0.0
+    return q2, p0, p1, s2 * h2, 0.0, 0.0, s2
+
+
+@njit(cache=True)
+def _query3(kind, params, verts, enorm, R, p, q, pb, point, normal):
+    """Gap data of the world point ``q`` against the body at ``(R, p)``, in world axes.
+
+    Returns ``(distance, n, x)`` as 7 numbers: the signed distance, the contact normal
+    ``n = −R·normal_body`` (into the workpiece) and the closest point ``x = p + R·point_body``.
+    ``pb, point, normal`` are scratch 3-vectors for shapes other than the box.
+    """
+    d0 = q[0] - p[0]
+    d1 = q[1] - p[1]
+    d2 = q[2] - p[2]
+    b0 = R[0, 0] * d0 + R[1, 0] * d1 + R[2, 0] * d2
+    b1 = R[0, 1] * d0 + R[1, 1] * d1 + R[2, 1] * d2
+    b2 = R[0, 2] * d0 + R[1, 2] * d1 + R[2, 2] * d2
+    if kind == BOX:
+        dist, x0, x1, x2, m0, m1, m2 = _box3(b0, b1, b2, params[0], params[1], params[2])
+    else:
+        pb[0] = b0
+        pb[1] = b1
+        pb[2] = b2
+        dist = project(kind, params, verts, enorm, pb, point, normal)
+        x0, x1, x2, m0, m1, m2 = point[0], point[1], point[2], normal[0], normal[1], normal[2]
+    return (
+        dist,
+        -(R[0, 0] * m0 + R[0, 1] * m1 + R[0, 2] * m2),
+        -(R[1, 0] * m0 + R[1, 1] * m1 + R[1, 2] * m2),
+        -(R[2, 0] * m0 + R[2, 1] * m1 + R[2, 2] * m2),
+        p[0] + (R[0, 0] * x0 + R[0, 1] * x1 + R[0, 2] * x2),
+        p[1] + (R[1, 0] * x0 + R[1, 1] * x1 + R[1, 2] * x2),
+        p[2] + (R[2, 0] * x0 + R[2, 1] * x1 + R[2, 2] * x2),
+    )
+
+
+@njit(cache=True)
 def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors,
              h, f_ext, tau_ext, restitution, margin, tol, max_iter, P_full, active_full, P_prev, active_prev,
              gap_full, u_full, n_full, bound_m, ws):  # fmt: skip
@@ -779,16 +851,10 @@ def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, lo
     for a in range(3):
         c[a] = p[a] + tmp[a]
     for i in range(k):
-        for a in range(3):
-            tmp[a] = loc_p[i, a] - p[a]
-        _mtv3_into(R, tmp, pb)
-        dist = project(kind, params, verts, enorm, pb, point, normal)
+        dist, n_w[i, 0], n_w[i, 1], n_w[i, 2], pt_w[i, 0], pt_w[i, 1], pt_w[i, 2] = _query3(
+            kind, params, verts, enorm, R, p, loc_p[i], pb, point, normal
+        )
         gap[i] = dist - loc_r[i]
-        _mv3_into(R, normal, tmp)
-        _mv3_into(R, point, tmp2)
-        for a in range(3):
-            n_w[i, a] = -tmp[a]
-            pt_w[i, a] = p[a] + tmp2[a]
         active[i] = gap[i] <= margin
     # free motion, angular-momentum form
     for a in range(3):
@@ -963,16 +1029,13 @@ def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, lo
         worst = 0.0
         for jj in range(nc):
             i = idx[jj]
-            for a in range(3):
-                tmp[a] = loc_p[i, a] - p_new[a]
-            _mtv3_into(R_new, tmp, pb)
-            g[jj] = project(kind, params, verts, enorm, pb, point, normal) - loc_r[i]
-            _mv3_into(R_new, normal, tmp)
-            nn0, nn1, nn2 = -tmp[0], -tmp[1], -tmp[2]
-            _mv3_into(R_new, point, tmp)
-            r0 = p_new[0] + tmp[0] - c_new[0]
-            r1 = p_new[1] + tmp[1] - c_new[1]
-            r2 = p_new[2] + tmp[2] - c_new[2]
+            dist, nn0, nn1, nn2, x0, x1, x2 = _query3(
+                kind, params, verts, enorm, R_new, p_new, loc_p[i], pb, point, normal
+            )
+            g[jj] = dist - loc_r[i]
+            r0 = x0 - c_new[0]
+            r1 = x1 - c_new[1]
+            r2 = x2 - c_new[2]
             G[jj, 0] = nn0
             G[jj, 1] = nn1
             G[jj, 2] = nn2
