@@ -154,6 +154,8 @@ class _Samples:
             dtype = np.int64 if key == "iterations" else float
             if not parts:
                 return np.zeros(shapes[key], dtype=dtype)
+            if len(parts) == 1:  # one compiled chunk: its arrays as they are
+                return np.asarray(parts[0], dtype=dtype).reshape((-1, *shapes[key][1:]))
             return np.concatenate([np.asarray(x, dtype=dtype).reshape((-1, *shapes[key][1:])) for x in parts])
 
         return Trajectory(
@@ -492,20 +494,21 @@ class Simulator:
         """A run as compiled loops of about 5000 steps (no Python per step)."""
         times, table = schedule
         gravity_f = self._mass * np.asarray(self.fixture.gravity, dtype=float)
-        samples = _Samples()
-        self._record(samples)
+        samples = _Samples()  # the kernels also record the initial state (first chunk)
         chunk = max(every, (5000 // every) * every)
         done = 0
         wall = 0.0
         status = kernels.STATUS_OK
         last_err, last_it = 0.0, 0  # a run of 0 steps solved nothing
         d = self.dimension
+        if n_steps == 0:
+            self._record(samples)
         while done < n_steps:
             n = min(chunk, n_steps - done)
             t0 = time.perf_counter()
             if d == 3:
                 out = kernels.run3(
-                    n, every, self.time_s, self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv,
+                    n, every, done == 0, self.time_s, self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv,
                     self._com_b, self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r,
                     self._mu, self._tors, self.dt, gravity_f, times, table, self.restitution, self.margin_m,
                     self._bound, self.tolerance, self.max_iterations, self._P, self._active, self._P_prev,
@@ -515,10 +518,10 @@ class Simulator:
             else:
                 theta = math.atan2(self._R[1, 0], self._R[0, 0])
                 out2 = kernels.run2(
-                    n, every, self.time_s, theta, self._p, self._v, float(self._w), self._mass,
+                    n, every, done == 0, self.time_s, theta, self._p, self._v, float(self._w), self._mass,
                     float(self._Ib[0, 0]), self._com_b, self._kind, self._params, self._verts, self._enorm,
                     self._loc_p, self._loc_r, self._mu, self.dt, gravity_f, times, table, self.restitution,
-                    self.margin_m, self._bound, self.tolerance, self.max_iterations, self._P, self._active,
+                    self.margin_m, self._bound, self.tolerance, self.max_iterations, self._P, self._active, self._gap,
                 )  # fmt: skip
                 (rt, rp, rori, rnu, rfn, rgap, rerr, rit, th, p2, v2, w2, P2, act2, gap2, u2, nw2,
                  t_end, k_done, status_k, pen, worst_k, l_err, l_it) = out2  # fmt: skip

@@ -714,6 +714,92 @@ def nsgs_ws(W, q, mu, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has_in
         failures = 0
         for j in range(nc):
             o, d = offsets[j], sizes[j]
+            if d == 3:
+                # the 3D contact in scalars: α (same summation order as below), then the
+                # closed-form open and strict-stick regimes of _fast_local
+                s0, s1, s2 = q[o], q[o + 1], q[o + 2]
+                for c in range(o):
+                    pc = P[c]
+                    s0 += W[o, c] * pc
+                    s1 += W[o + 1, c] * pc
+                    s2 += W[o + 2, c] * pc
+                for c in range(o + 3, m):
+                    pc = P[c]
+                    s0 += W[o, c] * pc
+                    s1 += W[o + 1, c] * pc
+                    s2 += W[o + 2, c] * pc
+                if s0 >= 0.0:
+                    P[o] = 0.0
+                    P[o + 1] = 0.0
+                    P[o + 2] = 0.0
+                    continue
+                if has_inv[j]:
+                    iv = inv[j]
+                    x0 = -iv[0, 0] * s0 - iv[0, 1] * s1 - iv[0, 2] * s2
+                    x1 = -iv[1, 0] * s0 - iv[1, 1] * s1 - iv[1, 2] * s2
+                    x2 = -iv[2, 0] * s0 - iv[2, 1] * s1 - iv[2, 2] * s2
+                    if x0 > 0.0 and math.sqrt(x1 * x1 + x2 * x2) < mu[j] * x0 * (1.0 - 1e-9):
+                        P[o] = x0
+                        P[o + 1] = x1
+                        P[o + 2] = x2
+                        continue
+                alpha[0] = s0
+                alpha[1] = s1
+                alpha[2] = s2
+                Pj[0] = P[o]
+                Pj[1] = P[o + 1]
+                Pj[2] = P[o + 2]
+                if not slide3_newton(diag[j, :3, :3], alpha[:3], mu[j], Pj[:3]):
+                    st, _ = local_solve_ws(diag[j, :3, :3], alpha[:3], mu[j], 3, Pj[:3], ws)
+                    if st == FAILED:
+                        failures += 1
+                P[o] = Pj[0]
+                P[o + 1] = Pj[1]
+                P[o + 2] = Pj[2]
+                continue
+            if d == 3:
+                # the 3D contact in scalars: α (same summation order as below), then the
+                # closed-form open and strict-stick regimes of _fast_local
+                s0, s1, s2 = q[o], q[o + 1], q[o + 2]
+                for c in range(o):
+                    pc = P[c]
+                    s0 += W[o, c] * pc
+                    s1 += W[o + 1, c] * pc
+                    s2 += W[o + 2, c] * pc
+                for c in range(o + 3, m):
+                    pc = P[c]
+                    s0 += W[o, c] * pc
+                    s1 += W[o + 1, c] * pc
+                    s2 += W[o + 2, c] * pc
+                if s0 >= 0.0:
+                    P[o] = 0.0
+                    P[o + 1] = 0.0
+                    P[o + 2] = 0.0
+                    continue
+                if has_inv[j]:
+                    iv = inv[j]
+                    x0 = -iv[0, 0] * s0 - iv[0, 1] * s1 - iv[0, 2] * s2
+                    x1 = -iv[1, 0] * s0 - iv[1, 1] * s1 - iv[1, 2] * s2
+                    x2 = -iv[2, 0] * s0 - iv[2, 1] * s1 - iv[2, 2] * s2
+                    if x0 > 0.0 and math.sqrt(x1 * x1 + x2 * x2) < mu[j] * x0 * (1.0 - 1e-9):
+                        P[o] = x0
+                        P[o + 1] = x1
+                        P[o + 2] = x2
+                        continue
+                alpha[0] = s0
+                alpha[1] = s1
+                alpha[2] = s2
+                Pj[0] = P[o]
+                Pj[1] = P[o + 1]
+                Pj[2] = P[o + 2]
+                if not slide3_newton(diag[j, :3, :3], alpha[:3], mu[j], Pj[:3]):
+                    st, _ = local_solve_ws(diag[j, :3, :3], alpha[:3], mu[j], 3, Pj[:3], ws)
+                    if st == FAILED:
+                        failures += 1
+                P[o] = Pj[0]
+                P[o + 1] = Pj[1]
+                P[o + 2] = Pj[2]
+                continue
             for a in range(d):
                 s = q[o + a]
                 for c in range(m):
@@ -1133,7 +1219,7 @@ def _schedule_index(times, t, k):
 
 
 @njit(cache=True)
-def run3(n_steps, record_every, t_start, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p,
+def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p,
          loc_r, mu, tors, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter,
          P, active, P_prev, active_prev, gap, u, n_w):  # fmt: skip
     """``n_steps`` of :func:`step3_ws` under a wrench schedule, compiled end to end.
@@ -1144,13 +1230,14 @@ def run3(n_steps, record_every, t_start, R, p, v, w, mass, Ib, Ib_inv, com_b, ki
     :meth:`fixplan.simulator.Simulator.step` does) and its moment re-expressed about the moving
     centre of mass, as :meth:`Simulator.step` does. The state and warm start (``R, p, v, w, P,
     active``) and the last step's ``gap, u, n_w`` are updated in place; returns the samples
-    taken every ``record_every`` steps and at the last (time, position, quaternion, twist,
-    normal forces, gaps, residual, sweeps) and ``(t, steps done, status, max penetration,
+    taken every ``record_every`` steps and at the last, preceded by the initial state when
+    ``first`` (time, position, quaternion, twist, normal forces, gaps; residual and sweeps per
+    recorded step) and ``(t, steps done, status, max penetration,
     worst residual, last residual, last sweeps)``.
     """
     k = loc_p.shape[0]
     ws = workspace3(k)
-    n_rec = n_steps // record_every + 1
+    n_rec = n_steps // record_every + 2
     rec_t = np.zeros(n_rec)
     rec_p = np.zeros((n_rec, 3))
     rec_q = np.zeros((n_rec, 4))
@@ -1163,6 +1250,17 @@ def run3(n_steps, record_every, t_start, R, p, v, w, mass, Ib, Ib_inv, com_b, ki
     tau = np.zeros(3)
     off = np.zeros(3)
     r = 0
+    re = 0
+    if first:
+        rec_t[0] = t_start
+        rec_p[0] = p
+        _quat_into(R, rec_q[0])
+        rec_nu[0, 0:3] = v
+        rec_nu[0, 3:6] = w
+        for i in range(k):
+            rec_fn[0, i] = P[i, 0] / h if active[i] else 0.0
+            rec_gap[0, i] = gap[i]
+        r = 1
     t = t_start
     max_pen = 0.0
     status = STATUS_OK
@@ -1209,10 +1307,11 @@ def run3(n_steps, record_every, t_start, R, p, v, w, mass, Ib, Ib_inv, com_b, ki
             for i in range(k):
                 rec_fn[r, i] = P[i, 0] / h if active[i] else 0.0
                 rec_gap[r, i] = gap[i]
-            rec_err[r] = err
-            rec_it[r] = iters
+            rec_err[re] = err
+            rec_it[re] = iters
+            re += 1
             r += 1
-    return (rec_t[:r], rec_p[:r], rec_q[:r], rec_nu[:r], rec_fn[:r], rec_gap[:r], rec_err[:r], rec_it[:r],
+    return (rec_t[:r], rec_p[:r], rec_q[:r], rec_nu[:r], rec_fn[:r], rec_gap[:r], rec_err[:re], rec_it[:re],
             t, done, status, max_pen, worst_err, last_err, last_it)  # fmt: skip
 
 
@@ -1229,8 +1328,8 @@ def step3_into(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, 
 
 
 @njit(cache=True)
-def run2(n_steps, record_every, t_start, theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r,
-         mu, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, P, active):  # fmt: skip
+def run2(n_steps, record_every, first, t_start, theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r,
+         mu, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, P, active, gap_in):  # fmt: skip
     """``n_steps`` of :func:`step2` under a wrench schedule ``(Fx, Fy, Mz)`` about the body origin.
 
     The planar counterpart of :func:`run3` (same schedule, margin and recording rules). Returns
@@ -1238,7 +1337,7 @@ def run2(n_steps, record_every, t_start, theta, p, v, w, mass, Izz, com_b, kind,
     penetration, worst residual, last residual, last sweeps)``.
     """
     k = loc_p.shape[0]
-    n_rec = n_steps // record_every + 1
+    n_rec = n_steps // record_every + 2
     rec_t = np.zeros(n_rec)
     rec_p = np.zeros((n_rec, 2))
     rec_th = np.zeros((n_rec, 1))
@@ -1252,6 +1351,17 @@ def run2(n_steps, record_every, t_start, theta, p, v, w, mass, Izz, com_b, kind,
     u = np.zeros((k, 4))
     n_w = np.zeros((k, 2))
     r = 0
+    re = 0
+    if first:
+        rec_t[0] = t_start
+        rec_p[0] = p
+        rec_th[0, 0] = theta
+        rec_nu[0, 0:2] = v
+        rec_nu[0, 2] = w
+        for i in range(k):
+            rec_fn[0, i] = P[i, 0] / h if active[i] else 0.0
+            rec_gap[0, i] = gap_in[i]
+        r = 1
     t = t_start
     max_pen = 0.0
     status = STATUS_OK
@@ -1293,8 +1403,9 @@ def run2(n_steps, record_every, t_start, theta, p, v, w, mass, Izz, com_b, kind,
             for i in range(k):
                 rec_fn[r, i] = P[i, 0] / h if active[i] else 0.0
                 rec_gap[r, i] = gap[i]
-            rec_err[r] = err
-            rec_it[r] = iters
+            rec_err[re] = err
+            rec_it[re] = iters
+            re += 1
             r += 1
-    return (rec_t[:r], rec_p[:r], rec_th[:r], rec_nu[:r], rec_fn[:r], rec_gap[:r], rec_err[:r], rec_it[:r],
+    return (rec_t[:r], rec_p[:r], rec_th[:r], rec_nu[:r], rec_fn[:r], rec_gap[:r], rec_err[:re], rec_it[:re],
             theta, p, v, w, P, active, gap, u, n_w, t, done, status, max_pen, worst_err, last_err, last_it)  # fmt: skip
