@@ -278,3 +278,28 @@ def test_close_side_locators_need_the_smaller_clearance():
     assert min(others) >= CLEARANCES_M[1] - 1e-7
     plan = Planner(fx).plan_from(fx.start, frozenset(base))
     assert plan.found, plan.reason
+
+
+def test_other_locators_are_held_against_the_model_start_gap():
+    """A turned box touching S2 with S1 0.35 mm away beside its goal face: S1's model gap (the
+    smooth maximum of two planes) starts below the exact one, the NLP holds S1 at the model's
+    start value, and the exact check asks no more than that (it asked the exact start gap and
+    rejected sound paths by 3–28 µm: generated box-321 seed 303, fixture 3)."""
+    from fixplan.fixture import loads
+    from fixplan.generate import generate_one
+    from fixplan.locating import solve_goal
+
+    g = generate_one("box-321", 303, 3)
+    fx = loads(g.toml_text, source=g.name)
+    est = ["B1", "B2", "B3", "S2"]
+    near = Pose.from_rpy_deg([0.0221337, 0.0945951, 0.1536], [0.0, 0.0, 3.2085])
+    pose = solve_goal(fx.workpiece, [fx.locator(n) for n in est], near, tol_m=1e-10).pose
+    s1 = fx.locator("S1")
+    gap0 = locator_contact(fx.workpiece, pose, s1).gap_m
+    assert 1e-4 < gap0 < 1e-3  # closer than the clearance: held at its start gap
+    tr = plan_transition(fx, pose, est, "E1", knots=10)
+    assert tr.success, tr.reason
+    assert tr.max_constraint_violation_m <= fx.tolerances.touch_m
+    gaps = [locator_contact(fx.workpiece, p, s1).gap_m for p in tr.poses[1:]]
+    assert min(gaps) >= gap0 - 1e-4  # the model's lower bound is within the smooth max's width
+    assert min(gaps) < gap0 - fx.tolerances.touch_m  # the path uses that room: the exact start gap was the wrong bound

@@ -607,7 +607,12 @@ def plan_transition(
     poses = [pose_from_twist(start, xi_sol[:, k], com_b) for k in range(K + 1)]
 
     # --- exact check --------------------------------------------------------------------------
-    violation = _violation(fixture, poses, est, target, others, clearance_m, start_gaps)
+    # the other locators are held against the model's start gaps (a lower bound of the exact
+    # ones: with a second face the smooth maximum sits up to ~0.7 SMOOTH_MAX_M below), which is
+    # what the NLP enforced; the exact start gap asked 28 µm more of a generated box and
+    # rejected a sound path ("a feature's closed form does not hold")
+    held = {n: min(start_gaps[n], plane_start[n]) for n in others}
+    violation = _violation(fixture, poses, est, target, others, clearance_m, {**start_gaps, **held})
     slip = _slip(fixture, poses, est) if kind == "roll" else 0.0
     dxi = np.diff(xi_sol, axis=1)
     cost = float(sum(np.sqrt(max(float(v @ M0 @ v), 0.0)) for v in dxi.T) / np.sqrt(wp.mass_kg))
