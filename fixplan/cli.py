@@ -1281,13 +1281,16 @@ def device_sim(
         bool, typer.Option("--lockstep", help="One period per answer, no wall clock (with 'haptic --clock device').")
     ] = False,
     wait: Annotated[float, typer.Option("--wait", help="Seconds to wait for 'fixplan haptic' to answer.")] = 60.0,
+    token: Annotated[
+        str | None, typer.Option("--token", help="The token of 'fixplan haptic --host H --token T'.")
+    ] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """A simulated haptic device with a human-like operator, over the UDP bridge (exit 0 when fixplan reports the goal)."""
     from fixplan.interactive.commands import run_device_sim
 
     code = run_device_sim(host=host, port=port, noise=noise, delay_ms=delay_ms, duration=duration, push=push,
-                          seed=seed, json_out=json_out, lockstep=lockstep, wait_s=wait)  # fmt: skip
+                          seed=seed, json_out=json_out, lockstep=lockstep, wait_s=wait, token=token)  # fmt: skip
     if code:
         raise typer.Exit(code)
 

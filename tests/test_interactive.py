@@ -249,3 +249,28 @@ def test_recording_of_a_long_session_stays_within_the_plan_file_limit(box, auto_
     data = plan_json(replace(res, trace=long), box)
     assert len(data["verification"]["trace"]["time_s"]) <= MAX_SAMPLES
     assert len(json.dumps(data)) < MAX_FILE_BYTES
+
+
+def test_bridge_with_a_token_answers_only_devices_that_present_it():
+    h = UdpHandle("127.0.0.1", 0, 6, {"ndof": 6}, token="tok-0123456789")
+    stranger = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    device = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    device.settimeout(2.0)
+    try:
+        stranger.sendto(protocol.encode_hello("wrong-token"), ("127.0.0.1", h.port))
+        stranger.sendto(protocol.encode_pose(1, 0.0, [0.5] * 6, np.zeros(6), 6), ("127.0.0.1", h.port))
+        device.sendto(protocol.encode_hello("tok-0123456789"), ("127.0.0.1", h.port))
+        device.sendto(protocol.encode_pose(1, 0.0, [0.1] * 6, np.zeros(6), 6), ("127.0.0.1", h.port))
+        out = None
+        for _ in range(200):
+            out = h.read(0.0)
+            if h.stats.received >= 4:
+                break
+        assert (h.stats.refused, h.stats.hellos, h.stats.accepted) == (2, 1, 1)
+        assert out is not None
+        np.testing.assert_array_equal(out[0], [0.1] * 6)  # the stranger's pose was not used
+        assert protocol.decode_config(device.recv(65536)) == {"ndof": 6}
+    finally:
+        stranger.close()
+        device.close()
+        h.close()

@@ -39,6 +39,7 @@ def test_gizmo_moved_through_viser_is_the_device_and_loads_the_part(box):
     app.start()
     app._stop.set()  # the test draws (and so reads the gizmo) itself, between ticks
     app._thread.join()
+    app.always_draw = True
     try:
         s._warm_up()
         # the gizmo 2 mm beside the part: after one tick the part feels K·dx (the handle is still)

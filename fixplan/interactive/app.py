@@ -35,7 +35,7 @@ from fixplan.pose import Pose, log_so3, quaternion_wxyz_from_matrix
 
 FloatArray = NDArray[np.float64]
 
-DISPLAY_HZ = 40.0
+DISPLAY_HZ = 30.0
 PART = (74, 127, 181)
 GOAL = (154, 165, 177)
 PROXY = (44, 160, 44)
@@ -135,6 +135,8 @@ class HapticApp:
         self.gate: Any = None
         self.gizmo: Any = None
         self.frames = 0
+        self.skipped = 0
+        self.always_draw = False  # draw even without a browser connected (tests that read the scene)
         self.display_s: list[float] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -297,6 +299,9 @@ class HapticApp:
         s = self.session
         snap = s.snapshot
         if snap is None:
+            return
+        if not self.server.get_clients() and not self.always_draw:
+            self.skipped += 1  # nobody is looking: no work that competes with the loop for the GIL
             return
         if self.gizmo is not None:
             if s.auto:  # the gizmo follows the simulated device, so that switching auto off does not jump

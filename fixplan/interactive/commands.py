@@ -82,7 +82,8 @@ def run_haptic(
     handle: Handle
     if kind == "udp":
         assert udp_port is not None  # noqa: S101 - parse_device gives udp a port
-        handle = UdpHandle("127.0.0.1" if host in ("localhost",) else host, udp_port, fixture.ndof)
+        # the bridge listens where the web app does; off 127.0.0.1 a device's HELLO must carry the token
+        handle = UdpHandle("127.0.0.1" if host == "localhost" else host, udp_port, fixture.ndof, token=token)
     elif kind == "spacemouse":
         handle = SpaceMouseHandle(x0)
     else:
@@ -119,7 +120,7 @@ def run_haptic(
         "reason": result.reason,
         "duration_s": result.duration_s,
         "sequence": [list(s) for _, s in result.states if s != ("reset",)],
-        "loop": result.stats.to_json(),
+        "loop": {**result.stats.to_json(), "scheduling": session.scheduling},
         "bridge": result.bridge,
     }
     if record is not None:
@@ -135,7 +136,7 @@ def run_haptic(
         _echo(f"status: {result.status} — {result.reason}")
         _echo(
             f"loop: {s.ticks} ticks, tick mean {s.tick_mean_us:.0f} µs, p99 {s.tick_p99_us:.0f} µs, "
-            f"{s.deadline_misses} deadline misses"
+            f"{s.deadline_misses} deadline misses ({session.scheduling})"
             + (
                 f"; bridge: {result.bridge['accepted']} poses, {result.bridge['malformed']} malformed, "
                 f"{result.bridge['out_of_order']} out of order"
@@ -160,6 +161,7 @@ def run_device_sim(
     json_out: bool,
     lockstep: bool = False,
     wait_s: float = 60.0,
+    token: str | None = None,
 ) -> int:
     """The simulated device; 0 when fixplan reported the goal."""
     from fixplan.interactive.device_sim import DeviceSim
@@ -175,7 +177,7 @@ def run_device_sim(
     if not (math.isfinite(wait_s) and 0 < wait_s <= 3600):
         raise InputError(f"--wait must be within (0, 3600] s, got {wait_s}")
     sim = DeviceSim(host, port, noise=noise, delay_ms=delay_ms, duration_s=duration, push=w, seed=seed,
-                    lockstep=lockstep, connect_timeout_s=wait_s)  # fmt: skip
+                    lockstep=lockstep, connect_timeout_s=wait_s, token=token)  # fmt: skip
     try:
         cfg = sim.connect()
         if w is not None and w.shape[0] != int(cfg["ndof"]):

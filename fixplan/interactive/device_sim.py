@@ -44,6 +44,7 @@ class DeviceSimResult:
     duration_s: float = 0.0
     last_flags: int = 0
     late_cycles: int = 0  # cycles that started more than one period late
+    scheduling: str = "normal"
 
     @property
     def rtt_mean_ms(self) -> float:
@@ -60,7 +61,7 @@ class DeviceSimResult:
         return {
             "sent": self.sent, "received": self.received, "dropped": self.dropped, "goal": self.goal,
             "ended": self.ended, "duration_s": self.duration_s, "rtt_mean_ms": fin(self.rtt_mean_ms),
-            "rtt_p99_ms": fin(self.rtt_p99_ms), "late_cycles": self.late_cycles,
+            "rtt_p99_ms": fin(self.rtt_p99_ms), "late_cycles": self.late_cycles, "scheduling": self.scheduling,
         }  # fmt: skip
 
 
@@ -159,6 +160,7 @@ class DeviceSim:
         seed: int = 0,
         connect_timeout_s: float = 60.0,
         lockstep: bool = False,
+        token: str | None = None,
     ):
         for name, value, lo in (("--noise", noise, 0.0), ("--delay-ms", delay_ms, 0.0)):
             if not (math.isfinite(value) and value >= lo):
@@ -179,6 +181,7 @@ class DeviceSim:
         self.period_s = 1.0 / rate_hz
         self.seed = seed
         self.lockstep = lockstep
+        self.token = token
         self.connect_timeout_s = connect_timeout_s
         self.config: dict[str, Any] = {}
         try:
@@ -193,7 +196,7 @@ class DeviceSim:
         deadline = time.perf_counter() + self.connect_timeout_s
         while time.perf_counter() < deadline:
             try:
-                self.sock.send(protocol.encode_hello())
+                self.sock.send(protocol.encode_hello(self.token))
             except OSError:
                 pass  # nobody listening yet (ICMP refused): try again
             t_wait = time.perf_counter() + 0.2
@@ -228,6 +231,10 @@ class DeviceSim:
         suggested: FloatArray | None = None
         last_seq = -1
         res = DeviceSimResult()
+        if not self.lockstep:
+            from fixplan.interactive.session import real_time_priority
+
+            res.scheduling = real_time_priority(30)  # a device's servo loop runs at real-time priority too
         seq = 0
         t0 = time.perf_counter()
         next_t = t0

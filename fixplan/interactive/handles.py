@@ -13,6 +13,7 @@ limp (no push on the part). :meth:`Handle.display` receives the wrench to displa
 
 from __future__ import annotations
 
+import hmac
 import math
 import socket
 import threading
@@ -91,6 +92,7 @@ class BridgeStats:
     sent: int = 0
     send_errors: int = 0
     timeouts: int = 0  # the device went silent for longer than the timeout
+    refused: int = 0  # HELLO with a wrong token, or poses from an address without a HELLO (token set)
     last_error: str = ""
     clients: set[Any] = field(default_factory=set)
 
@@ -98,7 +100,8 @@ class BridgeStats:
         return {
             "received": self.received, "accepted": self.accepted, "malformed": self.malformed,
             "out_of_order": self.out_of_order, "hellos": self.hellos, "sent": self.sent,
-            "send_errors": self.send_errors, "timeouts": self.timeouts, "last_error": self.last_error,
+            "send_errors": self.send_errors, "timeouts": self.timeouts, "refused": self.refused,
+            "last_error": self.last_error,
         }  # fmt: skip
 
 
@@ -108,7 +111,14 @@ class UdpHandle(Handle):
     kind = "udp"
 
     def __init__(
-        self, host: str, port: int, ndof: int, config: dict[str, Any] | None = None, *, timeout_s: float = 0.2
+        self,
+        host: str,
+        port: int,
+        ndof: int,
+        config: dict[str, Any] | None = None,
+        *,
+        timeout_s: float = 0.2,
+        token: str | None = None,
     ):
         self.ndof = ndof
         self.config: dict[str, Any] = dict(config or {})
@@ -122,6 +132,8 @@ class UdpHandle(Handle):
         self.sock.setblocking(False)
         self.port = int(self.sock.getsockname()[1])
         self.stats = BridgeStats()
+        self.token = token
+        self._allowed: set[Any] = set()  # addresses whose HELLO carried the token
         self._client: Any = None
         self._last: protocol.PosePacket | None = None
         self._last_at = -math.inf
@@ -154,13 +166,22 @@ class UdpHandle(Handle):
             try:
                 kind = protocol.message_type(data)
                 if kind == protocol.HELLO:
+                    if self.token is not None and not hmac.compare_digest(
+                        protocol.hello_token(data).encode(), self.token.encode()
+                    ):
+                        self.stats.refused += 1
+                        continue
                     self.stats.hellos += 1
+                    self._allowed.add(addr)
                     self._client = addr
                     self._last_seq = -1  # a new session of the device restarts its sequence
                     self._send(protocol.encode_config(self.config), addr)
                     continue
                 if kind != protocol.POSE:
                     raise protocol.ProtocolError(f"unexpected message type {kind}")
+                if self.token is not None and addr not in self._allowed:
+                    self.stats.refused += 1
+                    continue
                 pkt = protocol.decode_pose(data, self.ndof)
             except protocol.ProtocolError as exc:
                 self.stats.malformed += 1

@@ -7,8 +7,10 @@ rotation vector of ``R_world_body · R_startᵀ`` [rad] (3D, ``ndof`` 6); 2D: ``
 3) followed by three zeros. Wrenches are force [N] and moment about the body origin [N·m] in
 world axes, padded the same way.
 
-``HELLO`` (device → fixplan, 8 bytes)
-    ``magic "FXP1"``, ``type u8 = 3``, 3 zero bytes. fixplan answers ``CONFIG``.
+``HELLO`` (device → fixplan, 8 bytes, then the token when fixplan has one)
+    ``magic "FXP1"``, ``type u8 = 3``, 3 zero bytes, then the UTF-8 token (``fixplan haptic --host H
+    --token T`` binds the bridge to ``H`` and accepts poses only from addresses whose HELLO carried
+    ``T``; on 127.0.0.1 no token is needed). fixplan answers ``CONFIG``; a wrong token gets nothing.
 ``CONFIG`` (fixplan → device)
     ``magic``, ``type u8 = 4``, 3 zero bytes, then UTF-8 JSON: ``ndof``, ``period_s``, the coupling
     stiffness ``K`` and damping ``B`` per coordinate, the handle damping ``device_damping`` and
@@ -96,9 +98,14 @@ def _pad(x: Any, ndof: int) -> list[float]:
     return a + [0.0] * (6 - len(a))
 
 
-def encode_hello() -> bytes:
-    """A HELLO datagram."""
-    return _HEADER.pack(MAGIC, HELLO)
+def encode_hello(token: str | None = None) -> bytes:
+    """A HELLO datagram (with the token, when the bridge needs one)."""
+    return _HEADER.pack(MAGIC, HELLO) + (token or "").encode()
+
+
+def hello_token(data: bytes) -> str:
+    """The token a HELLO carries ('' for none)."""
+    return data[_HEADER.size :].decode("utf-8", errors="replace")
 
 
 def encode_config(config: dict[str, Any]) -> bytes:

@@ -303,6 +303,23 @@ class RemoteGuide:
         self._conn.close()
 
 
+def real_time_priority(priority: int = 40) -> str:
+    """Ask for ``SCHED_FIFO`` for the calling thread (as haptic loops run); what was granted, in words.
+
+    The loop sleeps most of each period, so it takes a small share of a core; the priority keeps
+    other processes from delaying its ticks. Without permission (not root, no ``CAP_SYS_NICE``,
+    no ``rtprio`` limit) the thread keeps the normal policy.
+    """
+    import os
+
+    try:
+        p = min(priority, os.sched_get_priority_max(os.SCHED_FIFO))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(p))
+    except (AttributeError, OSError, PermissionError) as exc:
+        return f"normal (real-time priority refused: {getattr(exc, 'strerror', None) or exc})"
+    return f"SCHED_FIFO {p}"
+
+
 class HapticSession:
     """The interactive loop around one fixture (see the module's docstring)."""
 
@@ -390,6 +407,7 @@ class HapticSession:
         self._thread: threading.Thread | None = None
         self._guide_thread: threading.Thread | None = None
         self._reset_requested = False
+        self.scheduling = "normal"
         self._restart_guide = False
         self._coords: tuple[FloatArray, FloatArray] | None = None
         if isinstance(handle, UdpHandle) and not handle.config:
@@ -773,6 +791,8 @@ class HapticSession:
 
     def _loop(self) -> None:
         T = self.period_s
+        if self.realtime:
+            self.scheduling = real_time_priority()
         old_interval = sys.getswitchinterval()
         sys.setswitchinterval(min(old_interval, 2e-4))  # the display thread gives the GIL back quickly
         gc.collect()
