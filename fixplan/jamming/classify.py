@@ -32,7 +32,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import scipy.optimize as so
 from numpy.typing import ArrayLike, NDArray
 
 from fixplan.errors import InputError
@@ -40,6 +39,7 @@ from fixplan.jamming.backends import BACKENDS, ClarabelProgram, ConeSolution
 from fixplan.jamming.programs import ProgramBuilder
 from fixplan.jamming.sliding import WitnessSearch
 from fixplan.kinematics import ContactSet
+from fixplan.nnls import nnls
 from fixplan.tolerances import DEFAULT, Tolerances
 
 FloatArray = NDArray[np.float64]
@@ -200,7 +200,7 @@ class Classifier:
         w_hat = w_e / scale
 
         # 1. held: normal forces alone (NNLS on the M⁻¹-weighted residual)
-        f_n, normal_res = so.nnls(self._normal_matrix, -(self.builder.C @ w_hat), maxiter=50 * len(cs) + 50)
+        f_n, normal_res = nnls(self._normal_matrix, -(self.builder.C @ w_hat), maxiter=50 * len(cs) + 50)
         if normal_res <= tol.balance_rel:
             lam = np.zeros(cs.J.shape[0])
             lam[cs.offsets] = f_n
@@ -216,7 +216,11 @@ class Classifier:
         # 2. jammed: static balance with friction
         sol, lam = self._solve("balance", w_hat)
         margin = self._residual_of("balance", w_hat, lam) if sol.solved else float("nan")
-        residuals = {"normal_balance": normal_res, "balance": margin, "cone_violation": sol.cone_violation}
+        residuals: dict[str, Any] = {
+            "normal_balance": normal_res,
+            "balance": margin,
+            "cone_violation": sol.cone_violation,
+        }
         if not sol.solved:
             return result(
                 "indeterminate",

@@ -37,7 +37,6 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-import scipy.linalg as sla
 from numpy.typing import NDArray
 
 from fixplan.kinematics import ContactSet
@@ -105,7 +104,11 @@ def null_basis(A: FloatArray, tol: float = 1e-10) -> FloatArray:
     """Orthonormal basis (columns) of the null space of ``A``."""
     if A.shape[0] == 0:
         return np.eye(A.shape[1])
-    return sla.null_space(A, rcond=tol)
+    # as scipy.linalg.null_space(A, rcond=tol), with numpy's SVD (scipy.linalg is not imported
+    # on the planner's path for this one call)
+    _, s, vh = np.linalg.svd(A, full_matrices=True)
+    rank = int(np.sum(s > (s.max(initial=0.0) * tol)))
+    return np.ascontiguousarray(vh[rank:].T)
 
 
 @dataclass(frozen=True)

@@ -490,7 +490,7 @@ class Executor:
         weight pressed into every locator: ``w = r − τ Σ_i G_iᵀ``, with ``r`` the part of gravity
         the locators cannot carry; τ is reduced until the push is within the hand's limits.
         """
-        from scipy.optimize import nnls
+        from fixplan.nnls import nnls
 
         fx = self.fixture
         cs = contact_set(fx, pose, list(self.names if names is None else names))
