@@ -657,18 +657,27 @@ def simulate(
     sim = Simulator(fixture, dt=dt, tolerance=tolerance)
     if _pose(fixture, pose) == "goal":
         sim.set_state(fixture.goal)
-    bar = None
+    bar: Any = None
     callback = None
     if n_steps >= 20000 and not json_out:
-        from rich.console import Console
-        from rich.progress import Progress
+        import time
 
-        bar = Progress(transient=True, console=Console(file=sys.stderr))
-        bar.start()
-        task = bar.add_task("simulating", total=n_steps)
+        started, done = time.perf_counter(), 0
 
         def callback(k: int) -> None:
-            bar.update(task, advance=k)
+            # the bar appears once the run has lasted 0.5 s: a shorter run (10^5 steps take about
+            # a second) pays neither for it nor for importing rich.progress (~50 ms)
+            nonlocal bar, done
+            done += k
+            if bar is None and time.perf_counter() - started >= 0.5:
+                from rich.console import Console
+                from rich.progress import Progress
+
+                bar = Progress(transient=True, console=Console(file=sys.stderr))
+                bar.start()
+                bar.add_task("simulating", total=n_steps, completed=done)
+            elif bar is not None:
+                bar.update(bar.task_ids[0], advance=k)
 
     try:
         traj = sim.run(duration, w, record_every=every, progress=callback)
