@@ -662,14 +662,17 @@ def simulate(
     if n_steps >= 20000 and not json_out:
         import time
 
-        started, done = time.perf_counter(), 0
+        started, done = 0.0, 0
 
         def callback(k: int) -> None:
-            # the bar appears once the run has lasted 0.5 s: a shorter run (10^5 steps take about
-            # a second) pays neither for it nor for importing rich.progress (~50 ms)
-            nonlocal bar, done
+            # the bar appears once the stepping has lasted 0.5 s (counted from the first report, after
+            # the process loaded its compiled code): a shorter run (10^5 steps take about a second)
+            # pays neither for it nor for importing rich.progress (~50 ms)
+            nonlocal bar, done, started
             done += k
-            if bar is None and time.perf_counter() - started >= 0.5:
+            if not started:
+                started = time.perf_counter()
+            elif bar is None and time.perf_counter() - started >= 0.5:
                 from rich.console import Console
                 from rich.progress import Progress
 
