@@ -58,6 +58,8 @@ gallery: install
 	@# The plan's figure (forces, gaps, wrench, contact states over time) that solve --report writes beside the report
 	$(BIN)/fixplan solve --report out/gallery/plan.md --force
 	cp out/gallery/plan.png docs/gallery/plan.png
+	@# fixplan haptic: a scripted gizmo session and a jammed push, photographed in headless Chromium
+	$(BIN)/python -m fixplan.interactive.gallery docs/gallery
 
 lint: install
 	$(BIN)/ruff check fixplan tests benchmarks

@@ -90,10 +90,10 @@ def one_run(with_browser: bool, seed: int) -> dict:
             haptic.send_signal(signal.SIGINT)
         out, _ = haptic.communicate(timeout=60)
         try:
-            dev_out, _ = device.communicate(timeout=30)
+            dev_out, dev_err = device.communicate(timeout=30)
         except subprocess.TimeoutExpired:
             device.kill()
-            dev_out, _ = device.communicate()
+            dev_out, dev_err = device.communicate()
         summary = json.loads(out) if out.strip() else {}
         dev = json.loads(dev_out) if dev_out.strip() else {}
         verified = None
@@ -105,6 +105,8 @@ def one_run(with_browser: bool, seed: int) -> dict:
         "case": "UDP device-sim + Chromium page" if with_browser else "UDP device-sim, no browser",
         "seed": seed,
         "status": summary.get("status", "?"),
+        "reason": summary.get("reason", ""),
+        "device_sim_error": "" if dev else dev_err.strip()[-300:],
         "session_s": summary.get("duration_s", math.nan),
         "ticks": loop.get("ticks", 0),
         "tick_mean_us": loop.get("tick_mean_us", math.nan),
@@ -159,6 +161,11 @@ def run(quick: bool) -> Section:
             f"{f(r['late_p99_us'], '.0f')} | {f(r['rtt_mean_ms'], '.2f')} | {f(r['rtt_p99_ms'], '.2f')} | "
             f"{'passed' if r['verify_passed'] else 'failed' if r['verify_passed'] is False else '–'} |"
         )
+    for r in rows:
+        if r["status"] != "reached":
+            lines += ["", f"{r['case']}, run {r['seed']}: {r['status']} — {r['reason']}"]
+            if r["device_sim_error"]:
+                lines.append(f"(device-sim: {r['device_sim_error']})")
     lines += ["", "Loop thread scheduling: " + ", ".join(sorted({r["scheduling"] for r in rows})) + "."]
     if not browser_ok:
         lines += ["", f"The browser runs were skipped: {browser_available()}."]

@@ -193,7 +193,8 @@ def replay_from_plan(data: Any, fixture: Fixture, source: str = "plan") -> Repla
         replay = _replay_from_trace(trace, fixture, source)
         v = cast(dict[str, Any], verification)
         verdict = "passed" if v.get("passed") else f"FAILED: {v.get('reason', '')}"
-        note = f"simulated verification ({verdict}), {len(replay)} samples, {replay.time_s[-1]:.2f} s"
+        what = "haptic session" if data.get("source") == "haptic session" else "simulated verification"
+        note = f"{what} ({verdict}), {len(replay)} samples, {replay.time_s[-1]:.2f} s"
         replay = _with_note(replay, note)
     elif data["transitions"]:
         replay = _replay_from_knots(data["transitions"], fixture, source)

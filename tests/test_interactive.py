@@ -201,6 +201,7 @@ def test_recording_replays_and_verifies(box, auto_recording):
         np.testing.assert_allclose(tr["wrench"], W.mean(axis=0), rtol=1e-5, atol=1e-5)
     replay = replay_from_plan(data, box, "rec")  # what fixplan view --plan shows
     assert replay.source == "trace" and len(replay) == len(data["verification"]["trace"]["time_s"])
+    assert replay.note.startswith("haptic session (passed)")
     v = verify_recording(box, data)
     assert v.passed, v.reason
     assert [tuple(s) for s in v.observed_sequence][-1] == tuple(sorted(loc.name for loc in box.locators))
@@ -274,3 +275,18 @@ def test_bridge_with_a_token_answers_only_devices_that_present_it():
         stranger.close()
         device.close()
         h.close()
+
+
+def test_reset_puts_the_part_back_at_rest_and_restarts_the_recording(box):
+    s = HapticSession(box, None, realtime=False, synchronous=False, guidance=False)
+    s._warm_up()
+    s.guidance = s.guidance.__class__(push=np.array([-8.0, 0, -10.0, 0, 0, 0]))  # a push that slides the part
+    for _ in range(200):
+        s.tick(0.0)
+    moved = np.linalg.norm(s.sim.pose.p_world - box.start.p_world)
+    assert moved > 1e-4 and s.trace.time_s
+    s.request_reset()
+    s.tick(0.0)  # the loop thread applies it at its next tick
+    assert s.resets == 1
+    assert np.linalg.norm(s.sim.pose.p_world - box.start.p_world) < 1e-5  # one step from the start, at rest
+    assert s.trace.time_s == [] and s.states == []

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from fixplan.errors import InputError
 from fixplan.interactive.handles import GizmoHandle
-from fixplan.interactive.session import HapticSession, Snapshot
+from fixplan.interactive.session import HapticSession, Snapshot, real_time_priority
 from fixplan.pose import Pose, log_so3, quaternion_wxyz_from_matrix
 
 FloatArray = NDArray[np.float64]
@@ -166,6 +166,12 @@ class HapticApp:
             url_port = self.gate.start()
         self._build_scene()
         self._build_panel()
+        if self.session.realtime:
+
+            @self.server.on_client_connect
+            async def _(_client: Any) -> None:
+                real_time_priority(20)  # viser's event-loop thread: the same reason as the display thread
+
         self._thread = threading.Thread(target=self._display_loop, name="fixplan-display", daemon=True)
         self._thread.start()
         host = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host  # noqa: S104 - shown URL only
@@ -219,7 +225,7 @@ class HapticApp:
         # the camera looks at the fixture from the front, above
         c = np.mean([_xyz(loc.p_world) for loc in fx.locators], axis=0)
         self.server.initial_camera.look_at = c
-        self.server.initial_camera.position = c + np.array([1.3, -2.0, 1.4]) * self.bound * 1.4
+        self.server.initial_camera.position = c + np.array([1.3, -2.0, 1.4]) * self.bound * 1.05
 
     def _build_panel(self) -> None:
         s = self.session
@@ -277,6 +283,10 @@ class HapticApp:
 
     # -- drawing ---------------------------------------------------------------------------------
     def _display_loop(self) -> None:
+        # below the loop's priority, above other processes: a display thread preempted while it holds
+        # the GIL would hold the loop up until the scheduler came back to it (priority inversion)
+        if self.session.realtime:
+            real_time_priority(20)
         period = 1.0 / DISPLAY_HZ
         next_t = time.perf_counter()
         while not self._stop.is_set():
@@ -362,8 +372,11 @@ class HapticApp:
             verdict = "**verdict**: –"
         else:
             margin = "" if g.margin is None else f", margin {g.margin:.3g}"
-            word = "<span style='color:#d62728'>**jammed**</span>" if g.verdict == "jammed" else f"**{g.verdict}**"
-            verdict = f"verdict of the current push: {word}{margin}"
+            if snap.speed_mps >= s.rest_speed_mps:  # classify judges a part at rest: say so while it moves
+                verdict = f"verdict of the current push if the part stopped here: **{g.verdict}**{margin} (moving)"
+            else:
+                word = "<span style='color:#d62728'>**jammed**</span>" if g.verdict == "jammed" else f"**{g.verdict}**"
+                verdict = f"verdict of the current push: {word}{margin}"
         self.verdict_md.content = verdict
         if g.target is not None:
             push = "" if g.push is None else " · push " + ", ".join(f"{x:.2f}" for x in g.push)
@@ -385,10 +398,13 @@ class HapticApp:
         if snap.bridge:
             b = snap.bridge
             bridge = f"  \nbridge: {b['accepted']} poses, {b['malformed']} malformed, {b['out_of_order']} out of order"
-        self.stats_md.content = (
-            f"t = {snap.time_s:.2f} s · loop {st.ticks} ticks, mean {st.tick_mean_us:.0f} µs, "
-            f"p99 {st.tick_p99_us:.0f} µs, {st.deadline_misses} deadline misses" + bridge
+        loop = (
+            f"loop {st.ticks} ticks, mean {st.tick_mean_us:.0f} µs, p99 {st.tick_p99_us:.0f} µs, "
+            f"{st.deadline_misses} deadline misses ({s.scheduling})"
+            if st.ticks
+            else "loop stepped by a script (no wall clock)"
         )
+        self.stats_md.content = f"t = {snap.time_s:.2f} s · {loop}" + bridge
 
     def stop(self) -> None:
         self._stop.set()

@@ -94,6 +94,13 @@ def open_live_page(
                 report.canvases = int(page.evaluate("document.querySelectorAll('canvas').length"))
                 report.text = str(page.evaluate("document.body.innerText"))
                 if screenshot is not None:
+                    # viser's "software WebGL" notice (headless Chromium has no GPU) would cover the scene
+                    for button in page.locator("[class*=Notification] button").all():
+                        try:
+                            button.click(timeout=1000)
+                        except PlaywrightError:
+                            pass
+                    page.wait_for_timeout(500)
                     Path(screenshot).parent.mkdir(parents=True, exist_ok=True)
                     page.screenshot(path=str(screenshot), full_page=False)
                     report.screenshot = Path(screenshot)

@@ -119,7 +119,7 @@ def run_haptic(
         "status": result.status,
         "reason": result.reason,
         "duration_s": result.duration_s,
-        "sequence": [list(s) for _, s in result.states if s != ("reset",)],
+        "sequence": [list(s) for _, s in result.states],
         "loop": {**result.stats.to_json(), "scheduling": session.scheduling},
         "bridge": result.bridge,
     }

@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from fixplan.errors import InputError
 from fixplan.interactive import protocol
+from fixplan.interactive.handles import Handle
 
 FloatArray = NDArray[np.float64]
 
@@ -117,7 +118,7 @@ class OperatorDevice:
         self.x = self.x + T * self.v
 
 
-class LockstepHandle:
+class LockstepHandle(Handle):
     """An :class:`OperatorDevice` wired straight into a session, one period per tick (reproducible runs).
 
     A :class:`~fixplan.interactive.handles.Handle` without sockets: :meth:`read` gives the handle's

@@ -45,7 +45,9 @@ FloatArray = NDArray[np.float64]
 
 SOURCE = "haptic session"
 KNOTS = 10  # poses kept per transition (for the knot replay and the planner's executor)
-MAX_SAMPLES = 400  # a longer session is recorded at a coarser step (the file stays within the 1 MiB plan-file limit)
+MAX_SAMPLES = (
+    1200  # about 730 bytes each: a longer session is recorded at a coarser step (within the 1 MiB plan-file limit)
+)
 DIGITS = 6  # significant digits kept in the file
 
 
@@ -96,7 +98,7 @@ def _transitions(res: SessionResult) -> list[dict[str, Any]]:
     """Per change of the observed contact state: from, to, added, the poses and the pushes."""
     tr = res.trace
     times = np.asarray(tr.time_s)
-    states = [(t, s) for t, s in res.states if s != ("reset",)]
+    states = list(res.states)
     out: list[dict[str, Any]] = []
     for (t0, s0), (t1, s1) in zip(states[:-1], states[1:], strict=True):
         idx = np.nonzero((times >= t0 - 1e-9) & (times < t1 + 1e-9))[0]
@@ -162,7 +164,7 @@ def _plan_json(res: SessionResult, fixture: Fixture) -> dict[str, Any]:
             normal_forces_N={n: [0.0] for n in names}, forces_world_N={n: [[0.0] * d] for n in names},
             coupling_wrench=[[0.0] * fixture.ndof], felt_wrench=[[0.0] * fixture.ndof], pressed=[[]],
         )  # fmt: skip
-    sequence = [list(s) for _, s in res.states if s != ("reset",)]
+    sequence = [list(s) for _, s in res.states]
     reached = res.status == "reached"
     return {
         "source": SOURCE,

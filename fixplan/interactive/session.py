@@ -127,7 +127,7 @@ class Trace:
 class SessionResult:
     """How a session ended, with everything the recording needs."""
 
-    status: str  # "reached" | "jammed" | "short" | "diverged"
+    status: str  # "reached" | "jammed" | "short" | "diverged" | "error" (a bug, with where)
     reason: str
     where: dict[str, Any]
     duration_s: float
@@ -419,6 +419,7 @@ class HapticSession:
         n = len(self.names)
         self.trace = Trace()
         self.states: list[tuple[float, tuple[str, ...]]] = []
+        self.resets = 0
         self._observed: frozenset[str] | None = None
         self._candidate: frozenset[str] | None = None
         self._candidate_since = 0.0
@@ -505,7 +506,11 @@ class HapticSession:
             self.guide = Guide(self.fixture, self.start_state, tick_s=self.guide.tick_s)
         elif isinstance(self.guide, RemoteGuide):
             self._restart_guide = True
-        self.states.append((self.sim.time_s, ("reset",)))
+        # the recording starts afresh from the start pose (what came before is not a way to load the part)
+        self.trace = Trace()
+        self.states = []
+        self.jammed_where = None
+        self.resets += 1
 
     # -- the loop ------------------------------------------------------------------------------
     def _answer(self, felt: FloatArray, x_w: FloatArray, v_w: FloatArray) -> Any:
@@ -764,12 +769,12 @@ class HapticSession:
         return LoopStats(n, float(a.mean()), float(np.percentile(a, 99)), float(a.max()), self._misses,
                          float(np.percentile(late, 99)))  # fmt: skip
 
-    def _end(self, why: str | None) -> None:
+    def _end(self, why: str | None, status: str = "diverged") -> None:
         if self.status is not None:
             return
         t = self.sim.time_s
         if why is not None:
-            self.status, self.reason = "diverged", why
+            self.status, self.reason = status, why
         elif self.goal_reached_at is not None:
             self.status = "reached"
             self.reason = f"every locator pressed, at rest at t = {self.goal_reached_at:.3f} s"
@@ -819,6 +824,15 @@ class HapticSession:
                         continue
                 except SolverError as exc:
                     self._end(f"the simulation diverged at t = {self.sim.time_s:.3f} s: {exc}")
+                except Exception as exc:  # noqa: BLE001 - a bug: end the session saying so, never hang
+                    import traceback
+
+                    where = traceback.extract_tb(exc.__traceback__)[-1]
+                    self._end(
+                        f"internal error in the haptic loop at t = {self.sim.time_s:.3f} s: {type(exc).__name__}: "
+                        f"{exc} ({where.filename}:{where.lineno}; a bug in fixplan)",
+                        status="error",
+                    )
                 end = time.perf_counter()
                 self._compute.append(end - start)
                 self._compute_sum += end - start
@@ -844,6 +858,8 @@ class HapticSession:
             self._ended.set()
 
     def _guide_loop(self) -> None:
+        if self.realtime:
+            real_time_priority(10)  # it holds the GIL to pickle snapshots: never preempted while it does
         last: Snapshot | None = None
         next_t = time.perf_counter()
         while not self._ended.is_set():
