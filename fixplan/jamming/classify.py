@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fixplan.errors import InputError
+from fixplan.jamming import _classify_kernels as _kernels
 from fixplan.jamming.backends import BACKENDS, ClarabelProgram, ConeSolution
 from fixplan.jamming.programs import ProgramBuilder
 from fixplan.jamming.sliding import WitnessSearch
@@ -80,24 +81,26 @@ class Classification:
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dictionary; an undefined number (NaN) is ``None``, never NaN or Infinity."""
+        # plain Python floats through tolist(): one conversion per array, not per number (the
+        # CLI's --json builds one of these per wrench)
         forces = {}
         for name, lam in self.contact_forces.items():
-            entry: dict[str, Any] = {
-                "normal": float(lam[0]),
-                "tangential": [float(x) for x in lam[1 : 1 + (1 if len(self.contact_frames[name][0]) == 2 else 2)]],
-            }
-            if len(lam) == 4:
-                entry["spin"] = float(lam[3])
-            entry["force_world"] = [float(x) for x in self.force_world(name)]
+            frame = self.contact_frames[name]
+            nt = 1 if frame.shape[1] == 2 else 2
+            values = lam.tolist()
+            entry: dict[str, Any] = {"normal": values[0], "tangential": values[1 : 1 + nt]}
+            if len(values) == 4:
+                entry["spin"] = values[3]
+            entry["force_world"] = self.force_world(name).tolist()
             forces[name] = entry
         return {
-            "wrench": [float(x) for x in self.wrench],
+            "wrench": list(self.wrench),
             "mode": self.mode,
             "margin": _finite_or_none(self.margin),  # None: undefined (a program failed; see reason)
             "contact_forces": forces,
             "certificate": self.certificate,
             "reason": self.reason,
-            "acceleration": None if self.acceleration is None else [float(x) for x in self.acceleration],
+            "acceleration": None if self.acceleration is None else self.acceleration.tolist(),
             "residuals": {k: _finite_or_none(v) for k, v in self.residuals.items()},
             "solve_time_s": float(self.solve_time_s),
         }
@@ -119,7 +122,9 @@ class Classifier:
         self.backend = backend
         self.builder = ProgramBuilder(cs)
         b = self.builder
-        self._normal_matrix = b.C @ cs.G.T  # NNLS: min ‖C(w + Gᵀ f_n)‖, f_n ≥ 0
+        self._normal_matrix = np.ascontiguousarray(b.C @ cs.G.T)  # NNLS: min ‖C(w + Gᵀ f_n)‖, f_n ≥ 0
+        A = self._normal_matrix  # fixplan.nnls's default dual tolerance, once
+        self._nnls_tol = 10.0 * np.finfo(float).eps * max(A.shape) * max(float(np.abs(A).sum(axis=0).max()), 1.0)
         self._projectors: dict[str, FloatArray] = {
             "balance": b.projector(None),
             "maintain": b.projector(b.N_maintain),
@@ -200,7 +205,10 @@ class Classifier:
         w_hat = w_e / scale
 
         # 1. held: normal forces alone (NNLS on the M⁻¹-weighted residual)
-        f_n, normal_res = nnls(self._normal_matrix, -(self.builder.C @ w_hat), maxiter=50 * len(cs) + 50)
+        rhs = -(self.builder.C @ w_hat)
+        f_n, normal_res, ok = _kernels.nnls(self._normal_matrix, rhs, 50 * len(cs) + 50, self._nnls_tol)
+        if not ok:  # the compiled QR met dependent columns: the NumPy version (SVD least squares)
+            f_n, normal_res = nnls(self._normal_matrix, rhs, maxiter=50 * len(cs) + 50)
         if normal_res <= tol.balance_rel:
             lam = np.zeros(cs.J.shape[0])
             lam[cs.offsets] = f_n
