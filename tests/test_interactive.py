@@ -290,3 +290,19 @@ def test_reset_puts_the_part_back_at_rest_and_restarts_the_recording(box):
     assert s.resets == 1
     assert np.linalg.norm(s.sim.pose.p_world - box.start.p_world) < 1e-5  # one step from the start, at rest
     assert s.trace.time_s == [] and s.states == []
+
+
+def test_a_2d_fixture_loads_and_its_recording_verifies():
+    """A generated 2D plate (x, y, θ): the same loop with three coordinates."""
+    from pathlib import Path
+
+    fx = fixplan.load(Path(__file__).resolve().parents[1] / "problems" / "gen-plate-2d-s2026-000.toml")
+    s = HapticSession(fx, None, realtime=False, synchronous=True, duration_s=10.0)
+    assert s.ndof == 3 and s.bridge_config()["ndof"] == 3
+    res = s.run()
+    assert res.status == "reached", res.reason
+    assert set(res.states[-1][1]) == {loc.name for loc in fx.locators}
+    np.testing.assert_allclose(np.array(res.trace.felt_wrench), -np.array(res.trace.coupling_wrench), atol=1e-12)
+    v = verify_recording(fx, json.loads(json.dumps(plan_json(res, fx))))
+    assert v.passed, v.reason
+

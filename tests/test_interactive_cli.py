@@ -117,3 +117,13 @@ def test_device_sim_without_fixplan_says_so():
     port = free_udp_port()
     r = fixplan_cli("device-sim", "--port", str(port), "--duration", "1", "--wait", "1")
     assert r.returncode == 2 and "answered" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_verify_runs_a_solved_plan_through_the_executor(tmp_path):
+    plan = tmp_path / "plan.json"
+    solved = fixplan_cli("solve", "--no-verify", "--out", str(plan), timeout=300)
+    assert solved.returncode == 1 and plan.is_file()  # unverified: solve skipped the loop
+    v = fixplan_cli("verify", str(plan), "--json", timeout=300)
+    assert v.returncode == 0, v.stderr
+    out = json.loads(v.stdout)
+    assert out["passed"] and out["observed_sequence"][-1] == ["B1", "B2", "B3", "E1", "S1", "S2"]

@@ -225,7 +225,10 @@ class HapticApp:
         # the camera looks at the fixture from the front, above
         c = np.mean([_xyz(loc.p_world) for loc in fx.locators], axis=0)
         self.server.initial_camera.look_at = c
-        self.server.initial_camera.position = c + np.array([1.3, -2.0, 1.4]) * self.bound * 1.05
+        if fx.dimension == 3:
+            self.server.initial_camera.position = c + np.array([1.3, -2.0, 1.4]) * self.bound * 1.05
+        else:  # the plane of motion, seen from the front (+z), y up
+            self.server.initial_camera.position = c + np.array([0.0, -0.6, 3.0]) * self.bound * 1.4
 
     def _build_panel(self) -> None:
         s = self.session
