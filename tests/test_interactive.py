@@ -305,4 +305,3 @@ def test_a_2d_fixture_loads_and_its_recording_verifies():
     np.testing.assert_allclose(np.array(res.trace.felt_wrench), -np.array(res.trace.coupling_wrench), atol=1e-12)
     v = verify_recording(fx, json.loads(json.dumps(plan_json(res, fx))))
     assert v.passed, v.reason
-
