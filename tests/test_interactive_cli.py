@@ -16,6 +16,17 @@ import fixplan
 CLI = [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())"]
 
 
+def strict_json(text: str) -> dict:
+    """Parse like the JSON contract (tests/test_json_contract.py): no NaN or Infinity, one object."""
+
+    def refuse(token: str) -> None:
+        raise ValueError(f"non-standard JSON constant {token}")
+
+    data = json.loads(text, parse_constant=refuse)
+    assert isinstance(data, dict)
+    return data
+
+
 def fixplan_cli(*args, timeout=120):
     return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=timeout)
 
@@ -51,13 +62,13 @@ def test_udp_session_reaches_the_goal_and_records_it(udp_session):
     code, stdout, stderr, sim, record = udp_session
     assert code == 0, stderr
     assert "http://127.0.0.1:" in stderr  # the URL is printed
-    summary = json.loads(stdout)
+    summary = strict_json(stdout)
     assert summary["status"] == "reached"
     assert summary["sequence"][-1] == ["B1", "B2", "B3", "E1", "S1", "S2"]
     b = summary["bridge"]
     assert b["malformed"] == 0 and b["out_of_order"] == 0 and b["accepted"] == summary["loop"]["ticks"]
     assert sim.returncode == 0, sim.stderr  # the device was told the goal was reached
-    device = json.loads(sim.stdout)
+    device = strict_json(sim.stdout)
     assert device["goal"] and device["ended"] and device["received"] >= device["sent"] - 1
     data = json.loads(record.read_text())
     assert data["source"] == "haptic session" and data["status"] == "reached"
@@ -73,7 +84,7 @@ def test_recording_passes_verify_and_view(udp_session, tmp_path):
     record = udp_session[4]
     v = fixplan_cli("verify", str(record), "--json")
     assert v.returncode == 0, v.stderr
-    out = json.loads(v.stdout)
+    out = strict_json(v.stdout)
     assert out["passed"] and out["observed_sequence"][-1] == ["B1", "B2", "B3", "E1", "S1", "S2"]
     page = fixplan_cli("view", "--plan", str(record), "--out", str(tmp_path / "s.html"))
     assert page.returncode == 0, page.stderr
@@ -125,5 +136,33 @@ def test_verify_runs_a_solved_plan_through_the_executor(tmp_path):
     assert solved.returncode == 1 and plan.is_file()  # unverified: solve skipped the loop
     v = fixplan_cli("verify", str(plan), "--json", timeout=300)
     assert v.returncode == 0, v.stderr
-    out = json.loads(v.stdout)
+    out = strict_json(v.stdout)
     assert out["passed"] and out["observed_sequence"][-1] == ["B1", "B2", "B3", "E1", "S1", "S2"]
+
+
+def test_jammed_udp_session_is_recorded_as_jammed_and_fails_verify(tmp_path):
+    """device-sim --push: a hand that pushes down 30 N and sideways 3 N; friction holds the part."""
+    record = tmp_path / "jam.json"
+    port = free_udp_port()
+    haptic = subprocess.Popen(
+        [*CLI, "haptic", "--device", f"udp:{port}", "--port", "0", "--no-browser", "--record", str(record),
+         "--until", "1", "--clock", "device", "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        sim = fixplan_cli("device-sim", "--port", str(port), "--lockstep", "--push", "0,-3,-30,0,0,0", "--json")
+        stdout, stderr = haptic.communicate(timeout=60)
+    finally:
+        if haptic.poll() is None:
+            haptic.kill()
+            haptic.communicate()
+    assert haptic.returncode == 1, stderr  # not at the goal
+    summary = strict_json(stdout)
+    assert summary["status"] == "jammed" and "held by friction" in summary["reason"]
+    assert sim.returncode == 1 and strict_json(sim.stdout)["ended"]
+    data = json.loads(record.read_text())
+    assert data["status"] == "jammed" and data["where"]["state"] == ["B1", "B2", "B3"]
+    v = fixplan_cli("verify", str(record), "--json")
+    assert v.returncode == 1
+    out = strict_json(v.stdout)
+    assert not out["passed"] and "jammed" in out["reason"]
