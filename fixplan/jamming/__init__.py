@@ -48,7 +48,7 @@ def classify(
     tolerances: Tolerances | None = None,
     jobs: int | None = None,
     progress: Callable[[int], None] | None = None,
-    as_json: bool = False,
+    as_json: bool | str = False,
 ) -> list[Classification]:
     """Classify each applied wrench (in addition to gravity) for the workpiece at rest.
 
@@ -70,9 +70,9 @@ def classify(
         Worker processes for large batches (default: the CPUs available; 1 = in-process).
     progress : callable, optional
         Called with the number of wrenches finished since the last call.
-    as_json : bool
+    as_json : bool or "text"
         Return each result's JSON dictionary instead (built in the worker processes; what the
-        CLI prints).
+        CLI prints), or with ``"text"`` its compact JSON text, encoded in the workers too.
 
     Returns
     -------

@@ -7,6 +7,7 @@ batches run in-process: starting workers costs more than it saves below a few hu
 
 from __future__ import annotations
 
+import json
 import multiprocessing as mp
 import os
 from collections.abc import Callable
@@ -23,11 +24,26 @@ FloatArray = NDArray[np.float64]
 PARALLEL_MIN = 400  # wrenches below which one process is faster
 
 
+def _encode(r: dict) -> str | dict:
+    """One result as compact strict JSON text (its dictionary if a number is not finite: the caller reports it)."""
+    try:
+        return json.dumps(r, separators=(",", ":"), allow_nan=False)
+    except (ValueError, TypeError):
+        return r
+
+
+def _finish(out: list, as_json: bool | str) -> list:
+    if not as_json:
+        return out
+    dicts = [r.to_json() for r in out]
+    return [_encode(d) for d in dicts] if as_json == "text" else dicts
+
+
 def _chunk(args: tuple) -> list:
     cs, gravity, tol, backend, W_com, W_given, as_json = args
     clf = Classifier(cs, gravity, tolerances=tol, backend=backend)
     out = [clf.classify(w, g) for w, g in zip(W_com, W_given, strict=True)]
-    return [r.to_json() for r in out] if as_json else out
+    return _finish(out, as_json)
 
 
 def default_jobs() -> int:
@@ -48,11 +64,13 @@ def classify_batch(
     *,
     jobs: int | None = None,
     progress: Callable[[int], None] | None = None,
-    as_json: bool = False,
+    as_json: bool | str = False,
 ) -> list:
     """Classify every row of ``W_com`` (about the centre of mass); results in input order.
 
-    With ``as_json`` the results come back as their JSON dictionaries, built in the workers.
+    With ``as_json`` the results come back as their JSON dictionaries, built in the workers;
+    with ``as_json="text"`` as compact strict JSON text, also encoded in the workers (a result
+    with a non-finite number stays a dictionary, for the caller to report).
     """
     n = W_com.shape[0]
     jobs = default_jobs() if jobs is None else max(1, jobs)
@@ -65,7 +83,7 @@ def classify_batch(
                 progress(100)
         if progress is not None and n % 100:
             progress(n % 100)
-        return [r.to_json() for r in out] if as_json else out
+        return _finish(out, as_json)
     n_chunks = max(jobs * 4, 1)
     bounds = np.linspace(0, n, n_chunks + 1).astype(int)
     tasks = [
