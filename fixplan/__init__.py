@@ -20,6 +20,7 @@ _LAZY = {
     "search_wrench": ("fixplan.jamming", "search_wrench"),
     "contact_set": ("fixplan.locating", "contact_set"),
     "Simulator": ("fixplan.simulator", "Simulator"),
+    "WrenchSchedule": ("fixplan.simulator", "WrenchSchedule"),
     "solve": ("fixplan.planner.solve", "solve"),
     "FixplanError": ("fixplan.errors", "FixplanError"),
     "FixtureError": ("fixplan.errors", "FixtureError"),
