@@ -256,3 +256,21 @@ def test_braking_a_sliding_part_is_the_dynamics_with_friction_against_the_slip()
     sim.set_state(fx.start, v)
     sim.step(res.wrench)
     assert (sim.twist[0] - v[0]) / sim.dt == pytest.approx(-s * 0.5, rel=2e-2)
+
+
+@pytest.mark.parametrize("objective", ["margin", "effort"])
+def test_without_the_classifier_check_the_same_push_is_returned(objective):
+    """``confirm=False`` (the executor's 200 Hz re-solves) returns the same certified push, margin
+    and forces as the checked search; only the classifier's verdicts are absent."""
+    fx = fixplan.load(fixplan.default_fixture_path())
+    for motion, slip in [([0, -0.5, 0, 0, 0, 0], None), ([0.3, -0.4, 0, 0, 0, 0.5], [0.01, -0.02, 0, 0, 0, 0.1])]:
+        kw = dict(pose="start", objective=objective, friction_margin=0.1, max_accel_factor=1.5, slip_twist=slip)
+        full = search_wrench(fx, motion, ["B1", "B2", "B3"], **kw)
+        fast = search_wrench(fx, motion, ["B1", "B2", "B3"], confirm=False, **kw)
+        assert full.found and fast.found
+        assert np.allclose(fast.wrench, full.wrench, rtol=0, atol=1e-12)
+        assert fast.margin_N == pytest.approx(full.margin_N, abs=1e-12)
+        assert fast.check is None and fast.balance_check is None and not fast.confirmed
+        # the push moves the part as asked: the classifier, run here, agrees
+        c = classify(fx, fast.wrench, ["B1", "B2", "B3"], pose="start", jobs=1)[0]
+        assert c.mode in ("slides", "pivots", "rolls")

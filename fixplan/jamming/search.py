@@ -314,6 +314,7 @@ def search_wrench(
     max_accel_factor: float = math.inf,
     slip_twist: ArrayLike | None = None,
     certify: bool = True,
+    confirm: bool = True,
 ) -> WrenchSearch:
     """The applied wrench that moves the part with acceleration ≥ ``motion``, without jamming.
 
@@ -351,6 +352,11 @@ def search_wrench(
     (``motion`` against its velocity, ``slip_twist`` its velocity) the push that decelerates it as
     asked is one friction would hold at rest, and that is what is wanted. ``found`` then means the
     program solved.
+
+    ``confirm=False`` skips the classifier's independent check of the wrench found (its balance
+    check and ``check``, both ``None`` then; ``confirmed`` is ``False``): the wrench is still
+    certified by the program's own constraint. For a feedback loop that re-solves the push many
+    times a second and watches the motion it causes, where the check was a quarter of each solve.
     """
     m = np.asarray(motion, dtype=float)
     if m.shape != (fixture.ndof,) or not np.all(np.isfinite(m)):
@@ -377,10 +383,10 @@ def search_wrench(
     F_max, T_max, notes = hand_limits(fixture)
     w_g = fixture.gravity_wrench()
     target = None if min_margin_N is None else float(min_margin_N)
-    clf_all = Classifier(cs, w_g, tolerances=fixture.tolerances)
     kept = [i for i, c in enumerate(cs.contacts) if roles[c.name] != "opening"]
     if not kept:
-        return _free_push(cs, clf_all, a_hat, roles, about, w_g, F_max, T_max, notes, target)
+        clf_free = Classifier(cs, w_g, tolerances=fixture.tolerances)
+        return _free_push(cs, clf_free, a_hat, roles, about, w_g, F_max, T_max, notes, target)
 
     def not_found(reason: str, binding: list[str] | None = None) -> WrenchSearch:
         return WrenchSearch(
@@ -457,6 +463,18 @@ def search_wrench(
     if abs(float(np.linalg.norm(w_user[cs.dimension :])) - T_max) <= 1e-6 * T_max:
         binding.append("max_torque")
 
+    met = None if target is None else bool(tau_best >= target * (1 - _TARGET_REL))
+    if not confirm:
+        reason = ("decelerates the sliding part as asked" if not certify else "moves as asked") + (
+            f" with every kept contact pressed by ≥ {floor_sig(tau)} N (not checked by the classifier){notes}"
+        )
+        if met is False and target is not None:
+            reason = f"margin target {target:.4g} N not met: best {_short_of(tau_best, target)} N; " + reason
+        return WrenchSearch(
+            True, w_user, tau, s * a_hat, roles, forces, None, reason, binding, (F_max, T_max),
+            margin_target_N=target, margin_target_met=met,
+        )  # fmt: skip
+    clf_all = Classifier(cs, w_g, tolerances=fixture.tolerances)
     bal = clf_all.classify(w_com, w_user)
     w_e_norm = clf_all.builder.m_inv_norm(w_com + w_g)
     jam_rel = bal.margin / w_e_norm if w_e_norm > 0 and math.isfinite(bal.margin) else None
@@ -466,7 +484,6 @@ def search_wrench(
         kept_cs = ContactSet(tuple(cs.contacts[i] for i in kept), cs.com_world, cs.mass_matrix, cs.body_origin_world)
         check = Classifier(kept_cs, w_g, tolerances=fixture.tolerances).classify(w_com, w_user)
     confirmed, why_not = _confirm(cs, check, a_hat, roles)
-    met = None if target is None else bool(tau_best >= target * (1 - _TARGET_REL))
     if bal.balanced and certify:
         reason = f"the wrench found is statically balanced ({bal.mode}): it would not move the part"
     elif not certify:

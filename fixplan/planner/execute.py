@@ -702,6 +702,7 @@ class Executor:
                 friction_margin=s.friction_margin * boost,
                 max_accel_factor=s.max_accel_factor,
                 slip_twist=slip,
+                confirm=False,  # the loop watches the motion it causes: no classifier check at 200 Hz
             )
         except InputError as exc:
             self._reject(t, str(exc))
@@ -787,6 +788,7 @@ class Executor:
                 max_accel_factor=s.max_accel_factor,
                 slip_twist=origin_motion(np.asarray(twist, dtype=float), com, pose.p_world),
                 certify=False,
+                confirm=False,
             )
         except InputError:
             return False
