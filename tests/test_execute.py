@@ -286,7 +286,7 @@ def _toward(fx, name, speed):
 def test_a_part_too_fast_for_its_target_is_slowed_against_its_own_motion():
     """The slow-down: none within the braking profile; beyond it, the deceleration opposes the
     twist, keeps the base contacts, and closes the excess in ``speed_time_s`` (capped at
-    ``accel_mps2``)."""
+    ``accel_mps2``). A spin that barely closes the gap is bounded by its mass-weighted speed."""
     fx, ex = _box_executor()
     s, step = ex.settings, ex.steps[0]
     M = ex._mass_matrix(fx.start)
@@ -305,9 +305,16 @@ def test_a_part_too_fast_for_its_target_is_slowed_against_its_own_motion():
     cos = float(a @ M @ -fast) / np.sqrt(float(a @ M @ a) * float(fast @ M @ fast))
     assert cos == pytest.approx(1.0, abs=1e-9)
     allowed = max(s.min_speed_mps, np.sqrt(2 * s.brake_mps2 * max(gap - 0.1 * lag, 0.0)))
-    ratio = max(0.1 / (1.5 * allowed), 0.1 / (1.5 * s.speed_mps))
+    ratio = 0.1 / (1.5 * min(allowed, s.speed_mps))  # a translation: closing rate = speed = 0.1
     expected = min(0.1 * (1 - 1 / ratio) / s.speed_time_s, s.accel_mps2)
     assert np.sqrt(float(a @ M @ a) / m) == pytest.approx(expected, rel=1e-6)
+    # a turn about the vertical through the centre of mass: S2's gap barely closes, yet the
+    # part's kinetic energy is that of a 0.1 m/s translation: slowed as such
+    spin = np.zeros(6)
+    spin[5] = 0.1 / np.sqrt(M[5, 5] / m)  # mass-weighted speed 0.1 m/s
+    a_spin = ex._slowdown(fx.start, spin, spin, M, step)
+    assert a_spin is not None
+    assert np.sqrt(float(a_spin @ M @ a_spin) / m) == pytest.approx(expected, rel=1e-6)
 
 
 def test_the_desired_motion_always_closes_the_targets_gap():

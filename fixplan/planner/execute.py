@@ -735,13 +735,16 @@ class Executor:
     ) -> FloatArray | None:
         """The deceleration of the part's own motion when it is too fast, else None.
 
-        Too fast: the target's gap closes faster than ``1.5 √(2 a_b g)`` (the braking profile,
-        with ``g`` what is left after the distance covered before a new push acts: one control
-        period plus the push's smoothing), and never below ``1.5 min_speed_mps``; or the
-        mass-weighted speed exceeds 1.5 × the cruise speed; both speeds as they will be when the
-        push acts (``twist_ahead``: the measured acceleration continued). The deceleration opposes the twist
-        and brings the speed back within the limit in about ``speed_time_s``, keeping the
-        established contacts.
+        Too fast: the target's gap closes, or the part moves (its mass-weighted speed, i.e. its
+        kinetic energy), faster than 1.5 × the braking profile ``√(2 a_b g)`` capped at the cruise
+        speed (``g``: the gap left after the distance covered before a new push acts, one control
+        period plus the push's smoothing; never below ``min_speed_mps``); both speeds as they will
+        be when the push acts (``twist_ahead``: the measured acceleration continued). A pivot
+        about a nearby locator closes the gap slowly while the part turns fast: bounded by the
+        closing rate alone it met its target with far more energy, and the impact pivoted it off
+        the locator it turned about (side locators 11 mm apart: six re-plans). The deceleration
+        opposes the twist and brings the speed back within the limit in about ``speed_time_s``,
+        keeping the established contacts.
         """
         s = self.settings
         speed = mass_speed(twist, M, self.mass)
@@ -752,7 +755,7 @@ class Executor:
         closing = -float(target.G[0] @ twist)  # m/s at which the target's gap closes
         closing_ahead = -float(target.G[0] @ twist_ahead)
         allowed = max(s.min_speed_mps, math.sqrt(2.0 * s.brake_mps2 * max(gap - max(closing, 0.0) * self._lag_s, 0.0)))
-        ratio = max(closing_ahead / (1.5 * allowed), mass_speed(twist_ahead, M, self.mass) / (1.5 * s.speed_mps))
+        ratio = max(closing_ahead, mass_speed(twist_ahead, M, self.mass)) / (1.5 * min(allowed, s.speed_mps))
         if ratio <= 1.0:
             return None
         a = min(speed * (1.0 - 1.0 / ratio) / s.speed_time_s, s.accel_mps2)
