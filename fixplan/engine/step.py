@@ -16,8 +16,11 @@ One call advances one rigid workpiece among fixed spherical-tip locators by one 
    ``g > 0`` (it may close during the step but not overshoot: ``g + h u_n ≥ 0``).
    Soft-finger spin rows are scaled by ``e_r`` so the 4D ellipsoid is a standard cone.
 4. **Nonsmooth Gauss–Seidel** with the exact one-contact solvers of :mod:`.local`, warm
-   started from the previous step's impulses, stopped on the FCLib residual (natural map),
-   ``max_iter`` only a cap.
+   started from the previous step's impulses (in 3D, a contact that slid in the last step from
+   the linear extrapolation of its last two impulses, projected on its cone), stopped on the
+   FCLib residual (natural map), ``max_iter`` only a cap. A 3D contact tries the closed-form
+   open and strict-stick regimes, then the sliding regime by Newton on the slip direction
+   started from its current impulse (:func:`slide3_newton`), then the general solver.
 5. **Update**: ``ν⁺ = ν_free + M⁻¹ Jᵀ P``; ``c⁺ = c + h v⁺``; ``R⁺ = exp(h ω̂⁺) R``.
 6. **Position post-stabilisation** (Cline & Pai): if an active contact penetrates at the new
    pose, the pose alone is moved by the ``M``-smallest displacement ``Δ = M⁻¹ Gᵀ λ`` with
@@ -27,6 +30,16 @@ One call advances one rigid workpiece among fixed spherical-tip locators by one 
 
 Everything here is ``numba.njit(cache=True)``; :mod:`.reference` is the plain NumPy version of
 the same step used by the tests.
+
+Speed (issue 11 §2). The 3D step :func:`step3_ws` works in the buffers of :func:`workspace3`,
+allocated once per run by :func:`run3` (the compiled multi-step loop under a constant or
+piecewise-constant wrench) or per call by :func:`step3_into` (Python's :meth:`Simulator.step`);
+it allocates nothing. Measured on the six-locator box before this layout: 10 µs per step, of
+which 3.7 µs detection, nearly all of it small-array allocation (~0.1 µs each). The code on the
+per-contact paths takes and returns scalars: a numba helper that merely *contains* a call to a
+general routine (the shape query :func:`~fixplan.engine.detect.project`, a cone projection on
+array views) cost about 0.2 µs per call even when that branch never ran, so the caller picks the
+box-only or 3D-only scalar path and keeps the general call for the other shapes and dimensions.
 """
 
 from __future__ import annotations
