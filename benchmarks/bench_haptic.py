@@ -123,6 +123,8 @@ def one_run(with_browser: bool, seed: int) -> dict:
         "console_errors": page["console_errors"],
         "verify_passed": verified,
         "scheduling": loop.get("scheduling", "?"),
+        "guidance_hz": loop.get("guidance_hz", math.nan),
+        "verdict_hz": loop.get("verdict_hz", math.nan),
     }
 
 
@@ -150,8 +152,9 @@ def run(quick: bool) -> Section:
         f"Load average when the benchmark ended: {load:.2f} on {os.cpu_count()} cores (the loop, the guidance",
         "process, device-sim and Chromium's software rendering share them).",
         "",
-        "| case | run | status | session [s] | ticks | tick mean [µs] | tick p99 [µs] | tick max [µs] | deadline misses | late p99 [µs] | round trip mean [ms] | round trip p99 [ms] | verify |",
-        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "| case | run | status | session [s] | ticks | tick mean [µs] | tick p99 [µs] | tick max [µs] | deadline misses"
+        " | late p99 [µs] | round trip mean [ms] | round trip p99 [ms] | guidance / verdict [Hz] | verify |",
+        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
     for r in rows:
         share = f"{r['deadline_misses']} ({100 * r['deadline_misses'] / max(r['ticks'], 1):.1f} %)"
@@ -159,6 +162,7 @@ def run(quick: bool) -> Section:
             f"| {r['case']} | {r['seed']} | {r['status']} | {f(r['session_s'], '.2f')} | {r['ticks']} | "
             f"{f(r['tick_mean_us'], '.0f')} | {f(r['tick_p99_us'], '.0f')} | {f(r['tick_max_us'], '.0f')} | {share} | "
             f"{f(r['late_p99_us'], '.0f')} | {f(r['rtt_mean_ms'], '.2f')} | {f(r['rtt_p99_ms'], '.2f')} | "
+            f"{f(r['guidance_hz'], '.0f')} / {f(r['verdict_hz'], '.0f')} | "
             f"{'passed' if r['verify_passed'] else 'failed' if r['verify_passed'] is False else '–'} |"
         )
     for r in rows:

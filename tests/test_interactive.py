@@ -184,6 +184,8 @@ def test_auto_session_reaches_the_goal_and_felt_is_the_coupling_reaction(box, au
     W, F = np.array(res.trace.coupling_wrench), np.array(res.trace.felt_wrench)
     np.testing.assert_allclose(F, -W, atol=1e-12)  # what the device displays is the coupling's reaction
     assert res.felt_equals_coupling_max_N == 0.0
+    # the verdict of the current push is refreshed every 40 ms of session time (25 Hz ≥ the 20 Hz asked)
+    assert res.rates["verdict_hz"] >= 20.0 and res.rates["guidance_hz"] >= 90.0
     assert max(abs(g) for g in res.final_gaps_m.values()) < 1e-4
     assert res.max_penetration_m < 1e-5
     # the push stays within the hand's limits (the coupling saturates there)

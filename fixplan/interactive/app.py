@@ -407,6 +407,8 @@ class HapticApp:
             if st.ticks
             else "loop stepped by a script (no wall clock)"
         )
+        rates = s.guidance_rates()
+        loop += f"; guidance {rates['guidance_hz']:.0f} Hz, verdict {rates['verdict_hz']:.0f} Hz"
         self.stats_md.content = f"t = {snap.time_s:.2f} s · {loop}" + bridge
 
     def stop(self) -> None:

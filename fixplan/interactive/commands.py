@@ -120,7 +120,7 @@ def run_haptic(
         "reason": result.reason,
         "duration_s": result.duration_s,
         "sequence": [list(s) for _, s in result.states],
-        "loop": {**result.stats.to_json(), "scheduling": session.scheduling},
+        "loop": {**result.stats.to_json(), "scheduling": session.scheduling, **session.guidance_rates()},
         "bridge": result.bridge,
     }
     if record is not None:
@@ -136,7 +136,8 @@ def run_haptic(
         _echo(f"status: {result.status} — {result.reason}")
         _echo(
             f"loop: {s.ticks} ticks, tick mean {s.tick_mean_us:.0f} µs, p99 {s.tick_p99_us:.0f} µs, "
-            f"{s.deadline_misses} deadline misses ({session.scheduling})"
+            f"{s.deadline_misses} deadline misses ({session.scheduling}); guidance "
+            f"{session.guidance_rates()['guidance_hz']:.0f} Hz, verdict {session.guidance_rates()['verdict_hz']:.0f} Hz"
             + (
                 f"; bridge: {result.bridge['accepted']} poses, {result.bridge['malformed']} malformed, "
                 f"{result.bridge['out_of_order']} out of order"

@@ -194,7 +194,7 @@ def _plan_json(res: SessionResult, fixture: Fixture) -> dict[str, Any]:
             "suggested_push": [None if w is None else [float(x) for x in w] for w in tr.suggested],
             "verdict": list(tr.verdict),
             "states": [{"time_s": float(t), "state": list(s)} for t, s in res.states],
-            "loop": res.stats.to_json(),
+            "loop": {**res.stats.to_json(), **res.rates},
             "bridge": res.bridge,
             "felt_equals_coupling_max_N": res.felt_equals_coupling_max_N,
         },

@@ -46,6 +46,7 @@ from fixplan.simulator import Simulator
 FloatArray = NDArray[np.float64]
 
 GUIDE_PERIOD_S = 0.02  # the guidance process re-solves the push at most at 50 Hz (each solve takes 5–15 ms)
+VERDICT_PERIOD_S = 0.04  # the verdict process classifies the current push at 25 Hz
 MODES = ("held", "jammed", "separates", "slides", "pivots", "rolls", "indeterminate", "free")
 
 
@@ -61,6 +62,7 @@ class Guidance:
     verdict: str | None = None  # classify's mode of the current push (None: not yet known)
     margin: float | None = None
     verdict_push: FloatArray | None = None  # the push that was classified
+    verdict_time_s: float | None = None  # session time of that classification
     note: str = ""  # planner status in words
 
 
@@ -142,6 +144,7 @@ class SessionResult:
     final_gaps_m: dict[str, float]
     saturated_ticks: int
     felt_equals_coupling_max_N: float  # max |felt + coupling| over the ticks the device did not saturate
+    rates: dict[str, float | None] = field(default_factory=dict)  # guidance and verdict updates per second
 
     @property
     def reached(self) -> bool:
@@ -158,7 +161,16 @@ def pose_from_coordinates(x: FloatArray, R0: FloatArray, dimension: int) -> Pose
 class Guide:
     """The planner's executor as guidance, and the jamming verdict of the current push."""
 
-    def __init__(self, fixture: Fixture, start_state: frozenset[str], *, tick_s: float, verdict_every_s: float = 0.04):
+    def __init__(
+        self,
+        fixture: Fixture,
+        start_state: frozenset[str],
+        *,
+        tick_s: float,
+        verdict_every_s: float = 0.0,
+        role: str = "both",
+    ):
+        self.role = role  # "both" | "plan" (the executor only) | "verdict" (classify only)
         self.fixture = fixture
         self.tick_s = tick_s
         self.verdict_every_s = verdict_every_s
@@ -171,6 +183,7 @@ class Guide:
         self.verdict: str | None = None
         self.margin: float | None = None
         self.verdict_push: FloatArray | None = None
+        self.verdict_time_s: float | None = None
         self.solves = 0
         self.plans = 0
 
@@ -198,6 +211,10 @@ class Guide:
         """One guidance step at the snapshot's state; ``push_now`` is what the part receives."""
         t = snap.time_s
         state = frozenset(snap.pressed)
+        if self.role == "verdict":
+            self._classify(snap, push_now)
+            return Guidance(t, verdict=self.verdict, margin=self.margin, verdict_push=self.verdict_push,
+                            verdict_time_s=self.verdict_time_s)  # fmt: skip
         ex = self._executor
         if ex is not None and ex.done and ex.log.outcome == "failed" and t >= self._next_replan:
             self.note = f"re-planning: {ex.log.reason}"
@@ -220,16 +237,20 @@ class Guide:
             target, transition, motion = g["target"], g["transition"], g["motion"]
             if ex.done and ex.log.outcome == "reached":
                 motion = "hold"
-        if t >= self._next_verdict:
+        if self.role == "both" and t >= self._next_verdict:
             self._next_verdict = t + self.verdict_every_s
             self._classify(snap, push_now)
-        return Guidance(t, target, transition, motion, push, self.verdict, self.margin, self.verdict_push, self.note)
+        return Guidance(
+            t, target, transition, motion, push, self.verdict, self.margin, self.verdict_push, self.verdict_time_s,
+            self.note,
+        )  # fmt: skip
 
     def _classify(self, snap: Snapshot, push_now: FloatArray) -> None:
         from fixplan.jamming import classify
 
         names = sorted(snap.pressed)
         self.verdict_push = push_now.copy()
+        self.verdict_time_s = snap.time_s
         if not names:
             self.verdict, self.margin = "free", None
             return
@@ -242,12 +263,16 @@ class Guide:
         self.margin = float(c.margin) if c.margin is not None and math.isfinite(c.margin) else None
 
 
-def _guide_worker(conn: Any, fixture: Fixture, start_state: frozenset[str], tick_s: float) -> None:
-    """The guidance process: answers each snapshot with a :class:`Guidance` (see :class:`RemoteGuide`)."""
+def _guide_worker(conn: Any, fixture: Fixture, start_state: frozenset[str], tick_s: float, role: str) -> None:
+    """A guidance process: answers each snapshot with a :class:`Guidance` (see :class:`RemoteGuide`)."""
     import os
 
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    guide = Guide(fixture, start_state, tick_s=tick_s)
+    if role == "verdict":
+        # a classification is 1–2 ms, 25 times a second: above the other processes (a browser
+        # rendering in software took it down to 5 Hz), below the loop and the display
+        real_time_priority(5)
+    guide = Guide(fixture, start_state, tick_s=tick_s, role=role)
     while True:
         try:
             msg = conn.recv()
@@ -270,14 +295,15 @@ class RemoteGuide:
     answer (the waiting thread releases the GIL).
     """
 
-    def __init__(self, fixture: Fixture, start_state: frozenset[str], *, tick_s: float):
+    def __init__(self, fixture: Fixture, start_state: frozenset[str], *, tick_s: float, role: str = "plan"):
         import multiprocessing as mp
 
         ctx = mp.get_context("spawn")
         self.tick_s = tick_s
+        self.role = role
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(
-            target=_guide_worker, args=(child, fixture, start_state, tick_s), name="fixplan-guidance", daemon=True
+            target=_guide_worker, args=(child, fixture, start_state, tick_s, role), name=f"fixplan-{role}", daemon=True
         )
         self._proc.start()
         child.close()
@@ -406,6 +432,9 @@ class HapticSession:
         self._ended = threading.Event()
         self._thread: threading.Thread | None = None
         self._guide_thread: threading.Thread | None = None
+        self.verdict_guide: RemoteGuide | None = None  # classify in its own process (real time only)
+        self._verdict_thread: threading.Thread | None = None
+        self._guidance_lock = threading.Lock()
         self._reset_requested = False
         self.scheduling = "normal"
         self._restart_guide = False
@@ -440,6 +469,10 @@ class HapticSession:
         self.saturated_ticks = 0
         self.felt_error_max = 0.0
         self.guidance = Guidance()
+        self.guide_updates = 0  # guidance answers received
+        self._first_guide_s: float | None = None  # session time of the first (after the planner's start-up)
+        self._first_verdict_s: float | None = None
+        self.verdict_updates = 0  # new classify verdicts among them
         self.status: str | None = None
         self.reason = ""
         self._zeros_n = np.zeros(n)
@@ -728,15 +761,43 @@ class HapticSession:
         )
         self.snapshot = snap
 
-    def _run_guide(self, snap: Snapshot) -> None:
-        guide = self.guide
+    def _run_guide(self, snap: Snapshot, verdict: bool = False) -> None:
+        """One guidance answer merged into :attr:`guidance`: the plan's fields, or (``verdict``) the verdict's."""
+        from dataclasses import replace
+
+        guide = self.verdict_guide if verdict else self.guide
         if guide is None:
             return
         try:
-            self.guidance = guide.update(snap, self._push_recent.copy())
-        except InputError as exc:  # the guidance process is gone: the session goes on without advice
-            self.guide = None
-            self.guidance = Guidance(snap.time_s, motion="none", note=f"no guidance: {exc}")
+            new = guide.update(snap, self._push_recent.copy())
+        except InputError as exc:  # a guidance process is gone: the session goes on without its advice
+            with self._guidance_lock:
+                if verdict:
+                    self.verdict_guide = None
+                    self.guidance = replace(self.guidance, verdict=None, margin=None, note=f"no verdict: {exc}")
+                else:
+                    self.guide = None
+                    self.guidance = replace(self.guidance, push=None, target=None, motion="none",
+                                            note=f"no guidance: {exc}")  # fmt: skip
+            return
+        with self._guidance_lock:
+            old = self.guidance
+            if new.verdict_time_s is not None and new.verdict_time_s != old.verdict_time_s:
+                self.verdict_updates += 1
+                if self._first_verdict_s is None:
+                    self._first_verdict_s = self.sim.time_s
+            if verdict:
+                merged = replace(old, verdict=new.verdict, margin=new.margin, verdict_push=new.verdict_push,
+                                 verdict_time_s=new.verdict_time_s)  # fmt: skip
+            else:
+                self.guide_updates += 1
+                if self._first_guide_s is None:
+                    self._first_guide_s = self.sim.time_s
+                merged = new if self.verdict_guide is None else replace(
+                    new, verdict=old.verdict, margin=old.margin, verdict_push=old.verdict_push,
+                    verdict_time_s=old.verdict_time_s,
+                )  # fmt: skip
+            self.guidance = merged
 
     def stats(self) -> LoopStats:
         """Tick timing so far: mean and misses over every tick, p99 over the last 2000 (cached for 0.25 s)."""
@@ -758,6 +819,18 @@ class HapticSession:
         )
         self._stats_cache = out
         return out
+
+    def guidance_rates(self) -> dict[str, float | None]:
+        """Guidance answers and new verdicts per second of session time, from the first answer on."""
+        if self._first_guide_s is None:
+            return {"guidance_hz": 0.0, "verdict_hz": 0.0, "guidance_start_s": None}
+        t = max(self.sim.time_s - self._first_guide_s, 1e-9)
+        t_v = max(self.sim.time_s - (self._first_verdict_s or self._first_guide_s), 1e-9)
+        return {
+            "guidance_hz": (self.guide_updates - 1) / t,
+            "verdict_hz": max(self.verdict_updates - 1, 0) / t_v,
+            "guidance_start_s": self._first_guide_s,  # the planner's start-up (a process, imports, the first plan)
+        }
 
     def final_stats(self) -> LoopStats:
         """Like :meth:`stats`, p99 over every tick."""
@@ -857,17 +930,18 @@ class HapticSession:
             sys.setswitchinterval(old_interval)
             self._ended.set()
 
-    def _guide_loop(self) -> None:
+    def _guide_loop(self, verdict: bool = False) -> None:
         if self.realtime:
             real_time_priority(10)  # it holds the GIL to pickle snapshots: never preempted while it does
+        period = VERDICT_PERIOD_S if verdict else GUIDE_PERIOD_S
         last: Snapshot | None = None
         next_t = time.perf_counter()
         while not self._ended.is_set():
             wait = next_t - time.perf_counter()
             if wait > 0 and self._ended.wait(wait):
                 return
-            next_t = max(next_t + GUIDE_PERIOD_S, time.perf_counter())
-            if self._restart_guide and isinstance(self.guide, RemoteGuide):
+            next_t = max(next_t + period, time.perf_counter())
+            if not verdict and self._restart_guide and isinstance(self.guide, RemoteGuide):
                 self._restart_guide = False
                 self.guide.close()
                 self.guide = RemoteGuide(self.fixture, self.start_state, tick_s=self.guide.tick_s)
@@ -876,7 +950,7 @@ class HapticSession:
                 time.sleep(0.002)
                 continue
             last = snap
-            self._run_guide(snap)
+            self._run_guide(snap, verdict=verdict)
 
     def _warm_up(self) -> None:
         """Load the engine's compiled kernels on a scratch copy, so that no tick pays for it."""
@@ -892,7 +966,8 @@ class HapticSession:
         """Start the loop (and the guidance) in their own threads."""
         self._warm_up()
         if self._guidance_on and not self.synchronous and self.guide is None:
-            self.guide = RemoteGuide(self.fixture, self.start_state, tick_s=GUIDE_PERIOD_S)
+            self.guide = RemoteGuide(self.fixture, self.start_state, tick_s=GUIDE_PERIOD_S, role="plan")
+            self.verdict_guide = RemoteGuide(self.fixture, self.start_state, tick_s=GUIDE_PERIOD_S, role="verdict")
         if self.synchronous and self.guide is not None and self.snapshot is not None:
             self._run_guide(self.snapshot)  # plan before the first tick
         self._thread = threading.Thread(target=self._loop, name="fixplan-haptic-loop", daemon=True)
@@ -900,6 +975,11 @@ class HapticSession:
         if self.guide is not None and not self.synchronous:
             self._guide_thread = threading.Thread(target=self._guide_loop, name="fixplan-guidance", daemon=True)
             self._guide_thread.start()
+        if self.verdict_guide is not None:
+            self._verdict_thread = threading.Thread(
+                target=self._guide_loop, kwargs={"verdict": True}, name="fixplan-verdict", daemon=True
+            )
+            self._verdict_thread.start()
         return self
 
     def wait(self, timeout_s: float | None = None) -> bool:
@@ -911,10 +991,12 @@ class HapticSession:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
-        if self._guide_thread is not None:
-            self._guide_thread.join(timeout=30.0)
-        if isinstance(self.guide, RemoteGuide):
-            self.guide.close()
+        for thread in (self._guide_thread, self._verdict_thread):
+            if thread is not None:
+                thread.join(timeout=30.0)
+        for guide in (self.guide, self.verdict_guide):
+            if isinstance(guide, RemoteGuide):
+                guide.close()
 
     def run(self) -> SessionResult:
         """Start, wait for the end (goal or time), stop, and return the result."""
@@ -955,6 +1037,7 @@ class HapticSession:
             final_gaps_m=gaps,
             saturated_ticks=self.saturated_ticks,
             felt_equals_coupling_max_N=self.felt_error_max,
+            rates=self.guidance_rates(),
         )
 
     def bridge_config(self) -> dict[str, Any]:
