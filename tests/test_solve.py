@@ -108,3 +108,17 @@ def test_verification_trace_balances_forces_at_rest(default_plan):
     # the real-time budget keeps every tick within the period, and its price is reported
     assert 0 < v.max_solver_error <= 1e-3
     assert v.to_json()["trace"]["normal_forces_N"]["B1"][-1] == pytest.approx(tr.normal_forces_N[-1, 0])
+
+
+def test_replan_from_a_part_touching_nothing():
+    """A part knocked free of every locator is re-planned from where it is (it raised a
+    ValueError in the goal solver, which got no locators)."""
+    from fixplan.planner.solve import Planner
+    from fixplan.pose import Pose
+
+    fx = fixplan.load(fixplan.default_fixture_path())
+    raised = Pose(fx.start.R_world_body, fx.start.p_world + np.array([0.0, 0.0, 0.01]))
+    steps = Planner(fx).replan(raised, frozenset())
+    assert not isinstance(steps, str), steps
+    assert steps[0].kind == "free" and not steps[0].established
+    assert {s.target for s in steps} == {loc.name for loc in fx.locators}

@@ -320,11 +320,14 @@ class Planner:
         fx = self.fixture
         # the observed contacts touch within the sensor's tolerance; the planner wants them exact:
         # the nearest pose (least-squares steps) where they do
-        settled = solve_goal(fx.workpiece, [fx.locator(n) for n in sorted(state)], pose, tol_m=1e-10)
-        if not settled.converged:
-            return f"no pose near the observed one keeps {{{', '.join(sorted(state))}}} touching"
+        start = pose
+        if state:  # a part touching nothing (knocked free) is planned from where it is
+            settled = solve_goal(fx.workpiece, [fx.locator(n) for n in sorted(state)], pose, tol_m=1e-10)
+            if not settled.converged:
+                return f"no pose near the observed one keeps {{{', '.join(sorted(state))}}} touching"
+            start = settled.pose
         try:
-            coarse = self.plan_from(settled.pose, state)
+            coarse = self.plan_from(start, state)
         except InputError as exc:
             return str(exc)
         return plan_steps(coarse.transitions) if coarse.found else coarse.reason
