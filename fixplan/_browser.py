@@ -60,15 +60,12 @@ _LAST_FRAME_JS = """async () => {
 
 
 @dataclass
-class PageReport:
-    """What happened when the page was opened."""
+class BrowserErrors:
+    """What went wrong in a page: console errors, uncaught page errors, blocked fetches."""
 
     console_errors: list[str] = field(default_factory=list)
     page_errors: list[str] = field(default_factory=list)
     blocked_requests: list[str] = field(default_factory=list)
-    state: dict[str, Any] = field(default_factory=dict)
-    last_frame_shown: bool | None = None
-    screenshot: Path | None = None
 
     @property
     def errors(self) -> list[str]:
@@ -78,6 +75,15 @@ class PageReport:
             + [f"page error: {m}" for m in self.page_errors]
             + [f"fetch attempted: {u}" for u in self.blocked_requests]
         )
+
+
+@dataclass
+class PageReport(BrowserErrors):
+    """What happened when the page was opened."""
+
+    state: dict[str, Any] = field(default_factory=dict)
+    last_frame_shown: bool | None = None
+    screenshot: Path | None = None
 
 
 def browser_available() -> str | None:

@@ -317,20 +317,7 @@ def nsgs_dense(W, q, mu, offsets, sizes, P, tol, max_iter):
 @njit(cache=True)
 def _pgs_lcp(A, b, x, iterations):
     """Projected Gauss–Seidel for 0 ≤ x ⊥ A x + b ≥ 0 (A symmetric PSD, small)."""
-    n = b.shape[0]
-    for _ in range(iterations):
-        change = 0.0
-        for i in range(n):
-            if A[i, i] <= 0.0:
-                continue
-            s = b[i]
-            for j in range(n):
-                s += A[i, j] * x[j]
-            new = max(0.0, x[i] - s / A[i, i])
-            change = max(change, abs(new - x[i]))
-            x[i] = new
-        if change <= 1e-16:
-            break
+    _pgs_lcp_n(A, b, x, b.shape[0], iterations)
 
 
 @njit(cache=True)
@@ -747,49 +734,6 @@ def nsgs_ws(W, q, mu, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has_in
         failures = 0
         for j in range(nc):
             o, d = offsets[j], sizes[j]
-            if d == 3:
-                # the 3D contact in scalars: α (same summation order as below), then the
-                # closed-form open and strict-stick regimes of _fast_local
-                s0, s1, s2 = q[o], q[o + 1], q[o + 2]
-                for c in range(o):
-                    pc = P[c]
-                    s0 += W[o, c] * pc
-                    s1 += W[o + 1, c] * pc
-                    s2 += W[o + 2, c] * pc
-                for c in range(o + 3, m):
-                    pc = P[c]
-                    s0 += W[o, c] * pc
-                    s1 += W[o + 1, c] * pc
-                    s2 += W[o + 2, c] * pc
-                if s0 >= 0.0:
-                    P[o] = 0.0
-                    P[o + 1] = 0.0
-                    P[o + 2] = 0.0
-                    continue
-                if has_inv[j]:
-                    iv = inv[j]
-                    x0 = -iv[0, 0] * s0 - iv[0, 1] * s1 - iv[0, 2] * s2
-                    x1 = -iv[1, 0] * s0 - iv[1, 1] * s1 - iv[1, 2] * s2
-                    x2 = -iv[2, 0] * s0 - iv[2, 1] * s1 - iv[2, 2] * s2
-                    if x0 > 0.0 and math.sqrt(x1 * x1 + x2 * x2) < mu[j] * x0 * (1.0 - 1e-9):
-                        P[o] = x0
-                        P[o + 1] = x1
-                        P[o + 2] = x2
-                        continue
-                alpha[0] = s0
-                alpha[1] = s1
-                alpha[2] = s2
-                Pj[0] = P[o]
-                Pj[1] = P[o + 1]
-                Pj[2] = P[o + 2]
-                if not slide3_newton(diag[j, :3, :3], alpha[:3], mu[j], Pj[:3]):
-                    st, _ = local_solve_ws(diag[j, :3, :3], alpha[:3], mu[j], 3, Pj[:3], ws)
-                    if st == FAILED:
-                        failures += 1
-                P[o] = Pj[0]
-                P[o + 1] = Pj[1]
-                P[o + 2] = Pj[2]
-                continue
             if d == 3:
                 # the 3D contact in scalars: α (same summation order as below), then the
                 # closed-form open and strict-stick regimes of _fast_local

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
+
+from fixplan.haptics._kernels import log_so3
 
 
 @njit(cache=True)
@@ -14,25 +14,7 @@ def coordinates3(R, p, com_world, twist, R0):
 
     ``twist`` is ``(v, ω)`` of the centre of mass; the origin's velocity is ``v + ω × (p − c)``.
     """
-    Rr = R @ R0.T
-    c = min(1.0, max(-1.0, (Rr[0, 0] + Rr[1, 1] + Rr[2, 2] - 1.0) / 2.0))
-    th = math.acos(c)
-    a = np.array([Rr[2, 1] - Rr[1, 2], Rr[0, 2] - Rr[2, 0], Rr[1, 0] - Rr[0, 1]])
-    if th < 1e-8:
-        rot = 0.5 * a
-    elif math.pi - th < 1e-6:
-        B = (Rr + np.eye(3)) / 2.0
-        k = 0
-        for i in range(1, 3):
-            if B[i, i] > B[k, k]:
-                k = i
-        axis = B[:, k] / math.sqrt(max(B[k, k], 1e-300))
-        axis /= math.sqrt(np.sum(axis * axis))
-        if np.sum(axis * a) < 0:
-            axis = -axis
-        rot = th * axis
-    else:
-        rot = th / (2.0 * math.sin(th)) * a
+    rot = log_so3(R @ R0.T)
     o = p - com_world
     w = twist[3:]
     x = np.empty(6)

@@ -12,28 +12,18 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
+from fixplan._browser import BrowserErrors
 from fixplan.errors import FixplanError
 
 
 @dataclass
-class LivePageReport:
+class LivePageReport(BrowserErrors):
     """What the page did while it was open."""
 
-    console_errors: list[str] = field(default_factory=list)
-    page_errors: list[str] = field(default_factory=list)
-    blocked_requests: list[str] = field(default_factory=list)
     requests: list[str] = field(default_factory=list)
     canvases: int = 0
     text: str = ""
     screenshot: Path | None = None
-
-    @property
-    def errors(self) -> list[str]:
-        return (
-            [f"console: {m}" for m in self.console_errors]
-            + [f"page error: {m}" for m in self.page_errors]
-            + [f"fetch attempted: {u}" for u in self.blocked_requests]
-        )
 
 
 def open_live_page(

@@ -81,7 +81,8 @@ def run_haptic(
     x0 = pose_coordinates(fixture.start, fixture.start.R_world_body)
     handle: Handle
     if kind == "udp":
-        assert udp_port is not None  # noqa: S101 - parse_device gives udp a port
+        if udp_port is None:  # parse_device gives udp a port
+            raise InputError("--device udp needs a port (udp:PORT)")
         # the bridge listens where the web app does; off 127.0.0.1 a device's HELLO must carry the token
         handle = UdpHandle("127.0.0.1" if host == "localhost" else host, udp_port, fixture.ndof, token=token)
     elif kind == "spacemouse":

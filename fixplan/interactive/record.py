@@ -308,7 +308,7 @@ def verify_recording(
     from fixplan.jamming import classify
     from fixplan.jamming.search import hand_limits
     from fixplan.planner.execute import ExecutionSettings
-    from fixplan.planner.verify import Verification, haptic_rig, pose_coordinates, trace_from_record
+    from fixplan.planner.verify import Verification, haptic_rig, loop_measures, pose_coordinates
     from fixplan.simulator import Simulator
 
     transitions = _check_recording(data, fixture, source)
@@ -396,24 +396,14 @@ def verify_recording(
     if pen > max_penetration_m:
         checks.append("penetration")
         reasons.append(f"penetration reached {pen:.3g} m (expected ≤ {max_penetration_m:g} m)")
-    felt = max((float(np.linalg.norm(f[:d])) for f in rec.felt_wrench), default=0.0)
     W = np.asarray(rec.coupling_wrench) if rec.coupling_wrench else np.zeros((1, fixture.ndof))
     return Verification(
         passed=not reasons,
         reason="; ".join(reasons) if reasons else "the recorded pushes load the part: every locator pressed, at rest",
         failed_checks=checks,
-        final_pose=sim.pose,
-        max_penetration_m=pen,
-        deadline_misses=rec.deadline_misses,
-        tick_mean_us=rec.mean_compute_s * 1e6,
-        tick_max_us=rec.max_compute_s * 1e6,
+        **loop_measures(rec, sim, every),
         observed_sequence=list(policy.observed),
         final_gaps_m={c.name: float(c.gap_m) for c in sim.contacts()},
-        duration_s=sim.time_s,
-        felt_force_max_N=felt,
-        unconverged_steps=rec.unconverged_steps,
-        max_solver_error=rec.max_solver_error,
-        trace=trace_from_record(rec, sim.names, every) if rec.trace else None,
         max_push_force_N=float(np.max(np.linalg.norm(W[:, :d], axis=1))),
         max_push_torque_Nm=float(np.max(np.linalg.norm(W[:, d:], axis=1))),
         saturated_ticks=rig.loop.saturated_ticks,

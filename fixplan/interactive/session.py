@@ -379,8 +379,8 @@ class HapticSession:
         if clock == "device":
             # one tick per pose, no wall clock: the guidance runs inside the loop (reproducible)
             realtime, synchronous = False, True
-            assert isinstance(handle, UdpHandle)  # noqa: S101 - checked above
-            handle.one_per_read = True
+            if isinstance(handle, UdpHandle):  # checked above: --clock device is UDP only
+                handle.one_per_read = True
         if duration_s is not None and not (duration_s > 0 and math.isfinite(duration_s)):
             raise InputError(f"session duration must be a positive number of seconds, got {duration_s}")
         self.fixture = fixture
@@ -424,8 +424,7 @@ class HapticSession:
         if guidance and synchronous:
             self.guide = Guide(fixture, self.start_state, tick_s=self.trace_every * self.period_s)
         self._auto = bool(auto) or handle is None
-        self._auto_dev: SimulatedDevice | None = None
-        self._new_auto_device(self.x0, np.zeros(self.ndof))
+        self._auto_dev = self._auto_device(self.x0, np.zeros(self.ndof))
         self._x_d = self.x0.copy()
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -479,7 +478,8 @@ class HapticSession:
         self.snapshot: Snapshot | None = None
         self._publish(np.zeros(self.ndof), np.zeros(self.ndof), tuple(sorted(self.start_state)), force=True)
 
-    def _new_auto_device(self, x: FloatArray, v: FloatArray) -> None:
+    def _auto_device(self, x: FloatArray, v: FloatArray) -> SimulatedDevice:
+        """A simulated device for the auto switch, like the loop's, at handle state ``(x, v)``."""
         old = self.rig.loop.device
         dev = SimulatedDevice(
             self.ndof,
@@ -490,7 +490,7 @@ class HapticSession:
         )
         dev._v = np.array(v, dtype=float)
         dev.open()
-        self._auto_dev = dev
+        return dev
 
     def _passive_scale_max(self) -> float:
         """The largest stiffness scale for which the coupling stays passive with the handle's damping."""
@@ -519,7 +519,7 @@ class HapticSession:
         """Let the planner's executor drive (the simulated device starts where the handle is)."""
         if on and not self._auto:
             x_w, v_w = self.rig.loop.workpiece_coordinates()
-            self._new_auto_device(self._x_d.copy(), v_w)
+            self._auto_dev = self._auto_device(self._x_d.copy(), v_w)
         if not on and self.handle is None:
             return  # no device: auto is the only driver
         self._auto = bool(on)
@@ -531,7 +531,7 @@ class HapticSession:
     def _reset(self) -> None:
         self.sim.set_state(self.fixture.start, None)
         self._coords = None
-        self._new_auto_device(self.x0, np.zeros(self.ndof))
+        self._auto_dev = self._auto_device(self.x0, np.zeros(self.ndof))
         self._observed = self._candidate = None
         self._settled_since = self._jammed_since = None
         self.goal_reached_at = None
@@ -597,7 +597,6 @@ class HapticSession:
             return False  # no new pose (a HELLO, a dropped datagram): the device's clock has not ticked
         if self._auto:
             dev = self._auto_dev
-            assert dev is not None  # noqa: S101 - set in __init__
             x_d, v_d = dev.position(), dev.velocity()
             K = self.K
         elif reading is None:
@@ -616,7 +615,6 @@ class HapticSession:
             self.felt_error_max = max(self.felt_error_max, float(np.max(np.abs(felt + w_c))))
         if self._auto:
             dev = self._auto_dev
-            assert dev is not None  # noqa: S101
             dev.set_force_and_torque(felt)
             push = self.guidance.push if self.guidance.push is not None else np.zeros(self.ndof)
             dev.advance(self.period_s, self.rig.operator_wrench(push, dev))

@@ -343,28 +343,39 @@ def verify(
             f"the push on the part exceeded the manipulator's limits: ‖F‖ up to {push_F:.3g} N (max_force {F_max:.3g} N), "
             f"‖T‖ up to {push_T:.3g} N·m (max_torque {T_max:.3g} N·m), averaged over 10 ms"
         )
-    felt = max((float(np.linalg.norm(f[:d])) for f in rec.felt_wrench), default=0.0)
     return Verification(
         passed=not reasons,
         reason="; ".join(reasons) if reasons else "every check passed",
         failed_checks=checks,
-        final_pose=sim.pose,
-        max_penetration_m=pen,
-        deadline_misses=rec.deadline_misses,
-        tick_mean_us=rec.mean_compute_s * 1e6,
-        tick_max_us=rec.max_compute_s * 1e6,
+        **loop_measures(rec, sim, trace_every),
         observed_sequence=list(log.observed),
         final_gaps_m=gaps,
-        duration_s=sim.time_s,
-        felt_force_max_N=felt,
-        unconverged_steps=rec.unconverged_steps,
-        max_solver_error=rec.max_solver_error,
-        trace=trace_from_record(rec, sim.names, trace_every) if rec.trace else None,
         execution=log,
         max_push_force_N=push_F,
         max_push_torque_Nm=push_T,
         saturated_ticks=loop.saturated_ticks,
     )
+
+
+def loop_measures(rec: Any, sim: Any, trace_every: int) -> dict[str, Any]:
+    """The :class:`Verification` fields a finished loop run measured.
+
+    Final pose, penetration, timing, felt force, solver quality and the trace; ``rec`` is the
+    loop's record, ``sim`` its simulator.
+    """
+    d = sim.pose.p_world.shape[0]
+    return {
+        "final_pose": sim.pose,
+        "max_penetration_m": sim.max_penetration_m,
+        "deadline_misses": rec.deadline_misses,
+        "tick_mean_us": rec.mean_compute_s * 1e6,
+        "tick_max_us": rec.max_compute_s * 1e6,
+        "duration_s": sim.time_s,
+        "felt_force_max_N": max((float(np.linalg.norm(f[:d])) for f in rec.felt_wrench), default=0.0),
+        "unconverged_steps": rec.unconverged_steps,
+        "max_solver_error": rec.max_solver_error,
+        "trace": trace_from_record(rec, sim.names, trace_every) if rec.trace else None,
+    }
 
 
 def _path_length(fixture: Fixture, step: Step) -> float:
