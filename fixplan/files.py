@@ -171,3 +171,20 @@ def write_output(path: Path, write: Callable[[Path], T]) -> T:
 def write_text(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` as UTF-8 (see :func:`write_output`)."""
     write_output(path, lambda p: p.write_text(text, encoding="utf-8"))
+
+
+def read_plan_json(path: Path, *, expected: str) -> object:
+    """The parsed JSON document of a plan file.
+
+    Raises :class:`InputError` with a one-line reason when it is unreadable, not JSON or nested
+    too deeply; ``expected`` says what the file should be.
+    """
+    import json
+
+    text = read_user_text(Path(path), expected=expected)
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise InputError(f"{path}: not a fixplan plan (JSON nested too deeply)") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None

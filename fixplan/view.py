@@ -143,15 +143,9 @@ def read_plan(path: Path, fixture: Fixture) -> Replay:
         The file is unreadable, not JSON, not a fixplan plan, malformed, or for another fixture
         (other locator names, another dimension, or another start pose).
     """
-    from fixplan.files import read_user_text
+    from fixplan.files import read_plan_json
 
-    text = read_user_text(Path(path), expected="a plan JSON written by 'fixplan solve --out'")
-    try:
-        data = json.loads(text)
-    except RecursionError:
-        raise InputError(f"{path}: not a fixplan plan (JSON nested too deeply)") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+    data = read_plan_json(Path(path), expected="a plan JSON written by 'fixplan solve --out'")
     return replay_from_plan(data, fixture, str(path))
 
 

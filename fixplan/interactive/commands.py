@@ -202,16 +202,10 @@ def run_device_sim(
 def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
     """Re-run a plan file in the haptic loop; 0 when it passes."""
     from fixplan.cli import _load
-    from fixplan.files import read_user_text
+    from fixplan.files import read_plan_json
     from fixplan.interactive.record import verify_plan_file
 
-    text = read_user_text(plan, expected="a plan JSON ('fixplan solve --out' or 'fixplan haptic --record')")  # ≤ 1 MiB
-    try:
-        data = json.loads(text)
-    except RecursionError:
-        raise InputError(f"{plan}: not a fixplan plan (JSON nested too deeply)") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{plan}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+    data = read_plan_json(plan, expected="a plan JSON ('fixplan solve --out' or 'fixplan haptic --record')")  # ≤ 1 MiB
     if not isinstance(data, dict):
         raise InputError(f"{plan}: not a fixplan plan (expected a JSON object)")
     if fixture_path is None and isinstance(data.get("fixture"), str) and Path(data["fixture"]).is_file():
