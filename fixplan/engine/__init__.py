@@ -44,7 +44,7 @@ _LAZY = {
     "ContactProblem": ("fixplan.engine.nsgs", "ContactProblem"),
     "ContactSolution": ("fixplan.engine.nsgs", "ContactSolution"),
     "build_problem": ("fixplan.engine.nsgs", "build_problem"),
-    "fclib_error": ("fixplan.engine.nsgs", "fclib_error"),
+    "fclib_error": ("fixplan.engine.residual", "fclib_error"),
     "solve_nsgs": ("fixplan.engine.nsgs", "solve_nsgs"),
     "solve_nsgs_reference": ("fixplan.engine.nsgs", "solve_nsgs_reference"),
     "solve_socp": ("fixplan.engine.socp", "solve_socp"),

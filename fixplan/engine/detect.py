@@ -145,3 +145,98 @@ def project(kind, params, verts, edge_normals, p, point, normal):
     else:
         normal[0], normal[1] = edge_normals[kbest, 0], edge_normals[kbest, 1]
     return dmin
+
+
+# Scalar 3D queries for the allocation-free step: a numba helper that merely *contains* a call to
+# the general :func:`project` costs about 0.2 µs per call even when that branch never runs, so the
+# caller picks the box-only scalar path and keeps the general call for the other shapes.
+
+
+@njit(cache=True)
+def _box3(p0, p1, p2, h0, h1, h2):
+    """:func:`fixplan.engine.detect.project` for a 3D box in scalars (same arithmetic, no arrays).
+
+    Returns ``(distance, point, normal)`` as 7 numbers (body frame).
+    """
+    q0 = abs(p0) - h0
+    q1 = abs(p1) - h1
+    q2 = abs(p2) - h2
+    out2 = 0.0
+    if q0 > 0.0:
+        out2 += q0 * q0
+    if q1 > 0.0:
+        out2 += q1 * q1
+    if q2 > 0.0:
+        out2 += q2 * q2
+    scale = max(h0, max(h1, h2))
+    n_out = math.sqrt(out2)
+    s0 = 1.0 if p0 >= 0.0 else -1.0
+    s1 = 1.0 if p1 >= 0.0 else -1.0
+    s2 = 1.0 if p2 >= 0.0 else -1.0
+    if n_out > 1e-12 * scale:
+        return (
+            n_out,
+            min(max(p0, -h0), h0),
+            min(max(p1, -h1), h1),
+            min(max(p2, -h2), h2),
+            s0 * q0 / n_out if q0 > 0.0 else 0.0,
+            s1 * q1 / n_out if q1 > 0.0 else 0.0,
+            s2 * q2 / n_out if q2 > 0.0 else 0.0,
+        )
+    # inside (or on the surface): the face of the largest q (the first one on ties)
+    if q0 >= q1 and q0 >= q2:
+        return q0, s0 * h0, p1, p2, s0, 0.0, 0.0
+    if q1 >= q2:
+        return q1, p0, s1 * h1, p2, 0.0, s1, 0.0
+    return q2, p0, p1, s2 * h2, 0.0, 0.0, s2
+
+
+@njit(cache=True)
+def _frame3(R, p, q0, q1, q2):
+    """``Rᵀ (q − p)``: the world point ``q`` in body coordinates (same sums as :func:`fixplan.engine.linalg.mtv`)."""
+    d0 = q0 - p[0]
+    d1 = q1 - p[1]
+    d2 = q2 - p[2]
+    return (
+        R[0, 0] * d0 + R[1, 0] * d1 + R[2, 0] * d2,
+        R[0, 1] * d0 + R[1, 1] * d1 + R[2, 1] * d2,
+        R[0, 2] * d0 + R[1, 2] * d1 + R[2, 2] * d2,
+    )
+
+
+@njit(cache=True)
+def _to_world3(R, p, dist, x0, x1, x2, m0, m1, m2):
+    """``(distance, n, x)`` in world axes from the body-frame point and outward normal.
+
+    ``n = −R·normal`` (the contact normal, into the workpiece), ``x = p + R·point``.
+    """
+    return (
+        dist,
+        -(R[0, 0] * m0 + R[0, 1] * m1 + R[0, 2] * m2),
+        -(R[1, 0] * m0 + R[1, 1] * m1 + R[1, 2] * m2),
+        -(R[2, 0] * m0 + R[2, 1] * m1 + R[2, 2] * m2),
+        p[0] + (R[0, 0] * x0 + R[0, 1] * x1 + R[0, 2] * x2),
+        p[1] + (R[1, 0] * x0 + R[1, 1] * x1 + R[1, 2] * x2),
+        p[2] + (R[2, 0] * x0 + R[2, 1] * x1 + R[2, 2] * x2),
+    )
+
+
+@njit(cache=True)
+def box_query3(half, R, p, q0, q1, q2):
+    """Gap data of the world point ``q`` against a box at ``(R, p)``: ``(distance, n, x)``, world axes.
+
+    Kept apart from :func:`query3`: a helper that merely contains the call to the general
+    :func:`~fixplan.engine.detect.project` cost 15× more per call (measured 1.2 against 0.08 µs
+    for six locators), so the caller chooses.
+    """
+    b0, b1, b2 = _frame3(R, p, q0, q1, q2)
+    dist, x0, x1, x2, m0, m1, m2 = _box3(b0, b1, b2, half[0], half[1], half[2])
+    return _to_world3(R, p, dist, x0, x1, x2, m0, m1, m2)
+
+
+@njit(cache=True)
+def query3(kind, params, verts, enorm, R, p, q0, q1, q2, pb, point, normal):
+    """:func:`box_query3` for any shape (``pb, point, normal``: scratch 3-vectors)."""
+    pb[0], pb[1], pb[2] = _frame3(R, p, q0, q1, q2)
+    dist = project(kind, params, verts, enorm, pb, point, normal)
+    return _to_world3(R, p, dist, point[0], point[1], point[2], normal[0], normal[1], normal[2])

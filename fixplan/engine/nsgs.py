@@ -36,13 +36,17 @@ import numpy as np
 import scipy.sparse as sp
 
 from fixplan.engine.budget import CHUNK_S, Budget
+from fixplan.engine.linalg import invert_small
 from fixplan.engine.local import (
     FAILED,
     WORKSPACE_SIZE,
     cone_solve_ws,
     coulomb_2d_ws,
+    open_or_stick,
     project_cone_into,
+    slide3_newton,
 )
+from fixplan.engine.residual import fclib_error, fclib_error_rows
 from fixplan.errors import InputError
 
 DEFAULT_TOL = 1e-8
@@ -303,46 +307,6 @@ class ContactSolution:
         return fclib_error(prob, self.reaction)
 
 
-def fclib_error(problem: ContactProblem, reaction: np.ndarray) -> float:
-    """FCLib/Siconos residual (natural map, ``ρ = 1``) of ``reaction``, plain NumPy.
-
-    Parameters
-    ----------
-    problem : ContactProblem
-        The problem.
-    reaction : ndarray, shape (m,)
-        Impulses ``r`` in the problem's own (unscaled) variables.
-
-    Returns
-    -------
-    float
-        ``sqrt(Σ_j ‖r̃_j − Proj(r̃_j − ũ_j^mod)‖²) / max(‖q̃‖, ‖r̃‖, ‖ũ‖)``, computed in the
-        scaled variables (identical to the unscaled ones without soft fingers).
-    """
-    r = np.asarray(reaction, dtype=float)
-    s = problem.row_scale
-    u_tilde = s * (problem.W @ r + problem.q)
-    r_tilde = np.divide(r, s, out=np.zeros_like(r), where=s > 0)
-    q_tilde = s * problem.q
-    total = 0.0
-    for j in range(problem.n_contacts):
-        o, d, mu = problem.offsets[j], problem.dims[j], problem.mu[j]
-        rj, uj = r_tilde[o : o + d], u_tilde[o : o + d]
-        x = rj - uj
-        x[0] -= mu * np.linalg.norm(uj[1:])
-        xn, nt = x[0], np.linalg.norm(x[1:])
-        if mu * nt <= -xn:
-            proj = np.zeros(d)
-        elif nt <= mu * xn:
-            proj = x
-        else:
-            pn = (xn + mu * nt) / (1.0 + mu * mu)
-            proj = np.concatenate(([pn], mu * pn * x[1:] / nt))
-        total += float(np.sum((rj - proj) ** 2))
-    scale = max(np.linalg.norm(q_tilde), np.linalg.norm(r_tilde), np.linalg.norm(u_tilde))
-    return math.sqrt(total) / float(scale) if scale > 0 else math.sqrt(total)
-
-
 # --------------------------------------------------------------------------- compiled kernels
 
 
@@ -496,6 +460,111 @@ def nsgs_kernel(indptr, indices, data, q, mu, offsets, dims, diag, r, tol, max_i
             status = 0
             break
     return it, err, status, failures
+
+
+@numba.njit(cache=True)
+def nsgs_dense(W, q, mu, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has_inv, u, scratch):
+    """NSGS on a dense ``W`` (the time step's Delassus matrix) in caller-owned buffers: no allocation.
+
+    The leading ``nc`` contacts / ``m`` rows of the buffers are used (``diag``, ``inv``:
+    ``(≥nc, 4, 4)``; ``has_inv``: ``(≥nc,)``; ``u``: ``(≥m,)``; ``scratch``:
+    ``WORKSPACE_SIZE + 16`` floats). Sweeps until :func:`fclib_error_rows` ≤ ``tol``, at most
+    ``max_iter``; returns ``(error, sweeps, converged, failed local solves in the last sweep)``.
+    Every contact first tries the closed-form open and strict-stick regimes
+    (:func:`~fixplan.engine.local.open_or_stick`); a 3D contact whose test fails then tries
+    :func:`~fixplan.engine.local.slide3_newton` from its current impulse, then the general exact
+    solver of :mod:`.local`. The sparse :func:`nsgs_kernel` is the same sweep for FCLib problems
+    (CSR ``W``, relaxation ``ω``, best iterate kept).
+    """
+    err = math.inf
+    failures = 0
+    if m == 0:
+        return 0.0, 0, True, 0
+    ws = scratch[0:WORKSPACE_SIZE]
+    alpha = scratch[WORKSPACE_SIZE : WORKSPACE_SIZE + 4]
+    Pj = scratch[WORKSPACE_SIZE + 4 : WORKSPACE_SIZE + 8]
+    xbuf = scratch[WORKSPACE_SIZE + 8 : WORKSPACE_SIZE + 12]
+    prbuf = scratch[WORKSPACE_SIZE + 12 : WORKSPACE_SIZE + 16]
+    for j in range(nc):
+        o, d = offsets[j], sizes[j]
+        for a in range(d):
+            for b in range(d):
+                diag[j, a, b] = W[o + a, o + b]
+        has_inv[j] = invert_small(diag[j, :d, :d], inv[j, :d, :d])
+    it = 0
+    for it in range(1, max_iter + 1):
+        failures = 0
+        for j in range(nc):
+            o, d = offsets[j], sizes[j]
+            if d == 3:
+                # the 3D contact in scalars: α (same summation order as below), then the
+                # closed-form open and strict-stick regimes of open_or_stick
+                s0, s1, s2 = q[o], q[o + 1], q[o + 2]
+                for c in range(o):
+                    pc = P[c]
+                    s0 += W[o, c] * pc
+                    s1 += W[o + 1, c] * pc
+                    s2 += W[o + 2, c] * pc
+                for c in range(o + 3, m):
+                    pc = P[c]
+                    s0 += W[o, c] * pc
+                    s1 += W[o + 1, c] * pc
+                    s2 += W[o + 2, c] * pc
+                if s0 >= 0.0:
+                    P[o] = 0.0
+                    P[o + 1] = 0.0
+                    P[o + 2] = 0.0
+                    continue
+                if has_inv[j]:
+                    iv = inv[j]
+                    x0 = -iv[0, 0] * s0 - iv[0, 1] * s1 - iv[0, 2] * s2
+                    x1 = -iv[1, 0] * s0 - iv[1, 1] * s1 - iv[1, 2] * s2
+                    x2 = -iv[2, 0] * s0 - iv[2, 1] * s1 - iv[2, 2] * s2
+                    if x0 > 0.0 and math.sqrt(x1 * x1 + x2 * x2) < mu[j] * x0 * (1.0 - 1e-9):
+                        P[o] = x0
+                        P[o + 1] = x1
+                        P[o + 2] = x2
+                        continue
+                alpha[0] = s0
+                alpha[1] = s1
+                alpha[2] = s2
+                Pj[0] = P[o]
+                Pj[1] = P[o + 1]
+                Pj[2] = P[o + 2]
+                if not slide3_newton(diag[j, :3, :3], alpha[:3], mu[j], Pj[:3]):
+                    st, _ = local_solve_ws(diag[j, :3, :3], alpha[:3], mu[j], 3, Pj[:3], ws)
+                    if st == FAILED:
+                        failures += 1
+                P[o] = Pj[0]
+                P[o + 1] = Pj[1]
+                P[o + 2] = Pj[2]
+                continue
+            for a in range(d):
+                s = q[o + a]
+                for c in range(m):
+                    if c < o or c >= o + d:
+                        s += W[o + a, c] * P[c]
+                alpha[a] = s
+            if not open_or_stick(alpha, mu[j], d, inv[j], has_inv[j], Pj):
+                for a in range(d):
+                    Pj[a] = P[o + a]
+                if not (d == 3 and slide3_newton(diag[j, :3, :3], alpha[:3], mu[j], Pj[:3])):
+                    st, _ = local_solve_ws(diag[j, :d, :d], alpha[:d], mu[j], d, Pj[:d], ws)
+                    if st == FAILED:
+                        failures += 1
+            for a in range(d):
+                P[o + a] = Pj[a]
+        for r in range(m):
+            s = q[r]
+            for c in range(m):
+                s += W[r, c] * P[c]
+            u[r] = s
+        err = fclib_error_rows(q, mu, offsets, sizes, nc, m, P, u, xbuf, prbuf)
+        if not math.isfinite(err):
+            return err, it, False, failures
+        if err <= tol:
+            return err, it, True, failures
+    return err, it, False, failures
 
 
 # --------------------------------------------------------------------------- drivers

@@ -205,7 +205,7 @@ def test_warm_started_slide_newton_agrees_with_the_general_solver(rng, cond):
     """The engine's sliding shortcut (Newton on the slip direction from a nearby impulse) gives
     the general solver's impulse when it answers, declines a sticking or open contact, and
     answers most sliding ones."""
-    from fixplan.engine.step import slide3_newton
+    from fixplan.engine.local import slide3_newton
 
     answered = slides = 0
     for trial in range(600):

@@ -12,10 +12,10 @@ from fixplan.engine import SOLVERS, get_solver, solve
 from fixplan.engine.local import law_violation
 from fixplan.engine.nsgs import (
     build_problem,
-    fclib_error,
     solve_nsgs,
     solve_nsgs_reference,
 )
+from fixplan.engine.residual import fclib_error
 from fixplan.engine.socp import solve_auto, solve_socp
 from fixplan.errors import InputError
 
