@@ -34,8 +34,8 @@ import numpy as np
 from run import Section
 
 import fixplan
+from fixplan.engine.simulator import Simulator
 from fixplan.pose import Pose, matrix_from_quaternion_wxyz, quaternion_wxyz_from_matrix
-from fixplan.simulator import Simulator
 
 try:
     import mujoco
@@ -697,7 +697,7 @@ def run(quick: bool) -> Section:
 
     L: list[str] = []
     L += [
-        "fixplan's Moreau–Jean/NSGS engine (`fixplan.simulator.Simulator`) against MuJoCo on the same scenes, same dt and",
+        "fixplan's Moreau–Jean/NSGS engine (`fixplan.engine.simulator.Simulator`) against MuJoCo on the same scenes, same dt and",
         "same initial states, in one process. Wall times are the best of "
         f"{reps} runs (2 cores shared with other work); steps/s = steps / best wall time.",
         f"fixplan runs use `Simulator.run(T, wrench, record_every={NEVER:.0e})` after a warm-up run "

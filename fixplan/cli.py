@@ -642,7 +642,7 @@ def simulate(
 
     A run longer than 10^7 steps (--duration / --dt) is refused unless --force.
     """
-    from fixplan.simulator import Simulator
+    from fixplan.engine.simulator import Simulator
 
     fixture = _load(file)
     if not limits.DURATION.contains(duration):

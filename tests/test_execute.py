@@ -232,8 +232,8 @@ def test_guidance_names_the_next_target_and_the_push():
 
 # -- the loop caps the push at the hand's limits ----------------------------------------------------
 def test_the_loop_caps_the_push_on_the_part_at_the_hands_limits():
+    from fixplan.engine.simulator import Simulator
     from fixplan.haptics import DeviceSpecs, HapticLoop, SimulatedDevice, VirtualCoupling
-    from fixplan.simulator import Simulator
 
     fx = _rect()
     sim = Simulator(fx)
@@ -257,9 +257,9 @@ def test_the_rig_transmits_the_push_as_one_wrench(name):
     former handle (2e-4 kg·m², 1 % of b in rotation) the moment led the force about fivefold after
     6 ms on a 33 cm tall box, which tipped off a base locator as every push began."""
     import fixplan
+    from fixplan.engine.simulator import Simulator
     from fixplan.jamming.search import hand_limits
     from fixplan.planner.verify import haptic_rig, pose_coordinates
-    from fixplan.simulator import Simulator
 
     fx = fixplan.load(fixplan.default_fixture_path())
     if name == "generated":  # a 14.7 kg box, 36 × 31 × 17 cm

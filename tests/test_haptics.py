@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 import fixplan
+from fixplan.engine.simulator import Simulator
 from fixplan.errors import InputError
 from fixplan.haptics import HapticLoop, SimulatedDevice, VirtualCoupling, check_passivity
-from fixplan.simulator import Simulator
 
 
 def test_passivity_condition_is_enforced():
@@ -59,7 +59,10 @@ def test_compiled_coupling_matches_the_python_formula(rng):
     x_d, v_d = rng.normal(size=6) * 0.01, rng.normal(size=6)
     x_w, v_w = loop.workpiece_coordinates()
     expected = coupling.wrench(x_d - x_w, v_d - v_w, 3)
-    got = _kernels.coupling3(sim._R, sim._p, sim._com_b, sim._v, sim._w, loop._R0, x_d, v_d, loop._K, loop._B)
+    b = sim.body_state
+    got = _kernels.coupling3(
+        b.R_world_body, b.p_world, sim.com_body, b.v_com_world, b.omega_world, loop._R0, x_d, v_d, loop._K, loop._B
+    )
     assert np.allclose(got, expected, atol=1e-12)
 
 

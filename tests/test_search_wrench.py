@@ -209,7 +209,7 @@ def test_the_engine_moves_the_sliding_part_as_the_slip_aware_push_asks():
     """One engine tick from the sliding state: with the slip-aware push the x-velocity holds
     (friction cancelled) and the part accelerates along +y; the push computed for a part at rest
     lets friction brake it along x at μ N / m."""
-    from fixplan.simulator import Simulator
+    from fixplan.engine.simulator import Simulator
 
     fx = fixplan.load(fixplan.default_fixture_path())
     m, mu = 2.0, 0.25
@@ -237,7 +237,7 @@ def test_braking_a_sliding_part_is_the_dynamics_with_friction_against_the_slip()
     braking operator makes is one friction would hold at rest). Along x: m a_x = F_x − μ N, so
     F_x = μ N − m s 0.5 with s ∈ [1, 1.5] (max_accel_factor): a forward push smaller than friction.
     One engine tick confirms the deceleration."""
-    from fixplan.simulator import Simulator
+    from fixplan.engine.simulator import Simulator
 
     fx = fixplan.load(fixplan.default_fixture_path())
     m, mu = 2.0, 0.25

@@ -1,4 +1,8 @@
-"""Contact engine: exact one-contact solvers, NSGS, SOCP, Newton and PROX solvers, FCLib I/O.
+"""Contact engine: the time-stepping simulator, exact one-contact solvers, NSGS, SOCP, Newton and PROX solvers, FCLib I/O.
+
+:class:`Simulator` (:mod:`.simulator`) integrates a fixture's workpiece with the compiled
+Moreau–Jean step of :mod:`.step`; the rest of this package solves one contact problem
+``u = W r + q`` at a time.
 
 Solvers share one signature, ``solver(problem, r0=None, tol=..., max_iter=...) ->
 ContactSolution``, and are looked up by name in :data:`SOLVERS` (imported lazily, so
@@ -61,6 +65,9 @@ _LAZY = {
     "solve_soft_finger": ("fixplan.engine.local", "solve_soft_finger"),
     "project_cone": ("fixplan.engine.local", "project_cone"),
     "law_violation": ("fixplan.engine.local", "law_violation"),
+    "Simulator": ("fixplan.engine.simulator", "Simulator"),
+    "WrenchSchedule": ("fixplan.engine.simulator", "WrenchSchedule"),
+    "BodyState": ("fixplan.engine.simulator", "BodyState"),
 }
 
 __all__ = sorted([*_LAZY, "SOLVERS", "get_solver", "solve"])

@@ -103,7 +103,7 @@ def _simulator_paths() -> None:
     import numpy as np
 
     import fixplan
-    from fixplan.simulator import Simulator, WrenchSchedule
+    from fixplan.engine.simulator import Simulator, WrenchSchedule
 
     for fx in (fixplan.load(fixplan.default_fixture_path()), fixplan.loads(RECT_2D)):
         n = 6 if fx.dimension == 3 else 3

@@ -591,7 +591,7 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
     ``wrenches[k]`` (force, moment about the body origin; world axes) acts from ``times[k]``
     to ``times[k + 1]`` (a constant wrench: one row); ``gravity_f`` = m g acts at the centre of
     mass. The wrench is evaluated at each step's start time ``t`` (accumulated ``t += h``, as
-    :meth:`fixplan.simulator.Simulator.step` does) and its moment re-expressed about the moving
+    :meth:`fixplan.engine.simulator.Simulator.step` does) and its moment re-expressed about the moving
     centre of mass, as :meth:`Simulator.step` does. The state and warm start (``R, p, v, w, P,
     active``) and the last step's ``gap, u, n_w`` are updated in place; returns the samples
     taken every ``record_every`` steps and at the last, preceded by the initial state when

@@ -24,12 +24,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fixplan.engine.simulator import ContactReport, Simulator
 from fixplan.errors import InputError
 from fixplan.haptics import _kernels
 from fixplan.haptics.coupling import VirtualCoupling
 from fixplan.haptics.device import SimulatedDevice
 from fixplan.pose import Pose, log_so3
-from fixplan.simulator import ContactReport, Simulator
 
 FloatArray = NDArray[np.float64]
 Operator = Callable[[float, SimulatedDevice], ArrayLike]
@@ -105,6 +105,7 @@ class HapticLoop:
         self.push_limits = push_limits
         self.saturated_ticks = 0
         self._R0 = sim.pose.R_world_body.copy()
+        self._com_b = sim.com_body
         d = sim.dimension
         n = 6 if d == 3 else 3
         self._K = np.concatenate([np.full(d, coupling.K_lin), np.full(n - d, coupling.K_rot)])
@@ -130,8 +131,8 @@ class HapticLoop:
         d = self.sim.dimension
         x_d, v_d = self.device.position(), self.device.velocity()
         if d == 3:
-            sim = self.sim
-            w_c = _kernels.coupling3(sim._R, sim._p, sim._com_b, sim._v, sim._w, self._R0, x_d, v_d, self._K, self._B)
+            R, p, v, w = self.sim.body_state
+            w_c = _kernels.coupling3(R, p, self._com_b, v, w, self._R0, x_d, v_d, self._K, self._B)
         else:
             x_w, v_w = self.workpiece_coordinates()
             w_c = self._K * (x_d - x_w) + self._B * (v_d - v_w)
@@ -165,9 +166,8 @@ class HapticLoop:
         scratch = copy.deepcopy(self.sim)
         x_d, v_d = self.device.position(), self.device.velocity()
         if scratch.dimension == 3:
-            _kernels.coupling3(
-                scratch._R, scratch._p, scratch._com_b, scratch._v, scratch._w, self._R0, x_d, v_d, self._K, self._B
-            )
+            R, p, v, w = scratch.body_state
+            _kernels.coupling3(R, p, self._com_b, v, w, self._R0, x_d, v_d, self._K, self._B)
         scratch.step(np.zeros(6 if scratch.dimension == 3 else 3))
 
     def run(

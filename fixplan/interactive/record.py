@@ -305,11 +305,11 @@ def verify_recording(
     settle_s: float = 0.2,
 ) -> Any:
     """Re-run a session's recorded pushes in the haptic loop; a :class:`~fixplan.planner.verify.Verification`."""
+    from fixplan.engine.simulator import Simulator
     from fixplan.jamming import classify
     from fixplan.jamming.search import hand_limits
     from fixplan.planner.execute import ExecutionSettings
     from fixplan.planner.verify import Verification, haptic_rig, loop_measures, pose_coordinates
-    from fixplan.simulator import Simulator
 
     transitions = _check_recording(data, fixture, source)
     sim = Simulator(fixture, tolerance=1e-6, max_iterations=40)

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.engine.simulator import Simulator
 from fixplan.errors import InputError, SolverError
 from fixplan.fixture import Fixture
 from fixplan.haptics import SimulatedDevice
@@ -41,7 +42,6 @@ from fixplan.haptics.coupling import check_passivity
 from fixplan.interactive import _kernels, protocol
 from fixplan.interactive.handles import Handle, UdpHandle
 from fixplan.pose import Pose, exp_so3, rot2
-from fixplan.simulator import Simulator
 
 FloatArray = NDArray[np.float64]
 

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.engine.simulator import Simulator
 from fixplan.errors import SolverError
 from fixplan.fixture import Fixture
 from fixplan.haptics import DeviceSpecs, HapticLoop, LoopRecord, SimulatedDevice, VirtualCoupling
@@ -43,7 +44,6 @@ from fixplan.planner.execute import (
 )
 from fixplan.planner.fine import twist_from_pose
 from fixplan.pose import Pose, log_so3
-from fixplan.simulator import Simulator
 
 FloatArray = NDArray[np.float64]
 

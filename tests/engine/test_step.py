@@ -7,9 +7,9 @@ import pytest
 
 import fixplan
 from fixplan.engine.reference import reference_step
+from fixplan.engine.simulator import Simulator
 from fixplan.errors import InputError
 from fixplan.pose import Pose
-from fixplan.simulator import Simulator
 
 
 @pytest.mark.parametrize(
@@ -82,8 +82,8 @@ def test_contact_report_before_any_step_has_the_exact_gaps():
     """`simulate --duration 0` printed every gap as 0 (the arrays before a step): a report is true
     from the start. The default box rests on B1-B3 (gap 0) with S1, S2, E1 open by their start gaps."""
     import fixplan
+    from fixplan.engine.simulator import Simulator
     from fixplan.locating import locator_contact
-    from fixplan.simulator import Simulator
 
     fx = fixplan.load(fixplan.default_fixture_path())
     sim = Simulator(fx)
@@ -111,7 +111,7 @@ def _twin_runs(fixture, pose, schedule, duration, com_b=None):
 def test_compiled_loop_equals_python_stepping_3d(com_b):
     """The compiled loop and Simulator.step from Python give one trajectory (to 1e-12): the box
     pushed into its six locators, then pulled away and pushed sideways (contacts open, slide, close)."""
-    from fixplan.simulator import WrenchSchedule
+    from fixplan.engine.simulator import WrenchSchedule
 
     f = fixplan.load(fixplan.default_fixture_path())
     push = -5.0 * np.ones(3) / math.sqrt(3.0)
@@ -132,7 +132,7 @@ def test_compiled_loop_equals_python_stepping_3d(com_b):
 
 def test_compiled_loop_equals_python_stepping_2d():
     """2D runs are compiled too, and agree with per-step stepping (polygon with an off-centre mass)."""
-    from fixplan.simulator import WrenchSchedule
+    from fixplan.engine.simulator import WrenchSchedule
 
     f = fixplan.load(fixplan.default_fixture_path().parents[2] / "problems" / "polygon-2d.toml")
     schedule = WrenchSchedule([0.0, 0.04], [[1.0, -2.0, 0.02], [-3.0, 0.5, -0.05]])
@@ -144,7 +144,7 @@ def test_compiled_loop_equals_python_stepping_2d():
 
 
 def test_wrench_schedule_is_checked():
-    from fixplan.simulator import WrenchSchedule
+    from fixplan.engine.simulator import WrenchSchedule
 
     with pytest.raises(InputError, match="increasing times"):
         WrenchSchedule([0.0, 0.0], np.zeros((2, 6)))
@@ -153,3 +153,21 @@ def test_wrench_schedule_is_checked():
     f = fixplan.load(fixplan.default_fixture_path())
     with pytest.raises(InputError, match="6 numbers per wrench"):
         Simulator(f).run(0.01, WrenchSchedule([0.0], np.zeros((1, 3))))
+
+
+def test_body_state_is_a_copy_of_the_state():
+    """``body_state`` reports the pose and twist, and writing into it leaves the simulator unchanged."""
+    f = fixplan.load(fixplan.default_fixture_path())
+    sim = Simulator(f)
+    twist = np.array([0.01, -0.02, 0.0, 0.1, 0.0, -0.2])
+    sim.set_state(f.start, twist)
+    b = sim.body_state
+    assert np.array_equal(b.R_world_body, sim.pose.R_world_body)
+    assert np.array_equal(b.p_world, sim.pose.p_world)
+    assert np.array_equal(np.concatenate([b.v_com_world, b.omega_world]), twist)
+    assert np.allclose(sim.com_world, b.p_world + b.R_world_body @ sim.com_body, atol=0)
+    b.R_world_body[:] = 0.0
+    b.p_world[:] = 0.0
+    b.v_com_world[:] = 0.0
+    assert np.array_equal(sim.pose.R_world_body, f.start.R_world_body)
+    assert np.array_equal(sim.twist, twist)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import fixplan
+from fixplan.engine.simulator import Simulator
 from fixplan.pose import log_so3
-from fixplan.simulator import Simulator
 
 BOX3 = """format = 1
 [scene]

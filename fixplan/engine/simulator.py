@@ -41,6 +41,19 @@ class State(NamedTuple):
     twist: FloatArray  # (v, ω) of the centre of mass, world axes
 
 
+class BodyState(NamedTuple):
+    """The body's state after the last step as plain copies: what a controller reads every tick.
+
+    Writable float64 copies (the simulator's own arrays stay private and are never handed out),
+    so a compiled controller sees the same array types as the engine's.
+    """
+
+    R_world_body: FloatArray  # (3, 3), or (2, 2) in 2D
+    p_world: FloatArray  # body origin, world [m]
+    v_com_world: FloatArray  # velocity of the centre of mass, world [m/s]
+    omega_world: FloatArray  # angular velocity, world [rad/s]: (3,), or (1,) in 2D
+
+
 @dataclass(frozen=True)
 class ContactReport:
     """One locator after the last step."""
@@ -313,6 +326,16 @@ class Simulator:
     def state(self) -> State:
         """``(pose, twist)``, also readable as ``.pose`` and ``.twist``."""
         return State(self.pose, self.twist)
+
+    @property
+    def body_state(self) -> BodyState:
+        """Rotation, origin, centre-of-mass velocity and angular velocity, as copies."""
+        return BodyState(self._R.copy(), self._p.copy(), self._v.copy(), np.atleast_1d(np.array(self._w, dtype=float)))
+
+    @property
+    def com_body(self) -> FloatArray:
+        """Centre of mass in body coordinates [m] (a copy)."""
+        return self._com_b.copy()
 
     @property
     def com_world(self) -> FloatArray:
