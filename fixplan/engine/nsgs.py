@@ -43,7 +43,6 @@ from fixplan.engine.local import (
     cone_solve_ws,
     coulomb_2d_ws,
     open_or_stick,
-    project_cone_into,
     slide3_newton,
 )
 from fixplan.engine.residual import fclib_error, fclib_error_rows
@@ -340,36 +339,13 @@ def _spmv(indptr, indices, data, x, q, out):
 
 @numba.njit(cache=True, error_model="numpy")
 def error_kernel(indptr, indices, data, q, mu, offsets, dims, r, u):
-    """FCLib residual of ``r`` (standard cones); fills ``u = W r + q``."""
+    """FCLib residual of ``r`` for CSR ``W`` (standard cones); fills ``u = W r + q``.
+
+    ``u`` by :func:`_spmv`, the residual by :func:`~fixplan.engine.residual.fclib_error_rows`
+    (the one compiled residual, shared with the time step's dense sweep).
+    """
     _spmv(indptr, indices, data, r, q, u)
-    nc = offsets.shape[0]
-    x = np.empty(4)
-    total = 0.0
-    for j in range(nc):
-        o = offsets[j]
-        d = dims[j]
-        ut = 0.0
-        for a in range(1, d):
-            ut += u[o + a] * u[o + a]
-        ut = math.sqrt(ut)
-        for a in range(d):
-            x[a] = r[o + a] - u[o + a]
-        x[0] -= mu[j] * ut
-        xv = x[:d]
-        project_cone_into(xv, mu[j], xv)
-        for a in range(d):
-            total += (r[o + a] - xv[a]) ** 2
-    nq = 0.0
-    nr = 0.0
-    nu = 0.0
-    for i in range(q.shape[0]):
-        nq += q[i] * q[i]
-        nr += r[i] * r[i]
-        nu += u[i] * u[i]
-    scale = math.sqrt(max(nq, max(nr, nu)))
-    if scale > 0.0:
-        return math.sqrt(total) / scale
-    return math.sqrt(total)
+    return fclib_error_rows(q, mu, offsets, dims, offsets.shape[0], q.shape[0], r, u, np.empty(4), np.empty(4))
 
 
 @numba.njit(cache=True, error_model="numpy")

@@ -4,9 +4,9 @@ import math
 
 import numpy as np
 import pytest
+from reference_step import reference_step
 
 import fixplan
-from fixplan.engine.reference import reference_step
 from fixplan.engine.simulator import Simulator
 from fixplan.errors import InputError
 from fixplan.pose import Pose

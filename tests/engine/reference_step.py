@@ -1,4 +1,4 @@
-"""Plain NumPy reference of the compiled step (:mod:`.step`), for tests.
+"""Plain NumPy reference of the compiled step (:mod:`fixplan.engine.step`): a test oracle.
 
 Written from the high-level pieces — the shape classes, :class:`fixplan.kinematics.Contact`
 Jacobians, NumPy linear algebra and a Python Gauss–Seidel loop — rather than from the kernels,
@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from fixplan.engine.local import project_cone, solve_cone, solve_coulomb_2d
+from fixplan.engine import residual
+from fixplan.engine.local import solve_cone, solve_coulomb_2d
+from fixplan.engine.nsgs import build_problem
 from fixplan.fixture import Fixture
 from fixplan.kinematics import Contact
 from fixplan.locating import locator_contact
@@ -19,16 +21,10 @@ from fixplan.pose import Pose, exp_so3, rot2
 
 
 def fclib_error(W, q, mu, offsets, sizes, P):
-    """The FCLib residual, written plainly."""
-    u = W @ P + q
-    total = 0.0
-    for o, d, m in zip(offsets, sizes, mu, strict=True):
-        ut = np.linalg.norm(u[o + 1 : o + d])
-        x = P[o : o + d] - u[o : o + d]
-        x[0] -= m * ut
-        total += float(np.sum((P[o : o + d] - project_cone(x, m)) ** 2))
-    scale = max(np.linalg.norm(q), np.linalg.norm(P), np.linalg.norm(u))
-    return np.sqrt(total) / scale if scale > 0 else np.sqrt(total)
+    """The FCLib residual of the dense problem (rows already scaled: a spin row is a standard cone row)."""
+    if len(sizes) == 0:
+        return 0.0
+    return residual.fclib_error(build_problem(W, q, mu, np.asarray(sizes), torsion_radius=1.0), P)
 
 
 def reference_step(fixture: Fixture, pose: Pose, twist: np.ndarray, P_warm: np.ndarray, warm_active: np.ndarray,
