@@ -27,7 +27,8 @@ _LAZY = {
     "InputError": ("fixplan.errors", "InputError"),
     "InfeasibleError": ("fixplan.errors", "InfeasibleError"),
     "SolverError": ("fixplan.errors", "SolverError"),
-    "Tolerances": ("fixplan.tolerances", "Tolerances"),
+    "Tolerances": ("fixplan.settings", "Tolerances"),
+    "Settings": ("fixplan.settings", "Settings"),
 }
 
 __all__ = sorted([*_LAZY, "__version__"])

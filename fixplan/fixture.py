@@ -26,7 +26,8 @@ from fixplan.errors import FixtureError, InfeasibleError, Issue
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
 from fixplan.pose import Pose
 from fixplan.schema import Reader, shorten
-from fixplan.tolerances import DEFAULT, Tolerances
+from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
+from fixplan.settings import Tolerances
 
 FloatArray = NDArray[np.float64]
 

@@ -8,7 +8,7 @@ ranges every command either gives finite results or says why not. The ranges are
 Why these numbers:
 
 * lengths: a workpiece from 0.1 mm to 100 m. The touch and penetration tolerances are 1 µm
-  (:mod:`fixplan.tolerances`), so a part must be much larger than that; 100 m is beyond any
+  (:mod:`fixplan.settings`), so a part must be much larger than that; 100 m is beyond any
   fixture and keeps a file written in millimetres (a "200 m box") from passing.
 * coordinates within 1 km of the origin: float64 then resolves 10⁻¹³ m, far below 1 µm.
 * mass 1 mg to 10 t, gravity within 100 m/s² (10 g) per axis, wrenches within 10⁶ N and

@@ -28,6 +28,7 @@ from fixplan.engine.detect import encode
 from fixplan.errors import InputError, SolverError
 from fixplan.fixture import Fixture
 from fixplan.pose import Pose, quaternion_wxyz_from_matrix, rot2
+from fixplan.settings import DEFAULT, EngineSettings
 
 FloatArray = NDArray[np.float64]
 _LOADED: set[int] = set()  # dimensions whose compiled loop this process has already called
@@ -228,8 +229,13 @@ class Simulator:
         NSGS stopping residual; default ``[simulation] tolerance``.
     restitution : float, optional
         Newton restitution coefficient; default ``[simulation] restitution``.
-    max_iterations : int
-        Cap on NSGS sweeps per step (the stop is the residual).
+    max_iterations : int, optional
+        Cap on NSGS sweeps per step (the stop is the residual); default ``settings.max_iterations``.
+    margin_m : float, optional
+        Contact detection margin [m]; default ``settings.margin_m``.
+    settings : EngineSettings
+        The engine's settings (:mod:`fixplan.settings`); the haptic loop passes the ``haptic``
+        profile's. Explicit ``tolerance``, ``max_iterations`` and ``margin_m`` override it.
     """
 
     def __init__(
@@ -239,9 +245,10 @@ class Simulator:
         tolerance: float | None = None,
         *,
         restitution: float | None = None,
-        max_iterations: int = 2000,
-        margin_m: float = 1e-4,
+        max_iterations: int | None = None,
+        margin_m: float | None = None,
         strict: bool = False,
+        settings: EngineSettings = DEFAULT.engine,
     ):
         if not fixture.locators:
             raise InputError(
@@ -250,14 +257,17 @@ class Simulator:
             )
         self.fixture = fixture
         self.dt = float(dt if dt is not None else fixture.simulation.timestep_s)
-        self.tolerance = float(tolerance if tolerance is not None else fixture.simulation.tolerance)
+        if tolerance is None:
+            tolerance = settings.tolerance if settings.tolerance is not None else fixture.simulation.tolerance
+        self.tolerance = float(tolerance)
         self.restitution = float(restitution if restitution is not None else fixture.simulation.restitution)
         if not (self.dt > 0 and math.isfinite(self.dt)):
             raise InputError(f"dt must be a positive number of seconds, got {dt}")
         if not (self.tolerance > 0):
             raise InputError(f"tolerance must be positive, got {tolerance}")
-        self.max_iterations = int(max_iterations)
-        self.margin_m = float(margin_m)
+        self.settings = settings
+        self.max_iterations = int(max_iterations if max_iterations is not None else settings.max_iterations)
+        self.margin_m = float(margin_m if margin_m is not None else settings.margin_m)
         self.strict = strict
         wp = fixture.workpiece
         self.dimension = fixture.dimension
@@ -449,8 +459,8 @@ class Simulator:
                 force = (Pn * n + self._P[i, 1] * t) / h
                 slip = abs(float(self._u[i, 1]))
                 spin = 0.0
-            slip_tol = 1e-7
-            mode = "sliding" if slip > slip_tol else ("rolling" if omega > 1e-6 else "sticking")
+            slip_tol, spin_tol = self.settings.slip_mps, self.settings.spin_radps
+            mode = "sliding" if slip > slip_tol else ("rolling" if omega > spin_tol else "sticking")
             reports.append(ContactReport(name, float(self._gap[i]), Pn / h, force, spin, mode))
         return reports
 

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fixplan.errors import InputError
+from fixplan.settings import HAPTIC, HapticRigSettings
 
 FloatArray = NDArray[np.float64]
 
@@ -31,13 +32,13 @@ class DeviceSpecs:
     max_damping_Ns_per_m: float
     workspace_radius_m: float
     physical_damping_Ns_per_m: float  # b: the handle's own viscous damping
-    physical_damping_rot_Nms_per_rad: float | None = None  # rotation; None: 1 % of b
+    physical_damping_rot_Nms_per_rad: float | None = None  # rotation; None: HAPTIC.haptic.rot_damping_fraction of b
 
     @property
     def rotational_damping_Nms_per_rad(self) -> float:
         """The handle's own rotational damping [N·m·s/rad] (1 % of ``b`` unless given)."""
         if self.physical_damping_rot_Nms_per_rad is None:
-            return 1e-2 * self.physical_damping_Ns_per_m
+            return HAPTIC.haptic.rot_damping_fraction * self.physical_damping_Ns_per_m
         return self.physical_damping_rot_Nms_per_rad
 
 
@@ -79,24 +80,27 @@ class SimulatedDevice(HapticDevice):
         self,
         ndof: int,
         *,
-        mass_kg: float = 0.2,
-        inertia_kgm2: float = 2e-4,
+        mass_kg: float | None = None,
+        inertia_kgm2: float | None = None,
         specs: DeviceSpecs | None = None,
         quantization_m: float = 0.0,
         x0: ArrayLike | None = None,
+        rig: HapticRigSettings = HAPTIC.haptic,
     ):
         if ndof not in (3, 6):
             raise InputError(f"a device has 3 (2D) or 6 (3D) coordinates, got {ndof}")
         self.ndof = ndof
         d = 2 if ndof == 3 else 3
+        mass_kg = rig.handle_mass_kg if mass_kg is None else mass_kg
+        inertia_kgm2 = rig.handle_inertia_kgm2 if inertia_kgm2 is None else inertia_kgm2
         self._M = np.concatenate([np.full(d, mass_kg), np.full(ndof - d, inertia_kgm2)])
         self._specs = specs or DeviceSpecs(
-            max_force_N=40.0,
-            max_torque_Nm=2.0,
-            max_stiffness_N_per_m=5000.0,
-            max_damping_Ns_per_m=50.0,
-            workspace_radius_m=0.5,
-            physical_damping_Ns_per_m=8.0,
+            max_force_N=rig.max_force_N,
+            max_torque_Nm=rig.max_torque_Nm,
+            max_stiffness_N_per_m=rig.max_stiffness_N_per_m,
+            max_damping_Ns_per_m=rig.max_damping_Ns_per_m,
+            workspace_radius_m=rig.workspace_radius_m,
+            physical_damping_Ns_per_m=rig.min_device_damping_Ns_per_m,
         )
         self.quantization_m = float(quantization_m)
         self._x = np.zeros(ndof) if x0 is None else np.array(x0, dtype=float)

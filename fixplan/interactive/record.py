@@ -40,6 +40,7 @@ from fixplan.errors import InputError, SolverError
 from fixplan.fixture import Fixture
 from fixplan.haptics import SimulatedDevice
 from fixplan.interactive.session import SessionResult
+from fixplan.settings import HAPTIC
 
 FloatArray = NDArray[np.float64]
 
@@ -301,7 +302,7 @@ def verify_recording(
     *,
     source: str = "plan",
     time_limit_s: float | None = None,
-    max_penetration_m: float = 1e-5,
+    max_penetration_m: float = HAPTIC.verification.max_penetration_m,
     settle_s: float = 0.2,
 ) -> Any:
     """Re-run a session's recorded pushes in the haptic loop; a :class:`~fixplan.planner.verify.Verification`."""
@@ -312,10 +313,10 @@ def verify_recording(
     from fixplan.planner.verify import Verification, haptic_rig, loop_measures, pose_coordinates
 
     transitions = _check_recording(data, fixture, source)
-    sim = Simulator(fixture, tolerance=1e-6, max_iterations=40)
+    sim = Simulator(fixture, settings=HAPTIC.engine)
     R0 = fixture.start.R_world_body.copy()
     F_max, T_max, _ = hand_limits(fixture)
-    rig = haptic_rig(fixture, sim, pose_coordinates(fixture.start, R0), F_max, T_max)
+    rig = haptic_rig(fixture, sim, pose_coordinates(fixture.start, R0), F_max, T_max, HAPTIC.haptic)
     settings = ExecutionSettings()
     wp = fixture.workpiece
     weight = wp.mass_kg * (float(np.linalg.norm(fixture.gravity)) or 9.81)

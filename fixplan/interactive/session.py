@@ -42,6 +42,7 @@ from fixplan.haptics.coupling import check_passivity
 from fixplan.interactive import _kernels, protocol
 from fixplan.interactive.handles import Handle, UdpHandle
 from fixplan.pose import Pose, exp_so3, rot2
+from fixplan.settings import HAPTIC, Settings
 
 FloatArray = NDArray[np.float64]
 
@@ -363,7 +364,8 @@ class HapticSession:
         trace_every: int = 10,
         clock: str = "wall",
         settle_s: float = 0.2,
-        max_sweeps: int = 40,
+        max_sweeps: int | None = None,
+        profile: Settings = HAPTIC,
     ):
         from fixplan.jamming.search import hand_limits
         from fixplan.locating import contact_set, require_full
@@ -386,14 +388,14 @@ class HapticSession:
         self.fixture = fixture
         self.handle = handle
         self.names = tuple(loc.name for loc in fixture.locators)
-        self.sim = Simulator(fixture, tolerance=1e-6, max_iterations=max_sweeps)
+        self.sim = Simulator(fixture, max_iterations=max_sweeps, settings=profile.engine)
         self.period_s = self.sim.dt
         self.dimension = fixture.dimension
         self.ndof = fixture.ndof
         self.R0 = fixture.start.R_world_body.copy()
         self.x0 = pose_coordinates(fixture.start, self.R0)
         self.F_max, self.T_max, _ = hand_limits(fixture)
-        self.rig = haptic_rig(fixture, self.sim, self.x0, self.F_max, self.T_max)
+        self.rig = haptic_rig(fixture, self.sim, self.x0, self.F_max, self.T_max, profile.haptic)
         c = self.rig.loop.coupling
         d = self.dimension
         self.K = self.rig.K.copy()

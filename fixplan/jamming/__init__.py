@@ -19,7 +19,7 @@ from fixplan.jamming.classify import MODES, Classification, Classifier, wrench_a
 from fixplan.jamming.search import WrenchSearch, search_wrench
 from fixplan.jamming.wedge import can_wedge, wedge_force
 from fixplan.locating import contact_set
-from fixplan.tolerances import Tolerances
+from fixplan.settings import Tolerances
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture

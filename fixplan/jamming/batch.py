@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from fixplan.jamming.classify import Classifier
 from fixplan.kinematics import ContactSet
-from fixplan.tolerances import Tolerances
+from fixplan.settings import Tolerances
 
 FloatArray = NDArray[np.float64]
 PARALLEL_MIN = 400  # wrenches below which one process is faster

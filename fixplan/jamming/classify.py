@@ -41,7 +41,8 @@ from fixplan.jamming.programs import ProgramBuilder
 from fixplan.jamming.sliding import WitnessSearch
 from fixplan.kinematics import ContactSet
 from fixplan.nnls import nnls
-from fixplan.tolerances import DEFAULT, Tolerances
+from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
+from fixplan.settings import Tolerances
 
 FloatArray = NDArray[np.float64]
 

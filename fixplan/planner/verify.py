@@ -44,6 +44,7 @@ from fixplan.planner.execute import (
 )
 from fixplan.planner.fine import twist_from_pose
 from fixplan.pose import Pose, log_so3
+from fixplan.settings import HAPTIC, HapticRigSettings, Settings
 
 FloatArray = NDArray[np.float64]
 
@@ -184,8 +185,18 @@ class HapticRig:
         )
 
 
-def haptic_rig(fixture: Fixture, sim: Simulator, x0: FloatArray, F_max: float, T_max: float) -> HapticRig:
-    """Device, coupling and operator gains scaled to the part (see the comments for each choice)."""
+def haptic_rig(
+    fixture: Fixture,
+    sim: Simulator,
+    x0: FloatArray,
+    F_max: float,
+    T_max: float,
+    rig: HapticRigSettings = HAPTIC.haptic,
+) -> HapticRig:
+    """Device, coupling and operator gains scaled to the part (see the comments for each choice).
+
+    The numbers are ``rig``'s (:class:`fixplan.settings.HapticRigSettings`, the ``haptic`` profile's).
+    """
     ndof = fixture.ndof
     # The coupling is scaled to the part: 1000 N/m per kg and 4800 N·m/rad per kg·m² of its
     # largest principal inertia (2000 N/m and 40 N·m/rad for the 2 kg default box), so the
@@ -203,21 +214,21 @@ def haptic_rig(fixture: Fixture, sim: Simulator, x0: FloatArray, F_max: float, T
     # before the push itself and tipped off a base locator as every push began.
     wp = fixture.workpiece
     I_max = float(np.max(np.linalg.eigvalsh(np.atleast_2d(wp.inertia_body))))
-    K_lin, K_rot = 1000.0 * wp.mass_kg, 4800.0 * I_max
+    K_lin, K_rot = rig.stiffness_per_kg * wp.mass_kg, rig.rot_stiffness_per_kgm2 * I_max
     ratio = K_rot / K_lin  # [m²]: rotation's share of each translational quantity
-    B_lin = 1e-3 * K_lin
+    B_lin = rig.damping_time_s * K_lin
     B_rot = B_lin * ratio
-    b = max(8.0, 1.5 * (K_lin * sim.dt / 2 + B_lin))
+    b = max(rig.min_device_damping_Ns_per_m, rig.passivity_safety * (K_lin * sim.dt / 2 + B_lin))
     b_rot = b * ratio  # passive too: b_rot ≥ 1.5 (K_rot T/2 + B_rot)
-    m_dev = 0.2
+    m_dev = rig.handle_mass_kg
     i_dev = m_dev * ratio
     # the device can display a little more than the hand may push (the coupling's transients)
     specs = DeviceSpecs(
-        max_force_N=1.5 * F_max,
-        max_torque_Nm=1.5 * T_max,
-        max_stiffness_N_per_m=max(5000.0, 2.0 * K_lin),
-        max_damping_Ns_per_m=max(50.0, 2.0 * B_lin),
-        workspace_radius_m=0.5,
+        max_force_N=rig.display_headroom * F_max,
+        max_torque_Nm=rig.display_headroom * T_max,
+        max_stiffness_N_per_m=max(rig.max_stiffness_N_per_m, rig.stiffness_headroom * K_lin),
+        max_damping_Ns_per_m=max(rig.max_damping_Ns_per_m, rig.stiffness_headroom * B_lin),
+        workspace_radius_m=rig.workspace_radius_m,
         physical_damping_Ns_per_m=b,
         physical_damping_rot_Nms_per_rad=b_rot,
     )
@@ -231,9 +242,9 @@ def haptic_rig(fixture: Fixture, sim: Simulator, x0: FloatArray, F_max: float, T
     # bandwidth), damping ratio 0.9, gains scaled by the handle's mass and inertia. At 45 rad/s the
     # lag of the transmitted push let 4 of 12 generated 3-2-1 boxes tip off a base locator when
     # the push changed (10 of 12 verified at 120).
-    w_op = 120.0
+    w_op, zeta = rig.operator_omega_radps, rig.operator_damping_ratio
     kp = np.concatenate([np.full(d, m_dev * w_op**2), np.full(ndof - d, i_dev * w_op**2)])
-    kd = np.concatenate([np.full(d, 2 * 0.9 * w_op * m_dev), np.full(ndof - d, 2 * 0.9 * w_op * i_dev)])
+    kd = np.concatenate([np.full(d, 2 * zeta * w_op * m_dev), np.full(ndof - d, 2 * zeta * w_op * i_dev)])
     damping = np.concatenate([np.full(d, b), np.full(ndof - d, b_rot)])
     return HapticRig(loop, K, kp, kd, damping)
 
@@ -247,24 +258,34 @@ def verify(
     noise: ExecutionNoise | None = None,
     replan: Replan | None = None,
     time_limit_s: float | None = None,
-    final_gap_m: float = 1e-4,
-    max_penetration_m: float = 1e-5,
-    limit_slack: float = 0.05,
-    trace_every_s: float = 0.01,
-    max_sweeps: int = 40,
+    final_gap_m: float | None = None,
+    max_penetration_m: float | None = None,
+    limit_slack: float | None = None,
+    trace_every_s: float | None = None,
+    max_sweeps: int | None = None,
+    profile: Settings = HAPTIC,
 ) -> Verification:
-    """Execute the plan (``steps`` from ``start_state``) in the haptic loop and check the outcome."""
+    """Execute the plan (``steps`` from ``start_state``) in the haptic loop and check the outcome.
+
+    ``profile`` (default: the ``haptic`` profile, :mod:`fixplan.settings`) gives the engine, the
+    rig and the thresholds; ``final_gap_m``, ``max_penetration_m``, ``limit_slack``,
+    ``trace_every_s`` and ``max_sweeps`` override single ones.
+    """
+    vs = profile.verification
+    final_gap_m = vs.final_gap_m if final_gap_m is None else final_gap_m
+    max_penetration_m = vs.max_penetration_m if max_penetration_m is None else max_penetration_m
+    limit_slack = vs.limit_slack if limit_slack is None else limit_slack
+    trace_every_s = vs.trace_every_s if trace_every_s is None else trace_every_s
     # a real-time loop bounds its work: a haptic-grade residual and at most ``max_sweeps`` NSGS
-    # sweeps per tick (≈ 7 µs a sweep with five or six sliding contacts: 40 sweeps stay within
-    # 0.3 ms of the 1 ms period). Steps that stop at the cap are counted, and the worst residual
-    # reached is reported.
-    sim = Simulator(fixture, tolerance=1e-6, max_iterations=max_sweeps)
+    # sweeps per tick (the profile's engine). Steps that stop at the cap are counted, and the
+    # worst residual reached is reported.
+    sim = Simulator(fixture, max_iterations=max_sweeps, settings=profile.engine)
     R0 = fixture.start.R_world_body.copy()
     ndof = 6 if fixture.dimension == 3 else 3
     x0 = pose_coordinates(fixture.start, R0)
     executor = Executor(fixture, start_state, steps, settings, replan=replan, noise=noise, tick_s=sim.dt)
     F_max, T_max = executor.F_max, executor.T_max
-    rig = haptic_rig(fixture, sim, x0, F_max, T_max)
+    rig = haptic_rig(fixture, sim, x0, F_max, T_max, profile.haptic)
     loop = rig.loop
     d = fixture.dimension
     threshold = executor.threshold_N
@@ -277,7 +298,7 @@ def verify(
     if time_limit_s is None:
         # generous: every transition at the slowest speed the executor keeps, plus settling
         nominal = sum(_path_length(fixture, st) for st in steps) / executor.settings.speed_mps
-        time_limit_s = min(3.0 * nominal + 2.0 + 0.5 * len(steps), 60.0)
+        time_limit_s = min(vs.time_factor * nominal + vs.time_base_s + vs.time_per_step_s * len(steps), vs.time_max_s)
     trace_every = max(int(round(trace_every_s / sim.dt)), 1) if trace_every_s > 0 else 0
     try:
         rec = loop.run(time_limit_s, operator, trace_every=trace_every, until=lambda: executor.done)
@@ -329,7 +350,7 @@ def verify(
         reasons.append(f"penetration reached {pen:.3g} m (expected ≤ {max_penetration_m:g} m)")
     # the push on the part, averaged over 10 ms, against the manipulator's limits
     W = np.array(rec.coupling_wrench) if rec.coupling_wrench else np.zeros((1, ndof))
-    win = max(int(round(0.01 / sim.dt)), 1)
+    win = max(int(round(vs.limit_window_s / sim.dt)), 1)
     if W.shape[0] >= win:
         kernel = np.ones(win) / win
         Wf = np.array([np.convolve(W[:, j], kernel, mode="valid") for j in range(ndof)]).T
@@ -341,7 +362,7 @@ def verify(
         checks.append("limits")
         reasons.append(
             f"the push on the part exceeded the manipulator's limits: ‖F‖ up to {push_F:.3g} N (max_force {F_max:.3g} N), "
-            f"‖T‖ up to {push_T:.3g} N·m (max_torque {T_max:.3g} N·m), averaged over 10 ms"
+            f"‖T‖ up to {push_T:.3g} N·m (max_torque {T_max:.3g} N·m), averaged over {vs.limit_window_s * 1e3:g} ms"
         )
     return Verification(
         passed=not reasons,

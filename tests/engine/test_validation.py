@@ -8,6 +8,7 @@ import pytest
 import fixplan
 from fixplan.engine.simulator import Simulator
 from fixplan.pose import log_so3
+from fixplan.settings import STRICT
 
 BOX3 = """format = 1
 [scene]
@@ -137,7 +138,7 @@ friction = 0.1
 def test_located_box_pushed_into_six_locators():
     """Pushed into its six locators with 50 N: penetration ≤ 1e-6 m, contact forces balance push + gravity."""
     f = fixplan.load(fixplan.default_fixture_path())
-    sim = Simulator(f, tolerance=1e-10)
+    sim = Simulator(f, settings=STRICT.engine)  # NSGS residual 1e-10
     sim.set_state(f.goal)
     push = -50.0 * np.ones(3) / math.sqrt(3.0)
     sim.run(0.5, np.concatenate([push, np.zeros(3)]))

@@ -1,0 +1,81 @@
+"""Settings in one place: the profiles the code selects, and no stray thresholds elsewhere."""
+
+import numpy as np
+import pytest
+
+import fixplan
+from fixplan import settings
+from fixplan.engine.simulator import Simulator
+from fixplan.errors import InputError
+from fixplan.jamming import classify
+from fixplan.planner.verify import haptic_rig, pose_coordinates
+
+
+def test_unknown_profile_lists_the_known_ones():
+    assert settings.profile("haptic") is settings.HAPTIC
+    with pytest.raises(InputError, match="unknown settings profile 'fast'.*default, haptic, strict"):
+        settings.profile("fast")
+
+
+def test_tolerances_module_is_an_alias():
+    from fixplan import tolerances
+
+    assert tolerances.DEFAULT is settings.DEFAULT.tolerances
+    assert tolerances.Tolerances is settings.Tolerances
+    assert tolerances.PROFILES["strict"] == settings.STRICT.tolerances
+    assert fixplan.load(fixplan.default_fixture_path()).tolerances == settings.DEFAULT.tolerances
+
+
+def test_engine_settings_reach_the_simulator():
+    """The haptic profile's engine is the loop's: a 1e-6 residual and 40 sweeps; explicit arguments win."""
+    f = fixplan.load(fixplan.default_fixture_path())
+    plain = Simulator(f)
+    assert plain.tolerance == f.simulation.tolerance and plain.max_iterations == settings.DEFAULT.engine.max_iterations
+    sim = Simulator(f, settings=settings.HAPTIC.engine)
+    assert (sim.tolerance, sim.max_iterations) == (1e-6, 40)
+    assert Simulator(f, max_iterations=7, settings=settings.HAPTIC.engine).max_iterations == 7
+
+
+def test_haptic_rig_follows_its_settings():
+    """K = k·m, b = max(b_min, s (K T/2 + B)) (passive with safety s), operator PD m ω², 2 ζ ω m."""
+    f = fixplan.load(fixplan.default_fixture_path())
+    sim = Simulator(f, settings=settings.HAPTIC.engine)
+    x0 = pose_coordinates(f.start, f.start.R_world_body)
+    for rig_settings in (
+        settings.HAPTIC.haptic,
+        settings.HapticRigSettings(stiffness_per_kg=400.0, passivity_safety=3.0),
+    ):
+        rig = haptic_rig(f, sim, x0, 20.0, 2.0, rig_settings)
+        c = rig.loop.coupling
+        m = f.workpiece.mass_kg
+        K = rig_settings.stiffness_per_kg * m
+        B = rig_settings.damping_time_s * K
+        assert c.K_lin == pytest.approx(K) and c.B_lin == pytest.approx(B)
+        b = max(rig_settings.min_device_damping_Ns_per_m, rig_settings.passivity_safety * (K * sim.dt / 2 + B))
+        assert c.device_damping == pytest.approx(b)
+        assert c.margins[0] == pytest.approx(b - (K * sim.dt / 2 + B))  # Colgate–Schenkel margin
+        w, z, m_dev = (
+            rig_settings.operator_omega_radps,
+            rig_settings.operator_damping_ratio,
+            rig_settings.handle_mass_kg,
+        )
+        assert rig.kp[0] == pytest.approx(m_dev * w**2) and rig.kd[0] == pytest.approx(2 * z * w * m_dev)
+        assert rig.loop.device.specs.max_force_N == pytest.approx(rig_settings.display_headroom * 20.0)
+
+
+def test_strict_profile_tightens_the_closed_form_check():
+    """Box on three supports, μ = 0.3: a push F < μ m g jams with zero residual; F > μ m g slides at (F − μ m g)/m.
+
+    Under the strict profile the cone programs meet the closed form to 1e-8 of the push."""
+    from tests.test_jamming import box_on_supports
+
+    f = box_on_supports(mu=0.3, mass=2.0)
+    strict = settings.STRICT.tolerances
+    limit = 0.3 * 2.0 * 9.81
+    r = classify(f, [0.9 * limit, 0, 0, 0, 0, 0], tolerances=strict)[0]
+    assert r.mode == "jammed" and r.margin <= strict.balance_rel * limit
+    F = 2 * limit
+    r = classify(f, [F, 0, 0, 0, 0, 0], tolerances=strict)[0]
+    assert r.mode == "slides"
+    assert r.acceleration[0] == pytest.approx((F - limit) / 2.0, rel=1e-9)
+    assert np.allclose(r.acceleration[1:], 0, atol=1e-10)
