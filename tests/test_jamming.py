@@ -276,3 +276,35 @@ def test_witness_jacobian_matches_finite_differences(roles, soft, rng):
         dz[k] = eps
         fd[:, k] = (rows.system(w, z + dz, roles)[0] - rows.system(w, z - dz, roles)[0]) / (2 * eps)
     assert np.allclose(Jac, fd, atol=1e-7 * max(1.0, np.abs(Jac).max()))
+
+
+def test_the_direct_csc_build_is_scipys_matrix_to_the_bit() -> None:
+    """``csc_from_dense`` hands Clarabel exactly the arrays ``scipy.sparse.csc_matrix`` would."""
+    import scipy.sparse as sp
+
+    from fixplan.jamming.backends import csc_from_dense
+
+    rng = np.random.default_rng(0)
+    for trial in range(300):
+        A = rng.normal(size=(int(rng.integers(1, 20)), int(rng.integers(1, 12))))
+        A[rng.random(A.shape) < 0.4] = 0.0
+        if trial % 25 == 0:
+            A[:] = 0.0
+        ours, theirs = csc_from_dense(A), sp.csc_matrix(A)
+        assert ours.shape == theirs.shape
+        for name in ("indptr", "indices", "data"):
+            a, b = getattr(ours, name), getattr(theirs, name)
+            assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
+def test_polygon_edges_are_computed_once_and_cannot_be_changed() -> None:
+    """The cached edge arrays equal a fresh computation and are read-only (shared by every call)."""
+    from fixplan.geometry.shapes import Polygon
+
+    poly = Polygon(((0.0, 0.0), (0.2, 0.0), (0.25, 0.1), (0.0, 0.12)))
+    V, E, N = poly._edges()
+    assert poly._edges()[0] is V
+    assert np.array_equal(E, np.roll(poly.array, -1, axis=0) - poly.array)
+    assert np.allclose(np.linalg.norm(N, axis=1), 1.0) and np.allclose(np.einsum("ij,ij->i", E, N), 0.0)
+    with pytest.raises(ValueError):
+        N[0, 0] = 1.0

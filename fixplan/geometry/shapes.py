@@ -12,6 +12,7 @@ On the surface itself the outward normal is taken from the face the point lies o
 
 from __future__ import annotations
 
+import functools
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
@@ -240,10 +241,21 @@ class Polygon(Shape):
         return np.asarray(self.vertices, dtype=float)
 
     def _edges(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        return self._edge_arrays
+
+    @functools.cached_property
+    def _edge_arrays(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Vertices, edge vectors and outward unit normals, computed once (read-only arrays).
+
+        ``project`` runs for every locator at every pose the planner and its executor look at;
+        rebuilding these per call was a third of it.
+        """
         V = self.array
         E = np.roll(V, -1, axis=0) - V
         lengths = np.linalg.norm(E, axis=1)
         normals = np.stack([E[:, 1], -E[:, 0]], axis=1) / lengths[:, None]  # outward for CCW
+        for a in (V, E, normals):
+            a.setflags(write=False)
         return V, E, normals
 
     def project(self, p_body: FloatArray) -> Projection:

@@ -14,6 +14,7 @@ Backends' statuses and exceptions never leak: a failed solve is reported in
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass
 
@@ -70,6 +71,26 @@ def clarabel_settings(eps: float):
     return s
 
 
+@functools.lru_cache(maxsize=64)
+def _zero_csc(n: int) -> sp.csc_matrix:
+    """The ``n × n`` zero matrix (the programs are linear: ``P = 0``); shared, never modified."""
+    return sp.csc_matrix((n, n))
+
+
+def csc_from_dense(A: FloatArray) -> sp.csc_matrix:
+    """``scipy.sparse.csc_matrix(A)`` for a dense ``A``, built directly (the same arrays, ~3× faster).
+
+    The search builds two or three tiny programs per call, hundreds of calls per plan; scipy's
+    conversion through COO was the largest share of their setup.
+    """
+    At = A.T
+    nonzero = At != 0.0
+    indptr = np.zeros(A.shape[1] + 1, dtype=np.int32)
+    np.cumsum(nonzero.sum(axis=1), out=indptr[1:])
+    indices = np.nonzero(nonzero)[1].astype(np.int32)
+    return sp.csc_matrix((At[nonzero], indices, indptr), shape=A.shape)
+
+
 class ClarabelProgram:
     """One program handed to Clarabel once; :meth:`solve` takes a new ``b`` each time."""
 
@@ -78,8 +99,8 @@ class ClarabelProgram:
 
         self.program = program
         n = program.A.shape[1]
-        self._P = sp.csc_matrix((n, n))
-        self._A = sp.csc_matrix(program.A)
+        self._P = _zero_csc(n)
+        self._A = csc_from_dense(np.asarray(program.A, dtype=np.float64))
         self._cones = _clarabel_cones(program)
         self._settings = clarabel_settings(eps)
         self._solver = clarabel.DefaultSolver(
