@@ -66,7 +66,9 @@ def run(quick: bool) -> Section:
                         (r.residuals.get("balance", r.residuals.get("normal_balance", 0.0)) for r in balanced),
                         default=0.0,
                     ),
-                    "max_cone_violation": max((r.residuals.get("cone_violation", 0.0) for r in res), default=0.0),
+                    "max_cone_violation": max(
+                        (v for r in res if (v := r.residuals.get("cone_violation")) is not None), default=float("nan")
+                    ),
                     "modes": " ".join(f"{k}:{v}" for k, v in sorted(Counter(r.mode for r in res).items())),
                 }
             )

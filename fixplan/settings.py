@@ -65,6 +65,9 @@ class Tolerances:
     slip_rel : float
         A contact's tangential acceleration counts as slipping above this fraction of the body
         acceleration.
+    wedge_force : float
+        Contacts wedge when they can hold self-equilibrated forces whose normal components sum to
+        more than this, out of 1 (:func:`fixplan.jamming.can_wedge`).
     """
 
     touch_m: float = 1e-6
@@ -73,6 +76,7 @@ class Tolerances:
     balance_rel: float = 1e-6
     cone_eps: float = 1e-9
     slip_rel: float = 1e-6
+    wedge_force: float = 1e-7
 
     def with_(self, **changes: float) -> Tolerances:
         """A copy with some fields changed."""

@@ -77,7 +77,7 @@ class StepInfo:
     error: float  # FCLib residual reached
     iterations: int
     converged: bool
-    failed_local_solves: int
+    failed_local_solves: int | None  # None after a compiled run(): its loop does not count them
     penetration_m: float  # deepest penetration after the step (0: none)
     names: tuple[str, ...]
     active_mask: NDArray[np.bool_]
@@ -571,7 +571,7 @@ class Simulator:
         traj.steps = n_steps
         if n_steps > 0:
             self.last = StepInfo(
-                float(last_err), int(last_it), status == kernels.STATUS_OK, 0, float(self.max_penetration_m),
+                float(last_err), int(last_it), status == kernels.STATUS_OK, None, float(self.max_penetration_m),
                 self._names_t, self._active.copy(),
             )  # fmt: skip
         return traj

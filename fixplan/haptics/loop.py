@@ -57,12 +57,14 @@ class LoopRecord:
         return int(sum(c > self.period_s for c in self.compute_s))
 
     @property
-    def mean_compute_s(self) -> float:
-        return float(np.mean(self.compute_s)) if self.compute_s else 0.0
+    def mean_compute_s(self) -> float | None:
+        """Mean compute time of a tick [s]; None when no tick ran."""
+        return float(np.mean(self.compute_s)) if self.compute_s else None
 
     @property
-    def max_compute_s(self) -> float:
-        return float(np.max(self.compute_s)) if self.compute_s else 0.0
+    def max_compute_s(self) -> float | None:
+        """Longest compute time of a tick [s]; None when no tick ran."""
+        return float(np.max(self.compute_s)) if self.compute_s else None
 
 
 class HapticLoop:

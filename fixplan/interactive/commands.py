@@ -136,7 +136,7 @@ def run_haptic(
         s = result.stats
         _echo(f"status: {result.status} — {result.reason}")
         _echo(
-            f"loop: {s.ticks} ticks, tick mean {s.tick_mean_us:.0f} µs, p99 {s.tick_p99_us:.0f} µs, "
+            f"loop: {s.ticks} ticks, tick mean {_us(s.tick_mean_us)} µs, p99 {_us(s.tick_p99_us)} µs, "
             f"{s.deadline_misses} deadline misses ({session.scheduling}); guidance "
             f"{session.guidance_rates()['guidance_hz']:.0f} Hz, verdict {session.guidance_rates()['verdict_hz']:.0f} Hz"
             + (
@@ -224,3 +224,8 @@ def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
         )
         print(f"observed states: {seq}; max penetration {v.max_penetration_m:.2e} m")
     return 0 if v.passed else 1
+
+
+def _us(value: float | None) -> str:
+    """A tick time [µs] in words: ``n/a`` when unknown (no tick ran)."""
+    return "n/a" if value is None else f"{value:.0f}"

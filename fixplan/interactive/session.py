@@ -72,11 +72,11 @@ class LoopStats:
     """Timing of the haptic loop so far."""
 
     ticks: int
-    tick_mean_us: float
-    tick_p99_us: float
-    tick_max_us: float
+    tick_mean_us: float | None  # None: no tick yet
+    tick_p99_us: float | None
+    tick_max_us: float | None
     deadline_misses: int  # ticks that ended after their deadline (real time) or computed longer than a period
-    late_p99_us: float  # how late ticks started, 99th percentile (real time)
+    late_p99_us: float | None  # how late ticks started, 99th percentile (real time; None: not measured)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -803,19 +803,19 @@ class HapticSession:
         """Tick timing so far: mean and misses over every tick, p99 over the last 2000 (cached for 0.25 s)."""
         n = len(self._compute)
         if not n:
-            return LoopStats(0, 0.0, 0.0, 0.0, 0, 0.0)
+            return LoopStats(0, None, None, None, 0, None)
         cached = self._stats_cache
         if cached is not None and n - cached.ticks < 250 and self.status is None:
             return cached
         recent = np.asarray(self._compute[-2000:]) * 1e6
-        late = np.asarray(self._late[-2000:]) * 1e6 if self._late else np.zeros(1)
+        late = np.asarray(self._late[-2000:]) * 1e6 if self._late else None  # stepped without a wall clock
         out = LoopStats(
             ticks=n,
             tick_mean_us=float(self._compute_sum / n * 1e6),
             tick_p99_us=float(np.percentile(recent, 99)),
             tick_max_us=float(self._compute_max * 1e6),
             deadline_misses=self._misses,
-            late_p99_us=float(np.percentile(late, 99)),
+            late_p99_us=float(np.percentile(late, 99)) if late is not None else None,
         )
         self._stats_cache = out
         return out
@@ -836,11 +836,11 @@ class HapticSession:
         """Like :meth:`stats`, p99 over every tick."""
         n = len(self._compute)
         if not n:
-            return LoopStats(0, 0.0, 0.0, 0.0, 0, 0.0)
+            return LoopStats(0, None, None, None, 0, None)
         a = np.asarray(self._compute) * 1e6
-        late = np.asarray(self._late) * 1e6 if self._late else np.zeros(1)
+        late = np.asarray(self._late) * 1e6 if self._late else None  # stepped without a wall clock: not measured
         return LoopStats(n, float(a.mean()), float(np.percentile(a, 99)), float(a.max()), self._misses,
-                         float(np.percentile(late, 99)))  # fmt: skip
+                         float(np.percentile(late, 99)) if late is not None else None)  # fmt: skip
 
     def _end(self, why: str | None, status: str = "diverged") -> None:
         if self.status is not None:

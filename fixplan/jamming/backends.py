@@ -39,7 +39,7 @@ class ConeSolution:
     status: str
     iterations: int
     solve_time_s: float
-    cone_violation: float
+    cone_violation: float | None  # largest violation of the program's cones at x; None: no answer to measure
 
 
 def _clarabel_cones(program: ConeProgram) -> list:
@@ -125,9 +125,11 @@ class ClarabelProgram:
         status = str(sol.status)
         solved = status in ("Solved", "AlmostSolved")
         x = np.asarray(sol.x, dtype=float)
+        prog = self.program
+        violation: float | None = None
         if not np.all(np.isfinite(x)):
             x = np.zeros_like(self.program.c)
             solved = False
-        prog = self.program
-        violation = cone_violation_of(b - prog.A @ x, prog.cones)
+        else:
+            violation = cone_violation_of(b - prog.A @ x, prog.cones)
         return ConeSolution(x, float(prog.c @ x), solved, status, int(sol.iterations), elapsed, violation)

@@ -63,4 +63,29 @@ def least_residual(
     )
     value = float(t.value) if t.value is not None else float("inf")
     iters = int(problem.solver_stats.num_iters or 0) if problem.solver_stats else 0
-    return ConeSolution(lam_full, value, solved, status, iters, elapsed, 0.0), lam_full
+    known = solved and t.value is not None and all(lam.value is not None for lam in lambdas)
+    violation = (
+        cone_violation(cs, lam_full, value, P @ C @ (np.asarray(w_hat, dtype=float) + J.T @ lam_full))
+        if known
+        else None
+    )
+    return ConeSolution(lam_full, value, solved, status, iters, elapsed, violation), lam_full
+
+
+def cone_violation(cs: ContactSet, lam: FloatArray, t: float, residual: FloatArray) -> float:
+    """Largest violation of the model's cones at its answer: each friction cone, and ``‖residual‖ ≤ t``.
+
+    Written from the mechanics like the model (``λ_n ≥ 0``, ``‖λ_t‖ ≤ μ λ_n``, the soft finger's
+    spin scaled by its torsion radius), not from :mod:`.programs`' cone rows.
+    """
+    worst = float(np.linalg.norm(residual)) - t
+    for offset, contact in zip(cs.offsets, cs.contacts, strict=True):
+        lam_c = lam[offset : offset + contact.size]
+        if contact.dimension == 2:
+            tangential = abs(float(lam_c[1]))
+        elif contact.soft:
+            tangential = float(np.linalg.norm([lam_c[1], lam_c[2], lam_c[3] / contact.torsion_m]))
+        else:
+            tangential = float(np.linalg.norm(lam_c[1:3]))
+        worst = max(worst, -float(lam_c[0]), tangential - contact.friction * float(lam_c[0]))
+    return max(worst, 0.0)

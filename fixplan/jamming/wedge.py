@@ -13,9 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from fixplan.errors import SolverError
 from fixplan.jamming.backends import ClarabelProgram
 from fixplan.jamming.programs import ConeProgram, force_layout
 from fixplan.kinematics import ContactSet
+from fixplan.settings import DEFAULT_TOLERANCES
 
 
 def wedge_program(cs: ContactSet) -> ConeProgram:
@@ -33,13 +35,23 @@ def wedge_program(cs: ContactSet) -> ConeProgram:
     return ConeProgram(c, A, b, cones, "wedge", nf)
 
 
-def wedge_force(cs: ContactSet) -> float:
-    """Largest total normal force (out of 1) the contacts can hold with no applied wrench."""
+def wedge_force(cs: ContactSet) -> float | None:
+    """Largest total normal force (out of 1) the contacts can hold with no applied wrench.
+
+    None when the program was not solved (the force is then unknown, not 0).
+    """
     prog = wedge_program(cs)
     sol = ClarabelProgram(prog).solve(prog.b)
-    return max(0.0, -sol.value) if sol.solved else 0.0
+    return max(0.0, -sol.value) if sol.solved else None
 
 
-def can_wedge(cs: ContactSet, tol: float = 1e-7) -> bool:
-    """True when the contacts can hold nonzero self-equilibrated forces (they wedge)."""
-    return wedge_force(cs) > tol
+def can_wedge(cs: ContactSet, tol: float | None = None) -> bool:
+    """True when the contacts can hold nonzero self-equilibrated forces (they wedge).
+
+    ``tol`` (default :attr:`fixplan.settings.Tolerances.wedge_force`) is the least total normal
+    force, out of 1, that counts; :class:`SolverError` when the program could not be solved.
+    """
+    force = wedge_force(cs)
+    if force is None:
+        raise SolverError("the wedging program was not solved: cannot say whether the contacts wedge")
+    return force > (DEFAULT_TOLERANCES.wedge_force if tol is None else tol)

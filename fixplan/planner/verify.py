@@ -389,10 +389,10 @@ def loop_measures(rec: Any, sim: Any, trace_every: int) -> dict[str, Any]:
         "final_pose": sim.pose,
         "max_penetration_m": sim.max_penetration_m,
         "deadline_misses": rec.deadline_misses,
-        "tick_mean_us": rec.mean_compute_s * 1e6,
-        "tick_max_us": rec.max_compute_s * 1e6,
+        "tick_mean_us": None if rec.mean_compute_s is None else rec.mean_compute_s * 1e6,  # None: no tick ran
+        "tick_max_us": None if rec.max_compute_s is None else rec.max_compute_s * 1e6,
         "duration_s": sim.time_s,
-        "felt_force_max_N": max((float(np.linalg.norm(f[:d])) for f in rec.felt_wrench), default=0.0),
+        "felt_force_max_N": max((float(np.linalg.norm(f[:d])) for f in rec.felt_wrench), default=None),
         "unconverged_steps": rec.unconverged_steps,
         "max_solver_error": rec.max_solver_error,
         "trace": trace_from_record(rec, sim.names, trace_every) if rec.trace else None,
