@@ -40,16 +40,13 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from fixplan.fixture import Fixture
+    from fixplan.planner.plan import Plan
     from fixplan.planner.solve import PlanResult
 
 FloatArray = NDArray[np.float64]
 Intervals = dict[str, list[tuple[float, float]]]
 
 GAP_LINTHRESH_M = 1e-6  # symlog: linear within ±1 µm (the touch tolerance)
-
-
-# a plan's status as words for a title ("plan planned" read as a typo)
-_STATUS_WORDS = {"planned": "plan found", "unverified": "plan unverified", "infeasible": "no plan (infeasible)"}
 
 
 def figure_path(report: Path) -> Path:
@@ -138,13 +135,29 @@ def bar_intervals(ax: Axes, gid: str) -> list[tuple[float, float]]:
     return sorted(out)
 
 
-def _planned_wrench_steps(result: PlanResult) -> tuple[FloatArray, FloatArray]:
-    """The plan's wrench per segment as a step function: times (S+1,) and values (S+1, ndof)."""
+def as_plan(result: Plan | PlanResult) -> Plan:
+    """The :class:`~fixplan.planner.plan.Plan` of a solve's result (a plan is returned as it is)."""
+    from fixplan.planner.plan import Plan
+
+    return result if isinstance(result, Plan) else result.plan
+
+
+def _planned_wrench_steps(plan: Plan) -> tuple[FloatArray, FloatArray]:
+    """The plan's wrench per segment as a step function: times (S+1,) and values (S+1, ndof).
+
+    A plan read from a file has no per-segment wrenches: its transition's mean wrench holds over it.
+    """
     times: list[float] = []
     rows: list[FloatArray] = []
     t0 = 0.0
-    for tr, T in zip(result.transitions, result.durations_s, strict=True):
-        W = np.atleast_2d(np.asarray(tr.wrenches, dtype=float))
+    for tr in plan.transitions:
+        T = tr.time_s
+        if tr.segment_wrenches is not None:
+            W = tr.segment_wrenches
+        elif tr.wrench is not None:
+            W = np.atleast_2d(tr.wrench)
+        else:
+            W = np.zeros((0, 0))
         K = W.shape[0]
         for k in range(K):
             times.append(t0 + T * k / K)
@@ -157,32 +170,12 @@ def _planned_wrench_steps(result: PlanResult) -> tuple[FloatArray, FloatArray]:
     return np.array(times), np.array(rows)
 
 
-def _knot_gaps(result: PlanResult, fixture: Fixture) -> tuple[FloatArray, FloatArray]:
-    """Gaps of every locator at the knot poses (T, n) and the knots' planned times (T,)."""
-    from fixplan.locating import locator_gaps
-
-    times: list[float] = []
-    gaps: list[FloatArray] = []
-    t0 = 0.0
-    for k_tr, (tr, T) in enumerate(zip(result.transitions, result.durations_s, strict=True)):
-        K = len(tr.poses) - 1
-        for k, pose in enumerate(tr.poses):
-            if k == 0 and k_tr > 0:
-                continue  # the previous transition's last knot
-            times.append(t0 + (T * k / K if K > 0 else 0.0))
-            gaps.append(locator_gaps(fixture.workpiece, pose, fixture.locators))
-        t0 += T
-    if not gaps:
-        return np.zeros(0), np.zeros((0, len(fixture.locators)))
-    return np.array(times), np.array(gaps)
-
-
 def _mark_boundaries(ax: Axes, bounds: FloatArray) -> None:
     for b in bounds:
         ax.axvline(float(b), color="0.35", linestyle="--", linewidth=0.8, zorder=0, gid="boundary")
 
 
-def plan_figure(result: PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> Figure:
+def plan_figure(result: Plan | PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> Figure:
     """Draw a plan (and its verification trace when there is one); see the module docstring.
 
     Every axes is named (``Axes.get_label()``): ``normal_forces``, ``gaps``, ``force``,
@@ -194,14 +187,17 @@ def plan_figure(result: PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> 
     from matplotlib import colormaps
     from matplotlib.figure import Figure
 
+    from fixplan.planner.plan import STATUS_WORDS, knot_timeline
+
+    plan = as_plan(result)
     names = [loc.name for loc in fixture.locators]
     d = fixture.dimension
     comp = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz") if d == 3 else ("Fx", "Fy", "Mz")
     tab10 = colormaps["tab10"]
     colors = {name: tab10(i % 10) for i, name in enumerate(names)}
     comp_colors = {c: tab10(i % 3) for i, c in enumerate(comp)}
-    trace = result.verification.trace if result.verification is not None else None
-    bounds = boundaries_s(result.durations_s)
+    trace = plan.verification.trace if plan.verification is not None else None
+    bounds = boundaries_s(plan.durations_s)
     planned_end = float(bounds[-1]) if len(bounds) else 0.0
     # without a trace, show the final planned state a little past the last boundary
     end_s = float(trace.time_s[-1]) if trace is not None and len(trace.time_s) else 1.08 * planned_end
@@ -224,25 +220,29 @@ def plan_figure(result: PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> 
         axes[p] = ax
 
     if trace is not None:
-        v = result.verification
+        unknown = np.full((len(trace), max(len(trace.names), fixture.ndof)), np.nan)  # a file may leave one out
+        normal_forces = trace.normal_forces_N if trace.normal_forces_N is not None else unknown
+        trace_gaps = trace.gaps_m if trace.gaps_m is not None else unknown
+        coupling = trace.coupling_wrench if trace.coupling_wrench is not None else unknown
+        v = plan.verification
         verdict = "passed" if v is not None and v.passed else "failed"
-        title = f"{fixture.name}: {_STATUS_WORDS.get(result.status, result.status)}, verification {verdict} (simulated haptic loop, 1 kHz)"
+        title = f"{fixture.name}: {STATUS_WORDS.get(plan.status, plan.status)}, verification {verdict} (simulated haptic loop, 1 kHz)"
         ax = axes["normal_forces"]
         for i, name in enumerate(trace.names):
-            ax.plot(trace.time_s, trace.normal_forces_N[:, i], color=colors.get(name), label=name, linewidth=1.2)
+            ax.plot(trace.time_s, normal_forces[:, i], color=colors.get(name), label=name, linewidth=1.2)
         ax.set_ylabel("normal force [N]")
         ax.legend(loc="best", fontsize=7, ncol=min(len(names), 6), framealpha=0.85)
         ax = axes["gaps"]
         for i, name in enumerate(trace.names):
-            ax.plot(trace.time_s, trace.gaps_m[:, i], color=colors.get(name), label=name, linewidth=1.2)
+            ax.plot(trace.time_s, trace_gaps[:, i], color=colors.get(name), label=name, linewidth=1.2)
         ax.set_ylabel("gap [m]")
     else:
-        why = "not run" if result.verification is None else "no trace"
-        title = (
-            f"{fixture.name}: {_STATUS_WORDS.get(result.status, result.status)} (verification {why}: the plan's knots)"
-        )
+        why = "not run" if plan.verification is None else "no trace"
+        title = f"{fixture.name}: {STATUS_WORDS.get(plan.status, plan.status)} (verification {why}: the plan's knots)"
         ax = axes["gaps"]
-        t_knots, g_knots = _knot_gaps(result, fixture)
+        knots = knot_timeline(plan, fixture)
+        t_knots = knots.time_s
+        g_knots = knots.gaps_m if knots.gaps_m is not None else np.zeros((0, len(names)))
         for i, name in enumerate(names):
             ax.plot(
                 t_knots,
@@ -259,13 +259,13 @@ def plan_figure(result: PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> 
     axes["gaps"].set_yscale("symlog", linthresh=GAP_LINTHRESH_M)
     axes["gaps"].axhline(0.0, color="0.6", linewidth=0.6, zorder=0)
 
-    t_plan, w_plan = _planned_wrench_steps(result)
+    t_plan, w_plan = _planned_wrench_steps(plan)
     for panel, idx, unit in (("force", range(d), "N"), ("moment", range(d, len(comp)), "N·m")):
         ax = axes[panel]
         for j in idx:
             c = comp[j]
             if trace is not None:
-                ax.plot(trace.time_s, trace.coupling_wrench[:, j], color=comp_colors[c], label=c, linewidth=1.2)
+                ax.plot(trace.time_s, coupling[:, j], color=comp_colors[c], label=c, linewidth=1.2)
             if len(t_plan):
                 ax.step(
                     t_plan,
@@ -283,7 +283,7 @@ def plan_figure(result: PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> 
         ax.legend(loc="best", fontsize=7, ncol=len(idx), framealpha=0.85)
 
     ax = axes["states"]
-    planned = planned_intervals(result.sequence, result.durations_s, names, end_s)
+    planned = planned_intervals(plan.sequence, plan.durations_s, names, end_s)
     observed = pressed_intervals(trace.time_s, trace.pressed, names) if trace is not None else None
     for row, name in enumerate(names):
         y = len(names) - 1 - row  # first locator on top
@@ -302,11 +302,11 @@ def plan_figure(result: PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> 
     ax.set_ylim(-0.6, len(names) - 0.4)
     ax.set_ylabel("pressed")
     starts = np.concatenate([[0.0], bounds])
-    for i, tr in enumerate(result.transitions):
+    for i, tr in enumerate(plan.transitions):
         ax.text(
             0.5 * (starts[i] + starts[i + 1]),
             len(names) - 0.45,
-            f"+{tr.target} ({tr.kind})",
+            f"+{tr.added} ({tr.planned_kind})",
             ha="center",
             va="bottom",
             fontsize=7,
@@ -325,7 +325,7 @@ def plan_figure(result: PlanResult, fixture: Fixture, *, dpi: float = 100.0) -> 
     return fig
 
 
-def save_plan_figure(result: PlanResult, fixture: Fixture, png: Path, *, dpi: float = 100.0) -> Path:
+def save_plan_figure(result: Plan | PlanResult, fixture: Fixture, png: Path, *, dpi: float = 100.0) -> Path:
     """Draw :func:`plan_figure` and write it as a PNG; returns ``png``."""
     plan_figure(result, fixture, dpi=dpi).savefig(png, dpi=dpi)
     return png

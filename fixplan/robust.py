@@ -359,7 +359,7 @@ def run_sample(
         "cause": failure_cause(v),
         "reason": v.reason,
         "replans": int(ex.counts["replans"]) if ex is not None else 0,
-        "sim_time_s": float(v.duration_s),
+        "sim_time_s": None if v.duration_s is None else float(v.duration_s),
         "wall_time_s": time.perf_counter() - t0,
     }
 

@@ -25,11 +25,9 @@ plotly is imported inside the functions that need it, so ``import fixplan`` stay
 
 from __future__ import annotations
 
-import json
-import math
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
@@ -38,10 +36,12 @@ from numpy.typing import NDArray
 
 from fixplan.errors import FixplanError, InputError
 from fixplan.geometry.shapes import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
-from fixplan.pose import Pose, matrix_from_quaternion_wxyz, rot2
+from fixplan.planner.plan import pose_from_json  # noqa: F401 - the old home of the plan's pose reader
+from fixplan.pose import Pose
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture
+    from fixplan.planner.plan import Plan, Timeline
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -49,8 +49,6 @@ IntArray = NDArray[np.int64]
 MAX_FRAMES = 150  # frames in the page's replay (a longer trace is subsampled evenly)
 FORCE_ARROW_FRACTION = 0.8  # the largest force arrow, as a fraction of the workpiece's bounding radius
 NORMAL_FRACTION = 0.25  # contact-normal length, as a fraction of the workpiece's bounding radius
-START_TOLERANCE_M = 1e-3  # a plan must start within this of the fixture's start pose ...
-START_TOLERANCE_RAD = 1e-2  # ... and this rotation, else it is for another fixture
 COORD_DECIMALS = 7  # coordinates written to the page are rounded to 0.1 µm (keeps the page small)
 FRAME_MS = 60  # display time per frame of the replay [ms]
 
@@ -68,22 +66,16 @@ PATH = "#17becf"
 # -- the replay ----------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Replay:
-    """What the page shows: workpiece poses over time with the forces and pressed locators.
+    """What the page shows: a :class:`~fixplan.planner.plan.Timeline` with where it comes from.
 
     Attributes
     ----------
     source : {"trace", "plan", "rest"}
         The simulated verification trace, the planned knot poses, or the start pose at rest.
-    time_s : (T,) array
-        Sample times [s].
-    poses : tuple of Pose
-        ``T_world_body`` per sample.
-    forces_world_N : (T, n, d) array or None
-        Force on the workpiece at each locator (fixture order), world axes [N]; None: not known.
-    pressed : tuple of tuple of str
-        Locators pushing on the part at each sample.
-    push_wrench : (T, ndof) array or None
-        The hand's wrench on the workpiece (force, moment about the body origin), world axes.
+    timeline : Timeline
+        Poses over time, with the pressed locators, the contact forces on the workpiece (world
+        axes [N]; None: not known) and the hand's push (``coupling_wrench``: force, moment about
+        the body origin, world axes; None: not known).
     note : str
         One line for the title (what is shown, status).
     extra_forces : tuple of (point_world, force_world_N)
@@ -91,51 +83,36 @@ class Replay:
     """
 
     source: str
-    time_s: FloatArray
-    poses: tuple[Pose, ...]
-    forces_world_N: FloatArray | None
-    pressed: tuple[tuple[str, ...], ...]
-    push_wrench: FloatArray | None
+    timeline: Timeline
     note: str
     extra_forces: tuple[tuple[FloatArray, FloatArray], ...] = ()
 
     def __len__(self) -> int:
-        return len(self.poses)
+        return len(self.timeline)
 
+    @property
+    def time_s(self) -> FloatArray:
+        return self.timeline.time_s
 
-def pose_from_json(obj: Any, dimension: int, where: str) -> Pose:
-    """A pose in the spec's JSON form: 3D ``{position, quaternion_wxyz}``, 2D ``{position, angle_deg}``."""
-    if not isinstance(obj, dict) or "position" not in obj:
-        raise InputError(f"{where}: expected a pose {{'position', ...}}, got {_short(obj)}")
-    other = 2 if dimension == 3 else 3
-    if dimension == 3 and "quaternion_wxyz" not in obj and "angle_deg" in obj:
-        raise InputError(f"{where}: a 2D pose (angle_deg) in a plan for a 3D fixture: the plan is for another fixture")
-    if dimension == 2 and "quaternion_wxyz" in obj:
-        raise InputError(
-            f"{where}: a 3D pose (quaternion_wxyz) in a plan for a 2D fixture: the plan is for another fixture"
-        )
-    position = _vector(obj["position"], f"{where}.position")
-    if position.shape[0] != dimension:
-        raise InputError(
-            f"{where}.position: expected {dimension} numbers, got {position.shape[0]} (a plan for a {other}D fixture?)"
-        )
-    if dimension == 3:
-        q = _vector(obj.get("quaternion_wxyz"), f"{where}.quaternion_wxyz")
-        if q.shape[0] != 4 or not np.linalg.norm(q) > 0.0:
-            raise InputError(f"{where}.quaternion_wxyz: expected 4 numbers, not all zero")
-        return Pose(matrix_from_quaternion_wxyz(q), position)
-    angle = obj.get("angle_deg")
-    if not isinstance(angle, int | float) or isinstance(angle, bool) or not math.isfinite(angle):
-        raise InputError(f"{where}.angle_deg: expected a number [deg], got {_short(angle)}")
-    return Pose(rot2(math.radians(angle)), position)
+    @property
+    def poses(self) -> tuple[Pose, ...]:
+        return self.timeline.poses
 
+    @property
+    def pressed(self) -> tuple[tuple[str, ...], ...]:
+        return self.timeline.pressed
 
-# a plan's status as words ("plan planned" read as a typo)
-_STATUS_WORDS = {"planned": "plan found", "unverified": "plan unverified", "infeasible": "no plan (infeasible)"}
+    @property
+    def forces_world_N(self) -> FloatArray | None:
+        return self.timeline.forces_world_N
+
+    @property
+    def push_wrench(self) -> FloatArray | None:
+        return self.timeline.coupling_wrench
 
 
 def read_plan(path: Path, fixture: Fixture) -> Replay:
-    """Read a plan JSON (``fixplan solve --out``) and check it belongs to ``fixture``.
+    """Read a plan JSON (``fixplan solve --out``), check it belongs to ``fixture``, and replay it.
 
     Raises
     ------
@@ -143,141 +120,50 @@ def read_plan(path: Path, fixture: Fixture) -> Replay:
         The file is unreadable, not JSON, not a fixplan plan, malformed, or for another fixture
         (other locator names, another dimension, or another start pose).
     """
-    from fixplan.files import read_plan_json
+    from fixplan.planner.plan import read_plan as read
 
-    data = read_plan_json(Path(path), expected="a plan JSON written by 'fixplan solve --out'")
-    return replay_from_plan(data, fixture, str(path))
+    return plan_replay(read(Path(path), fixture), fixture, str(path))
 
 
 def replay_from_plan(data: Any, fixture: Fixture, source: str = "plan") -> Replay:
-    """The replay of a plan's JSON object (see :func:`read_plan`)."""
-    if not isinstance(data, dict) or not isinstance(data.get("transitions"), list) or "status" not in data:
-        raise InputError(f"{source}: not a fixplan plan (expected the JSON object written by 'fixplan solve --out')")
-    known = [loc.name for loc in fixture.locators]
-    mentioned: list[str] = []
-    for i, tr in enumerate(data["transitions"]):
-        if not isinstance(tr, dict):
-            raise InputError(f"{source}: transitions[{i}]: expected an object, got {_short(tr)}")
-        mentioned += [*_names(tr.get("from", []), f"{source}: transitions[{i}].from")]
-        if "added" in tr:
-            mentioned += _names([tr["added"]], f"{source}: transitions[{i}].added")
-    for i, s in enumerate(data.get("sequence") or []):
-        mentioned += _names(s, f"{source}: sequence[{i}]")
-    verification = data.get("verification")
-    trace = verification.get("trace") if isinstance(verification, dict) else None
-    if trace is not None:
-        if not isinstance(trace, dict):
-            raise InputError(f"{source}: verification.trace: expected an object, got {_short(trace)}")
-        names = _names(trace.get("names"), f"{source}: verification.trace.names")
-        if names != known:
-            missing = [n for n in names if n not in known] or [n for n in known if n not in names]
-            raise InputError(
-                f"{source}: the plan is for another fixture: its trace has locators {', '.join(names)}, "
-                f"{fixture.source} has {', '.join(known)} (differing: {', '.join(missing) or 'order'})"
-            )
-    unknown = sorted(set(mentioned) - set(known))
-    if unknown:
-        raise InputError(
-            f"{source}: the plan is for another fixture: it names locators {', '.join(unknown)} "
-            f"that {fixture.source} does not have (it has {', '.join(known)})"
+    """The replay of a plan file's JSON object (see :func:`read_plan`)."""
+    from fixplan.planner.plan import plan_for_fixture
+
+    return plan_replay(plan_for_fixture(data, fixture, source), fixture, source)
+
+
+def plan_replay(plan: Plan, fixture: Fixture, source: str = "plan") -> Replay:
+    """The replay of a plan: its verification trace when there is one, else its knot poses."""
+    from fixplan.planner.plan import STATUS_WORDS, knot_timeline
+
+    v = plan.verification
+    if v is not None and v.trace is not None:
+        verdict = "passed" if v.passed else f"FAILED: {v.reason}"
+        what = "haptic session" if plan.extras.get("source") == "haptic session" else "simulated verification"
+        note = f"{what} ({verdict}), {len(v.trace)} samples, {v.trace.time_s[-1]:.2f} s"
+        return Replay("trace", v.trace, note)
+    if plan.transitions:
+        knots = knot_timeline(plan, fixture, source)
+        note = (
+            f"planned knot poses ({len(knots)} knots, {sum(plan.durations_s):.2f} s; no verification trace, "
+            "so no contact forces)"
         )
-
-    status = str(data["status"])
-    if trace is not None:
-        replay = _replay_from_trace(trace, fixture, source)
-        v = cast(dict[str, Any], verification)
-        verdict = "passed" if v.get("passed") else f"FAILED: {v.get('reason', '')}"
-        what = "haptic session" if data.get("source") == "haptic session" else "simulated verification"
-        note = f"{what} ({verdict}), {len(replay)} samples, {replay.time_s[-1]:.2f} s"
-        replay = _with_note(replay, note)
-    elif data["transitions"]:
-        replay = _replay_from_knots(data["transitions"], fixture, source)
-    else:
-        reason = str(data.get("reason") or "")
-        replay = Replay(
-            "plan",
-            np.zeros(1),
-            (fixture.start,),
-            None,
-            (),
-            None,
-            f"{_STATUS_WORDS.get(status, f'plan {status}')}{': ' + reason if reason else ''} (nothing to replay)",
-        )
-        replay = _with_pressed_at_rest(replay, fixture)
-    _check_starts_at(replay.poses[0], fixture, source)
-    return replay
+        return Replay("plan", knots, note)
+    words = STATUS_WORDS.get(plan.status, f"plan {plan.status}")
+    note = f"{words}{': ' + plan.reason if plan.reason else ''} (nothing to replay)"
+    return Replay("plan", _at_rest(fixture), note)
 
 
-def _replay_from_trace(trace: dict, fixture: Fixture, source: str) -> Replay:
-    d = fixture.dimension
-    where = f"{source}: verification.trace"
-    names = [loc.name for loc in fixture.locators]
-    time_s = _vector(trace.get("time_s"), f"{where}.time_s")
-    T = time_s.shape[0]
-    if T == 0:
-        raise InputError(f"{where}.time_s: empty (expected the sample times)")
-    poses_json = trace.get("poses")
-    if not isinstance(poses_json, list) or len(poses_json) != T:
-        raise InputError(f"{where}.poses: expected {T} poses (one per time_s), got {_short(poses_json)}")
-    poses = tuple(pose_from_json(p, d, f"{where}.poses[{k}]") for k, p in enumerate(poses_json))
-    forces_json = trace.get("forces_world_N")
-    if not isinstance(forces_json, dict):
-        raise InputError(f"{where}.forces_world_N: expected {{locator: [[f...]...]}}, got {_short(forces_json)}")
-    forces = np.zeros((T, len(names), d))
-    for i, name in enumerate(names):
-        try:
-            f = np.asarray(forces_json[name], dtype=float)
-        except (KeyError, TypeError, ValueError):
-            raise InputError(f"{where}.forces_world_N.{name}: expected {T} rows of {d} numbers") from None
-        if f.shape != (T, d) or not np.all(np.isfinite(f)):
-            raise InputError(f"{where}.forces_world_N.{name}: expected {T} rows of {d} finite numbers, got {f.shape}")
-        forces[:, i] = f
-    pressed_json = trace.get("pressed")
-    if not isinstance(pressed_json, list) or len(pressed_json) != T:
-        raise InputError(f"{where}.pressed: expected {T} lists of locator names")
-    pressed = tuple(tuple(_names(s, f"{where}.pressed[{k}]")) for k, s in enumerate(pressed_json))
-    push = None
-    if trace.get("coupling_wrench") is not None:
-        try:
-            push = np.asarray(trace["coupling_wrench"], dtype=float)
-        except (TypeError, ValueError):
-            push = None
-        if push is None or push.shape != (T, fixture.ndof) or not np.all(np.isfinite(push)):
-            raise InputError(f"{where}.coupling_wrench: expected {T} rows of {fixture.ndof} finite numbers")
-    return Replay("trace", time_s, poses, forces, pressed, push, "")
+def _at_rest(fixture: Fixture, forces_world_N: FloatArray | None = None) -> Timeline:
+    """One sample at the start pose with the locators touching there."""
+    from fixplan.locating import locator_contact
+    from fixplan.planner.plan import Timeline
 
-
-def _replay_from_knots(transitions: list, fixture: Fixture, source: str) -> Replay:
-    d = fixture.dimension
-    times: list[float] = []
-    poses: list[Pose] = []
-    pressed: list[tuple[str, ...]] = []
-    pushes: list[FloatArray] = []
-    t0 = 0.0
-    for i, tr in enumerate(transitions):
-        where = f"{source}: transitions[{i}]"
-        knots = tr.get("poses")
-        if not isinstance(knots, list) or not knots:
-            raise InputError(f"{where}.poses: expected the planned knot poses, got {_short(knots)}")
-        duration = tr.get("time_s", 1.0)
-        if not isinstance(duration, int | float) or not (duration >= 0 and math.isfinite(duration)):
-            raise InputError(f"{where}.time_s: expected a non-negative number [s], got {_short(duration)}")
-        wrench = _vector(tr.get("wrench", [0.0] * fixture.ndof), f"{where}.wrench")
-        if wrench.shape[0] != fixture.ndof:
-            raise InputError(f"{where}.wrench: expected {fixture.ndof} numbers, got {wrench.shape[0]}")
-        before = tuple(_names(tr.get("from", []), f"{where}.from"))
-        after = tuple(sorted([*before, str(tr.get("added", ""))])) if tr.get("added") else before
-        n = len(knots)
-        for k, knot in enumerate(knots):
-            if i > 0 and k == 0:
-                continue  # the previous transition ended here
-            poses.append(pose_from_json(knot, d, f"{where}.poses[{k}]"))
-            times.append(t0 + (duration * k / (n - 1) if n > 1 else 0.0))
-            pressed.append(after if k == n - 1 else before)
-            pushes.append(wrench)
-        t0 += duration
-    note = f"planned knot poses ({len(poses)} knots, {t0:.2f} s; no verification trace, so no contact forces)"
-    return Replay("plan", np.array(times), tuple(poses), None, tuple(pressed), np.array(pushes), note)
+    tol = fixture.tolerances.touch_m
+    pose = fixture.start
+    touching = tuple(loc.name for loc in fixture.locators if locator_contact(fixture.workpiece, pose, loc).gap_m <= tol)
+    names = tuple(loc.name for loc in fixture.locators)
+    return Timeline(names, np.zeros(1), (pose,), (touching,), forces_world_N=forces_world_N)
 
 
 def rest_replay(fixture: Fixture, *, forces: bool = True) -> Replay:
@@ -286,8 +172,7 @@ def rest_replay(fixture: Fixture, *, forces: bool = True) -> Replay:
     The forces come from :func:`fixplan.classify` with no push: drawn when the part is ``held``
     or ``jammed`` at rest, else the note says what gravity alone does.
     """
-    replay = Replay("rest", np.zeros(1), (fixture.start,), None, (), None, "start pose")
-    replay = _with_pressed_at_rest(replay, fixture)
+    replay = Replay("rest", _at_rest(fixture), "start pose")
     if not forces:
         return replay
     from fixplan.jamming import classify
@@ -296,16 +181,16 @@ def rest_replay(fixture: Fixture, *, forces: bool = True) -> Replay:
     try:
         cs = contact_set(fixture, "start")
         if not cs.contacts:
-            return _with_note(replay, "start pose (no contacts: nothing holds the part)")
+            return replace(replay, note="start pose (no contacts: nothing holds the part)")
         # as_json: each result is its JSON dictionary, with the contact forces in world axes
         result = cast(
             dict[str, Any], classify(fixture, np.zeros((1, fixture.ndof)), pose="start", jobs=1, as_json=True)[0]
         )
     except FixplanError as exc:
-        return _with_note(replay, f"start pose (no rest forces: {exc})")
+        return replace(replay, note=f"start pose (no rest forces: {exc})")
     mode = result["mode"]
     if mode not in ("held", "jammed"):
-        return _with_note(replay, f"start pose (under gravity alone the part {mode}: no rest forces)")
+        return replace(replay, note=f"start pose (under gravity alone the part {mode}: no rest forces)")
     names = [loc.name for loc in fixture.locators]
     F = np.zeros((1, len(names), fixture.dimension))
     extra = []
@@ -316,78 +201,7 @@ def rest_replay(fixture: Fixture, *, forces: bool = True) -> Replay:
             F[0, names.index(name)] = fw
         else:
             extra.append((np.asarray(points[name], dtype=float), fw))
-    return Replay(
-        "rest",
-        replay.time_s,
-        replay.poses,
-        F,
-        replay.pressed,
-        None,
-        f"start pose at rest under gravity ({mode})",
-        tuple(extra),
-    )
-
-
-def _with_pressed_at_rest(replay: Replay, fixture: Fixture) -> Replay:
-    from fixplan.locating import locator_contact
-
-    tol = fixture.tolerances.touch_m
-    pose = replay.poses[0]
-    touching = tuple(loc.name for loc in fixture.locators if locator_contact(fixture.workpiece, pose, loc).gap_m <= tol)
-    return Replay(
-        replay.source,
-        replay.time_s,
-        replay.poses,
-        replay.forces_world_N,
-        (touching,) * len(replay),
-        replay.push_wrench,
-        replay.note,
-        replay.extra_forces,
-    )
-
-
-def _with_note(replay: Replay, note: str) -> Replay:
-    return Replay(
-        replay.source,
-        replay.time_s,
-        replay.poses,
-        replay.forces_world_N,
-        replay.pressed,
-        replay.push_wrench,
-        note,
-        replay.extra_forces,
-    )
-
-
-def _check_starts_at(first: Pose, fixture: Fixture, source: str) -> None:
-    dp, dr = first.distance_to(fixture.start)
-    if dp > START_TOLERANCE_M or dr > START_TOLERANCE_RAD:
-        pos = ", ".join(f"{x:.4g}" for x in first.p_world)
-        start = ", ".join(f"{x:.4g}" for x in fixture.start.p_world)
-        raise InputError(
-            f"{source}: the plan is for another fixture: it starts at ({pos}), {fixture.source} starts at "
-            f"({start}) ({dp:.3g} m, {math.degrees(dr):.3g}° away; expected ≤ {START_TOLERANCE_M:g} m, "
-            f"{math.degrees(START_TOLERANCE_RAD):.2g}°)"
-        )
-
-
-def _vector(obj: Any, where: str) -> FloatArray:
-    if not isinstance(obj, list) or not all(
-        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in obj
-    ):
-        raise InputError(f"{where}: expected a list of finite numbers, got {_short(obj)}")
-    return np.asarray(obj, dtype=float)
-
-
-def _names(obj: Any, where: str) -> list[str]:
-    if not isinstance(obj, list) or not all(isinstance(x, str) for x in obj):
-        raise InputError(f"{where}: expected a list of locator names, got {_short(obj)}")
-    return list(obj)
-
-
-def _short(obj: Any) -> str:
-    text = json.dumps(obj) if not isinstance(obj, str) else repr(obj)
-    return text if len(text) <= 40 else text[:37] + "..."
+    return Replay("rest", _at_rest(fixture, F), f"start pose at rest under gravity ({mode})", tuple(extra))
 
 
 def frame_indices(n_samples: int, max_frames: int = MAX_FRAMES) -> IntArray:

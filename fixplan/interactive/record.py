@@ -254,9 +254,9 @@ class RecordedPushes:
 
 
 def _check_recording(data: Any, fixture: Fixture, source: str) -> list[dict[str, Any]]:
-    from fixplan.view import replay_from_plan
+    from fixplan.planner.plan import plan_for_fixture
 
-    replay_from_plan(data, fixture, source)  # the plan belongs to this fixture (names, start pose)
+    plan_for_fixture(data, fixture, source)  # the plan belongs to this fixture (names, start pose)
     transitions = data["transitions"]
     for i, tr in enumerate(transitions):
         p = tr.get("pushes") if isinstance(tr, dict) else None
@@ -310,7 +310,8 @@ def verify_recording(
     from fixplan.jamming import classify
     from fixplan.jamming.search import hand_limits
     from fixplan.planner.execute import ExecutionSettings
-    from fixplan.planner.verify import Verification, haptic_rig, loop_measures, pose_coordinates
+    from fixplan.planner.plan import Verification
+    from fixplan.planner.verify import haptic_rig, loop_measures, pose_coordinates
 
     transitions = _check_recording(data, fixture, source)
     sim = Simulator(fixture, settings=HAPTIC.engine)
@@ -415,27 +416,22 @@ def verify_plan_file(fixture: Fixture, data: dict[str, Any], *, source: str = "p
     """``fixplan verify``: a session's recorded pushes, or a solved plan's transitions through the executor."""
     from fixplan.locating import contact_set
     from fixplan.planner.execute import Step
+    from fixplan.planner.plan import plan_for_fixture
     from fixplan.planner.solve import Planner
     from fixplan.planner.verify import verify
-    from fixplan.view import pose_from_json, replay_from_plan
 
     if isinstance(data, dict) and data.get("source") == SOURCE:
         return verify_recording(fixture, data, source=source)
-    replay_from_plan(data, fixture, source)
-    if data.get("status") == "infeasible" or not data.get("transitions"):
-        if data.get("status") == "infeasible":
-            raise InputError(f"{source}: the plan is infeasible (no transitions to run): {data.get('reason', '')}")
+    plan = plan_for_fixture(data, fixture, source)
+    if plan.status == "infeasible":
+        raise InputError(f"{source}: the plan is infeasible (no transitions to run): {plan.reason}")
     steps = []
-    for i, tr in enumerate(data["transitions"]):
-        if "added" not in tr:
+    for i, tr in enumerate(plan.transitions):
+        if tr.added is None:
             raise InputError(
                 f"{source}: transitions[{i}]: no 'added' locator (expected a plan from 'fixplan solve --out')"
             )
-        poses = tuple(
-            pose_from_json(p, fixture.dimension, f"{source}: transitions[{i}].poses[{k}]")
-            for k, p in enumerate(tr.get("poses") or [])
-        )
-        steps.append(Step(tuple(tr.get("from", [])), str(tr["added"]), str(tr.get("motion", "slide")), poses))
+        steps.append(Step(tr.from_state, tr.added, tr.motion, tr.poses))
     touching = contact_set(fixture, "start")
     start_state = frozenset(c.name for c in touching.contacts if c.kind == "locator")
     return verify(fixture, start_state, steps, replan=Planner(fixture).replan)

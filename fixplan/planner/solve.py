@@ -27,6 +27,7 @@ from fixplan.locating import contact_set, require_full, solve_goal
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
 from fixplan.planner.execute import ExecutionSettings, Step
 from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, _segment_wrenches, plan_transition
+from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.verify import Verification, verify
 from fixplan.pose import Pose
 
@@ -78,48 +79,52 @@ class PlanResult:
         failed = [a for a in self.attempts if not a.success]
         return bool(failed) and all(_wrench_certificate(a.reason) for a in failed)
 
-    def to_json(self) -> dict[str, Any]:
+    @property
+    def plan(self) -> Plan:
+        """The plan as :class:`~fixplan.planner.plan.Plan` (what ``fixplan solve --out`` writes)."""
         transitions = []
         robust: list[float | None] = list(self.friction_robustness) or [None] * len(self.transitions)
         for tr, T, rob in zip(self.transitions, self.durations_s, robust, strict=True):
             rows = tr.wrenches[np.isfinite(tr.wrenches).all(axis=1)] if len(tr.wrenches) else tr.wrenches
-            w = rows.mean(axis=0) if len(rows) else None
             margins = tr.margins[np.isfinite(tr.margins)]
             transitions.append(
-                {
-                    "from": list(tr.established),
-                    "to": sorted([*tr.established, tr.target]),
-                    "added": tr.target,
-                    "motion": tr.kind if tr.established else "free",
-                    "wrench": None if w is None else [float(x) for x in w],
-                    # the least normal force on the kept contacts; null from no contact (nothing to press)
-                    "margin": float(np.min(margins)) if len(margins) else None,
-                    "friction_robustness": None if rob is None or not math.isfinite(rob) else float(rob),
-                    "time_s": T,
-                    "path_length_m": float(tr.cost),
-                    "max_constraint_violation_m": float(tr.max_constraint_violation_m),
-                    "solve_time_s": float(tr.solve_time_s),
-                    "poses": [p.to_json() for p in tr.poses],
-                }
+                PlannedTransition(
+                    from_state=tuple(tr.established),
+                    to_state=tuple(sorted([*tr.established, tr.target])),
+                    added=tr.target,
+                    motion=tr.kind if tr.established else "free",
+                    wrench=rows.mean(axis=0) if len(rows) else None,
+                    # the least normal force on the kept contacts; None from no contact (nothing to press)
+                    margin_N=float(np.min(margins)) if len(margins) else None,
+                    friction_robustness=None if rob is None or not math.isfinite(rob) else float(rob),
+                    time_s=T,
+                    path_length_m=float(tr.cost),
+                    max_constraint_violation_m=float(tr.max_constraint_violation_m),
+                    solve_time_s=float(tr.solve_time_s),
+                    poses=tuple(tr.poses),
+                    segment_wrenches=np.atleast_2d(np.asarray(tr.wrenches, dtype=float)),
+                    kind=tr.kind,
+                )
             )
-        return {
-            "status": self.status,
-            "reason": self.reason,
-            "sequence": [list(s) for s in self.sequence],
-            "transitions": transitions,
-            "tried": [
-                {"from": list(a.established), "add": a.target, "ok": a.success, "reason": a.reason}
-                for a in self.attempts
-            ],
-            "proven": self.proven,
-            "certificate": [
-                {"from": list(a.established), "add": a.target, "reason": a.reason} for a in self.certificate
-            ]
-            if self.status == "infeasible"
-            else [],
-            "verification": None if self.verification is None else self.verification.to_json(),
-            "timings": self.timings,
-        }
+        infeasible = self.status == "infeasible"
+        return Plan(
+            status=self.status,
+            reason=self.reason,
+            sequence=tuple(tuple(s) for s in self.sequence),
+            transitions=tuple(transitions),
+            tried=tuple(TriedTransition(tuple(a.established), a.target, a.success, a.reason) for a in self.attempts),
+            proven=self.proven,
+            certificate=tuple(
+                TriedTransition(tuple(a.established), a.target, False, a.reason) for a in self.certificate
+            )
+            if infeasible
+            else (),
+            verification=self.verification,
+            timings=dict(self.timings),
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        return self.plan.to_json()
 
 
 def _wrench_certificate(reason: str) -> bool:

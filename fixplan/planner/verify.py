@@ -21,7 +21,7 @@ what the push can cause) stops the run with that reason.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -30,10 +30,9 @@ from numpy.typing import NDArray
 from fixplan.engine.simulator import Simulator
 from fixplan.errors import SolverError
 from fixplan.fixture import Fixture
-from fixplan.haptics import DeviceSpecs, HapticLoop, LoopRecord, SimulatedDevice, VirtualCoupling
+from fixplan.haptics import DeviceSpecs, HapticLoop, SimulatedDevice, VirtualCoupling
 from fixplan.kinematics import mass_matrix
 from fixplan.planner.execute import (
-    ExecutionLog,
     ExecutionNoise,
     ExecutionSettings,
     Executor,
@@ -43,114 +42,11 @@ from fixplan.planner.execute import (
     mass_speed,
 )
 from fixplan.planner.fine import twist_from_pose
+from fixplan.planner.plan import Timeline, Verification
 from fixplan.pose import Pose, log_so3
 from fixplan.settings import HAPTIC, HapticRigSettings, Settings
 
 FloatArray = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class VerificationTrace:
-    """What the simulated load looked like, sampled every ``every_s`` (and at the last tick).
-
-    ``coupling_wrench`` is the wrench the virtual coupling applied to the workpiece (device
-    coordinates: force and moment about the body origin, world axes); ``felt_wrench`` is what the
-    device displayed to the user (saturated). Contact forces are on the workpiece, world axes.
-    """
-
-    every_s: float
-    names: tuple[str, ...]  # locators, in file order
-    time_s: FloatArray  # (T,)
-    poses: tuple[Pose, ...]  # (T,)
-    gaps_m: FloatArray  # (T, n)
-    normal_forces_N: FloatArray  # (T, n)
-    forces_world_N: FloatArray  # (T, n, d)
-    coupling_wrench: FloatArray  # (T, ndof)
-    felt_wrench: FloatArray  # (T, ndof)
-    pressed: tuple[tuple[str, ...], ...]  # locators pushing on the part at each sample
-
-    def to_json(self) -> dict[str, Any]:
-        def rows(a: FloatArray) -> list[list[float]]:
-            return [[float(x) for x in r] for r in a]
-
-        return {
-            "every_s": self.every_s,
-            "names": list(self.names),
-            "time_s": [float(t) for t in self.time_s],
-            "poses": [p.to_json() for p in self.poses],
-            "gaps_m": {n: [float(x) for x in self.gaps_m[:, i]] for i, n in enumerate(self.names)},
-            "normal_forces_N": {n: [float(x) for x in self.normal_forces_N[:, i]] for i, n in enumerate(self.names)},
-            "forces_world_N": {n: rows(self.forces_world_N[:, i]) for i, n in enumerate(self.names)},
-            "coupling_wrench": rows(self.coupling_wrench),
-            "felt_wrench": rows(self.felt_wrench),
-            "pressed": [list(s) for s in self.pressed],
-        }
-
-
-def trace_from_record(rec: LoopRecord, names: Sequence[str], every: int) -> VerificationTrace:
-    """Collect the loop's sampled trace (``HapticLoop.run(..., trace_every=every)``) into arrays."""
-    ticks = [k for k, _, _, _ in rec.trace]
-    return VerificationTrace(
-        every_s=every * rec.period_s,
-        names=tuple(names),
-        time_s=np.array([t for _, t, _, _ in rec.trace]),
-        poses=tuple(p for _, _, p, _ in rec.trace),
-        gaps_m=np.array([[c.gap_m for c in cs] for _, _, _, cs in rec.trace]),
-        normal_forces_N=np.array([[c.normal_force_N for c in cs] for _, _, _, cs in rec.trace]),
-        forces_world_N=np.array([[c.force_world for c in cs] for _, _, _, cs in rec.trace]),
-        coupling_wrench=np.array([rec.coupling_wrench[k] for k in ticks]),
-        felt_wrench=np.array([rec.felt_wrench[k] for k in ticks]),
-        pressed=tuple(rec.active_contacts[k] for k in ticks),
-    )
-
-
-@dataclass
-class Verification:
-    """The outcome of running a plan through the haptic loop."""
-
-    passed: bool
-    reason: str
-    final_pose: Pose
-    max_penetration_m: float
-    deadline_misses: int | None  # None: the loop did not finish (diverged)
-    tick_mean_us: float | None
-    tick_max_us: float | None
-    observed_sequence: list[tuple[str, ...]]
-    final_gaps_m: dict[str, float]
-    duration_s: float
-    felt_force_max_N: float | None
-    unconverged_steps: int = 0
-    max_solver_error: float = 0.0
-    trace: VerificationTrace | None = None
-    execution: ExecutionLog | None = None
-    max_push_force_N: float | None = None  # on the part, averaged over 10 ms
-    max_push_torque_Nm: float | None = None
-    saturated_ticks: int = 0  # ticks where the coupling asked more than the hand's limits (capped there)
-    failed_checks: list[str] = field(default_factory=list)  # "executor", "final gap", "penetration", "limits"
-    extras: dict[str, Any] = field(default_factory=dict)
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "passed": self.passed,
-            "reason": self.reason,
-            "final_pose": self.final_pose.to_json(),
-            "max_penetration": self.max_penetration_m,
-            "deadline_misses": self.deadline_misses,
-            "tick_mean_us": self.tick_mean_us,
-            "tick_max_us": self.tick_max_us,
-            "observed_sequence": [list(s) for s in self.observed_sequence],
-            "final_gaps": self.final_gaps_m,
-            "duration_s": self.duration_s,
-            "felt_force_max": self.felt_force_max_N,
-            "unconverged_steps": self.unconverged_steps,
-            "max_solver_error": self.max_solver_error,
-            "max_push_force": self.max_push_force_N,
-            "max_push_torque": self.max_push_torque_Nm,
-            "saturated_ticks": self.saturated_ticks,
-            "failed_checks": list(self.failed_checks),
-            "execution": None if self.execution is None else self.execution.to_json(),
-            "trace": None if self.trace is None else self.trace.to_json(),
-        }
 
 
 def pose_coordinates(pose: Pose, R0: FloatArray) -> FloatArray:
@@ -395,7 +291,7 @@ def loop_measures(rec: Any, sim: Any, trace_every: int) -> dict[str, Any]:
         "felt_force_max_N": max((float(np.linalg.norm(f[:d])) for f in rec.felt_wrench), default=None),
         "unconverged_steps": rec.unconverged_steps,
         "max_solver_error": rec.max_solver_error,
-        "trace": trace_from_record(rec, sim.names, trace_every) if rec.trace else None,
+        "trace": Timeline.from_record(rec, sim.names, trace_every) if rec.trace else None,
     }
 
 
