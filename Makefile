@@ -51,7 +51,7 @@ gallery: install
 	mkdir -p docs/gallery
 	$(BIN)/fixplan solve --out out/gallery-plan.json --force
 	$(BIN)/fixplan view --plan out/gallery-plan.json --out out/scene.html --force
-	$(BIN)/python -m fixplan._browser out/scene.html docs/gallery/scene.png --width 900 --height 600
+	$(BIN)/python -m fixplan.present.browser out/scene.html docs/gallery/scene.png --width 900 --height 600
 	@# Whitney's jamming diagram: the peg in the hole (peg-hole-mid) pushed down 1 N, lateral force x moment
 	$(BIN)/fixplan map problems/peg-hole-mid.toml --axes Fx,Mz --range -0.6:0.6,-0.03:0.03 --wrench 0,-1,0 --n 60 --out out/gallery/jamming-map.png --force
 	cp out/gallery/jamming-map.png docs/gallery/jamming-map.png

@@ -40,7 +40,7 @@ def _watch_page(url: str, proc: subprocess.Popen, deadline: float) -> dict:
     """Keep the page open in headless Chromium until the session ends; what the page did."""
     from playwright.sync_api import sync_playwright
 
-    from fixplan._browser import CHROMIUM, CHROMIUM_ARGS
+    from fixplan.present.browser import CHROMIUM, CHROMIUM_ARGS
 
     info = {"console_errors": 0, "opened": False}
     with sync_playwright() as pw:
@@ -129,7 +129,7 @@ def one_run(with_browser: bool, seed: int) -> dict:
 
 
 def run(quick: bool) -> Section:
-    from fixplan._browser import browser_available
+    from fixplan.present.browser import browser_available
 
     repeats = 1 if quick else 3
     rows = []

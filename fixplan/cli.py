@@ -551,7 +551,8 @@ def map_(
     json_out: JsonOpt = False,
 ) -> None:
     """Classify a grid of pushes over two wrench components and draw the jamming diagram."""
-    from fixplan.mapping import jamming_map, save_map
+    from fixplan.mapping import jamming_map
+    from fixplan.present.maps import save_map
 
     fixture = _load(file)
     names_all = AXES_3D if fixture.dimension == 3 else AXES_2D
@@ -851,9 +852,9 @@ def solve(
     With --perturb-seed K the loop runs on perturbed world K of 'fixplan robust' instead of the
     nominal one. With --batch DIR: exit 0 only if every file is planned.
     """
-    from fixplan.planner.solve import report_markdown
     from fixplan.planner.solve import solve as run_solve
-    from fixplan.plots import figure_path, save_plan_figure
+    from fixplan.present.plots import figure_path, save_plan_figure
+    from fixplan.present.report import report_markdown
 
     if batch is not None:
         if file is not None or out is not None or report is not None or order is not None or perturb_seed is not None:
@@ -1108,7 +1109,9 @@ def view(
     With --plan the page replays the plan's simulated verification (or its knot poses); without
     it, the start pose at rest under gravity. The page embeds plotly.js and fetches nothing.
     """
-    from fixplan.view import read_plan, rest_replay, scene_figure, scene_info, write_scene
+    from fixplan.present.page import write_scene
+    from fixplan.present.replay import read_plan, rest_replay
+    from fixplan.present.scene import scene_figure, scene_info
 
     fixture = _load(file)
     check_distinct([("FILE", file), ("--plan", plan), ("--out", out)])

@@ -19,7 +19,7 @@ from fixplan.interactive.handles import UdpHandle, parse_device
 from fixplan.interactive.record import plan_json, verify_recording
 from fixplan.interactive.session import HapticSession, pose_from_coordinates
 from fixplan.planner.verify import pose_coordinates
-from fixplan.view import replay_from_plan
+from fixplan.present.replay import replay_from_plan
 
 
 @pytest.fixture(scope="module")

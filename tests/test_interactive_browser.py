@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 import fixplan
-from fixplan._browser import browser_available
 from fixplan.interactive.app import HapticApp, _wxyz, _xyz
 from fixplan.interactive.gate import COOKIE, token_ok
 from fixplan.interactive.handles import GizmoHandle
 from fixplan.interactive.record import plan_json, verify_recording
 from fixplan.interactive.session import HapticSession, pose_from_coordinates
 from fixplan.planner.verify import pose_coordinates
+from fixplan.present.browser import browser_available
 
 browser = pytest.mark.skipif(browser_available() is not None, reason=str(browser_available()))
 

@@ -11,8 +11,8 @@ import fixplan
 from fixplan.cli import main
 from fixplan.errors import InputError
 from fixplan.locating import locator_gaps
-from fixplan.planner.solve import report_markdown, solve
-from fixplan.plots import (
+from fixplan.planner.solve import solve
+from fixplan.present.plots import (
     bar_intervals,
     boundaries_s,
     figure_path,
@@ -20,6 +20,7 @@ from fixplan.plots import (
     planned_intervals,
     pressed_intervals,
 )
+from fixplan.present.report import report_markdown
 
 matplotlib.use("Agg")
 
@@ -203,8 +204,9 @@ def test_cli_infeasible_plan_has_no_figure(tmp_path, capsys):
 
 def test_drawing_leaves_the_callers_backend_alone(fixture, verified, tmp_path):
     """A notebook's inline backend must survive save_map and the plan figure (no matplotlib.use inside)."""
-    from fixplan.mapping import jamming_map, save_map
-    from fixplan.plots import save_plan_figure
+    from fixplan.mapping import jamming_map
+    from fixplan.present.maps import save_map
+    from fixplan.present.plots import save_plan_figure
 
     before = matplotlib.get_backend()
     matplotlib.use("svg")

@@ -15,26 +15,13 @@ import numpy as np
 import pytest
 
 import fixplan
-from fixplan._browser import CHROMIUM, open_page
 from fixplan.errors import InputError
 from fixplan.geometry.shapes import Box, Cylinder, Sphere
-from fixplan.view import (
-    FORCE_ARROW_FRACTION,
-    MAX_FRAMES,
-    box_mesh,
-    external_references,
-    frame_indices,
-    locator_tips,
-    points_world,
-    read_plan,
-    replay_from_plan,
-    rest_replay,
-    scene_figure,
-    scene_info,
-    shape_mesh,
-    sphere_mesh,
-    write_scene,
-)
+from fixplan.present.browser import CHROMIUM, open_page
+from fixplan.present.meshes import box_mesh, locator_tips, points_world, shape_mesh, sphere_mesh
+from fixplan.present.page import external_references, write_scene
+from fixplan.present.replay import read_plan, replay_from_plan, rest_replay
+from fixplan.present.scene import FORCE_ARROW_FRACTION, MAX_FRAMES, frame_indices, scene_figure, scene_info
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEMS = ROOT / "problems"

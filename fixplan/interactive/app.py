@@ -50,7 +50,7 @@ PUSH = (44, 160, 44)
 
 def _mesh(fixture: Any) -> tuple[FloatArray, NDArray[np.int64]]:
     """Body-frame mesh of the workpiece (2D shapes extruded to a thin slab)."""
-    from fixplan.view import shape_mesh, shape_outline
+    from fixplan.present.meshes import shape_mesh, shape_outline
 
     shape = fixture.workpiece.shape
     if fixture.dimension == 3:
@@ -329,7 +329,7 @@ class HapticApp:
             return
         self._last = snap
         fx = s.fixture
-        from fixplan.view import locator_tips
+        from fixplan.present.meshes import locator_tips
 
         pose = snap.pose
         with self.server.atomic():

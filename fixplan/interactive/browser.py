@@ -1,6 +1,6 @@
 """Open the ``fixplan haptic`` page in headless Chromium (the browser test, the gallery, the benchmark).
 
-Like :mod:`fixplan._browser` for ``fixplan view``: Playwright drives Debian's ``chromium``; any
+Like :mod:`fixplan.present.browser` for ``fixplan view``: Playwright drives Debian's ``chromium``; any
 request to a host other than the page's own (127.0.0.1) is blocked and recorded.
 """
 
@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
-from fixplan._browser import BrowserErrors
 from fixplan.errors import FixplanError
+from fixplan.present.browser import BrowserErrors
 
 
 @dataclass
@@ -37,7 +37,7 @@ def open_live_page(
     timeout_s: float = 60.0,
 ) -> LivePageReport:
     """Open ``url``, wait for the viser canvas (and ``wait_text`` in the panel), keep it open ``hold_s``."""
-    from fixplan._browser import CHROMIUM, CHROMIUM_ARGS, browser_available
+    from fixplan.present.browser import CHROMIUM, CHROMIUM_ARGS, browser_available
 
     why = browser_available()
     if why is not None:

@@ -1,12 +1,8 @@
-"""The scene as one self-contained HTML page: workpiece, locators, contact normals, force arrows, replay.
+"""The scene figure: workpiece, locators, contact normals, force arrows, and the replay's frames.
 
-:func:`read_plan` turns the JSON written by ``fixplan solve --out`` into a :class:`Replay` (the
-verification trace when present: the simulated motion sampled every 10 ms, with the contact
-forces; else the planned knot poses), checking that the plan belongs to the fixture.
-:func:`rest_replay` is the scene without a plan: the start pose with the contact forces that
-hold the part at rest under gravity. :func:`scene_figure` draws a replay with plotly (3D: Mesh3d
-workpiece and locator tips; 2D: filled polygons) and :func:`write_scene` writes the page with
-plotly.js embedded, so the page fetches nothing when it is opened.
+:func:`scene_figure` draws a :class:`~fixplan.present.replay.Replay` (a plan's timeline, or the
+start pose at rest) with plotly (3D: Mesh3d workpiece and locator tips; 2D: filled polygons);
+:func:`~fixplan.present.page.write_scene` writes it as a page that fetches nothing.
 
 Drawing conventions (one place):
 
@@ -25,23 +21,18 @@ plotly is imported inside the functions that need it, so ``import fixplan`` stay
 
 from __future__ import annotations
 
-import re
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
-from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from fixplan.errors import FixplanError, InputError
-from fixplan.geometry.shapes import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
-from fixplan.planner.plan import pose_from_json  # noqa: F401 - the old home of the plan's pose reader
-from fixplan.pose import Pose
+from fixplan.present.meshes import locator_tips, points_world, shape_mesh, shape_outline, sphere_mesh
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture
-    from fixplan.planner.plan import Plan, Timeline
+    from fixplan.pose import Pose
+    from fixplan.present.replay import Replay
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -63,147 +54,6 @@ PUSH = "#2ca02c"
 PATH = "#17becf"
 
 
-# -- the replay ----------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Replay:
-    """What the page shows: a :class:`~fixplan.planner.plan.Timeline` with where it comes from.
-
-    Attributes
-    ----------
-    source : {"trace", "plan", "rest"}
-        The simulated verification trace, the planned knot poses, or the start pose at rest.
-    timeline : Timeline
-        Poses over time, with the pressed locators, the contact forces on the workpiece (world
-        axes [N]; None: not known) and the hand's push (``coupling_wrench``: force, moment about
-        the body origin, world axes; None: not known).
-    note : str
-        One line for the title (what is shown, status).
-    extra_forces : tuple of (point_world, force_world_N)
-        Forces at explicit ``[[contact]]`` entries (rest only), drawn like locator forces.
-    """
-
-    source: str
-    timeline: Timeline
-    note: str
-    extra_forces: tuple[tuple[FloatArray, FloatArray], ...] = ()
-
-    def __len__(self) -> int:
-        return len(self.timeline)
-
-    @property
-    def time_s(self) -> FloatArray:
-        return self.timeline.time_s
-
-    @property
-    def poses(self) -> tuple[Pose, ...]:
-        return self.timeline.poses
-
-    @property
-    def pressed(self) -> tuple[tuple[str, ...], ...]:
-        return self.timeline.pressed
-
-    @property
-    def forces_world_N(self) -> FloatArray | None:
-        return self.timeline.forces_world_N
-
-    @property
-    def push_wrench(self) -> FloatArray | None:
-        return self.timeline.coupling_wrench
-
-
-def read_plan(path: Path, fixture: Fixture) -> Replay:
-    """Read a plan JSON (``fixplan solve --out``), check it belongs to ``fixture``, and replay it.
-
-    Raises
-    ------
-    InputError
-        The file is unreadable, not JSON, not a fixplan plan, malformed, or for another fixture
-        (other locator names, another dimension, or another start pose).
-    """
-    from fixplan.planner.plan import read_plan as read
-
-    return plan_replay(read(Path(path), fixture), fixture, str(path))
-
-
-def replay_from_plan(data: Any, fixture: Fixture, source: str = "plan") -> Replay:
-    """The replay of a plan file's JSON object (see :func:`read_plan`)."""
-    from fixplan.planner.plan import plan_for_fixture
-
-    return plan_replay(plan_for_fixture(data, fixture, source), fixture, source)
-
-
-def plan_replay(plan: Plan, fixture: Fixture, source: str = "plan") -> Replay:
-    """The replay of a plan: its verification trace when there is one, else its knot poses."""
-    from fixplan.planner.plan import STATUS_WORDS, knot_timeline
-
-    v = plan.verification
-    if v is not None and v.trace is not None:
-        verdict = "passed" if v.passed else f"FAILED: {v.reason}"
-        what = "haptic session" if plan.extras.get("source") == "haptic session" else "simulated verification"
-        note = f"{what} ({verdict}), {len(v.trace)} samples, {v.trace.time_s[-1]:.2f} s"
-        return Replay("trace", v.trace, note)
-    if plan.transitions:
-        knots = knot_timeline(plan, fixture, source)
-        note = (
-            f"planned knot poses ({len(knots)} knots, {sum(plan.durations_s):.2f} s; no verification trace, "
-            "so no contact forces)"
-        )
-        return Replay("plan", knots, note)
-    words = STATUS_WORDS.get(plan.status, f"plan {plan.status}")
-    note = f"{words}{': ' + plan.reason if plan.reason else ''} (nothing to replay)"
-    return Replay("plan", _at_rest(fixture), note)
-
-
-def _at_rest(fixture: Fixture, forces_world_N: FloatArray | None = None) -> Timeline:
-    """One sample at the start pose with the locators touching there."""
-    from fixplan.locating import locator_contact
-    from fixplan.planner.plan import Timeline
-
-    tol = fixture.tolerances.touch_m
-    pose = fixture.start
-    touching = tuple(loc.name for loc in fixture.locators if locator_contact(fixture.workpiece, pose, loc).gap_m <= tol)
-    names = tuple(loc.name for loc in fixture.locators)
-    return Timeline(names, np.zeros(1), (pose,), (touching,), forces_world_N=forces_world_N)
-
-
-def rest_replay(fixture: Fixture, *, forces: bool = True) -> Replay:
-    """The start pose at rest: the locators touching there, and (``forces``) the contact forces under gravity.
-
-    The forces come from :func:`fixplan.classify` with no push: drawn when the part is ``held``
-    or ``jammed`` at rest, else the note says what gravity alone does.
-    """
-    replay = Replay("rest", _at_rest(fixture), "start pose")
-    if not forces:
-        return replay
-    from fixplan.jamming import classify
-    from fixplan.locating import contact_set
-
-    try:
-        cs = contact_set(fixture, "start")
-        if not cs.contacts:
-            return replace(replay, note="start pose (no contacts: nothing holds the part)")
-        # as_json: each result is its JSON dictionary, with the contact forces in world axes
-        result = cast(
-            dict[str, Any], classify(fixture, np.zeros((1, fixture.ndof)), pose="start", jobs=1, as_json=True)[0]
-        )
-    except FixplanError as exc:
-        return replace(replay, note=f"start pose (no rest forces: {exc})")
-    mode = result["mode"]
-    if mode not in ("held", "jammed"):
-        return replace(replay, note=f"start pose (under gravity alone the part {mode}: no rest forces)")
-    names = [loc.name for loc in fixture.locators]
-    F = np.zeros((1, len(names), fixture.dimension))
-    extra = []
-    points = {c.name: c.point_world for c in cs.contacts}
-    for name, f in result["contact_forces"].items():
-        fw = np.asarray(f["force_world"], dtype=float)
-        if name in names:
-            F[0, names.index(name)] = fw
-        else:
-            extra.append((np.asarray(points[name], dtype=float), fw))
-    return Replay("rest", _at_rest(fixture, F), f"start pose at rest under gravity ({mode})", tuple(extra))
-
-
 def frame_indices(n_samples: int, max_frames: int = MAX_FRAMES) -> IntArray:
     """At most ``max_frames`` evenly spread sample indices, always the first and the last."""
     if n_samples <= 0:
@@ -213,99 +63,6 @@ def frame_indices(n_samples: int, max_frames: int = MAX_FRAMES) -> IntArray:
     if max_frames < 2:
         return np.array([n_samples - 1], dtype=np.int64)
     return np.unique(np.round(np.linspace(0, n_samples - 1, max_frames)).astype(np.int64))
-
-
-# -- geometry ------------------------------------------------------------------------------------
-def box_mesh(half: Sequence[float]) -> tuple[FloatArray, IntArray]:
-    """The 8 corners (body frame) and 12 outward-oriented triangles of a box of half extents ``half``."""
-    hx, hy, hz = (float(h) for h in half)
-    V = np.array([[sx * hx, sy * hy, sz * hz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    # corner index = 4 i_x + 2 i_y + i_z (i = 0 for −, 1 for +)
-    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]  # -x +x -y +y -z +z
-    F = np.array([t for a, b, c, e in quads for t in ((a, b, c), (a, c, e))], dtype=np.int64)
-    return V, F
-
-
-def cylinder_mesh(radius: float, length: float, segments: int = 32) -> tuple[FloatArray, IntArray]:
-    """A closed cylinder, axis along body z: two rings of ``segments`` vertices and the two cap centres."""
-    a = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
-    ring = np.stack([radius * np.cos(a), radius * np.sin(a)], axis=1)
-    h = length / 2.0
-    V = np.vstack(
-        [np.column_stack([ring, np.full(segments, -h)]), np.column_stack([ring, np.full(segments, h)]), [[0, 0, -h]]]
-    )
-    V = np.vstack([V, [[0.0, 0.0, h]]])
-    bottom, top = 2 * segments, 2 * segments + 1
-    F = []
-    for k in range(segments):
-        j = (k + 1) % segments
-        F += [(k, j, segments + j), (k, segments + j, segments + k), (bottom, j, k), (top, segments + k, segments + j)]
-    return V, np.array(F, dtype=np.int64)
-
-
-def sphere_mesh(radius: float, rings: int = 12, segments: int = 24) -> tuple[FloatArray, IntArray]:
-    """A UV sphere: two poles and ``rings − 1`` rings of ``segments`` vertices."""
-    V = [[0.0, 0.0, radius]]
-    for i in range(1, rings):
-        th = np.pi * i / rings
-        for k in range(segments):
-            ph = 2.0 * np.pi * k / segments
-            V.append([radius * np.sin(th) * np.cos(ph), radius * np.sin(th) * np.sin(ph), radius * np.cos(th)])
-    V.append([0.0, 0.0, -radius])
-    south = len(V) - 1
-    F = []
-
-    def at(i: int, k: int) -> int:
-        return 1 + (i - 1) * segments + k % segments
-
-    for k in range(segments):
-        F.append((0, at(1, k), at(1, k + 1)))
-        F.append((south, at(rings - 1, k + 1), at(rings - 1, k)))
-        for i in range(1, rings - 1):
-            F += [(at(i, k), at(i + 1, k), at(i + 1, k + 1)), (at(i, k), at(i + 1, k + 1), at(i, k + 1))]
-    return np.array(V), np.array(F, dtype=np.int64)
-
-
-def shape_mesh(shape: Shape) -> tuple[FloatArray, IntArray]:
-    """Vertices (body frame) and triangles of a 3D shape."""
-    if isinstance(shape, Box):
-        return box_mesh(tuple(float(h) for h in shape.half))
-    if isinstance(shape, Cylinder):
-        return cylinder_mesh(shape.radius, shape.length)
-    if isinstance(shape, Sphere):
-        return sphere_mesh(shape.radius)
-    raise InputError(f"no mesh for a {shape.name} workpiece (expected box, cylinder or sphere)")
-
-
-def shape_outline(shape: Shape, segments: int = 64) -> FloatArray:
-    """The outline of a 2D shape, counter-clockwise vertices in the body frame (not closed)."""
-    if isinstance(shape, Rectangle):
-        hx, hy = shape.half
-        return np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
-    if isinstance(shape, Disk):
-        a = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
-        return shape.radius * np.stack([np.cos(a), np.sin(a)], axis=1)
-    if isinstance(shape, Polygon):
-        return shape.array.copy()
-    raise InputError(f"no outline for a {shape.name} workpiece (expected rectangle, disk or polygon)")
-
-
-def points_world(pose: Pose, points_body: FloatArray) -> FloatArray:
-    """Body-frame points (rows) moved to the world frame by ``T_world_body``."""
-    return np.asarray(points_body, dtype=float) @ pose.R_world_body.T + pose.p_world
-
-
-def locator_tips(fixture: Fixture, pose: Pose) -> tuple[FloatArray, FloatArray]:
-    """Per locator (fixture order): the tip ``p + ρ n`` and the contact normal ``n`` at ``pose``."""
-    from fixplan.locating import locator_contact
-
-    tips, normals = [], []
-    for loc in fixture.locators:
-        c = locator_contact(fixture.workpiece, pose, loc)
-        tips.append(loc.p_world + loc.radius_m * c.normal_world)
-        normals.append(c.normal_world)
-    d = fixture.dimension
-    return np.array(tips).reshape(-1, d), np.array(normals).reshape(-1, d)
 
 
 def force_scale(fixture: Fixture, replay: Replay) -> float:
@@ -742,34 +499,3 @@ def _add_controls(fig: Any, names: list[str], times: list[float], *, redraw: boo
             }
         ],
     )
-
-
-# -- the page ------------------------------------------------------------------------------------
-_EXTERNAL = re.compile(r"""<(?:script|link|img|iframe)\b[^>]*\b(?:src|href)\s*=\s*["']?\s*(?:https?:)?//""", re.I)
-
-
-def external_references(html: str) -> list[str]:
-    """Tags of ``html`` that would load something from the network (script/link/img/iframe src or href)."""
-    return [m.group(0) for m in _EXTERNAL.finditer(html)]
-
-
-def write_scene(fig: Any, path: Path) -> int:
-    """Write ``fig`` as a self-contained HTML page (plotly.js embedded, no MathJax); return its size [bytes].
-
-    Raises
-    ------
-    FixplanError
-        The page would fetch something (a bug: every script is embedded).
-    """
-    html = fig.to_html(
-        include_plotlyjs=True,
-        include_mathjax=False,
-        full_html=True,
-        auto_play=False,
-        config={"displaylogo": False, "responsive": True},
-    )
-    refs = external_references(html)
-    if refs:
-        raise FixplanError(f"the page would fetch {refs[0]!r}: refusing to write {path}")
-    Path(path).write_text(html, encoding="utf-8")
-    return len(html.encode("utf-8"))

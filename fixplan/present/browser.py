@@ -1,6 +1,6 @@
 """Open a page written by ``fixplan view`` in headless Chromium and report what it did.
 
-Used by the browser test and by ``make gallery`` (``python -m fixplan._browser page.html shot.png``).
+Used by the browser test and by ``make gallery`` (``python -m fixplan.present.browser page.html shot.png``).
 Playwright (the ``dev`` extra) drives Debian's ``chromium`` at :data:`CHROMIUM`; its own browser
 download (``playwright install``) is never used. Every request that is not the page's own file
 is blocked and recorded, so a page that tries to fetch anything is caught.
@@ -168,8 +168,8 @@ def open_page(
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m fixplan._browser PAGE.html SHOT.png [--width W] [--height H]``: screenshot a page."""
-    parser = argparse.ArgumentParser(prog="python -m fixplan._browser", description=main.__doc__)
+    """``python -m fixplan.present.browser PAGE.html SHOT.png [--width W] [--height H]``: screenshot a page."""
+    parser = argparse.ArgumentParser(prog="python -m fixplan.present.browser", description=main.__doc__)
     parser.add_argument("html", type=Path)
     parser.add_argument("png", type=Path)
     parser.add_argument("--width", type=int, default=900)
@@ -177,15 +177,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--first-frame", action="store_true", help="Screenshot the first frame, not the last.")
     args = parser.parse_args(argv)
     if not args.html.is_file():
-        print(f"fixplan._browser: {args.html}: no such file", file=sys.stderr)
+        print(f"fixplan.present.browser: {args.html}: no such file", file=sys.stderr)
         return 2
     try:
         report = open_page(args.html, args.png, width=args.width, height=args.height, last_frame=not args.first_frame)
     except FixplanError as exc:
-        print(f"fixplan._browser: {exc}", file=sys.stderr)
+        print(f"fixplan.present.browser: {exc}", file=sys.stderr)
         return 2
     for line in report.errors:
-        print(f"fixplan._browser: {line}", file=sys.stderr)
+        print(f"fixplan.present.browser: {line}", file=sys.stderr)
     print(f"wrote {args.png} ({args.png.stat().st_size / 1024:.0f} KB)")
     return 1 if report.errors else 0
 
