@@ -35,7 +35,7 @@ from run import Section
 
 import fixplan
 from fixplan.engine.simulator import Simulator
-from fixplan.pose import Pose, matrix_from_quaternion_wxyz, quaternion_wxyz_from_matrix
+from fixplan.spatial import Pose, matrix_from_quaternion_wxyz, quaternion_wxyz_from_matrix
 
 try:
     import mujoco

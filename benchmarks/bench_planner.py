@@ -19,7 +19,7 @@ from run import Section
 import fixplan
 from fixplan.locating import locator_contact
 from fixplan.planner.fine import plan_transition
-from fixplan.pose import Pose, exp_so3, log_so3
+from fixplan.spatial import Pose, exp_so3, log_so3
 
 ROOT = Path(__file__).resolve().parents[1]
 # the default fixture and the 2D target case first, then every other full fixture of problems/

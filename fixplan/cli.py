@@ -248,7 +248,7 @@ def _fixture_summary(fixture) -> dict[str, Any]:  # type: ignore[no-untyped-def]
     """What validate says about a loaded fixture: kind, note, warnings, and the --verbose details."""
     from fixplan.errors import Issue
     from fixplan.locating import contact_set, locator_contact
-    from fixplan.pose import rpy_from_matrix
+    from fixplan.spatial import rpy_from_matrix
 
     d = fixture.dimension
     kind = f"{d}D {fixture.workpiece.shape.name}, {len(fixture.locators)} locators, {len(fixture.contacts)} contacts"

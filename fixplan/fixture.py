@@ -24,10 +24,10 @@ from numpy.typing import NDArray
 from fixplan import limits
 from fixplan.errors import FixtureError, InfeasibleError, Issue
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
-from fixplan.pose import Pose
 from fixplan.schema import Reader, shorten
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
 from fixplan.settings import Tolerances
+from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]
 

@@ -44,7 +44,7 @@ from fixplan.errors import FixtureError, InfeasibleError, InputError
 from fixplan.fixture import Fixture, loads
 from fixplan.geometry import Polygon
 from fixplan.locating import contact_set, locator_gaps, solve_goal
-from fixplan.pose import cross2, rot2
+from fixplan.spatial import cross2, rot2
 
 FAMILIES: dict[str, str] = {
     "box-321": (

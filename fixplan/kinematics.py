@@ -23,26 +23,9 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fixplan.pose import Pose, cross2
+from fixplan.spatial import Pose, cross2, shift_wrench, skew, tangent_basis
 
 FloatArray = NDArray[np.float64]
-
-
-def tangent_basis(normal: ArrayLike) -> FloatArray:
-    """Unit tangents completing ``normal`` to a right-handed frame: (1, 2) in 2D, (2, 3) in 3D."""
-    n = np.asarray(normal, dtype=float)
-    if n.shape[0] == 2:
-        return np.array([[-n[1], n[0]]])
-    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    t1 = a - (a @ n) * n
-    t1 /= np.linalg.norm(t1)
-    t2 = _skew(n) @ t1  # n × t1 (np.cross costs ~50 µs a call here: it is on the search's hot path)
-    return np.stack([t1, t2])
-
-
-def _skew(v: FloatArray) -> FloatArray:
-    """The matrix ``[v]×`` with ``[v]× x = v × x``."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 @dataclass(frozen=True)
@@ -90,7 +73,7 @@ class Contact:
         frame = np.vstack([n, self.tangents_world])  # rows n, t1, t2
         J = np.zeros((self.size, 6))
         J[:3, :3] = frame
-        J[:3, 3:] = frame @ _skew(r).T  # row x: (r × x)ᵀ = xᵀ [r]×ᵀ
+        J[:3, 3:] = frame @ skew(r).T  # row x: (r × x)ᵀ = xᵀ [r]×ᵀ
         if self.soft:
             J[3, 3:] = n
         return J
@@ -173,24 +156,8 @@ class ContactSet:
 
     def wrench_about_com(self, wrench: ArrayLike, about_world: ArrayLike | None = None) -> FloatArray:
         """Re-express a wrench given about a world point (default: body origin) about ``c``."""
-        w = np.asarray(wrench, dtype=float)
-        d = self.dimension
-        point = self.body_origin_world if about_world is None else np.asarray(about_world, dtype=float)
-        offset = point - self.com_world
-        if d == 3:
-            F = w[:3]
-            o = offset
-            return np.array(
-                [
-                    F[0],
-                    F[1],
-                    F[2],
-                    w[3] + o[1] * F[2] - o[2] * F[1],
-                    w[4] + o[2] * F[0] - o[0] * F[2],
-                    w[5] + o[0] * F[1] - o[1] * F[0],
-                ]
-            )
-        return np.array([w[0], w[1], w[2] + offset[0] * w[1] - offset[1] * w[0]])
+        point = self.body_origin_world if about_world is None else about_world
+        return shift_wrench(wrench, point, self.com_world)
 
 
 def mass_matrix(mass_kg: float, inertia_body: ArrayLike, R_world_body: ArrayLike) -> FloatArray:

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from fixplan.errors import InfeasibleError, InputError
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
-from fixplan.pose import Pose
+from fixplan.spatial import Pose
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture, Locator, Workpiece

@@ -40,7 +40,7 @@ from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.fixture import Fixture, Locator
 from fixplan.locating import contact_set, locator_contact, locator_gaps, solve_goal
 from fixplan.planner.execute import ExecutionNoise, ExecutionSettings, Step
-from fixplan.pose import Pose
+from fixplan.spatial import Pose
 
 if TYPE_CHECKING:
     from fixplan.planner.solve import PlanResult

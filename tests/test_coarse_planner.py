@@ -7,7 +7,7 @@ import pytest
 
 from fixplan.errors import InputError
 from fixplan.planner.coarse import search
-from fixplan.pose import Pose
+from fixplan.spatial import Pose
 
 START = Pose.identity(3)
 

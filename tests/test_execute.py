@@ -15,7 +15,7 @@ import pytest
 import fixplan
 from fixplan.jamming.search import search_wrench
 from fixplan.planner.execute import ExecutionSettings, Executor, Step, origin_motion, project_keeping
-from fixplan.pose import Pose
+from fixplan.spatial import Pose
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 G = 9.81

@@ -16,7 +16,7 @@ from fixplan.errors import InputError
 from fixplan.fixture import default_fixture_path
 from fixplan.locating import locator_contact
 from fixplan.planner.fine import Transition, feature_at, plan_transition
-from fixplan.pose import Pose
+from fixplan.spatial import Pose
 
 ROOT = Path(__file__).resolve().parents[1]
 TOUCH = 1e-6  # [m]

@@ -48,7 +48,7 @@ def test_user_feels_the_locator_reaction():
 def test_compiled_coupling_matches_the_python_formula(rng):
     """The tick's compiled coupling equals K (x_d − x_w) + B (ẋ_d − ẋ_w) computed from the workpiece coordinates."""
     from fixplan.haptics import _kernels
-    from fixplan.pose import Pose
+    from fixplan.spatial import Pose
 
     f = fixplan.load(fixplan.default_fixture_path())
     sim = Simulator(f)
@@ -68,7 +68,7 @@ def test_compiled_coupling_matches_the_python_formula(rng):
 
 def test_tick_applies_the_coupling_of_the_rotating_part(rng):
     """The wrench a tick applies is K (x_d − x_w) + B (ẋ_d − ẋ_w) of the part's state before the step (spinning part)."""
-    from fixplan.pose import Pose
+    from fixplan.spatial import Pose
 
     f = fixplan.load(fixplan.default_fixture_path())
     sim = Simulator(f)

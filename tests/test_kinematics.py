@@ -1,7 +1,6 @@
-"""Contact kinematics: Jacobians against finite differences on SE(3)/SE(2), poses vs pinocchio."""
+"""Contact kinematics: Jacobians against finite differences on SE(3)/SE(2)."""
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
 import fixplan
@@ -9,20 +8,7 @@ from fixplan.fixture import Locator, Workpiece
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Sphere
 from fixplan.kinematics import com_world
 from fixplan.locating import locator_contact
-from fixplan.pose import Pose, exp_so3, log_so3, matrix_from_rpy, quaternion_wxyz_from_matrix
-
-
-def test_pose_helpers_match_pinocchio(rng):
-    for _ in range(20):
-        rpy = rng.uniform(-1.5, 1.5, 3)
-        assert np.allclose(matrix_from_rpy(rpy), pin.rpy.rpyToMatrix(*rpy), atol=1e-14)
-        w = rng.normal(size=3)
-        assert np.allclose(exp_so3(w), pin.exp3(w), atol=1e-14)
-        assert np.allclose(log_so3(exp_so3(w)), pin.log3(pin.exp3(w)), atol=1e-10)
-        q = pin.Quaternion(matrix_from_rpy(rpy))
-        ours = quaternion_wxyz_from_matrix(matrix_from_rpy(rpy))
-        ref = np.array([q.w, q.x, q.y, q.z]) * np.sign(q.w)
-        assert np.allclose(ours, ref, atol=1e-12)
+from fixplan.spatial import Pose, log_so3
 
 
 def _workpiece(shape, mass=1.3):

@@ -114,7 +114,7 @@ def test_replan_from_a_part_touching_nothing():
     """A part knocked free of every locator is re-planned from where it is (it raised a
     ValueError in the goal solver, which got no locators)."""
     from fixplan.planner.solve import Planner
-    from fixplan.pose import Pose
+    from fixplan.spatial import Pose
 
     fx = fixplan.load(fixplan.default_fixture_path())
     raised = Pose(fx.start.R_world_body, fx.start.p_world + np.array([0.0, 0.0, 0.01]))

@@ -8,8 +8,6 @@ nothing per step); the others return a new array (the planar step).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
@@ -145,51 +143,3 @@ def invert_small(A, out):
         for j in range(d):
             out[i, j] = M[i, d + j]
     return True
-
-
-@njit(cache=True)
-def exp_so3_into(x, y, z, R):
-    """``R = exp([x, y, z]^)`` by Rodrigues' formula, entry by entry."""
-    th2 = x * x + y * y + z * z
-    th = math.sqrt(th2)
-    if th < 1e-8:
-        a, b = 1.0, 0.5
-    else:
-        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
-    R[0, 0] = 1.0 - b * (y * y + z * z)
-    R[1, 1] = 1.0 - b * (x * x + z * z)
-    R[2, 2] = 1.0 - b * (x * x + y * y)
-    R[0, 1] = -a * z + b * x * y
-    R[1, 0] = a * z + b * x * y
-    R[0, 2] = a * y + b * x * z
-    R[2, 0] = -a * y + b * x * z
-    R[1, 2] = -a * x + b * y * z
-    R[2, 1] = a * x + b * y * z
-
-
-@njit(cache=True)
-def quat_into(R, out):
-    """Unit quaternion ``(w, x, y, z)``, ``w ≥ 0`` (as :func:`fixplan.pose.quaternion_wxyz_from_matrix`)."""
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    if tr > 0:
-        s = 2.0 * math.sqrt(tr + 1.0)
-        out[0] = 0.25 * s
-        out[1] = (R[2, 1] - R[1, 2]) / s
-        out[2] = (R[0, 2] - R[2, 0]) / s
-        out[3] = (R[1, 0] - R[0, 1]) / s
-    else:
-        i = 0
-        if R[1, 1] > R[i, i]:
-            i = 1
-        if R[2, 2] > R[i, i]:
-            i = 2
-        j, m = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * math.sqrt(1.0 + R[i, i] - R[j, j] - R[m, m])
-        out[0] = (R[m, j] - R[j, m]) / s
-        out[1 + i] = 0.25 * s
-        out[1 + j] = (R[j, i] + R[i, j]) / s
-        out[1 + m] = (R[m, i] + R[i, m]) / s
-    nq = math.sqrt(out[0] ** 2 + out[1] ** 2 + out[2] ** 2 + out[3] ** 2)
-    sgn = 1.0 if out[0] / nq >= 0 else -1.0
-    for a in range(4):
-        out[a] = sgn * out[a] / nq

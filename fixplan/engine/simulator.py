@@ -6,7 +6,7 @@ angular-momentum update, position post-stabilisation). Wrenches are given as eve
 fixplan: force and moment about the body-frame origin, world axes, applied in addition to
 gravity.
 
-State conventions: the pose is ``T_world_body`` (:class:`~fixplan.pose.Pose`); the twist is
+State conventions: the pose is ``T_world_body`` (:class:`~fixplan.spatial.Pose`); the twist is
 ``(v, ω)`` of the centre of mass in world axes (3D: 6 numbers, 2D: ``(vx, vy, ω)``).
 """
 
@@ -27,8 +27,8 @@ from fixplan.engine import step as kernels
 from fixplan.engine.detect import encode
 from fixplan.errors import InputError, SolverError
 from fixplan.fixture import Fixture
-from fixplan.pose import Pose, quaternion_wxyz_from_matrix, rot2
 from fixplan.settings import DEFAULT, EngineSettings
+from fixplan.spatial import Pose, quaternion_wxyz_from_matrix, rot2, shift_wrench_by, tangent_basis
 
 FloatArray = NDArray[np.float64]
 _LOADED: set[int] = set()  # dimensions whose compiled loop this process has already called
@@ -360,12 +360,10 @@ class Simulator:
         w = np.asarray(wrench, dtype=float)
         if w.shape != ((6,) if d == 3 else (3,)) or not np.isfinite(w).all():
             raise InputError(f"wrench expects {6 if d == 3 else 3} finite numbers, got {np.asarray(wrench).tolist()}")
-        o = -(self._R @ self._com_b)  # body origin relative to the centre of mass
+        w_com = shift_wrench_by(w, self._R @ self._com_b)  # from the body origin to the centre of mass
         if d == 3:
-            F = w[:3]
-            cross = np.array([o[1] * F[2] - o[2] * F[1], o[2] * F[0] - o[0] * F[2], o[0] * F[1] - o[1] * F[0]])
-            return g + F, w[3:] + cross
-        return g + w[:2], float(w[2] + o[0] * w[1] - o[1] * w[0])
+            return g + w_com[:3], w_com[3:]
+        return g + w_com[:2], float(w_com[2])
 
     def step(self, wrench: ArrayLike | None = None) -> StepInfo:
         """Advance one step under ``wrench`` (about the body origin) plus gravity."""
@@ -448,8 +446,6 @@ class Simulator:
                 reports.append(ContactReport(name, float(self._gap[i]), 0.0, np.zeros(d), 0.0, "open"))
                 continue
             if d == 3:
-                from fixplan.kinematics import tangent_basis
-
                 t1, t2 = tangent_basis(n)
                 force = (Pn * n + self._P[i, 1] * t1 + self._P[i, 2] * t2) / h
                 slip = float(np.hypot(self._u[i, 1], self._u[i, 2]))

@@ -53,8 +53,9 @@ import math
 import numpy as np
 from numba import njit
 
+from fixplan._spatial_kernels import exp_so3_into, quat_into, shifted_moment2, shifted_moment3, tangents3
 from fixplan.engine.detect import BOX, box_query3, project, query3
-from fixplan.engine.linalg import exp_so3_into, mm, mm3_into, mtv, mtv3_into, mv, mv3_into, quat_into
+from fixplan.engine.linalg import mm, mm3_into, mtv, mtv3_into, mv, mv3_into
 from fixplan.engine.local import WORKSPACE_SIZE, project_cone_into
 from fixplan.engine.nsgs import nsgs_dense
 
@@ -388,22 +389,14 @@ def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, lo
         row = offsets[jj]
         n0, n1, n2 = n_w[i, 0], n_w[i, 1], n_w[i, 2]
         r0, r1, r2 = pt_w[i, 0] - c[0], pt_w[i, 1] - c[1], pt_w[i, 2] - c[2]
-        # tangents: the choice of tangents3 / fixplan.kinematics.tangent_basis
-        if abs(n0) < 0.9:
-            e0, e1, e2 = 1.0, 0.0, 0.0
-        else:
-            e0, e1, e2 = 0.0, 1.0, 0.0
-        dot = e0 * n0 + e1 * n1 + e2 * n2
-        s0, s1, s2 = e0 - dot * n0, e1 - dot * n1, e2 - dot * n2
-        nrm = math.sqrt(s0**2 + s1**2 + s2**2)
-        s0, s1, s2 = s0 / nrm, s1 / nrm, s2 / nrm
+        s0, s1, s2, b0, b1, b2 = tangents3(n0, n1, n2)  # fixplan.spatial.tangent_basis
         for a in range(3):
             if a == 0:
                 t0, t1, t2 = n0, n1, n2
             elif a == 1:
                 t0, t1, t2 = s0, s1, s2
             else:
-                t0, t1, t2 = n1 * s2 - n2 * s1, n2 * s0 - n0 * s2, n0 * s1 - n1 * s0
+                t0, t1, t2 = b0, b1, b2
             J[row + a, 0] = t0
             J[row + a, 1] = t1
             J[row + a, 2] = t2
@@ -612,7 +605,7 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
     rec_it = np.zeros(n_rec, dtype=np.int64)
     f_ext = np.zeros(3)
     tau = np.zeros(3)
-    off = np.zeros(3)
+    r_com = np.zeros(3)
     r = 0
     re = 0
     if first:
@@ -634,16 +627,15 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
     ks = 0
     for s in range(1, n_steps + 1):
         ks = _schedule_index(times, t, ks)
-        mv3_into(R, com_b, off)
-        for a in range(3):
-            off[a] = -off[a]  # body origin relative to the centre of mass
+        mv3_into(R, com_b, r_com)  # lever from the body origin to the centre of mass
         F0, F1, F2 = wrenches[ks, 0], wrenches[ks, 1], wrenches[ks, 2]
         f_ext[0] = gravity_f[0] + F0
         f_ext[1] = gravity_f[1] + F1
         f_ext[2] = gravity_f[2] + F2
-        tau[0] = wrenches[ks, 3] + (off[1] * F2 - off[2] * F1)
-        tau[1] = wrenches[ks, 4] + (off[2] * F0 - off[0] * F2)
-        tau[2] = wrenches[ks, 5] + (off[0] * F1 - off[1] * F0)
+        # the schedule's wrench is about the body origin; the step wants it about the centre of mass
+        tau[0], tau[1], tau[2] = shifted_moment3(
+            F0, F1, F2, wrenches[ks, 3], wrenches[ks, 4], wrenches[ks, 5], r_com[0], r_com[1], r_com[2]
+        )
         speed = (
             math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
             + math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]) * bound
@@ -737,12 +729,12 @@ def run2(n_steps, record_every, first, t_start, theta, p, v, w, mass, Izz, com_b
     for s in range(1, n_steps + 1):
         ks = _schedule_index(times, t, ks)
         cs, sn = math.cos(theta), math.sin(theta)
-        o0 = -(cs * com_b[0] - sn * com_b[1])
-        o1 = -(sn * com_b[0] + cs * com_b[1])
+        r0 = cs * com_b[0] - sn * com_b[1]  # lever from the body origin to the centre of mass
+        r1 = sn * com_b[0] + cs * com_b[1]
         F0, F1 = wrenches[ks, 0], wrenches[ks, 1]
         f_ext[0] = gravity_f[0] + F0
         f_ext[1] = gravity_f[1] + F1
-        tau = wrenches[ks, 2] + o0 * F1 - o1 * F0
+        tau = shifted_moment2(F0, F1, wrenches[ks, 2], r0, r1)  # about the centre of mass
         speed = math.sqrt(v[0] * v[0] + v[1] * v[1]) + abs(w) * bound
         margin = margin_m + 2.0 * h * speed
         out = step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r, mu,

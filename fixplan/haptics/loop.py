@@ -29,7 +29,7 @@ from fixplan.errors import InputError
 from fixplan.haptics import _kernels
 from fixplan.haptics.coupling import VirtualCoupling
 from fixplan.haptics.device import SimulatedDevice
-from fixplan.pose import Pose, log_so3
+from fixplan.spatial import Pose, log_so3, shift_twist
 
 FloatArray = NDArray[np.float64]
 Operator = Callable[[float, SimulatedDevice], ArrayLike]
@@ -115,17 +115,11 @@ class HapticLoop:
 
     def workpiece_coordinates(self) -> tuple[FloatArray, FloatArray]:
         """Workpiece coordinates matching the device's: body origin (+ rotation vector), and their rates."""
-        pose, twist = self.sim.state
-        d = self.sim.dimension
-        if d == 3:
-            x = np.concatenate([pose.p_world, log_so3(pose.R_world_body @ self._R0.T)])
-            w = twist[3:]
-            v_origin = twist[:3] + np.cross(w, pose.p_world - self.sim.com_world)
-            return x, np.concatenate([v_origin, w])
-        x = np.array([pose.p_world[0], pose.p_world[1], pose.angle_rad])
-        wz = float(twist[2])
-        off = pose.p_world - self.sim.com_world
-        return x, np.array([twist[0] - wz * off[1], twist[1] + wz * off[0], wz])
+        pose, nu_com = self.sim.state
+        nu_origin = shift_twist(nu_com, self.sim.com_world, pose.p_world)
+        if self.sim.dimension == 3:
+            return np.concatenate([pose.p_world, log_so3(pose.R_world_body @ self._R0.T)]), nu_origin
+        return np.array([pose.p_world[0], pose.p_world[1], pose.angle_rad]), nu_origin
 
     def tick(self, operator_wrench: ArrayLike) -> tuple[FloatArray, FloatArray, float]:
         """One sample period; returns (coupling wrench on the workpiece, felt wrench, compute time [s])."""

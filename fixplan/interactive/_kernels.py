@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from fixplan.haptics._kernels import log_so3
+from fixplan._spatial_kernels import log_so3, shifted_velocity3
 
 
 @njit(cache=True)
@@ -15,14 +15,11 @@ def coordinates3(R, p, com_world, twist, R0):
     ``twist`` is ``(v, ω)`` of the centre of mass; the origin's velocity is ``v + ω × (p − c)``.
     """
     rot = log_so3(R @ R0.T)
-    o = p - com_world
-    w = twist[3:]
+    r = p - com_world  # lever from the centre of mass to the body origin
     x = np.empty(6)
     v = np.empty(6)
     x[:3] = p
     x[3:] = rot
-    v[0] = twist[0] + w[1] * o[2] - w[2] * o[1]
-    v[1] = twist[1] + w[2] * o[0] - w[0] * o[2]
-    v[2] = twist[2] + w[0] * o[1] - w[1] * o[0]
-    v[3:] = w
+    v[0], v[1], v[2] = shifted_velocity3(twist[0], twist[1], twist[2], twist[3], twist[4], twist[5], r[0], r[1], r[2])
+    v[3:] = twist[3:]
     return x, v

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from fixplan.errors import InputError
 from fixplan.interactive.handles import GizmoHandle
 from fixplan.interactive.session import HapticSession, Snapshot, real_time_priority
-from fixplan.pose import Pose, log_so3, quaternion_wxyz_from_matrix
+from fixplan.spatial import Pose, log_so3, quaternion_wxyz_from_matrix
 
 FloatArray = NDArray[np.float64]
 
@@ -274,7 +274,7 @@ class HapticApp:
             return
         p = np.asarray(self.gizmo.position, dtype=float)
         q = np.asarray(self.gizmo.wxyz, dtype=float)
-        from fixplan.pose import matrix_from_quaternion_wxyz
+        from fixplan.spatial import matrix_from_quaternion_wxyz
 
         R = matrix_from_quaternion_wxyz(q)
         if s.dimension == 3:

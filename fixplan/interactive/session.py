@@ -41,8 +41,8 @@ from fixplan.haptics import SimulatedDevice
 from fixplan.haptics.coupling import check_passivity
 from fixplan.interactive import _kernels, protocol
 from fixplan.interactive.handles import Handle, UdpHandle
-from fixplan.pose import Pose, exp_so3, rot2
 from fixplan.settings import HAPTIC, Settings
+from fixplan.spatial import Pose, exp_so3, rot2
 
 FloatArray = NDArray[np.float64]
 

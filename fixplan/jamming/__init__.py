@@ -23,7 +23,7 @@ from fixplan.settings import Tolerances
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture
-    from fixplan.pose import Pose
+    from fixplan.spatial import Pose
 
 __all__ = [
     "MODES",

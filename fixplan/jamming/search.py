@@ -61,11 +61,11 @@ from fixplan.jamming.classify import Classification, Classifier
 from fixplan.jamming.programs import ConeProgram, force_layout
 from fixplan.kinematics import ContactSet
 from fixplan.locating import contact_set
-from fixplan.pose import cross2
+from fixplan.spatial import shift_twist, shift_wrench, skew
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture
-    from fixplan.pose import Pose
+    from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]
 
@@ -161,11 +161,7 @@ class WrenchSearch:
 
 def twist_at_com(cs: ContactSet, twist: FloatArray, about_world: FloatArray) -> FloatArray:
     """A twist of the point ``about_world`` re-expressed as the twist of the centre of mass."""
-    d = cs.dimension
-    off = cs.com_world - about_world
-    if d == 3:
-        return np.concatenate([twist[:3] + np.cross(twist[3:], off), twist[3:]])
-    return np.array([twist[0] - twist[2] * off[1], twist[1] + twist[2] * off[0], twist[2]])
+    return shift_twist(twist, about_world, cs.com_world)
 
 
 def _finite_twist(fixture: Fixture, x: ArrayLike, what: str) -> FloatArray:
@@ -604,11 +600,7 @@ def _robust_friction(cs: ContactSet, roles: dict[str, str], delta: float) -> Con
 
 def _about_point(cs: ContactSet, w_com: FloatArray, point: FloatArray) -> FloatArray:
     """Re-express a wrench about the centre of mass as one about ``point``."""
-    d = cs.dimension
-    off = cs.com_world - point
-    if d == 3:
-        return np.concatenate([w_com[:3], w_com[3:] + np.cross(off, w_com[:3])])
-    return np.array([w_com[0], w_com[1], w_com[2] + cross2(off, w_com[:2])])
+    return shift_wrench(w_com, cs.com_world, point)
 
 
 def _build(
@@ -717,7 +709,7 @@ def _build(
     # ‖T about the user's point‖ ≤ T_max: T_p = T_c + (c − p) × F
     off = cs.com_world - about
     if d == 3:
-        Kx = np.array([[0, -off[2], off[1]], [off[2], 0, -off[0]], [-off[1], off[0], 0]])
+        Kx = skew(off)  # the linear map F ↦ (c − p) × F of spatial.shift_wrench
         A_t = np.zeros((4, nx))
         A_t[1:, 3:6] = -np.eye(3)
         A_t[1:, 0:3] = -Kx

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from fixplan.errors import InputError
-from fixplan.pose import Pose
+from fixplan.spatial import Pose
 
 State = frozenset[str]
 

@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from fixplan.errors import InputError
 from fixplan.locating import contact_set
 from fixplan.planner.fine import twist_from_pose
-from fixplan.pose import Pose
+from fixplan.spatial import Pose, shift_twist, shift_wrench
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture
@@ -166,11 +166,7 @@ def mass_speed(nu: FloatArray, M: FloatArray, m: float) -> float:
 
 def origin_motion(com_rate: FloatArray, com_world: FloatArray, origin_world: FloatArray) -> FloatArray:
     """A twist (rate) of the centre of mass re-expressed at the body origin."""
-    d = com_world.shape[0]
-    r = origin_world - com_world
-    if d == 3:
-        return np.concatenate([com_rate[:3] + np.cross(com_rate[3:], r), com_rate[3:]])
-    return np.array([com_rate[0] - com_rate[2] * r[1], com_rate[1] + com_rate[2] * r[0], com_rate[2]])
+    return shift_twist(com_rate, com_world, origin_world)
 
 
 def project_keeping(nu: FloatArray, A: FloatArray | None, M_inv: FloatArray) -> FloatArray:
@@ -504,11 +500,7 @@ class Executor:
         w_o = np.zeros(self.ndof)
         for _ in range(30):
             w_c = r - tau * G.sum(axis=0)
-            off = com - pose.p_world
-            if d == 3:
-                w_o = np.concatenate([w_c[:3], w_c[3:] + np.cross(off, w_c[:3])])
-            else:
-                w_o = np.array([w_c[0], w_c[1], w_c[2] + off[0] * w_c[1] - off[1] * w_c[0]])
+            w_o = shift_wrench(w_c, com, pose.p_world)
             if np.linalg.norm(w_o[:d]) <= self.F_max and np.linalg.norm(w_o[d:]) <= self.T_max:
                 break
             tau *= 0.7

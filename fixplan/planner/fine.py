@@ -88,7 +88,7 @@ from numpy.typing import NDArray
 from fixplan.errors import InputError, SolverError
 from fixplan.kinematics import mass_matrix
 from fixplan.locating import contact_set, locator_contact
-from fixplan.pose import Pose, log_so3
+from fixplan.spatial import Pose, log_so3, shift_twist, shift_wrench, tangent_seed
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture, Locator
@@ -672,11 +672,6 @@ def _state(est: tuple[str, ...]) -> str:
     return "{" + ", ".join(est) + "}" if est else "free"
 
 
-def _tangent_seed(n_b: FloatArray) -> FloatArray:
-    a = np.array([1.0, 0.0, 0.0]) if abs(n_b[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    return a
-
-
 def _no_slip(
     ca: Any,
     frames: list,
@@ -718,11 +713,12 @@ def _no_slip(
             out.append(ca.dot(t, disp))
             continue
         n0 = _numeric_normal(features[n], start, locs[n])
-        a = _tangent_seed(n0)
+        a = tangent_seed(n0)
         if axis_b is not None and j == 1:
             along = axis_b - (axis_b @ n0) * n0
             if np.linalg.norm(along) > 1e-9:
                 a = along / np.linalg.norm(along)
+        # spatial.tangent_basis, in CasADi: t1 = the seed projected off n, t2 = n × t1
         t1 = ca.DM(a) - ca.dot(ca.DM(a), n_b) * n_b
         t1 = t1 / ca.sqrt(ca.dot(t1, t1))
         t2 = ca.cross(n_b, t1)
@@ -851,30 +847,23 @@ def _segment_wrenches(
     for k in range(K):
         a, b = poses[k], poses[k + 1]
         cs = contact_set(fixture, a, list(est))
-        c = cs.com_world
-        v_o = b.p_world - a.p_world
         if d == 3:
             w = log_so3(b.R_world_body @ a.R_world_body.T)
-            nu = np.concatenate([v_o + np.cross(w, c - a.p_world), w])  # twist of the centre of mass
         else:
-            w_z = (b.angle_rad - a.angle_rad + np.pi) % (2 * np.pi) - np.pi
-            r = c - a.p_world
-            nu = np.array([v_o[0] - w_z * r[1], v_o[1] + w_z * r[0], w_z])
+            w = np.array([(b.angle_rad - a.angle_rad + np.pi) % (2 * np.pi) - np.pi])
+        nu_origin = np.concatenate([b.p_world - a.p_world, w])  # displacement twist of the body origin
+        nu = shift_twist(nu_origin, a.p_world, cs.com_world)  # ... and of the centre of mass
         M = cs.mass_matrix
         Minv = cs.M_inv
         if len(est):
             A = cs.J if kind == "roll" else cs.G
             nu = nu - Minv @ A.T @ np.linalg.pinv(A @ Minv @ A.T, rcond=1e-10) @ (A @ nu)
-        size = float(np.sqrt(max(nu @ M @ nu, 0.0) / wp.mass_kg))
+        size = float(np.sqrt(max(float(nu @ M @ nu), 0.0) / wp.mass_kg))
         if size <= 1e-15:
             reasons.append("the segment does not move")
             continue
         a_com = nu * (acceleration_mps2 / size)
-        if d == 3:
-            motion = np.concatenate([a_com[:3] + np.cross(a_com[3:], a.p_world - c), a_com[3:]])
-        else:
-            r = a.p_world - c
-            motion = np.array([a_com[0] - a_com[2] * r[1], a_com[1] + a_com[2] * r[0], a_com[2]])
+        motion = shift_twist(a_com, cs.com_world, a.p_world)  # the search takes the origin's motion
         if not est:
             ok, wr, why = _free_wrench(fixture, a, a_com, M)
             found[k], reasons = ok, [*reasons, why]
@@ -905,14 +894,8 @@ def _free_wrench(fixture: Fixture, pose: Pose, a_com: FloatArray, M: FloatArray)
     """Free flight: ``w = M a − w_g`` about the centre of mass, reported about the body origin."""
     d = fixture.dimension
     w_c = M @ a_com - fixture.gravity_wrench()
-    c = pose.point_world_from_body(fixture.workpiece.com_body)
-    off = c - pose.p_world
-    if d == 3:
-        w_o = np.concatenate([w_c[:3], w_c[3:] + np.cross(off, w_c[:3])])
-        T = float(np.linalg.norm(w_o[3:]))
-    else:
-        w_o = np.array([w_c[0], w_c[1], w_c[2] + off[0] * w_c[1] - off[1] * w_c[0]])
-        T = abs(float(w_o[2]))
+    w_o = shift_wrench(w_c, pose.point_world_from_body(fixture.workpiece.com_body), pose.p_world)
+    T = float(np.linalg.norm(w_o[3:])) if d == 3 else abs(float(w_o[2]))
     F = float(np.linalg.norm(w_o[:d]))
     F_max, T_max = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
     if F > F_max or T > T_max:

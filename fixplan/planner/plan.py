@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import InputError
-from fixplan.pose import Pose, matrix_from_quaternion_wxyz, rot2
+from fixplan.spatial import Pose, matrix_from_quaternion_wxyz, rot2
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture

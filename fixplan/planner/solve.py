@@ -29,7 +29,7 @@ from fixplan.planner.execute import ExecutionSettings, Step
 from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, _segment_wrenches, plan_transition
 from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.verify import Verification, verify
-from fixplan.pose import Pose
+from fixplan.spatial import Pose
 
 ROBUST_GRID = (0.05, 0.1, 0.2, 0.3, 0.5)
 # Gaps kept at the other locators along a fine path [m], tried in turn when IPOPT finds no path:

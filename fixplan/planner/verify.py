@@ -43,8 +43,8 @@ from fixplan.planner.execute import (
 )
 from fixplan.planner.fine import twist_from_pose
 from fixplan.planner.plan import Timeline, Verification
-from fixplan.pose import Pose, log_so3
 from fixplan.settings import HAPTIC, HapticRigSettings, Settings
+from fixplan.spatial import Pose, log_so3
 
 FloatArray = NDArray[np.float64]
 

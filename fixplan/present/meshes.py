@@ -20,7 +20,7 @@ from fixplan.geometry.shapes import Box, Cylinder, Disk, Polygon, Rectangle, Sha
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture
-    from fixplan.pose import Pose
+    from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]

@@ -22,7 +22,7 @@ from fixplan.errors import FixplanError
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture
     from fixplan.planner.plan import Plan, Timeline
-    from fixplan.pose import Pose
+    from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]
 

@@ -31,8 +31,8 @@ from fixplan.present.meshes import locator_tips, points_world, shape_mesh, shape
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture
-    from fixplan.pose import Pose
     from fixplan.present.replay import Replay
+    from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]

@@ -17,7 +17,7 @@ from fixplan.engine.nsgs import build_problem
 from fixplan.fixture import Fixture
 from fixplan.kinematics import Contact
 from fixplan.locating import locator_contact
-from fixplan.pose import Pose, exp_so3, rot2
+from fixplan.spatial import Pose, exp_so3, rot2
 
 
 def fclib_error(W, q, mu, offsets, sizes, P):

@@ -9,7 +9,7 @@ from reference_step import reference_step
 import fixplan
 from fixplan.engine.simulator import Simulator
 from fixplan.errors import InputError
-from fixplan.pose import Pose
+from fixplan.spatial import Pose
 
 
 @pytest.mark.parametrize(

@@ -7,8 +7,8 @@ import pytest
 
 import fixplan
 from fixplan.engine.simulator import Simulator
-from fixplan.pose import log_so3
 from fixplan.settings import STRICT
+from fixplan.spatial import log_so3
 
 BOX3 = """format = 1
 [scene]

@@ -1,4 +1,7 @@
-"""Rigid poses in 2D and 3D: ``T_world_body`` as a rotation and the body-origin position.
+"""Frames: rigid poses, SO(3), tangent bases, and moving wrenches and twists between points.
+
+The one home of fixplan's spatial algebra; :mod:`fixplan._spatial_kernels` is its compiled twin
+(the same formulas for numba kernels, pinned to these by ``tests/test_spatial.py``).
 
 Conventions (used everywhere in fixplan):
 
@@ -8,6 +11,21 @@ Conventions (used everywhere in fixplan):
 - Twists are ``(v, ω)`` in **world axes** about the centre of mass ``c`` (MATH.md); a pose is
   moved by a twist with the left (world-frame) retraction
   ``c⁺ = c + v,  R⁺ = exp(ω̂) R`` (3D) or ``θ⁺ = θ + ω`` (2D).
+- A wrench ``w = (f, m)`` or twist ``t = (v, ω)`` is only meaningful with the point it is taken
+  at; names say which: ``w_com``, ``w_origin``, ``v_com``, ``nu_com`` (world axes always).
+
+Moving a wrench or a twist from point ``a`` to point ``b`` (world axes, lever ``r = b − a``):
+
+- wrench: the moment about ``b`` of forces ``f_i`` at ``x_i`` is
+  ``m_b = Σ (x_i − b) × f_i = Σ (x_i − a) × f_i + (a − b) × Σ f_i``, so
+  ``w_b = (f, m_a + (a − b) × f) = (f, m_a + f × r)``;
+- twist: a rigid velocity field is ``v(x) = v_a + ω × (x − a)``, so
+  ``t_b = (v_a + ω × r, ω)``;
+- in 2D the same with the scalar cross product: ``m_b = m_a + f_x r_y − f_y r_x`` and
+  ``v_b = v_a + ω (−r_y, r_x)``.
+
+The power ``w · t = f·v + m·ω`` is the same at every point:
+``f·(ω × r) + (f × r)·ω = 0`` (a triple product with two equal factors, up to sign).
 """
 
 from __future__ import annotations
@@ -115,6 +133,71 @@ def cross2(a: ArrayLike, b: ArrayLike) -> float:
     u = np.asarray(a, dtype=float)
     v = np.asarray(b, dtype=float)
     return float(u[0] * v[1] - u[1] * v[0])
+
+
+def skew(v: ArrayLike) -> FloatArray:
+    """The matrix ``[v]×`` with ``[v]× x = v × x``."""
+    w = np.asarray(v, dtype=float)
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def tangent_seed(normal: ArrayLike) -> FloatArray:
+    """The axis projected onto the tangent plane of a 3D ``normal`` to give its first tangent."""
+    return np.array([1.0, 0.0, 0.0]) if abs(float(np.asarray(normal)[0])) < 0.9 else np.array([0.0, 1.0, 0.0])
+
+
+def tangent_basis(normal: ArrayLike) -> FloatArray:
+    """Unit tangents completing ``normal`` to a right-handed frame: (1, 2) in 2D, (2, 3) in 3D.
+
+    2D: ``t = (−n_y, n_x)``. 3D: ``t1`` is :func:`tangent_seed` projected off ``n`` and
+    normalised, ``t2 = n × t1``.
+    """
+    n = np.asarray(normal, dtype=float)
+    if n.shape[0] == 2:
+        return np.array([[-n[1], n[0]]])
+    a = tangent_seed(n)
+    t1 = a - (a @ n) * n
+    t1 /= np.linalg.norm(t1)
+    t2 = skew(n) @ t1  # n × t1 (np.cross costs ~50 µs a call here: it is on the search's hot path)
+    return np.stack([t1, t2])
+
+
+def shift_wrench_by(wrench: ArrayLike, lever: ArrayLike) -> FloatArray:
+    """A wrench ``(f, m_a)`` at point ``a`` as the wrench at ``b = a + lever``: ``(f, m_a + f × r)``.
+
+    See the module docstring for the derivation; 2D wrenches are ``(f_x, f_y, m_z)``.
+    """
+    w = np.asarray(wrench, dtype=float)
+    r = np.asarray(lever, dtype=float)
+    if r.shape[0] == 3:
+        return np.concatenate([w[:3], w[3:] + np.cross(w[:3], r)])
+    return np.array([w[0], w[1], w[2] - w[1] * r[0] + w[0] * r[1]])
+
+
+def shift_wrench(wrench: ArrayLike, from_point: ArrayLike, to_point: ArrayLike) -> FloatArray:
+    """A wrench given at ``from_point`` as the same wrench at ``to_point`` (world points and axes).
+
+    ``w_b = (f, m_a + (a − b) × f)`` with ``a = from_point``, ``b = to_point``.
+    """
+    return shift_wrench_by(wrench, np.asarray(to_point, dtype=float) - np.asarray(from_point, dtype=float))
+
+
+def shift_twist_by(twist: ArrayLike, lever: ArrayLike) -> FloatArray:
+    """A twist ``(v_a, ω)`` of point ``a`` as the twist of ``b = a + lever``: ``(v_a + ω × r, ω)``.
+
+    The same for a twist rate (accelerations in the first-order sense the planner uses: the
+    centripetal term is not added). 2D twists are ``(v_x, v_y, ω)``.
+    """
+    t = np.asarray(twist, dtype=float)
+    r = np.asarray(lever, dtype=float)
+    if r.shape[0] == 3:
+        return np.concatenate([t[:3] + np.cross(t[3:], r), t[3:]])
+    return np.array([t[0] - t[2] * r[1], t[1] + t[2] * r[0], t[2]])
+
+
+def shift_twist(twist: ArrayLike, from_point: ArrayLike, to_point: ArrayLike) -> FloatArray:
+    """A twist of ``from_point`` as the twist of ``to_point``: ``v_b = v_a + ω × (b − a)``."""
+    return shift_twist_by(twist, np.asarray(to_point, dtype=float) - np.asarray(from_point, dtype=float))
 
 
 @dataclass(frozen=True)
