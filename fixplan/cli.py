@@ -20,6 +20,7 @@ import typer
 from fixplan import limits
 from fixplan.errors import FixplanError, FixtureError, InputError, InputFileError, SolverError, one_line
 from fixplan.files import check_distinct, check_output, write_output, write_text
+from fixplan.settings import DEFAULT
 
 try:  # typer ≥ 0.20 vendors click; older typer depends on it
     from typer._click import exceptions as click_exc
@@ -271,7 +272,7 @@ def _fixture_summary(fixture) -> dict[str, Any]:  # type: ignore[no-untyped-def]
     if fixture.is_full:
         note = ", goal " + ("given and checked" if fixture.goal_given is not None else "computed")
         cs = contact_set(fixture, "goal", [loc.name for loc in fixture.locators])
-        rank = int(np.linalg.matrix_rank(cs.G, tol=1e-9))
+        rank = int(np.linalg.matrix_rank(cs.G, tol=DEFAULT.numerics.rank_tol))
         determined = rank >= fixture.ndof
         details.append(f"goal ({'given' if fixture.goal_given is not None else 'computed'}): {pose_text(fixture.goal)}")
         details.append(
@@ -834,7 +835,7 @@ def solve(
     seed: SeedOpt = 0,
     mu_spread: MuSpreadOpt = 0.2,
     pose_sigma: PoseSigmaOpt = "1e-3,1",
-    locator_sigma: LocatorSigmaOpt = 1e-4,
+    locator_sigma: LocatorSigmaOpt = DEFAULT.robust.locator_sigma_m,
     force_noise: ForceNoiseOpt = 0.05,
     latency_ms: LatencyOpt = 2.0,
     batch: Annotated[
@@ -885,7 +886,7 @@ def solve(
         from fixplan.locating import contact_set
 
         cs = contact_set(fixture, "goal", [loc.name for loc in fixture.locators])
-        rank = int(np.linalg.matrix_rank(cs.G, tol=1e-9))
+        rank = int(np.linalg.matrix_rank(cs.G, tol=DEFAULT.numerics.rank_tol))
         if rank < fixture.ndof:
             _err(
                 f"warning: {fixture.source}: the locators do not determine the pose (rank G = {rank} < "
@@ -1028,7 +1029,7 @@ def robust(
     seed: SeedOpt = 0,
     mu_spread: MuSpreadOpt = 0.2,
     pose_sigma: PoseSigmaOpt = "1e-3,1",
-    locator_sigma: LocatorSigmaOpt = 1e-4,
+    locator_sigma: LocatorSigmaOpt = DEFAULT.robust.locator_sigma_m,
     force_noise: ForceNoiseOpt = 0.05,
     latency_ms: LatencyOpt = 2.0,
     scheduler: SchedulerOpt = None,
@@ -1137,7 +1138,9 @@ def _count(n: int, noun: str) -> str:
 @app.command()
 def fclib(
     file: Annotated[Path, typer.Argument(help="An FCLib HDF5 problem (local or global, 3D or 2D).")],
-    tol: Annotated[float, typer.Option("--tol", help="Target FCLib residual (natural map, relative).")] = 1e-8,
+    tol: Annotated[
+        float, typer.Option("--tol", help="Target FCLib residual (natural map, relative).")
+    ] = DEFAULT.engine.fclib_tolerance,
     max_iter: Annotated[
         int | None,
         typer.Option(

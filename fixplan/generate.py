@@ -44,6 +44,7 @@ from fixplan.errors import FixtureError, InfeasibleError, InputError
 from fixplan.fixture import Fixture, loads
 from fixplan.geometry import Polygon
 from fixplan.locating import contact_set, locator_gaps, solve_goal
+from fixplan.settings import DEFAULT
 from fixplan.spatial import cross2, rot2
 
 FAMILIES: dict[str, str] = {
@@ -497,7 +498,7 @@ def _check(fixture: Fixture, draft: _Draft) -> str | None:
         if name not in draft.resting and gap < CLEARANCE_M:
             return f"{name} should be clear at the start but has a gap of {gap:.3g} m"
     G = contact_set(fixture, "goal", names).G
-    rank = int(np.linalg.matrix_rank(G, tol=1e-9))
+    rank = int(np.linalg.matrix_rank(G, tol=DEFAULT.numerics.rank_tol))
     if rank < fixture.ndof:
         return f"rank G = {rank} < {fixture.ndof} at the goal"
     found = solve_goal(wp, fixture.locators, fixture.start)

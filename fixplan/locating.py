@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from fixplan.errors import InfeasibleError, InputError
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
+from fixplan.settings import DEFAULT
 from fixplan.spatial import Pose
 
 if TYPE_CHECKING:
@@ -139,7 +140,7 @@ def solve_goal(
     for it in range(1, max_iterations + 1):  # noqa: B007 - used after the loop
         if np.max(np.abs(gaps)) <= tol_m:
             break
-        step = -np.linalg.lstsq(G, gaps, rcond=1e-10)[0]
+        step = -np.linalg.lstsq(G, gaps, rcond=DEFAULT.numerics.rcond)[0]
         # Limit rotations per step to keep far starts on the right faces.
         d = start.dimension
         ang = float(np.linalg.norm(step[d:]))
@@ -151,7 +152,7 @@ def solve_goal(
         while True:
             trial = pose.retract(alpha * step, workpiece.com_body)
             g_trial = gaps_at(trial)
-            if float(g_trial @ g_trial) < f0 or alpha < 1e-6:
+            if float(g_trial @ g_trial) < f0 or alpha < DEFAULT.numerics.line_search_min_step:
                 break
             alpha /= 2.0
         f1 = float(g_trial @ g_trial)
@@ -159,10 +160,10 @@ def solve_goal(
             break  # no step decreases the gaps: a least-squares minimum, not a pose touching every locator
         pose = trial
         gaps, G = residual(pose)
-        if f1 > (1.0 - 1e-6) * f0 and f1 > tol_m**2:
+        if f1 > (1.0 - DEFAULT.numerics.stall_rel) * f0 and f1 > tol_m**2:
             break  # stalled at a least-squares minimum (more locators than the pose can satisfy)
     max_gap = float(np.max(np.abs(gaps))) if len(gaps) else 0.0
-    rank = int(np.linalg.matrix_rank(G, tol=1e-9)) if len(gaps) else 0
+    rank = int(np.linalg.matrix_rank(G, tol=DEFAULT.numerics.rank_tol)) if len(gaps) else 0
     return GoalResult(pose, max_gap, it, rank, converged=max_gap <= max(tol_m, 1e-10))
 
 

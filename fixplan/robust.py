@@ -39,7 +39,8 @@ from numpy.typing import NDArray
 from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.fixture import Fixture, Locator
 from fixplan.locating import contact_set, locator_contact, locator_gaps, solve_goal
-from fixplan.planner.execute import ExecutionNoise, ExecutionSettings, Step
+from fixplan.planner.execute import ExecutionNoise, Step
+from fixplan.settings import DEFAULT, RobustSettings
 from fixplan.spatial import Pose
 
 if TYPE_CHECKING:
@@ -49,95 +50,9 @@ if TYPE_CHECKING:
 FloatArray = NDArray[np.float64]
 
 Z95 = 1.959963984540054  # the standard normal's 97.5 % quantile
-REST_GAP_M = 1e-9  # the nominally touching locators touch the perturbed start within this
-MAX_PENETRATION_M = 1e-6  # no locator penetrates the perturbed start by more
+REST_GAP_M = DEFAULT.robust.rest_gap_m  # the nominally touching locators touch the perturbed start within this
+MAX_PENETRATION_M = DEFAULT.robust.max_penetration_m  # no locator penetrates the perturbed start by more
 MAX_DRAWS = 100  # start-pose redraws before a sample is declared impossible
-
-
-@dataclass(frozen=True)
-class RobustSettings:
-    """The uncertainty sampled, and the planner/executor options (as ``fixplan solve``'s)."""
-
-    samples: int = 20
-    seed: int = 0
-    mu_spread: float = 0.2  # friction μ_i (1 + u), u uniform in ±mu_spread
-    pose_sigma_m: float = 1e-3  # start translation, per axis in the resting plane [m]
-    pose_sigma_deg: float = 1.0  # start rotation about the gravity axis [deg]
-    locator_sigma_m: float = 1e-4  # locator tip offset, per axis [m]
-    force_noise: float = 0.05  # operator: relative force noise per control period
-    latency_s: float = 0.002  # operator: reaction delay [s]
-    acceleration_mps2: float = 1.0
-    margin_N: float | None = None
-    friction_margin: float = 0.1
-    knots: int = 10
-
-    def check(self) -> None:
-        """Raise :class:`InputError` naming the option that is out of range."""
-        checks = [
-            ("--samples", self.samples, self.samples >= 0 and self.samples == int(self.samples), "an integer ≥ 0"),
-            ("--seed", self.seed, self.seed >= 0 and self.seed == int(self.seed), "an integer ≥ 0"),
-            ("--mu-spread", self.mu_spread, 0.0 <= self.mu_spread <= 1.0, "a fraction in [0, 1]"),
-            ("--pose-sigma (translation)", self.pose_sigma_m, 0.0 <= self.pose_sigma_m <= 0.1, "0 .. 0.1 m"),
-            ("--pose-sigma (rotation)", self.pose_sigma_deg, 0.0 <= self.pose_sigma_deg <= 30.0, "0 .. 30 deg"),
-            ("--locator-sigma", self.locator_sigma_m, 0.0 <= self.locator_sigma_m <= 0.01, "0 .. 0.01 m"),
-            ("--force-noise", self.force_noise, 0.0 <= self.force_noise <= 1.0, "a fraction in [0, 1]"),
-            ("--latency-ms", self.latency_s * 1e3, 0.0 <= self.latency_s <= 0.1, "0 .. 100 ms"),
-        ]
-        for name, value, ok, expected in checks:
-            if not (isinstance(value, int | float) and math.isfinite(value) and ok):
-                raise InputError(f"{name} must be {expected}, got {value}")
-
-    @property
-    def perturbs(self) -> bool:
-        """Whether the world is perturbed at all (else every sample is the nominal world)."""
-        return any(x > 0 for x in (self.mu_spread, self.pose_sigma_m, self.pose_sigma_deg, self.locator_sigma_m))
-
-    def execution_settings(self) -> ExecutionSettings:
-        """The executor's settings, as ``solve`` builds them."""
-        return ExecutionSettings(
-            accel_mps2=self.acceleration_mps2, friction_margin=self.friction_margin, margin_N=self.margin_N
-        )
-
-    def noise(self, seed: int) -> ExecutionNoise:
-        return ExecutionNoise(force_noise=self.force_noise, latency_s=self.latency_s, seed=seed)
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "seed": self.seed,
-            "mu_spread": self.mu_spread,
-            "pose_sigma_m": self.pose_sigma_m,
-            "pose_sigma_deg": self.pose_sigma_deg,
-            "locator_sigma_m": self.locator_sigma_m,
-            "force_noise": self.force_noise,
-            "latency_s": self.latency_s,
-            "acceleration_mps2": self.acceleration_mps2,
-            "margin_N": self.margin_N,
-            "friction_margin": self.friction_margin,
-        }
-
-    def replay_options(self) -> list[str]:
-        """The command-line options that reproduce these settings (those not at their defaults)."""
-        d = RobustSettings()
-        out: list[str] = []
-        if self.seed != d.seed:
-            out += ["--seed", str(self.seed)]
-        if self.mu_spread != d.mu_spread:
-            out += ["--mu-spread", f"{self.mu_spread:g}"]
-        if (self.pose_sigma_m, self.pose_sigma_deg) != (d.pose_sigma_m, d.pose_sigma_deg):
-            out += ["--pose-sigma", f"{self.pose_sigma_m:g},{self.pose_sigma_deg:g}"]
-        if self.locator_sigma_m != d.locator_sigma_m:
-            out += ["--locator-sigma", f"{self.locator_sigma_m:g}"]
-        if self.force_noise != d.force_noise:
-            out += ["--force-noise", f"{self.force_noise:g}"]
-        if self.latency_s != d.latency_s:
-            out += ["--latency-ms", f"{self.latency_s * 1e3:g}"]
-        if self.acceleration_mps2 != d.acceleration_mps2:
-            out += ["--accel", f"{self.acceleration_mps2:g}"]
-        if self.margin_N is not None:
-            out += ["--margin", f"{self.margin_N:g}"]
-        if self.friction_margin != d.friction_margin:
-            out += ["--friction-margin", f"{self.friction_margin:g}"]
-        return out
 
 
 def wilson_interval(k: int, n: int, z: float = Z95) -> tuple[float, float] | None:
@@ -194,7 +109,7 @@ def _rest_on(fixture: Fixture, locators: Sequence[Locator], pose: Pose, touching
             break
         c_w = pose.point_world_from_body(wp.com_body)
         G = np.array([c.jacobian(c_w)[0] for c in contacts])
-        pose = pose.retract(-np.linalg.lstsq(G, gaps, rcond=1e-10)[0], wp.com_body)
+        pose = pose.retract(-np.linalg.lstsq(G, gaps, rcond=DEFAULT.numerics.rcond)[0], wp.com_body)
     return pose
 
 

@@ -17,6 +17,18 @@ Groups
     factor, the simulated handle, the device's limits, the operator's PD hand.
 :class:`VerificationSettings`
     The thresholds a simulated load must meet to verify a plan.
+:class:`PlannerSettings`
+    The planner: clearances, the friction-margin grid, IPOPT's options.
+:class:`SearchSettings`
+    The wrench search: margins, the slip threshold, when a limit binds.
+:class:`ExecutionSettings`
+    How the executor pushes (:mod:`fixplan.planner.execute`).
+:class:`RobustSettings`
+    The uncertainty a robustness study samples (:mod:`fixplan.robust`, ``fixplan robust``'s options).
+:class:`WitnessSettings`
+    When a candidate motion counts as a sliding witness.
+:class:`Numerics`
+    Rank and pseudo-inverse cut-offs of the numerical linear algebra, Clarabel's options.
 
 A :class:`Settings` bundles one of each. The named profiles in :data:`PROFILES`:
 
@@ -38,10 +50,14 @@ Pass settings explicitly (``settings=profile("strict").tolerances``); there is n
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fixplan.errors import InputError
+
+if TYPE_CHECKING:
+    from fixplan.planner.execute import ExecutionNoise
 
 
 @dataclass(frozen=True)
@@ -100,6 +116,8 @@ class EngineSettings:
         A contact report calls a contact sliding above this tangential speed [m/s].
     spin_radps : float
         ... and rolling (not sticking) above this body angular speed [rad/s].
+    fclib_tolerance : float
+        Target FCLib residual of ``fixplan fclib`` (natural map, relative).
     """
 
     tolerance: float | None = None
@@ -107,6 +125,7 @@ class EngineSettings:
     margin_m: float = 1e-4
     slip_mps: float = 1e-7
     spin_radps: float = 1e-6
+    fclib_tolerance: float = 1e-8
 
 
 @dataclass(frozen=True)
@@ -146,6 +165,13 @@ class HapticRigSettings:
         Natural frequency of the operator's PD hand [rad/s] (about 20 Hz, a robot force loop).
     operator_damping_ratio : float
         Its damping ratio.
+    switch_interval_s : float
+        Real-time session: the interpreter's thread switch interval at most this [s] (the display
+        thread gives the GIL back quickly).
+    spin_s : float
+        The loop sleeps only when the next tick is more than this away [s] ...
+    wake_early_s : float
+        ... and wakes this long before it, spinning the rest [s].
     """
 
     stiffness_per_kg: float = 1000.0
@@ -165,6 +191,9 @@ class HapticRigSettings:
     workspace_radius_m: float = 0.5
     operator_omega_radps: float = 120.0
     operator_damping_ratio: float = 0.9
+    switch_interval_s: float = 2e-4
+    spin_s: float = 2e-4
+    wake_early_s: float = 1.5e-4
 
 
 @dataclass(frozen=True)
@@ -205,6 +234,283 @@ class VerificationSettings:
 
 
 @dataclass(frozen=True)
+class PlannerSettings:
+    """The loading planner (:mod:`fixplan.planner`).
+
+    Attributes
+    ----------
+    clearances_m : tuple of float
+        Gaps kept at the other locators along a fine path [m], tried in turn when IPOPT finds no
+        path (a fixed 1 mm is an angle on a part whose locators sit close together).
+    robust_grid : tuple of float
+        Friction margins δ tried per transition (pushes robust to μ(1 ± δ)).
+    smooth_max_m : float
+        Length scale of the smooth maximum of two face planes' gaps [m].
+    ipopt_tol : float
+        IPOPT's ``tol`` for a transition's NLP.
+    ipopt_max_iter : int
+        IPOPT's ``max_iter``.
+    ipopt_constr_viol_tol : float
+        IPOPT's ``constr_viol_tol``.
+    settle_tol_m : float
+        A re-plan first settles the observed contacts to touch within this [m].
+    same_pose_m : float
+        A warm start is reused when it starts within this of the start pose [m, rad].
+    cost_slack : float
+        The coarse search re-ranks when a transition costs more than this factor over its guess.
+    """
+
+    clearances_m: tuple[float, ...] = (1e-3, 1e-4)
+    robust_grid: tuple[float, ...] = (0.05, 0.1, 0.2, 0.3, 0.5)
+    smooth_max_m: float = 1e-4
+    ipopt_tol: float = 1e-9
+    ipopt_max_iter: int = 500
+    ipopt_constr_viol_tol: float = 1e-10
+    settle_tol_m: float = 1e-10
+    same_pose_m: float = 1e-9
+    cost_slack: float = 1.5
+
+    def ipopt_options(self, tol: float | None = None, max_iter: int | None = None) -> dict[str, Any]:
+        """IPOPT's options for a transition (quiet), with ``tol`` and ``max_iter`` overridable."""
+        return {
+            "print_level": 0,
+            "sb": "yes",
+            "tol": self.ipopt_tol if tol is None else tol,
+            "max_iter": int(self.ipopt_max_iter if max_iter is None else max_iter),
+            "constr_viol_tol": self.ipopt_constr_viol_tol,
+        }
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """The wrench search (:func:`fixplan.jamming.search_wrench`).
+
+    Attributes
+    ----------
+    jam_margin_rel : float
+        Default least relative distance of the wrench found from static balance.
+    target_rel : float
+        A margin target counts as met within this relative shortfall (solver accuracy).
+    slip_rel : float
+        A kept contact slipping at this fraction of the part's speed slides against its slip.
+    role_rel : float
+        A contact's normal velocity under the motion counts as zero below this (relative).
+    found_rel : float
+        A push whose least normal force is at most this fraction of ``F_max`` is no push.
+    binding_rel : float
+        A limit binds when the push reaches it within this fraction.
+    limit_rel : float
+        A wrench exceeds a limit beyond this fraction (round-off).
+    along_rel : float
+        The check's acceleration may fall short of the requested one by this fraction ...
+    off_axis_rel : float
+        ... and point off its axis by this (mass-weighted) fraction.
+    """
+
+    jam_margin_rel: float = 1e-3
+    target_rel: float = 1e-6
+    slip_rel: float = 0.05
+    role_rel: float = 1e-9
+    found_rel: float = 1e-9
+    binding_rel: float = 1e-6
+    limit_rel: float = 1e-9
+    along_rel: float = 1e-6
+    off_axis_rel: float = 1e-4
+
+
+@dataclass(frozen=True)
+class ExecutionSettings:
+    """How the executor pushes. Speeds and accelerations are of the mass-weighted twist.
+
+    The mass-weighted speed of a twist ``ν`` of the centre of mass is ``√(νᵀ M ν / m)`` [m/s]:
+    the speed of the centre of mass for a translation, the radius-of-gyration speed for a spin.
+    """
+
+    control_rate_hz: float = 200.0  # wrench re-solves per second (held between solves)
+    speed_mps: float = 0.04  # cruise speed
+    min_speed_mps: float = 0.004  # speed kept up to the very end of a transition
+    accel_mps2: float = 1.0  # largest commanded acceleration
+    brake_mps2: float = 0.1  # deceleration of the speed profile toward the target
+    speed_time_s: float = 0.05  # the speed error is closed in about this long
+    min_accel_fraction: float = 0.05  # least |acceleration| asked (of accel_mps2): never a jamming push
+    max_accel_factor: float = 1.5  # the push may accelerate at most this × the acceleration asked
+    friction_margin: float = 0.1  # δ: pushes robust to friction μ(1 ± δ)
+    margin_N: float | None = None  # least normal force on kept contacts (default: the part's weight)
+    press_fraction: float = 0.02  # force-sensor threshold as a fraction of the weight
+    contact_gap_m: float = 2e-6  # a locator this close counts as in contact even when friction leaves it unloaded
+    dwell_s: float = 0.01  # a pressed set counts once held this long
+    stall_speed_mps: float = 1e-4
+    stall_s: float = 0.12
+    max_retries: int = 3  # stall recoveries per transition before giving up
+    max_replans: int = 8  # 8 verified 64 of 72 development fixtures, 4 verified 62
+    settle_s: float = 0.2  # at rest with every locator pressed this long: done
+    recover_s: float = 0.15  # after a lost contact, press the part back this long before re-planning
+    smoothing_s: float = 0.02  # first-order lag on the applied push (0: none)
+    hold_fraction: float = 0.25  # at the goal, each locator is pressed by this fraction of the weight
+    speed_limit_factor: float = 25.0  # speed beyond this × the cruise speed (and ≥ 1 m/s) is divergence
+
+
+@dataclass(frozen=True)
+class RobustSettings:
+    """The uncertainty sampled, and the planner/executor options (as ``fixplan solve``'s)."""
+
+    samples: int = 20
+    seed: int = 0
+    mu_spread: float = 0.2  # friction μ_i (1 + u), u uniform in ±mu_spread
+    pose_sigma_m: float = 1e-3  # start translation, per axis in the resting plane [m]
+    pose_sigma_deg: float = 1.0  # start rotation about the gravity axis [deg]
+    locator_sigma_m: float = 1e-4  # locator tip offset, per axis [m]
+    force_noise: float = 0.05  # operator: relative force noise per control period
+    latency_s: float = 0.002  # operator: reaction delay [s]
+    acceleration_mps2: float = 1.0
+    margin_N: float | None = None
+    friction_margin: float = 0.1
+    knots: int = 10
+    rest_gap_m: float = 1e-9  # the nominally touching locators touch the perturbed start within this [m]
+    max_penetration_m: float = 1e-6  # no locator penetrates the perturbed start by more [m]
+
+    def check(self) -> None:
+        """Raise :class:`InputError` naming the option that is out of range."""
+        checks = [
+            ("--samples", self.samples, self.samples >= 0 and self.samples == int(self.samples), "an integer ≥ 0"),
+            ("--seed", self.seed, self.seed >= 0 and self.seed == int(self.seed), "an integer ≥ 0"),
+            ("--mu-spread", self.mu_spread, 0.0 <= self.mu_spread <= 1.0, "a fraction in [0, 1]"),
+            ("--pose-sigma (translation)", self.pose_sigma_m, 0.0 <= self.pose_sigma_m <= 0.1, "0 .. 0.1 m"),
+            ("--pose-sigma (rotation)", self.pose_sigma_deg, 0.0 <= self.pose_sigma_deg <= 30.0, "0 .. 30 deg"),
+            ("--locator-sigma", self.locator_sigma_m, 0.0 <= self.locator_sigma_m <= 0.01, "0 .. 0.01 m"),
+            ("--force-noise", self.force_noise, 0.0 <= self.force_noise <= 1.0, "a fraction in [0, 1]"),
+            ("--latency-ms", self.latency_s * 1e3, 0.0 <= self.latency_s <= 0.1, "0 .. 100 ms"),
+        ]
+        for name, value, ok, expected in checks:
+            if not (isinstance(value, int | float) and math.isfinite(value) and ok):
+                raise InputError(f"{name} must be {expected}, got {value}")
+
+    @property
+    def perturbs(self) -> bool:
+        """Whether the world is perturbed at all (else every sample is the nominal world)."""
+        return any(x > 0 for x in (self.mu_spread, self.pose_sigma_m, self.pose_sigma_deg, self.locator_sigma_m))
+
+    def execution_settings(self) -> ExecutionSettings:
+        """The executor's settings, as ``solve`` builds them."""
+        return ExecutionSettings(
+            accel_mps2=self.acceleration_mps2, friction_margin=self.friction_margin, margin_N=self.margin_N
+        )
+
+    def noise(self, seed: int) -> ExecutionNoise:
+        from fixplan.planner.execute import ExecutionNoise
+
+        return ExecutionNoise(force_noise=self.force_noise, latency_s=self.latency_s, seed=seed)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "seed": self.seed,
+            "mu_spread": self.mu_spread,
+            "pose_sigma_m": self.pose_sigma_m,
+            "pose_sigma_deg": self.pose_sigma_deg,
+            "locator_sigma_m": self.locator_sigma_m,
+            "force_noise": self.force_noise,
+            "latency_s": self.latency_s,
+            "acceleration_mps2": self.acceleration_mps2,
+            "margin_N": self.margin_N,
+            "friction_margin": self.friction_margin,
+        }
+
+    def replay_options(self) -> list[str]:
+        """The command-line options that reproduce these settings (those not at their defaults)."""
+        d = RobustSettings()
+        out: list[str] = []
+        if self.seed != d.seed:
+            out += ["--seed", str(self.seed)]
+        if self.mu_spread != d.mu_spread:
+            out += ["--mu-spread", f"{self.mu_spread:g}"]
+        if (self.pose_sigma_m, self.pose_sigma_deg) != (d.pose_sigma_m, d.pose_sigma_deg):
+            out += ["--pose-sigma", f"{self.pose_sigma_m:g},{self.pose_sigma_deg:g}"]
+        if self.locator_sigma_m != d.locator_sigma_m:
+            out += ["--locator-sigma", f"{self.locator_sigma_m:g}"]
+        if self.force_noise != d.force_noise:
+            out += ["--force-noise", f"{self.force_noise:g}"]
+        if self.latency_s != d.latency_s:
+            out += ["--latency-ms", f"{self.latency_s * 1e3:g}"]
+        if self.acceleration_mps2 != d.acceleration_mps2:
+            out += ["--accel", f"{self.acceleration_mps2:g}"]
+        if self.margin_N is not None:
+            out += ["--margin", f"{self.margin_N:g}"]
+        if self.friction_margin != d.friction_margin:
+            out += ["--friction-margin", f"{self.friction_margin:g}"]
+        return out
+
+
+@dataclass(frozen=True)
+class WitnessSettings:
+    """When a candidate motion is accepted as a sliding witness (:mod:`fixplan.jamming.sliding`).
+
+    Attributes
+    ----------
+    residual_fraction : float
+        The witness's dynamics residual must be below this fraction of ``Tolerances.balance_rel``.
+    normal_rel : float
+        A kept contact's normal acceleration counts as zero below this fraction of the motion's.
+    force_rel : float
+        Contact forces may leave their cones by this fraction of the force scale (round-off).
+    root_rel : float
+        A Newton root's residual is at most this fraction of the wrench.
+    solve_rel : float
+        A linear solve's residual is at most this fraction of its right-hand side.
+    seed_force : float
+        Newton starts with at least this normal force on a kept contact (relative).
+    seed_force_open : float
+        ... and on every contact when it starts from a perturbed guess.
+    """
+
+    residual_fraction: float = 1e-3
+    normal_rel: float = 1e-8
+    force_rel: float = 1e-9
+    root_rel: float = 1e-9
+    solve_rel: float = 1e-9
+    seed_force: float = 1e-6
+    seed_force_open: float = 1e-3
+
+
+@dataclass(frozen=True)
+class Numerics:
+    """Cut-offs of numerical linear algebra (not physics): one value each, named for its use.
+
+    Attributes
+    ----------
+    rank_tol : float
+        Singular values below this count as zero in the rank of a contact Jacobian.
+    rcond : float
+        Relative cut-off of pseudo-inverses, least-squares steps and null spaces.
+    zero_rel : float
+        A length or norm counts as zero below this fraction of its reference (or of 1).
+    same_time_s : float
+        Two instants within this are the same [s].
+    line_search_min_step : float
+        A backtracking line search gives up below this step.
+    stall_rel : float
+        Gauss–Newton stalls when an iteration decreases its objective by less than this fraction.
+    taylor_switch_rad2 : float
+        Below this squared angle [rad²] series expansions replace sin/cos ratios.
+    format_nudge_rel : float
+        Numbers printed with a few digits are nudged by this fraction before truncation.
+    clarabel_ktratio, clarabel_max_iter : float, int
+        Clarabel's ``tol_ktratio`` and ``max_iter`` for the jamming programs (its gap and
+        feasibility tolerances are ``Tolerances.cone_eps``).
+    """
+
+    rank_tol: float = 1e-9
+    rcond: float = 1e-10
+    zero_rel: float = 1e-9
+    same_time_s: float = 1e-9
+    line_search_min_step: float = 1e-6
+    stall_rel: float = 1e-6
+    taylor_switch_rad2: float = 1e-10
+    format_nudge_rel: float = 1e-7
+    clarabel_ktratio: float = 1e-7
+    clarabel_max_iter: int = 100
+
+
+@dataclass(frozen=True)
 class Settings:
     """One of each group: what a profile selects."""
 
@@ -213,6 +519,12 @@ class Settings:
     engine: EngineSettings = field(default_factory=EngineSettings)
     haptic: HapticRigSettings = field(default_factory=HapticRigSettings)
     verification: VerificationSettings = field(default_factory=VerificationSettings)
+    planner: PlannerSettings = field(default_factory=PlannerSettings)
+    search: SearchSettings = field(default_factory=SearchSettings)
+    numerics: Numerics = field(default_factory=Numerics)
+    execution: ExecutionSettings = field(default_factory=ExecutionSettings)
+    witness: WitnessSettings = field(default_factory=WitnessSettings)
+    robust: RobustSettings = field(default_factory=RobustSettings)
 
     def with_(self, **changes: Any) -> Settings:
         """A copy with some groups replaced."""

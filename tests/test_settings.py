@@ -79,3 +79,77 @@ def test_strict_profile_tightens_the_closed_form_check():
     assert r.mode == "slides"
     assert r.acceleration[0] == pytest.approx((F - limit) / 2.0, rel=1e-9)
     assert np.allclose(r.acceleration[1:], 0, atol=1e-10)
+
+
+# -- no stray thresholds ---------------------------------------------------------------------------
+# A threshold-looking literal is a float in [1e-11, 1e-3): a tolerance, a gap, a rate. Not counted:
+# smaller ones (round-off guards such as 1e-300 or 1e-12 slack, far below any tolerance) and floors
+# written as an argument of max()/min() (guards against dividing by zero, not thresholds).
+# Allowed where they are, with the reason:
+ALLOWED_MODULES = {
+    "settings.py": "the settings themselves",
+    "limits.py": "the accepted input ranges, one place already (docs/limits.md)",
+    "spatial.py": "series switch points of SO(3) exp/log (mathematics, not settings)",
+    "engine/": "constants compiled into numba kernels (numba freezes them); the engine's own numerics",
+    "_kernels.py": "constants compiled into numba kernels: the same switch points as their Python twins",
+    "fixture.py": "the fixture format's documented [simulation] defaults (docs: FIXTURE_FORMAT)",
+    "model.py": "the fixture format's documented [simulation] defaults (docs: FIXTURE_FORMAT)",
+    "generate.py": "the random fixture generator's distributions and exactness of what it generates",
+    "present/": "figure and scene scales (display only)",
+    "interactive/app.py": "the browser view's drawing scales (display only)",
+}
+
+
+def _threshold_literals(path):
+    import ast
+
+    tree = ast.parse(path.read_text())
+    guarded = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("max", "min"):
+            guarded.update(id(a) for a in node.args)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.UnaryOp) and id(node) in guarded:
+            guarded.add(id(node.operand))
+    return [
+        (node.lineno, node.value)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Constant)
+        and isinstance(node.value, float)
+        and 1e-11 <= abs(node.value) < 1e-3
+        and id(node) not in guarded
+    ]
+
+
+def test_no_threshold_literal_outside_settings():
+    from pathlib import Path
+
+    root = Path(fixplan.__file__).parent
+    stray = []
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        if any(rel.startswith(key) or rel.endswith(key) for key in ALLOWED_MODULES):
+            continue
+        stray += [f"fixplan/{rel}:{line}: {value!r}" for line, value in _threshold_literals(path)]
+    assert not stray, "thresholds belong in fixplan/settings.py:\n" + "\n".join(stray)
+
+
+def test_solver_options_only_in_settings():
+    """IPOPT's options are built by PlannerSettings.ipopt_options, nowhere else."""
+    import ast
+    from pathlib import Path
+
+    root = Path(fixplan.__file__).parent
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        if path.name == "settings.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Dict):
+                keys = {k.value for k in node.keys if isinstance(k, ast.Constant)}
+                if keys & {"constr_viol_tol", "print_level", "sb"}:  # IPOPT-only keys
+                    found.append(f"{path.relative_to(root)}:{node.lineno}")
+    assert not found, f"solver option dicts outside settings.py: {found}"
+    options = settings.DEFAULT.planner.ipopt_options()
+    assert options["tol"] == 1e-9 and options["max_iter"] == 500 and options["constr_viol_tol"] == 1e-10
+    assert settings.DEFAULT.planner.ipopt_options(tol=1e-6, max_iter=3)["max_iter"] == 3

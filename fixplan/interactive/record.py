@@ -40,7 +40,7 @@ from fixplan.errors import InputError, SolverError
 from fixplan.fixture import Fixture
 from fixplan.haptics import SimulatedDevice
 from fixplan.interactive.session import SessionResult
-from fixplan.settings import HAPTIC
+from fixplan.settings import DEFAULT, HAPTIC
 
 FloatArray = NDArray[np.float64]
 
@@ -102,7 +102,8 @@ def _transitions(res: SessionResult) -> list[dict[str, Any]]:
     states = list(res.states)
     out: list[dict[str, Any]] = []
     for (t0, s0), (t1, s1) in zip(states[:-1], states[1:], strict=True):
-        idx = np.nonzero((times >= t0 - 1e-9) & (times < t1 + 1e-9))[0]
+        eps = DEFAULT.numerics.same_time_s
+        idx = np.nonzero((times >= t0 - eps) & (times < t1 + eps))[0]
         if len(idx) == 0:
             continue
         added = sorted(set(s1) - set(s0))

@@ -41,7 +41,7 @@ from fixplan.haptics import SimulatedDevice
 from fixplan.haptics.coupling import check_passivity
 from fixplan.interactive import _kernels, protocol
 from fixplan.interactive.handles import Handle, UdpHandle
-from fixplan.settings import HAPTIC, Settings
+from fixplan.settings import DEFAULT, HAPTIC, Settings
 from fixplan.spatial import Pose, exp_so3, rot2
 
 FloatArray = NDArray[np.float64]
@@ -195,7 +195,7 @@ class Guide:
         if self._planner is None:
             self._planner = Planner(self.fixture)
         self.plans += 1
-        if not self.plans - 1 and pose.distance_to(self.fixture.start)[0] < 1e-9:
+        if not self.plans - 1 and pose.distance_to(self.fixture.start)[0] < DEFAULT.planner.same_pose_m:
             coarse = self._planner.plan_from(pose, state)
             steps: Any = plan_steps(coarse.transitions) if coarse.found else coarse.reason
         else:
@@ -388,6 +388,7 @@ class HapticSession:
         self.fixture = fixture
         self.handle = handle
         self.names = tuple(loc.name for loc in fixture.locators)
+        self.rig_settings = profile.haptic
         self.sim = Simulator(fixture, max_iterations=max_sweeps, settings=profile.engine)
         self.period_s = self.sim.dt
         self.dimension = fixture.dimension
@@ -630,7 +631,7 @@ class HapticSession:
             self._sample(w_c, felt)
             if self.synchronous and self.guide is not None and self.snapshot is not None:
                 self._run_guide(self.snapshot)
-        if self.duration_s is not None and sim.time_s >= self.duration_s - 1e-9:
+        if self.duration_s is not None and sim.time_s >= self.duration_s - DEFAULT.numerics.same_time_s:
             self._end(None)
         elif self.until_goal and self.goal_reached_at is not None:
             self._end(None)
@@ -872,7 +873,9 @@ class HapticSession:
         if self.realtime:
             self.scheduling = real_time_priority()
         old_interval = sys.getswitchinterval()
-        sys.setswitchinterval(min(old_interval, 2e-4))  # the display thread gives the GIL back quickly
+        sys.setswitchinterval(
+            min(old_interval, self.rig_settings.switch_interval_s)
+        )  # the display thread yields the GIL quickly
         gc.collect()
         gc.freeze()  # long-lived objects out of the collector's way: collections stay short
         try:
@@ -881,8 +884,8 @@ class HapticSession:
                 if self.realtime:
                     next_t += T
                     now = time.perf_counter()
-                    if next_t - now > 2e-4:
-                        time.sleep(next_t - now - 1.5e-4)
+                    if next_t - now > self.rig_settings.spin_s:
+                        time.sleep(next_t - now - self.rig_settings.wake_early_s)
                     while (now := time.perf_counter()) < next_t:
                         pass
                     if now - next_t > 50 * T:  # fell far behind (the process was stopped): start afresh

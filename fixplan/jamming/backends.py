@@ -23,6 +23,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from fixplan.jamming.programs import ConeProgram, cone_violation_of
+from fixplan.settings import DEFAULT
 
 FloatArray = NDArray[np.float64]
 
@@ -65,9 +66,9 @@ def clarabel_settings(eps: float):
     s.tol_gap_abs = eps
     s.tol_gap_rel = eps
     s.tol_feas = eps
-    s.tol_ktratio = 1e-7
+    s.tol_ktratio = DEFAULT.numerics.clarabel_ktratio
     s.presolve_enable = False  # keeps the data layout fixed so ``update`` is allowed
-    s.max_iter = 100
+    s.max_iter = DEFAULT.numerics.clarabel_max_iter
     return s
 
 
@@ -94,7 +95,7 @@ def csc_from_dense(A: FloatArray) -> sp.csc_matrix:
 class ClarabelProgram:
     """One program handed to Clarabel once; :meth:`solve` takes a new ``b`` each time."""
 
-    def __init__(self, program: ConeProgram, eps: float = 1e-9):
+    def __init__(self, program: ConeProgram, eps: float = DEFAULT.tolerances.cone_eps):
         import clarabel
 
         self.program = program

@@ -41,6 +41,7 @@ from fixplan.jamming.programs import ProgramBuilder
 from fixplan.jamming.sliding import WitnessSearch
 from fixplan.kinematics import ContactSet
 from fixplan.nnls import nnls
+from fixplan.settings import DEFAULT as DEFAULT_SETTINGS
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
 from fixplan.settings import Tolerances
 
@@ -133,7 +134,11 @@ class Classifier:
         }
         self._programs: dict[str, ClarabelProgram] = {}
         self._witness = WitnessSearch(
-            cs, b.C, b.N_maintain, slip_rel=tolerances.slip_rel, res_tol=max(tolerances.balance_rel * 1e-3, 1e-12)
+            cs,
+            b.C,
+            b.N_maintain,
+            slip_rel=tolerances.slip_rel,
+            res_tol=max(tolerances.balance_rel * DEFAULT_SETTINGS.witness.residual_fraction, 1e-12),
         )
         self.frames = {c.name: np.vstack([c.normal_world, c.tangents_world]) for c in cs.contacts}
         self._names = cs.names

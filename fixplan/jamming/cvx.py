@@ -14,12 +14,13 @@ from numpy.typing import NDArray
 
 from fixplan.jamming.backends import ConeSolution
 from fixplan.kinematics import ContactSet
+from fixplan.settings import DEFAULT_TOLERANCES
 
 FloatArray = NDArray[np.float64]
 
 
 def least_residual(
-    cs: ContactSet, w_hat: FloatArray, P: FloatArray, C: FloatArray, eps: float = 1e-9
+    cs: ContactSet, w_hat: FloatArray, P: FloatArray, C: FloatArray, eps: float = DEFAULT_TOLERANCES.cone_eps
 ) -> tuple[ConeSolution, FloatArray]:
     """``min ‖P C (ŵ + Σ J_iᵀ λ_i)‖`` over ``λ_i`` in the exact friction cones.
 

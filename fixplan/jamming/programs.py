@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.kinematics import ContactSet
+from fixplan.settings import DEFAULT
 
 FloatArray = NDArray[np.float64]
 
@@ -100,7 +101,7 @@ def force_layout(cs: ContactSet) -> ForceLayout:
     return ForceLayout(S, np.array(normal_index, dtype=np.int64), tuple(cones), R)
 
 
-def null_basis(A: FloatArray, tol: float = 1e-10) -> FloatArray:
+def null_basis(A: FloatArray, tol: float = DEFAULT.numerics.rcond) -> FloatArray:
     """Orthonormal basis (columns) of the null space of ``A``."""
     if A.shape[0] == 0:
         return np.eye(A.shape[1])

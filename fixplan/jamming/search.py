@@ -61,6 +61,7 @@ from fixplan.jamming.classify import Classification, Classifier
 from fixplan.jamming.programs import ConeProgram, force_layout
 from fixplan.kinematics import ContactSet
 from fixplan.locating import contact_set
+from fixplan.settings import DEFAULT
 from fixplan.spatial import shift_twist, shift_wrench, skew
 
 if TYPE_CHECKING:
@@ -69,10 +70,11 @@ if TYPE_CHECKING:
 
 FloatArray = NDArray[np.float64]
 
-JAM_MARGIN_REL = 1e-3  # default least relative distance of the wrench found from static balance
-_TARGET_REL = 1e-6  # a margin target counts as met within this relative shortfall (solver accuracy)
+_SEARCH = DEFAULT.search  # the search's thresholds (fixplan.settings.SearchSettings)
+JAM_MARGIN_REL = _SEARCH.jam_margin_rel  # default least relative distance of the wrench found from static balance
+_TARGET_REL = _SEARCH.target_rel  # a margin target counts as met within this relative shortfall (solver accuracy)
 _MOVING = ("slides", "pivots", "rolls")
-SLIP_REL = 0.05  # a kept contact slipping at ≥ 5 % of the part's speed slides against its slip
+SLIP_REL = _SEARCH.slip_rel  # a kept contact slipping at ≥ 5 % of the part's speed slides against its slip
 
 
 def floor_sig(x: float, digits: int = 4) -> str:
@@ -86,7 +88,8 @@ def floor_sig(x: float, digits: int = 4) -> str:
         return str(x)
     if x == 0.0:
         return "0"
-    v = x * (1 + 1e-7) if x > 0 else x * (1 - 1e-7)
+    nudge = DEFAULT.numerics.format_nudge_rel
+    v = x * (1 + nudge) if x > 0 else x * (1 - nudge)
     e = math.floor(math.log10(abs(v))) - digits + 1
     q = math.floor(v / 10.0**e) * 10.0**e
     return f"{q:.{digits}g}"
@@ -272,7 +275,7 @@ def _certificate(cs: ContactSet, target: FloatArray, *, project: bool) -> FloatA
     y = sol.x[:n]
     size = float(np.linalg.norm(L.T @ y))
     ref = float(np.linalg.norm(L.T @ target)) if project else float(np.linalg.norm(np.linalg.solve(L, target)))
-    if size <= 1e-9 * max(ref, 1e-300) or (not project and float(y @ target) <= 0.0):
+    if size <= DEFAULT.numerics.zero_rel * max(ref, 1e-300) or (not project and float(y @ target) <= 0.0):
         return None
     return y / size
 
@@ -373,7 +376,7 @@ def search_wrench(
     about = cs.body_origin_world if at is None else np.asarray(at, dtype=float)
     a_hat = twist_at_com(cs, m, about)
     slip = None if slip_twist is None else twist_at_com(cs, _finite_twist(fixture, slip_twist, "slip_twist"), about)
-    roles, directions = _roles(cs, a_hat, 1e-9, slip)
+    roles, directions = _roles(cs, a_hat, _SEARCH.role_rel, slip)
     wp = fixture.workpiece
     g = float(np.linalg.norm(fixture.gravity)) or 9.81
     F_max, T_max, notes = hand_limits(fixture)
@@ -411,11 +414,11 @@ def search_wrench(
     prog, meta = _build(**build, cert=y, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
     sol = ClarabelProgram(prog).solve(prog.b)
     n = cs.ndof
-    if not sol.solved or -sol.value <= 1e-9 * F_max:
+    if not sol.solved or -sol.value <= _SEARCH.found_rel * F_max:
         # Diagnose: is it the limits, or the motion itself?
         prog_free, _ = _build(**build, cert=y, F_max=1e3 * F_max, T_max=1e3 * T_max)  # type: ignore[arg-type]
         free = ClarabelProgram(prog_free).solve(prog_free.b)
-        if free.solved and -free.value > 1e-9 * F_max:
+        if free.solved and -free.value > _SEARCH.found_rel * F_max:
             F_need = float(np.linalg.norm(free.x[: cs.dimension]))
             return not_found(
                 f"the manipulator is too weak: this motion needs more than max_force {F_max:.4g} N or max_torque"
@@ -454,9 +457,9 @@ def search_wrench(
     forces = {c.name: lam[o : o + c.size] for c, o in zip(cs.contacts, cs.offsets, strict=True)}
     w_user = _about_point(cs, w_com, about)  # the applied wrench about the user's point
     binding = []
-    if abs(float(np.linalg.norm(w_com[: cs.dimension])) - F_max) <= 1e-6 * F_max:
+    if abs(float(np.linalg.norm(w_com[: cs.dimension])) - F_max) <= _SEARCH.binding_rel * F_max:
         binding.append("max_force")
-    if abs(float(np.linalg.norm(w_user[cs.dimension :])) - T_max) <= 1e-6 * T_max:
+    if abs(float(np.linalg.norm(w_user[cs.dimension :])) - T_max) <= _SEARCH.binding_rel * T_max:
         binding.append("max_torque")
 
     met = None if target is None else bool(tau_best >= target * (1 - _TARGET_REL))
@@ -525,9 +528,9 @@ def _confirm(cs: ContactSet, check: Classification, a_hat: FloatArray, roles: di
     ref = float(a_hat @ M @ a_hat)
     along = float(a @ M @ a_hat) / ref
     off_axis = a - along * a_hat
-    if along < 1 - 1e-6:
+    if along < 1 - _SEARCH.along_rel:
         return False, f"its acceleration is {along:.4g} × the requested one"
-    if float(off_axis @ M @ off_axis) > (1e-4) ** 2 * float(a @ M @ a):
+    if float(off_axis @ M @ off_axis) > _SEARCH.off_axis_rel**2 * float(a @ M @ a):
         return False, "its acceleration points elsewhere than the requested motion"
     for c, off in zip(cs.contacts, cs.offsets, strict=True):
         if roles[c.name] == "opening" and float(cs.J[off] @ a) <= 0.0:
@@ -556,7 +559,7 @@ def _free_push(
     limits = (F_max, T_max)
     forces = {c.name: np.zeros(c.size) for c in cs.contacts}
     met = None if target is None else True  # no kept contact: the least normal force is vacuous
-    if F > F_max * (1 + 1e-9) or T > T_max * (1 + 1e-9):
+    if F > F_max * (1 + _SEARCH.limit_rel) or T > T_max * (1 + _SEARCH.limit_rel):
         binding = [k for k, over in (("max_force", F > F_max), ("max_torque", T > T_max)) if over]
         reason = (
             f"the manipulator is too weak: every contact opens, so the push is M a − w_g with ‖F‖ = {F:.4g} N,"

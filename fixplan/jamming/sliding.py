@@ -38,6 +38,9 @@ from numpy.typing import NDArray
 
 from fixplan.jamming import _witness_kernels as kernels
 from fixplan.kinematics import ContactSet
+from fixplan.settings import DEFAULT
+
+_W = DEFAULT.witness  # the acceptance thresholds (fixplan.settings.WitnessSettings)
 
 FloatArray = NDArray[np.float64]
 Roles = tuple[tuple[int, ...], tuple[int, ...]]  # (sticking indices, open indices)
@@ -120,24 +123,24 @@ def _accept(
     for i, (c, off) in enumerate(zip(cs.contacts, cs.offsets, strict=True)):
         un = float(cs.J[off] @ a)
         if i in opened:
-            if un <= 1e-8 * acc_ref:
+            if un <= _W.normal_rel * acc_ref:
                 return None
             continue
-        if abs(un) > 1e-8 * acc_ref:
+        if abs(un) > _W.normal_rel * acc_ref:
             return None
         li = lam[off : off + c.size]
-        if li[0] < -1e-9 * f_scale:
+        if li[0] < -_W.force_rel * f_scale:
             return None
         if i in stick:
             tang = li[1:].copy()
             if c.soft:
                 tang[-1] /= c.torsion_m
-            if float(np.linalg.norm(tang)) > c.friction * li[0] + 1e-9 * f_scale:
+            if float(np.linalg.norm(tang)) > c.friction * li[0] + _W.force_rel * f_scale:
                 return None
         elif c.friction > 0.0:
             s = rows.Dm[i, : c.size - 1] * (cs.J[off + 1 : off + c.size] @ a)
             slip = float(np.linalg.norm(s)) / acc_ref
-            if slip <= slip_rel and li[0] <= 1e-9 * f_scale:
+            if slip <= slip_rel and li[0] <= _W.force_rel * f_scale:
                 # idle: kept, no slip and no force (a point on the motion's axis, e.g. an end stop
                 # on a spinning cylinder's axis). Zero force satisfies Coulomb's law whatever the
                 # slip direction, so it does not stop the others from sliding.
@@ -168,7 +171,7 @@ def _start_for(cs: ContactSet, base: FloatArray, roles: Roles) -> FloatArray:
     for i, c in enumerate(cs.contacts):
         if i in opened:
             continue
-        fn = abs(base[n + i]) + 1e-6
+        fn = abs(base[n + i]) + _W.seed_force
         parts.append(np.concatenate([[fn], np.zeros(c.size - 1)]) if i in stick else np.array([fn]))
     return np.concatenate(parts)
 
@@ -203,8 +206,8 @@ class WitnessSearch:
         C: FloatArray,
         null_G: FloatArray,
         *,
-        slip_rel: float = 1e-6,
-        res_tol: float = 1e-9,
+        slip_rel: float = DEFAULT.tolerances.slip_rel,
+        res_tol: float = DEFAULT.tolerances.balance_rel * _W.residual_fraction,
         rng_seed: int = 0,
     ):
         self.cs = cs
@@ -242,13 +245,13 @@ class WitnessSearch:
             for _ in range(2):
                 a = self.N @ self.rng.standard_normal(self.N.shape[1])
                 a *= max(float(np.linalg.norm(base[:n])), 1e-3) / max(float(np.linalg.norm(a)), 1e-300)
-                starts.append(np.concatenate([a, np.abs(base[n:]) + 1e-3]))
+                starts.append(np.concatenate([a, np.abs(base[n:]) + _W.seed_force_open]))
         w_norm = max(float(np.linalg.norm(w_e)), 1e-300)
         for roles in patterns:
             for z0 in starts if roles == ((), ()) else starts[:2]:
                 z = rows.newton(w_e, _start_for(cs, z0, roles), roles)
                 F, _, _ = rows.system(w_e, z, roles)
-                if not float(np.linalg.norm(F)) <= 1e-9 * w_norm:  # not a root (or NaN)
+                if not float(np.linalg.norm(F)) <= _W.root_rel * w_norm:  # not a root (or NaN)
                     continue
                 witness = _accept(rows, w_e, z, roles, self.C, self.slip_rel, self.res_tol)
                 if witness is not None:
@@ -299,7 +302,7 @@ class WitnessSearch:
             if (
                 z is None
                 or not np.all(np.isfinite(z))
-                or float(np.linalg.norm(K @ z - rhs)) > 1e-9 * max(float(np.linalg.norm(rhs)), 1e-300)
+                or float(np.linalg.norm(K @ z - rhs)) > _W.solve_rel * max(float(np.linalg.norm(rhs)), 1e-300)
             ):
                 # singular (rank-deficient G, e.g. concurrent normals): the least-norm solution is
                 # one of many consistent motions; _accept checks its residual like any other

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from fixplan.errors import InputError
+from fixplan.settings import DEFAULT
 from fixplan.spatial import Pose
 
 State = frozenset[str]
@@ -254,7 +255,10 @@ def _lazy_search(
                 done[key] = result
                 _record(attempts, progress, state, target, result)
                 guess = guessed.get(key)
-                if not result.success or (guess is not None and float(result.cost) > 1.5 * guess[0] + 1e-9):
+                if not result.success or (
+                    guess is not None
+                    and float(result.cost) > DEFAULT.planner.cost_slack * guess[0] + DEFAULT.numerics.zero_rel
+                ):
                     complete = False  # failed, or dearer than guessed: another sequence may now be better
                     break
             pose = done[key].end_pose

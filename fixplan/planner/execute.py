@@ -49,6 +49,7 @@ from numpy.typing import NDArray
 from fixplan.errors import InputError
 from fixplan.locating import contact_set
 from fixplan.planner.fine import twist_from_pose
+from fixplan.settings import DEFAULT, ExecutionSettings
 from fixplan.spatial import Pose, shift_twist, shift_wrench
 
 if TYPE_CHECKING:
@@ -71,38 +72,6 @@ class Step:
 
     def to_json(self) -> dict[str, Any]:
         return {"established": list(self.established), "target": self.target, "kind": self.kind}
-
-
-@dataclass(frozen=True)
-class ExecutionSettings:
-    """How the executor pushes. Speeds and accelerations are of the mass-weighted twist.
-
-    The mass-weighted speed of a twist ``ν`` of the centre of mass is ``√(νᵀ M ν / m)`` [m/s]:
-    the speed of the centre of mass for a translation, the radius-of-gyration speed for a spin.
-    """
-
-    control_rate_hz: float = 200.0  # wrench re-solves per second (held between solves)
-    speed_mps: float = 0.04  # cruise speed
-    min_speed_mps: float = 0.004  # speed kept up to the very end of a transition
-    accel_mps2: float = 1.0  # largest commanded acceleration
-    brake_mps2: float = 0.1  # deceleration of the speed profile toward the target
-    speed_time_s: float = 0.05  # the speed error is closed in about this long
-    min_accel_fraction: float = 0.05  # least |acceleration| asked (of accel_mps2): never a jamming push
-    max_accel_factor: float = 1.5  # the push may accelerate at most this × the acceleration asked
-    friction_margin: float = 0.1  # δ: pushes robust to friction μ(1 ± δ)
-    margin_N: float | None = None  # least normal force on kept contacts (default: the part's weight)
-    press_fraction: float = 0.02  # force-sensor threshold as a fraction of the weight
-    contact_gap_m: float = 2e-6  # a locator this close counts as in contact even when friction leaves it unloaded
-    dwell_s: float = 0.01  # a pressed set counts once held this long
-    stall_speed_mps: float = 1e-4
-    stall_s: float = 0.12
-    max_retries: int = 3  # stall recoveries per transition before giving up
-    max_replans: int = 8  # 8 verified 64 of 72 development fixtures, 4 verified 62
-    settle_s: float = 0.2  # at rest with every locator pressed this long: done
-    recover_s: float = 0.15  # after a lost contact, press the part back this long before re-planning
-    smoothing_s: float = 0.02  # first-order lag on the applied push (0: none)
-    hold_fraction: float = 0.25  # at the goal, each locator is pressed by this fraction of the weight
-    speed_limit_factor: float = 25.0  # speed beyond this × the cruise speed (and ≥ 1 m/s) is divergence
 
 
 @dataclass(frozen=True)
@@ -173,7 +142,7 @@ def project_keeping(nu: FloatArray, A: FloatArray | None, M_inv: FloatArray) -> 
     """The ``M``-orthogonal projection of ``nu`` onto ``{ν : A ν = 0}``."""
     if A is None or A.shape[0] == 0:
         return nu
-    return nu - M_inv @ A.T @ np.linalg.pinv(A @ M_inv @ A.T, rcond=1e-10) @ (A @ nu)
+    return nu - M_inv @ A.T @ np.linalg.pinv(A @ M_inv @ A.T, rcond=DEFAULT.numerics.rcond) @ (A @ nu)
 
 
 class Executor:
@@ -583,7 +552,7 @@ class Executor:
         A = cs.G[-1:] if est_cs_rows is None else np.vstack([est_cs_rows, cs.G[-1:]])
         b = np.zeros(A.shape[0])
         b[-1] = -max(gap, 1e-4)
-        direct = M_inv @ A.T @ np.linalg.pinv(A @ M_inv @ A.T, rcond=1e-10) @ b
+        direct = M_inv @ A.T @ np.linalg.pinv(A @ M_inv @ A.T, rcond=DEFAULT.numerics.rcond) @ b
         left = gap
         nu = direct
         if not self._use_direct and len(step.path) >= 2:

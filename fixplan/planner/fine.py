@@ -88,6 +88,7 @@ from numpy.typing import NDArray
 from fixplan.errors import InputError, SolverError
 from fixplan.kinematics import mass_matrix
 from fixplan.locating import contact_set, locator_contact
+from fixplan.settings import DEFAULT, PlannerSettings
 from fixplan.spatial import Pose, log_so3, shift_twist, shift_wrench, tangent_seed
 
 if TYPE_CHECKING:
@@ -315,7 +316,7 @@ def _plane_features(fixture: Fixture) -> list[Feature]:
     return []
 
 
-SMOOTH_MAX_M = 1e-4  # length scale of the smooth maximum of two face planes' gaps [m]
+SMOOTH_MAX_M = DEFAULT.planner.smooth_max_m  # length scale of the smooth maximum of two face planes' gaps [m]
 
 
 def clearance_features(fixture: Fixture, locator: Locator, start: Pose, feature: Feature) -> tuple[Feature, ...]:
@@ -357,7 +358,7 @@ def smooth_max(ca: Any, a: Any, b: Any, scale_m: float = SMOOTH_MAX_M) -> Any:
 def _exp_so3_ca(ca: Any, w: Any) -> Any:
     """Rodrigues' formula in CasADi, with a Taylor branch near 0 (both branches stay finite)."""
     th2 = ca.dot(w, w)
-    small = th2 < 1e-10
+    small = th2 < DEFAULT.numerics.taylor_switch_rad2
     th2_safe = ca.if_else(small, 1.0, th2)
     th = ca.sqrt(th2_safe)
     a = ca.if_else(small, 1.0 - th2 / 6.0, ca.sin(th) / th)
@@ -402,10 +403,11 @@ def plan_transition(
     warm_start: Transition | None = None,
     kind: str | None = None,
     acceleration_mps2: float = 1.0,
-    max_iter: int = 500,
-    tol: float = 1e-9,
+    max_iter: int | None = None,
+    tol: float | None = None,
     friction_margin: float = 0.0,
     margin_N: float | None = None,
+    settings: PlannerSettings = DEFAULT.planner,
 ) -> Transition:
     """Plan the path and wrenches that add ``target`` to the ``established`` contacts.
 
@@ -585,7 +587,7 @@ def plan_transition(
     opti.solver(
         "ipopt",
         {"print_time": False},
-        {"print_level": 0, "sb": "yes", "tol": tol, "max_iter": int(max_iter), "constr_viol_tol": 1e-10},
+        settings.ipopt_options(tol, max_iter),
     )
     t0 = time.perf_counter()
     try:
@@ -716,7 +718,7 @@ def _no_slip(
         a = tangent_seed(n0)
         if axis_b is not None and j == 1:
             along = axis_b - (axis_b @ n0) * n0
-            if np.linalg.norm(along) > 1e-9:
+            if np.linalg.norm(along) > DEFAULT.numerics.zero_rel:
                 a = along / np.linalg.norm(along)
         # spatial.tangent_basis, in CasADi: t1 = the seed projected off n, t2 = n × t1
         t1 = ca.DM(a) - ca.dot(ca.DM(a), n_b) * n_b
@@ -750,7 +752,7 @@ def _initial_guess(
     wp = fixture.workpiece
     if warm is not None and len(warm.poses) >= 2:
         dp, ang = warm.poses[0].distance_to(start)
-        if dp <= 1e-9 and ang <= 1e-9:
+        if dp <= DEFAULT.planner.same_pose_m and ang <= DEFAULT.planner.same_pose_m:
             xs = np.array([twist_from_pose(start, p, com_b) for p in warm.poses]).T
             s_old = np.linspace(0.0, 1.0, xs.shape[1])
             s_new = np.linspace(0.0, 1.0, K + 1)
@@ -857,7 +859,7 @@ def _segment_wrenches(
         Minv = cs.M_inv
         if len(est):
             A = cs.J if kind == "roll" else cs.G
-            nu = nu - Minv @ A.T @ np.linalg.pinv(A @ Minv @ A.T, rcond=1e-10) @ (A @ nu)
+            nu = nu - Minv @ A.T @ np.linalg.pinv(A @ Minv @ A.T, rcond=DEFAULT.numerics.rcond) @ (A @ nu)
         size = float(np.sqrt(max(float(nu @ M @ nu), 0.0) / wp.mass_kg))
         if size <= 1e-15:
             reasons.append("the segment does not move")

@@ -29,15 +29,16 @@ from fixplan.planner.execute import ExecutionSettings, Step
 from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, _segment_wrenches, plan_transition
 from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.verify import Verification, verify
+from fixplan.settings import DEFAULT
 from fixplan.spatial import Pose
 
-ROBUST_GRID = (0.05, 0.1, 0.2, 0.3, 0.5)
+ROBUST_GRID = DEFAULT.planner.robust_grid
 # Gaps kept at the other locators along a fine path [m], tried in turn when IPOPT finds no path:
 # a fixed 1 mm is an angle on a part whose locators sit close together (two side locators 11 mm
 # apart on a 44 mm face hold a part touching one of them ≥ 5° away from the other; the next
 # transition can then not touch the end locator without closing that gap): the smaller
 # clearance still keeps the path clear of every locator, with less room for the executor.
-CLEARANCES_M = (1e-3, 1e-4)
+CLEARANCES_M = DEFAULT.planner.clearances_m  # fixplan.settings.PlannerSettings.clearances_m
 
 
 @dataclass
@@ -229,7 +230,7 @@ class Planner:
         A = np.vstack([rows, cs.G[-1:]])
         b = np.zeros(A.shape[0])
         b[-1] = -max(gap, 0.0)
-        step = cs.M_inv @ A.T @ np.linalg.pinv(A @ cs.M_inv @ A.T, rcond=1e-10) @ b
+        step = cs.M_inv @ A.T @ np.linalg.pinv(A @ cs.M_inv @ A.T, rcond=DEFAULT.numerics.rcond) @ b
         if not np.all(np.isfinite(step)):
             return None
         length = float(np.sqrt(max(float(step @ cs.mass_matrix @ step), 0.0) / fx.workpiece.mass_kg))
@@ -244,7 +245,9 @@ class Planner:
         # the nearest pose (least-squares steps) where they do
         start = pose
         if state:  # a part touching nothing (knocked free) is planned from where it is
-            settled = solve_goal(fx.workpiece, [fx.locator(n) for n in sorted(state)], pose, tol_m=1e-10)
+            settled = solve_goal(
+                fx.workpiece, [fx.locator(n) for n in sorted(state)], pose, tol_m=DEFAULT.planner.settle_tol_m
+            )
             if not settled.converged:
                 return f"no pose near the observed one keeps {{{', '.join(sorted(state))}}} touching"
             start = settled.pose
