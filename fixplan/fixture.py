@@ -1,4 +1,4 @@
-"""Fixture files (TOML, ``../shared/spec/FIXTURE_FORMAT.md``) → a validated :class:`Fixture`.
+"""Fixture files (TOML, ``docs/fixture-format.md``) → a validated :class:`Fixture`.
 
 Every problem in a file is reported, each as ``FILE: dotted.key.path: what is wrong (what was
 expected)``, by raising one :class:`~fixplan.errors.FixtureError` that carries them all.

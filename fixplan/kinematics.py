@@ -1,6 +1,6 @@
 """Contact frames, contact Jacobians and the mass matrix of a contact configuration.
 
-Conventions (MATH.md):
+Conventions (docs/math.md):
 
 - twist ``ν = (v, ω)`` of the centre of mass ``c`` in world axes (3D: 6 numbers; 2D:
   ``(vx, vy, ω)``);

@@ -8,7 +8,7 @@ Conventions (used everywhere in fixplan):
 - ``rpy_deg = [roll, pitch, yaw]`` in files means ``R = Rz(yaw) · Ry(pitch) · Rx(roll)``
   (fixed-axis X-Y-Z, as in URDF and pinocchio's ``rpy.rpyToMatrix``).
 - A 2D pose is ``(x, y, θ)`` with ``θ`` counter-clockwise.
-- Twists are ``(v, ω)`` in **world axes** about the centre of mass ``c`` (MATH.md); a pose is
+- Twists are ``(v, ω)`` in **world axes** about the centre of mass ``c`` (docs/math.md); a pose is
   moved by a twist with the left (world-frame) retraction
   ``c⁺ = c + v,  R⁺ = exp(ω̂) R`` (3D) or ``θ⁺ = θ + ω`` (2D).
 - A wrench ``w = (f, m)`` or twist ``t = (v, ω)`` is only meaningful with the point it is taken

@@ -9,7 +9,7 @@ Given a ``d × d`` matrix ``W`` (the diagonal Delassus block ``W_jj``, symmetric
 definite in the usual case; a non-symmetric ``W`` with positive definite symmetric part is
 also handled), a vector ``α̂`` (the free velocity of the contact, ``α̂ = q_j + Σ_{k≠j} W_jk P_k``)
 and a friction coefficient ``μ ≥ 0``, find the impulse ``P = (P_n, P_t)`` and the velocity
-``u = W P + α̂`` with (MATH.md, "Contact laws")::
+``u = W P + α̂`` with (docs/math.md, "Contact laws")::
 
     K_μ ∋ P ⊥ ũ ∈ K_μ*,   ũ = u + (μ ‖u_t‖, 0, …),   K_μ = {‖P_t‖ ≤ μ P_n}.
 
@@ -60,7 +60,7 @@ For ``k = 1`` the sliding case is in closed form (the sliding direction is ``±1
 ``P_n = −α̂_n / (W_nn ∓ μ W_nt)``; :func:`solve_coulomb_2d` enumerates the four regimes and only
 falls back on the root find when rounding rejects all of them.
 
-Soft finger (MATH.md [10])
+Soft finger (docs/math.md [10])
 --------------------------
 ``P_t1² + P_t2² + P_s²/e_r² ≤ μ² P_n²`` (``e_x = e_y = 1``, ``e_r`` the torsion radius [m]).
 With ``s = (1, 1, 1, e_r)`` the scaled impulse ``P̃ = P / s`` and scaled velocity ``ũ = s ∘ u``
@@ -237,7 +237,7 @@ def project_cone_into(x, mu, out):
 
 @numba.njit(cache=True, error_model="numpy")
 def project_cone(x, mu):
-    """Euclidean projection of ``x`` onto the Coulomb cone ``K_μ`` (MATH.md formula).
+    """Euclidean projection of ``x`` onto the Coulomb cone ``K_μ`` (docs/math.md formula).
 
     Parameters
     ----------

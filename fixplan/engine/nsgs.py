@@ -1,6 +1,6 @@
 """Nonsmooth Gauss–Seidel (NSGS) for the local frictional contact problem ``u = W r + q``.
 
-The problem (MATH.md, "Transfer equations" and "Contact laws"; FCLib's "local" problem): find
+The problem (docs/math.md, "Transfer equations" and "Contact laws"; FCLib's "local" problem): find
 the impulses ``r`` and velocities ``u = W r + q`` such that every contact ``j`` obeys its law
 ``K_μj ∋ r_j ⊥ ũ_j ∈ K_μj*``. Contact ``j`` occupies rows ``offset[j] : offset[j] + dim[j]``,
 ordered ``(normal, tangent1[, tangent2[, spin]])``; ``dim`` is 2 (planar Coulomb), 3 (Coulomb)

@@ -1,4 +1,4 @@
-"""The compiled Moreau–Jean time step (MATH.md [3]–[5], contact laws [8]–[10], NSGS).
+"""The compiled Moreau–Jean time step (docs/math.md [3]–[5], contact laws [8]–[10], NSGS).
 
 One call advances one rigid workpiece among fixed spherical-tip locators by one step ``h``:
 

@@ -4,7 +4,7 @@ Every shape answers one question, :meth:`Shape.project`: for a point ``p_body``,
 distance to the surface (negative inside), the closest surface point and the outward unit
 normal there. A spherical locator tip of radius ρ centred at ``p`` then has the gap
 ``distance − ρ``, touches at the closest point, and pushes along the *inward* normal
-(MATH.md's ``n``, from the locator into the workpiece).
+(docs/math.md's ``n``, from the locator into the workpiece).
 
 On the surface itself the outward normal is taken from the face the point lies on (not from a
 0/0 difference), so point locators resting exactly on a face get an exact normal.

@@ -1,7 +1,7 @@
 """Jamming analysis: what a push does to a part at rest in its contacts, and which push won't jam.
 
 - :func:`classify` — the mode per wrench (held, jammed, separates, slides, rolls, indeterminate);
-- :func:`search_wrench` — the non-jamming wrench for a desired motion (MATH.md program 2);
+- :func:`search_wrench` — the non-jamming wrench for a desired motion (docs/math.md program 2);
 - :func:`can_wedge` — whether the contacts can hold self-equilibrated forces.
 """
 

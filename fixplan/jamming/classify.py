@@ -1,4 +1,4 @@
-"""Classify what a wrench does to a workpiece at rest in contact (MATH.md, "As cone programs").
+"""Classify what a wrench does to a workpiece at rest in contact (docs/math.md, "As cone programs").
 
 For the total wrench ``w_e`` (applied + gravity, about the centre of mass) the verdict is the
 first certificate found, in this order:
@@ -10,7 +10,7 @@ first certificate found, in this order:
 4. ``rolls`` — a motion with no slip at any contact is consistent with forces in the cones;
 5. ``slides`` — Theorem 1's witness: every contact kept and sliding with friction at its limit;
 6. ``pivots`` — every contact kept, some sticking while the others slide (the body turns about
-   the sticking contacts). Not in the issue's list: added because it is a definite outcome, and
+   the sticking contacts). Beyond the modes the paper names: added because it is a definite outcome, and
    by Theorem 1 it is *not* a non-jamming motion for n ≥ 3 (a contact's tangential constraint
    is active while the body moves);
 7. ``indeterminate`` — no certificate either way (say which, e.g. mixed stick–slip, or a

@@ -12,7 +12,7 @@ Contact forces are the reduced variables ``f``: per contact the normal force, th
 ``μ > 0`` — the tangential components and, for a soft finger, the spin moment. ``λ = S f``
 expands them to the full contact vectors of :class:`~fixplan.kinematics.ContactSet`.
 
-Friction cones are exact (MATH.md [9], [10]):
+Friction cones are exact (docs/math.md [9], [10]):
 
 - 3D point contact: ``(μ f_n, f_t1, f_t2) ∈ SOC³``;
 - 3D soft finger: ``(μ f_n, f_t1, f_t2, f_s / e_r) ∈ SOC⁴``;

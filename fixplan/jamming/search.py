@@ -1,4 +1,4 @@
-"""The non-jamming wrench for a desired motion (MATH.md "As cone programs", program 2).
+"""The non-jamming wrench for a desired motion (docs/math.md "As cone programs", program 2).
 
 Given the desired acceleration ``â`` of the workpiece (a twist rate of the body-frame origin,
 world axes), every contact is sorted by what ``â`` does to it:

@@ -3,7 +3,7 @@
 Unknowns: the acceleration ``a`` (twist rate of the centre of mass, world axes) and the
 contact forces. Each contact has a role:
 
-- *sliding*: kept (``G_i a = 0``) with friction at its limit opposing the slip (MATH.md [13],
+- *sliding*: kept (``G_i a = 0``) with friction at its limit opposing the slip (docs/math.md [13],
   [14], [19], [20]): ``λ_i = f_n,i (1, −μ_i D d_i)``, ``d_i = s_i/‖s_i‖``, ``s_i = D T_i a``
   (``T_i`` its tangent [and spin] rows; ``D = diag(1, 1, e_r)`` for a soft finger, else 1);
 - *sticking*: no relative acceleration (``J_i a = 0``), force ``λ_i`` free, checked to lie in

@@ -2,14 +2,14 @@
 
 A contact state is a set of touched locators. From ``start``, where the ``established``
 locators touch, :func:`plan_transition` finds ``knots + 1`` poses ending where ``target`` touches
-too (MATH.md "Planning", Section IV of the paper):
+too (docs/math.md "Planning", Section IV of the paper):
 
 - every established locator keeps touching (gap = 0) at every knot;
 - the target's gap never increases and is exactly 0 at the last knot;
 - every other locator keeps a gap ≥ ``clearance_m`` at every knot (or its start gap, if that is
   smaller);
 - **roll** or **slide** on the established contacts. With fewer than three established contacts
-  the body rolls (MATH.md: n < 3): the material point at each established contact does not
+  the body rolls (docs/math.md: n < 3): the material point at each established contact does not
   slip, to first order — its displacement between consecutive knots has no tangential
   component. Three or more contacts leave too few rolling motions, and the body slides on all
   of them (Theorem 1). In 2D rolling on two contacts leaves no motion at all (2 normal +
@@ -61,7 +61,7 @@ appear if the transcription carried the contact forces (a dynamic, force-based t
 let the solver choose which locators touch — a mathematical program with complementarity
 constraints, which violates the constraint qualifications IPOPT relies on and needs relaxation
 (``g_i λ_i ≤ ε``) or penalty homotopies. The forces are found instead per segment, after the path,
-by the non-jamming wrench search (MATH.md program 2 for sliding, program 3 for rolling).
+by the non-jamming wrench search (docs/math.md program 2 for sliding, program 3 for rolling).
 
 Wrenches
 --------
