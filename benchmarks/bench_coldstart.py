@@ -1,4 +1,4 @@
-"""First run after installing (issue 11 §3): `fixplan solve` with an empty numba cache, after
+"""First run after installing: `fixplan solve` with an empty numba cache, after
 `make install`'s precompile step, and warm.
 
 numba keeps compiled kernels on disk (``cache=True``): by default in ``__pycache__`` next to each
@@ -75,7 +75,7 @@ def run(quick: bool) -> Section:
         "compiled kernels; it runs the commands themselves (solve, simulate 3D/2D, classify, map, the FCLib solvers) "
         "on small inputs, so the cache holds the signatures later runs look up.",
         "",
-        f"Target (issue 11 §3): the first `fixplan solve` after install within 2× a warm run: **{first:.2f} s** vs "
+        f"Target: the first `fixplan solve` after install within 2× a warm run: **{first:.2f} s** vs "
         f"**{warm_med:.2f} s** warm ({ratio:.2f}×: {'met' if ratio <= 2.0 else 'missed'}); with an empty cache it "
         f"took {cold:.1f} s ({cold / warm_med:.0f}×).",
     ]

@@ -1,4 +1,4 @@
-"""fixplan's contact engine against MuJoCo, side by side in one run (issue 3 §8).
+"""fixplan's contact engine against MuJoCo, side by side in one run.
 
 Same scenes, same step, same initial states:
 
@@ -719,7 +719,7 @@ def run(quick: bool) -> Section:
     else:
         L.append("**MuJoCo is not installed: only fixplan's side is reported.**")
 
-    # item 1
+    # section 1
     L += [
         "",
         "### 1. Six-locator box: default fixture at its goal, 5 N along (−1,−1,−1)/√3 through the centre of mass, dt = 1 ms",
@@ -812,7 +812,7 @@ def run(quick: bool) -> Section:
         "the run stops at 0.1 s because the trailing support unloads at ≈ 0.14 s (MuJoCo's box then tips: −0.4 mm at 0.2 s).",
     ]
 
-    # item 4
+    # section 4
     fp_sweep = [r for r in rows_sweep if r["engine"] == "fixplan"]
     front = pareto([(r["wall_s_per_sim_s"], r["vel_rel_err"]) for r in fp_sweep])
     for r, f in zip(fp_sweep, front, strict=True):
@@ -872,7 +872,7 @@ def run(quick: bool) -> Section:
     ]
 
     # targets
-    L += ["", "### Targets (issue 3 §8, issue 11 §2)", ""]
+    L += ["", "### Targets", ""]
     fp1 = pick(rows_box, "fixplan", "Simulator.run")
     if mujoco is not None:
         roll1 = pick(rows_box, "MuJoCo", "mujoco.rollout")
@@ -881,7 +881,7 @@ def run(quick: bool) -> Section:
         L.append(
             f"- steps/s ≥ MuJoCo's on the six-locator box (API): fixplan **{fps:,.0f}** vs MuJoCo rollout **{rs:,.0f}** "
             f"(factor {fps / rs:.2f}: {'met' if fps >= rs else 'missed'}) and vs the mj_step loop {ls:,.0f} "
-            f"(factor {fps / ls:.2f}: {'met' if fps >= ls else 'missed'}). Issue 11 measured 0.60×."
+            f"(factor {fps / ls:.2f}: {'met' if fps >= ls else 'missed'}). Measured before the speed work: 0.60×."
         )
         fc, mc = cli["fixplan_min"], cli["mujoco"]
         fcm, mcm = cli["fixplan_median"], cli["mujoco_median"]
@@ -891,15 +891,15 @@ def run(quick: bool) -> Section:
             f"(factor {fcm / mcm:.2f}); lower quartiles {cli['fixplan_q1']:,.0f} vs {cli['mujoco_q1']:,.0f} "
             f"(factor {cli['fixplan_q1'] / cli['mujoco_q1']:.2f}); CPU time **{cli['fixplan_cpu']:,.0f}** vs "
             f"**{cli['mujoco_cpu']:,.0f}** (factor {cli['fixplan_cpu'] / cli['mujoco_cpu']:.2f}: "
-            f"{'met' if cli['fixplan_cpu'] >= cli['mujoco_cpu'] else 'missed'}). Issue 11 measured 0.16–0.62×. The "
+            f"{'met' if cli['fixplan_cpu'] >= cli['mujoco_cpu'] else 'missed'}). Measured before the speed work: 0.16–0.62×. The "
             "wall-time differences carry the start-up's spread (seconds on a shared machine) against 20000 steps "
             "that take about 0.1 s; the CPU time of the same processes is the steadier figure."
         )
         fsl, msl = pick(rows_slide, "fixplan", "Simulator"), pick(rows_slide, "MuJoCo", "mujoco.rollout")
         L.append(
-            f"- sliding box (item 3, API): fixplan **{fsl['steps_per_s']:,.0f}** vs MuJoCo rollout "
+            f"- sliding box (API): fixplan **{fsl['steps_per_s']:,.0f}** vs MuJoCo rollout "
             f"**{msl['steps_per_s']:,.0f}** steps/s (factor {fsl['steps_per_s'] / msl['steps_per_s']:.2f}: "
-            f"{'met' if fsl['steps_per_s'] >= msl['steps_per_s'] else 'missed'}); issue 11 measured ≈ 0.25×. fixplan's"
+            f"{'met' if fsl['steps_per_s'] >= msl['steps_per_s'] else 'missed'}); measured before the speed work: ≈ 0.25×. fixplan's"
             " time is its whole `Simulator.run` call (Python set-up and recording included), MuJoCo's the rollout call alone."
         )
         fs, ms = pick(rows_stick, "fixplan", "Simulator"), pick(rows_stick, "MuJoCo", "mujoco.rollout")
@@ -913,7 +913,7 @@ def run(quick: bool) -> Section:
             ok = fpv == 0.0 or mjv / fpv >= 100.0
             L.append(
                 f"- {what} ≥ 100× smaller than MuJoCo's: fixplan **{_e(fpv)} m** vs MuJoCo **{_e(mjv)} m**: "
-                f"{_ratio(mjv, fpv)} ({'met' if ok else 'missed'}). Issue reference for MuJoCo: {ref}."
+                f"{_ratio(mjv, fpv)} ({'met' if ok else 'missed'}). expected for MuJoCo: {ref}."
             )
         L.append("  (fixplan's penetration here is its worst over the run, not only the steady value.)")
     return Section("Contact engine against MuJoCo", "\n".join(L), rows)

@@ -9,7 +9,7 @@ Numba kernels are compiled before timing; reading and condensing the file is exc
 Rows (``results/bench_fclib.csv``): one per (problem, method, tolerance) with time, error,
 iterations, success and, for ``auto``, the stage path. The report shows
 
-- auto per problem: stage path, final error, time (the issue's table);
+- auto per problem: stage path, final error, time;
 - a work-precision table: per method and tolerance, problems solved and the shifted geometric
   mean time (qpbenchmark's summary; unsolved problems count at their time);
 - a performance profile (Dolan–Moré, as Siconos reports its solvers): the share of problems each
@@ -36,7 +36,7 @@ FCLIB_DIRS = (SHARED / "fclib", SHARED / "fclib-siconos")
 SOLVERS = ("nsgs", "socp", "nsn", "prox", "auto")
 TOLERANCES = (1e-4, 1e-6, 1e-8)
 MAX_ITER = {"nsgs": 1_000_000, "socp": 60, "nsn": 200, "prox": 100, "auto": None}
-TIME_LIMIT_S = 60.0  # the bound per solve
+TIME_LIMIT_S = 60.0  # every solve answers within a minute
 QUICK_TIME_LIMIT_S = 20.0
 TAUS = (1, 2, 4, 10, 100, 1000)
 SHIFT_S = 1e-3  # shift of the geometric mean of times [s]
@@ -254,7 +254,7 @@ def run(quick: bool) -> Section:
         "### Scaling: 2D granular flows on a wall",
         "",
         "Time to 1e-8 against contacts (sparse W throughout: CSR sweeps, sparse SOCP, SuperLU for Newton). "
-        "The 2 020-contact flow of the series is not in ../shared; run with "
+        "The 2 020-contact flow of the series is not among these files; run with "
         "`FIXPLAN_FCLIB_EXTRA=dir` to add it.",
         "",
         _scaling_table(rows, 1e-8),

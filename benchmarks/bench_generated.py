@@ -1,4 +1,4 @@
-"""Generated fixtures: the planner judged on fixtures it was not tuned on (issue 9 §4).
+"""Generated fixtures: the planner judged on fixtures it was not tuned on .
 
 40 ``box-321`` fixtures of seed 101 and 40 ``plate-2d`` fixtures of seed 202
 (:func:`fixplan.generate.generate`, written to a temporary directory) are each solved as a user
@@ -10,7 +10,7 @@ Per family the report gives the share verified (``planned``: the simulated hapti
 the part), proven infeasible (``infeasible`` with ``proven``: every blocking transition
 certified by its wrench search) and failed without proof (``unverified``, an unproven
 ``infeasible``, a timeout or a crash), the median and p95 of the whole process, and every
-failure with its reason. Targets (issue 9): failed without proof ≤ 5 %; 3D median ≤ 5 s and
+failure with its reason. Targets: failed without proof ≤ 5 %; 3D median ≤ 5 s and
 p95 ≤ 20 s; 2D median ≤ 1.5 s.
 
 When ``fixplan robust`` exists, the first ``ROBUST_PER_FAMILY`` verified fixtures of each family
@@ -270,7 +270,7 @@ def _markdown(
         "Failed without proof = `unverified`, `infeasible` without `proven` (a blocking transition the path NLP did",
         "not find rather than one the wrench search rules out), a timeout or a crash.",
         "",
-        "Targets (issue 9 §4):",
+        "Targets:",
         "",
         *verdicts,
         "- every plan printed as planned passes verification: **met by construction** (see above).",

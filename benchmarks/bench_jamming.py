@@ -1,6 +1,6 @@
 """Classification speed against accuracy: cvxpy path vs fast path, 3 and 6 contacts, and the map.
 
-Targets (issue 2): ≤ 0.5 ms per classification with six contacts (batch throughput of the
+Targets: ≤ 0.5 ms per classification with six contacts (batch throughput of the
 whole classify process) and a 100×100 jamming map in ≤ 10 s.
 """
 
@@ -103,7 +103,7 @@ def run(quick: bool) -> Section:
                 [exe, "classify", "--wrenches", str(csv), "--pose", "goal", "--json"], check=True, capture_output=True
             )
             cli_dt = min(cli_dt, time.perf_counter() - t0)
-        # issue 11 §4: per wrench by difference of whole processes (2000 and 4000 wrenches,
+        # per wrench by difference of whole processes (2000 and 4000 wrenches,
         # interleaved): start-up, imports and the numba cache load cancel
         diff_reps = 5 if quick else 7
         sizes = (2000, 4000)
@@ -193,10 +193,10 @@ def run(quick: bool) -> Section:
     lines += [
         "",
         f"Targets: six contacts ≤ 0.5 ms per classification (whole process, {n_cli} wrenches, total / n): "
-        f"**{whole:.3f} ms** ({'met' if whole <= 0.5 else 'missed'}); issue 11 §4, by difference of whole "
+        f"**{whole:.3f} ms** ({'met' if whole <= 0.5 else 'missed'}); by difference of whole "
         f"processes (4000 − 2000 wrenches, fastest of {diff_reps} each): **{1e3 * per_min:.3f} ms** per wrench, "
         f"median of the paired differences {1e3 * per_med:.3f} ms "
-        f"({'met' if max(per_min, per_med) <= 0.5e-3 else 'missed'}; issue: 0.61 ms under load); CPU time of "
+        f"({'met' if max(per_min, per_med) <= 0.5e-3 else 'missed'}; before: 0.61 ms under load); CPU time of "
         f"the command and its workers {1e3 * per_cpu:.3f} ms per wrench (the wall time on {default_jobs()} idle cores "
         f"would be about {1e3 * per_cpu / default_jobs():.3f} ms); "
         f"100×100 map ≤ 10 s: **{map_dt:.2f} s** for {n_map}×{n_map} "

@@ -1,6 +1,6 @@
 """Planning: plan-and-verify time per problem, haptic tick compute, and discretization vs error vs time.
 
-Targets (issue 4): the default 3D fixture ≤ 10 s and a 2D one ≤ 3 s end to end (compile cache
+Targets: the default 3D fixture ≤ 10 s and a 2D one ≤ 3 s end to end (compile cache
 warm; the cold first run is reported too); haptic tick compute mean ≤ 100 µs with 0 deadline
 misses in verification.
 """

@@ -1,7 +1,7 @@
-"""Issue 12 §2-§5, case by case: each hostile input of the report gets exit 2, its exact message, and loses nothing.
+"""Hostile input, case by case: each bad file, option or command line gets exit 2, its exact message, and loses nothing.
 
 The fuzz suite (``tests/fuzz``) keeps the contract on random input; these tests pin the
-messages and numbers of the cases the issue named. The CLI runs in-process (``main(argv)``)
+messages and numbers of the cases once reported. The CLI runs in-process (``main(argv)``)
 except where a run could block (a named pipe), which runs in a subprocess with a timeout.
 """
 
@@ -43,7 +43,7 @@ def strict_json(text: str) -> dict:
     return json.loads(text, parse_constant=refuse)
 
 
-# -- §3 files and text ------------------------------------------------------------------------
+# -- files and text -------------------------------------------------------------------------
 ENCODINGS = {
     "binary": (bytes(range(256)) * 4, "is a binary file (expected a .toml fixture file)"),
     "invalid-utf8": (
@@ -132,7 +132,7 @@ def _many_locators(n: int) -> str:
 
 def test_many_locators_refused_fast(capsys, tmp_path: Path) -> None:
     big = tmp_path / "big.toml"
-    big.write_text(_many_locators(20000))  # about 1.5 MB, as in the issue
+    big.write_text(_many_locators(20000))  # about 1.5 MB, as once reported
     t0 = time.perf_counter()
     code, _, err = run(capsys, "validate", big)
     assert code == 2 and time.perf_counter() - t0 < 5
@@ -183,7 +183,7 @@ def test_point_locators_at_one_place(capsys, tmp_path: Path) -> None:
     )
 
 
-# -- §4 commands ------------------------------------------------------------------------------
+# -- commands -------------------------------------------------------------------------------
 def test_simulate_duration_zero_and_dt_past_duration(capsys) -> None:
     code, out, _ = run(capsys, "simulate", "--duration", "0", "--json")
     result = strict_json(out)
@@ -267,7 +267,7 @@ def test_solve_order_is_checked_on_a_located_part(capsys) -> None:
     assert code == 2 and "--order names unknown locators: NOPE" in err
 
 
-# -- §5 what a newcomer trips on --------------------------------------------------------------
+# -- what a newcomer trips on ---------------------------------------------------------------
 def test_bare_fixplan_and_version(capsys) -> None:
     code, out, err = run(capsys)
     assert code == 0 and err == ""

@@ -1,4 +1,4 @@
-"""Issue 4 §6: a fixture whose naive loading order fails while the planner finds another.
+"""A fixture whose naive loading order fails while the planner finds another.
 
 ``problems/naive-order-jams.toml`` (its comment block derives the numbers): a 2D rectangle resting
 on B1 alone. The file order S1, B2 must tip the part up about B1 against gravity's 0.544 N m, more

@@ -1,7 +1,7 @@
 """Every full fixture of ``problems/`` gets a verified plan, or a stated and tested reason why none exists.
 
 The expected outcomes are the ``[[plan]]`` entries of ``problems/expected.toml``, each with its
-hand derivation (``why``). A verified plan must also satisfy issue 4 §4 on its own numbers:
+hand derivation (``why``). A verified plan must also pass the verification's own thresholds on its numbers:
 the observed contact states equal the planned ones, every locator ends within 1e-4 m, and the
 penetration stays below 1e-5 m.
 """

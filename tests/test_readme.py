@@ -1,4 +1,4 @@
-"""The README's examples against the code (issue 12 §5: the README had drifted from it).
+"""The README's examples against the code (the README once drifted from the code; these keep them together).
 
 - the ``classify --json`` example's numbers are what the command prints (rounded as shown);
 - the Python API block runs (the two ``fixplan.solve`` lines are checked by signature only: a

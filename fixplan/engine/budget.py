@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from fixplan.errors import InputError
 
 DEFAULT_TIME_LIMIT_S = 60.0
-"""Default time limit of ``solve_auto`` and ``fixplan fclib`` [s] (issue 11: answer within 60 s)."""
+"""Default time limit of ``solve_auto`` and ``fixplan fclib`` [s]: every FCLib solve answers within a minute."""
 CHUNK_S = 0.05
 """Target wall time of one compiled chunk of sweeps between two deadline checks [s]."""
 

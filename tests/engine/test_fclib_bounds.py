@@ -1,4 +1,4 @@
-"""The FCLib solvers always answer within their bounds (issue 11 §1).
+"""The FCLib solvers always answer within their bounds.
 
 Counts, not wall times, are asserted here (wall-time targets are in
 ``benchmarks/bench_fclib.py``): ``max_iter`` caps every stage of ``auto``, a time limit stops

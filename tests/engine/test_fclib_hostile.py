@@ -1,6 +1,6 @@
 """Hostile FCLib files: every bad array is refused (exit 2) with its HDF5 path, before anything compiled runs.
 
-Issue 12 §1: a column index of −1 or non-monotone row pointers used to crash the process
+Before the reader checked every array, a column index of −1 or non-monotone row pointers used to crash the process
 (glibc double free); an index of 99 in a 3×3 matrix was accepted; a dense ``W``, an empty or
 string ``m`` and string ``x`` gave internal errors (exit 3). The abort cases run the CLI in a
 subprocess so that a crash cannot take pytest down with it.

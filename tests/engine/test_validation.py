@@ -1,4 +1,4 @@
-"""The engine against closed forms (issue 3 §7). Each docstring gives the closed form."""
+"""The engine against closed forms. Each docstring gives the closed form."""
 
 import math
 

@@ -1,6 +1,6 @@
 """The contract every fuzzed run must keep, and two ways to run the CLI.
 
-The contract (issue 12): exit status 0, 1 or 2 within a time bound; no traceback and no
+The contract: exit status 0, 1 or 2 within a time bound; no traceback and no
 ``internal error``; with ``--json`` and exit 0/1, stdout is exactly one strict JSON object
 (``NaN``/``Infinity`` refused); a failure (exit 2) explains itself on stderr, each line printable;
 every file that existed before the run is byte-for-byte unchanged unless ``--force`` was given.

@@ -1,4 +1,4 @@
-"""Odd command lines (issue 12 §6): options with values of every kind, outputs onto users' files.
+"""Odd command lines: options with values of every kind, outputs onto users' files.
 
 Each run happens in a folder holding a user's files (a fixture, a picture, a CSV, a plan, a
 dangling symbolic link); none may change without ``--force``, and none may be created outside

@@ -1,4 +1,4 @@
-"""Malformed FCLib files (issue 12 §6): ``fixplan fclib`` refuses them (exit 2) or solves them (0/1).
+"""Malformed FCLib files: ``fixplan fclib`` refuses them (exit 2) or solves them (0/1).
 
 A valid local 3D problem (``mutations.write_local_problem``) has one dataset deleted, replaced
 (empty, negative, huge, NaN, a string, floats where indices go, a matrix, a group) or reordered.
@@ -18,10 +18,10 @@ ALL_CASES = [(field, how) for field in FCLIB_FIELDS for how in FCLIB_REPLACEMENT
 SHORT = [ALL_CASES[k] for k in sorted(np.random.default_rng(12).choice(len(ALL_CASES), size=8, replace=False))]
 CASES = ALL_CASES if LONG else SHORT
 
-# Cases the FCLib reader does not refuse yet are listed here with the issue's reason; none are
-# at the time of writing (the reader validates every array, issue 12 §1).
+# Cases the FCLib reader does not refuse yet are listed here (expected to fail); none are at
+# the time of writing: the reader validates every array.
 NOT_YET_REFUSED: set[tuple[str, str]] = set()
-READER_IN_PROGRESS = "FCLib reader validation (issue 12 §1) in progress"
+READER_IN_PROGRESS = "the FCLib reader does not check this array yet"
 
 
 def _param(case: tuple[str, str]):  # type: ignore[no-untyped-def]

@@ -1,4 +1,4 @@
-"""Mutated fixture files (issue 12 §6): every command keeps the contract of ``harness.assert_contract``."""
+"""Mutated fixture files: every command keeps the contract of ``harness.assert_contract``."""
 
 from __future__ import annotations
 
