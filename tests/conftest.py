@@ -1,15 +1,77 @@
-"""Shared test helpers: paths, the optional ../shared folder, seeded RNG."""
+"""Shared test helpers: paths, the optional ../shared folder, seeded RNG, the CLI, the box on three supports.
+
+Test modules import the plain helpers (``from conftest import PROBLEMS, run_cli``); pytest puts
+this folder on ``sys.path`` when it loads this file.
+"""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+import fixplan
+
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEMS = ROOT / "problems"
 SHARED = ROOT.parent / "shared"
+CLI = [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())"]
+"""``fixplan`` as a fresh process, from this checkout's package (not an installed entry point)."""
+
+
+def run_cli(
+    *args: str, timeout: float | None = 600, cwd: Path | None = None, check_rc: int | None = None
+) -> subprocess.CompletedProcess[str]:
+    """``fixplan ARGS`` in a fresh process; stdout and stderr captured as text.
+
+    ``check_rc`` asserts the exit status (the message is stderr).
+    """
+    proc = subprocess.run([*CLI, *map(str, args)], capture_output=True, text=True, timeout=timeout, cwd=cwd)
+    if check_rc is not None:
+        assert proc.returncode == check_rc, proc.stderr
+    return proc
+
+
+def box_on_three_supports(
+    mu: float = 0.3,
+    *,
+    mass: float = 2.0,
+    gravity: Sequence[float] = (0.0, 0.0, -9.81),
+    torsion: float = 0.0,
+    simulation: dict[str, float] | None = None,
+    extra: str = "",
+) -> fixplan.Fixture:
+    """A 0.2×0.1×0.05 box (``mass`` [kg]) resting on three point supports B1–B3 under its −z face.
+
+    The supports are at ``(∓0.06, −0.03, 0)`` and ``(0, 0.03, 0)``: the centre of mass, above
+    ``(0, 0)``, is inside their triangle. ``mu`` and ``torsion`` [m] apply to all three;
+    ``simulation`` fills the ``[simulation]`` table (``timestep``, ``tolerance``,
+    ``restitution``); ``extra`` is appended TOML (more locators).
+    """
+    tors = f"torsion = {torsion}\n" if torsion else ""
+    locators = "".join(
+        f'[[locator]]\nname = "B{i}"\nposition = [{x}, {y}, 0.0]\nfriction = {mu}\n{tors}'
+        for i, (x, y) in enumerate([(-0.06, -0.03), (0.06, -0.03), (0.0, 0.03)], 1)
+    )
+    g = "[" + ", ".join(f"{x:.17g}" for x in gravity) + "]"
+    sim = "".join(f"{k} = {v}\n" for k, v in (simulation or {}).items())
+    return fixplan.loads(
+        f"""format = 1
+[scene]
+name = "box-3-supports"
+gravity = {g}
+[workpiece]
+shape = "box"
+size = [0.2, 0.1, 0.05]
+mass = {mass}
+start = {{ position = [0.0, 0.0, 0.025] }}
+{"[simulation]" if sim else ""}
+{sim}{locators}{extra}"""
+    )
 
 
 @pytest.fixture

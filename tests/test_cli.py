@@ -1,26 +1,12 @@
 """The command line: JSON contracts, exit codes, and never overwriting a user's file."""
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PROBLEMS, run_cli
 
-ROOT = Path(__file__).resolve().parents[1]
-PROBLEMS = ROOT / "problems"
-
-
-def fixplan(*args, check_rc=None):
-    proc = subprocess.run(
-        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args],
-        capture_output=True,
-        text=True,
-    )
-    if check_rc is not None:
-        assert proc.returncode == check_rc, proc.stderr
-    return proc
+fixplan = run_cli
 
 
 def test_classify_json_contract(tmp_path):

@@ -7,17 +7,15 @@ balance; the haptic loop's push cap against the hand's limits.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from conftest import PROBLEMS
 
 import fixplan
 from fixplan.jamming.search import search_wrench
 from fixplan.planner.execute import ExecutionSettings, Executor, Step, origin_motion, project_keeping
 from fixplan.spatial import Pose
 
-PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 G = 9.81
 
 
@@ -263,7 +261,7 @@ def test_the_rig_transmits_the_push_as_one_wrench(name):
 
     fx = fixplan.load(fixplan.default_fixture_path())
     if name == "generated":  # a 14.7 kg box, 36 × 31 × 17 cm
-        fx = fixplan.load(Path(__file__).resolve().parents[1] / "problems" / "gen-box-321-s2026-000.toml")
+        fx = fixplan.load(PROBLEMS / "gen-box-321-s2026-000.toml")
     sim = Simulator(fx)
     F_max, T_max, _ = hand_limits(fx)
     rig = haptic_rig(fx, sim, pose_coordinates(fx.start, fx.start.R_world_body), F_max, T_max)

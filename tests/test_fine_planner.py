@@ -5,11 +5,11 @@ point fixed in the world, so the end pose of a roll is known from the contact's 
 """
 
 import json
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import ROOT
 
 import fixplan
 from fixplan.errors import InputError
@@ -18,7 +18,6 @@ from fixplan.locating import locator_contact
 from fixplan.planner.fine import Transition, feature_at, plan_transition
 from fixplan.spatial import Pose
 
-ROOT = Path(__file__).resolve().parents[1]
 TOUCH = 1e-6  # [m]
 
 

@@ -5,11 +5,10 @@ to overwrite."""
 
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from conftest import run_cli
 
 from fixplan import generate as gen
 from fixplan.errors import InputError
@@ -167,12 +166,7 @@ def test_bad_arguments_are_input_errors():
     assert gen.generate("plate-2d", 0, 0) == []
 
 
-def fixplan(*args):
-    return subprocess.run(
-        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args],
-        capture_output=True,
-        text=True,
-    )
+fixplan = run_cli
 
 
 def test_cli_writes_validates_and_refuses_to_overwrite(tmp_path):

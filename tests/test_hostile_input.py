@@ -18,14 +18,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PROBLEMS, ROOT
 
 from fixplan import limits
 from fixplan.cli import main
 from fixplan.errors import InputError
 from fixplan.files import write_output
 
-ROOT = Path(__file__).resolve().parents[1]
-PROBLEMS = ROOT / "problems"
 BOX = (PROBLEMS / "box-3-2-1.toml").read_text(encoding="utf-8")
 
 

@@ -9,6 +9,7 @@ import socket
 
 import numpy as np
 import pytest
+from conftest import PROBLEMS
 
 import fixplan
 from fixplan.errors import InputError
@@ -296,9 +297,8 @@ def test_reset_puts_the_part_back_at_rest_and_restarts_the_recording(box):
 
 def test_a_2d_fixture_loads_and_its_recording_verifies():
     """A generated 2D plate (x, y, θ): the same loop with three coordinates."""
-    from pathlib import Path
 
-    fx = fixplan.load(Path(__file__).resolve().parents[1] / "problems" / "gen-plate-2d-s2026-000.toml")
+    fx = fixplan.load(PROBLEMS / "gen-plate-2d-s2026-000.toml")
     s = HapticSession(fx, None, realtime=False, synchronous=True, duration_s=10.0)
     assert s.ndof == 3 and s.bridge_config()["ndof"] == 3
     res = s.run()

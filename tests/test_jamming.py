@@ -2,30 +2,10 @@
 
 import numpy as np
 import pytest
+from conftest import box_on_three_supports as box_on_supports
 
 import fixplan
 from fixplan.jamming import can_wedge, classify, search_wrench, wedge_force
-
-
-def box_on_supports(mu=0.3, mass=2.0, gravity="[0.0, 0.0, -9.81]", torsion=None):
-    """A 0.2×0.1×0.05 box on three point supports under its -z face (CoM inside the triangle)."""
-    tors = f"\ntorsion = {torsion}" if torsion else ""
-    locs = "".join(
-        f'[[locator]]\nname = "B{i}"\nposition = [{x}, {y}, 0.0]\nfriction = {mu}{tors}\n'
-        for i, (x, y) in enumerate([(-0.06, -0.03), (0.06, -0.03), (0.0, 0.03)], 1)
-    )
-    return fixplan.loads(
-        f"""format = 1
-[scene]
-name = "box-3-supports"
-gravity = {gravity}
-[workpiece]
-shape = "box"
-size = [0.2, 0.1, 0.05]
-mass = {mass}
-start = {{ position = [0.0, 0.0, 0.025] }}
-{locs}"""
-    )
 
 
 def peg(depth, r=0.01, mu=0.3, gravity="[0.0, 0.0]"):
@@ -110,7 +90,7 @@ def test_extreme_friction(mu):
 )
 def test_mode_invariant_under_scaling_in_zero_gravity(wrench):
     """Without gravity the problem is homogeneous: 1e-6 N and 1e6 N give the same verdict."""
-    f = box_on_supports(gravity="[0.0, 0.0, 0.0]")
+    f = box_on_supports(gravity=(0.0, 0.0, 0.0))
     modes = {classify(f, [np.array(wrench) * s])[0].mode for s in (1e-6, 1e-3, 1.0, 1e3, 1e6)}
     assert len(modes) == 1, modes
 
@@ -261,7 +241,7 @@ def test_witness_jacobian_matches_finite_differences(roles, soft, rng):
     """The analytic Jacobian of the kept/sliding/sticking/open system, against central differences."""
     from fixplan.jamming.sliding import Rows, _start_for
 
-    f = box_on_supports(mu=0.4, torsion=0.01 if soft else None)
+    f = box_on_supports(mu=0.4, torsion=0.01 if soft else 0.0)
     cs = fixplan.contact_set(f)
     rows = Rows(cs)
     w = rng.normal(size=6)

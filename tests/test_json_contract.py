@@ -12,12 +12,11 @@ from pathlib import Path
 
 import pytest
 import typer.main
+from conftest import PROBLEMS
 
 from fixplan.cli import app, main
 from fixplan.fixture import load
 
-ROOT = Path(__file__).resolve().parents[1]
-PROBLEMS = ROOT / "problems"
 FIXTURES = sorted(p for p in PROBLEMS.glob("*.toml") if p.name != "expected.toml")
 NAN_ERROR = "Out of range float values are not JSON compliant"  # json.dumps(allow_nan=False)
 SOLVE_NAN = "solve NaN margin: fixed in planner rewrite"

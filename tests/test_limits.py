@@ -10,24 +10,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT, run_cli
 
 import fixplan
 from fixplan import limits
 from fixplan.errors import FixtureError
 
-ROOT = Path(__file__).resolve().parents[1]
 DOC = (ROOT / "docs" / "limits.md").read_text(encoding="utf-8")
+
+
+def fixplan_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    return run_cli(*args, timeout=300, cwd=cwd)
+
+
 BOX = (ROOT / "problems" / "box-3-2-1.toml").read_text(encoding="utf-8")
-
-
-def fixplan_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=cwd,
-    )
 
 
 @pytest.mark.parametrize(

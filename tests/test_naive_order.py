@@ -8,15 +8,14 @@ on B2 and then slides it 1 cm onto S1 (2.44 N <= max_force 3 N).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
+from conftest import PROBLEMS
 
 import fixplan
 from fixplan.locating import locator_gaps
 from fixplan.planner.solve import solve
 
-FILE = Path(__file__).resolve().parents[1] / "problems" / "naive-order-jams.toml"
+FILE = PROBLEMS / "naive-order-jams.toml"
 
 
 @pytest.fixture(scope="module")

@@ -9,14 +9,12 @@ penetration stays below 1e-5 m.
 from __future__ import annotations
 
 import tomllib
-from pathlib import Path
 
 import pytest
+from conftest import PROBLEMS
 
 import fixplan
 
-ROOT = Path(__file__).resolve().parents[1]
-PROBLEMS = ROOT / "problems"
 ENTRIES = tomllib.loads((PROBLEMS / "expected.toml").read_text())["plan"]
 
 

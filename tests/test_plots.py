@@ -6,6 +6,7 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 import pytest
+from conftest import ROOT
 
 import fixplan
 from fixplan.cli import main
@@ -24,7 +25,6 @@ from fixplan.present.report import report_markdown
 
 matplotlib.use("Agg")
 
-ROOT = Path(__file__).resolve().parents[1]
 JAMS = ROOT / "problems" / "naive-order-jams.toml"
 WEAK = ROOT / "problems" / "box-weak-hand.toml"
 

@@ -18,12 +18,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest import PROBLEMS
 
 import fixplan
 from fixplan.locating import locator_gaps
 
-ROOT = Path(__file__).resolve().parents[1]
-PROBLEMS = ROOT / "problems"
 EXPECTED = PROBLEMS / "expected.toml"
 
 MODES = {"held", "jammed", "separates", "rolls", "slides", "pivots", "indeterminate"}

@@ -15,26 +15,18 @@ import inspect
 import json
 import re
 import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT, run_cli
 
 import fixplan
 
-ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 
 
-def fixplan_cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=ROOT,
-    )
+def fixplan_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return run_cli(*args, timeout=300, cwd=ROOT)
 
 
 def _blocks(lang: str) -> list[str]:

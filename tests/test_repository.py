@@ -10,9 +10,9 @@ look in), and ``CHANGELOG.md``, the project's history.
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import ROOT
+
 SKIP_DIRS = {".git", ".venv", "__pycache__", "build", "dist", ".mypy_cache", ".ruff_cache", ".pytest_cache"}
 HISTORY = {"CHANGELOG.md"}
 READS_SHARED_DATA = {

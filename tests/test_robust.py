@@ -17,13 +17,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PROBLEMS, ROOT, run_cli
 
 from fixplan.fixture import load
 from fixplan.locating import locator_gaps
 from fixplan.robust import RobustSettings, draw_world, robust, verify_sample, wilson_interval
 
-ROOT = Path(__file__).resolve().parents[1]
-PROBLEMS = ROOT / "problems"
 JAMS = PROBLEMS / "naive-order-jams.toml"  # rests on B1 alone; plan {B1} → {B1,B2} → all
 # a large uncertainty under which some samples of naive-order-jams fail (seed 1: B1 lost, re-plan fails)
 HARD = ["--mu-spread", "0.9", "--pose-sigma", "3e-3,4", "--force-noise", "0.5", "--latency-ms", "20"]
@@ -31,13 +30,7 @@ HARD_SAMPLES = 3
 
 
 def fixplan(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
+    return run_cli(*args, timeout=timeout, cwd=ROOT)
 
 
 def strict_json(text: str):  # type: ignore[no-untyped-def]

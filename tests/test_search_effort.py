@@ -9,15 +9,13 @@ centre of mass.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from conftest import PROBLEMS
 
 import fixplan
 from fixplan.jamming.search import search_wrench
 
-PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 G = 9.81
 
 

@@ -7,10 +7,10 @@ Numbers (box-3-2-1.toml / default.toml: 2 kg, μ = 0.25, g = 9.81, m g = 19.62 N
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PROBLEMS
 
 import fixplan
 from fixplan.cli import main
@@ -19,7 +19,6 @@ from fixplan.jamming.classify import Classifier
 from fixplan.jamming.search import floor_sig
 from fixplan.kinematics import ContactSet
 
-PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 G = 9.81
 
 

@@ -6,6 +6,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import PROBLEMS
 
 import fixplan
 from fixplan.planner.solve import solve
@@ -44,7 +45,7 @@ def test_plans_are_deterministic(default_plan):
 
 def test_weak_manipulator_is_infeasible_with_the_binding_constraint():
     r = solve(
-        fixplan.load(fixplan.default_fixture_path().parents[2] / "problems" / "box-weak-hand.toml"),
+        fixplan.load(PROBLEMS / "box-weak-hand.toml"),
         run_verification=False,
     )
     assert r.status == "infeasible" and not r.ok
@@ -84,7 +85,7 @@ def test_solve_cli_json_and_exit_codes(tmp_path):
 
 
 def test_fixture_located_at_start_needs_no_transition():
-    r = solve(fixplan.load(fixplan.default_fixture_path().parents[2] / "problems" / "rect-3.toml"))
+    r = solve(fixplan.load(PROBLEMS / "rect-3.toml"))
     assert r.status == "planned" and r.ok and r.transitions == []
     assert r.sequence == [("B1", "B2", "S1")]
     assert max(abs(g) for g in r.verification.final_gaps_m.values()) <= 1e-4

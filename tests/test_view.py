@@ -7,12 +7,10 @@ The browser test (marked ``browser``) opens the page in headless Chromium throug
 
 import copy
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PROBLEMS, run_cli
 
 import fixplan
 from fixplan.errors import InputError
@@ -23,16 +21,7 @@ from fixplan.present.page import external_references, write_scene
 from fixplan.present.replay import read_plan, replay_from_plan, rest_replay
 from fixplan.present.scene import FORCE_ARROW_FRACTION, MAX_FRAMES, frame_indices, scene_figure, scene_info
 
-ROOT = Path(__file__).resolve().parents[1]
-PROBLEMS = ROOT / "problems"
-
-
-def fixplan_cli(*args):
-    return subprocess.run(
-        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args],
-        capture_output=True,
-        text=True,
-    )
+fixplan_cli = run_cli
 
 
 @pytest.fixture(scope="module")

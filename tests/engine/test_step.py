@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import PROBLEMS
 from reference_step import reference_step
 
 import fixplan
@@ -16,7 +17,7 @@ from fixplan.spatial import Pose
     "name", ["box-3-2-1.toml", "box-3-2-1-soft.toml", "rect-3.toml", "cylinder-5.toml", "polygon-2d.toml"]
 )
 def test_compiled_step_matches_numpy_reference(name, rng):
-    f = fixplan.load(fixplan.default_fixture_path().parents[2] / "problems" / name)
+    f = fixplan.load(PROBLEMS / name)
     sim = Simulator(f, tolerance=1e-12)
     d = f.dimension
     for _trial in range(4):
@@ -40,7 +41,7 @@ def test_compiled_step_matches_numpy_reference(name, rng):
 
 
 def test_explicit_contacts_only_is_refused():
-    f = fixplan.load(fixplan.default_fixture_path().parents[2] / "problems" / "peg-hole-mid.toml")
+    f = fixplan.load(PROBLEMS / "peg-hole-mid.toml")
     with pytest.raises(InputError, match="no geometry to simulate"):
         Simulator(f)
 
@@ -134,7 +135,7 @@ def test_compiled_loop_equals_python_stepping_2d():
     """2D runs are compiled too, and agree with per-step stepping (polygon with an off-centre mass)."""
     from fixplan.engine.simulator import WrenchSchedule
 
-    f = fixplan.load(fixplan.default_fixture_path().parents[2] / "problems" / "polygon-2d.toml")
+    f = fixplan.load(PROBLEMS / "polygon-2d.toml")
     schedule = WrenchSchedule([0.0, 0.04], [[1.0, -2.0, 0.02], [-3.0, 0.5, -0.05]])
     (a, b), ta, tb = _twin_runs(f, f.start, schedule, 0.08)
     for key in ("time_s", "position", "orientation", "velocity", "gap"):

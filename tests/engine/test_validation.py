@@ -4,36 +4,18 @@ import math
 
 import numpy as np
 import pytest
+from conftest import box_on_three_supports
 
 import fixplan
 from fixplan.engine.simulator import Simulator
 from fixplan.settings import STRICT
 from fixplan.spatial import log_so3
 
-BOX3 = """format = 1
-[scene]
-name = "{name}"
-gravity = {gravity}
-[workpiece]
-shape = "box"
-size = [0.2, 0.1, 0.05]
-mass = {mass}
-start = {{ position = [0.0, 0.0, 0.025] }}
-[simulation]
-timestep = {dt}
-tolerance = {tol}
-restitution = {e}
-{locators}"""
-
 
 def box_on_three(mu, gravity=(0.0, 0.0, -9.81), mass=2.0, dt=1e-3, tol=1e-10, e=0.0, torsion=0.0, extra=""):
-    tors = f"torsion = {torsion}\n" if torsion else ""
-    locs = "".join(
-        f'[[locator]]\nname = "B{i}"\nposition = [{x}, {y}, 0.0]\nfriction = {mu}\n{tors}'
-        for i, (x, y) in enumerate([(-0.06, -0.03), (0.06, -0.03), (0.0, 0.03)], 1)
-    )
-    g = "[" + ", ".join(f"{x:.17g}" for x in gravity) + "]"
-    return fixplan.loads(BOX3.format(name="b", gravity=g, mass=mass, dt=dt, tol=tol, e=e, locators=locs + extra))
+    """The box on three supports with this module's solver settings (tight tolerance, no restitution)."""
+    sim = {"timestep": dt, "tolerance": tol, "restitution": e}
+    return box_on_three_supports(mu, mass=mass, gravity=gravity, torsion=torsion, simulation=sim, extra=extra)
 
 
 def incline_gravity(theta_deg, g=9.81):

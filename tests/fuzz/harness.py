@@ -22,6 +22,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from conftest import ROOT
+
 EXIT_OK = (0, 1, 2)
 
 
@@ -153,9 +155,7 @@ def budget(examples: int):  # type: ignore[no-untyped-def]
         max_examples=examples * SCALE if LONG else examples,
         deadline=None,
         derandomize=not LONG,
-        database=DirectoryBasedExampleDatabase(str(Path(__file__).resolve().parents[2] / ".hypothesis"))
-        if LONG
-        else None,
+        database=DirectoryBasedExampleDatabase(str(ROOT / ".hypothesis")) if LONG else None,
         suppress_health_check=list(HealthCheck),
         print_blob=True,
     )

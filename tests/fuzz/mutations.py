@@ -16,10 +16,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from conftest import PROBLEMS
 from hypothesis import strategies as st
 
-ROOT = Path(__file__).resolve().parents[2]
-PROBLEMS = ROOT / "problems"
 SEEDS = sorted(p for p in PROBLEMS.glob("*.toml") if p.name != "expected.toml")
 DOCUMENTS = {p.name: tomllib.loads(p.read_text(encoding="utf-8")) for p in SEEDS}
 
