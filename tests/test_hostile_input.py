@@ -12,13 +12,12 @@ import errno
 import json
 import os
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import PROBLEMS, ROOT
+from conftest import CLI, PROBLEMS, ROOT
 
 from fixplan import limits
 from fixplan.cli import main
@@ -108,7 +107,7 @@ def test_named_pipe_is_refused_without_blocking(tmp_path: Path) -> None:
     os.mkfifo(fifo)
     t0 = time.perf_counter()
     proc = subprocess.run(
-        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", "validate", str(fifo)],
+        [*CLI, "validate", str(fifo)],
         capture_output=True,
         text=True,
         timeout=30,

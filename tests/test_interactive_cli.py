@@ -7,13 +7,11 @@ pose, the guidance inside the loop), so its outcome does not depend on how busy 
 import json
 import socket
 import subprocess
-import sys
 
 import pytest
+from conftest import CLI
 
 import fixplan
-
-CLI = [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())"]
 
 
 def strict_json(text: str) -> dict:

@@ -3,10 +3,10 @@
 import json
 import math
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import PROBLEMS
 
 import fixplan
 from fixplan.errors import InputError
@@ -20,9 +20,6 @@ from fixplan.planner.plan import (
     read_plan,
 )
 from fixplan.planner.solve import solve
-
-ROOT = Path(__file__).resolve().parents[1]
-PROBLEMS = ROOT / "problems"
 
 
 def _strict(token: str) -> None:

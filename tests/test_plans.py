@@ -11,7 +11,7 @@ from __future__ import annotations
 import tomllib
 
 import pytest
-from conftest import PROBLEMS
+from conftest import PROBLEMS, run_cli
 
 import fixplan
 
@@ -106,8 +106,6 @@ def _check_plan(entry, fx, r):
 
 def test_validate_checks_plan_entries(tmp_path):
     import shutil
-    import subprocess
-    import sys
 
     for name in ("box-3-2-1.toml", "cylinder-5.toml"):
         shutil.copy(PROBLEMS / name, tmp_path / name)
@@ -118,11 +116,7 @@ def test_validate_checks_plan_entries(tmp_path):
         '[[plan]]\nfile = "box-3-2-1.toml"\nstatus = "infeasible"\nverified = true\nbinding = "max_speed"\nwhy = "x"\n'
         '[[plan]]\nfile = "box-3-2-1.toml"\nstatus = "planned"\nwhy = "x"\nxfail_reason = 3\n'
     )
-    proc = subprocess.run(
-        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", "validate", str(table)],
-        capture_output=True,
-        text=True,
-    )
+    proc = run_cli("validate", table, timeout=None)
     assert proc.returncode == 2
     err = proc.stderr
     assert "plan[0].status" in err

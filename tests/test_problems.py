@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import subprocess
-import sys
 import tomllib
 from functools import cache
 from pathlib import Path
@@ -18,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import PROBLEMS
+from conftest import PROBLEMS, run_cli
 
 import fixplan
 from fixplan.locating import locator_gaps
@@ -97,12 +95,7 @@ def test_problem_loads(path: Path) -> None:
 def test_validate_cli_accepts_every_problem() -> None:
     """``fixplan validate problems/*.toml`` (the verdict table included) exits 0 and flags the bad design."""
     files = [str(p) for p in sorted(PROBLEMS.glob("*.toml"))]
-    proc = subprocess.run(
-        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", "validate", *files],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    proc = run_cli("validate", *files, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     lines = {line.split(":")[0]: line for line in proc.stdout.splitlines()}
     warnings = {line.split(":")[0]: line for line in proc.stderr.splitlines()}
@@ -123,11 +116,7 @@ def test_validate_rejects_a_broken_verdict_table(tmp_path: Path) -> None:
     bad.write_text(
         f'[[case]]\nfile = "{PROBLEMS / "box-3-2-1.toml"}"\nwrench = [1.0, 2.0]\nmode = "flies"\nwhy = "x"\n'
     )
-    proc = subprocess.run(
-        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", "validate", str(bad)],
-        capture_output=True,
-        text=True,
-    )
+    proc = run_cli("validate", bad, timeout=None)
     assert proc.returncode == 2
     assert f"{bad}: case[0].wrench: got 2 numbers (expected 6 for a 3D scene)" in proc.stderr
     assert f"{bad}: case[0].mode: got 'flies'" in proc.stderr

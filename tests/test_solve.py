@@ -1,12 +1,10 @@
 """fixplan solve: a verified plan for the default fixture, a clear infeasible case, determinism."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
-from conftest import PROBLEMS
+from conftest import PROBLEMS, run_cli
 
 import fixplan
 from fixplan.planner.solve import solve
@@ -55,21 +53,8 @@ def test_weak_manipulator_is_infeasible_with_the_binding_constraint():
 def test_solve_cli_json_and_exit_codes(tmp_path):
     out = tmp_path / "plan.json"
     md = tmp_path / "plan.md"
-    cmd = [
-        sys.executable,
-        "-c",
-        "import sys; from fixplan.cli import main; sys.exit(main())",
-        "solve",
-        "--json",
-        "--no-verify",
-        "--order",
-        "S1,S2,E1",
-        "--out",
-        str(out),
-        "--report",
-        str(md),
-    ]
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    args = ["solve", "--json", "--no-verify", "--order", "S1,S2,E1", "--out", str(out), "--report", str(md)]
+    proc = run_cli(*args, timeout=None)
     # a sequence that was not run in the loop is not a plan that holds: exit 1, and the status says so
     assert proc.returncode == 1, proc.stderr
     payload = json.loads(proc.stdout)
@@ -78,9 +63,9 @@ def test_solve_cli_json_and_exit_codes(tmp_path):
     assert json.loads(out.read_text()) == payload
     text = md.read_text()
     assert "# Loading plan: box-3-2-1" in text and "| 3 | {B1, B2, B3, S1, S2} | E1 | slide |" in text
-    again = subprocess.run(cmd, capture_output=True, text=True)
+    again = run_cli(*args, timeout=None)
     assert again.returncode == 2 and "exists" in again.stderr
-    bad = subprocess.run(cmd[:4] + ["--order", "S1,S9"], capture_output=True, text=True)
+    bad = run_cli("solve", "--order", "S1,S9", timeout=None)
     assert bad.returncode == 2 and "unknown" in bad.stderr
 
 

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from conftest import run_cli
 
 from fixplan.engine import get_solver
 from fixplan.engine.auto import STAGES, solve_auto
@@ -30,13 +30,8 @@ from fixplan.errors import InputError
 CAPSULES = "Capsules-i125-1213.hdf5"  # NSGS stalls near 1e-6 here: every stage of auto runs
 
 
-def fixplan(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+def fixplan(*args: str) -> subprocess.CompletedProcess[str]:
+    return run_cli(*args, timeout=300)
 
 
 def nonmonotone_problem():

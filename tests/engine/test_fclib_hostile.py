@@ -9,25 +9,20 @@ subprocess so that a crash cannot take pytest down with it.
 from __future__ import annotations
 
 import subprocess
-import sys
 from collections.abc import Callable
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
+from conftest import run_cli
 
 from fixplan.engine.fclib import read_fclib
 from fixplan.errors import InputError
 
 
-def fixplan(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-    )
+def fixplan(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    return run_cli(*args, timeout=timeout)
 
 
 def write_csr(path: Path, indptr, indices, data, size: int, q=None, mu=None, **overrides) -> Path:

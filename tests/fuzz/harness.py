@@ -22,7 +22,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from conftest import ROOT
+from conftest import CLI, ROOT
 
 EXIT_OK = (0, 1, 2)
 
@@ -87,7 +87,7 @@ def run_subprocess(args: Sequence[str], timeout_s: float = 60.0, cwd: Path | Non
     env.pop("FIXPLAN_DEBUG", None)
     try:
         proc = subprocess.run(
-            [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())", *args],
+            [*CLI, *args],
             capture_output=True,
             text=True,
             errors="replace",
