@@ -95,7 +95,7 @@ def _pgs_lcp(A, b, x, n, iterations):
 @njit(cache=True)
 def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r, mu,
           h, f_ext, tau_ext, restitution, margin, tol, max_iter, P_warm, warm_active, bound_m):  # fmt: skip
-    """One planar step (ν = (vx, vy, ω)). Same outputs as :func:`step3` with 2-row contacts."""
+    """One planar step, ``ν = (vx, vy, ω)``: :func:`step3_ws` with 2-row contacts (allocating its arrays)."""
     k = loc_p.shape[0]
     cs, sn = math.cos(theta), math.sin(theta)
     R = np.array([[cs, -sn], [sn, cs]])
