@@ -2,7 +2,19 @@
 
 :class:`Simulator` (:mod:`.simulator`) integrates a fixture's workpiece with the compiled
 Moreau–Jean step of :mod:`.step`; the rest of this package solves one contact problem
-``u = W r + q`` at a time.
+``u = W r + q`` at a time. Modules, one concept each:
+
+- :mod:`.simulator` — the :class:`Simulator`, its trajectories and contact reports;
+- :mod:`.step` — the compiled time step (2D, 3D) and the compiled multi-step loops;
+- :mod:`.detect` — gap, contact point and normal of a locator tip against each shape;
+- :mod:`.linalg` — small dense products and inverses without BLAS;
+- :mod:`.local` — the exact one-contact solvers and their closed-form shortcuts;
+- :mod:`.nsgs` — the contact problem, its solution, and nonsmooth Gauss–Seidel (sparse for
+  FCLib problems, dense for the time step);
+- :mod:`.residual` — the FCLib residual, in NumPy and compiled;
+- :mod:`.socp`, :mod:`.newton`, :mod:`.auto` — the other solvers and the automatic chain;
+- :mod:`.budget` — time limits and iteration caps; :mod:`.fclib` — FCLib files;
+- :mod:`.precompile` — fills numba's cache with every kernel the commands use.
 
 Solvers share one signature, ``solver(problem, r0=None, tol=..., max_iter=...) ->
 ContactSolution``, and are looked up by name in :data:`SOLVERS` (imported lazily, so

@@ -29,7 +29,8 @@ One call advances one rigid workpiece among fixed spherical-tip locators by one 
    (Baumgarte-type velocity terms would); the correction only ever pushes out of contact.
 
 Everything here is ``numba.njit(cache=True)``. The pieces live by concept: detection in
-:mod:`.detect`, the small dense products and SO(3) updates in :mod:`.linalg`, the sweep in
+:mod:`.detect`, the small dense products in :mod:`.linalg`, rotations, tangents and moment
+shifts in :mod:`fixplan._spatial_kernels`, the sweep in
 :func:`fixplan.engine.nsgs.nsgs_dense`, its stopping residual in :mod:`.residual`, the exact
 one-contact solvers and their closed-form shortcuts in :mod:`.local`. This module is only the
 Moreau–Jean step (planar :func:`step2`, spatial :func:`step3_ws`) and the compiled multi-step
