@@ -150,10 +150,6 @@ class ContactSet:
     def torsion(self) -> FloatArray:
         return np.array([c.torsion_m for c in self.contacts])
 
-    def wrench_from_forces(self, forces: ArrayLike) -> FloatArray:
-        """``Jᵀ λ``: the wrench about the centre of mass of stacked contact forces."""
-        return self.J.T @ np.asarray(forces, dtype=float)
-
     def wrench_about_com(self, wrench: ArrayLike, about_world: ArrayLike | None = None) -> FloatArray:
         """Re-express a wrench given about a world point (default: body origin) about ``c``."""
         point = self.body_origin_world if about_world is None else about_world

@@ -69,9 +69,6 @@ class CoarsePlan:
     attempts: list[Attempt] = field(default_factory=list)
     reason: str = ""
 
-    def failed_orders(self) -> list[Attempt]:
-        return [a for a in self.attempts if not a.success]
-
 
 def _key(state: State) -> tuple[str, ...]:
     return tuple(sorted(state))
