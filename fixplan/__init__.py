@@ -18,7 +18,7 @@ except PackageNotFoundError:  # pragma: no cover - a source tree that was never 
 _LAZY = {
     "load": ("fixplan.fixture", "load"),
     "loads": ("fixplan.fixture", "loads"),
-    "Fixture": ("fixplan.fixture", "Fixture"),
+    "Fixture": ("fixplan.model", "Fixture"),
     "default_fixture_path": ("fixplan.fixture", "default_fixture_path"),
     "classify": ("fixplan.jamming", "classify"),
     "search_wrench": ("fixplan.jamming", "search_wrench"),

@@ -139,7 +139,7 @@ def _pose(fixture, pose: str):
     if pose not in ("start", "goal"):
         raise InputError(f"--pose must be 'start' or 'goal', got {pose!r}")
     if pose == "goal":
-        from fixplan.locating import require_full
+        from fixplan.model import require_full
 
         require_full(fixture, "--pose goal")
     return pose

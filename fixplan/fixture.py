@@ -1,4 +1,7 @@
-"""Fixture files (TOML, ``docs/fixture-format.md``) → a validated :class:`Fixture`.
+"""Fixture files (TOML, ``docs/fixture-format.md``) → a validated :class:`~fixplan.model.Fixture`.
+
+The loader and its checks; the model it builds lives in :mod:`fixplan.model` (re-exported here).
+The located pose is computed here, at load, and stored in the model as ``goal_pose``.
 
 Every problem in a file is reported, each as ``FILE: dotted.key.path: what is wrong (what was
 expected)``, by raising one :class:`~fixplan.errors.FixtureError` that carries them all.
@@ -13,7 +16,7 @@ from __future__ import annotations
 import re
 import sys
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -22,8 +25,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan import limits
-from fixplan.errors import FixtureError, InfeasibleError, Issue
+from fixplan.errors import FixtureError, Issue
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
+from fixplan.locating import locator_contact, solve_goal
+from fixplan.model import ExplicitContact, Fixture, Locator, Manipulator, SimulationSettings, Workpiece
 from fixplan.schema import Reader, shorten
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
 from fixplan.settings import Tolerances
@@ -49,112 +54,6 @@ _VERTEX = limits.Range("a vertex coordinate", "m", -limits.LENGTH_MAX_M, limits.
 def default_fixture_path() -> Path:
     """The bundled default fixture (a 3-2-1 box), used when a command is given no file."""
     return _DATA / "default.toml"
-
-
-@dataclass(frozen=True)
-class Locator:
-    """A fixed locator: a spherical tip (radius 0: a point) at ``p_world``."""
-
-    name: str
-    p_world: FloatArray
-    radius_m: float
-    friction: float
-    torsion_m: float = 0.0
-    face: str | None = None
-
-
-@dataclass(frozen=True)
-class ExplicitContact:
-    """A geometry-free contact given at the start pose."""
-
-    name: str
-    point_world: FloatArray
-    normal_world: FloatArray  # unit, the direction in which the fixture pushes the workpiece
-    friction: float
-    torsion_m: float = 0.0
-
-
-@dataclass(frozen=True)
-class Manipulator:
-    """What the hand or robot can exert on the workpiece."""
-
-    max_force_N: float = float("inf")
-    max_torque_Nm: float = float("inf")
-
-
-@dataclass(frozen=True)
-class SimulationSettings:
-    """Defaults for the simulator, overridable on the command line."""
-
-    timestep_s: float = 1e-3
-    restitution: float = 0.0
-    tolerance: float = 1e-8
-
-
-@dataclass(frozen=True)
-class Workpiece:
-    """The rigid part: its shape, mass and inertia about the centre of mass (body axes)."""
-
-    shape: Shape
-    mass_kg: float
-    inertia_body: FloatArray  # (3,3) in 3D, (1,1) in 2D
-    com_body: FloatArray
-
-
-@dataclass(frozen=True)
-class Fixture:
-    """A validated fixture file."""
-
-    source: str
-    name: str
-    dimension: int
-    gravity: FloatArray  # [m/s²], world frame
-    workpiece: Workpiece
-    locators: tuple[Locator, ...]
-    contacts: tuple[ExplicitContact, ...]
-    manipulator: Manipulator
-    simulation: SimulationSettings
-    start: Pose
-    goal_given: Pose | None = None
-    tolerances: Tolerances = field(default=DEFAULT)
-    warnings: tuple[Issue, ...] = ()  # plausibility warnings (not errors): `validate` prints them
-
-    @property
-    def ndof(self) -> int:
-        return 6 if self.dimension == 3 else 3
-
-    @property
-    def is_full(self) -> bool:
-        """Six locators in 3D, three in 2D: enough to locate the part."""
-        return len(self.locators) >= (6 if self.dimension == 3 else 3)
-
-    @property
-    def names(self) -> list[str]:
-        return [loc.name for loc in self.locators] + [c.name for c in self.contacts]
-
-    @cached_property
-    def goal(self) -> Pose:
-        """The located pose (every locator touching); only defined for a full fixture."""
-        from fixplan.locating import require_full, solve_goal
-
-        require_full(self, "the goal pose")
-        if self.goal_given is not None:
-            return self.goal_given
-        result = solve_goal(self.workpiece, self.locators, self.start)
-        if not result.converged:
-            raise InfeasibleError(f"{self.source}: no pose touches all locators (largest gap {result.max_gap_m:.3g} m)")
-        return result.pose
-
-    def gravity_wrench(self) -> FloatArray:
-        """Gravity as a wrench about the centre of mass, world axes."""
-        g = self.workpiece.mass_kg * self.gravity
-        return np.concatenate([g, np.zeros(3)]) if self.dimension == 3 else np.array([g[0], g[1], 0.0])
-
-    def locator(self, name: str) -> Locator:
-        for loc in self.locators:
-            if loc.name == name:
-                return loc
-        raise KeyError(name)
 
 
 def load(path: str | Path, tolerances: Tolerances = DEFAULT) -> Fixture:
@@ -268,10 +167,9 @@ class _Builder:
             goal_given=goal,
             tolerances=self.tol,
         )
-        self.check_geometry(fixture)
+        goal = self.check_geometry(fixture)
         self.fail_if_issues()
-        object.__setattr__(fixture, "warnings", tuple(self.warnings))
-        return fixture
+        return replace(fixture, goal_pose=goal, warnings=tuple(self.warnings))
 
     def check_entry_count(self) -> None:
         """At most :data:`~fixplan.limits.MAX_ENTRIES` locators and contacts, refused before any is read."""
@@ -673,9 +571,8 @@ class _Builder:
         return SimulationSettings(h or 1e-3, e or 0.0, tol or 1e-8)
 
     # -- checks that need the whole model -------------------------------------------------------------
-    def check_geometry(self, fixture: Fixture) -> None:
-        from fixplan.locating import locator_contact, solve_goal
-
+    def check_geometry(self, fixture: Fixture) -> Pose | None:
+        """Check the locators against the shape and locate the part; the located pose (full fixtures)."""
         r, tol = self.r, self.tol
         locs = fixture.locators
         for i, a in enumerate(locs):
@@ -708,7 +605,7 @@ class _Builder:
                     "workpiece.goal",
                     f"a goal needs a full fixture ({6 if fixture.dimension == 3 else 3} locators); this one has {len(locs)}",
                 )
-            return
+            return None
         if fixture.goal_given is not None:
             goal = fixture.goal_given
             for loc in locs:
@@ -725,9 +622,8 @@ class _Builder:
                     "locator",
                     f"no pose touches all {len(locs)} locators (largest gap {result.max_gap_m:.3g} m after {result.iterations} iteration{'s' if result.iterations != 1 else ''})",
                 )
-                return
+                return None
             goal = result.pose
-            object.__setattr__(fixture, "goal", goal)  # cache the computed goal
         for loc in locs:
             if loc.face is None:
                 continue
@@ -735,3 +631,4 @@ class _Builder:
             face = wp.shape.face_of(wp.shape.project(p_body).point_body)
             if face != loc.face:
                 r.error(f"locator.{loc.name}.face", f"touches face {face!r} at the goal (expected {loc.face!r})")
+        return goal

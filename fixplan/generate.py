@@ -41,9 +41,10 @@ from typing import Any
 import numpy as np
 
 from fixplan.errors import FixtureError, InfeasibleError, InputError
-from fixplan.fixture import Fixture, loads
+from fixplan.fixture import loads
 from fixplan.geometry import Polygon
 from fixplan.locating import contact_set, locator_gaps, solve_goal
+from fixplan.model import Fixture
 from fixplan.settings import DEFAULT
 from fixplan.spatial import cross2, rot2
 

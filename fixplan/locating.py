@@ -13,19 +13,16 @@ each step solves ``G Δ = −g`` in the least-squares sense and retracts the pos
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import InfeasibleError, InputError
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
+from fixplan.model import Fixture, Locator, Workpiece, require_full
 from fixplan.settings import DEFAULT
 from fixplan.spatial import Pose
-
-if TYPE_CHECKING:
-    from fixplan.fixture import Fixture, Locator, Workpiece
 
 FloatArray = NDArray[np.float64]
 
@@ -167,11 +164,20 @@ def solve_goal(
     return GoalResult(pose, max_gap, it, rank, converged=max_gap <= max(tol_m, 1e-10))
 
 
-def require_full(fixture: Fixture, what: str) -> None:
-    """Raise a clear error when ``what`` needs a full fixture (6 locators in 3D, 3 in 2D)."""
-    need = 6 if fixture.dimension == 3 else 3
-    if len(fixture.locators) < need:
-        raise InfeasibleError(
-            f"{what} needs a full fixture ({need} locators in {fixture.dimension}D); "
-            f"{fixture.source} has {len(fixture.locators)}"
-        )
+def with_goal(fixture: Fixture) -> Fixture:
+    """``fixture`` with its located pose set again, for a model changed after loading.
+
+    The given goal when there is one (``goal_given``, unchecked here), else the pose that
+    :func:`solve_goal` finds from the start pose; :class:`InfeasibleError` when no pose touches
+    every locator or the fixture is not full.
+    """
+    require_full(fixture, "the goal pose")
+    if fixture.goal_given is not None:
+        return replace(fixture, goal_pose=fixture.goal_given)
+    result = solve_goal(fixture.workpiece, fixture.locators, fixture.start)
+    if not result.converged:
+        raise InfeasibleError(f"{fixture.source}: no pose touches all locators (largest gap {result.max_gap_m:.3g} m)")
+    return replace(fixture, goal_pose=result.pose)
+
+
+__all__ = ["GoalResult", "contact_set", "locator_contact", "locator_gaps", "require_full", "solve_goal", "with_goal"]

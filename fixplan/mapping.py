@@ -15,7 +15,7 @@ from fixplan.jamming.classify import MODES
 from fixplan.locating import contact_set
 
 if TYPE_CHECKING:
-    from fixplan.fixture import Fixture
+    from fixplan.model import Fixture
 
 
 @dataclass(frozen=True)

@@ -37,8 +37,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import FixplanError, InfeasibleError, InputError
-from fixplan.fixture import Fixture, Locator
-from fixplan.locating import contact_set, locator_contact, locator_gaps, solve_goal
+from fixplan.locating import contact_set, locator_contact, locator_gaps, solve_goal, with_goal
+from fixplan.model import Fixture, Locator
 from fixplan.planner.execute import ExecutionNoise, Step
 from fixplan.settings import DEFAULT, RobustSettings
 from fixplan.spatial import Pose
@@ -163,8 +163,8 @@ def draw_world(fixture: Fixture, sample: int, settings: RobustSettings) -> tuple
     if goal_given is not None:
         res = solve_goal(wp, locators, goal_given)
         goal_given = res.pose if res.converged else None
-    perturbed = dataclasses.replace(fixture, locators=locators, start=start, goal_given=goal_given)
-    perturbed.goal  # noqa: B018 - computed now: raises InfeasibleError if no pose touches every locator
+    # located again: raises InfeasibleError if no pose touches every locator
+    perturbed = with_goal(dataclasses.replace(fixture, locators=locators, start=start, goal_given=goal_given))
     what = Perturbation(
         sample,
         {loc.name: loc.friction for loc in locators},

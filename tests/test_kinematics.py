@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 import fixplan
-from fixplan.fixture import Locator, Workpiece
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Sphere
 from fixplan.kinematics import com_world
 from fixplan.locating import locator_contact
+from fixplan.model import Locator, Workpiece
 from fixplan.spatial import Pose, log_so3
 
 

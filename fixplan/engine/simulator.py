@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from fixplan.engine import step as kernels
 from fixplan.engine.detect import encode
 from fixplan.errors import InputError, SolverError
-from fixplan.fixture import Fixture
+from fixplan.model import Fixture
 from fixplan.settings import DEFAULT, EngineSettings
 from fixplan.spatial import Pose, quaternion_wxyz_from_matrix, rot2, shift_wrench_by, tangent_basis
 

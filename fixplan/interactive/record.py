@@ -37,9 +37,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import InputError, SolverError
-from fixplan.fixture import Fixture
 from fixplan.haptics import SimulatedDevice
 from fixplan.interactive.session import SessionResult
+from fixplan.model import Fixture
 from fixplan.settings import DEFAULT, HAPTIC
 
 FloatArray = NDArray[np.float64]

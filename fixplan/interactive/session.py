@@ -36,11 +36,11 @@ from numpy.typing import NDArray
 
 from fixplan.engine.simulator import Simulator
 from fixplan.errors import InputError, SolverError
-from fixplan.fixture import Fixture
 from fixplan.haptics import SimulatedDevice
 from fixplan.haptics.coupling import check_passivity
 from fixplan.interactive import _kernels, protocol
 from fixplan.interactive.handles import Handle, UdpHandle
+from fixplan.model import Fixture
 from fixplan.settings import DEFAULT, HAPTIC, Settings
 from fixplan.spatial import Pose, exp_so3, rot2
 
@@ -368,7 +368,8 @@ class HapticSession:
         profile: Settings = HAPTIC,
     ):
         from fixplan.jamming.search import hand_limits
-        from fixplan.locating import contact_set, require_full
+        from fixplan.locating import contact_set
+        from fixplan.model import require_full
         from fixplan.planner.execute import ExecutionSettings
         from fixplan.planner.verify import haptic_rig, pose_coordinates
 

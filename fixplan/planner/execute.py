@@ -53,7 +53,7 @@ from fixplan.settings import DEFAULT, ExecutionSettings
 from fixplan.spatial import Pose, shift_twist, shift_wrench
 
 if TYPE_CHECKING:
-    from fixplan.fixture import Fixture
+    from fixplan.model import Fixture
 
 FloatArray = NDArray[np.float64]
 State = frozenset[str]

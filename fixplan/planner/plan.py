@@ -38,8 +38,8 @@ from fixplan.errors import InputError
 from fixplan.spatial import Pose, matrix_from_quaternion_wxyz, rot2
 
 if TYPE_CHECKING:
-    from fixplan.fixture import Fixture
     from fixplan.haptics import LoopRecord
+    from fixplan.model import Fixture
     from fixplan.planner.execute import ExecutionLog
 
 FloatArray = NDArray[np.float64]

@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from fixplan.errors import InputError
-from fixplan.fixture import Fixture
-from fixplan.locating import contact_set, require_full, solve_goal
+from fixplan.locating import contact_set, solve_goal
+from fixplan.model import Fixture, require_full
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
 from fixplan.planner.execute import ExecutionSettings, Step
 from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, _segment_wrenches, plan_transition

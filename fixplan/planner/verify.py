@@ -29,9 +29,9 @@ from numpy.typing import NDArray
 
 from fixplan.engine.simulator import Simulator
 from fixplan.errors import SolverError
-from fixplan.fixture import Fixture
 from fixplan.haptics import DeviceSpecs, HapticLoop, SimulatedDevice, VirtualCoupling
 from fixplan.kinematics import mass_matrix
+from fixplan.model import Fixture
 from fixplan.planner.execute import (
     ExecutionNoise,
     ExecutionSettings,

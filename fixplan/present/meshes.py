@@ -19,7 +19,7 @@ from fixplan.errors import InputError
 from fixplan.geometry.shapes import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
 
 if TYPE_CHECKING:
-    from fixplan.fixture import Fixture
+    from fixplan.model import Fixture
     from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]

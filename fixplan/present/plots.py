@@ -39,7 +39,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
-    from fixplan.fixture import Fixture
+    from fixplan.model import Fixture
     from fixplan.planner.plan import Plan
     from fixplan.planner.solve import PlanResult
 

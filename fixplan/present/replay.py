@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from fixplan.errors import FixplanError
 
 if TYPE_CHECKING:
-    from fixplan.fixture import Fixture
+    from fixplan.model import Fixture
     from fixplan.planner.plan import Plan, Timeline
     from fixplan.spatial import Pose
 

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from fixplan.present.meshes import locator_tips, points_world, shape_mesh, shape_outline, sphere_mesh
 
 if TYPE_CHECKING:
-    from fixplan.fixture import Fixture
+    from fixplan.model import Fixture
     from fixplan.present.replay import Replay
     from fixplan.spatial import Pose
 

@@ -14,9 +14,9 @@ import numpy as np
 from fixplan.engine import residual
 from fixplan.engine.local import solve_cone, solve_coulomb_2d
 from fixplan.engine.nsgs import build_problem
-from fixplan.fixture import Fixture
 from fixplan.kinematics import Contact
 from fixplan.locating import locator_contact
+from fixplan.model import Fixture
 from fixplan.spatial import Pose, exp_so3, rot2
 
 
