@@ -14,7 +14,7 @@ from conftest import PROBLEMS
 
 import fixplan
 from fixplan.cli import main
-from fixplan.jamming import classify, search_wrench
+from fixplan.jamming import classify, search_wrench, search_wrench_in
 from fixplan.jamming.classify import Classifier
 from fixplan.jamming.search import floor_sig
 from fixplan.kinematics import ContactSet
@@ -273,3 +273,29 @@ def test_without_the_classifier_check_the_same_push_is_returned(objective):
         # the push moves the part as asked: the classifier, run here, agrees
         c = classify(fx, fast.wrench, ["B1", "B2", "B3"], pose="start", jobs=1)[0]
         assert c.mode in ("slides", "pivots", "rolls")
+
+
+# ---------------------------------------------------------------- the contact-set form
+def test_the_contact_set_form_gives_the_fixture_level_answer():
+    """search_wrench_in(cs, a_com) with the motion moved to the centre of mass by hand: the same push.
+
+    At the located box (centre c), the acceleration of c ``a_c = (0.1, 0.05, 0)``, ``α = (0, 0, 0.2)``
+    (sliding on the base, turning, leaving the side locators) seen at the corner point
+    ``p = c + (0.1, 0.05, 0)`` is ``a_c + α × (p − c) = (0.1 − 0.2·0.05, 0.05 + 0.2·0.1, 0) = (0.09, 0.07, 0)``.
+    """
+    fx = fixplan.load(PROBLEMS / "box-3-2-1.toml")
+    names = ["B1", "B2", "B3", "S1", "S2"]
+    cs = fixplan.contact_set(fx, "goal", names)
+    corner = cs.com_world + np.array([0.1, 0.05, 0.0])
+    a_com = np.array([0.1, 0.05, 0.0, 0.0, 0.0, 0.2])
+    ref = search_wrench(fx, [0.09, 0.07, 0, 0, 0, 0.2], names, pose="goal", at=corner, objective="effort")
+    res = search_wrench_in(cs, a_com, fx, about_world=corner, objective="effort")
+    assert res.found == ref.found and res.reason == ref.reason
+    assert res.contact_roles == ref.contact_roles
+    if ref.found:
+        assert np.allclose(res.wrench, ref.wrench, rtol=1e-7, atol=1e-9)
+        assert np.allclose(res.acceleration, ref.acceleration, rtol=1e-7, atol=1e-12)
+    # the acceleration reported is the centre of mass's, along the one asked for
+    if res.acceleration is not None:
+        s = float(res.acceleration @ a_com) / float(a_com @ a_com)
+        assert s >= 1.0 - 1e-9 and np.allclose(res.acceleration, s * a_com, atol=1e-12)

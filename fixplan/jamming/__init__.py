@@ -2,6 +2,7 @@
 
 - :func:`classify` — the mode per wrench (held, jammed, separates, slides, rolls, indeterminate);
 - :func:`search_wrench` — the non-jamming wrench for a desired motion (docs/math.md program 2);
+  :func:`search_wrench_in` the same for a contact set already built (motion of the centre of mass);
 - :func:`can_wedge` — whether the contacts can hold self-equilibrated forces.
 """
 
@@ -16,13 +17,13 @@ from numpy.typing import ArrayLike
 from fixplan.errors import InputError
 from fixplan.jamming.batch import classify_batch
 from fixplan.jamming.classify import MODES, Classification, Classifier, wrench_array
-from fixplan.jamming.search import WrenchSearch, search_wrench
+from fixplan.jamming.search import WrenchSearch, search_wrench, search_wrench_in
 from fixplan.jamming.wedge import can_wedge, wedge_force
 from fixplan.locating import contact_set
 from fixplan.settings import Tolerances
 
 if TYPE_CHECKING:
-    from fixplan.fixture import Fixture
+    from fixplan.model import Fixture
     from fixplan.spatial import Pose
 
 __all__ = [
@@ -33,6 +34,7 @@ __all__ = [
     "can_wedge",
     "classify",
     "search_wrench",
+    "search_wrench_in",
     "wedge_force",
 ]
 

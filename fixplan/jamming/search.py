@@ -65,7 +65,7 @@ from fixplan.settings import DEFAULT
 from fixplan.spatial import shift_twist, shift_wrench, skew
 
 if TYPE_CHECKING:
-    from fixplan.fixture import Fixture
+    from fixplan.model import Fixture
     from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]
@@ -160,11 +160,6 @@ class WrenchSearch:
             "binding": list(self.binding),
             "limits": {"max_force": _finite_or_none(self.limits[0]), "max_torque": _finite_or_none(self.limits[1])},
         }
-
-
-def twist_at_com(cs: ContactSet, twist: FloatArray, about_world: FloatArray) -> FloatArray:
-    """A twist of the point ``about_world`` re-expressed as the twist of the centre of mass."""
-    return shift_twist(twist, about_world, cs.com_world)
 
 
 def _finite_twist(fixture: Fixture, x: ArrayLike, what: str) -> FloatArray:
@@ -356,12 +351,43 @@ def search_wrench(
     check and ``check``, both ``None`` then; ``confirmed`` is ``False``): the wrench is still
     certified by the program's own constraint. For a feedback loop that re-solves the push many
     times a second and watches the motion it causes, where the check was a quarter of each solve.
+
+    This is the fixture-level form: it builds the contact set at ``pose`` and moves ``motion``
+    (and ``slip_twist``) from the body origin (or ``at``) to the centre of mass, then calls
+    :func:`search_wrench_in`, which a caller holding a contact set calls directly.
     """
     m = np.asarray(motion, dtype=float)
     if m.shape != (fixture.ndof,) or not np.all(np.isfinite(m)):
         raise InputError(f"--motion expects {fixture.ndof} finite numbers, got {list(np.atleast_1d(m))}")
     if float(np.linalg.norm(m)) == 0.0:
         raise InputError("--motion is zero (expected the desired acceleration of the part)")
+    _check_options(objective, min_margin_N, friction_margin, jam_margin_rel)
+    cs = contact_set(fixture, pose, contacts)
+    _check_contacts(cs)
+    about = cs.body_origin_world if at is None else np.asarray(at, dtype=float)
+    a_com = shift_twist(m, about, cs.com_world)
+    slip_com = (
+        None
+        if slip_twist is None
+        else shift_twist(_finite_twist(fixture, slip_twist, "slip_twist"), about, cs.com_world)
+    )
+    return search_wrench_in(
+        cs,
+        a_com,
+        fixture,
+        about_world=about,
+        objective=objective,
+        min_margin_N=min_margin_N,
+        jam_margin_rel=jam_margin_rel,
+        friction_margin=friction_margin,
+        max_accel_factor=max_accel_factor,
+        slip_com=slip_com,
+        certify=certify,
+        confirm=confirm,
+    )
+
+
+def _check_options(objective: str, min_margin_N: float | None, friction_margin: float, jam_margin_rel: float) -> None:
     if objective not in ("margin", "effort"):
         raise InputError(f"unknown search objective {objective!r} (expected 'margin' or 'effort')")
     if min_margin_N is not None and not (math.isfinite(min_margin_N) and min_margin_N >= 0.0):
@@ -370,12 +396,47 @@ def search_wrench(
         raise InputError(f"friction_margin must be a finite number ≥ 0, got {friction_margin}")
     if not (0.0 < jam_margin_rel < 1.0):
         raise InputError(f"jam_margin_rel must lie in (0, 1), got {jam_margin_rel}")
-    cs = contact_set(fixture, pose, contacts)
+
+
+def _check_contacts(cs: ContactSet) -> None:
     if len(cs) == 0:
         raise InputError("no contacts to analyse (the workpiece touches no locator here; name contacts explicitly)")
-    about = cs.body_origin_world if at is None else np.asarray(at, dtype=float)
-    a_hat = twist_at_com(cs, m, about)
-    slip = None if slip_twist is None else twist_at_com(cs, _finite_twist(fixture, slip_twist, "slip_twist"), about)
+
+
+def search_wrench_in(
+    cs: ContactSet,
+    a_com: ArrayLike,
+    fixture: Fixture,
+    *,
+    about_world: ArrayLike | None = None,
+    objective: str = "margin",
+    min_margin_N: float | None = None,
+    jam_margin_rel: float = JAM_MARGIN_REL,
+    friction_margin: float = 0.0,
+    max_accel_factor: float = math.inf,
+    slip_com: ArrayLike | None = None,
+    certify: bool = True,
+    confirm: bool = True,
+) -> WrenchSearch:
+    """:func:`search_wrench` for a contact set already built, with the motion of the centre of mass.
+
+    ``a_com`` is the desired acceleration of the centre of mass ``cs.com_world`` (and
+    ``slip_com`` the slip twist, see :func:`search_wrench`), world axes: no shift to and from
+    the body origin. ``fixture`` gives gravity, the hand's limits and the tolerances; the wrench
+    found is reported about ``about_world`` (default: the body origin ``cs.body_origin_world``).
+    The other arguments and the answer are those of :func:`search_wrench`.
+    """
+    a_hat = np.asarray(a_com, dtype=float)
+    if a_hat.shape != (cs.ndof,) or not np.all(np.isfinite(a_hat)):
+        raise InputError(f"--motion expects {cs.ndof} finite numbers, got {list(np.atleast_1d(a_hat))}")
+    if float(np.linalg.norm(a_hat)) == 0.0:
+        raise InputError("--motion is zero (expected the desired acceleration of the part)")
+    _check_options(objective, min_margin_N, friction_margin, jam_margin_rel)
+    _check_contacts(cs)
+    about = cs.body_origin_world if about_world is None else np.asarray(about_world, dtype=float)
+    slip = None if slip_com is None else np.asarray(slip_com, dtype=float)
+    if slip is not None and (slip.shape != (cs.ndof,) or not np.all(np.isfinite(slip))):
+        raise InputError(f"slip_twist expects {cs.ndof} finite numbers, got {list(np.atleast_1d(slip))}")
     roles, directions = _roles(cs, a_hat, _SEARCH.role_rel, slip)
     wp = fixture.workpiece
     g = float(np.linalg.norm(fixture.gravity)) or 9.81

@@ -69,9 +69,9 @@ Each segment ``k → k+1`` is pushed from rest at knot ``k`` (quasi-static loadi
 acceleration is the direction of the finite-difference twist of the body origin
 ``(p_{k+1} − p_k, log(R_{k+1} R_kᵀ))``, projected (in the ``M``-metric) onto the motions that
 keep the established contacts exactly at knot ``k`` (normal rows for sliding, all rows for
-rolling), scaled to ``acceleration_mps2``, and given to
-:func:`~fixplan.jamming.search.search_wrench` with ``contacts=list(established)`` and
-``pose=`` the knot. A segment whose search fails makes the transition fail with its reason. With
+rolling), scaled to ``acceleration_mps2``, and given as the acceleration of the centre of mass,
+with the contact set of the established contacts at the knot (built once per segment), to
+:func:`~fixplan.jamming.search.search_wrench_in`. A segment whose search fails makes the transition fail with its reason. With
 no established contact (free motion) the wrench is ``M a − w_g``, checked against the limits.
 """
 
@@ -92,7 +92,7 @@ from fixplan.settings import DEFAULT, PlannerSettings
 from fixplan.spatial import Pose, log_so3, shift_twist, shift_wrench, tangent_seed
 
 if TYPE_CHECKING:
-    from fixplan.fixture import Fixture, Locator
+    from fixplan.model import Fixture, Locator
 
 FloatArray = NDArray[np.float64]
 
@@ -838,7 +838,7 @@ def _segment_wrenches(
     margin_N: float | None = None,
 ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], list[str]]:
     """The non-jamming wrench search for every segment (see the module docstring)."""
-    from fixplan.jamming.search import search_wrench
+    from fixplan.jamming.search import search_wrench_in
 
     wp = fixture.workpiece
     d, nv, K = fixture.dimension, fixture.ndof, len(poses) - 1
@@ -865,18 +865,17 @@ def _segment_wrenches(
             reasons.append("the segment does not move")
             continue
         a_com = nu * (acceleration_mps2 / size)
-        motion = shift_twist(a_com, cs.com_world, a.p_world)  # the search takes the origin's motion
         if not est:
             ok, wr, why = _free_wrench(fixture, a, a_com, M)
             found[k], reasons = ok, [*reasons, why]
             wrenches[k] = wr
             continue
         try:
-            res = search_wrench(
+            # the contact set and the motion of the centre of mass as they are (built once)
+            res = search_wrench_in(
+                cs,
+                a_com,
                 fixture,
-                motion,
-                list(est),
-                pose=a,
                 objective="effort",
                 min_margin_N=margin_N,
                 friction_margin=friction_margin,
