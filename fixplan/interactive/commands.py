@@ -62,7 +62,7 @@ def run_haptic(
     clock: str = "wall",
 ) -> int:
     """Run a session; 0 when the goal was reached, 1 otherwise."""
-    from fixplan.cli import _load
+    from fixplan.cli._app import _load
     from fixplan.files import check_distinct, check_output
     from fixplan.interactive.handles import GizmoHandle, Handle, SpaceMouseHandle, UdpHandle, parse_device
 
@@ -201,7 +201,7 @@ def run_device_sim(
 
 def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
     """Re-run a plan file in the haptic loop; 0 when it passes."""
-    from fixplan.cli import _load
+    from fixplan.cli._app import _load
     from fixplan.files import read_plan_json
     from fixplan.interactive.record import verify_plan_file
 

@@ -1,0 +1,577 @@
+"""Commands that analyse a fixture: validate, classify, search, map, simulate."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import typer
+
+from fixplan import limits
+from fixplan.cli._app import (
+    AtOpt,
+    ContactsOpt,
+    FileArg,
+    JsonOpt,
+    PoseOpt,
+    _console,
+    _emit_json,
+    _err,
+    _json_text,
+    _load,
+    _names,
+    _numbers,
+    _pose,
+    _shown,
+    _wrench,
+    _writable,
+    app,
+)
+from fixplan.errors import FixtureError, InputError, InputFileError, one_line
+from fixplan.files import check_distinct, write_output
+
+
+@app.command()
+def validate(
+    files: Annotated[list[Path], typer.Argument(help="Fixture files (or expected-verdict tables) to check.")],
+    verbose: Annotated[
+        bool,
+        typer.Option(
+            "--verbose",
+            "-v",
+            help="Also show the goal pose, each locator's gap at the start, and whether the locators determine the pose.",
+        ),
+    ] = False,
+) -> None:
+    """Check fixture files; print one line per problem (FILE: key: message) and exit 2 if any.
+
+    Warnings (an under-determined fixture, an implausible density) print on stderr as
+    FILE: key: warning: ... and do not change the exit status.
+    """
+    from fixplan.expectations import check_expectations, looks_like_expectations, read_toml
+    from fixplan.fixture import load
+
+    bad = False
+    for path in files:
+        data = read_toml(path)
+        if data is not None and looks_like_expectations(data):
+            issues, counts = check_expectations(path, data)
+            for issue in issues:
+                typer.echo(issue.format(str(path)), err=True)
+            bad |= bool(issues)
+            if not issues:
+                typer.echo(
+                    one_line(
+                        f"{path}: ok (expected verdicts: " + ", ".join(f"{n} {k}" for k, n in counts.items()) + ")"
+                    )
+                )
+            continue
+        try:
+            fixture = load(path)
+        except FixtureError as exc:
+            bad = True
+            for issue in exc.issues:
+                typer.echo(issue.format(str(path)), err=True)
+            continue
+        summary = _fixture_summary(fixture)
+        for issue in summary["warnings"]:
+            typer.echo(issue.format(str(path)), err=True)
+        typer.echo(one_line(f"{path}: ok ({summary['kind']}{summary['note']})"))
+        if verbose:
+            for line in summary["details"]:
+                typer.echo(one_line(f"  {line}"))
+    if bad:
+        raise typer.Exit(2)
+
+
+def _fixture_summary(fixture) -> dict[str, Any]:  # type: ignore[no-untyped-def]
+    """What validate says about a loaded fixture: kind, note, warnings, and the --verbose details."""
+    from fixplan.errors import Issue
+    from fixplan.locating import contact_set, locator_contact
+    from fixplan.spatial import rpy_from_matrix
+
+    d = fixture.dimension
+    kind = f"{d}D {fixture.workpiece.shape.name}, {len(fixture.locators)} locators, {len(fixture.contacts)} contacts"
+    warnings = list(fixture.warnings)
+    details: list[str] = []
+    note = ""
+
+    def pose_text(pose) -> str:  # type: ignore[no-untyped-def]
+        pos = ", ".join(f"{x:.6g}" for x in pose.p_world)
+        if d == 3:
+            rpy = ", ".join(f"{x:.4g}" for x in np.degrees(rpy_from_matrix(pose.R_world_body)))
+            return f"position [{pos}] m, rpy [{rpy}] deg"
+        return f"position [{pos}] m, angle {np.degrees(pose.angle_rad):.4g} deg"
+
+    details.append(f"start: {pose_text(fixture.start)}")
+    for loc in fixture.locators:
+        gap = locator_contact(fixture.workpiece, fixture.start, loc).gap_m
+        touching = "touching" if gap <= fixture.tolerances.touch_m else "open"
+        details.append(f"  {loc.name}: gap {gap:.3g} m at the start ({touching})")
+    if fixture.is_full:
+        note = ", goal " + ("given and checked" if fixture.goal_given is not None else "computed")
+        cs = contact_set(fixture, "goal", [loc.name for loc in fixture.locators])
+        rank = int(np.linalg.matrix_rank(cs.G, tol=1e-9))
+        determined = rank >= fixture.ndof
+        details.append(f"goal ({'given' if fixture.goal_given is not None else 'computed'}): {pose_text(fixture.goal)}")
+        details.append(
+            f"rank of G at the goal: {rank} of {fixture.ndof}: "
+            + ("the locators determine the pose" if determined else "the locators do NOT determine the pose")
+        )
+        if not determined:
+            warnings.append(
+                Issue(
+                    "locator",
+                    f"warning: the locators do not determine the pose (rank G = {rank} < {fixture.ndof}): "
+                    "the part can move while touching every locator",
+                )
+            )
+    else:
+        need = 6 if d == 3 else 3
+        details.append(f"no goal: {len(fixture.locators)} locators, a full fixture has {need} (analysis only)")
+    return {"kind": kind, "note": note, "warnings": warnings, "details": details}
+
+
+CLASSIFY_TABLE_ROWS = 50  # above this many wrenches, classify prints counts per mode instead of every row
+
+
+def _classify_table(fixture, results, names) -> None:  # type: ignore[no-untyped-def]
+    from rich.table import Table
+
+    table = Table(title=f"{fixture.name}: contacts {', '.join(names)}")
+    table.add_column("#", justify="right")
+    table.add_column("wrench")
+    table.add_column("mode")
+    table.add_column("margin", justify="right")
+    table.add_column("decided by")
+    for i, r in enumerate(results, 1):
+        margin = f"{r.margin:.3g}" if math.isfinite(r.margin) else "-"
+        table.add_row(str(i), ",".join(f"{x:g}" for x in r.wrench), r.mode, margin, r.certificate)
+    _console().print(table)
+
+
+def _classify_summary(fixture, results, names, out: Path | None) -> None:  # type: ignore[no-untyped-def]
+    """Counts per mode for a long list of wrenches (the rows go to --out)."""
+    from collections import Counter
+
+    counts = Counter(r.mode for r in results)
+    typer.echo(one_line(f"{fixture.name}: {len(results)} wrenches on contacts {', '.join(names)}"))
+    for mode, k in counts.most_common():
+        typer.echo(f"  {mode:13s} {k:6d}  ({100 * k / len(results):.1f} %)")
+    if out is None:
+        typer.echo(
+            f"(more than {CLASSIFY_TABLE_ROWS} wrenches: counts per mode only; --out FILE.csv writes one row per wrench)"
+        )
+
+
+def _write_classify_csv(path: Path, results: list[dict[str, Any]], ndof: int) -> None:
+    import csv
+
+    axes = AXES_3D if ndof == 6 else AXES_2D
+
+    def write(p: Path) -> None:
+        with open(p, "w", newline="", encoding="utf-8") as fh:
+            out = csv.writer(fh)
+            out.writerow(["index", *axes, "mode", "margin", "certificate"])
+            for i, r in enumerate(results, 1):
+                margin = "" if r["margin"] is None else f"{r['margin']:.6g}"
+                out.writerow([i, *(f"{x:.12g}" for x in r["wrench"]), r["mode"], margin, r["certificate"]])
+
+    write_output(path, write)
+
+
+@app.command()
+def classify(
+    file: FileArg = None,
+    wrench: Annotated[
+        str | None,
+        typer.Option("--wrench", help="Fx,Fy,Fz,Tx,Ty,Tz (2D: Fx,Fy,Mz), about the body origin, world axes."),
+    ] = None,
+    wrenches: Annotated[Path | None, typer.Option("--wrenches", help="CSV file, one wrench per line.")] = None,
+    contacts: ContactsOpt = None,
+    at: AtOpt = None,
+    pose: PoseOpt = "start",
+    backend: Annotated[
+        str, typer.Option("--backend", help="clarabel (fast matrix path) or cvxpy (reference model).")
+    ] = "clarabel",
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="Write one CSV row per wrench: index, wrench, mode, margin, certificate."),
+    ] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite --out if it exists.")] = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Classify pushes: held, jammed, separates, slides, pivots, rolls or indeterminate.
+
+    More than 50 wrenches print as counts per mode (the rows go to --out or --json).
+    """
+    from fixplan.jamming import classify as run
+    from fixplan.locating import contact_set
+
+    fixture = _load(file)
+    if (wrench is None) == (wrenches is None):
+        raise InputError("give exactly one of --wrench or --wrenches")
+    n = fixture.ndof
+    if wrench is not None:
+        W = _wrench(wrench, "--wrench", n)[None, :]
+    else:
+        W = _read_wrench_csv(wrenches, n)  # type: ignore[arg-type]
+    at_p = None if at is None else _numbers(at, "--at", fixture.dimension, limits.COORDINATE)
+    p = _pose(fixture, pose)
+    names = _names(contacts)
+    check_distinct([("FILE", file), ("--wrenches", wrenches), ("--out", out)])
+    target = None if out is None else _writable(out, force)
+    cs = contact_set(fixture, p, names)
+    if len(cs) == 0:
+        from fixplan.locating import locator_gaps
+
+        where = fixture.start if p == "start" else fixture.goal
+        gaps = locator_gaps(fixture.workpiece, where, fixture.locators)
+        nearest = ""
+        if len(gaps):
+            k = int(np.argmin(gaps))
+            nearest = f"; the nearest is {fixture.locators[k].name}, {gaps[k]:.3g} m away"
+        raise InputError(
+            f"{fixture.source}: no contacts to analyse at the {pose} pose: no locator touches the workpiece"
+            f"{nearest} (name hypothetical contacts with --contacts)"
+        )
+    for c in cs.contacts:
+        if c.kind == "locator" and c.gap_m > fixture.tolerances.touch_m:
+            _err(f"warning: {c.name} does not touch at the {pose} pose (gap {c.gap_m:.3g} m); analysed as if it did")
+    # a long batch printed as compact JSON is encoded by the processes that classify it
+    text = json_out and target is None and len(W) > 100
+    results = run(fixture, W, names, at_p, pose=p, backend=backend, as_json="text" if text else json_out)
+    if text:
+        texts = [r for r in results if isinstance(r, str)]
+        if len(texts) == len(results):
+            head = _json_text({"file": fixture.source, "pose": pose, "contacts": cs.names, "results": []}, compact=True)
+            sys.stdout.write(head[:-2] + ",".join(texts) + "]}\n")  # head ends with "results":[]}
+            return
+        results = [json.loads(r) if isinstance(r, str) else r for r in results]  # a non-finite number: reported below
+    if target is not None:
+        rows: list[dict[str, Any]] = [r if isinstance(r, dict) else r.to_json() for r in results]
+        _write_classify_csv(target, rows, n)
+    if json_out:
+        _emit_json(
+            {"file": fixture.source, "pose": pose, "contacts": cs.names, "results": results},
+            compact=len(results) > 100,
+        )
+    else:
+        if len(results) > CLASSIFY_TABLE_ROWS:
+            _classify_summary(fixture, results, cs.names, target)
+        else:
+            _classify_table(fixture, results, cs.names)
+        if target is not None:
+            typer.echo(f"wrote {target}")
+
+
+def _read_wrench_csv(path: Path, n: int) -> np.ndarray:
+    """Wrenches from a CSV file, one per line; every bad line is reported (FILE: line K: ...)."""
+    from fixplan.errors import Issue
+    from fixplan.files import read_user_text
+
+    text = read_user_text(path, expected=f"a CSV file of wrenches, {n} numbers per line")
+    rows = []
+    issues: list[Issue] = []
+    ranges = limits.wrench_ranges(n)
+    seen_data = False
+    for lineno, line in enumerate(text.splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        try:
+            rows.append(_numbers(line, "wrench", n, ranges))
+        except InputError as exc:
+            # a header line is allowed as the first non-empty line
+            if not seen_data and not any(ch.isdigit() for ch in line.replace("Fx", "")):
+                seen_data = True
+                continue
+            issues.append(Issue(f"line {lineno}", str(exc)))
+        seen_data = True
+        if len(issues) >= 100:
+            issues.append(Issue("...", "more bad lines not shown (stopped after 100)"))
+            break
+    if issues:
+        raise InputFileError(str(path), issues)
+    if not rows:
+        raise InputError(f"{path}: no wrenches (expected one wrench of {n} numbers per line)")
+    return np.array(rows)
+
+
+AXES_3D = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
+AXES_2D = ("Fx", "Fy", "Mz")
+
+
+@app.command()
+def search(
+    file: FileArg = None,
+    motion: Annotated[
+        str,
+        typer.Option(
+            "--motion", help="Desired acceleration of the body origin: ax,ay,az,αx,αy,αz (2D: ax,ay,α) [m/s², rad/s²]."
+        ),
+    ] = "",
+    contacts: ContactsOpt = None,
+    at: AtOpt = None,
+    pose: PoseOpt = "start",
+    objective: Annotated[
+        str,
+        typer.Option(
+            "--objective",
+            help="margin: the largest least normal force; effort: the least push keeping each contact pressed by ≥ --min-margin.",
+        ),
+    ] = "margin",
+    min_margin: Annotated[
+        float | None,
+        typer.Option(
+            "--min-margin",
+            help="Target least normal force [N]: kept by --objective effort (default: the part's weight); "
+            "exit 1 when even the best margin falls short of it.",
+        ),
+    ] = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Find the non-jamming push for a desired motion (exit 1 when none exists or --min-margin is not met)."""
+    from fixplan.jamming import search_wrench
+
+    fixture = _load(file)
+    if not motion:
+        raise InputError("--motion is required (the desired acceleration, e.g. 0.1,0,0,0,0,0)")
+    m = _numbers(motion, "--motion", fixture.ndof, limits.ACCELERATION)
+    at_p = None if at is None else _numbers(at, "--at", fixture.dimension, limits.COORDINATE)
+    if objective not in ("margin", "effort"):
+        raise InputError(f"--objective must be margin or effort, got {objective!r}")
+    if min_margin is not None and not (0.0 <= min_margin <= limits.FORCE_MAX_N):
+        raise InputError(f"--min-margin is {min_margin:g} (expected a force [N] in [0, {limits.FORCE_MAX_N:g}])")
+    result = search_wrench(
+        fixture, m, _names(contacts), pose=_pose(fixture, pose), at=at_p, objective=objective, min_margin_N=min_margin
+    )
+    if json_out:
+        _emit_json(result.to_json())
+    else:
+        if result.found and result.wrench is not None:
+            typer.echo(f"wrench: {','.join(f'{x:.6g}' for x in result.wrench)}")
+            margin = "none (no kept contact)" if result.margin_N is None else f"{result.margin_N:.4g} N"
+            typer.echo(f"margin: least normal force {margin}; check: {result.check.mode if result.check else '-'}")
+            typer.echo("contacts: " + ", ".join(f"{k} {v}" for k, v in result.contact_roles.items()))
+            if result.binding:
+                typer.echo("binding limits: " + ", ".join(result.binding))
+        typer.echo(result.reason)
+    if not result.found or result.margin_target_met is False:
+        raise typer.Exit(1)
+
+
+@app.command("map")
+def map_(
+    file: FileArg = None,
+    axes: Annotated[
+        str | None,
+        typer.Option(
+            "--axes",
+            help="Two wrench components: 3D Fx,Fy,Fz,Tx,Ty,Tz (Mx,My,Mz also name the moments); 2D Fx,Fy,Mz. "
+            "Default: Fx,Tz in 3D, Fx,Mz in 2D.",
+            show_default=False,
+        ),
+    ] = None,
+    range_: Annotated[str, typer.Option("--range", help="min:max for each axis, e.g. -20:20,-2:2.")] = "-10:10,-1:1",
+    n: Annotated[int, typer.Option("--n", help="Grid points per axis.", min=2, max=1000)] = 100,
+    wrench: Annotated[
+        str | None, typer.Option("--wrench", help="Base wrench for the other components (default 0).")
+    ] = None,
+    contacts: ContactsOpt = None,
+    at: AtOpt = None,
+    pose: PoseOpt = "start",
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out", help="Image to write (.png, .svg or .pdf); a CSV with the same stem is written beside it."
+        ),
+    ] = Path("map.png"),
+    force: Annotated[bool, typer.Option("--force", help="Overwrite existing output files.")] = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Classify a grid of pushes over two wrench components and draw the jamming diagram."""
+    from fixplan.mapping import jamming_map
+    from fixplan.present.maps import save_map
+
+    fixture = _load(file)
+    names_all = AXES_3D if fixture.dimension == 3 else AXES_2D
+    aliases = {"Mx": "Tx", "My": "Ty", "Mz": "Tz"} if fixture.dimension == 3 else {"Tz": "Mz"}
+    if axes is None:
+        axes = "Fx,Tz" if fixture.dimension == 3 else "Fx,Mz"
+    ax = [aliases.get(a.strip(), a.strip()) for a in axes.split(",")]
+    if len(ax) != 2 or any(a not in names_all for a in ax) or ax[0] == ax[1]:
+        raise InputError(
+            f"--axes expects two different names from {','.join(names_all)} for a {fixture.dimension}D fixture, "
+            f"got {_shown(axes)}"
+        )
+    parts = range_.split(",")
+    if len(parts) != 2:
+        raise InputError(f"--range expects min:max,min:max, got {_shown(range_)}")
+    bounds = []
+    for part, name in zip(parts, ax, strict=True):
+        rng = limits.wrench_ranges(fixture.ndof)[names_all.index(name)]
+        lo_hi = _numbers(part.replace(":", ","), f"--range of {name}", 2, rng)
+        if lo_hi[0] >= lo_hi[1]:
+            raise InputError(f"--range {_shown(part)}: min must be below max")
+        bounds.append((float(lo_hi[0]), float(lo_hi[1])))
+    base = np.zeros(fixture.ndof) if wrench is None else _wrench(wrench, "--wrench", fixture.ndof)
+    at_p = None if at is None else _numbers(at, "--at", fixture.dimension, limits.COORDINATE)
+    if out.suffix.lower() not in (".png", ".svg", ".pdf"):
+        raise InputError(
+            f"--out {out}: expected an image file ending in .png, .svg or .pdf (the CSV is written beside it "
+            "with the same stem)"
+        )
+    check_distinct([("FILE", file), ("--out", out), ("the CSV beside --out", out.with_suffix(".csv"))])
+    png = _writable(out, force)
+    csv_path = _writable(out.with_suffix(".csv"), force, "the CSV beside --out")
+    result = jamming_map(
+        fixture,
+        (names_all.index(ax[0]), names_all.index(ax[1])),
+        bounds,
+        n,
+        base=base,
+        contacts=_names(contacts),
+        at=at_p,
+        pose=_pose(fixture, pose),
+        progress=not json_out,
+        axis_names=(ax[0], ax[1]),
+    )
+    write_output(png, lambda p: save_map(result, p, csv_path))
+    counts = result.counts()
+    summary: dict[str, Any] = {
+        "png": str(png),
+        "csv": str(csv_path),
+        "axes": ax,
+        "base_wrench": base,
+        "counts": counts,
+        "time_s": result.time_s,
+        "per_classification_s": result.time_s / result.modes.size,
+    }
+    if json_out:
+        _emit_json(summary)
+    else:
+        if wrench is not None:
+            typer.echo(f"base wrench {','.join(f'{x:g}' for x in base)} (the components other than {ax[0]}, {ax[1]})")
+        typer.echo(
+            f"wrote {png} and {csv_path}: {result.modes.size} pushes in {result.time_s:.2f} s; "
+            + ", ".join(f"{k} {v}" for k, v in counts.items())
+        )
+
+
+@app.command()
+def simulate(
+    file: FileArg = None,
+    duration: Annotated[float, typer.Option("--duration", help="Simulated time [s].")] = 1.0,
+    dt: Annotated[float | None, typer.Option("--dt", help="Time step [s] (default: [simulation] timestep).")] = None,
+    wrench: Annotated[
+        str | None, typer.Option("--wrench", help="Constant applied wrench about the body origin (default 0).")
+    ] = None,
+    tolerance: Annotated[
+        float | None, typer.Option("--tolerance", help="NSGS residual (default: [simulation] tolerance).")
+    ] = None,
+    pose: PoseOpt = "start",
+    out: Annotated[Path | None, typer.Option("--out", help="Write the trajectory as CSV.")] = None,
+    every: Annotated[int, typer.Option("--every", help="Record every N-th step in --out.", min=1)] = 1,
+    force: Annotated[
+        bool,
+        typer.Option("--force", help="Overwrite --out if it exists; run more than 10^7 steps."),
+    ] = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Simulate the workpiece among its locators (Moreau–Jean, exact Coulomb and soft-finger friction).
+
+    A run longer than 10^7 steps (--duration / --dt) is refused unless --force.
+    """
+    from fixplan.engine.simulator import Simulator
+
+    fixture = _load(file)
+    if not limits.DURATION.contains(duration):
+        raise InputError(f"--duration is {duration:g} (expected {limits.DURATION.expected()})")
+    if dt is not None and not limits.TIMESTEP.contains(dt):
+        raise InputError(f"--dt is {dt:g} (expected {limits.TIMESTEP.expected()})")
+    if tolerance is not None and not limits.SOLVER_TOLERANCE.contains(tolerance):
+        raise InputError(f"--tolerance is {tolerance:g} (expected {limits.SOLVER_TOLERANCE.expected()})")
+    h = dt if dt is not None else fixture.simulation.timestep_s
+    if duration > 0 and h > duration:
+        raise InputError(f"--dt {h:g} s is longer than --duration {duration:g} s (expected a time step ≤ the duration)")
+    n_steps = int(round(duration / h))
+    if n_steps > limits.MAX_SIM_STEPS and not force:
+        raise InputError(
+            f"--duration {duration:g} s at a time step of {h:g} s is {n_steps:.3g} steps, more than the limit of "
+            f"{limits.MAX_SIM_STEPS:.0e} (use --force to run it anyway)"
+        )
+    w = None if wrench is None else _wrench(wrench, "--wrench", fixture.ndof)
+    check_distinct([("FILE", file), ("--out", out)])
+    target = None if out is None else _writable(out, force)
+    sim = Simulator(fixture, dt=dt, tolerance=tolerance)
+    if _pose(fixture, pose) == "goal":
+        sim.set_state(fixture.goal)
+    bar: Any = None
+    callback = None
+    if n_steps >= 20000 and not json_out:
+        import time
+
+        started, done = 0.0, 0
+
+        def callback(k: int) -> None:
+            # the bar appears once the stepping has lasted 0.5 s (counted from the first report, after
+            # the process loaded its compiled code): a shorter run (10^5 steps take about a second)
+            # pays neither for it nor for importing rich.progress (~50 ms)
+            nonlocal bar, done, started
+            done += k
+            if not started:
+                started = time.perf_counter()
+            elif bar is None and time.perf_counter() - started >= 0.5:
+                from rich.console import Console
+                from rich.progress import Progress
+
+                bar = Progress(transient=True, console=Console(file=sys.stderr))
+                bar.start()
+                bar.add_task("simulating", total=n_steps, completed=done)
+            elif bar is not None:
+                bar.update(bar.task_ids[0], advance=k)
+
+    try:
+        traj = sim.run(duration, w, record_every=every, progress=callback)
+    finally:
+        if bar is not None:
+            bar.stop()
+    if target is not None:
+        write_output(target, traj.to_csv)
+    twist = sim.twist
+    d = fixture.dimension
+    result: dict[str, Any] = {
+        "steps": sim.steps,
+        "time": sim.time_s,
+        "pose": sim.pose.to_json(),
+        "velocity": {"linear": [float(x) for x in twist[:d]], "angular": [float(x) for x in twist[d:]]},
+        "max_penetration": float(traj.max_penetration_m),
+        "contacts": [c.to_json() for c in sim.contacts()],
+        "solver": {
+            "max_error": float(max(traj.error, default=0.0)),
+            "mean_iterations": float(np.mean(traj.iterations)) if len(traj.iterations) else 0.0,
+            "converged": bool(max(traj.error, default=0.0) <= sim.tolerance),
+            "tolerance": sim.tolerance,
+        },
+        "wall_time_s": traj.wall_time_s,
+    }
+    if json_out:
+        _emit_json(result)
+        return
+    typer.echo(
+        f"{fixture.name}: {sim.steps} steps of {sim.dt:g} s in {traj.wall_time_s:.3f} s ({sim.steps / max(traj.wall_time_s, 1e-9):,.0f} steps/s)"
+    )
+    typer.echo(f"pose: {json.dumps(result['pose'])}")
+    typer.echo(f"velocity: linear {result['velocity']['linear']} angular {result['velocity']['angular']}")
+    typer.echo(
+        f"max penetration: {traj.max_penetration_m:.3g} m; solver: max residual {result['solver']['max_error']:.3g}, mean sweeps {result['solver']['mean_iterations']:.2f}"
+    )
+    for c in sim.contacts():
+        typer.echo(f"  {c.name:6s} {c.mode:9s} gap {c.gap_m: .3e} m  normal force {c.normal_force_N:.4g} N")
+    if target is not None:
+        typer.echo(f"wrote {target}")

@@ -1,0 +1,142 @@
+"""Tools beside the planner: fclib (solve an FCLib problem), generate (seeded random fixtures)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+
+from fixplan.cli._app import (
+    JsonOpt,
+    _emit_json,
+    _writable,
+    app,
+)
+from fixplan.errors import InputError
+from fixplan.files import write_text
+
+
+def _count(n: int, noun: str) -> str:
+    """``1 contact``, ``3 contacts``."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+@app.command()
+def fclib(
+    file: Annotated[Path, typer.Argument(help="An FCLib HDF5 problem (local or global, 3D or 2D).")],
+    tol: Annotated[float, typer.Option("--tol", help="Target FCLib residual (natural map, relative).")] = 1e-8,
+    max_iter: Annotated[
+        int | None,
+        typer.Option(
+            "--max-iter",
+            help="Iteration cap (sweeps for nsgs, rounds for socp/prox, steps for nsn; for auto: of every stage).",
+            min=1,
+        ),
+    ] = None,
+    time_limit: Annotated[
+        float,
+        typer.Option(
+            "--time-limit",
+            help="Seconds for reading and solving; at the limit the best answer so far is printed (exit 1).",
+        ),
+    ] = 60.0,
+    solver: Annotated[str, typer.Option("--solver", help="auto, nsgs, socp, nsn, prox or nsgs-numpy.")] = "auto",
+    json_out: JsonOpt = False,
+) -> None:
+    """Solve an FCLib frictional-contact problem; exit 0 converged, 1 not converged, 2 bad input.
+
+    auto runs NSGS, then the SOCP fixed point, nonsmooth Newton and PROX, each when the one before
+    stalls, and answers with the best reaction found, always within --time-limit.
+    """
+    from fixplan.engine.fclib import solve_fclib_file
+
+    if not (tol > 0 and np.isfinite(tol)):
+        raise InputError(f"--tol must be a positive number, got {tol}")
+    if not time_limit > 0:
+        raise InputError(f"--time-limit must be a positive number of seconds, got {time_limit}")
+    result = solve_fclib_file(file, tol=tol, max_iter=max_iter, solver=solver, time_limit=time_limit)
+    if json_out:
+        _emit_json(
+            {
+                "file": str(file),
+                "kind": result.kind,
+                "contacts": result.n_contacts,
+                "solver": result.solver,
+                "error": float(result.error),
+                "iterations": int(result.iterations),
+                "converged": bool(result.converged),
+                "time_s": float(result.time_s),
+                "reason": result.extras.get("reason", ""),
+                "stages": list(result.stages),
+                "reaction": [float(x) for x in result.reaction],
+                "velocity": [float(x) for x in result.velocity],
+            },
+            compact=True,
+        )
+    else:
+        verdict = "converged" if result.converged else "NOT converged"
+        typer.echo(
+            f"{file}: {result.kind} problem, {_count(result.n_contacts, 'contact')}; {result.solver}: error "
+            f"{result.error:.3g} after {_count(result.iterations, 'iteration')} in {result.time_s * 1e3:.1f} ms "
+            f"({verdict}, tol {tol:g})"
+        )
+        for stage in result.stages:
+            typer.echo(
+                f"  {stage['method']}: {stage['start_error']:.3g} -> {stage['error']:.3g} in "
+                f"{_count(stage['iterations'], 'iteration')}, {stage['time_s'] * 1e3:.1f} ms ({stage['status']})"
+            )
+        if not result.converged:
+            typer.echo(f"  best answer kept: {result.extras.get('reason', '')}")
+    if not result.converged:
+        raise typer.Exit(1)
+
+
+@app.command()
+def generate(
+    family: Annotated[str | None, typer.Argument(help="Fixture family (see --list).", show_default=False)] = None,
+    count: Annotated[
+        int, typer.Option("--count", help="How many fixtures (index 0 .. N-1), at most 10000.", min=1, max=10000)
+    ] = 10,
+    seed: Annotated[
+        int, typer.Option("--seed", help="Seed ≥ 0; fixture k of a seed is the same whatever --count.", min=0)
+    ] = 0,
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Directory for FAMILY-sSEED-NNN.toml (created if absent).")
+    ] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite existing files.")] = False,
+    list_: Annotated[bool, typer.Option("--list", help="List the families and exit.")] = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Write seeded random fixtures of a family (box-321, plate-2d), each checked before it is written."""
+    from fixplan.generate import FAMILIES, check_family, fixture_name
+    from fixplan.generate import generate as run
+
+    if list_:
+        if json_out:
+            _emit_json({"families": FAMILIES})
+        else:
+            for name, description in FAMILIES.items():
+                typer.echo(f"{name}: {description}")
+        return
+    if family is None:
+        raise InputError("give a FAMILY (one of: " + ", ".join(FAMILIES) + ") or --list")
+    check_family(family)
+    if out is None:
+        raise InputError("--out DIR is required (the directory to write the fixtures into)")
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out} is a file (expected a directory)")
+    targets = [out / f"{fixture_name(family, seed, i)}.toml" for i in range(count)]
+    for target in targets:
+        _writable(target, force)
+    fixtures = run(family, count, seed)
+    for target, fx in zip(targets, fixtures, strict=True):
+        write_text(target, fx.toml_text)
+    if json_out:
+        files = [
+            {"name": fx.name, "path": str(t), "params": fx.params} for t, fx in zip(targets, fixtures, strict=True)
+        ]
+        _emit_json({"family": family, "seed": seed, "count": count, "out": str(out), "files": files})
+    else:
+        typer.echo(f"wrote {count} {family} fixtures (seed {seed}) to {out}: {targets[0].name} .. {targets[-1].name}")
