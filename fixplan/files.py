@@ -18,10 +18,14 @@ import os
 import stat
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 from fixplan.errors import InputError
 from fixplan.limits import MAX_FILE_BYTES
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
 
 T = TypeVar("T")
 
@@ -188,3 +192,38 @@ def read_plan_json(path: Path, *, expected: str) -> object:
         raise InputError(f"{path}: not a fixplan plan (JSON nested too deeply)") from None
     except json.JSONDecodeError as exc:
         raise InputError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+
+
+def read_wrench_csv(path: Path, n: int) -> NDArray[np.float64]:
+    """Wrenches from a CSV file, one per line; every bad line is reported (FILE: line K: ...)."""
+    import numpy as np
+
+    from fixplan import limits
+    from fixplan.errors import InputFileError, Issue
+
+    text = read_user_text(path, expected=f"a CSV file of wrenches, {n} numbers per line")
+    rows = []
+    issues: list[Issue] = []
+    ranges = limits.wrench_ranges(n)
+    seen_data = False
+    for lineno, line in enumerate(text.splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        try:
+            rows.append(limits.parse_numbers(line, "wrench", n, ranges))
+        except InputError as exc:
+            # a header line is allowed as the first non-empty line
+            if not seen_data and not any(ch.isdigit() for ch in line.replace("Fx", "")):
+                seen_data = True
+                continue
+            issues.append(Issue(f"line {lineno}", str(exc)))
+        seen_data = True
+        if len(issues) >= 100:
+            issues.append(Issue("...", "more bad lines not shown (stopped after 100)"))
+            break
+    if issues:
+        raise InputFileError(str(path), issues)
+    if not rows:
+        raise InputError(f"{path}: no wrenches (expected one wrench of {n} numbers per line)")
+    return np.array(rows)

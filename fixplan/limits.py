@@ -27,6 +27,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+from numpy.typing import NDArray
+
+from fixplan.errors import InputError
+
 
 @dataclass(frozen=True)
 class Range:
@@ -104,3 +109,26 @@ def wrench_ranges(ndof: int) -> list[Range]:
     """The range of each wrench component: ``Fx,Fy,Fz,Tx,Ty,Tz`` (3D) or ``Fx,Fy,Mz`` (2D)."""
     forces = 3 if ndof == 6 else 2
     return [WRENCH_FORCE] * forces + [WRENCH_TORQUE] * (ndof - forces)
+
+
+def parse_numbers(
+    text: str, what: str, n: int | None = None, ranges: list[Range] | Range | None = None
+) -> NDArray[np.float64]:
+    """Comma-separated finite numbers, ``n`` of them, each inside its range (when given); :class:`InputError` names ``what``."""
+    from fixplan.schema import shorten
+
+    shown = shorten(text)
+    try:
+        values = np.array([float(x) for x in text.split(",")], dtype=float)
+    except ValueError:
+        raise InputError(f"{what} must be comma-separated numbers, got {shown}") from None
+    if n is not None and values.shape[0] != n:
+        raise InputError(f"{what} expects {n} numbers, got {values.shape[0]} in {shown}")
+    if not np.all(np.isfinite(values)):
+        raise InputError(f"{what} must be finite numbers, got {shown}")
+    if ranges is not None:
+        per = ranges if isinstance(ranges, list) else [ranges] * len(values)
+        for i, (x, rng) in enumerate(zip(values, per, strict=False)):
+            if not rng.contains(float(x)):
+                raise InputError(f"{what}: number {i + 1} is {x:g} (expected {rng.expected()})")
+    return values

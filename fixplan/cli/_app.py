@@ -94,22 +94,8 @@ def _load(path: Path | None):
 def _numbers(
     text: str, what: str, n: int | None = None, ranges: list[limits.Range] | limits.Range | None = None
 ) -> np.ndarray:
-    """Comma-separated finite numbers, ``n`` of them, each inside its range (when given)."""
-    shown = _shown(text)
-    try:
-        values = np.array([float(x) for x in text.split(",")], dtype=float)
-    except ValueError:
-        raise InputError(f"{what} must be comma-separated numbers, got {shown}") from None
-    if n is not None and values.shape[0] != n:
-        raise InputError(f"{what} expects {n} numbers, got {values.shape[0]} in {shown}")
-    if not np.all(np.isfinite(values)):
-        raise InputError(f"{what} must be finite numbers, got {shown}")
-    if ranges is not None:
-        per = ranges if isinstance(ranges, list) else [ranges] * len(values)
-        for i, (x, rng) in enumerate(zip(values, per, strict=False)):
-            if not rng.contains(float(x)):
-                raise InputError(f"{what}: number {i + 1} is {x:g} (expected {rng.expected()})")
-    return values
+    """Comma-separated finite numbers (:func:`fixplan.limits.parse_numbers`)."""
+    return limits.parse_numbers(text, what, n, ranges)
 
 
 def _shown(text: str) -> str:

@@ -31,7 +31,7 @@ from fixplan.cli._app import (
     _writable,
     app,
 )
-from fixplan.errors import FixtureError, InputError, InputFileError, one_line
+from fixplan.errors import FixtureError, InputError, one_line
 from fixplan.files import check_distinct, write_output
 
 
@@ -54,6 +54,7 @@ def validate(
     """
     from fixplan.expectations import check_expectations, looks_like_expectations, read_toml
     from fixplan.fixture import load
+    from fixplan.summary import summarize
 
     bad = False
     for path in files:
@@ -77,63 +78,15 @@ def validate(
             for issue in exc.issues:
                 typer.echo(issue.format(str(path)), err=True)
             continue
-        summary = _fixture_summary(fixture)
-        for issue in summary["warnings"]:
+        summary = summarize(fixture)
+        for issue in summary.warnings:
             typer.echo(issue.format(str(path)), err=True)
-        typer.echo(one_line(f"{path}: ok ({summary['kind']}{summary['note']})"))
+        typer.echo(one_line(f"{path}: ok ({summary.kind}{summary.note})"))
         if verbose:
-            for line in summary["details"]:
+            for line in summary.details:
                 typer.echo(one_line(f"  {line}"))
     if bad:
         raise typer.Exit(2)
-
-
-def _fixture_summary(fixture) -> dict[str, Any]:  # type: ignore[no-untyped-def]
-    """What validate says about a loaded fixture: kind, note, warnings, and the --verbose details."""
-    from fixplan.errors import Issue
-    from fixplan.locating import contact_set, locator_contact
-    from fixplan.spatial import rpy_from_matrix
-
-    d = fixture.dimension
-    kind = f"{d}D {fixture.workpiece.shape.name}, {len(fixture.locators)} locators, {len(fixture.contacts)} contacts"
-    warnings = list(fixture.warnings)
-    details: list[str] = []
-    note = ""
-
-    def pose_text(pose) -> str:  # type: ignore[no-untyped-def]
-        pos = ", ".join(f"{x:.6g}" for x in pose.p_world)
-        if d == 3:
-            rpy = ", ".join(f"{x:.4g}" for x in np.degrees(rpy_from_matrix(pose.R_world_body)))
-            return f"position [{pos}] m, rpy [{rpy}] deg"
-        return f"position [{pos}] m, angle {np.degrees(pose.angle_rad):.4g} deg"
-
-    details.append(f"start: {pose_text(fixture.start)}")
-    for loc in fixture.locators:
-        gap = locator_contact(fixture.workpiece, fixture.start, loc).gap_m
-        touching = "touching" if gap <= fixture.tolerances.touch_m else "open"
-        details.append(f"  {loc.name}: gap {gap:.3g} m at the start ({touching})")
-    if fixture.is_full:
-        note = ", goal " + ("given and checked" if fixture.goal_given is not None else "computed")
-        cs = contact_set(fixture, "goal", [loc.name for loc in fixture.locators])
-        rank = int(np.linalg.matrix_rank(cs.G, tol=1e-9))
-        determined = rank >= fixture.ndof
-        details.append(f"goal ({'given' if fixture.goal_given is not None else 'computed'}): {pose_text(fixture.goal)}")
-        details.append(
-            f"rank of G at the goal: {rank} of {fixture.ndof}: "
-            + ("the locators determine the pose" if determined else "the locators do NOT determine the pose")
-        )
-        if not determined:
-            warnings.append(
-                Issue(
-                    "locator",
-                    f"warning: the locators do not determine the pose (rank G = {rank} < {fixture.ndof}): "
-                    "the part can move while touching every locator",
-                )
-            )
-    else:
-        need = 6 if d == 3 else 3
-        details.append(f"no goal: {len(fixture.locators)} locators, a full fixture has {need} (analysis only)")
-    return {"kind": kind, "note": note, "warnings": warnings, "details": details}
 
 
 CLASSIFY_TABLE_ROWS = 50  # above this many wrenches, classify prints counts per mode instead of every row
@@ -209,6 +162,7 @@ def classify(
 
     More than 50 wrenches print as counts per mode (the rows go to --out or --json).
     """
+    from fixplan.files import read_wrench_csv
     from fixplan.jamming import classify as run
     from fixplan.locating import contact_set
 
@@ -219,7 +173,7 @@ def classify(
     if wrench is not None:
         W = _wrench(wrench, "--wrench", n)[None, :]
     else:
-        W = _read_wrench_csv(wrenches, n)  # type: ignore[arg-type]
+        W = read_wrench_csv(wrenches, n)  # type: ignore[arg-type]
     at_p = None if at is None else _numbers(at, "--at", fixture.dimension, limits.COORDINATE)
     p = _pose(fixture, pose)
     names = _names(contacts)
@@ -267,39 +221,6 @@ def classify(
             _classify_table(fixture, results, cs.names)
         if target is not None:
             typer.echo(f"wrote {target}")
-
-
-def _read_wrench_csv(path: Path, n: int) -> np.ndarray:
-    """Wrenches from a CSV file, one per line; every bad line is reported (FILE: line K: ...)."""
-    from fixplan.errors import Issue
-    from fixplan.files import read_user_text
-
-    text = read_user_text(path, expected=f"a CSV file of wrenches, {n} numbers per line")
-    rows = []
-    issues: list[Issue] = []
-    ranges = limits.wrench_ranges(n)
-    seen_data = False
-    for lineno, line in enumerate(text.splitlines(), 1):
-        line = line.strip()
-        if not line or line.startswith("#"):
-            continue
-        try:
-            rows.append(_numbers(line, "wrench", n, ranges))
-        except InputError as exc:
-            # a header line is allowed as the first non-empty line
-            if not seen_data and not any(ch.isdigit() for ch in line.replace("Fx", "")):
-                seen_data = True
-                continue
-            issues.append(Issue(f"line {lineno}", str(exc)))
-        seen_data = True
-        if len(issues) >= 100:
-            issues.append(Issue("...", "more bad lines not shown (stopped after 100)"))
-            break
-    if issues:
-        raise InputFileError(str(path), issues)
-    if not rows:
-        raise InputError(f"{path}: no wrenches (expected one wrench of {n} numbers per line)")
-    return np.array(rows)
 
 
 AXES_3D = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
@@ -487,6 +408,7 @@ def simulate(
 
     A run longer than 10^7 steps (--duration / --dt) is refused unless --force.
     """
+    from fixplan.engine.outcome import RunOutcome
     from fixplan.engine.simulator import Simulator
 
     fixture = _load(file)
@@ -543,35 +465,22 @@ def simulate(
             bar.stop()
     if target is not None:
         write_output(target, traj.to_csv)
-    twist = sim.twist
-    d = fixture.dimension
-    result: dict[str, Any] = {
-        "steps": sim.steps,
-        "time": sim.time_s,
-        "pose": sim.pose.to_json(),
-        "velocity": {"linear": [float(x) for x in twist[:d]], "angular": [float(x) for x in twist[d:]]},
-        "max_penetration": float(traj.max_penetration_m),
-        "contacts": [c.to_json() for c in sim.contacts()],
-        "solver": {
-            "max_error": float(max(traj.error, default=0.0)),
-            "mean_iterations": float(np.mean(traj.iterations)) if len(traj.iterations) else 0.0,
-            "converged": bool(max(traj.error, default=0.0) <= sim.tolerance),
-            "tolerance": sim.tolerance,
-        },
-        "wall_time_s": traj.wall_time_s,
-    }
+    outcome = RunOutcome.of(sim, traj)
     if json_out:
-        _emit_json(result)
+        _emit_json(outcome.to_json())
         return
     typer.echo(
-        f"{fixture.name}: {sim.steps} steps of {sim.dt:g} s in {traj.wall_time_s:.3f} s ({sim.steps / max(traj.wall_time_s, 1e-9):,.0f} steps/s)"
+        f"{fixture.name}: {outcome.steps} steps of {outcome.dt:g} s in {outcome.wall_time_s:.3f} s "
+        f"({outcome.steps / max(outcome.wall_time_s, 1e-9):,.0f} steps/s)"
     )
-    typer.echo(f"pose: {json.dumps(result['pose'])}")
-    typer.echo(f"velocity: linear {result['velocity']['linear']} angular {result['velocity']['angular']}")
+    velocity = outcome.to_json()["velocity"]
+    typer.echo(f"pose: {json.dumps(outcome.pose.to_json())}")
+    typer.echo(f"velocity: linear {velocity['linear']} angular {velocity['angular']}")
     typer.echo(
-        f"max penetration: {traj.max_penetration_m:.3g} m; solver: max residual {result['solver']['max_error']:.3g}, mean sweeps {result['solver']['mean_iterations']:.2f}"
+        f"max penetration: {outcome.max_penetration_m:.3g} m; solver: max residual {outcome.max_error:.3g}, "
+        f"mean sweeps {outcome.mean_iterations:.2f}"
     )
-    for c in sim.contacts():
+    for c in outcome.contacts:
         typer.echo(f"  {c.name:6s} {c.mode:9s} gap {c.gap_m: .3e} m  normal force {c.normal_force_N:.4g} N")
     if target is not None:
         typer.echo(f"wrote {target}")

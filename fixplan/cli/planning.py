@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
-import numpy as np
 import typer
 
 from fixplan import limits
@@ -25,6 +24,10 @@ from fixplan.cli._app import (
 )
 from fixplan.errors import InputError
 from fixplan.files import check_distinct, write_output, write_text
+
+if TYPE_CHECKING:
+    from fixplan.fixture import Fixture
+    from fixplan.planner.plan import Plan
 
 # -- the perturbed world of `fixplan robust` (and `solve --perturb-seed`) -------------------------
 SeedOpt = Annotated[int, typer.Option("--seed", help="Base seed of the perturbed worlds (sample k: rng([seed, k])).")]
@@ -175,10 +178,9 @@ def solve(
     target, report_path = out, report
     names = _names(order, "--order")
     if fixture.is_full:
-        from fixplan.locating import contact_set
+        from fixplan.summary import goal_rank
 
-        cs = contact_set(fixture, "goal", [loc.name for loc in fixture.locators])
-        rank = int(np.linalg.matrix_rank(cs.G, tol=1e-9))
+        rank = goal_rank(fixture)
         if rank < fixture.ndof:
             _err(
                 f"warning: {fixture.source}: the locators do not determine the pose (rank G = {rank} < "
@@ -205,20 +207,21 @@ def solve(
         from fixplan.robust import verify_on_world
 
         result, perturbation = verify_on_world(fixture, result, perturb_seed, perturb)
-    payload = result.to_json()
+    plan = result.plan
     if perturbation is not None:
-        payload["perturbation"] = perturbation
+        plan = plan.with_extras(perturbation=perturbation)
+    payload = plan.to_json()
     if target is not None:
         write_text(target, _json_text(payload) + "\n")
     written = [] if target is None else [target]
     if report_path is not None:
         figures = []
-        if figure is not None and result.status != "infeasible":
+        if figure is not None and plan.status != "infeasible":
             # the figure first, so the report never links to a missing file
-            write_output(figure, lambda p: save_plan_figure(result, fixture, p))
+            write_output(figure, lambda p: save_plan_figure(plan, fixture, p))
             figures.append(figure.name)  # beside the report: a relative link
             written.append(figure)
-        write_text(report_path, report_markdown(result, fixture, figures=figures))
+        write_text(report_path, report_markdown(plan, fixture, figures=figures))
         written.append(report_path)
     if json_out:
         _emit_json(payload)
@@ -228,38 +231,38 @@ def solve(
             typer.echo(
                 f"perturbed world {perturb_seed} (seed {seed}): friction {mu}; start {json.dumps(perturbation['start'])}"
             )
-        _print_plan(result, payload, fixture)
+        _print_plan(plan, fixture)
         if written:
             typer.echo("wrote " + ", ".join(str(p) for p in written))
-    if not result.ok:
+    if not plan.ok:
         raise typer.Exit(1)
 
 
-def _print_plan(result, payload: dict[str, Any], fixture) -> None:  # type: ignore[no-untyped-def]
+def _print_plan(plan: Plan, fixture: Fixture) -> None:
     from rich.table import Table
 
-    if payload["transitions"]:
+    if plan.transitions:
         table = Table(title=f"{fixture.name}: loading plan")
         for col in ("#", "from + added", "motion", "push (mean)", "least margin [N]", "friction δ", "time [s]"):
             table.add_column(col)
-        for i, tr in enumerate(payload["transitions"], 1):
-            w = "-" if tr["wrench"] is None else ",".join(f"{x:.3g}" for x in tr["wrench"])
-            margin = "-" if tr["margin"] is None else f"{tr['margin']:.3g}"
-            rob = "-" if tr["friction_robustness"] is None else f"±{tr['friction_robustness']:.2g}"
+        for i, tr in enumerate(plan.transitions, 1):
+            w = "-" if tr.wrench is None else ",".join(f"{x:.3g}" for x in tr.wrench)
+            margin = "-" if tr.margin_N is None else f"{tr.margin_N:.3g}"
+            rob = "-" if tr.friction_robustness is None else f"±{tr.friction_robustness:.2g}"
             table.add_row(
                 str(i),
-                f"{{{','.join(tr['from'])}}} + {tr['added']}",
-                tr["motion"],
+                f"{{{','.join(tr.from_state)}}} + {tr.added}",
+                tr.motion,
                 w,
                 margin,
                 rob,
-                f"{tr['time_s']:.2f}",
+                f"{tr.time_s:.2f}",
             )
         _console().print(table)
-    if not payload["transitions"] and result.status != "infeasible":
+    if not plan.transitions and plan.status != "infeasible":
         typer.echo(f"{fixture.name}: the part starts located (every locator touches): there is nothing to plan")
-    typer.echo(f"status: {result.status}" + (f" — {result.reason}" if result.reason else ""))
-    v = result.verification
+    typer.echo(f"status: {plan.status}" + (f" — {plan.reason}" if plan.reason else ""))
+    v = plan.verification
     if v is not None:
         ex = v.execution
         if ex is not None:
@@ -281,7 +284,7 @@ def _print_plan(result, payload: dict[str, Any], fixture) -> None:  # type: igno
                 "period to compute on this machine (simulated time does not slip, so this measures speed, not the verdict)"
             )
         typer.echo("; ".join(parts))
-    typer.echo(f"time: {result.timings.get('total_s', 0.0):.2f} s")
+    typer.echo(f"time: {plan.timings.get('total_s', 0.0):.2f} s")
 
 
 def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | None, friction_margin: float,

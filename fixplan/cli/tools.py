@@ -58,23 +58,7 @@ def fclib(
         raise InputError(f"--time-limit must be a positive number of seconds, got {time_limit}")
     result = solve_fclib_file(file, tol=tol, max_iter=max_iter, solver=solver, time_limit=time_limit)
     if json_out:
-        _emit_json(
-            {
-                "file": str(file),
-                "kind": result.kind,
-                "contacts": result.n_contacts,
-                "solver": result.solver,
-                "error": float(result.error),
-                "iterations": int(result.iterations),
-                "converged": bool(result.converged),
-                "time_s": float(result.time_s),
-                "reason": result.extras.get("reason", ""),
-                "stages": list(result.stages),
-                "reaction": [float(x) for x in result.reaction],
-                "velocity": [float(x) for x in result.velocity],
-            },
-            compact=True,
-        )
+        _emit_json({"file": str(file), **result.to_json()}, compact=True)
     else:
         verdict = "converged" if result.converged else "NOT converged"
         typer.echo(

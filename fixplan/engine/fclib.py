@@ -121,6 +121,22 @@ class FclibResult:
     extras: dict
     stages: tuple = ()
 
+    def to_json(self) -> dict[str, Any]:
+        """The answer of ``fixplan fclib --json`` (without the file): quality, stages, reaction, velocity."""
+        return {
+            "kind": self.kind,
+            "contacts": self.n_contacts,
+            "solver": self.solver,
+            "error": float(self.error),
+            "iterations": int(self.iterations),
+            "converged": bool(self.converged),
+            "time_s": float(self.time_s),
+            "reason": self.extras.get("reason", ""),
+            "stages": list(self.stages),
+            "reaction": [float(x) for x in self.reaction],
+            "velocity": [float(x) for x in self.velocity],
+        }
+
 
 _MAX_DIM = 2**31 - 1  # FCLib stores indices as int32
 

@@ -1,0 +1,122 @@
+"""What a loaded fixture is: its kind, each locator's gap at the start, the goal, and whether the locators determine the pose.
+
+``fixplan validate`` prints :func:`summarize`'s answer (``--verbose``: its details);
+``fixplan solve`` warns with :func:`goal_rank` when the locators leave the pose free.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from fixplan.errors import Issue
+
+if TYPE_CHECKING:
+    from fixplan.fixture import Fixture
+    from fixplan.spatial import Pose
+
+RANK_TOL = 1e-9  # singular values of G below this count as zero
+
+
+def goal_rank(fixture: Fixture) -> int:
+    """The rank of ``G`` (the locators' contact normals as wrenches) at the goal, every locator touching.
+
+    The locators determine the pose when it is ``fixture.ndof``; below, the part can move while
+    touching every locator.
+    """
+    from fixplan.locating import contact_set
+
+    cs = contact_set(fixture, "goal", [loc.name for loc in fixture.locators])
+    return int(np.linalg.matrix_rank(cs.G, tol=RANK_TOL))
+
+
+@dataclass(frozen=True)
+class FixtureSummary:
+    """What :func:`summarize` found.
+
+    Attributes
+    ----------
+    kind : str
+        ``3D box, 6 locators, 0 contacts``.
+    goal : {"given", "computed"} or None
+        Where the goal pose comes from; None without a goal (fewer locators than a full fixture).
+    start_gaps_m : dict
+        Each locator's gap at the start pose [m].
+    rank : int or None
+        :func:`goal_rank` (None without a goal).
+    warnings : tuple of Issue
+        The loader's warnings, and an under-determined pose.
+    details : tuple of str
+        One line per fact, for people (``fixplan validate --verbose``).
+    """
+
+    kind: str
+    goal: str | None
+    start_gaps_m: dict[str, float]
+    rank: int | None
+    ndof: int
+    warnings: tuple[Issue, ...]
+    details: tuple[str, ...]
+
+    @property
+    def determines_pose(self) -> bool | None:
+        """Whether the locators determine the pose at the goal (None without a goal)."""
+        return None if self.rank is None else self.rank >= self.ndof
+
+    @property
+    def note(self) -> str:
+        """``, goal given and checked`` / ``, goal computed`` / empty: the tail of validate's ok line."""
+        if self.goal is None:
+            return ""
+        return ", goal " + ("given and checked" if self.goal == "given" else "computed")
+
+
+def summarize(fixture: Fixture) -> FixtureSummary:
+    """The kind, start gaps, goal and determinacy of a loaded fixture (see :class:`FixtureSummary`)."""
+    from fixplan.locating import locator_contact
+    from fixplan.spatial import rpy_from_matrix
+
+    d = fixture.dimension
+    kind = f"{d}D {fixture.workpiece.shape.name}, {len(fixture.locators)} locators, {len(fixture.contacts)} contacts"
+    warnings = list(fixture.warnings)
+    details: list[str] = []
+
+    def pose_text(pose: Pose) -> str:
+        pos = ", ".join(f"{x:.6g}" for x in pose.p_world)
+        if d == 3:
+            rpy = ", ".join(f"{x:.4g}" for x in np.degrees(rpy_from_matrix(pose.R_world_body)))
+            return f"position [{pos}] m, rpy [{rpy}] deg"
+        return f"position [{pos}] m, angle {np.degrees(pose.angle_rad):.4g} deg"
+
+    details.append(f"start: {pose_text(fixture.start)}")
+    gaps: dict[str, float] = {}
+    for loc in fixture.locators:
+        gap = float(locator_contact(fixture.workpiece, fixture.start, loc).gap_m)
+        gaps[loc.name] = gap
+        touching = "touching" if gap <= fixture.tolerances.touch_m else "open"
+        details.append(f"  {loc.name}: gap {gap:.3g} m at the start ({touching})")
+    goal: str | None = None
+    rank: int | None = None
+    if fixture.is_full:
+        goal = "given" if fixture.goal_given is not None else "computed"
+        rank = goal_rank(fixture)
+        determined = rank >= fixture.ndof
+        details.append(f"goal ({goal}): {pose_text(fixture.goal)}")
+        details.append(
+            f"rank of G at the goal: {rank} of {fixture.ndof}: "
+            + ("the locators determine the pose" if determined else "the locators do NOT determine the pose")
+        )
+        if not determined:
+            warnings.append(
+                Issue(
+                    "locator",
+                    f"warning: the locators do not determine the pose (rank G = {rank} < {fixture.ndof}): "
+                    "the part can move while touching every locator",
+                )
+            )
+    else:
+        need = 6 if d == 3 else 3
+        details.append(f"no goal: {len(fixture.locators)} locators, a full fixture has {need} (analysis only)")
+    return FixtureSummary(kind, goal, gaps, rank, fixture.ndof, tuple(warnings), tuple(details))
