@@ -12,12 +12,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fixplan.errors import Issue
+from fixplan.settings import DEFAULT
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture
     from fixplan.spatial import Pose
-
-RANK_TOL = 1e-9  # singular values of G below this count as zero
 
 
 def goal_rank(fixture: Fixture) -> int:
@@ -29,7 +28,7 @@ def goal_rank(fixture: Fixture) -> int:
     from fixplan.locating import contact_set
 
     cs = contact_set(fixture, "goal", [loc.name for loc in fixture.locators])
-    return int(np.linalg.matrix_rank(cs.G, tol=RANK_TOL))
+    return int(np.linalg.matrix_rank(cs.G, tol=DEFAULT.numerics.rank_tol))
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ from fixplan.cli._app import (
 )
 from fixplan.errors import InputError
 from fixplan.files import check_distinct, write_output, write_text
+from fixplan.settings import DEFAULT
 
 if TYPE_CHECKING:
     from fixplan.fixture import Fixture
@@ -130,7 +131,7 @@ def solve(
     seed: SeedOpt = 0,
     mu_spread: MuSpreadOpt = 0.2,
     pose_sigma: PoseSigmaOpt = "1e-3,1",
-    locator_sigma: LocatorSigmaOpt = 1e-4,
+    locator_sigma: LocatorSigmaOpt = DEFAULT.robust.locator_sigma_m,
     force_noise: ForceNoiseOpt = 0.05,
     latency_ms: LatencyOpt = 2.0,
     batch: Annotated[
@@ -324,7 +325,7 @@ def robust(
     seed: SeedOpt = 0,
     mu_spread: MuSpreadOpt = 0.2,
     pose_sigma: PoseSigmaOpt = "1e-3,1",
-    locator_sigma: LocatorSigmaOpt = 1e-4,
+    locator_sigma: LocatorSigmaOpt = DEFAULT.robust.locator_sigma_m,
     force_noise: ForceNoiseOpt = 0.05,
     latency_ms: LatencyOpt = 2.0,
     scheduler: SchedulerOpt = None,

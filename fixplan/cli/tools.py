@@ -16,6 +16,7 @@ from fixplan.cli._app import (
 )
 from fixplan.errors import InputError
 from fixplan.files import write_text
+from fixplan.settings import DEFAULT
 
 
 def _count(n: int, noun: str) -> str:
@@ -26,7 +27,9 @@ def _count(n: int, noun: str) -> str:
 @app.command()
 def fclib(
     file: Annotated[Path, typer.Argument(help="An FCLib HDF5 problem (local or global, 3D or 2D).")],
-    tol: Annotated[float, typer.Option("--tol", help="Target FCLib residual (natural map, relative).")] = 1e-8,
+    tol: Annotated[
+        float, typer.Option("--tol", help="Target FCLib residual (natural map, relative).")
+    ] = DEFAULT.engine.fclib_tolerance,
     max_iter: Annotated[
         int | None,
         typer.Option(
