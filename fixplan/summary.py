@@ -15,7 +15,7 @@ from fixplan.errors import Issue
 from fixplan.settings import DEFAULT
 
 if TYPE_CHECKING:
-    from fixplan.fixture import Fixture
+    from fixplan.model import Fixture
     from fixplan.spatial import Pose
 
 

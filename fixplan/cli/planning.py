@@ -27,7 +27,7 @@ from fixplan.files import check_distinct, write_output, write_text
 from fixplan.settings import DEFAULT
 
 if TYPE_CHECKING:
-    from fixplan.fixture import Fixture
+    from fixplan.model import Fixture
     from fixplan.planner.plan import Plan
 
 # -- the perturbed world of `fixplan robust` (and `solve --perturb-seed`) -------------------------
