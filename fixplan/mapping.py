@@ -20,7 +20,11 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class JammingMap:
-    """Modes and margins on a grid of two wrench components."""
+    """Modes and balance residuals on a grid of two wrench components.
+
+    ``margins`` holds each cell's :attr:`~fixplan.jamming.classify.Classification.balance_residual`
+    [N/√kg] (the CSV column keeps the name ``margin``).
+    """
 
     axis_names: tuple[str, str]
     x: NDArray[np.float64]
@@ -80,7 +84,7 @@ def jamming_map(
         if bar is not None:
             bar.stop()
     modes = np.array([r.mode for r in results], dtype=object).reshape(n, n)
-    margins = np.array([r.margin for r in results]).reshape(n, n)
+    margins = np.array([r.balance_residual for r in results]).reshape(n, n)
     elapsed = time.perf_counter() - t0
     title = f"{fixture.name}: contacts {', '.join(cs.names)}"
     others = [k for k in range(fixture.ndof) if k not in components]

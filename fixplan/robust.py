@@ -44,7 +44,7 @@ from fixplan.settings import DEFAULT, RobustSettings
 from fixplan.spatial import Pose
 
 if TYPE_CHECKING:
-    from fixplan.planner.solve import PlanResult
+    from fixplan.planner.solve import PlanResult, PlanStatus
     from fixplan.planner.verify import Verification
 
 FloatArray = NDArray[np.float64]
@@ -245,6 +245,7 @@ def verify_on_world(
     v = verify_sample(fixture, start_state, plan_steps(result.transitions), sample, settings)
     timings = {**result.timings, "verify_s": time.perf_counter() - t0}
     where = f"on perturbed world {sample} (seed {settings.seed})"
+    status: PlanStatus
     if v.passed:
         status, reason = "planned", f"verified {where}"
     else:

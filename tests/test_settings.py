@@ -67,7 +67,7 @@ def test_strict_profile_tightens_the_closed_form_check():
     """Box on three supports, μ = 0.3: a push F < μ m g jams with zero residual; F > μ m g slides at (F − μ m g)/m.
 
     Under the strict profile the cone programs meet the closed form to 1e-8 of the push."""
-    from tests.test_jamming import box_on_supports
+    from conftest import box_on_three_supports as box_on_supports
 
     f = box_on_supports(mu=0.3, mass=2.0)
     strict = settings.STRICT.tolerances

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from conftest import box_on_three_supports as box_on_supports
 
 import fixplan
 from fixplan.engine.simulator import Simulator
@@ -10,7 +11,7 @@ from fixplan.haptics import HapticLoop, SimulatedDevice, VirtualCoupling
 from fixplan.jamming import backends, can_wedge, wedge_force
 from fixplan.jamming.cvx import least_residual
 from fixplan.planner.verify import loop_measures
-from tests.test_jamming import box_on_supports, peg
+from tests.test_jamming import peg
 
 
 def test_cvx_cone_violation_is_measured_or_none(monkeypatch):

@@ -6,7 +6,7 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal, cast
 
 import numpy as np
 import typer
@@ -102,7 +102,7 @@ def _classify_table(fixture, results, names) -> None:  # type: ignore[no-untyped
     table.add_column("margin", justify="right")
     table.add_column("decided by")
     for i, r in enumerate(results, 1):
-        margin = f"{r.margin:.3g}" if math.isfinite(r.margin) else "-"
+        margin = f"{r.balance_residual:.3g}" if math.isfinite(r.balance_residual) else "-"
         table.add_row(str(i), ",".join(f"{x:g}" for x in r.wrench), r.mode, margin, r.certificate)
     _console().print(table)
 
@@ -269,7 +269,13 @@ def search(
     if min_margin is not None and not (0.0 <= min_margin <= limits.FORCE_MAX_N):
         raise InputError(f"--min-margin is {min_margin:g} (expected a force [N] in [0, {limits.FORCE_MAX_N:g}])")
     result = search_wrench(
-        fixture, m, _names(contacts), pose=_pose(fixture, pose), at=at_p, objective=objective, min_margin_N=min_margin
+        fixture,
+        m,
+        _names(contacts),
+        pose=_pose(fixture, pose),
+        at=at_p,
+        objective=cast(Literal["margin", "effort"], objective),  # checked above
+        min_margin_N=min_margin,
     )
     if json_out:
         _emit_json(result.to_json())

@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -55,6 +55,9 @@ class BodyState(NamedTuple):
     omega_world: FloatArray  # angular velocity, world [rad/s]: (3,), or (1,) in 2D
 
 
+ContactMode = Literal["open", "sticking", "sliding", "rolling"]  # a contact after a step
+
+
 @dataclass(frozen=True)
 class ContactReport:
     """One locator after the last step."""
@@ -64,7 +67,7 @@ class ContactReport:
     normal_force_N: float
     force_world: FloatArray  # average contact force over the step, on the workpiece [N]
     spin_moment_Nm: float  # soft fingers only
-    mode: str  # "open" | "sticking" | "sliding" | "rolling"
+    mode: ContactMode
 
     def to_json(self) -> dict[str, Any]:
         return {"name": self.name, "gap": self.gap_m, "normal_force": self.normal_force_N, "mode": self.mode}
@@ -456,7 +459,7 @@ class Simulator:
                 slip = abs(float(self._u[i, 1]))
                 spin = 0.0
             slip_tol, spin_tol = self.settings.slip_mps, self.settings.spin_radps
-            mode = "sliding" if slip > slip_tol else ("rolling" if omega > spin_tol else "sticking")
+            mode: ContactMode = "sliding" if slip > slip_tol else ("rolling" if omega > spin_tol else "sticking")
             reports.append(ContactReport(name, float(self._gap[i]), Pn / h, force, spin, mode))
         return reports
 

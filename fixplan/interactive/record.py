@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast, get_args
 
 import numpy as np
 from numpy.typing import NDArray
@@ -360,7 +360,7 @@ def verify_recording(
                         state["outcome"] = "jammed"
                         state["reason"] = (
                             f"jammed at t = {t:.3f} s in {{{', '.join(obs)}}}: the recorded push "
-                            f"({', '.join(f'{x:.3g}' for x in w)}) is held by friction (margin {c.margin:.3g})"
+                            f"({', '.join(f'{x:.3g}' for x in w)}) is held by friction (margin {c.balance_residual:.3g})"
                         )
         else:
             state["still"] = None
@@ -416,7 +416,7 @@ def verify_recording(
 def verify_plan_file(fixture: Fixture, data: dict[str, Any], *, source: str = "plan") -> Any:
     """``fixplan verify``: a session's recorded pushes, or a solved plan's transitions through the executor."""
     from fixplan.locating import contact_set
-    from fixplan.planner.execute import Step
+    from fixplan.planner.execute import Step, TransitionKind
     from fixplan.planner.plan import plan_for_fixture
     from fixplan.planner.solve import Planner
     from fixplan.planner.verify import verify
@@ -432,7 +432,11 @@ def verify_plan_file(fixture: Fixture, data: dict[str, Any], *, source: str = "p
             raise InputError(
                 f"{source}: transitions[{i}]: no 'added' locator (expected a plan from 'fixplan solve --out')"
             )
-        steps.append(Step(tr.from_state, tr.added, tr.motion, tr.poses))
+        if tr.motion not in get_args(TransitionKind):
+            raise InputError(
+                f"{source}: transitions[{i}].motion: expected one of {', '.join(get_args(TransitionKind))}, got {tr.motion!r}"
+            )
+        steps.append(Step(tr.from_state, tr.added, cast(TransitionKind, tr.motion), tr.poses))
     touching = contact_set(fixture, "start")
     start_state = frozenset(c.name for c in touching.contacts if c.kind == "locator")
     return verify(fixture, start_state, steps, replan=Planner(fixture).replan)

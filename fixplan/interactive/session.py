@@ -29,7 +29,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +40,7 @@ from fixplan.haptics import SimulatedDevice
 from fixplan.haptics.coupling import check_passivity
 from fixplan.interactive import _kernels, protocol
 from fixplan.interactive.handles import Handle, UdpHandle
+from fixplan.jamming.classify import MODES as CLASSIFY_MODES
 from fixplan.model import Fixture
 from fixplan.settings import DEFAULT, HAPTIC, Settings
 from fixplan.spatial import Pose, exp_so3, rot2
@@ -48,7 +49,9 @@ FloatArray = NDArray[np.float64]
 
 GUIDE_PERIOD_S = 0.02  # the guidance process re-solves the push at most at 50 Hz (each solve takes 5–15 ms)
 VERDICT_PERIOD_S = 0.04  # the verdict process classifies the current push at 25 Hz
-MODES = ("held", "jammed", "separates", "slides", "pivots", "rolls", "indeterminate", "free")
+MODES = (*CLASSIFY_MODES, "free")  # the verdicts, in the protocol's order (it sends the index)
+Motion = Literal["free", "slide", "roll", "hold", "plan", "none"]  # what the guidance asks
+SessionStatus = Literal["reached", "jammed", "short", "diverged", "error"]
 
 
 @dataclass(frozen=True)
@@ -58,7 +61,7 @@ class Guidance:
     time_s: float = 0.0
     target: str | None = None  # the next locator to press
     transition: int | None = None
-    motion: str = "plan"  # "free" | "slide" | "roll" | "hold" | "plan" (planning) | "none"
+    motion: Motion = "plan"  # "plan": planning
     push: FloatArray | None = None  # suggested non-jamming push on the part (about the body origin, world axes)
     verdict: str | None = None  # classify's mode of the current push (None: not yet known)
     margin: float | None = None
@@ -130,7 +133,7 @@ class Trace:
 class SessionResult:
     """How a session ended, with everything the recording needs."""
 
-    status: str  # "reached" | "jammed" | "short" | "diverged" | "error" (a bug, with where)
+    status: SessionStatus  # "error": a bug, with where
     reason: str
     where: dict[str, Any]
     duration_s: float
@@ -230,7 +233,7 @@ class Guide:
             ex = self._executor
         push = None
         target = transition = None
-        motion = "none"
+        motion: Motion = "none"
         if ex is not None:
             push = np.array(ex.command(t, snap.pose, snap.twist, state), dtype=float)
             self.solves += 1
@@ -261,7 +264,9 @@ class Guide:
             self.verdict, self.margin = "indeterminate", None
             return
         self.verdict = c.mode
-        self.margin = float(c.margin) if c.margin is not None and math.isfinite(c.margin) else None
+        self.margin = (
+            float(c.balance_residual) if c.balance_residual is not None and math.isfinite(c.balance_residual) else None
+        )
 
 
 def _guide_worker(conn: Any, fixture: Fixture, start_state: frozenset[str], tick_s: float, role: str) -> None:
@@ -476,7 +481,7 @@ class HapticSession:
         self._first_guide_s: float | None = None  # session time of the first (after the planner's start-up)
         self._first_verdict_s: float | None = None
         self.verdict_updates = 0  # new classify verdicts among them
-        self.status: str | None = None
+        self.status: SessionStatus | None = None
         self.reason = ""
         self._zeros_n = np.zeros(n)
         self.snapshot: Snapshot | None = None
@@ -844,7 +849,7 @@ class HapticSession:
         return LoopStats(n, float(a.mean()), float(np.percentile(a, 99)), float(a.max()), self._misses,
                          float(np.percentile(late, 99)) if late is not None else None)  # fmt: skip
 
-    def _end(self, why: str | None, status: str = "diverged") -> None:
+    def _end(self, why: str | None, status: SessionStatus = "diverged") -> None:
         if self.status is not None:
             return
         t = self.sim.time_s
@@ -1026,7 +1031,7 @@ class HapticSession:
             where = dict(self.jammed_where)
         gaps = {c.name: float(c.gap_m) for c in self.sim.contacts()}
         return SessionResult(
-            status=str(self.status),
+            status=self.status or "error",  # _end above always sets it
             reason=self.reason,
             where=where,
             duration_s=self.sim.time_s,

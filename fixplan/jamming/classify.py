@@ -29,7 +29,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -47,28 +47,43 @@ from fixplan.settings import Tolerances
 
 FloatArray = NDArray[np.float64]
 
-MODES = ("held", "jammed", "separates", "slides", "pivots", "rolls", "indeterminate")
+Mode = Literal["held", "jammed", "separates", "slides", "pivots", "rolls", "indeterminate"]
+MODES: tuple[Mode, ...] = get_args(Mode)  # in this order (the interactive protocol sends the index)
 
 
-def _finite_or_none(x: float) -> float | None:
+def _finite_or_none(x: float | None) -> float | None:
+    """``x`` as a float, or None when it is unknown (None) or undefined (NaN, infinite)."""
+    if x is None:
+        return None
     x = float(x)
     return x if np.isfinite(x) else None
 
 
 @dataclass(frozen=True)
 class Classification:
-    """What one wrench does: the mode, the margin, the contact forces and how it was decided."""
+    """What one wrench does: the mode, the balance residual, the contact forces and how it was decided.
+
+    ``balance_residual`` is the least ``M⁻¹``-weighted static-balance residual ``‖L⁻¹(w + Jᵀλ)‖``
+    [N/√kg] (0 when balanced; NaN when a program failed). It was called ``margin``; that name
+    stays as a read-only alias and as the JSON key ``"margin"``. Not to be confused with a
+    search's ``margin_N`` (least normal force [N]) or ``friction_margin`` (relative friction δ).
+    """
 
     wrench: tuple[float, ...]  # applied wrench as given (about the body origin or ``at``)
-    mode: str
-    margin: float  # least M⁻¹-weighted static-balance residual; 0 when balanced
+    mode: Mode
+    balance_residual: float  # [N/√kg] least M⁻¹-weighted static-balance residual; 0 when balanced
     contact_forces: dict[str, FloatArray]  # λ_i in the contact frame (n, t1, t2[, spin])
     certificate: str  # which program decided
     reason: str  # one line for a person
     solve_time_s: float
     acceleration: FloatArray | None = None  # centre-of-mass twist rate, world axes (moving modes)
-    residuals: dict[str, float] = field(default_factory=dict)
+    residuals: dict[str, float | None] = field(default_factory=dict)  # None: not measured
     contact_frames: dict[str, FloatArray] = field(default_factory=dict)  # rows n, t1[, t2] (world)
+
+    @property
+    def margin(self) -> float:
+        """Deprecated alias of :attr:`balance_residual` [N/√kg] (the JSON key stays ``"margin"``)."""
+        return self.balance_residual
 
     @property
     def balanced(self) -> bool:
@@ -98,7 +113,7 @@ class Classification:
         return {
             "wrench": list(self.wrench),
             "mode": self.mode,
-            "margin": _finite_or_none(self.margin),  # None: undefined (a program failed; see reason)
+            "margin": _finite_or_none(self.balance_residual),  # None: undefined (a program failed; see reason)
             "contact_forces": forces,
             "certificate": self.certificate,
             "reason": self.reason,
@@ -179,13 +194,13 @@ class Classifier:
         names, sizes, offsets = self._names, self._sizes, self._offsets
 
         def result(
-            mode: str,
-            margin: float,
+            mode: Mode,
+            balance_residual: float,
             lam: FloatArray | None,
             certificate: str,
             reason: str,
             accel: FloatArray | None = None,
-            **res: float,
+            **res: float | None,
         ) -> Classification:
             if lam is None:
                 forces = {n: np.zeros(k) for n, k in zip(names, sizes, strict=True)}
@@ -194,7 +209,7 @@ class Classifier:
             return Classification(
                 given,
                 mode,
-                margin,
+                balance_residual,
                 forces,
                 certificate,
                 reason,

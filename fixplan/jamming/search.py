@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -148,12 +148,12 @@ class WrenchSearch:
             "contact_roles": dict(self.contact_roles),
             "contact_forces": {k: [float(x) for x in v] for k, v in self.contact_forces.items()},
             "check_mode": None if check is None else check.mode,
-            "check_margin": None if check is None else _finite_or_none(check.margin),
+            "check_margin": None if check is None else _finite_or_none(check.balance_residual),
             "check_acceleration": None
             if check is None or check.acceleration is None
             else [float(x) for x in check.acceleration],
             "balance_check_mode": None if bal is None else bal.mode,
-            "balance_check_margin": None if bal is None else _finite_or_none(bal.margin),
+            "balance_check_margin": None if bal is None else _finite_or_none(bal.balance_residual),
             "jam_margin_rel": _finite_or_none(self.jam_margin_rel),
             "confirmed": self.confirmed,
             "reason": self.reason,
@@ -301,7 +301,7 @@ def search_wrench(
     *,
     pose: Pose | str | None = None,
     at: ArrayLike | None = None,
-    objective: str = "margin",
+    objective: Literal["margin", "effort"] = "margin",
     min_margin_N: float | None = None,
     jam_margin_rel: float = JAM_MARGIN_REL,
     friction_margin: float = 0.0,
@@ -537,7 +537,7 @@ def search_wrench_in(
     clf_all = Classifier(cs, w_g, tolerances=fixture.tolerances)
     bal = clf_all.classify(w_com, w_user)
     w_e_norm = clf_all.builder.m_inv_norm(w_com + w_g)
-    jam_rel = bal.margin / w_e_norm if w_e_norm > 0 and math.isfinite(bal.margin) else None
+    jam_rel = bal.balance_residual / w_e_norm if w_e_norm > 0 and math.isfinite(bal.balance_residual) else None
     if len(kept) == len(cs):
         check = bal
     else:
@@ -629,7 +629,7 @@ def _free_push(
         return WrenchSearch(False, None, None, None, roles, {}, None, reason, binding, limits, margin_target_N=target)
     bal = clf.classify(w_com, w_user)
     w_e_norm = clf.builder.m_inv_norm(w_com + w_g)
-    jam_rel = bal.margin / w_e_norm if w_e_norm > 0 and math.isfinite(bal.margin) else None
+    jam_rel = bal.balance_residual / w_e_norm if w_e_norm > 0 and math.isfinite(bal.balance_residual) else None
     if bal.balanced:
         reason = f"every contact opens, but M a − w_g is statically balanced ({bal.mode}): it would not move the part"
     else:

@@ -41,7 +41,7 @@ import math
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,13 +61,17 @@ State = frozenset[str]
 FAILURE_KINDS = ("lost contact", "unplanned contact", "replan failed", "stall", "diverged", "timeout")
 
 
+TransitionKind = Literal["roll", "slide", "free"]  # how a transition moves the part
+Outcome = Literal["running", "reached", "failed"]  # an execution so far
+
+
 @dataclass(frozen=True)
 class Step:
     """The policy of one transition: press ``target`` while keeping ``established`` pressed."""
 
     established: tuple[str, ...]
     target: str
-    kind: str  # "roll" | "slide" | "free"
+    kind: TransitionKind
     path: tuple[Pose, ...]  # guide poses, the first near where the transition starts, the last where target touches
 
     def to_json(self) -> dict[str, Any]:
@@ -102,7 +106,7 @@ class ExecutionLog:
         }
     )
     observed: list[tuple[str, ...]] = field(default_factory=list)  # debounced pressed sets, in order
-    outcome: str = "running"  # "running" | "reached" | "failed"
+    outcome: Outcome = "running"
     reason: str = ""
     # why it failed, one of FAILURE_KINDS (None while running or when reached)
     failure_kind: str | None = None
@@ -531,7 +535,11 @@ class Executor:
             c = classify(self.fixture, self._applied, names, pose=pose, jobs=1)[0]
         except Exception as exc:  # noqa: BLE001 - a report, never a reason to stop
             return f"push not classified: {exc}"
-        margin = "" if c.margin is None or not math.isfinite(c.margin) else f", margin {c.margin:.3g}"
+        margin = (
+            ""
+            if c.balance_residual is None or not math.isfinite(c.balance_residual)
+            else f", margin {c.balance_residual:.3g}"
+        )
         return f"the held push: {c.mode}{margin}"
 
     def direction(self, pose: Pose, step: Step) -> tuple[FloatArray, float]:

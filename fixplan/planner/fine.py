@@ -116,8 +116,9 @@ class Transition:
     wrenches : (knots, ndof) array
         Applied wrench per segment (about the body origin, world axes, as ``search_wrench``
         reports it); a row of NaN where the search failed or was not run.
-    margins : (knots,) array
-        Least normal force over the established contacts per segment [N] (NaN when not found).
+    margins_N : (knots,) array
+        Least normal force over the established contacts per segment [N] (NaN when not found);
+        ``margins`` is a read-only alias, and ``"margins"`` its JSON key.
     found : (knots,) bool array
         Whether each segment's wrench search succeeded.
     segment_reasons : list of str
@@ -138,7 +139,7 @@ class Transition:
     kind: str
     poses: list[Pose]
     wrenches: FloatArray
-    margins: FloatArray
+    margins_N: FloatArray
     success: bool
     reason: str
     max_constraint_violation_m: float
@@ -159,6 +160,11 @@ class Transition:
     def knots(self) -> int:
         return len(self.poses) - 1
 
+    @property
+    def margins(self) -> FloatArray:
+        """Alias of :attr:`margins_N` (least normal force per segment [N])."""
+        return self.margins_N
+
     def to_json(self) -> dict[str, Any]:
         """Snake-case JSON with poses in the fixture spec's form."""
 
@@ -173,7 +179,7 @@ class Transition:
             "reason": self.reason,
             "poses": [p.to_json() for p in self.poses],
             "wrenches": [[num(x) for x in row] for row in self.wrenches],
-            "margins": [num(x) for x in self.margins],
+            "margins": [num(x) for x in self.margins_N],
             "found": [bool(x) for x in self.found],
             "segment_reasons": list(self.segment_reasons),
             "max_constraint_violation_m": float(self.max_constraint_violation_m),

@@ -29,7 +29,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast, get_args
 
 import numpy as np
 from numpy.typing import NDArray
@@ -456,7 +456,7 @@ class Verification:
 
 def execution_from_json(obj: Any, where: str = "execution") -> ExecutionLog:
     """The executor's log from its JSON form (``ExecutionLog.to_json``; the debounced states are not in it)."""
-    from fixplan.planner.execute import ExecutionLog
+    from fixplan.planner.execute import ExecutionLog, Outcome
 
     if not isinstance(obj, dict):
         raise InputError(f"{where}: expected an object, got {_short(obj)}")
@@ -466,9 +466,12 @@ def execution_from_json(obj: Any, where: str = "execution") -> ExecutionLog:
     counts = obj.get("counts") or {}
     if not isinstance(counts, dict):
         raise InputError(f"{where}.counts: expected {{name: count}}, got {_short(counts)}")
+    outcome = str(obj.get("outcome", "running"))
+    if outcome not in get_args(Outcome):
+        raise InputError(f"{where}.outcome: expected one of {', '.join(get_args(Outcome))}, got {_short(outcome)}")
     log = ExecutionLog(
         events=[(float(e.get("time_s", 0.0)), str(e.get("kind", "")), str(e.get("message", ""))) for e in events],
-        outcome=str(obj.get("outcome", "running")),
+        outcome=cast(Outcome, outcome),
         reason=str(obj.get("reason", "")),
         failure_kind=obj.get("failure_kind"),
         max_command_force_N=float(obj.get("max_command_force_N", 0.0)),

@@ -17,7 +17,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal, cast
 
 import numpy as np
 
@@ -25,7 +25,7 @@ from fixplan.errors import InputError
 from fixplan.locating import contact_set, solve_goal
 from fixplan.model import Fixture, require_full
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
-from fixplan.planner.execute import ExecutionSettings, Step
+from fixplan.planner.execute import ExecutionSettings, Step, TransitionKind
 from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, _segment_wrenches, plan_transition
 from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.verify import Verification, verify
@@ -41,11 +41,14 @@ ROBUST_GRID = DEFAULT.planner.robust_grid
 CLEARANCES_M = DEFAULT.planner.clearances_m  # fixplan.settings.PlannerSettings.clearances_m
 
 
+PlanStatus = Literal["planned", "unverified", "infeasible"]
+
+
 @dataclass
 class PlanResult:
     """A plan (or the reason there is none), its verification and timings."""
 
-    status: str  # "planned" (verified) | "unverified" | "infeasible"
+    status: PlanStatus  # "planned" (verified) | "unverified" | "infeasible"
     reason: str
     sequence: list[tuple[str, ...]]
     transitions: list[Transition]
@@ -87,7 +90,7 @@ class PlanResult:
         robust: list[float | None] = list(self.friction_robustness) or [None] * len(self.transitions)
         for tr, T, rob in zip(self.transitions, self.durations_s, robust, strict=True):
             rows = tr.wrenches[np.isfinite(tr.wrenches).all(axis=1)] if len(tr.wrenches) else tr.wrenches
-            margins = tr.margins[np.isfinite(tr.margins)]
+            margins = tr.margins_N[np.isfinite(tr.margins_N)]
             transitions.append(
                 PlannedTransition(
                     from_state=tuple(tr.established),
@@ -141,7 +144,12 @@ def _duration(tr: Transition, acceleration_mps2: float) -> float:
 def plan_steps(transitions: Sequence[Transition]) -> list[Step]:
     """The executor's policy from the fine plans: target, motion and guide path per transition."""
     return [
-        Step(tuple(tr.established), tr.target, tr.kind if tr.established else "free", tuple(tr.poses))
+        Step(
+            tuple(tr.established),
+            tr.target,
+            cast(TransitionKind, tr.kind) if tr.established else "free",
+            tuple(tr.poses),
+        )
         for tr in transitions
     ]
 
@@ -323,7 +331,7 @@ def solve(
     )
 
 
-def _status(verification: Verification | None, note: str) -> tuple[str, str]:
+def _status(verification: Verification | None, note: str) -> tuple[PlanStatus, str]:
     """``planned`` only when the loop confirmed the plan; else ``unverified`` with where and why."""
     if verification is None:
         return "unverified", "verification skipped (--no-verify): the sequence was not run in the haptic loop"
