@@ -15,7 +15,8 @@ import fixplan
 from fixplan.errors import InputError
 from fixplan.fixture import default_fixture_path
 from fixplan.locating import locator_contact
-from fixplan.planner.fine import Transition, feature_at, plan_transition
+from fixplan.planner.features import feature_at
+from fixplan.planner.fine import Transition, plan_transition
 from fixplan.spatial import Pose
 
 TOUCH = 1e-6  # [m]
@@ -222,7 +223,7 @@ def test_clearance_features_are_lower_bounds_that_keep_a_turned_part_clear(defau
     s log 2 below that. The goal's face alone has a negative plane gap for some of them (a side
     locator beside the end face of a turned box), which let a planned path run the part's corner
     into the locator."""
-    from fixplan.planner.fine import SMOOTH_MAX_M, clearance_features, smooth_max
+    from fixplan.planner.features import SMOOTH_MAX_M, clearance_features, smooth_max
 
     rng = np.random.default_rng(11)
     goal = default.goal

@@ -592,7 +592,7 @@ class Executor:
 
     def _solve(self, t: float, pose: Pose, twist: FloatArray, M: FloatArray) -> None:
         from fixplan.jamming.search import search_wrench
-        from fixplan.planner.fine import _free_wrench
+        from fixplan.planner.segments import free_wrench
 
         s = self.settings
         step = self.steps[self.index]
@@ -649,7 +649,7 @@ class Executor:
         a_com = nu_hat * a_cmd
         self.log.counts["solves"] += 1
         if not step.established:
-            ok, w, why = _free_wrench(self.fixture, pose, a_com, M)
+            ok, w, why = free_wrench(self.fixture, pose, a_com, M)
             if ok:
                 self._accept(w)
             else:

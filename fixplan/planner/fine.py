@@ -46,7 +46,7 @@ For a convex shape each of these is a lower bound of the true signed distance (t
 inside the feature's half-space, cylinder or ball), so the clearance constraints are safe — a
 locator whose goal face has a negative plane gap at the start (it lies beside another face) is
 kept clear of a smooth maximum with the face that separates it there
-(:func:`clearance_features`) — and
+(:func:`~fixplan.planner.features.clearance_features`) — and
 it is exact where the closest point lies on the feature; established contacts and the target are
 therefore also kept on their feature (face bounds, edge segment, cylinder length). Every planned
 pose is checked afterwards with the exact :func:`~fixplan.locating.locator_contact` gaps; the
@@ -63,16 +63,8 @@ constraints, which violates the constraint qualifications IPOPT relies on and ne
 (``g_i λ_i ≤ ε``) or penalty homotopies. The forces are found instead per segment, after the path,
 by the non-jamming wrench search (docs/math.md program 2 for sliding, program 3 for rolling).
 
-Wrenches
---------
-Each segment ``k → k+1`` is pushed from rest at knot ``k`` (quasi-static loading): its desired
-acceleration is the direction of the finite-difference twist of the body origin
-``(p_{k+1} − p_k, log(R_{k+1} R_kᵀ))``, projected (in the ``M``-metric) onto the motions that
-keep the established contacts exactly at knot ``k`` (normal rows for sliding, all rows for
-rolling), scaled to ``acceleration_mps2``, and given as the acceleration of the centre of mass,
-with the contact set of the established contacts at the knot (built once per segment), to
-:func:`~fixplan.jamming.search.search_wrench_in`. A segment whose search fails makes the transition fail with its reason. With
-no established contact (free motion) the wrench is ``M a − w_g``, checked against the limits.
+Its pieces live apart: the closed-form surface features in :mod:`fixplan.planner.features`, the
+applied wrench of each segment in :mod:`fixplan.planner.segments`.
 """
 
 from __future__ import annotations
@@ -88,8 +80,10 @@ from numpy.typing import NDArray
 from fixplan.errors import InputError, SolverError
 from fixplan.kinematics import mass_matrix
 from fixplan.locating import contact_set, locator_contact
+from fixplan.planner.features import Feature, clearance_features, feature_at, smooth_max
+from fixplan.planner.segments import segment_wrenches
 from fixplan.settings import DEFAULT, PlannerSettings
-from fixplan.spatial import Pose, log_so3, shift_twist, shift_wrench, tangent_seed
+from fixplan.spatial import Pose, log_so3, tangent_seed
 
 if TYPE_CHECKING:
     from fixplan.model import Fixture, Locator
@@ -191,169 +185,7 @@ class Transition:
         }
 
 
-# ---------------------------------------------------------------------------------------------
 GOAL_PULL = 1.0  # weight of the end pose's distance from the goal, relative to the path's energy
-
-# Features: the surface patch a locator touches, in closed form (CasADi or numpy)
-# ---------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Feature:
-    """One smooth piece of a convex shape's surface, in the body frame.
-
-    ``kind`` is ``"plane"`` (outward normal ``normal``, offset ``offset``: the plane ``n·x = h``),
-    ``"round"`` (a ball of radius ``radius`` about the origin: sphere, disk) or ``"side"`` (the
-    lateral surface of a cylinder of radius ``radius`` about body z). ``bounds`` are linear
-    inequalities ``A x ≤ b`` that keep a point on the patch (face extents, edge segment,
-    cylinder length); ``disc_radius`` bounds ``‖x_xy‖`` on a cylinder end.
-    """
-
-    kind: str
-    label: str
-    normal: FloatArray | None = None
-    offset: float = 0.0
-    radius: float = 0.0
-    bounds_A: FloatArray | None = None
-    bounds_b: FloatArray | None = None
-    disc_radius: float | None = None
-
-    def distance(self, ca: Any, q: Any) -> Any:
-        """Signed distance of the body point ``q`` to the feature's surface (no tip radius)."""
-        if self.kind == "plane":
-            return ca.dot(ca.DM(self.normal), q) - self.offset
-        if self.kind == "round":
-            return ca.sqrt(ca.dot(q, q)) - self.radius
-        return ca.sqrt(q[0] ** 2 + q[1] ** 2) - self.radius
-
-    def normal_at(self, ca: Any, q: Any) -> Any:
-        """Outward unit normal at the projection of ``q``."""
-        if self.kind == "plane":
-            return ca.DM(self.normal)
-        if self.kind == "round":
-            return q / ca.sqrt(ca.dot(q, q))
-        rho = ca.sqrt(q[0] ** 2 + q[1] ** 2)
-        return ca.vertcat(q[0] / rho, q[1] / rho, 0)
-
-    def point_at(self, ca: Any, q: Any) -> Any:
-        """The closest point on the feature's surface to ``q``."""
-        return q - self.distance(ca, q) * self.normal_at(ca, q)
-
-    def inside(self, ca: Any, x: Any) -> list[Any]:
-        """Expressions that are ≥ 0 when the surface point ``x`` lies on the patch."""
-        out = []
-        if self.bounds_A is not None and self.bounds_b is not None:
-            for a, b in zip(self.bounds_A, self.bounds_b, strict=True):
-                out.append(b - ca.dot(ca.DM(a), x))
-        if self.disc_radius is not None:
-            out.append(self.disc_radius**2 - x[0] ** 2 - x[1] ** 2)
-        return out
-
-
-def _box_face(half: FloatArray, face: str, label: str) -> Feature:
-    d = half.shape[0]
-    axis = "xyz".index(face[1])
-    sign = 1.0 if face[0] == "+" else -1.0
-    n = np.zeros(d)
-    n[axis] = sign
-    A, b = [], []
-    for j in range(d):
-        if j == axis:
-            continue
-        e = np.zeros(d)
-        e[j] = 1.0
-        A += [e, -e]
-        b += [half[j], half[j]]
-    return Feature("plane", label, n, float(half[axis]), bounds_A=np.array(A), bounds_b=np.array(b))
-
-
-def feature_at(fixture: Fixture, locator: Locator, pose: Pose) -> Feature:
-    """The feature of the workpiece nearest to ``locator`` at ``pose``."""
-    from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Sphere
-
-    shape = fixture.workpiece.shape
-    q = pose.point_body_from_world(locator.p_world)
-    proj = shape.project(q)
-    if isinstance(shape, Box | Rectangle):
-        face = shape.face_of(proj.point_body) or "+x"
-        return _box_face(shape.half, face, face)
-    if isinstance(shape, Sphere | Disk):
-        return Feature("round", "surface", radius=float(shape.radius))
-    if isinstance(shape, Cylinder):
-        face = shape.face_of(proj.point_body) or "side"
-        half_len = shape.length / 2.0
-        if face == "side":
-            A = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
-            return Feature(
-                "side", "side", radius=float(shape.radius), bounds_A=A, bounds_b=np.array([half_len, half_len])
-            )
-        sign = 1.0 if face == "+z" else -1.0
-        return Feature("plane", face, np.array([0.0, 0.0, sign]), half_len, disc_radius=float(shape.radius))
-    if isinstance(shape, Polygon):
-        V, E, N = shape._edges()
-        k = int(np.argmax(np.einsum("ij,ij->i", q - V, N)))
-        e = E[k] / float(E[k] @ E[k])
-        # 0 ≤ (x − V_k)·E_k/|E_k|² ≤ 1
-        A = np.array([-e, e])
-        b = np.array([-float(e @ V[k]), 1.0 + float(e @ V[k])])
-        return Feature("plane", f"edge{k}", N[k].copy(), float(N[k] @ V[k]), bounds_A=A, bounds_b=b)
-    raise InputError(
-        f"the fine planner has no closed-form gap for a {shape.name!r} workpiece (expected box, cylinder, sphere, rectangle, disk or polygon)"
-    )
-
-
-def _plane_features(fixture: Fixture) -> list[Feature]:
-    """Every face plane of a polyhedral workpiece (box, rectangle, polygon); [] for round shapes."""
-    from fixplan.geometry import Box, Polygon, Rectangle
-
-    shape = fixture.workpiece.shape
-    if isinstance(shape, Box | Rectangle):
-        axes = "xyz"[: shape.half.shape[0]]
-        return [_box_face(shape.half, sign + ax, sign + ax) for ax in axes for sign in "+-"]
-    if isinstance(shape, Polygon):
-        V, E, N = shape._edges()
-        out = []
-        for k in range(len(V)):
-            e = E[k] / float(E[k] @ E[k])
-            A = np.array([-e, e])
-            b = np.array([-float(e @ V[k]), 1.0 + float(e @ V[k])])
-            out.append(Feature("plane", f"edge{k}", N[k].copy(), float(N[k] @ V[k]), bounds_A=A, bounds_b=b))
-        return out
-    return []
-
-
-SMOOTH_MAX_M = DEFAULT.planner.smooth_max_m  # length scale of the smooth maximum of two face planes' gaps [m]
-
-
-def clearance_features(fixture: Fixture, locator: Locator, start: Pose, feature: Feature) -> tuple[Feature, ...]:
-    """The face planes that keep ``locator`` clear along a path from ``start``.
-
-    A face plane's gap ``n·q − h − ρ`` is a lower bound of the true gap of a convex part, so
-    "plane gap ≥ c > 0" keeps the locator clear — if that can hold at the start. The goal's face of
-    a locator that starts beside another face (a part turned 18° whose side locator lies past the
-    face's end) has a *negative* plane gap there, the constraint "no closer than at the start" is
-    then vacuous, and planned paths ran the part's corner into the locator. Such a locator gets a
-    second plane, the face that separates it best at the start, and the clearance is asked of the
-    smooth maximum of the two (:func:`smooth_max`, itself ≤ the larger plane gap ≤ the true gap):
-    the part may still turn the goal's face in front of the locator. Keeping it clear of the second
-    face alone forbade that and left transitions with no path.
-    """
-    if feature.kind != "plane":
-        return (feature,)
-    q = start.point_body_from_world(locator.p_world)
-
-    def plane_gap(f: Feature) -> float:  # every feature here is a plane: its normal is set
-        return float(np.asarray(f.normal, dtype=float) @ q) - f.offset - locator.radius_m
-
-    if plane_gap(feature) > 0.0:
-        return (feature,)
-    best = max(_plane_features(fixture), key=plane_gap, default=feature)
-    return (feature, best) if plane_gap(best) > plane_gap(feature) else (feature,)
-
-
-def smooth_max(ca: Any, a: Any, b: Any, scale_m: float = SMOOTH_MAX_M) -> Any:
-    """``s log(eᵃᐟˢ + eᵇᐟˢ) − s log 2``: smooth, ≤ max(a, b), equal to it where a = b (stable form)."""
-    return ca.fmax(a, b) + scale_m * ca.log1p(ca.exp(-ca.fabs(a - b) / scale_m)) - scale_m * np.log(2.0)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -644,7 +476,7 @@ def plan_transition(
         )
 
     # --- wrenches per segment -----------------------------------------------------------------
-    wrenches, margins, found, reasons = _segment_wrenches(
+    wrenches, margins, found, reasons = segment_wrenches(
         fixture, poses, est, kind, acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N
     )
     bad = [k for k in range(K) if not found[k]]
@@ -833,92 +665,9 @@ def _slip(fixture: Fixture, poses: list[Pose], est: tuple[str, ...]) -> float:
     return worst
 
 
-def _segment_wrenches(
-    fixture: Fixture,
-    poses: list[Pose],
-    est: tuple[str, ...],
-    kind: str,
-    acceleration_mps2: float,
-    *,
-    friction_margin: float = 0.0,
-    margin_N: float | None = None,
-) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], list[str]]:
-    """The non-jamming wrench search for every segment (see the module docstring)."""
-    from fixplan.jamming.search import search_wrench_in
-
-    wp = fixture.workpiece
-    d, nv, K = fixture.dimension, fixture.ndof, len(poses) - 1
-    wrenches = np.full((K, nv), np.nan)
-    margins = np.full(K, np.nan)
-    found = np.zeros(K, dtype=bool)
-    reasons: list[str] = []
-    for k in range(K):
-        a, b = poses[k], poses[k + 1]
-        cs = contact_set(fixture, a, list(est))
-        if d == 3:
-            w = log_so3(b.R_world_body @ a.R_world_body.T)
-        else:
-            w = np.array([(b.angle_rad - a.angle_rad + np.pi) % (2 * np.pi) - np.pi])
-        nu_origin = np.concatenate([b.p_world - a.p_world, w])  # displacement twist of the body origin
-        nu = shift_twist(nu_origin, a.p_world, cs.com_world)  # ... and of the centre of mass
-        M = cs.mass_matrix
-        Minv = cs.M_inv
-        if len(est):
-            A = cs.J if kind == "roll" else cs.G
-            nu = nu - Minv @ A.T @ np.linalg.pinv(A @ Minv @ A.T, rcond=DEFAULT.numerics.rcond) @ (A @ nu)
-        size = float(np.sqrt(max(float(nu @ M @ nu), 0.0) / wp.mass_kg))
-        if size <= 1e-15:
-            reasons.append("the segment does not move")
-            continue
-        a_com = nu * (acceleration_mps2 / size)
-        if not est:
-            ok, wr, why = _free_wrench(fixture, a, a_com, M)
-            found[k], reasons = ok, [*reasons, why]
-            wrenches[k] = wr
-            continue
-        try:
-            # the contact set and the motion of the centre of mass as they are (built once)
-            res = search_wrench_in(
-                cs,
-                a_com,
-                fixture,
-                objective="effort",
-                min_margin_N=margin_N,
-                friction_margin=friction_margin,
-            )
-        except InputError as exc:
-            reasons.append(str(exc))
-            continue
-        found[k] = res.found
-        reasons.append(res.reason)
-        if res.found and res.wrench is not None:
-            wrenches[k] = res.wrench
-            margins[k] = res.margin_N
-    return wrenches, margins, found, reasons
-
-
-def _free_wrench(fixture: Fixture, pose: Pose, a_com: FloatArray, M: FloatArray) -> tuple[bool, FloatArray, str]:
-    """Free flight: ``w = M a − w_g`` about the centre of mass, reported about the body origin."""
-    d = fixture.dimension
-    w_c = M @ a_com - fixture.gravity_wrench()
-    w_o = shift_wrench(w_c, pose.point_world_from_body(fixture.workpiece.com_body), pose.p_world)
-    T = float(np.linalg.norm(w_o[3:])) if d == 3 else abs(float(w_o[2]))
-    F = float(np.linalg.norm(w_o[:d]))
-    F_max, T_max = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
-    if F > F_max or T > T_max:
-        return (
-            False,
-            w_o,
-            f"the manipulator is too weak: free motion needs ‖F‖ = {F:.3g} N, ‖T‖ = {T:.3g} N·m (max_force {F_max:.3g} N, max_torque {T_max:.3g} N·m)",
-        )
-    return True, w_o, f"free motion: ‖F‖ = {F:.3g} N, ‖T‖ = {T:.3g} N·m"
-
-
 __all__ = [
-    "Feature",
     "Transition",
     "default_kind",
-    "feature_at",
     "plan_transition",
     "pose_from_twist",
     "twist_from_pose",

@@ -26,8 +26,9 @@ from fixplan.locating import contact_set, solve_goal
 from fixplan.model import Fixture, require_full
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
 from fixplan.planner.execute import ExecutionSettings, Step, TransitionKind
-from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, _segment_wrenches, plan_transition
+from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, plan_transition
 from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
+from fixplan.planner.segments import segment_wrenches
 from fixplan.planner.verify import Verification, verify
 from fixplan.settings import DEFAULT
 from fixplan.spatial import Pose
@@ -170,7 +171,7 @@ def friction_robustness(
         return float("inf")
     best = 0.0
     for delta in grid:
-        _, _, found, _ = _segment_wrenches(
+        _, _, found, _ = segment_wrenches(
             fixture, tr.poses[:2], tuple(tr.established), tr.kind, acceleration_mps2,
             friction_margin=delta, margin_N=margin_N,
         )  # fmt: skip

@@ -1,0 +1,115 @@
+"""The applied wrench of each segment of a planned path (the fine planner's second half).
+
+Wrenches
+--------
+Each segment ``k → k+1`` is pushed from rest at knot ``k`` (quasi-static loading): its desired
+acceleration is the direction of the finite-difference twist of the body origin
+``(p_{k+1} − p_k, log(R_{k+1} R_kᵀ))``, projected (in the ``M``-metric) onto the motions that
+keep the established contacts exactly at knot ``k`` (normal rows for sliding, all rows for
+rolling), scaled to ``acceleration_mps2``, and given as the acceleration of the centre of mass,
+with the contact set of the established contacts at the knot (built once per segment), to
+:func:`~fixplan.jamming.search.search_wrench_in`. A segment whose search fails makes the
+transition fail with its reason. With no established contact (free motion) the wrench is
+``M a − w_g``, checked against the limits.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fixplan.errors import InputError
+from fixplan.locating import contact_set
+from fixplan.settings import DEFAULT
+from fixplan.spatial import Pose, log_so3, shift_twist, shift_wrench
+
+if TYPE_CHECKING:
+    from fixplan.model import Fixture
+
+FloatArray = NDArray[np.float64]
+
+
+def segment_wrenches(
+    fixture: Fixture,
+    poses: list[Pose],
+    est: tuple[str, ...],
+    kind: str,
+    acceleration_mps2: float,
+    *,
+    friction_margin: float = 0.0,
+    margin_N: float | None = None,
+) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], list[str]]:
+    """The non-jamming wrench search for every segment (see the module docstring)."""
+    from fixplan.jamming.search import search_wrench_in
+
+    wp = fixture.workpiece
+    d, nv, K = fixture.dimension, fixture.ndof, len(poses) - 1
+    wrenches = np.full((K, nv), np.nan)
+    margins = np.full(K, np.nan)
+    found = np.zeros(K, dtype=bool)
+    reasons: list[str] = []
+    for k in range(K):
+        a, b = poses[k], poses[k + 1]
+        cs = contact_set(fixture, a, list(est))
+        if d == 3:
+            w = log_so3(b.R_world_body @ a.R_world_body.T)
+        else:
+            w = np.array([(b.angle_rad - a.angle_rad + np.pi) % (2 * np.pi) - np.pi])
+        nu_origin = np.concatenate([b.p_world - a.p_world, w])  # displacement twist of the body origin
+        nu = shift_twist(nu_origin, a.p_world, cs.com_world)  # ... and of the centre of mass
+        M = cs.mass_matrix
+        Minv = cs.M_inv
+        if len(est):
+            A = cs.J if kind == "roll" else cs.G
+            nu = nu - Minv @ A.T @ np.linalg.pinv(A @ Minv @ A.T, rcond=DEFAULT.numerics.rcond) @ (A @ nu)
+        size = float(np.sqrt(max(float(nu @ M @ nu), 0.0) / wp.mass_kg))
+        if size <= 1e-15:
+            reasons.append("the segment does not move")
+            continue
+        a_com = nu * (acceleration_mps2 / size)
+        if not est:
+            ok, wr, why = free_wrench(fixture, a, a_com, M)
+            found[k], reasons = ok, [*reasons, why]
+            wrenches[k] = wr
+            continue
+        try:
+            # the contact set and the motion of the centre of mass as they are (built once)
+            res = search_wrench_in(
+                cs,
+                a_com,
+                fixture,
+                objective="effort",
+                min_margin_N=margin_N,
+                friction_margin=friction_margin,
+            )
+        except InputError as exc:
+            reasons.append(str(exc))
+            continue
+        found[k] = res.found
+        reasons.append(res.reason)
+        if res.found and res.wrench is not None:
+            wrenches[k] = res.wrench
+            margins[k] = res.margin_N
+    return wrenches, margins, found, reasons
+
+
+def free_wrench(fixture: Fixture, pose: Pose, a_com: FloatArray, M: FloatArray) -> tuple[bool, FloatArray, str]:
+    """Free flight: ``w = M a − w_g`` about the centre of mass, reported about the body origin."""
+    d = fixture.dimension
+    w_c = M @ a_com - fixture.gravity_wrench()
+    w_o = shift_wrench(w_c, pose.point_world_from_body(fixture.workpiece.com_body), pose.p_world)
+    T = float(np.linalg.norm(w_o[3:])) if d == 3 else abs(float(w_o[2]))
+    F = float(np.linalg.norm(w_o[:d]))
+    F_max, T_max = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
+    if F > F_max or T > T_max:
+        return (
+            False,
+            w_o,
+            f"the manipulator is too weak: free motion needs ‖F‖ = {F:.3g} N, ‖T‖ = {T:.3g} N·m (max_force {F_max:.3g} N, max_torque {T_max:.3g} N·m)",
+        )
+    return True, w_o, f"free motion: ‖F‖ = {F:.3g} N, ‖T‖ = {T:.3g} N·m"
+
+
+__all__ = ["free_wrench", "segment_wrenches"]
