@@ -1,4 +1,4 @@
-"""What ``fixplan haptic``, ``fixplan device-sim`` and ``fixplan verify`` do (``cli.py`` registers them)."""
+"""What ``fixplan haptic``, ``fixplan device-sim`` and ``fixplan verify`` do (``fixplan.cli.haptic`` registers them)."""
 
 from __future__ import annotations
 
