@@ -102,3 +102,45 @@ def test_session_stats_unknown_before_the_first_tick():
     st = s.stats()
     assert st.ticks == 0 and st.tick_mean_us is None and st.tick_max_us is None and st.late_p99_us is None
     assert s.final_stats().to_json()["tick_mean_us"] is None
+
+
+def test_diverged_verification_has_no_loop_measures(monkeypatch):
+    """A load that diverges reports None for what the unfinished loop never measured, not 0."""
+    from fixplan.errors import SolverError
+    from fixplan.haptics import HapticLoop
+    from fixplan.planner.verify import verify
+
+    def diverge(self, *args, **kwargs):
+        raise SolverError("NSGS produced a non-finite state")
+
+    monkeypatch.setattr(HapticLoop, "run", diverge)
+    box = fixplan.load(fixplan.default_fixture_path())
+    v = verify(box, frozenset(), [])
+    assert not v.passed and "diverged" in v.reason
+    assert v.deadline_misses is None and v.tick_mean_us is None and v.tick_max_us is None
+    assert v.unconverged_steps is None and v.max_solver_error is None and v.felt_force_max_N is None
+    doc = v.to_json()
+    assert doc["unconverged_steps"] is None and doc["max_solver_error"] is None
+
+
+def test_solver_error_over_ticks_is_the_worst_step_error(monkeypatch):
+    """After ticks: the worst FCLib residual the steps reached; before any: None."""
+    f = fixplan.load(fixplan.default_fixture_path())
+    sim = Simulator(f)
+    sim.set_state(f.goal)
+    dev = SimulatedDevice(6, x0=np.concatenate([f.goal.p_world, np.zeros(3)]))
+    coupling = VirtualCoupling(1000.0, 2.0, 20.0, 0.02, 1e-3, device_damping=8.0, device_damping_rot=0.08)
+    loop = HapticLoop(sim, dev, coupling)
+    assert loop.run(0.0, lambda t, d: np.zeros(6)).max_solver_error is None
+    errors = []
+    original = Simulator.step
+
+    def step(self, *args, **kwargs):
+        info = original(self, *args, **kwargs)
+        errors.append(info.error)
+        return info
+
+    monkeypatch.setattr(Simulator, "step", step)
+    rec = loop.run(0.005, lambda t, d: np.array([-5.0, 0, 0, 0, 0, 0]))
+    ticks = len(rec.compute_s)
+    assert ticks == 5 and rec.max_solver_error == max(errors[-ticks:])  # (a warm-up step may precede the ticks)

@@ -47,7 +47,7 @@ class LoopRecord:
     workpiece_position: list[FloatArray] = field(default_factory=list)
     active_contacts: list[tuple[str, ...]] = field(default_factory=list)  # locators pressing on the part
     unconverged_steps: int = 0  # engine steps that stopped at the sweep cap
-    max_solver_error: float = 0.0  # worst FCLib residual the engine reached over the ticks
+    max_solver_error: float | None = None  # worst FCLib residual the engine reached over the ticks (None: no tick)
     period_s: float = 1e-3
     # every ``trace_every`` ticks (and the last): (tick index, time [s], pose, per-locator contact reports)
     trace: list[tuple[int, float, Pose, list[ContactReport]]] = field(default_factory=list)
@@ -201,7 +201,8 @@ class HapticLoop:
                 rec.active_contacts.append(self.sim.pressed())
                 last = self.sim.last
                 if last is not None:
-                    rec.max_solver_error = max(rec.max_solver_error, last.error)
+                    worst = rec.max_solver_error
+                    rec.max_solver_error = last.error if worst is None else max(worst, last.error)
                     if not last.converged:
                         rec.unconverged_steps += 1
                 stop = until is not None and until()

@@ -364,8 +364,8 @@ class Verification:
     final_gaps_m: dict[str, float]
     duration_s: float | None
     felt_force_max_N: float | None
-    unconverged_steps: int = 0
-    max_solver_error: float = 0.0
+    unconverged_steps: int | None = None  # None: the loop did not finish (diverged)
+    max_solver_error: float | None = None  # None: no tick finished
     trace: Timeline | None = None
     execution: ExecutionLog | None = None
     max_push_force_N: float | None = None  # on the part, averaged over 10 ms
@@ -441,8 +441,8 @@ class Verification:
             final_gaps_m={str(n): float(g) for n, g in gaps.items()},
             duration_s=num("duration_s"),
             felt_force_max_N=num("felt_force_max"),
-            unconverged_steps=count("unconverged_steps", 0) or 0,
-            max_solver_error=num("max_solver_error", 0.0),
+            unconverged_steps=count("unconverged_steps", None),
+            max_solver_error=num("max_solver_error"),
             trace=timeline,
             execution=None if execution is None else execution_from_json(execution, f"{where}.execution"),
             max_push_force_N=num("max_push_force"),
