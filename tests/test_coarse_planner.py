@@ -80,3 +80,58 @@ def test_lattice_is_searched_deterministically():
     runs = [search(frozenset(), ["A", "B", "C"], START, scripted({"A": 1.0, "B": 1.0, "C": 1.0})) for _ in range(3)]
     assert all(r.sequence == runs[0].sequence for r in runs)
     assert runs[0].sequence[0] == ("A",)
+
+
+def _exact_estimate(costs):
+    """A lazy-search estimate equal to the scripted cost (so only the precheck reorders)."""
+
+    def estimate(pose, state, target):
+        return costs.get(target, 1.0) * (1.0 + 0.1 * len(state)), Pose(
+            pose.R_world_body, pose.p_world + np.array([0.0, 0.0, 1.0])
+        )
+
+    return estimate
+
+
+def _counting(evaluate):
+    calls = []
+
+    def wrapped(pose, state, target):
+        calls.append((tuple(sorted(state)), target))
+        return evaluate(pose, state, target)
+
+    return wrapped, calls
+
+
+def test_a_failed_precheck_reorders_the_lazy_search_before_any_fine_plan():
+    """C-then-B2 (6.7) is cheapest, but adding B2 to {B1, C} fails its cheap check and would jam.
+
+    With the precheck the search fine-plans B2-then-C (7.1) and never the jamming transition:
+    3 fine plans (B1→C is learned first, then B1→B2, B1,B2→C) instead of 4 without it.
+    """
+    costs = {"B2": 1.0, "C": 5.0}
+    jam = (("B1", "C"), "B2")
+    for precheck, expected_calls in ((None, 4), (lambda p, s, t: "jams" if (tuple(sorted(s)), t) == jam else None, 3)):
+        evaluate, calls = _counting(scripted(costs, forbidden={jam}))
+        plan = search(
+            frozenset({"B1"}), ["B1", "B2", "C"], START, evaluate,
+            estimate=_exact_estimate(costs), precheck=precheck,
+        )  # fmt: skip
+        assert plan.found and plan.sequence == [("B1",), ("B1", "B2"), ("B1", "B2", "C")]
+        assert plan.cost == pytest.approx(7.1)
+        assert len(calls) == expected_calls
+        assert (jam in calls) == (precheck is None)
+
+
+def test_a_failed_precheck_never_drops_a_transition():
+    """The precheck is a guess: when every other sequence fails, the flagged one is still planned."""
+    costs = {"B2": 1.0, "C": 5.0}
+    flagged = (("B1", "C"), "B2")
+    forbidden = {(("B1",), "B2")}  # B2 first is impossible: only C then B2 remains
+    evaluate, calls = _counting(scripted(costs, forbidden=forbidden))
+    plan = search(
+        frozenset({"B1"}), ["B1", "B2", "C"], START, evaluate,
+        estimate=_exact_estimate(costs), precheck=lambda p, s, t: "x" if (tuple(sorted(s)), t) == flagged else None,
+    )  # fmt: skip
+    assert plan.found and plan.sequence == [("B1",), ("B1", "C"), ("B1", "B2", "C")]
+    assert flagged in calls

@@ -61,7 +61,11 @@ def test_planner_finds_another_order_and_verifies_it(fixture: fixplan.Fixture, n
     assert [tr.kind for tr in r.transitions] == ["roll", "slide"]
     for tr in r.transitions:
         assert tr.success and min(tr.margins) > 0
-    # the tip-up toward S1 was tried and rejected for the hand's limits
+    # the tip-up toward S1 was rejected for the hand's limits by the cheap cone check before any
+    # IPOPT run: never fine-planned, since the other order succeeded
     rejected = [a for a in r.attempts if not a.success]
     assert any(a.target == "S1" and a.established == ("B1",) and "too weak" in a.reason for a in rejected)
+    tip_up = [a for a in r.attempts if a.target == "S1" and a.established == ("B1",)]
+    assert [a.stage for a in tip_up] == ["precheck"]
+    assert r.to_json()["tried"][0]["stage"] == "precheck"
     assert max(abs(g) for g in r.verification.final_gaps_m.values()) <= 1e-4

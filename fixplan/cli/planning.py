@@ -192,6 +192,8 @@ def solve(
 
         def progress(a) -> None:  # type: ignore[no-untyped-def]
             verdict = "ok" if a.success else f"fails: {a.reason}"
+            if a.stage == "precheck":
+                verdict = f"cheap check fails, tried after the others: {a.reason}"
             typer.echo(f"  tried {{{', '.join(a.established)}}} + {a.target}: {verdict}", err=True)
 
     result = run_solve(

@@ -45,6 +45,11 @@ class TransitionResult(Protocol):
 Evaluate = Callable[[Pose, State, str], TransitionResult]
 # a cheap guess of a transition: (cost, end pose), or None when it is clearly impossible
 Estimate = Callable[[Pose, State, str], "tuple[float, Pose] | None"]
+# a cheap necessary check of a transition from the pose it would start at, before its fine plan:
+# None when it passes, else why not (e.g. no non-jamming push at the first poses of the guess)
+Precheck = Callable[[Pose, State, str], "str | None"]
+# how much dearer a transition that failed its precheck is made: it is tried after the others
+PRECHECK_PENALTY = 100.0
 
 
 @dataclass(frozen=True)
@@ -56,6 +61,9 @@ class Attempt:
     success: bool
     cost: float
     reason: str
+    # "fine": its fine plan was run; "precheck": only the cheap check before it, which failed (the
+    # transition was then tried after the others, and appears again if it was fine-planned)
+    stage: str = "fine"
 
 
 @dataclass
@@ -83,6 +91,7 @@ def search(
     order: Sequence[str] | None = None,
     progress: Callable[[Attempt], None] | None = None,
     estimate: Estimate | None = None,
+    precheck: Precheck | None = None,
 ) -> CoarsePlan:
     """Cheapest monotone sequence of contact states from ``start_state`` to all locators.
 
@@ -90,9 +99,13 @@ def search(
     transitions on the current best sequence are fine-planned (``evaluate``), in order, and the
     search repeats with what was learned until the best sequence is made of evaluated
     transitions only. Without it every transition out of a settled state is evaluated.
+
+    ``precheck`` (lazy search only) is run on a transition of the best sequence before its fine
+    plan; one that fails it is not dropped but made :data:`PRECHECK_PENALTY` times dearer, so the
+    search first tries the sequences that pass and still fine-plans this one when they all fail.
     """
     if estimate is not None and order is None:
-        return _lazy_search(start_state, all_locators, start_pose, evaluate, estimate, progress)
+        return _lazy_search(start_state, all_locators, start_pose, evaluate, estimate, progress, precheck)
     goal: State = frozenset(all_locators)
     unknown = start_state - goal
     if unknown:
@@ -143,7 +156,7 @@ def _record(
 
 
 def _no_sequence(attempts: list[Attempt]) -> str:
-    failures = [a for a in attempts if not a.success]
+    failures = [a for a in attempts if not a.success and a.stage == "fine"]
     reason = "no sequence of transitions reaches every locator"
     if failures:
         last = failures[-1]
@@ -217,6 +230,7 @@ def _lazy_search(
     evaluate: Evaluate,
     estimate: Estimate,
     progress: Callable[[Attempt], None] | None,
+    precheck: Precheck | None = None,
 ) -> CoarsePlan:
     """LazySP over the lattice: fine-plan only the transitions on the current best sequence."""
     goal: State = frozenset(all_locators)
@@ -226,6 +240,7 @@ def _lazy_search(
     attempts: list[Attempt] = []
     done: dict[tuple[State, str], Any] = {}  # evaluated transitions
     guessed: dict[tuple[State, str], tuple[float, Pose] | None] = {}
+    prechecked: set[tuple[State, str]] = set()
 
     def weight(state: State, target: str, pose: Pose) -> tuple[float, Pose, Any] | None:
         key = (state, target)
@@ -237,7 +252,8 @@ def _lazy_search(
         g = guessed[key]
         return None if g is None else (g[0], g[1], None)
 
-    for _ in range(4 * 2 ** len(goal)):  # each round evaluates at least one transition
+    # each round evaluates or prechecks at least one transition (at most n·2ⁿ⁻¹ of each)
+    for _ in range(4 * 2 ** len(goal) + len(goal) * 2 ** len(goal)):
         # Dijkstra on evaluated costs where known, estimates elsewhere
         path = _dijkstra(start_state, goal, start_pose, weight, lambda state: sorted(goal - state))
         if path is None:
@@ -248,6 +264,19 @@ def _lazy_search(
         for state, target, _ in path:
             key = (state, target)
             if key not in done:
+                if precheck is not None and key not in prechecked:
+                    prechecked.add(key)
+                    guess = guessed.get(key)
+                    why = None if guess is None else precheck(pose, state, target)
+                    if guess is not None and why is not None:
+                        # the cheap check fails: try the other sequences first, this one later
+                        guessed[key] = (PRECHECK_PENALTY * guess[0] + 1e-6, guess[1])
+                        attempt = Attempt(_key(state), target, False, float("inf"), why, "precheck")
+                        attempts.append(attempt)
+                        if progress is not None:
+                            progress(attempt)
+                        complete = False
+                        break
                 result = evaluate(pose, state, target)
                 done[key] = result
                 _record(attempts, progress, state, target, result)

@@ -601,9 +601,13 @@ class TriedTransition:
     added: str
     ok: bool
     reason: str
+    # "fine": its fine plan ran; "precheck": only the cheap cone check before it, which failed (the
+    # search then tried the transition after the others)
+    stage: str = "fine"
 
     def to_json(self) -> dict[str, Any]:
-        return {"from": list(self.from_state), "add": self.added, "ok": self.ok, "reason": self.reason}
+        return {"from": list(self.from_state), "add": self.added, "ok": self.ok, "reason": self.reason,
+                "stage": self.stage}  # fmt: skip
 
     @classmethod
     def from_json(cls, obj: Any, where: str = "tried") -> TriedTransition:
@@ -614,6 +618,7 @@ class TriedTransition:
             str(obj.get("add", "")),
             bool(obj.get("ok", False)),
             str(obj.get("reason", "")),
+            str(obj.get("stage", "fine")),
         )
 
 

@@ -26,7 +26,7 @@ from fixplan.locating import contact_set, solve_goal
 from fixplan.model import Fixture, require_full
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
 from fixplan.planner.execute import ExecutionSettings, Step, TransitionKind
-from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, plan_transition
+from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, default_kind, plan_transition
 from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.segments import segment_wrenches
 from fixplan.planner.verify import Verification, verify
@@ -70,7 +70,7 @@ class PlanResult:
         Each proves that no push within the hand's limits moves the part as needed (``too weak``,
         or every such push jams).
         """
-        return [a for a in self.attempts if not a.success and _wrench_certificate(a.reason)]
+        return [a for a in self.attempts if not a.success and a.stage == "fine" and _wrench_certificate(a.reason)]
 
     @property
     def proven(self) -> bool | None:
@@ -81,7 +81,7 @@ class PlanResult:
         """
         if self.status != "infeasible":
             return None
-        failed = [a for a in self.attempts if not a.success]
+        failed = [a for a in self.attempts if not a.success and a.stage == "fine"]
         return bool(failed) and all(_wrench_certificate(a.reason) for a in failed)
 
     @property
@@ -117,7 +117,9 @@ class PlanResult:
             reason=self.reason,
             sequence=tuple(tuple(s) for s in self.sequence),
             transitions=tuple(transitions),
-            tried=tuple(TriedTransition(tuple(a.established), a.target, a.success, a.reason) for a in self.attempts),
+            tried=tuple(
+                TriedTransition(tuple(a.established), a.target, a.success, a.reason, a.stage) for a in self.attempts
+            ),
             proven=self.proven,
             certificate=tuple(
                 TriedTransition(tuple(a.established), a.target, False, a.reason) for a in self.certificate
@@ -202,6 +204,8 @@ class Planner:
         self.margin_N = margin_N
         self.progress = progress
         self.fine_time_s = 0.0
+        self.prechecks = 0  # cheap checks run before fine plans, and how many failed
+        self.precheck_failures = 0
 
     def plan_from(self, pose: Pose, state: frozenset[str], order: Sequence[str] | None = None) -> CoarsePlan:
         """The cheapest monotone sequence from ``state`` at ``pose`` to every locator."""
@@ -223,7 +227,10 @@ class Planner:
                 self.fine_time_s += time.perf_counter() - t
             return cache[key]
 
-        return search(state, self.names, pose, evaluate, order=order, progress=self.progress, estimate=self.estimate)
+        return search(
+            state, self.names, pose, evaluate, order=order, progress=self.progress,
+            estimate=self.estimate, precheck=self.precheck,
+        )  # fmt: skip
 
     def estimate(self, pose: Pose, state: frozenset[str], target: str) -> tuple[float, Pose] | None:
         """A cheap guess of a transition for the lazy search: (mass-weighted length [m], end pose).
@@ -244,6 +251,30 @@ class Planner:
             return None
         length = float(np.sqrt(max(float(step @ cs.mass_matrix @ step), 0.0) / fx.workpiece.mass_kg))
         return length, pose.retract(step, fx.workpiece.com_body)
+
+    def precheck(self, pose: Pose, state: frozenset[str], target: str) -> str | None:
+        """A cheap necessary check before a transition's fine plan (one cone program, no IPOPT).
+
+        Is there a non-jamming push, within the hand's limits, for the first segment of the
+        :meth:`estimate` step at ``pose``? None when there is (or nothing to check: no kept contact),
+        else the search's reason. The fine plan may still find another way (its path bends), so
+        the lazy search only tries such a transition later; it never drops it.
+        """
+        if not state:
+            return None
+        guess = self.estimate(pose, state, target)
+        if guess is None:
+            return None
+        est = tuple(sorted(state))
+        self.prechecks += 1
+        _, _, found, reasons = segment_wrenches(
+            self.fixture, [pose, guess[1]], est, default_kind(self.fixture.dimension, len(est)),
+            self.acceleration_mps2, friction_margin=self.friction_margin, margin_N=self.margin_N,
+        )  # fmt: skip
+        if found[0]:
+            return None
+        self.precheck_failures += 1
+        return reasons[0] if reasons else "no non-jamming push for the first step"
 
     def replan(self, pose: Pose, state: frozenset[str]) -> list[Step] | str:
         """The executor's guard: a new policy from the observed state, or why there is none."""
