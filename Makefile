@@ -21,12 +21,12 @@ $(STAMP): pyproject.toml
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends chromium >/dev/null; }
 	@# Compile the numba kernels into their on-disk cache now (about 2 minutes), so that the first
 	@# command after installing starts warm; not fatal: a failure only means that run compiles.
-	$(BIN)/python -m fixplan.engine.precompile --quiet || echo "make install: precompile failed (the first run will compile)" >&2
+	$(BIN)/python -m fixplan.cli.precompile --quiet || echo "make install: precompile failed (the first run will compile)" >&2
 	touch $(STAMP)
 
 # Refill numba's cache after editing a kernel (make install does it once).
 precompile: install
-	$(BIN)/python -m fixplan.engine.precompile
+	$(BIN)/python -m fixplan.cli.precompile
 
 demo: install
 	$(BIN)/fixplan validate fixplan/data/default.toml

@@ -8,7 +8,7 @@ cache of the working tree:
 
 1. cold: ``fixplan solve`` on the default fixture with the empty cache (what a fresh clone paid
    before ``make install`` compiled anything);
-2. install: ``python -m fixplan.engine.precompile`` into another empty cache (the step ``make
+2. install: ``python -m fixplan.cli.precompile`` into another empty cache (the step ``make
    install`` runs);
 3. first run after install: ``fixplan solve`` with that cache;
 4. warm: the same command twice more.
@@ -47,7 +47,7 @@ def run(quick: bool) -> Section:
         solve = [exe, "solve", "--out", str(tmp / "plan.json"), "--force"]
         cold = _timed(solve, tmp / "cache-cold", tmp)
         installed = tmp / "cache-installed"
-        install = _timed([sys.executable, "-m", "fixplan.engine.precompile", "--quiet"], installed, tmp)
+        install = _timed([sys.executable, "-m", "fixplan.cli.precompile", "--quiet"], installed, tmp)
         first = _timed(solve, installed, tmp)
         warm = [_timed(solve, installed, tmp) for _ in range(2 if quick else 3)]
         size = _size_mb(installed)
@@ -71,7 +71,7 @@ def run(quick: bool) -> Section:
         lines.append(f"| {r['case']} | {r['wall_s']:.2f} | {'–' if x != x else f'{x:.2f}'} |")
     lines += [
         "",
-        f"The precompile step (`python -m fixplan.engine.precompile`, run by `make install`) wrote {size:.1f} MB of "
+        f"The precompile step (`python -m fixplan.cli.precompile`, run by `make install`) wrote {size:.1f} MB of "
         "compiled kernels; it runs the commands themselves (solve, simulate 3D/2D, classify, map, the FCLib solvers) "
         "on small inputs, so the cache holds the signatures later runs look up.",
         "",

@@ -14,7 +14,6 @@ Moreau–Jean step of :mod:`.step`; the rest of this package solves one contact 
 - :mod:`.residual` — the FCLib residual, in NumPy and compiled;
 - :mod:`.socp`, :mod:`.newton`, :mod:`.auto` — the other solvers and the automatic chain;
 - :mod:`.budget` — time limits and iteration caps; :mod:`.fclib` — FCLib files;
-- :mod:`.precompile` — fills numba's cache with every kernel the commands use.
 
 Solvers share one signature, ``solver(problem, r0=None, tol=..., max_iter=...) ->
 ContactSolution``, and are looked up by name in :data:`SOLVERS` (imported lazily, so

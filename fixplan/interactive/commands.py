@@ -62,8 +62,8 @@ def run_haptic(
     clock: str = "wall",
 ) -> int:
     """Run a session; 0 when the goal was reached, 1 otherwise."""
-    from fixplan.cli._app import _load
     from fixplan.files import check_distinct, check_output
+    from fixplan.fixture import default_fixture_path, load
     from fixplan.interactive.handles import GizmoHandle, Handle, SpaceMouseHandle, UdpHandle, parse_device
 
     kind, udp_port = parse_device(device)
@@ -71,7 +71,7 @@ def run_haptic(
     if not (0 <= port <= 65535):
         raise InputError(f"--port must be 0..65535, got {port}")
     token = check_host(host, token)
-    fixture = _load(file)
+    fixture = load(file if file is not None else default_fixture_path())
     if record is not None:
         check_distinct([("FILE", file), ("--record", record)])
         check_output(record, force, option="--record")
@@ -201,8 +201,8 @@ def run_device_sim(
 
 def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
     """Re-run a plan file in the haptic loop; 0 when it passes."""
-    from fixplan.cli._app import _load
     from fixplan.files import read_plan_json
+    from fixplan.fixture import default_fixture_path, load
     from fixplan.interactive.record import verify_plan_file
 
     data = read_plan_json(plan, expected="a plan JSON ('fixplan solve --out' or 'fixplan haptic --record')")  # ≤ 1 MiB
@@ -210,7 +210,7 @@ def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
         raise InputError(f"{plan}: not a fixplan plan (expected a JSON object)")
     if fixture_path is None and isinstance(data.get("fixture"), str) and Path(data["fixture"]).is_file():
         fixture_path = Path(data["fixture"])
-    fixture = _load(fixture_path)
+    fixture = load(fixture_path if fixture_path is not None else default_fixture_path())
     v = verify_plan_file(fixture, data, source=str(plan))
     if json_out:
         out = v.to_json()

@@ -1,4 +1,4 @@
-"""Fill numba's on-disk cache with every kernel the commands use: ``python -m fixplan.engine.precompile``.
+"""Fill numba's on-disk cache with every kernel the commands use: ``python -m fixplan.cli.precompile``.
 
 fixplan's kernels are ``numba.njit(cache=True)``: compiled on first use (about a minute and a
 half for ``fixplan solve`` on a fresh clone, several minutes on a loaded machine), then loaded
