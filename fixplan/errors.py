@@ -84,3 +84,12 @@ class SolverError(FixplanError):
     def __init__(self, message: str, *, extras: dict | None = None):
         super().__init__(message)
         self.extras = dict(extras or {})
+
+
+SHOWN_CHARS = 40  # a value quoted in a message is cut to this many characters
+
+
+def shorten(text: str) -> str:
+    """``repr(text)`` (escapes keep a message on one line), cut to a readable length."""
+    shown = repr(text)
+    return shown if len(shown) <= SHOWN_CHARS else shown[: SHOWN_CHARS - 1] + "…"

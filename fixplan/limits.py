@@ -115,7 +115,7 @@ def parse_numbers(
     text: str, what: str, n: int | None = None, ranges: list[Range] | Range | None = None
 ) -> NDArray[np.float64]:
     """Comma-separated finite numbers, ``n`` of them, each inside its range (when given); :class:`InputError` names ``what``."""
-    from fixplan.schema import shorten
+    from fixplan.errors import shorten
 
     shown = shorten(text)
     try:

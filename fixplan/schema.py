@@ -12,10 +12,9 @@ import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from fixplan.errors import Issue
+from fixplan.errors import SHOWN_CHARS as _SHOWN_CHARS
+from fixplan.errors import Issue, shorten
 from fixplan.limits import Range
-
-_SHOWN_CHARS = 40  # a value quoted in a message is cut to this many characters
 
 
 def _kind(value: Any) -> str:
@@ -32,12 +31,6 @@ def _kind(value: Any) -> str:
     if isinstance(value, dict):
         return "a table"
     return type(value).__name__
-
-
-def shorten(text: str) -> str:
-    """``repr(text)`` (escapes keep a message on one line), cut to a readable length."""
-    shown = repr(text)
-    return shown if len(shown) <= _SHOWN_CHARS else shown[: _SHOWN_CHARS - 1] + "…"
 
 
 def _is_number(value: Any) -> bool:
