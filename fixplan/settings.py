@@ -52,12 +52,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from fixplan.errors import InputError
-
-if TYPE_CHECKING:
-    from fixplan.planner.execute import ExecutionNoise
 
 
 @dataclass(frozen=True)
@@ -258,6 +255,11 @@ class PlannerSettings:
         A warm start is reused when it starts within this of the start pose [m, rad].
     cost_slack : float
         The coarse search re-ranks when a transition costs more than this factor over its guess.
+    precheck_penalty : float
+        A transition that fails its cheap cone check before the fine plan is made this many times
+        dearer (tried after the others, never dropped).
+    precheck_floor : float
+        ... and at least this much dearer, so that a transition guessed free is postponed too.
     """
 
     clearances_m: tuple[float, ...] = (1e-3, 1e-4)
@@ -269,6 +271,8 @@ class PlannerSettings:
     settle_tol_m: float = 1e-10
     same_pose_m: float = 1e-9
     cost_slack: float = 1.5
+    precheck_penalty: float = 100.0
+    precheck_floor: float = 1e-6
 
     def ipopt_options(self, tol: float | None = None, max_iter: int | None = None) -> dict[str, Any]:
         """IPOPT's options for a transition (quiet), with ``tol`` and ``max_iter`` overridable."""
@@ -316,6 +320,18 @@ class SearchSettings:
     limit_rel: float = 1e-9
     along_rel: float = 1e-6
     off_axis_rel: float = 1e-4
+
+
+@dataclass(frozen=True)
+class ExecutionNoise:
+    """Operator imperfections: relative force noise per control period and a reaction delay.
+
+    Used by :mod:`fixplan.planner.execute` (also importable from there) and ``fixplan robust``.
+    """
+
+    force_noise: float = 0.0  # standard deviation, relative to each wrench component's size
+    latency_s: float = 0.0
+    seed: int = 0
 
 
 @dataclass(frozen=True)
@@ -397,8 +413,6 @@ class RobustSettings:
         )
 
     def noise(self, seed: int) -> ExecutionNoise:
-        from fixplan.planner.execute import ExecutionNoise
-
         return ExecutionNoise(force_noise=self.force_noise, latency_s=self.latency_s, seed=seed)
 
     def to_json(self) -> dict[str, Any]:

@@ -85,6 +85,7 @@ def _fclib_problems() -> None:
     import scipy.sparse as sp
 
     from fixplan.engine import SOLVERS, build_problem, solve
+    from fixplan.settings import DEFAULT
 
     rng = np.random.default_rng(0)
     for dim in (3, 2):
@@ -95,7 +96,7 @@ def _fclib_problems() -> None:
         q = rng.normal(size=m)
         problem = build_problem(W, q, 0.3, dims=dim)
         for name in sorted(SOLVERS):
-            solve(problem, name, tol=1e-8, max_iter=50)
+            solve(problem, name, tol=DEFAULT.engine.fclib_tolerance, max_iter=50)
 
 
 def _simulator_paths() -> None:

@@ -49,7 +49,7 @@ Estimate = Callable[[Pose, State, str], "tuple[float, Pose] | None"]
 # None when it passes, else why not (e.g. no non-jamming push at the first poses of the guess)
 Precheck = Callable[[Pose, State, str], "str | None"]
 # how much dearer a transition that failed its precheck is made: it is tried after the others
-PRECHECK_PENALTY = 100.0
+PRECHECK_PENALTY = DEFAULT.planner.precheck_penalty
 
 
 @dataclass(frozen=True)
@@ -270,7 +270,10 @@ def _lazy_search(
                     why = None if guess is None else precheck(pose, state, target)
                     if guess is not None and why is not None:
                         # the cheap check fails: try the other sequences first, this one later
-                        guessed[key] = (PRECHECK_PENALTY * guess[0] + 1e-6, guess[1])
+                        guessed[key] = (
+                            max(PRECHECK_PENALTY * guess[0], guess[0] + DEFAULT.planner.precheck_floor),
+                            guess[1],
+                        )
                         attempt = Attempt(_key(state), target, False, float("inf"), why, "precheck")
                         attempts.append(attempt)
                         if progress is not None:

@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from fixplan.errors import InputError
 from fixplan.locating import contact_set
 from fixplan.planner.fine import twist_from_pose
-from fixplan.settings import DEFAULT, ExecutionSettings
+from fixplan.settings import DEFAULT, ExecutionNoise, ExecutionSettings
 from fixplan.spatial import Pose, shift_twist, shift_wrench
 
 if TYPE_CHECKING:
@@ -76,15 +76,6 @@ class Step:
 
     def to_json(self) -> dict[str, Any]:
         return {"established": list(self.established), "target": self.target, "kind": self.kind}
-
-
-@dataclass(frozen=True)
-class ExecutionNoise:
-    """Operator imperfections: relative force noise per control period and a reaction delay."""
-
-    force_noise: float = 0.0  # standard deviation, relative to each wrench component's size
-    latency_s: float = 0.0
-    seed: int = 0
 
 
 @dataclass
