@@ -62,8 +62,8 @@ gallery: install
 	$(BIN)/python -m fixplan.interactive.gallery docs/gallery
 
 lint: install
-	$(BIN)/ruff check fixplan tests benchmarks
-	$(BIN)/ruff format --check fixplan tests benchmarks
+	$(BIN)/ruff check fixplan tests benchmarks tools
+	$(BIN)/ruff format --check fixplan tests benchmarks tools
 	$(BIN)/mypy
 
 clean:

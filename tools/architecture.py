@@ -33,7 +33,7 @@ _LAYER_LIST: list[tuple[str, list[str]]] = [
     # shapes and their distances
     ("geometry", ["geometry"]),
     # the fixture file -> validated model; contact frames, Jacobians; locators touching
-    ("model", ["schema", "model", "fixture", "kinematics", "locating", "limits", "files"]),
+    ("model", ["schema", "model", "fixture", "kinematics", "locating", "limits", "files", "summary"]),
     # the contact dynamics engine and the jamming cone programs: physics, no planning
     ("mechanics", ["engine", "simulator", "jamming"]),
     # the planner (coarse, fine, executor, verification) and the simulated haptic rig it runs in
@@ -56,7 +56,7 @@ _LAYER_LIST: list[tuple[str, list[str]]] = [
         ],
     ),
     # the command line: parses, calls the library, prints
-    ("interface", ["cli", "__main__"]),
+    ("interface", ["cli", "__main__", "precompile"]),
 ]
 for _layer, (_name, _nodes) in enumerate(_LAYER_LIST):
     for _n in _nodes:
