@@ -147,9 +147,17 @@ def search(
 def _record(
     attempts: list[Attempt], progress: Callable[[Attempt], None] | None, state: State, target: str, result: Any
 ) -> None:
-    attempt = Attempt(
-        _key(state), target, bool(result.success), float(result.cost) if result.success else float("inf"), result.reason
-    )
+    _log(
+        attempts,
+        progress,
+        Attempt(
+            _key(state), target, bool(result.success), float(result.cost) if result.success else float("inf"),
+            result.reason,
+        ),
+    )  # fmt: skip
+
+
+def _log(attempts: list[Attempt], progress: Callable[[Attempt], None] | None, attempt: Attempt) -> None:
     attempts.append(attempt)
     if progress is not None:
         progress(attempt)
@@ -274,10 +282,7 @@ def _lazy_search(
                             max(PRECHECK_PENALTY * guess[0], guess[0] + DEFAULT.planner.precheck_floor),
                             guess[1],
                         )
-                        attempt = Attempt(_key(state), target, False, float("inf"), why, "precheck")
-                        attempts.append(attempt)
-                        if progress is not None:
-                            progress(attempt)
+                        _log(attempts, progress, Attempt(_key(state), target, False, float("inf"), why, "precheck"))
                         complete = False
                         break
                 result = evaluate(pose, state, target)
