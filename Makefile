@@ -15,18 +15,25 @@ $(STAMP): pyproject.toml
 	@test -x $(BIN)/fixplan
 	@# Headless Chromium for `fixplan view`'s browser test and `make gallery` (Debian's package; Playwright
 	@# drives it, `playwright install` is never run). As root apt-get runs directly, else through sudo if present.
-	@command -v chromium >/dev/null || { \
+	@# A C compiler for the ahead-of-time kernels (numba.pycc, below), from Debian's gcc when none is there.
+	@PKGS="$$(command -v chromium >/dev/null || echo chromium) $$(command -v cc >/dev/null || echo gcc)"; \
+	if [ -n "$$(echo $$PKGS)" ]; then \
 	  if [ "$$(id -u)" = 0 ]; then SUDO=; elif command -v sudo >/dev/null; then SUDO=sudo; \
-	  else echo "make install: chromium missing and not root (browser tests will skip)" >&2; exit 0; fi; \
-	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends chromium >/dev/null; }
+	  else echo "make install: $$PKGS missing and not root (browser tests skip; kernels stay just-in-time)" >&2; exit 0; fi; \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq --no-install-recommends $$PKGS >/dev/null; fi
 	@# Compile the numba kernels into their on-disk cache now (about 2 minutes), so that the first
-	@# command after installing starts warm; not fatal: a failure only means that run compiles.
+	@# command after installing starts warm, then the 2D path's kernels ahead of time (fixplan/_aot*,
+	@# loaded without numba); not fatal: a failure only means those runs compile or use the JIT.
 	$(BIN)/python -m fixplan.cli.precompile --quiet || echo "make install: precompile failed (the first run will compile)" >&2
+	@# Bytecode for the package (an editable install has none, and PYTHONDONTWRITEBYTECODE may forbid writing it later).
+	$(BIN)/python -m compileall -q fixplan >/dev/null
 	touch $(STAMP)
 
-# Refill numba's cache after editing a kernel (make install does it once).
+# Refill numba's cache and rebuild the ahead-of-time kernels after editing the package (make install
+# does it once; until then an edited checkout runs numba's JIT: `fixplan --version` says which).
 precompile: install
 	$(BIN)/python -m fixplan.cli.precompile
+	$(BIN)/python -m compileall -q fixplan >/dev/null
 
 demo: install
 	$(BIN)/fixplan validate fixplan/data/default.toml

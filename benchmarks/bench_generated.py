@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 from run import Section
 
+from fixplan import aot
 from fixplan.generate import generate
 
 FAMILIES = (("box-321", 101), ("plate-2d", 202))
@@ -45,6 +46,9 @@ ROBUST_PER_FAMILY, ROBUST_SAMPLES, ROBUST_SEED, ROBUST_TIMEOUT_S = 5, 10, 0, 900
 TARGET_FAILED = 0.05
 TARGETS_S = {"box-321": {"median": 5.0, "p95": 20.0}, "plate-2d": {"median": 1.5}}
 Z95 = 1.959963984540054
+# The family also solved with numba's JIT (FIXPLAN_KERNELS=jit) when fixplan.aot's extension is in use.
+KERNEL_FAMILY = "plate-2d"
+WALL_CLOCK_KEYS = ("timings", "deadline_misses", "wall_time", "solve_time", "_us")
 
 
 def _exe() -> str:
@@ -56,11 +60,13 @@ def _short(text: str, n: int = 150) -> str:
     return text if len(text) <= n else text[: n - 1] + "…"
 
 
-def _run_json(cmd: list[str], timeout: float) -> tuple[float, dict[str, Any] | None, int | None, str]:
+def _run_json(
+    cmd: list[str], timeout: float, env: dict[str, str] | None = None
+) -> tuple[float, dict[str, Any] | None, int | None, str]:
     """(wall s, the one JSON object printed or None, exit code or None on timeout, error text)."""
     t0 = time.perf_counter()
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env)
     except subprocess.TimeoutExpired:
         return time.perf_counter() - t0, None, None, "timeout"
     wall = time.perf_counter() - t0
@@ -75,13 +81,23 @@ def _run_json(cmd: list[str], timeout: float) -> tuple[float, dict[str, Any] | N
     return wall, out, proc.returncode, ""
 
 
-def _solve(path: Path) -> dict[str, Any]:
-    wall, out, code, err = _run_json([_exe(), "solve", str(path), "--json"], TIMEOUT_S)
+def _answer(value: Any) -> Any:
+    """A solve's JSON without the fields measured on the wall clock (those differ run to run)."""
+    if isinstance(value, dict):
+        return {k: _answer(v) for k, v in value.items() if not any(w in k for w in WALL_CLOCK_KEYS)}
+    if isinstance(value, list):
+        return [_answer(v) for v in value]
+    return value
+
+
+def _solve(path: Path, env: dict[str, str] | None = None) -> dict[str, Any]:
+    wall, out, code, err = _run_json([_exe(), "solve", str(path), "--json"], TIMEOUT_S, env)
     row: dict[str, Any] = {"status": "timeout" if err == "timeout" else "crash", "proven": None, "exit": code}
     row.update({"n_transitions": None, "replans": None, "plan_s": None, "verify_s": None, "wall_s": wall})
     if out is None:
         row["reason"] = err
         return row
+    row["answer"] = _answer(out)
     status = out.get("status")
     expected_exit = 0 if status == "planned" else 1
     if status not in ("planned", "unverified", "infeasible") or code != expected_exit:
@@ -163,6 +179,7 @@ def run(quick: bool) -> Section:
     count = QUICK_COUNT if quick else COUNT
     rows: list[dict[str, Any]] = []
     robust_rows: list[dict[str, Any]] = []
+    jit_rows: list[dict[str, Any]] = []
     robust_ok = _robust_available()
     load = [os.getloadavg()[0]]
     code = _git_state()  # at the start: what is measured
@@ -181,6 +198,15 @@ def run(quick: bool) -> Section:
                 r = _solve(path)
                 print(f"[bench_generated]   {r['status']} {r['wall_s']:.1f} s", file=sys.stderr, flush=True)
                 rows.append({"family": family, "seed": seed, "index": g.index, "name": g.name, **r})
+            if family == KERNEL_FAMILY and aot.status().startswith("ahead-of-time"):
+                jit_env = dict(os.environ, **{aot.ENV: "jit"})
+                _run_json([_exe(), "solve", str(paths[0]), "--json"], TIMEOUT_S, jit_env)  # warm-up
+                for path, r in zip(paths, rows[-len(paths) :], strict=True):
+                    print(f"[bench_generated] {path.stem} with the JIT ...", file=sys.stderr, flush=True)
+                    j = _solve(path, jit_env)
+                    jit_rows.append(
+                        {"name": path.stem, "wall_s": j["wall_s"], "same": j.get("answer") == r.get("answer")}
+                    )
             if robust_ok:
                 verified = [p for p, r in zip(paths, rows[-len(paths) :], strict=True) if r["status"] == "planned"]
                 for path in verified[:ROBUST_PER_FAMILY]:
@@ -196,7 +222,7 @@ def run(quick: bool) -> Section:
     ]
     return Section(
         "Generated fixtures: the planner on fixtures it was not tuned on",
-        _markdown(rows, robust_rows, robust_ok, quick, total_s, load, code),
+        _markdown(rows, robust_rows, robust_ok, quick, total_s, load, code, jit_rows),
         csv_rows,
         csv_name="generated",
     )
@@ -210,6 +236,7 @@ def _markdown(
     total_s: float,
     load: list[float],
     code: str,
+    jit_rows: list[dict[str, Any]],
 ) -> str:
     from run import machine_markdown
 
@@ -223,6 +250,7 @@ def _markdown(
         "",
         machine_markdown(),
         f"- code: {code}",
+        f"- kernels: {aot.status()}",
         "",
         "| family | fixtures | verified (planned) | proven infeasible | failed without proof | median wall [s] | p95 wall [s] | max wall [s] | median plan [s] | median verify [s] |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
@@ -275,6 +303,24 @@ def _markdown(
         *verdicts,
         "- every plan printed as planned passes verification: **met by construction** (see above).",
     ]
+    if jit_rows:
+        fam = [r for r in rows if r["family"] == KERNEL_FAMILY]
+        same = sum(bool(j["same"]) for j in jit_rows)
+        lines += [
+            "",
+            f"Kernels ahead of time against numba's JIT (`fixplan.aot`): the same {len(jit_rows)} `{KERNEL_FAMILY}` "
+            f"fixtures solved again with `{aot.ENV}=jit` (numba imported and its registries set up in every process).",
+            "",
+            "| kernels | median wall [s] | p95 wall [s] | answers equal to the ahead-of-time run |",
+            "|---|---:|---:|---:|",
+            f"| ahead of time | {np.median([r['wall_s'] for r in fam]):.2f} | "
+            f"{np.percentile([r['wall_s'] for r in fam], 95):.2f} | – |",
+            f"| JIT | {np.median([j['wall_s'] for j in jit_rows]):.2f} | "
+            f"{np.percentile([j['wall_s'] for j in jit_rows], 95):.2f} | {same}/{len(jit_rows)} |",
+            "",
+            "Equal = the whole `--json` answer (status, sequence, wrenches, paths, verification trace) to the bit,",
+            f"fields measured on the wall clock ({', '.join(WALL_CLOCK_KEYS)}) aside.",
+        ]
     proven_rows = [r for r in rows if r["status"] == "infeasible" and r["proven"]]
     lines += [
         "",

@@ -73,13 +73,22 @@ def _version(value: bool) -> None:
             typer.echo(f"fixplan {version('fixplan')}")
         except PackageNotFoundError:  # pragma: no cover - running from a source tree without install
             typer.echo("fixplan (version unknown: not installed)")
+        from fixplan import aot
+
+        typer.echo(f"kernels: {aot.status()}")
         raise typer.Exit(0)
 
 
 @app.callback()
 def _root(
     version: Annotated[
-        bool, typer.Option("--version", help="Print the version and exit.", callback=_version, is_eager=True)
+        bool,
+        typer.Option(
+            "--version",
+            help="Print the version and which kernels run (ahead-of-time or JIT), and exit.",
+            callback=_version,
+            is_eager=True,
+        ),
     ] = False,
 ) -> None:
     """Plan how a workpiece is loaded into a fixture without jamming."""

@@ -11,6 +11,10 @@ stepping) and 2D, ``map`` and the FCLib solvers (``auto`` and each method) on sm
 Running the real code paths compiles exactly the signatures (argument types and layouts) that
 later runs look up; a hand-written list of signatures would drift from the code.
 
+Then it compiles the kernels of the 2D solve path ahead of time (:func:`build_aot`, about
+half a minute): ``fixplan/_aot<suffix>`` and ``fixplan/_aot.json``, loaded by :mod:`fixplan.aot`
+without importing numba. ``--no-aot`` skips that.
+
 Where the cache lives (numba's rules): ``NUMBA_CACHE_DIR`` when set, else ``__pycache__`` next
 to each module (``fixplan/engine/__pycache__/*.nbi`` and ``*.nbc``), or a per-user directory
 when the package directory is not writable. Run this module with the same setting as later
@@ -24,12 +28,16 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import json
 import os
 import sys
 import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
+
+from fixplan import aot
 
 RECT_2D = """format = 1
 [scene]
@@ -124,6 +132,7 @@ def steps(tmp: Path) -> list[tuple[str, Callable[[], None]]]:
     w3 = ",".join(["-2.5"] * 3 + ["0"] * 3)
     return [
         ("solve (default fixture)", lambda: _cli("solve", "--out", str(tmp / "plan.json"), "--force")),
+        ("solve (a 2D plate)", lambda: _cli("solve", str(rect), "--out", str(tmp / "plan2.json"), "--force")),
         ("simulate 3D", lambda: _cli("simulate", "--pose", "goal", "--wrench", w3, "--duration", "0.01")),
         ("simulate 2D", lambda: _cli("simulate", str(rect), "--duration", "0.01")),
         ("simulator step and schedules", _simulator_paths),
@@ -138,11 +147,93 @@ def steps(tmp: Path) -> list[tuple[str, Callable[[], None]]]:
     ]
 
 
+def _argument(numba_type: Any) -> dict[str, Any]:
+    """One argument type of a compiled signature as :mod:`fixplan.aot`'s manifest records it."""
+    from numba.core import types
+
+    if isinstance(numba_type, types.Array) and numba_type.aligned and numba_type.layout in ("C", "A"):
+        dtype = str(numba_type.dtype)
+        if dtype in ("float64", "int64", "bool"):
+            return {
+                "kind": "array",
+                "dtype": dtype,
+                "ndim": numba_type.ndim,
+                "contiguous": numba_type.layout == "C",
+                "mutable": bool(numba_type.mutable),
+            }
+    elif numba_type in (types.float64, types.int64, types.boolean):
+        return {"kind": "scalar", "dtype": str(numba_type)}
+    raise TypeError(f"no ahead-of-time export for an argument of type {numba_type}")
+
+
+def build_aot(out_dir: Path | None = None) -> str:
+    """Compile :data:`fixplan.aot.EXPORTS` with ``numba.pycc`` into ``fixplan/_aot*`` and its manifest.
+
+    Every signature the JIT dispatchers hold (the workloads just compiled or loaded them) becomes
+    one variant; a signature with an argument type the guard cannot check is left to the JIT.
+    Built in a temporary directory and moved into place, so a running process never sees half a
+    build. Returns a one-line summary.
+    """
+    import importlib
+    import shutil
+    import warnings
+
+    import numba
+    from numba.pycc import CC
+
+    out_dir = out_dir or aot.PACKAGE_DIR
+    hexdigest = aot.fingerprint()
+    manifest: dict[str, Any] = {"fingerprint": hexdigest, "numba": numba.__version__, "exports": {}}
+    skipped: list[str] = []
+    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # numba.pycc's pending-deprecation notice
+        cc = CC(aot.EXTENSION)
+        cc.output_dir = tmp
+        cc.target_cpu = "host"  # as the JIT compiles
+        for module, name in aot.EXPORTS:
+            dispatcher = getattr(importlib.import_module(module), name)
+            entries: list[dict[str, Any]] = []
+            for argtypes in dispatcher.signatures:
+                try:
+                    args = [_argument(t) for t in argtypes]
+                except TypeError as exc:
+                    skipped.append(f"{module}.{name}{tuple(str(t) for t in argtypes)}: {exc}")
+                    continue
+                export = aot.export_name(module, name, len(entries))
+                cc.export(export, dispatcher.overloads[argtypes].signature)(dispatcher.py_func)
+                entries.append({"export": export, "args": args})
+            if entries:
+                manifest["exports"][f"{module}.{name}"] = entries
+            else:
+                skipped.append(f"{module}.{name}: no compiled signature to export (no workload called it)")
+        namespace = {"FINGERPRINT": aot.fingerprint_int(hexdigest)}
+        exec("def fingerprint__():\n    return FINGERPRINT\n", namespace)  # noqa: S102 - a constant function
+        cc.export("fingerprint__", "i8()")(namespace["fingerprint__"])
+        cc.compile()
+        (built,) = Path(tmp).glob(f"{aot.EXTENSION}.*")
+        target = out_dir / built.name
+        for old in out_dir.glob(f"{aot.EXTENSION}.*"):
+            if old.suffix != ".json" and old.name != built.name:
+                old.unlink()  # an extension of another Python version or platform
+        shutil.move(str(built), target.with_name(target.name + ".tmp"))
+        os.replace(target.with_name(target.name + ".tmp"), target)
+        json_tmp = out_dir / (aot.MANIFEST.name + ".tmp")
+        json_tmp.write_text(json.dumps(manifest, indent=1) + "\n")
+        os.replace(json_tmp, out_dir / aot.MANIFEST.name)
+    n = sum(len(v) for v in manifest["exports"].values())
+    text = f"ahead-of-time kernels: {n} exports in {target.name}"
+    return text + (f"; left to the JIT: {'; '.join(skipped)}" if skipped else "")
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run every workload; exit status 1 when one failed (the others still ran)."""
+    """Run every workload, then build the ahead-of-time kernels; exit status 1 when a step failed."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quiet", action="store_true", help="print only the total")
+    parser.add_argument("--no-aot", action="store_true", help="only fill numba's cache; build no extension")
     args = parser.parse_args(argv)
+    # The workloads must run numba's dispatchers (not a previous build's extension), so that their
+    # signatures are there to export.
+    os.environ[aot.ENV] = "jit"
     t_all = time.perf_counter()
     print(f"fixplan precompile: numba cache in {cache_location()}", file=sys.stderr, flush=True)
     failed = 0
@@ -157,8 +248,17 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             if not args.quiet:
                 print(f"  {label}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+    if not args.no_aot:
+        t0 = time.perf_counter()
+        try:
+            summary = build_aot()
+        except Exception as exc:  # noqa: BLE001 - the JIT still works without the extension
+            failed += 1
+            print(f"  ahead-of-time build: failed ({type(exc).__name__}: {exc})", file=sys.stderr, flush=True)
+        else:
+            print(f"  {summary}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     print(
-        f"fixplan precompile: {time.perf_counter() - t_all:.1f} s" + (f", {failed} workloads failed" if failed else ""),
+        f"fixplan precompile: {time.perf_counter() - t_all:.1f} s" + (f", {failed} steps failed" if failed else ""),
         file=sys.stderr,
     )
     return 1 if failed else 0

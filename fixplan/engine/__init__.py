@@ -6,6 +6,7 @@ Moreau–Jean step of :mod:`.step`; the rest of this package solves one contact 
 
 - :mod:`.simulator` — the :class:`Simulator`, its trajectories and contact reports;
 - :mod:`.step` — the compiled time step (2D, 3D) and the compiled multi-step loops;
+- :mod:`.encode` — each shape as a kind code and parameter arrays for the kernels (no numba);
 - :mod:`.detect` — gap, contact point and normal of a locator tip against each shape;
 - :mod:`.linalg` — small dense products and inverses without BLAS;
 - :mod:`.local` — the exact one-contact solvers and their closed-form shortcuts;
@@ -14,6 +15,7 @@ Moreau–Jean step of :mod:`.step`; the rest of this package solves one contact 
 - :mod:`.residual` — the FCLib residual, in NumPy and compiled;
 - :mod:`.socp`, :mod:`.newton`, :mod:`.auto` — the other solvers and the automatic chain;
 - :mod:`.budget` — time limits and iteration caps; :mod:`.fclib` — FCLib files;
+- :mod:`.outcome` — what a finished run says, and the step's status codes (no numba);
 
 Solvers share one signature, ``solver(problem, r0=None, tol=..., max_iter=...) ->
 ContactSolution``, and are looked up by name in :data:`SOLVERS` (imported lazily, so

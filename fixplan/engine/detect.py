@@ -1,16 +1,10 @@
 """Compiled contact detection: the closed-form point queries of :mod:`fixplan.geometry.shapes`.
 
 The engine's hot loop cannot call Python shape objects, so each shape is encoded as a kind code
-and a parameter array, and :func:`project` answers the same question as
-:meth:`fixplan.geometry.Shape.project` (signed distance, closest point, outward normal) in the
-body frame. ``tests/engine/test_detect.py`` checks the two agree on random points.
-
-Codes and parameters (``params``; ``verts``/``edge_normals`` only for polygons):
-
-- ``BOX`` (box or rectangle): half extents (3 or 2 numbers);
-- ``BALL`` (sphere or disk): radius;
-- ``CYLINDER``: radius, half length (axis = body z);
-- ``POLYGON``: vertices (n × 2, counter-clockwise) and outward edge normals (n × 2).
+and a parameter array (:func:`fixplan.engine.encode.encode`), and :func:`project` answers the
+same question as :meth:`fixplan.geometry.Shape.project` (signed distance, closest point, outward normal) in the
+body frame (codes and parameters: :mod:`fixplan.engine.encode`). ``tests/engine/test_detect.py``
+checks the two agree on random points.
 """
 
 from __future__ import annotations
@@ -20,26 +14,7 @@ import math
 import numpy as np
 from numba import njit
 
-from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
-
-BOX, BALL, CYLINDER, POLYGON = 0, 1, 2, 3
-
-
-def encode(shape: Shape) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
-    """``(kind, params, verts, edge_normals)`` for the compiled queries."""
-    empty = np.zeros((0, 2))
-    if isinstance(shape, Box | Rectangle):
-        return BOX, np.asarray(shape.half, dtype=float), empty, empty
-    if isinstance(shape, Sphere | Disk):
-        return BALL, np.array([shape.radius]), empty, empty
-    if isinstance(shape, Cylinder):
-        return CYLINDER, np.array([shape.radius, shape.length / 2.0]), empty, empty
-    if isinstance(shape, Polygon):
-        V = shape.array
-        E = np.roll(V, -1, axis=0) - V
-        N = np.stack([E[:, 1], -E[:, 0]], axis=1) / np.linalg.norm(E, axis=1)[:, None]
-        return POLYGON, np.array([shape.bounding_radius]), np.ascontiguousarray(V), np.ascontiguousarray(N)
-    raise TypeError(f"no compiled query for {type(shape).__name__}")  # pragma: no cover
+from fixplan.engine.encode import BALL, BOX, CYLINDER
 
 
 @njit(cache=True)

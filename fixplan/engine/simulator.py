@@ -23,14 +23,18 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from fixplan.engine import step as kernels
-from fixplan.engine.detect import encode
+from fixplan.aot import kernel
+from fixplan.engine.encode import encode
+from fixplan.engine.outcome import STATUS_NONFINITE, STATUS_NOT_CONVERGED, STATUS_OK
 from fixplan.errors import InputError, SolverError
 from fixplan.model import Fixture
 from fixplan.settings import DEFAULT, EngineSettings
 from fixplan.spatial import Pose, quaternion_wxyz_from_matrix, rot2, shift_wrench_by, tangent_basis
 
 FloatArray = NDArray[np.float64]
+_STEP = "fixplan.engine.step"  # the compiled step and loops (fixplan.aot: ahead of time when built)
+_step2, _step3_into = kernel(_STEP, "step2"), kernel(_STEP, "step3_into")
+_run2, _run3 = kernel(_STEP, "run2"), kernel(_STEP, "run3")
 _LOADED: set[int] = set()  # dimensions whose compiled loop this process has already called
 WrenchInput = ArrayLike | Callable[[float, "Simulator"], ArrayLike] | None
 
@@ -377,7 +381,7 @@ class Simulator:
         speed = math.sqrt(float(v @ v)) + w_norm * self._bound
         margin = self.margin_m + 2.0 * h * speed
         if self.dimension == 3:
-            err, iters, status, failures, pen = kernels.step3_into(
+            err, iters, status, failures, pen = _step3_into(
                 self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
                 self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu, self._tors, h, f, tau,
                 self.restitution, margin, self.tolerance, self.max_iterations, self._P, self._active, self._P_prev,
@@ -385,7 +389,7 @@ class Simulator:
             )  # fmt: skip
         else:
             theta = math.atan2(self._R[1, 0], self._R[0, 0])
-            out = kernels.step2(
+            out = _step2(
                 theta, self._p, self._v, self._w, self._mass, float(self._Ib[0, 0]), self._com_b,
                 self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu,
                 h, f, tau, self.restitution, margin, self.tolerance, self.max_iterations, self._P, self._active,
@@ -393,15 +397,15 @@ class Simulator:
             )  # fmt: skip
             rot, p, v2, w2, P, active, gap, u, n_w, _pt, err, iters, status, failures, pen = out
             self._gap = gap
-            if status != kernels.STATUS_NONFINITE:
+            if status != STATUS_NONFINITE:
                 self._R, self._p, self._v, self._w = rot2(rot), p, v2, w2
                 self._P, self._active, self._u, self._nw = P, active, u, n_w
-        if status == kernels.STATUS_NONFINITE:
+        if status == STATUS_NONFINITE:
             raise SolverError(
                 f"step {self.steps} at t = {self.time_s:.6g} s produced a non-finite state; the state was kept",
                 extras={"error": err, "iterations": iters},
             )
-        if status == kernels.STATUS_NOT_CONVERGED and self.strict:
+        if status == STATUS_NOT_CONVERGED and self.strict:
             raise SolverError(f"NSGS did not reach {self.tolerance:g} at t = {self.time_s:.6g} s (error {err:.3g})")
         self.time_s += h
         self.steps += 1
@@ -410,7 +414,7 @@ class Simulator:
         self.last = StepInfo(
             float(err),
             int(iters),
-            status == kernels.STATUS_OK,
+            status == STATUS_OK,
             int(failures),
             float(pen),
             self._names_t,
@@ -531,7 +535,7 @@ class Simulator:
         chunk = max(every, (5000 // every) * every)
         done = 0
         wall = 0.0
-        status = kernels.STATUS_OK
+        status = STATUS_OK
         last_err, last_it = 0.0, 0  # a run of 0 steps solved nothing
         d = self.dimension
         if n_steps == 0:
@@ -554,11 +558,11 @@ class Simulator:
             self.max_penetration_m = max(self.max_penetration_m, float(pen))
             if k_done > 0:
                 last_err, last_it = l_err, l_it
-            if status_k == kernels.STATUS_NONFINITE:
+            if status_k == STATUS_NONFINITE:
                 raise SolverError(
                     f"step {self.steps} at t = {self.time_s:.6g} s produced a non-finite state; the state before it was kept"
                 )
-            if status_k == kernels.STATUS_NOT_CONVERGED:
+            if status_k == STATUS_NOT_CONVERGED:
                 status = status_k
                 if self.strict:
                     raise SolverError(f"NSGS did not reach {self.tolerance:g} in some step (worst error {worst_k:.3g})")
@@ -570,7 +574,7 @@ class Simulator:
         traj.steps = n_steps
         if n_steps > 0:
             self.last = StepInfo(
-                float(last_err), int(last_it), status == kernels.STATUS_OK, None, float(self.max_penetration_m),
+                float(last_err), int(last_it), status == STATUS_OK, None, float(self.max_penetration_m),
                 self._names_t, self._active.copy(),
             )  # fmt: skip
         return traj
@@ -580,7 +584,7 @@ class Simulator:
     ) -> tuple[Any, ...]:
         """``n`` compiled steps (3D: state updated in place; 2D: stored back here); the samples and figures."""
         if self.dimension == 3:
-            return kernels.run3(  # type: ignore[no-any-return]
+            return _run3(  # type: ignore[no-any-return]
                 n, every, first, self.time_s, self._R, self._p, self._v, self._w, self._mass, self._Ib,
                 self._Ib_inv, self._com_b, self._kind, self._params, self._verts, self._enorm, self._loc_p,
                 self._loc_r, self._mu, self._tors, self.dt, gravity_f, times, table, self.restitution,
@@ -588,7 +592,7 @@ class Simulator:
                 self._P_prev, self._active_prev, self._gap, self._u, self._nw,
             )  # fmt: skip
         theta = math.atan2(self._R[1, 0], self._R[0, 0])
-        out = kernels.run2(
+        out = _run2(
             n, every, first, self.time_s, theta, self._p, self._v, float(self._w), self._mass,
             float(self._Ib[0, 0]), self._com_b, self._kind, self._params, self._verts, self._enorm,
             self._loc_p, self._loc_r, self._mu, self.dt, gravity_f, times, table, self.restitution,
@@ -596,7 +600,7 @@ class Simulator:
         )  # fmt: skip
         (rt, rp, rori, rnu, rfn, rgap, rerr, rit, th, p2, v2, w2, P2, act2, gap2, u2, nw2,
          t_end, k_done, status_k, pen, worst_k, l_err, l_it) = out  # fmt: skip
-        if k_done > 0 or status_k == kernels.STATUS_NONFINITE:
+        if k_done > 0 or status_k == STATUS_NONFINITE:
             self._gap = gap2
         if k_done > 0:
             self._R, self._p, self._v, self._w = rot2(th), p2, v2, float(w2)

@@ -55,12 +55,12 @@ import numpy as np
 from numba import njit
 
 from fixplan._spatial_kernels import exp_so3_into, quat_into, shifted_moment2, shifted_moment3, tangents3
-from fixplan.engine.detect import BOX, box_query3, project, query3
+from fixplan.engine.detect import box_query3, project, query3
+from fixplan.engine.encode import BOX
 from fixplan.engine.linalg import mm, mm3_into, mtv, mtv3_into, mv, mv3_into
 from fixplan.engine.local import WORKSPACE_SIZE, project_cone_into
 from fixplan.engine.nsgs import nsgs_dense
-
-STATUS_OK, STATUS_NOT_CONVERGED, STATUS_NONFINITE = 0, 1, 2
+from fixplan.engine.outcome import STATUS_NONFINITE, STATUS_NOT_CONVERGED, STATUS_OK
 
 
 @njit(cache=True)
@@ -621,7 +621,7 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
         r = 1
     t = t_start
     max_pen = 0.0
-    status = STATUS_OK
+    status = np.int64(STATUS_OK)  # not a literal: st (int64) is assigned to it below
     worst_err = 0.0
     last_err, last_it = 0.0, 0
     done = 0
@@ -722,7 +722,7 @@ def run2(n_steps, record_every, first, t_start, theta, p, v, w, mass, Izz, com_b
         r = 1
     t = t_start
     max_pen = 0.0
-    status = STATUS_OK
+    status = np.int64(STATUS_OK)  # not a literal: st (int64) is assigned to it below
     worst_err = 0.0
     last_err, last_it = 0.0, 0
     done = 0

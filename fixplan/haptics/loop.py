@@ -24,15 +24,17 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fixplan.aot import kernel
 from fixplan.engine.simulator import ContactReport, Simulator
 from fixplan.errors import InputError
-from fixplan.haptics import _kernels
 from fixplan.haptics.coupling import VirtualCoupling
 from fixplan.haptics.device import SimulatedDevice
 from fixplan.spatial import Pose, log_so3, shift_twist
 
 FloatArray = NDArray[np.float64]
 Operator = Callable[[float, SimulatedDevice], ArrayLike]
+
+_coupling3 = kernel("fixplan.haptics._kernels", "coupling3")  # 3D only: imported on first call
 
 
 @dataclass
@@ -128,7 +130,7 @@ class HapticLoop:
         x_d, v_d = self.device.position(), self.device.velocity()
         if d == 3:
             R, p, v, w = self.sim.body_state
-            w_c = _kernels.coupling3(R, p, self._com_b, v, w, self._R0, x_d, v_d, self._K, self._B)
+            w_c = _coupling3(R, p, self._com_b, v, w, self._R0, x_d, v_d, self._K, self._B)
         else:
             x_w, v_w = self.workpiece_coordinates()
             w_c = self._K * (x_d - x_w) + self._B * (v_d - v_w)
@@ -163,7 +165,7 @@ class HapticLoop:
         x_d, v_d = self.device.position(), self.device.velocity()
         if scratch.dimension == 3:
             R, p, v, w = scratch.body_state
-            _kernels.coupling3(R, p, self._com_b, v, w, self._R0, x_d, v_d, self._K, self._B)
+            _coupling3(R, p, self._com_b, v, w, self._R0, x_d, v_d, self._K, self._B)
         scratch.step(np.zeros(6 if scratch.dimension == 3 else 3))
 
     def run(

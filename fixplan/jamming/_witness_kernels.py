@@ -15,8 +15,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-SLIDE, STICK, OPEN = 0, 1, 2
-
 
 @njit(cache=True)
 def system(M, J, off, size, mu, D, w, z, role):

@@ -34,8 +34,8 @@ from typing import Any, Literal, get_args
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from fixplan.aot import kernel
 from fixplan.errors import InputError
-from fixplan.jamming import _classify_kernels as _kernels
 from fixplan.jamming.backends import BACKENDS, ClarabelProgram, ConeSolution
 from fixplan.jamming.programs import ProgramBuilder
 from fixplan.jamming.sliding import WitnessSearch
@@ -44,6 +44,8 @@ from fixplan.nnls import nnls
 from fixplan.settings import DEFAULT as DEFAULT_SETTINGS
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
 from fixplan.settings import Tolerances
+
+_nnls_kernel = kernel("fixplan.jamming._classify_kernels", "nnls")
 
 FloatArray = NDArray[np.float64]
 
@@ -227,7 +229,7 @@ class Classifier:
 
         # 1. held: normal forces alone (NNLS on the M⁻¹-weighted residual)
         rhs = -(self.builder.C @ w_hat)
-        f_n, normal_res, ok = _kernels.nnls(self._normal_matrix, rhs, 50 * len(cs) + 50, self._nnls_tol)
+        f_n, normal_res, ok = _nnls_kernel(self._normal_matrix, rhs, 50 * len(cs) + 50, self._nnls_tol)
         if not ok:  # the compiled QR met dependent columns: the NumPy version (SVD least squares)
             f_n, normal_res = nnls(self._normal_matrix, rhs, maxiter=50 * len(cs) + 50)
         if normal_res <= tol.balance_rel:

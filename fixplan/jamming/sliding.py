@@ -36,13 +36,18 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from fixplan.jamming import _witness_kernels as kernels
+from fixplan.aot import kernel
+from fixplan.jamming._roles import OPEN, STICK
 from fixplan.kinematics import ContactSet
 from fixplan.settings import DEFAULT
 
 _W = DEFAULT.witness  # the acceptance thresholds (fixplan.settings.WitnessSettings)
 
 FloatArray = NDArray[np.float64]
+_KERNELS = "fixplan.jamming._witness_kernels"
+_system = kernel(_KERNELS, "system")
+_newton = kernel(_KERNELS, "newton")
+_fixed_point = kernel(_KERNELS, "fixed_point")
 Roles = tuple[tuple[int, ...], tuple[int, ...]]  # (sticking indices, open indices)
 
 
@@ -79,21 +84,21 @@ class Rows:
     def code(self, roles: Roles) -> NDArray[np.int64]:
         """Role codes for the kernels: 0 slide, 1 stick, 2 open."""
         m = np.zeros(len(self.cs), dtype=np.int64)
-        m[list(roles[0])] = kernels.STICK
-        m[list(roles[1])] = kernels.OPEN
+        m[list(roles[0])] = STICK
+        m[list(roles[1])] = OPEN
         return m
 
     def system(self, w_e: FloatArray, z: FloatArray, roles: Roles) -> tuple[FloatArray, FloatArray, FloatArray]:
-        return kernels.system(self.M, self.Jall, self.off, self.size, self.mu_arr, self.Dm, w_e, z, self.code(roles))
+        return _system(self.M, self.Jall, self.off, self.size, self.mu_arr, self.Dm, w_e, z, self.code(roles))
 
     def newton(self, w_e: FloatArray, z0: FloatArray, roles: Roles, iterations: int = 30) -> FloatArray:
-        return kernels.newton(
+        return _newton(
             self.M, self.Jall, self.off, self.size, self.mu_arr, self.Dm, w_e, z0, self.code(roles), iterations
         )
 
     def fixed_point(self, w_e: FloatArray, z0: FloatArray, sweeps: int = 4) -> FloatArray:
         """All-slide start: freeze slip directions at the current a, solve the linear system, repeat."""
-        return kernels.fixed_point(self.M, self.Jall, self.off, self.size, self.mu_arr, self.Dm, w_e, z0, sweeps)
+        return _fixed_point(self.M, self.Jall, self.off, self.size, self.mu_arr, self.Dm, w_e, z0, sweeps)
 
 
 def _accept(

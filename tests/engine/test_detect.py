@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from fixplan.engine.detect import encode, project
+from fixplan.engine.detect import project
+from fixplan.engine.encode import encode
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Sphere
 
 SHAPES = [

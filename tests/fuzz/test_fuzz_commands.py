@@ -215,7 +215,10 @@ def test_help_and_version_on_stdout() -> None:
     version = run_in_process(["--version"])
     from importlib.metadata import version as installed
 
-    assert version.code == 0 and version.stdout.strip() == f"fixplan {installed('fixplan')}"
+    from fixplan import aot
+
+    assert version.code == 0
+    assert version.stdout.splitlines() == [f"fixplan {installed('fixplan')}", f"kernels: {aot.status()}"]
 
 
 def test_generate_into_the_folder_only(tmp_path: Path) -> None:

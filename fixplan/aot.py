@@ -1,0 +1,196 @@
+"""Kernels compiled ahead of time: numba's own code for the 2D path, loaded without numba.
+
+Why. A ``fixplan solve`` of a 2D plate spent about as long starting numba as planning: its
+import (0.27 s) and, on the first kernel loaded from the on-disk cache, the set-up of its typing
+and lowering registries (0.45 s), in every process. ``python -m fixplan.cli.precompile`` (run by
+``make install``) therefore also compiles the kernels of :data:`EXPORTS` with ``numba.pycc``
+into one extension module beside this file, ``fixplan/_aot<suffix>``, and writes
+``fixplan/_aot.json``: for every export, the argument types it was compiled for. Those types are
+read from the JIT dispatchers after the precompile workloads ran the real commands, so they are
+the signatures the commands use, not a hand-written list.
+
+Same code. The extension is compiled from the same Python source by the same compiler, for the
+host CPU like the JIT; ``tests/test_aot.py`` pins every export to its JIT twin, bit for bit.
+
+When it is used. :func:`kernel` hands out the compiled function only when the extension exists,
+imports, and was built from this very source: the SHA-256 of every ``.py`` file of the package
+and of the Python and NumPy versions (:func:`fingerprint`) must equal the one the build recorded
+in the manifest and compiled into the extension. Otherwise, or with ``FIXPLAN_KERNELS=jit`` in
+the environment, it hands out numba's dispatcher, imported on first call, as before: editing any
+file of the package falls back to JIT until the next precompile. :func:`status` says which and why.
+
+Guarded calls. A compiled function does not check its arguments: a wrong dtype is reinterpreted,
+a list crashes the process. Every call therefore compares its arguments with the export's types
+(exact scalar types; arrays by dtype, rank, C-contiguity and writability), about 0.1 µs per
+argument; a call that matches no compiled variant goes to the JIT dispatcher instead and is
+counted in :data:`fallbacks`.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib
+import json
+import os
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+EXTENSION = "_aot"  # the module fixplan._aot
+MANIFEST = PACKAGE_DIR / "_aot.json"
+ENV = "FIXPLAN_KERNELS"  # "jit" forces numba's dispatchers
+
+# The kernels the 2D solve path calls from Python (planning: the jamming classifier's NNLS and
+# the witness system; verification: the engine's planar step and its compiled loop).
+EXPORTS: tuple[tuple[str, str], ...] = (
+    ("fixplan.engine.step", "step2"),
+    ("fixplan.engine.step", "run2"),
+    ("fixplan.jamming._classify_kernels", "nnls"),
+    ("fixplan.jamming._witness_kernels", "system"),
+)
+
+fallbacks: dict[str, int] = {}  # "module.name" -> calls that matched no compiled variant
+
+_SCALARS: dict[str, tuple[type, ...]] = {
+    "float64": (float, np.float64),
+    "int64": (int, np.int64),
+    "bool": (bool, np.bool_),
+}
+
+
+def fingerprint() -> str:
+    """SHA-256 (hex) of every ``.py`` file of the package, with the Python and NumPy versions."""
+    digest = hashlib.sha256(f"python {sys.version_info[:3]} numpy {np.__version__}\n".encode())
+    for path in sorted(PACKAGE_DIR.rglob("*.py")):
+        digest.update(path.relative_to(PACKAGE_DIR).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def fingerprint_int(hexdigest: str) -> int:
+    """The first 60 bits of a fingerprint, as the int64 the extension's ``fingerprint__()`` returns."""
+    return int(hexdigest[:15], 16)
+
+
+def export_name(module: str, name: str, variant: int) -> str:
+    """The extension's name for variant ``variant`` of ``module.name``: ``step__step2__0``."""
+    return f"{module.rsplit('.', 1)[-1].lstrip('_')}__{name}__{variant}"
+
+
+@functools.cache
+def _load() -> tuple[Any, dict[str, Any], str]:
+    """(the extension module or None, its manifest, a one-line reason)."""
+    if os.environ.get(ENV, "").strip().lower() == "jit":
+        return None, {}, f"just-in-time (numba): {ENV}=jit"
+    if not MANIFEST.is_file():
+        return None, {}, "just-in-time (numba): not built (python -m fixplan.cli.precompile builds it)"
+    try:
+        manifest = json.loads(MANIFEST.read_text())
+        recorded = str(manifest["fingerprint"])
+        exports = manifest["exports"]
+        if not isinstance(exports, dict):
+            raise TypeError("exports is not a table")
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        return None, {}, f"just-in-time (numba): {MANIFEST.name} unreadable ({exc})"
+    if recorded != fingerprint():
+        return None, {}, "just-in-time (numba): the source changed since the build (precompile rebuilds it)"
+    try:
+        module = importlib.import_module(f"fixplan.{EXTENSION}")
+        built = int(module.fingerprint__())
+    except (ImportError, AttributeError, OSError) as exc:
+        return None, {}, f"just-in-time (numba): the extension does not load ({exc})"
+    if built != fingerprint_int(recorded):
+        return None, {}, "just-in-time (numba): the extension and its manifest come from different builds"
+    return (
+        module,
+        manifest,
+        f"ahead-of-time: {Path(module.__file__ or EXTENSION).name}, built by numba {manifest.get('numba', '?')}",
+    )
+
+
+def status() -> str:
+    """One line: which kernels run (ahead-of-time or just-in-time) and why."""
+    return _load()[2]
+
+
+def _spec(arg: dict[str, Any]) -> tuple[type, ...] | tuple[np.dtype[Any], int, bool, bool]:
+    """A manifest argument as the tuple :func:`_accepts` compares with."""
+    if arg["kind"] == "scalar":
+        return _SCALARS[arg["dtype"]]
+    return (np.dtype(arg["dtype"]), int(arg["ndim"]), bool(arg["contiguous"]), bool(arg["mutable"]))
+
+
+def _accepts(args: Sequence[Any], specs: Sequence[Any]) -> bool:
+    """Whether ``args`` have exactly the types one compiled variant was built for."""
+    if len(args) != len(specs):
+        return False
+    for a, s in zip(args, specs, strict=True):
+        if type(s[0]) is type:  # a scalar: its exact Python or NumPy type
+            if type(a) not in s:
+                return False
+        elif (
+            type(a) is not np.ndarray
+            or a.dtype != s[0]
+            or a.ndim != s[1]
+            or (s[2] and not a.flags.c_contiguous)
+            or (s[3] and not a.flags.writeable)
+        ):
+            return False
+    return True
+
+
+class _JitKernel:
+    """numba's dispatcher for ``module.name``, imported on the first call."""
+
+    __slots__ = ("_function", "_module", "_name")
+
+    def __init__(self, module: str, name: str) -> None:
+        self._module, self._name = module, name
+        self._function: Callable[..., Any] | None = None
+
+    def resolve(self) -> Callable[..., Any]:
+        if self._function is None:
+            self._function = getattr(importlib.import_module(self._module), self._name)
+        return self._function
+
+    def __call__(self, *args: Any) -> Any:
+        return self.resolve()(*args)
+
+
+class _AotKernel:
+    """The compiled variants of one kernel, each behind its argument check; JIT when none fits."""
+
+    __slots__ = ("_jit", "_key", "_variants")
+
+    def __init__(self, key: str, variants: list[tuple[tuple[Any, ...], Callable[..., Any]]], jit: _JitKernel) -> None:
+        self._key, self._variants, self._jit = key, variants, jit
+
+    def __call__(self, *args: Any) -> Any:
+        for specs, function in self._variants:
+            if _accepts(args, specs):
+                return function(*args)
+        fallbacks[self._key] = fallbacks.get(self._key, 0) + 1
+        return self._jit(*args)
+
+
+@functools.cache
+def kernel(module: str, name: str) -> Callable[..., Any]:
+    """``module.name`` compiled ahead of time when usable (see the module's text), else numba's JIT.
+
+    Never imports numba itself: the JIT dispatcher is imported on its first call.
+    """
+    jit = _JitKernel(module, name)
+    extension, manifest, _ = _load()
+    entries = manifest.get("exports", {}).get(f"{module}.{name}") if extension is not None else None
+    if not entries:
+        return jit
+    try:
+        variants = [(tuple(_spec(a) for a in e["args"]), getattr(extension, e["export"])) for e in entries]
+    except (KeyError, TypeError, AttributeError):
+        return jit
+    return _AotKernel(f"{module}.{name}", variants, jit)

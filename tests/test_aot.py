@@ -1,0 +1,230 @@
+"""The ahead-of-time kernels (:mod:`fixplan.aot`) compute what numba's JIT computes, to the bit.
+
+The extension is built by ``python -m fixplan.cli.precompile`` (``make install`` runs it). The
+tests that need it skip, with the reason :func:`fixplan.aot.status` gives, when it is not built
+from this very source (after editing a file, until the next precompile). The guard and the
+fallback rules are tested without it.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import PROBLEMS, ROOT
+
+import fixplan
+from fixplan import aot
+from fixplan.engine import simulator as simulator_module
+from fixplan.engine.simulator import Simulator, WrenchSchedule
+
+BUILT = aot.status().startswith("ahead-of-time")
+needs_build = pytest.mark.skipif(not BUILT, reason=f"no usable extension: {aot.status()}")
+
+PLATES_2D = ["gen-plate-2d-s2026-000.toml", "gen-plate-2d-s2026-002.toml", "polygon-2d.toml", "naive-order-jams.toml"]
+
+
+def _jit(module: str, name: str):  # numba's dispatcher itself
+    import importlib
+
+    return getattr(importlib.import_module(module), name)
+
+
+# -- the guard: a compiled function is only called with the types it was built for ----------
+def _spec(**kw):
+    return aot._spec(kw)
+
+
+def test_the_guard_accepts_exact_types_only() -> None:
+    specs = (
+        _spec(kind="scalar", dtype="float64"),
+        _spec(kind="scalar", dtype="int64"),
+        _spec(kind="array", dtype="float64", ndim=2, contiguous=True, mutable=True),
+    )
+    A = np.zeros((3, 2))
+    assert aot._accepts((1.5, 3, A), specs)
+    assert aot._accepts((np.float64(1.5), np.int64(3), A), specs)
+    assert not aot._accepts((1, 3, A), specs)  # an int where a float64 is compiled: numba would type it int64
+    assert not aot._accepts((1.5, True, A), specs)  # a bool is not an int64
+    assert not aot._accepts((1.5, 3.0, A), specs)
+    assert not aot._accepts((1.5, 3, A.astype(np.float32)), specs)  # would be reinterpreted
+    assert not aot._accepts((1.5, 3, A.astype(np.int64)), specs)
+    assert not aot._accepts((1.5, 3, np.zeros(3)), specs)  # rank
+    assert not aot._accepts((1.5, 3, np.asfortranarray(np.zeros((3, 2)))), specs)  # not C-contiguous
+    assert not aot._accepts((1.5, 3, np.zeros((3, 4))[:, ::2]), specs)
+    assert not aot._accepts((1.5, 3, A.tolist()), specs)  # a list would crash the process
+    readonly = A.copy()
+    readonly.flags.writeable = False
+    assert not aot._accepts((1.5, 3, readonly), specs)
+    assert not aot._accepts((1.5, 3), specs)
+
+
+def test_a_call_no_variant_accepts_goes_to_the_jit_and_is_counted(monkeypatch) -> None:
+    calls: list[str] = []
+    jit = aot._JitKernel("m", "f")
+    jit._function = lambda *a: calls.append("jit") or "jit"  # type: ignore[assignment]
+    spec = (_spec(kind="array", dtype="float64", ndim=1, contiguous=True, mutable=True),)
+    kernel = aot._AotKernel("m.f", [(spec, lambda *a: calls.append("aot") or "aot")], jit)
+    monkeypatch.setattr(aot, "fallbacks", {})
+    assert kernel(np.zeros(2)) == "aot"
+    assert kernel(np.zeros(2, dtype=np.float32)) == "jit"
+    assert kernel([0.0, 0.0]) == "jit"
+    assert calls == ["aot", "jit", "jit"] and aot.fallbacks == {"m.f": 2}
+
+
+def test_without_a_usable_build_every_kernel_is_numbas_dispatcher(monkeypatch, tmp_path: Path) -> None:
+    """Not built, built from other source, or FIXPLAN_KERNELS=jit: the JIT, and status says why."""
+    cases = [
+        ({"MANIFEST": tmp_path / "none.json"}, {}, "not built"),
+        ({"fingerprint": lambda: "0" * 64}, {}, "the source changed"),
+        ({}, {aot.ENV: "jit"}, f"{aot.ENV}=jit"),
+    ]
+    manifest = tmp_path / "_aot.json"
+    manifest.write_text(json.dumps({"fingerprint": aot.fingerprint(), "exports": {}}))
+    for attrs, env, reason in cases:
+        with monkeypatch.context() as m:
+            m.setattr(aot, "MANIFEST", manifest)
+            for k, v in attrs.items():
+                m.setattr(aot, k, v)
+            for k, v in env.items():
+                m.setenv(k, v)
+            aot._load.cache_clear()
+            aot.kernel.cache_clear()
+            assert reason in aot.status()
+            assert isinstance(aot.kernel("fixplan.engine.step", "step2"), aot._JitKernel)
+    aot._load.cache_clear()
+    aot.kernel.cache_clear()
+
+
+def test_the_fingerprint_changes_with_any_source_byte(monkeypatch, tmp_path: Path) -> None:
+    (tmp_path / "a.py").write_text("x = 1\n")
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "b.py").write_text("y = 2\n")
+    monkeypatch.setattr(aot, "PACKAGE_DIR", tmp_path)
+    first = aot.fingerprint()
+    assert aot.fingerprint() == first
+    (tmp_path / "sub" / "b.py").write_text("y = 3\n")
+    assert aot.fingerprint() != first
+    assert 0 <= aot.fingerprint_int(first) < 2**63
+
+
+# -- the build: every export equals its JIT twin ----------------------------------------------
+@needs_build
+def test_the_manifest_covers_every_export_with_compiled_variants() -> None:
+    exports = json.loads(aot.MANIFEST.read_text())["exports"]
+    assert sorted(exports) == sorted(f"{m}.{n}" for m, n in aot.EXPORTS)
+    for module, name in aot.EXPORTS:
+        assert isinstance(aot.kernel(module, name), aot._AotKernel)
+
+
+@needs_build
+def test_nnls_equals_the_jit_bit_for_bit(rng: np.random.Generator) -> None:
+    aot_nnls = aot.kernel("fixplan.jamming._classify_kernels", "nnls")
+    jit_nnls = _jit("fixplan.jamming._classify_kernels", "nnls")
+    for _ in range(200):
+        m, n = rng.integers(2, 9), rng.integers(1, 12)
+        A = np.ascontiguousarray(rng.normal(size=(m, n)))
+        b = rng.normal(size=m) * 10.0 ** rng.integers(-3, 3)
+        x_a, res_a, ok_a = aot_nnls(A, b, 50 * n + 50, 1e-12)
+        x_j, res_j, ok_j = jit_nnls(A, b, 50 * n + 50, 1e-12)
+        assert np.array_equal(x_a, x_j) and res_a == res_j and ok_a == ok_j
+        assert np.all(x_a >= 0.0)
+    assert aot.fallbacks.get("fixplan.jamming._classify_kernels.nnls", 0) == 0
+
+
+@needs_build
+def test_the_witness_system_equals_the_jit_bit_for_bit(rng: np.random.Generator) -> None:
+    from fixplan.jamming.sliding import Rows
+    from fixplan.locating import contact_set
+
+    aot_system = aot.kernel("fixplan.jamming._witness_kernels", "system")
+    jit_system = _jit("fixplan.jamming._witness_kernels", "system")
+    for name in PLATES_2D:
+        fx = fixplan.load(PROBLEMS / name)
+        cs = contact_set(fx, fx.goal_pose, [loc.name for loc in fx.locators])
+        rows = Rows(cs)
+        k = len(cs)
+        for _ in range(20):
+            roles = rng.integers(0, 3, size=k).astype(np.int64)
+            # unknowns: a, then f_n of a sliding contact, λ (its size) of a sticking one, none if open
+            nz = cs.ndof + int(np.sum(np.where(roles == 0, 1, np.where(roles == 1, rows.size, 0))))
+            args = (
+                rows.M,
+                rows.Jall,
+                rows.off,
+                rows.size,
+                rows.mu_arr,
+                rows.Dm,
+                rng.normal(size=cs.ndof),
+                rng.normal(size=nz),
+                roles,
+            )
+            for got, want in zip(aot_system(*args), jit_system(*args), strict=True):
+                assert np.array_equal(got, want)
+
+
+@needs_build
+@pytest.mark.parametrize("name", PLATES_2D)
+def test_a_2d_simulation_steps_and_runs_identically(monkeypatch, name: str) -> None:
+    """Simulator.step (the haptic loop's call) and Simulator.run (the compiled loop), AOT vs JIT."""
+    fx = fixplan.load(PROBLEMS / name)
+    pushes = np.array([[-2.0, -3.0, 0.05], [1.0, -4.0, -0.1], [0.0, 0.0, 0.0]])
+    schedule = WrenchSchedule(np.array([0.0, 0.05, 0.1]), pushes)
+
+    def simulate() -> tuple[list[np.ndarray], dict[str, np.ndarray]]:
+        sim = Simulator(fx)
+        states = []
+        for t in range(150):
+            info = sim.step(pushes[t // 50])
+            states.append(np.concatenate([sim.pose.p_world, [sim.pose.angle_rad], sim.twist, [info.error]]))
+        run = Simulator(fx).run(0.2, schedule, record_every=5)
+        return states, run.arrays()
+
+    states_aot, run_aot = simulate()
+    assert isinstance(simulator_module._step2, aot._AotKernel)
+    monkeypatch.setattr(simulator_module, "_step2", _jit("fixplan.engine.step", "step2"))
+    monkeypatch.setattr(simulator_module, "_run2", _jit("fixplan.engine.step", "run2"))
+    states_jit, run_jit = simulate()
+    assert all(np.array_equal(a, b) for a, b in zip(states_aot, states_jit, strict=True))
+    assert run_aot.keys() == run_jit.keys()
+    assert all(np.array_equal(run_aot[k], run_jit[k], equal_nan=True) for k in run_aot)
+    assert not any(key.startswith("fixplan.engine.step") for key in aot.fallbacks)
+
+
+def _solve_json(path: Path, env: dict[str, str]) -> tuple[dict, list[str]]:
+    code = (
+        "import json, sys; from fixplan.cli import main; from fixplan import aot\n"
+        "try:\n    main(['solve', sys.argv[1], '--json'])\nexcept SystemExit:\n    pass\n"
+        "print(json.dumps({'numba': 'numba' in sys.modules, 'fallbacks': aot.fallbacks}), file=sys.stderr)\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code, str(path)], capture_output=True, text=True, cwd=ROOT, env=env, timeout=600
+    )
+    return json.loads(proc.stdout), proc.stderr.strip().splitlines()
+
+
+def _without_wall_clock(value):
+    if isinstance(value, dict):
+        wall = ("timings", "deadline_misses", "wall_time", "solve_time", "_us")  # measured, not computed
+        return {k: _without_wall_clock(v) for k, v in value.items() if not any(w in k for w in wall)}
+    if isinstance(value, list):
+        return [_without_wall_clock(v) for v in value]
+    return value
+
+
+@needs_build
+def test_a_2d_solve_runs_without_numba_and_answers_as_the_jit_does() -> None:
+    import os
+
+    path = PROBLEMS / "gen-plate-2d-s2026-000.toml"
+    env = {k: v for k, v in os.environ.items() if k != aot.ENV}
+    out_aot, err_aot = _solve_json(path, env)
+    out_jit, err_jit = _solve_json(path, {**env, aot.ENV: "jit"})
+    assert json.loads(err_aot[-1]) == {"numba": False, "fallbacks": {}}
+    assert json.loads(err_jit[-1])["numba"] is True
+    assert out_aot["status"] == "planned"
+    assert _without_wall_clock(out_aot) == _without_wall_clock(out_jit)
