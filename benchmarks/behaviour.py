@@ -39,11 +39,12 @@ def _is_timing(key: str) -> bool:
     )
 
 
-def _clean(obj: Any, drop: frozenset[str] = frozenset()) -> Any:
+def without_wall_clock(obj: Any, drop: frozenset[str] = frozenset()) -> Any:
+    """``obj`` (a command's JSON answer) without its wall-clock fields, the keys in ``drop`` and checkout paths."""
     if isinstance(obj, dict):
-        return {k: _clean(v, drop) for k, v in obj.items() if not _is_timing(k) and k not in drop}
+        return {k: without_wall_clock(v, drop) for k, v in obj.items() if not _is_timing(k) and k not in drop}
     if isinstance(obj, list):
-        return [_clean(v, drop) for v in obj]
+        return [without_wall_clock(v, drop) for v in obj]
     if isinstance(obj, str):  # paths of the checkout differ between clones and worktrees
         return obj.replace(str(ROOT) + "/", "")
     return obj
@@ -58,9 +59,9 @@ def _run(args: list[str], drop: frozenset[str] = frozenset()) -> dict[str, Any]:
     out: dict[str, Any] = {"exit": result.exit_code}
     text = result.stdout.strip()
     try:
-        out["json"] = _clean(json.loads(text), drop) if text else None
+        out["json"] = without_wall_clock(json.loads(text), drop) if text else None
     except json.JSONDecodeError:
-        out["text"] = _clean(text.splitlines()[-1]) if text else ""
+        out["text"] = without_wall_clock(text.splitlines()[-1]) if text else ""
     return out
 
 

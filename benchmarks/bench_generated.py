@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from behaviour import without_wall_clock
 from run import Section
 
 from fixplan import aot
@@ -48,7 +49,6 @@ TARGETS_S = {"box-321": {"median": 5.0, "p95": 20.0}, "plate-2d": {"median": 1.5
 Z95 = 1.959963984540054
 # The family also solved with numba's JIT (FIXPLAN_KERNELS=jit) when fixplan.aot's extension is in use.
 KERNEL_FAMILY = "plate-2d"
-WALL_CLOCK_KEYS = ("timings", "deadline_misses", "wall_time", "solve_time", "_us")
 
 
 def _exe() -> str:
@@ -81,15 +81,6 @@ def _run_json(
     return wall, out, proc.returncode, ""
 
 
-def _answer(value: Any) -> Any:
-    """A solve's JSON without the fields measured on the wall clock (those differ run to run)."""
-    if isinstance(value, dict):
-        return {k: _answer(v) for k, v in value.items() if not any(w in k for w in WALL_CLOCK_KEYS)}
-    if isinstance(value, list):
-        return [_answer(v) for v in value]
-    return value
-
-
 def _solve(path: Path, env: dict[str, str] | None = None) -> dict[str, Any]:
     wall, out, code, err = _run_json([_exe(), "solve", str(path), "--json"], TIMEOUT_S, env)
     row: dict[str, Any] = {"status": "timeout" if err == "timeout" else "crash", "proven": None, "exit": code}
@@ -97,7 +88,7 @@ def _solve(path: Path, env: dict[str, str] | None = None) -> dict[str, Any]:
     if out is None:
         row["reason"] = err
         return row
-    row["answer"] = _answer(out)
+    row["answer"] = without_wall_clock(out)
     status = out.get("status")
     expected_exit = 0 if status == "planned" else 1
     if status not in ("planned", "unverified", "infeasible") or code != expected_exit:
@@ -319,7 +310,7 @@ def _markdown(
             f"{np.percentile([j['wall_s'] for j in jit_rows], 95):.2f} | {same}/{len(jit_rows)} |",
             "",
             "Equal = the whole `--json` answer (status, sequence, wrenches, paths, verification trace) to the bit,",
-            f"fields measured on the wall clock ({', '.join(WALL_CLOCK_KEYS)}) aside.",
+            "fields measured on the wall clock aside (`benchmarks/behaviour.py`'s `without_wall_clock`).",
         ]
     proven_rows = [r for r in rows if r["status"] == "infeasible" and r["proven"]]
     lines += [
