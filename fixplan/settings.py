@@ -357,6 +357,8 @@ class ExecutionSettings:
     dwell_s: float = 0.01  # a pressed set counts once held this long
     stall_speed_mps: float = 1e-4
     stall_s: float = 0.12
+    progress_s: float = 1.5  # a transition whose target's gap has not shrunk by progress_m for this long stalls
+    progress_m: float = 5e-4
     max_retries: int = 3  # stall recoveries per transition before giving up
     max_replans: int = 8  # 8 verified 64 of 72 development fixtures, 4 verified 62
     settle_s: float = 0.2  # at rest with every locator pressed this long: done
@@ -525,6 +527,44 @@ class Numerics:
 
 
 @dataclass(frozen=True)
+class PolicySettings:
+    """The contact-state policy (:mod:`fixplan.planner.policy`): a next transition for every state.
+
+    Attributes
+    ----------
+    backoff_m : float
+        A state's representative pose is the located pose backed off so that every locator not in
+        the state opens by this gap [m] while the state's locators keep touching (the pre-image of
+        the goal, to first order).
+    min_open_fraction : float
+        ... and the state counts as realisable when every such locator's exact gap there is at
+        least this fraction of ``backoff_m`` (no other contact closes with the state's).
+    checks_per_state : int
+        Candidate transitions out of a state whose first push is checked (one cone program each),
+        cheapest cost-to-go first; the first that has a non-jamming push is kept.
+    max_locators : int
+        Above this many locators the policy covers the plan's states and the states one contact
+        away from them only (2ⁿ states otherwise).
+    max_verifications : int
+        ``solve`` verifies at most this many plans: when the simulated load of the best sequence
+        fails, the transition where it failed is set aside and the next-best sequence is tried.
+    approach_samples : int
+        Poses per leg of the free approach path at which every locator's exact gap is checked.
+    approach_waypoint_scales : tuple of float
+        The approach's detour waypoint lies this many back-offs out from the goal, tried in turn
+        (:mod:`fixplan.planner.approach`).
+    """
+
+    backoff_m: float = 2e-3
+    min_open_fraction: float = 0.5
+    checks_per_state: int = 4
+    max_locators: int = 8
+    max_verifications: int = 3
+    approach_samples: int = 40
+    approach_waypoint_scales: tuple[float, ...] = (3.0, 6.0, 12.0, 25.0, 50.0, 100.0)
+
+
+@dataclass(frozen=True)
 class Settings:
     """One of each group: what a profile selects."""
 
@@ -539,6 +579,7 @@ class Settings:
     execution: ExecutionSettings = field(default_factory=ExecutionSettings)
     witness: WitnessSettings = field(default_factory=WitnessSettings)
     robust: RobustSettings = field(default_factory=RobustSettings)
+    policy: PolicySettings = field(default_factory=PolicySettings)
 
     def with_(self, **changes: Any) -> Settings:
         """A copy with some groups replaced."""

@@ -118,7 +118,8 @@ def test_undefined_numbers_are_null(box_unverified):
 def test_the_plan_json_keys_are_the_cli_contract(box_unverified):
     data = box_unverified.to_json()
     assert list(data) == [
-        "status", "reason", "sequence", "transitions", "tried", "proven", "certificate", "verification", "timings",
+        "status", "reason", "sequence", "transitions", "tried", "proven", "certificate", "verification", "policy",
+        "coverage", "timings",
     ]  # fmt: skip
     assert list(data["transitions"][0]) == [
         "from", "to", "added", "motion", "wrench", "margin", "friction_robustness", "time_s", "path_length_m",

@@ -54,6 +54,7 @@ from fixplan.spatial import Pose, shift_twist, shift_wrench
 
 if TYPE_CHECKING:
     from fixplan.model import Fixture
+    from fixplan.planner.policy import Policy
 
 FloatArray = NDArray[np.float64]
 State = frozenset[str]
@@ -94,6 +95,7 @@ class ExecutionLog:
             "retries": 0,
             "skipped_states": 0,
             "recovered": 0,
+            "policy_switches": 0,
         }
     )
     observed: list[tuple[str, ...]] = field(default_factory=list)  # debounced pressed sets, in order
@@ -153,8 +155,10 @@ class Executor:
         replan: Replan | None = None,
         noise: ExecutionNoise | None = None,
         tick_s: float = 1e-3,
+        policy: Policy | None = None,
     ):
         self.fixture = fixture
+        self.policy = policy
         self.settings = s = settings or ExecutionSettings()
         self.noise = noise or ExecutionNoise()
         self.rng = np.random.default_rng(self.noise.seed)
@@ -184,6 +188,8 @@ class Executor:
         self._settled_since: float | None = None
         self._hold: FloatArray | None = None
         self._seen: set[str] = set()  # locators observed in contact at least once
+        self._policy_failed: set[State] = set()  # states whose transition stalled and were re-planned from
+        self._progress: tuple[int, float, float] | None = None  # (transition, least target gap [m], since [s])
         self._arrived = False  # the current target touches: holding until the state is confirmed
         self._recover_until: float | None = None  # pressing a lost contact back until then
         self._recover_why = ""
@@ -305,7 +311,27 @@ class Executor:
             why = f"unplanned contact state {_fmt(P)} in transition {self.index + 1} (planned {_fmt(self.states[self.index + 1]) if self.index + 1 < len(self.states) else 'the goal'})"
         self._recover_until = None
         self.log.event(t, "guard", why)
+        if self._follow_policy(t, P, why):
+            return
         self._replan(t, pose, P, why, "lost contact" if lost else "unplanned contact")
+
+    def _follow_policy(self, t: float, state: State, why: str) -> bool:
+        """Take the policy's transitions from ``state`` (no planner call); False when it has none.
+
+        A state the policy already led into and that stalled is not taken again from the policy:
+        the re-planner gets it (a fine plan from the pose the part is in).
+        """
+        if self.policy is None or state in self._policy_failed:
+            return False
+        chain = self.policy.chain(state, self.goal_state)
+        if not chain:
+            return False
+        self.log.counts["policy_switches"] += 1
+        self._set_plan(state, chain)
+        self._retry, self._use_direct, self._still_since = 0, False, None
+        seq = " → ".join(_fmt(s) for s in self.states)
+        self.log.event(t, "policy", f"{why}: the policy's transitions from {_fmt(state)}: {seq}")
+        return True
 
     def _replan(self, t: float, pose: Pose, state: State, why: str, kind_of_guard: str) -> None:
         if self.replan is None:
@@ -413,7 +439,8 @@ class Executor:
                 self._recover_until = None
                 P = self._observed if self._observed is not None else frozenset()
                 self.log.event(t, "guard", f"{self._recover_why}; not restored by pressing")
-                self._replan(t, pose, P, self._recover_why, "lost contact")
+                if not self._follow_policy(t, P, self._recover_why):
+                    self._replan(t, pose, P, self._recover_why, "lost contact")
                 if self.done:
                     return self._applied
             else:
@@ -442,6 +469,18 @@ class Executor:
                 self._solve(t, pose, twist, M)
             self._target = self._with_noise(self.wrench)
         return self._applied
+
+    def carry_wrench(self, pose: Pose) -> FloatArray:
+        """The push that holds the part still in free space at ``pose`` (gravity's opposite, about the body origin)."""
+        from fixplan.planner.segments import free_wrench
+
+        return free_wrench(self.fixture, pose, np.zeros(self.ndof), self._mass_matrix(pose))[1]
+
+    def preload(self, w: FloatArray) -> None:
+        """Start with ``w`` already applied (a part that is carried when the run begins)."""
+        self.wrench = np.asarray(w, dtype=float).copy()
+        self._target = self.wrench.copy()
+        self._applied = self.wrench.copy()
 
     def hold_wrench(self, pose: Pose, names: Sequence[str] | None = None) -> FloatArray:
         """A push that keeps every locator (or ``names``) pressed at ``pose`` (about the body origin, world axes).
@@ -482,7 +521,26 @@ class Executor:
         return mass_matrix(wp.mass_kg, wp.inertia_body, pose.R_world_body)
 
     def _check_stall(self, t: float, pose: Pose, speed: float) -> None:
+        """Two guards on the current transition: at rest, or moving without closing the target's gap.
+
+        No progress — the target's gap not ``progress_m`` smaller than its least value so far for
+        ``progress_s`` — is a stall too: a part rocking on a kept contact, or sliding along it
+        without coming nearer, has speed but goes nowhere (a plate slid for 7 s with its side
+        locator 30 mm away until the time ran out).
+        """
         s = self.settings
+        step = self.steps[self.index]
+        from fixplan.locating import locator_contact
+
+        gap = float(locator_contact(self.fixture.workpiece, pose, self.fixture.locator(step.target)).gap_m)
+        if self._progress is None or self._progress[0] != self.index or gap < self._progress[1] - s.progress_m:
+            self._progress = (self.index, gap, t)
+        elif t - self._progress[2] >= s.progress_s:
+            self._progress = (self.index, gap, t)
+            self._stalled(
+                t, pose, f"no progress in transition {self.index + 1}: {step.target}'s gap stays at {gap:.3g} m"
+            )
+            return
         if speed >= s.stall_speed_mps:
             self._still_since = None
             return
@@ -492,13 +550,28 @@ class Executor:
         if t - self._still_since < s.stall_s:
             return
         self._still_since = None
+        self._stalled(t, pose, f"at rest in transition {self.index + 1} before {step.target} touches")
+
+    def _stalled(self, t: float, pose: Pose, what: str) -> None:
+        """A stall: re-search the push, then go along the direct motion, then re-plan from here, then fail."""
+        s = self.settings
         self.log.counts["stalls"] += 1
         step = self.steps[self.index]
+        state = self.states[self.index]
+        if self._retry >= s.max_retries and self.replan is not None and state not in self._policy_failed:
+            # the transition (the policy's, planned at a representative pose, or the plan's from
+            # where the part was then) does not move the part from where it is now: a fine plan
+            # from here is the last resort
+            self._policy_failed.add(state)
+            why = f"{what}: {_fmt(state)} + {step.target} stalled after {self._retry} re-searches"
+            self.log.event(t, "guard", why)
+            self._replan(t, pose, state, why, "stall")
+            return
         if self._retry >= s.max_retries:
             self._fail(
                 t,
                 f"stalled in transition {self.index + 1} ({_fmt(self.states[self.index])} + {step.target}) at t = {t:.3f} s "
-                f"after {self._retry} re-searches: "
+                f"after {self._retry} re-searches ({what}): "
                 + (
                     self._last_reason or f"it stays at rest under pushes found to move it ({self._verdict(pose, step)})"
                 ),
@@ -512,7 +585,7 @@ class Executor:
         self.log.event(
             t,
             "stall",
-            f"at rest in transition {self.index + 1} before {step.target} touches ({self._verdict(pose, step)}): "
+            f"{what} ({self._verdict(pose, step)}): "
             f"re-search #{self._retry}"
             + (" along the direct gap-closing motion" if self._use_direct else " with a larger push"),
         )
@@ -564,11 +637,28 @@ class Executor:
                 for a, b_ in zip(step.path[ahead:-1], step.path[ahead + 1 :], strict=True)
             ]
             left_path = dist[ahead] + float(sum(seg))
+            if est_cs_rows is None and ahead < len(step.path) - 2:
+                # free flight along the guide (the approach from free space may first take the
+                # part back, away from the target): follow it, nothing to keep, until its last
+                # segment leads onto the target
+                size = mass_speed(twists[ahead], M, wp.mass_kg)
+                if size > 1e-15:
+                    return twists[ahead] / size, max(left_path, gap)
             if left_path > max(2.0 * gap, 1e-3) or ahead < len(step.path) - 1:
                 to = project_keeping(twists[ahead], est_cs_rows, M_inv)
                 # blend in the gap-closing motion so the path leads onto the target
                 nu = to + 0.5 * direct * (mass_speed(to, M, wp.mass_kg) / max(mass_speed(direct, M, wp.mass_kg), 1e-15))
                 left = max(left_path, gap)
+        elif len(step.path) < 2 and fx.goal_pose is not None:
+            # no guide (a policy's transition planned at a representative pose): close the gap while
+            # turning toward the goal — the motions that keep the contacts and leave the target's
+            # gap alone, toward the located pose, at most as fast as the closing motion (closing
+            # the gap greedily rolled a tilted box on one base locator further from the goal)
+            keep_target = cs.G[-1:] if est_cs_rows is None else np.vstack([est_cs_rows, cs.G[-1:]])
+            toward = project_keeping(twist_from_pose(pose, fx.goal_pose, wp.com_body), keep_target, M_inv)
+            size_t, size_d = mass_speed(toward, M, wp.mass_kg), mass_speed(direct, M, wp.mass_kg)
+            if size_t > 1e-15:
+                nu = direct + toward * min(1.0, size_d / size_t)
         nu = project_keeping(nu, est_cs_rows, M_inv)
         if nu is not direct and float(cs.G[-1] @ nu) >= 0.0:
             # the guide leads away from the target (the part is off the path, e.g. a perturbed
@@ -640,6 +730,14 @@ class Executor:
         a_com = nu_hat * a_cmd
         self.log.counts["solves"] += 1
         if not step.established:
+            # free flight: the hand controls the whole twist, not only its part along the motion
+            # (a part that fell off a contact kept falling while the push only set its speed
+            # toward the target: 1 m/s within 0.7 s); the velocity error is closed in speed_time_s
+            a_com = (nu_hat * v_des - twist_ahead) / s.speed_time_s
+            size = mass_speed(a_com, M, self.mass)
+            cap = s.accel_mps2 * boost
+            if size > cap:
+                a_com = a_com * (cap / size)
             ok, w, why = free_wrench(self.fixture, pose, a_com, M)
             if ok:
                 self._accept(w)

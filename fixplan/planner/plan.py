@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import InputError
+from fixplan.planner.policy import Policy
 from fixplan.spatial import Pose, matrix_from_quaternion_wxyz, rot2
 
 if TYPE_CHECKING:
@@ -623,7 +624,9 @@ class TriedTransition:
 
 
 # top-level keys of a plan file, in the order solve writes them
-_PLAN_KEYS = ("status", "reason", "sequence", "transitions", "tried", "proven", "certificate", "verification")
+_PLAN_KEYS = (
+    "status", "reason", "sequence", "transitions", "tried", "proven", "certificate", "verification", "policy", "coverage",
+)  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)
@@ -649,6 +652,9 @@ class Plan:
         None when not run.
     timings : dict
         Wall-clock times [s] by phase.
+    policy : Policy or None
+        The next transition from every contact state the part can be observed in
+        (:mod:`fixplan.planner.policy`); None when not built (no plan, or a recorded session).
     extras : dict
         Other keys of the file (``perturbation``; a recorded session's ``source``, ``fixture``,
         ``where``, ``session``), written after the others.
@@ -665,6 +671,7 @@ class Plan:
     timings: dict[str, float] = field(default_factory=dict)
     extras: dict[str, Any] = field(default_factory=dict)
     present: tuple[str, ...] | None = field(default=None, repr=False)  # the top-level keys a file had
+    policy: Policy | None = None
 
     @property
     def ok(self) -> bool:
@@ -698,6 +705,8 @@ class Plan:
             "proven": self.proven,
             "certificate": [{"from": list(a.from_state), "add": a.added, "reason": a.reason} for a in self.certificate],
             "verification": None if self.verification is None else self.verification.to_json(),
+            "policy": None if self.policy is None else self.policy.to_json(),
+            "coverage": None if self.policy is None else self.policy.coverage,
         }
         out = {k: v for k, v in values.items() if self.present is None or k in self.present}
         if self.present is None or "timings" in self.present:
@@ -732,6 +741,11 @@ class Plan:
         if not isinstance(tried, list) or not isinstance(certificate, list):
             raise InputError(f"{source}: tried and certificate: expected lists of transitions")
         proven = data.get("proven")
+        policy = (
+            None
+            if data.get("policy") is None
+            else Policy.from_json(data["policy"], f"{source}: policy", coverage=data.get("coverage"))
+        )
         timings = data.get("timings") or {}
         if not isinstance(timings, dict):
             raise InputError(f"{source}: timings: expected {{phase: seconds}}, got {_short(timings)}")
@@ -751,6 +765,7 @@ class Plan:
             timings={str(k): x for k, x in timings.items()},
             extras={k: x for k, x in data.items() if k not in (*_PLAN_KEYS, "timings")},
             present=tuple(k for k in data if k in (*_PLAN_KEYS, "timings")),
+            policy=policy,
         )
 
 

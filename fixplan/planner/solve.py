@@ -24,10 +24,12 @@ import numpy as np
 from fixplan.errors import InputError
 from fixplan.locating import contact_set, solve_goal
 from fixplan.model import Fixture, require_full
+from fixplan.planner.approach import Approach, plan_approach
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
 from fixplan.planner.execute import ExecutionSettings, Step, TransitionKind
 from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, default_kind, plan_transition
 from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
+from fixplan.planner.policy import Policy, build_policy
 from fixplan.planner.segments import segment_wrenches
 from fixplan.planner.verify import Verification, verify
 from fixplan.settings import DEFAULT
@@ -58,6 +60,7 @@ class PlanResult:
     durations_s: list[float]
     timings: dict[str, float] = field(default_factory=dict)
     friction_robustness: list[float] = field(default_factory=list)  # per transition: largest δ of ROBUST_GRID
+    policy: Policy | None = None  # the next transition from every contact state (planner/policy.py)
 
     @property
     def ok(self) -> bool:
@@ -128,6 +131,7 @@ class PlanResult:
             else (),
             verification=self.verification,
             timings=dict(self.timings),
+            policy=self.policy,
         )
 
     def to_json(self) -> dict[str, Any]:
@@ -206,13 +210,21 @@ class Planner:
         self.fine_time_s = 0.0
         self.prechecks = 0  # cheap checks run before fine plans, and how many failed
         self.precheck_failures = 0
+        # transitions set aside because their simulated load failed: (state, target) → why
+        self.set_aside: dict[tuple[frozenset[str], str], str] = {}
+        # fine plans by (state, target, start pose): a search after a transition was set aside
+        # reuses every fine plan that starts where an earlier one did
+        self._cache: dict[tuple[tuple[str, ...], str, bytes], Transition] = {}
 
     def plan_from(self, pose: Pose, state: frozenset[str], order: Sequence[str] | None = None) -> CoarsePlan:
         """The cheapest monotone sequence from ``state`` at ``pose`` to every locator."""
-        cache: dict[tuple[tuple[str, ...], str], Transition] = {}
+        cache = self._cache
 
         def evaluate(pose_: Pose, state_: frozenset[str], target: str) -> Transition:
-            key = (tuple(sorted(state_)), target)
+            key = (tuple(sorted(state_)), target, _pose_key(pose_))
+            why = self.set_aside.get((frozenset(state_), target))
+            if why is not None:
+                return _set_aside(self.fixture, pose_, state_, target, why)
             if key not in cache:
                 t = time.perf_counter()
                 for clearance in CLEARANCES_M:
@@ -298,6 +310,56 @@ class Planner:
         return plan_steps(coarse.transitions) if coarse.found else coarse.reason
 
 
+def with_approach(fixture: Fixture, tr: Transition, approach: Approach) -> Transition:
+    """The first (free) transition with the approach path from the start in front of it.
+
+    The approach's segments are free flight carrying the part: the push holds it against gravity.
+    """
+    from dataclasses import replace
+
+    from fixplan.planner.segments import free_wrench
+
+    extra = len(approach.poses) - 1
+    mid = approach.poses[len(approach.poses) // 2]
+    M = contact_set(fixture, mid, []).mass_matrix
+    _, hold, _ = free_wrench(fixture, mid, np.zeros(fixture.ndof), M)
+    wrenches = np.vstack([np.tile(hold, (extra, 1)), tr.wrenches]) if len(tr.wrenches) else tr.wrenches
+    return replace(
+        tr,
+        poses=[*approach.poses[:-1], *tr.poses],
+        wrenches=wrenches,
+        margins_N=np.concatenate([np.full(extra, np.nan), tr.margins_N]),
+        found=np.concatenate([np.ones(extra, dtype=bool), tr.found]),
+        segment_reasons=["free approach to the staging pose"] * extra + list(tr.segment_reasons),
+        cost=float(tr.cost) + approach.length_m,
+        reason=f"approach to the staging pose ({'via a waypoint, ' if approach.via_waypoint else ''}"
+        f"least gap {approach.least_gap_m:.3g} m), then {tr.reason}",
+    )
+
+
+def _pose_key(pose: Pose) -> bytes:
+    return pose.p_world.tobytes() + np.asarray(pose.R_world_body).tobytes()
+
+
+def _set_aside(fixture: Fixture, pose: Pose, state: frozenset[str], target: str, why: str) -> Transition:
+    """A transition the search must not take again: its simulated load failed."""
+    K, nv = 1, fixture.ndof
+    est = tuple(sorted(state))
+    return Transition(
+        est, target, default_kind(fixture.dimension, len(est)), [pose], np.full((K, nv), np.nan), np.full(K, np.nan),
+        False, f"set aside: the simulated load of a plan through it failed ({why})", 0.0, 0.0, "not run",
+    )  # fmt: skip
+
+
+def failed_transition(transitions: Sequence[Transition], observed: Sequence[Sequence[str]]) -> int:
+    """The index of the first planned transition whose end state the simulated load never reached."""
+    seen = {frozenset(s) for s in observed}
+    for i, tr in enumerate(transitions):
+        if frozenset(tr.established) | {tr.target} not in seen:
+            return i
+    return len(transitions) - 1
+
+
 def solve(
     fixture: Fixture,
     *,
@@ -342,25 +404,62 @@ def solve(
         timings = {"plan_s": 0.0, "fine_s": 0.0, "total_s": time.perf_counter() - t0}
         status, reason = _status(verification, "already located at the start pose: every locator touches")
         return PlanResult(status, reason, [tuple(sorted(names))], [], [], verification, [], timings)
-    coarse = planner.plan_from(fixture.start, start_state, order)
+    approach = plan_approach(fixture) if not start_state and fixture.goal_pose is not None else None
+    begin = approach.staging if approach is not None else fixture.start
+    coarse = planner.plan_from(begin, start_state, order)
     t_plan = time.perf_counter() - t0
     timings = {"plan_s": t_plan, "fine_s": planner.fine_time_s}
     if not coarse.found:
         timings["total_s"] = time.perf_counter() - t0
         return PlanResult("infeasible", coarse.reason, [], [], coarse.attempts, None, [], timings)
-    transitions = list(coarse.transitions)
-    durations = [_duration(tr, acceleration_mps2) for tr in transitions]
-    robustness = [friction_robustness(fixture, tr, acceleration_mps2, margin_N) for tr in transitions]
-    verification = None
-    if run_verification:
+    attempts = list(coarse.attempts)
+    first: PlanResult | None = None
+    budget = max(DEFAULT.policy.max_verifications, 1) if run_verification else 1
+    for round_ in range(budget):
+        transitions = list(coarse.transitions)
+        if approach is not None and transitions:
+            transitions[0] = with_approach(fixture, transitions[0], approach)
+        durations = [_duration(tr, acceleration_mps2) for tr in transitions]
+        robustness = [friction_robustness(fixture, tr, acceleration_mps2, margin_N) for tr in transitions]
         t1 = time.perf_counter()
-        verification = verify(fixture, start_state, plan_steps(transitions), settings=settings, replan=replan, **vopts)
-        timings["verify_s"] = time.perf_counter() - t1
+        policy = build_policy(fixture, planner, start_state, transitions)
+        timings["policy_s"] = timings.get("policy_s", 0.0) + time.perf_counter() - t1
+        verification = None
+        if run_verification:
+            t1 = time.perf_counter()
+            verification = verify(
+                fixture, start_state, plan_steps(transitions), settings=settings, replan=replan, policy=policy, **vopts
+            )
+            timings["verify_s"] = timings.get("verify_s", 0.0) + time.perf_counter() - t1
+        status, reason = _status(verification, "")
+        if round_:
+            reason = (
+                reason + "; " if reason else ""
+            ) + f"sequence {round_ + 1} tried after the simulated load of the first failed"
+        result = PlanResult(
+            status, reason, coarse.sequence, transitions, attempts, verification, durations, timings, robustness, policy
+        )
+        if first is None:
+            first = result
+        if status != "unverified" or verification is None or order is not None or round_ + 1 >= budget:
+            break
+        # the simulated load failed: set the transition where it failed aside, try the next-best sequence
+        i = failed_transition(transitions, verification.observed_sequence)
+        tr = transitions[i]
+        planner.set_aside[(frozenset(tr.established), tr.target)] = verification.reason
+        coarse = planner.plan_from(begin, start_state, order)
+        attempts += [a for a in coarse.attempts if a not in attempts]
+        if not coarse.found:
+            break
+    if first is not None and not result.ok and result is not first:
+        # no other sequence verified either: report the first (best) one's failure
+        result = first
+        result.reason += "; the next-best sequences failed too"
+    result.attempts = attempts
+    timings["fine_s"] = planner.fine_time_s
     timings["total_s"] = time.perf_counter() - t0
-    status, reason = _status(verification, "")
-    return PlanResult(
-        status, reason, coarse.sequence, transitions, coarse.attempts, verification, durations, timings, robustness
-    )
+    result.timings = timings
+    return result
 
 
 def _status(verification: Verification | None, note: str) -> tuple[PlanStatus, str]:

@@ -43,6 +43,7 @@ from fixplan.planner.execute import (
 )
 from fixplan.planner.fine import twist_from_pose
 from fixplan.planner.plan import Timeline, Verification
+from fixplan.planner.policy import Policy
 from fixplan.settings import HAPTIC, HapticRigSettings, Settings
 from fixplan.spatial import Pose, log_so3
 
@@ -160,12 +161,15 @@ def verify(
     trace_every_s: float | None = None,
     max_sweeps: int | None = None,
     profile: Settings = HAPTIC,
+    policy: Policy | None = None,
 ) -> Verification:
     """Execute the plan (``steps`` from ``start_state``) in the haptic loop and check the outcome.
 
     ``profile`` (default: the ``haptic`` profile, :mod:`fixplan.settings`) gives the engine, the
     rig and the thresholds; ``final_gap_m``, ``max_penetration_m``, ``limit_slack``,
-    ``trace_every_s`` and ``max_sweeps`` override single ones.
+    ``trace_every_s`` and ``max_sweeps`` override single ones. ``policy`` (:mod:`.policy`) is
+    what the executor consults when it observes a state the plan does not expect, before it
+    re-plans.
     """
     vs = profile.verification
     final_gap_m = vs.final_gap_m if final_gap_m is None else final_gap_m
@@ -179,9 +183,16 @@ def verify(
     R0 = fixture.start.R_world_body.copy()
     ndof = 6 if fixture.dimension == 3 else 3
     x0 = pose_coordinates(fixture.start, R0)
-    executor = Executor(fixture, start_state, steps, settings, replan=replan, noise=noise, tick_s=sim.dt)
+    executor = Executor(fixture, start_state, steps, settings, replan=replan, noise=noise, tick_s=sim.dt, policy=policy)
     F_max, T_max = executor.F_max, executor.T_max
     rig = haptic_rig(fixture, sim, x0, F_max, T_max, profile.haptic)
+    if not start_state:
+        # a part starting in free space is already carried: the hand holds it against gravity
+        # from the first tick (the handle displaced w / K ahead), instead of letting it drop
+        # until the coupling's spring catches up (a 2 kg box fell 12 mm before it did)
+        w0 = executor.carry_wrench(fixture.start)
+        rig = haptic_rig(fixture, sim, x0 + w0 / rig.K, F_max, T_max, profile.haptic)
+        executor.preload(w0)
     loop = rig.loop
     d = fixture.dimension
     threshold = executor.threshold_N
