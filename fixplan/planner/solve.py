@@ -227,11 +227,15 @@ class Planner:
                 return _set_aside(self.fixture, pose_, state_, target, why)
             if key not in cache:
                 t = time.perf_counter()
+                # the kind of motion whose first-order step closes the target (rolling on two
+                # contacts in 3D leaves one rotation, which often cannot)
+                g = self.guess(pose_, state_, target) if state_ else None
+                kind = None if g is None else g[2]
                 for clearance in CLEARANCES_M:
                     tr = plan_transition(
                         self.fixture, pose_, sorted(state_), target, knots=self.knots,
                         acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
-                        margin_N=self.margin_N, clearance_m=clearance,
+                        margin_N=self.margin_N, clearance_m=clearance, kind=kind,
                     )  # fmt: skip
                     if tr.ipopt_status in IPOPT_PATH_FOUND:
                         break  # a path: its wrenches decide, not the clearance
@@ -244,43 +248,47 @@ class Planner:
             estimate=self.estimate, precheck=self.precheck,
         )  # fmt: skip
 
-    def estimate(self, pose: Pose, state: frozenset[str], target: str) -> tuple[float, Pose] | None:
-        """A cheap guess of a transition for the lazy search: (mass-weighted length [m], end pose).
+    def guess(self, pose: Pose, state: frozenset[str], target: str) -> tuple[float, Pose, str] | None:
+        """A cheap guess of a transition: (mass-weighted length [m], end pose, kind of motion).
 
         The least-``M``-norm step that closes the target's gap keeping the established contacts,
-        to first order. No IPOPT, no cone program.
+        to first order, in the fine planner's kind of motion (rolling keeps every row of the kept
+        contacts, sliding their normal rows); the other kind when that one cannot close the gap.
+        No IPOPT, no cone program.
         """
-        fx = self.fixture
-        est = sorted(state)
-        cs = contact_set(fx, pose, [*est, target])
-        gap = float(cs.contacts[-1].gap_m)
-        rows = cs.G[: len(est)] if est else np.zeros((0, fx.ndof))
-        A = np.vstack([rows, cs.G[-1:]])
-        b = np.zeros(A.shape[0])
-        b[-1] = -max(gap, 0.0)
-        step = cs.M_inv @ A.T @ np.linalg.pinv(A @ cs.M_inv @ A.T, rcond=DEFAULT.numerics.rcond) @ b
-        if not np.all(np.isfinite(step)):
-            return None
-        length = float(np.sqrt(max(float(step @ cs.mass_matrix @ step), 0.0) / fx.workpiece.mass_kg))
-        return length, pose.retract(step, fx.workpiece.com_body)
+        from fixplan.planner.policy import gap_closing_step
+
+        first = default_kind(self.fixture.dimension, len(state)) if state else "free"
+        kinds = [first] + ([k for k in ("roll", "slide") if k != first] if state else [])
+        for kind in kinds:
+            step = gap_closing_step(self.fixture, pose, state, target, kind)
+            if step is not None:
+                return step[0], step[1], kind
+        return None
+
+    def estimate(self, pose: Pose, state: frozenset[str], target: str) -> tuple[float, Pose] | None:
+        """The lazy search's estimate: :meth:`guess` without its kind."""
+        g = self.guess(pose, state, target)
+        return None if g is None else (g[0], g[1])
 
     def precheck(self, pose: Pose, state: frozenset[str], target: str) -> str | None:
         """A cheap necessary check before a transition's fine plan (one cone program, no IPOPT).
 
         Is there a non-jamming push, within the hand's limits, for the first segment of the
-        :meth:`estimate` step at ``pose``? None when there is (or nothing to check: no kept contact),
-        else the search's reason. The fine plan may still find another way (its path bends), so
-        the lazy search only tries such a transition later; it never drops it.
+        :meth:`guess` step at ``pose``, in the guess's kind of motion? None when there is (or
+        nothing to check: no kept contact), else the search's reason. The fine plan may still find
+        another way (its path bends), so the lazy search only tries such a transition later; it
+        never drops it.
         """
         if not state:
             return None
-        guess = self.estimate(pose, state, target)
+        guess = self.guess(pose, state, target)
         if guess is None:
             return None
         est = tuple(sorted(state))
         self.prechecks += 1
         _, _, found, reasons = segment_wrenches(
-            self.fixture, [pose, guess[1]], est, default_kind(self.fixture.dimension, len(est)),
+            self.fixture, [pose, guess[1]], est, guess[2],
             self.acceleration_mps2, friction_margin=self.friction_margin, margin_N=self.margin_N,
         )  # fmt: skip
         if found[0]:
