@@ -181,6 +181,7 @@ class Guide:
         self.start_state = start_state
         self._planner: Any = None
         self._executor: Any = None
+        self._policy: Any = None  # planner/policy.py's Policy once the first plan is made
         self._next_verdict = 0.0
         self._next_replan = 0.0
         self.note = "planning"
@@ -201,6 +202,12 @@ class Guide:
         if not self.plans - 1 and pose.distance_to(self.fixture.start)[0] < DEFAULT.planner.same_pose_m:
             coarse = self._planner.plan_from(pose, state)
             steps: Any = plan_steps(coarse.transitions) if coarse.found else coarse.reason
+            if coarse.found and self.fixture.goal_pose is not None:
+                # the next transition from every contact state: the guidance follows the person's
+                # part into states the plan did not expect without waiting for the planner
+                from fixplan.planner.policy import build_policy
+
+                self._policy = build_policy(self.fixture, self._planner, state, coarse.transitions)
         else:
             steps = self._planner.replan(pose, state)
         if isinstance(steps, str):
@@ -208,7 +215,9 @@ class Guide:
             self.note = f"no plan from {{{', '.join(sorted(state))}}}: {steps}"
             self._next_replan = t + 1.0
             return
-        self._executor = Executor(self.fixture, state, steps, replan=self._planner.replan, tick_s=self.tick_s)
+        self._executor = Executor(
+            self.fixture, state, steps, replan=self._planner.replan, tick_s=self.tick_s, policy=self._policy
+        )
         self.note = "following the plan" if steps else "every locator touches: hold"
 
     def update(self, snap: Snapshot, push_now: FloatArray) -> Guidance:
@@ -239,6 +248,13 @@ class Guide:
             self.solves += 1
             g = ex.guidance()
             target, transition, motion = g["target"], g["transition"], g["motion"]
+            switched = ex.log.counts.get("policy_switches", 0)
+            if switched and ex.steps and ex.index < len(ex.steps):
+                here = ex.states[ex.index]
+                self.note = (
+                    f"following the policy from {{{', '.join(sorted(here))}}}"
+                    f" ({switched} switch{'es' if switched != 1 else ''} off the plan)"
+                )
             if ex.done and ex.log.outcome == "reached":
                 motion = "hold"
         if self.role == "both" and t >= self._next_verdict:

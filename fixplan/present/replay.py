@@ -43,12 +43,16 @@ class Replay:
         One line for the title (what is shown, status).
     extra_forces : tuple of (point_world, force_world_N)
         Forces at explicit ``[[contact]]`` entries (rest only), drawn like locator forces.
+    policy : tuple of str
+        The plan's policy, one line per contact state (``{B1, B2} → +S1 (slide)``), and its
+        coverage first; empty without one.
     """
 
     source: str
     timeline: Timeline
     note: str
     extra_forces: tuple[tuple[FloatArray, FloatArray], ...] = ()
+    policy: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return len(self.timeline)
@@ -95,8 +99,29 @@ def replay_from_plan(data: Any, fixture: Fixture, source: str = "plan") -> Repla
     return plan_replay(plan_for_fixture(data, fixture, source), fixture, source)
 
 
+def policy_lines(plan: Plan) -> tuple[str, ...]:
+    """The plan's policy as lines: its coverage, then one line per state (fewest contacts first)."""
+    if plan.policy is None:
+        return ()
+    cov = plan.policy.coverage
+    head = (
+        f"policy: {cov.get('states_planned')} of {cov.get('states_reachable')} reachable contact states "
+        "have a next transition with a non-jamming push"
+    )
+    rows = []
+    for e in plan.policy.to_json():
+        state = "{" + ", ".join(e["state"]) + "}" if e["state"] else "free"
+        mark = "" if e["checked"] else " (no push found)"
+        rows.append(f"{state} → +{e['target']} ({e['motion']}, {e['source']}){mark}")
+    return (head, *rows)
+
+
 def plan_replay(plan: Plan, fixture: Fixture, source: str = "plan") -> Replay:
     """The replay of a plan: its verification trace when there is one, else its knot poses."""
+    return replace(_plan_replay(plan, fixture, source), policy=policy_lines(plan))
+
+
+def _plan_replay(plan: Plan, fixture: Fixture, source: str = "plan") -> Replay:
     from fixplan.planner.plan import STATUS_WORDS, knot_timeline
 
     v = plan.verification

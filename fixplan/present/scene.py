@@ -314,6 +314,13 @@ def scene_figure(fixture: Fixture, replay: Replay, *, max_frames: int = MAX_FRAM
             if on
         ]
         title += f"<br><sup>arrows: 1 N = {scale * 1e3:.3g} mm ({', '.join(kinds)})</sup>"
+    if replay.policy:
+        # the policy beside the scene: what the executor does in every contact state
+        fig.add_annotation(
+            text="<br>".join(replay.policy),
+            xref="paper", yref="paper", x=0.0, y=0.0, xanchor="left", yanchor="bottom",
+            align="left", showarrow=False, font={"size": 9}, bgcolor="rgba(255,255,255,0.7)",
+        )  # fmt: skip
     fig.update_layout(
         title={"text": title, "x": 0.02, "xanchor": "left"},
         meta={

@@ -1,0 +1,193 @@
+"""The policy over contact states (pre-images), the approach from free space, and the progress guard."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+from conftest import PROBLEMS
+
+import fixplan
+from fixplan.jamming import classify
+from fixplan.locating import locator_gaps
+from fixplan.planner.approach import plan_approach
+from fixplan.planner.execute import ExecutionSettings, Executor, Step
+from fixplan.planner.plan import Plan
+from fixplan.planner.policy import Policy, build_policy, representative_pose
+from fixplan.planner.solve import Planner, solve
+from fixplan.settings import DEFAULT
+
+
+@pytest.fixture(scope="module")
+def box() -> fixplan.Fixture:
+    return fixplan.load(fixplan.default_fixture_path())
+
+
+@pytest.fixture(scope="module")
+def box_policy(box) -> Policy:
+    planner = Planner(box)
+    base = frozenset({"B1", "B2", "B3"})
+    coarse = planner.plan_from(box.start, base)
+    assert coarse.found
+    return build_policy(box, planner, base, coarse.transitions)
+
+
+def _free_twin(fx_path, position, rpy=None, angle=None) -> fixplan.Fixture:
+    text = open(fx_path).read()
+    if rpy is not None:
+        line = f"start = {{ position = [{', '.join(map(str, position))}], rpy_deg = [{', '.join(map(str, rpy))}] }}"
+    else:
+        line = f"start = {{ position = [{', '.join(map(str, position))}], angle_deg = {angle} }}"
+    return fixplan.loads(re.sub(r"^start = \{[^\n]*\}", line, text, flags=re.M), source="free twin")
+
+
+def test_representative_poses_touch_the_state_and_open_the_rest(box):
+    """Every realisable state's pre-image pose: its locators touch exactly, every other one is open."""
+    names = [loc.name for loc in box.locators]
+    realisable = 0
+    for k in range(len(names)):
+        for state in map(frozenset, __import__("itertools").combinations(names, k)):
+            pose = representative_pose(box, box.goal, state)
+            if pose is None:
+                continue
+            realisable += 1
+            gaps = dict(zip(names, locator_gaps(box.workpiece, pose, box.locators), strict=True))
+            for n in names:
+                if n in state:
+                    assert abs(gaps[n]) <= 1e-9, (state, n, gaps[n])
+                else:
+                    # the back-off opens it by 2 mm to first order: at least half of it exactly
+                    assert gaps[n] >= 0.5 * DEFAULT.policy.backoff_m, (state, n, gaps[n])
+    # the 3-2-1 box has full rank at the goal: every proper subset of its locators is realisable
+    assert realisable == 2 ** len(names) - 1
+
+
+def test_the_policy_covers_every_state_and_leads_to_the_goal(box, box_policy):
+    goal = frozenset(loc.name for loc in box.locators)
+    assert len(box_policy.entries) == 2 ** len(goal) - 1
+    for state, entry in box_policy.entries.items():
+        chain = box_policy.chain(state, goal)
+        assert chain is not None
+        # one locator more per step, ending with every locator
+        s = state
+        for step in chain:
+            assert frozenset(step.established) == s and step.target not in s
+            s = s | {step.target}
+        assert s == goal
+    # reachable: the 7 proper supersets of the start state (the base), and the states one lost
+    # contact away from a planned one: 3 from each planned state that is not the base's superset already
+    planned = [frozenset(e.state) for e in box_policy.entries.values() if e.source == "plan"]
+    base = frozenset({"B1", "B2", "B3"})
+    lost = {p - {x} for p in planned for x in p} - {s for s in box_policy.entries if base <= s}
+    assert box_policy.reachable == {s for s in box_policy.entries if base <= s} | lost
+    assert len(lost) == 9 and len(box_policy.reachable) == 16
+    assert box_policy.coverage["fraction"] == 1.0
+
+
+def test_the_plans_own_states_keep_the_fine_plan(box, box_policy):
+    plan_entries = [e for e in box_policy.entries.values() if e.source == "plan"]
+    assert len(plan_entries) == 3  # base → +1 → +1 → +1
+    for e in plan_entries:
+        assert len(e.path) >= 2 and e.checked and e.margin_N is not None and e.margin_N > 0
+
+
+def test_pre_image_pushes_move_the_part(box, box_policy):
+    """A checked entry's push, classified at its representative pose with the state's contacts, moves the part.
+
+    Not held, not jammed: it is the non-jamming push of the entry's first step, within the hand's limits.
+    """
+    checked = [e for e in box_policy.entries.values() if e.source == "pre-image" and e.checked and e.state]
+    assert len(checked) >= 40
+    for e in checked[::5]:
+        w = e.wrench
+        assert np.linalg.norm(w[:3]) <= box.manipulator.max_force_N * (1 + 1e-9)
+        assert np.linalg.norm(w[3:]) <= box.manipulator.max_torque_Nm * (1 + 1e-9)
+        c = classify(box, w, list(e.state), pose=e.pose, jobs=1)[0]
+        assert c.mode not in ("held", "jammed"), (e.state, e.target, c.mode)
+
+
+def test_the_policy_round_trips_through_the_plan_file(box):
+    r = solve(box, run_verification=False)
+    data = r.to_json()
+    assert data["coverage"]["fraction"] == 1.0 and len(data["policy"]) == 63
+    again = Plan.from_json(data)
+    assert again.to_json() == r.plan.to_json()
+
+
+def test_the_executor_takes_the_policy_before_it_replans(box, box_policy):
+    """An unplanned contact state with a policy entry: the policy's transitions, no planner call."""
+
+    def replan(pose, state):
+        raise AssertionError("the executor re-planned although the policy had the state")
+
+    base = ("B1", "B2", "B3")
+    steps = [Step(base, "S2", "slide", (box.start, box.start))]
+    ex = Executor(box, frozenset(base), steps, ExecutionSettings(), replan=replan, policy=box_policy)
+    t = 0.0
+    for state, n in ((set(base), 20), (set(base) | {"E1"}, 20)):
+        for _ in range(n):
+            ex.command(t, box.start, np.zeros(6), frozenset(state))
+            t += 1e-3
+    assert ex.log.counts["unplanned_contact"] == 1 and ex.log.counts["policy_switches"] == 1
+    assert ex.log.counts["replans"] == 0 and not ex.done
+    assert ex.states[0] == frozenset({*base, "E1"}) and ex.states[-1] == frozenset(loc.name for loc in box.locators)
+    assert ex.steps[0].target == box_policy.entry(frozenset({*base, "E1"})).target
+
+
+def test_no_progress_is_a_stall():
+    """Moving without closing the target's gap: after progress_s the transition stalls (a guard before the fix)."""
+    fx = fixplan.load(fixplan.default_fixture_path())
+    base = ("B1", "B2", "B3")
+    steps = [Step(base, "S2", "slide", (fx.start, fx.start))]
+    ex = Executor(fx, frozenset(base), steps, ExecutionSettings(progress_s=0.3, max_retries=1))
+    twist = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.05])  # turning in place: speed, but S2's gap stays
+    t = 0.0
+    for _ in range(900):
+        ex.command(t, fx.start, twist, frozenset(base))
+        t += 1e-3
+        if ex.done:
+            break
+    stalls = [m for _, k, m in ex.log.events if k == "stall"]
+    assert stalls and "no progress in transition 1: S2's gap stays" in stalls[0]
+    assert ex.done and ex.log.failure_kind == "stall" and "no progress" in ex.log.reason
+
+
+def test_the_approach_is_clear_and_ends_at_the_staging_pose(box):
+    fx = _free_twin(fixplan.default_fixture_path(), [0.13, 0.08, 0.07], rpy=[12.0, -9.0, 15.0])
+    ap = plan_approach(fx)
+    assert ap is not None
+    assert ap.poses[0].distance_to(fx.start) == (0.0, 0.0)
+    # the staging pose has the goal's orientation and every locator about 2 mm away
+    assert ap.staging.distance_to(fx.goal)[1] <= 1e-6
+    gaps = locator_gaps(fx.workpiece, ap.staging, fx.locators)
+    assert np.all(gaps >= 0.5 * DEFAULT.policy.backoff_m) and np.all(gaps <= 2.0 * DEFAULT.policy.backoff_m)
+    # every pose of the path is clear of every locator (the exact gaps)
+    least = min(float(np.min(locator_gaps(fx.workpiece, p, fx.locators))) for p in ap.poses)
+    assert least == pytest.approx(ap.least_gap_m) and least > 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("path", "position", "rpy", "angle"),
+    [
+        (fixplan.default_fixture_path(), [0.12, 0.07, 0.05], [5.0, 4.0, -5.0], None),
+        (fixplan.default_fixture_path(), [0.14, 0.10, 0.09], [10.0, -8.0, 12.0], None),
+        (PROBLEMS / "gen-plate-2d-s2026-001.toml", None, None, 12.0),
+    ],
+)
+def test_a_part_starting_in_free_space_is_loaded(path, position, rpy, angle):
+    """Free starts that failed before the policy and the approach (unplanned first contact, a fall)."""
+    if position is None:
+        base = fixplan.load(path)
+        position = list(base.goal.p_world + np.array([0.02, 0.03]))
+    fx = _free_twin(path, position, rpy=rpy, angle=angle)
+    assert np.min(locator_gaps(fx.workpiece, fx.start, fx.locators)) > 1e-3  # nothing touches
+    r = solve(fx)
+    assert r.ok, r.reason
+    v = r.verification
+    assert v.passed and max(abs(g) for g in v.final_gaps_m.values()) <= 1e-4
+    assert v.max_penetration_m <= 1e-5
+    # the part never fell: it stayed within a part's size of the fixture
+    heights = [p.p_world[-1] for p in v.trace.poses]
+    assert min(heights) >= fx.goal.p_world[-1] - 0.01
