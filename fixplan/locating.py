@@ -12,17 +12,19 @@ each step solves ``G Δ = −g`` in the least-squares sense and retracts the pos
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import itertools
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import InfeasibleError, InputError
+from fixplan.geometry import Box, Cylinder, Polygon, Rectangle, Shape
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
 from fixplan.model import Fixture, Locator, Workpiece, require_full
-from fixplan.settings import DEFAULT
-from fixplan.spatial import Pose
+from fixplan.settings import DEFAULT, GoalSettings
+from fixplan.spatial import Pose, exp_so3, log_so3, rot2
 
 FloatArray = NDArray[np.float64]
 
@@ -94,9 +96,96 @@ def contact_set(
     return ContactSet(tuple(chosen), c, M, pose.p_world.copy())
 
 
+# -- the located pose --------------------------------------------------------------------------------
+# A contact model gives every locator's gap, contact point and inward normal (world) at a pose: the
+# exact one (the shape's signed distance), or one where each locator touches the plane of a named
+# face (a cylinder's side: the side's surface), which Gauss–Newton follows well from far away.
+ContactModel = Callable[[Pose], tuple[FloatArray, FloatArray, FloatArray]]
+
+
+def _exact_model(workpiece: Workpiece, locators: Sequence[Locator]) -> ContactModel:
+    shape = workpiece.shape
+    tips = [(loc.p_world, loc.radius_m) for loc in locators]
+
+    def model(pose: Pose) -> tuple[FloatArray, FloatArray, FloatArray]:
+        projections = [(shape.project(pose.point_body_from_world(p)), rho) for p, rho in tips]
+        gaps = np.array([proj.distance - rho for proj, rho in projections])
+        points_body = np.array([proj.point_body for proj, _ in projections]).reshape(len(tips), -1)
+        normals_body = np.array([proj.normal_body for proj, _ in projections]).reshape(len(tips), -1)
+        return gaps, points_body @ pose.R_world_body.T + pose.p_world, -(normals_body @ pose.R_world_body.T)
+
+    return model
+
+
+def named_faces(shape: Shape) -> tuple[str, ...]:
+    """The faces a locator may name (``face = "-z"``): a box's and a rectangle's sides, a cylinder's ends and side."""
+    if isinstance(shape, Box):
+        return ("+x", "-x", "+y", "-y", "+z", "-z")
+    if isinstance(shape, Rectangle):
+        return ("+x", "-x", "+y", "-y")
+    if isinstance(shape, Cylinder):
+        return ("+z", "-z", "side")
+    return ()
+
+
+def _face_axis(shape: Shape, face: str) -> tuple[int, float, float]:
+    """A planar face's body axis, its sign and its distance from the body origin [m]."""
+    k = "xyz".index(face[1])
+    sign = 1.0 if face[0] == "+" else -1.0
+    if isinstance(shape, Cylinder):
+        return k, sign, shape.length / 2.0
+    assert isinstance(shape, Box | Rectangle)
+    return k, sign, float(shape.half[k])
+
+
+def _face_normal_body(shape: Shape, face: str, point_body: FloatArray) -> FloatArray:
+    """The outward normal of ``face`` at a point on it (body axes)."""
+    if face == "side":
+        radial = np.array([point_body[0], point_body[1], 0.0])
+        return radial / max(float(np.linalg.norm(radial)), 1e-300)
+    k, sign, _ = _face_axis(shape, face)
+    normal = np.zeros(shape.dimension)
+    normal[k] = sign
+    return normal
+
+
+def _face_model(workpiece: Workpiece, locators: Sequence[Locator], faces: Sequence[str]) -> ContactModel:
+    """Each locator touching the plane of its face (a cylinder's side: the infinite side)."""
+    shape = workpiece.shape
+    d = shape.dimension
+    rows = []
+    for loc, face in zip(locators, faces, strict=True):
+        if face == "side":
+            assert isinstance(shape, Cylinder)
+            rows.append((loc.p_world, loc.radius_m, -1, 1.0, shape.radius))
+        else:
+            k, sign, offset = _face_axis(shape, face)
+            rows.append((loc.p_world, loc.radius_m, k, sign, offset))
+
+    def model(pose: Pose) -> tuple[FloatArray, FloatArray, FloatArray]:
+        gaps = np.empty(len(rows))
+        points = np.empty((len(rows), d))
+        normals = np.empty((len(rows), d))
+        for i, (p_world, rho, k, sign, offset) in enumerate(rows):
+            q = pose.point_body_from_world(p_world)
+            if k < 0:  # the cylinder's side: radial
+                u = np.array([q[0], q[1], 0.0])
+                u /= max(float(np.linalg.norm(u)), 1e-300)
+            else:
+                u = np.zeros(d)
+                u[k] = sign
+            dist = float(u @ q) - offset
+            gaps[i] = dist - rho
+            points[i] = pose.point_world_from_body(q - dist * u)
+            normals[i] = -(pose.R_world_body @ u)
+        return gaps, points, normals
+
+    return model
+
+
 @dataclass(frozen=True)
 class GoalResult:
-    """The located pose and how well every locator touches there."""
+    """The pose one Gauss–Newton run reaches and how well every locator touches there."""
 
     pose: Pose
     max_gap_m: float  # largest |gap| over the locators at ``pose``
@@ -105,28 +194,26 @@ class GoalResult:
     converged: bool
 
 
-def solve_goal(
+def _gauss_newton(
+    model: ContactModel,
     workpiece: Workpiece,
-    locators: Sequence[Locator],
     start: Pose,
     *,
-    tol_m: float = 1e-12,
-    max_iterations: int = 100,
+    tol_m: float,
+    max_iterations: int,
+    translation_only: bool = False,
+    settings: GoalSettings = DEFAULT.goal,
 ) -> GoalResult:
-    """Damped Gauss–Newton for the pose where every locator touches (see module docstring)."""
+    """Damped Gauss–Newton on ``model``'s gaps from ``start`` (see the module docstring)."""
     pose = start
+    d = start.dimension
     scale = max(workpiece.shape.bounding_radius, 1e-9)
 
-    def gaps_at(p: Pose) -> FloatArray:
-        return np.array([locator_contact(workpiece, p, loc).gap_m for loc in locators])
-
     def residual(p: Pose) -> tuple[FloatArray, FloatArray]:
-        contacts = [locator_contact(workpiece, p, loc) for loc in locators]
-        gaps = np.array([c.gap_m for c in contacts])
+        gaps, points, n = model(p)
         # the normal rows [n, r × n] of the contact Jacobians (written out: np.cross per row is slow)
-        n = np.array([c.normal_world for c in contacts]).reshape(len(contacts), -1)
-        r = np.array([c.point_world for c in contacts]).reshape(len(contacts), -1) - com_world(p, workpiece.com_body)
-        if n.shape[1] == 2:
+        r = points - com_world(p, workpiece.com_body)
+        if d == 2:
             moment = (r[:, 0] * n[:, 1] - r[:, 1] * n[:, 0])[:, None]
         else:
             moment = np.cross(r, n)
@@ -135,20 +222,23 @@ def solve_goal(
     gaps, G = residual(pose)
     it = 0
     for it in range(1, max_iterations + 1):  # noqa: B007 - used after the loop
-        if np.max(np.abs(gaps)) <= tol_m:
+        if len(gaps) == 0 or np.max(np.abs(gaps)) <= tol_m:
             break
-        step = -np.linalg.lstsq(G, gaps, rcond=DEFAULT.numerics.rcond)[0]
+        if translation_only:
+            step = np.zeros(G.shape[1])
+            step[:d] = -np.linalg.lstsq(G[:, :d], gaps, rcond=DEFAULT.numerics.rcond)[0]
+        else:
+            step = -np.linalg.lstsq(G, gaps, rcond=DEFAULT.numerics.rcond)[0]
         # Limit rotations per step to keep far starts on the right faces.
-        d = start.dimension
         ang = float(np.linalg.norm(step[d:]))
         lin = float(np.linalg.norm(step[:d]))
-        limit = max(ang / 0.2, lin / (0.5 * scale), 1.0)
+        limit = max(ang / settings.max_turn_rad, lin / (settings.max_shift_rel * scale), 1.0)
         step /= limit
         f0 = float(gaps @ gaps)
         alpha = 1.0
         while True:
             trial = pose.retract(alpha * step, workpiece.com_body)
-            g_trial = gaps_at(trial)
+            g_trial = model(trial)[0]
             if float(g_trial @ g_trial) < f0 or alpha < DEFAULT.numerics.line_search_min_step:
                 break
             alpha /= 2.0
@@ -161,23 +251,314 @@ def solve_goal(
             break  # stalled at a least-squares minimum (more locators than the pose can satisfy)
     max_gap = float(np.max(np.abs(gaps))) if len(gaps) else 0.0
     rank = int(np.linalg.matrix_rank(G, tol=DEFAULT.numerics.rank_tol)) if len(gaps) else 0
-    return GoalResult(pose, max_gap, it, rank, converged=max_gap <= max(tol_m, 1e-10))
+    return GoalResult(pose, max_gap, it, rank, converged=max_gap <= max(tol_m, settings.touch_gap_m))
+
+
+def solve_goal(
+    workpiece: Workpiece,
+    locators: Sequence[Locator],
+    start: Pose,
+    *,
+    tol_m: float = DEFAULT.goal.stop_gap_m,
+    max_iterations: int = DEFAULT.goal.max_iterations,
+) -> GoalResult:
+    """Damped Gauss–Newton from ``start`` for a nearby pose where every locator touches (local).
+
+    The exact gaps; no check of faces. :func:`find_goal` finds the located pose from far starts.
+    """
+    return _gauss_newton(
+        _exact_model(workpiece, locators), workpiece, start, tol_m=tol_m, max_iterations=max_iterations
+    )
+
+
+@dataclass(frozen=True)
+class GoalSearch:
+    """The located pose found from a start by :func:`find_goal`, or why there is none.
+
+    Attributes
+    ----------
+    found : bool
+        A pose touches every locator (each |gap| ≤ ``GoalSettings.touch_gap_m``, none penetrating)
+        from outside, every locator that names a face on that face.
+    pose : Pose or None
+        The located pose (the nearest to the start, in the mass-weighted metric, of those found).
+    max_gap_m : float
+        Largest |gap| at ``pose``, or at the best pose reached when none was found [m].
+    rank : int
+        Rank of ``G`` at ``pose`` (6 in 3D, 3 in 2D: the locators determine the pose).
+    starts : int
+        Starts tried: 1 when Gauss–Newton from the start pose found it.
+    reason : str
+        Why there is no located pose (empty when found): a proof when ``proven``, else that the
+        search did not converge.
+    proven : bool
+        ``reason`` proves that no pose touches every locator.
+    face_mismatches : tuple of (str, str)
+        When a pose touches every locator but not on the faces the locators name: each such
+        locator's name and what it touches there (``face '+z'``, ``the edge of face '-z'``).
+    """
+
+    found: bool
+    pose: Pose | None
+    max_gap_m: float
+    rank: int
+    starts: int
+    reason: str = ""
+    proven: bool = False
+    face_mismatches: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def message(self) -> str:
+        """One line for people: why no pose is located (empty when found)."""
+        if self.found:
+            return ""
+        if self.proven:
+            return f"no pose touches every locator: {self.reason}"
+        if self.face_mismatches:
+            touched = ", ".join(f"{name} touches {what}" for name, what in self.face_mismatches)
+            return f"at the located pose {touched}, not the face named"
+        return self.reason
+
+
+def _diameter(shape: Shape) -> float:
+    """The largest distance between two points of the shape [m] (an upper bound for unknown shapes)."""
+    if isinstance(shape, Polygon):
+        V = shape.array
+        return float(np.max(np.linalg.norm(V[:, None, :] - V[None, :, :], axis=2)))
+    if isinstance(shape, Box | Rectangle):
+        return 2.0 * float(np.linalg.norm(shape.half))
+    if isinstance(shape, Cylinder):
+        return 2.0 * float(np.hypot(shape.radius, shape.length / 2.0))
+    return 2.0 * shape.bounding_radius
+
+
+def _face_width(shape: Shape, face: str) -> float | None:
+    """The largest distance between two points of a planar face [m] (None: not planar)."""
+    if face == "side":
+        return None
+    if isinstance(shape, Cylinder):
+        return 2.0 * shape.radius
+    assert isinstance(shape, Box | Rectangle)
+    k, _, _ = _face_axis(shape, face)
+    others = np.delete(np.asarray(shape.size, dtype=float), k)
+    return float(np.linalg.norm(others))
+
+
+def no_pose_proof(workpiece: Workpiece, locators: Sequence[Locator], settings: GoalSettings = DEFAULT.goal) -> str:
+    """Why no pose can touch every locator, proved from distances alone; empty when no proof is found.
+
+    Two tips farther apart than the part is wide plus their radii; two tips on opposite faces
+    closer than the faces are apart plus their radii; two tips on one face farther apart than
+    the face is wide; tips of one radius on one plane face not on one plane (a line in 2D).
+    """
+    shape = workpiece.shape
+    slack = 2.0 * settings.touch_gap_m
+    width = _diameter(shape)
+    for i, a in enumerate(locators):
+        for b in locators[i + 1 :]:
+            dist = float(np.linalg.norm(a.p_world - b.p_world))
+            radii = a.radius_m + b.radius_m
+            if dist > width + radii + slack:
+                return (
+                    f"{a.name} and {b.name} are {dist:.4g} m apart, more than the part's width {width:.4g} m "
+                    f"plus their tip radii {radii:.4g} m"
+                )
+            if a.face is None or b.face is None or "side" in (a.face, b.face):
+                continue
+            ka, sa, ha = _face_axis(shape, a.face)
+            kb, sb, hb = _face_axis(shape, b.face)
+            if ka == kb and sa != sb and dist < ha + hb + radii - slack:
+                return (
+                    f"{a.name} on face {a.face} and {b.name} on face {b.face} are {dist:.4g} m apart, less than "
+                    f"the {ha + hb:.4g} m between these faces plus their tip radii {radii:.4g} m"
+                )
+            face_width = _face_width(shape, a.face)
+            if a.face == b.face and face_width is not None:
+                reach = float(np.hypot(face_width, a.radius_m - b.radius_m))
+                if dist > reach + slack:
+                    return (
+                        f"{a.name} and {b.name} on face {a.face} are {dist:.4g} m apart, more than the face is "
+                        f"wide ({face_width:.4g} m)"
+                    )
+    d = shape.dimension
+    for face in named_faces(shape):
+        on = [loc for loc in locators if loc.face == face]
+        if face == "side" or len(on) <= d or len({loc.radius_m for loc in on}) != 1:
+            continue
+        P = np.array([loc.p_world for loc in on])
+        centred = P - P.mean(axis=0)
+        normal = np.linalg.svd(centred)[2][-1]  # of the best plane (line in 2D) through the tips
+        off = float(np.max(np.abs(centred @ normal)))
+        if off > slack:
+            where = "one plane" if d == 3 else "one line"
+            return (
+                f"{', '.join(loc.name for loc in on)} on face {face} are not on {where} ({off:.3g} m off the best one)"
+            )
+    return ""
+
+
+def _symmetry_turns(d: int) -> list[FloatArray]:
+    """The rotations mapping a box (rectangle) onto itself, but the identity: 23 in 3D, 3 in 2D."""
+    if d == 2:
+        return [rot2(np.pi / 2.0 * k) for k in (1, 2, 3)]
+    out = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            R = np.zeros((3, 3))
+            for row, (col, s) in enumerate(zip(perm, signs, strict=True)):
+                R[row, col] = s
+            if np.linalg.det(R) > 0.0 and not np.array_equal(R, np.eye(3)):
+                out.append(R)
+    return out
+
+
+def _turn_rings(d: int, settings: GoalSettings) -> list[list[FloatArray]]:
+    """The wider search's body-frame turns of the start, in rings of growing angle."""
+    rings: list[list[FloatArray]] = [[np.eye(d)]]
+    for deg in settings.turns_deg:
+        a = np.radians(deg)
+        if d == 2:
+            rings.append([rot2(a), rot2(-a)])
+        else:
+            rings.append([exp_so3(s * a * axis) for axis in np.eye(3) for s in (1.0, -1.0)])
+    rings.append(_symmetry_turns(d))
+    return rings
+
+
+def _distance2(workpiece: Workpiece, a: Pose, b: Pose) -> float:
+    """Squared mass-weighted distance from ``a`` to ``b``: ``ξᵀ M ξ``, ξ the twist of the centre of mass [kg·m²]."""
+    dc = com_world(b, workpiece.com_body) - com_world(a, workpiece.com_body)
+    if a.dimension == 3:
+        turn = log_so3(b.R_world_body @ a.R_world_body.T)
+    else:
+        turn = np.array([(b.angle_rad - a.angle_rad + np.pi) % (2.0 * np.pi) - np.pi])
+    xi = np.concatenate([dc, turn])
+    return float(xi @ mass_matrix(workpiece.mass_kg, workpiece.inertia_body, a.R_world_body) @ xi)
+
+
+def _face_mismatches(
+    workpiece: Workpiece, locators: Sequence[Locator], pose: Pose, settings: GoalSettings
+) -> tuple[tuple[str, str], ...]:
+    """Locators naming a face they do not touch at ``pose`` from outside, with the face they touch."""
+    shape = workpiece.shape
+    out = []
+    for loc in locators:
+        if loc.face is None:
+            continue
+        proj = shape.project(pose.point_body_from_world(loc.p_world))
+        face = shape.face_of(proj.point_body) or "?"
+        agree = float(proj.normal_body @ _face_normal_body(shape, loc.face, proj.point_body))
+        if face != loc.face:
+            out.append((loc.name, f"face {face!r}"))
+        elif agree < settings.face_normal_cos:
+            out.append((loc.name, f"the edge of face {face!r}"))
+    return tuple(out)
+
+
+def find_goal(
+    workpiece: Workpiece, locators: Sequence[Locator], start: Pose, settings: GoalSettings = DEFAULT.goal
+) -> GoalSearch:
+    """The located pose, where every locator touches, from any start; deterministic.
+
+    1. Gauss–Newton on the exact gaps from the start (the common case: one start).
+    2. Else starts turned about the body axes by ``settings.turns_deg`` and by the part's
+       symmetry turns, ring by ring. From each start the part first slides (translation only)
+       towards the locators; on a shape with named faces (box, rectangle, cylinder) each locator
+       then touches the plane of its face (``face``, else the face it is nearest there) — Gauss–
+       Newton on plane gaps is well behaved from far away — and the exact gaps polish the pose.
+    3. A pose counts when every exact |gap| ≤ ``settings.touch_gap_m`` (no penetration) and each
+       locator that names a face touches that face from outside (its contact normal is the
+       face's). The first ring with such poses gives the one nearest the start in the
+       mass-weighted metric (ties: the earlier start).
+
+    Without a located pose the answer says why: :func:`no_pose_proof`'s proof, the faces the
+    locators touch instead of those they name, or that the search did not converge.
+    """
+    proof = no_pose_proof(workpiece, locators, settings)
+    if proof:
+        return GoalSearch(False, None, float("inf"), 0, 0, proof, proven=True)
+    exact = _exact_model(workpiece, locators)
+    iterations = {"tol_m": settings.stop_gap_m, "max_iterations": settings.max_iterations, "settings": settings}
+    first = _gauss_newton(exact, workpiece, start, **iterations)  # type: ignore[arg-type]
+    mismatched = _face_mismatches(workpiece, locators, first.pose, settings) if first.converged else ()
+    if first.converged and not mismatched:
+        return GoalSearch(True, first.pose, first.max_gap_m, first.rank, 1)
+    best = first
+    touching: list[tuple[float, int, GoalResult, tuple[tuple[str, str], ...]]] = []
+    if first.converged:
+        touching.append((_distance2(workpiece, start, first.pose), 0, first, mismatched))
+    faces = named_faces(workpiece.shape)
+    d = start.dimension
+    c_start = com_world(start, workpiece.com_body)
+    tried = 1
+    for ring in _turn_rings(d, settings):
+        found: list[tuple[float, int, GoalResult]] = []
+        for turn in ring:
+            tried += 1
+            R = start.R_world_body @ turn
+            candidate = Pose(R, c_start - R @ workpiece.com_body)
+            slid = _gauss_newton(exact, workpiece, candidate, translation_only=True, **iterations)  # type: ignore[arg-type]
+            pose = slid.pose
+            if faces:
+                named = [
+                    loc.face
+                    or workpiece.shape.face_of(
+                        workpiece.shape.project(pose.point_body_from_world(loc.p_world)).point_body
+                    )
+                    or faces[0]
+                    for loc in locators
+                ]
+                pose = _gauss_newton(_face_model(workpiece, locators, named), workpiece, pose, **iterations).pose  # type: ignore[arg-type]
+            result = _gauss_newton(exact, workpiece, pose, **iterations)  # type: ignore[arg-type]
+            if result.max_gap_m < best.max_gap_m:
+                best = result
+            if not result.converged:
+                continue
+            mismatched = _face_mismatches(workpiece, locators, result.pose, settings)
+            dist2 = _distance2(workpiece, start, result.pose)
+            if mismatched:
+                touching.append((dist2, tried, result, mismatched))
+            else:
+                found.append((dist2, tried, result))
+        if found:
+            _, _, result = min(found, key=lambda item: (item[0], item[1]))
+            return GoalSearch(True, result.pose, result.max_gap_m, result.rank, tried)
+    if touching:
+        _, _, result, mismatched = min(touching, key=lambda item: (item[0], item[1]))
+        return GoalSearch(False, result.pose, result.max_gap_m, result.rank, tried, face_mismatches=mismatched)
+    reason = (
+        f"goal finding did not converge from {tried} starts (largest gap {best.max_gap_m:.3g} m at the best); "
+        "give workpiece.goal (the located pose)"
+    )
+    return GoalSearch(False, None, best.max_gap_m, best.rank, tried, reason)
 
 
 def with_goal(fixture: Fixture) -> Fixture:
     """``fixture`` with its located pose set again, for a model changed after loading.
 
     The given goal when there is one (``goal_given``, unchecked here), else the pose that
-    :func:`solve_goal` finds from the start pose; :class:`InfeasibleError` when no pose touches
-    every locator or the fixture is not full.
+    :func:`find_goal` finds from the start pose; :class:`InfeasibleError` saying why when it
+    finds none, or when the fixture is not full.
     """
     require_full(fixture, "the goal pose")
     if fixture.goal_given is not None:
         return replace(fixture, goal_pose=fixture.goal_given)
-    result = solve_goal(fixture.workpiece, fixture.locators, fixture.start)
-    if not result.converged:
-        raise InfeasibleError(f"{fixture.source}: no pose touches all locators (largest gap {result.max_gap_m:.3g} m)")
-    return replace(fixture, goal_pose=result.pose)
+    search = find_goal(fixture.workpiece, fixture.locators, fixture.start)
+    if not search.found or search.pose is None:
+        raise InfeasibleError(f"{fixture.source}: {search.message}")
+    return replace(fixture, goal_pose=search.pose, goal_starts=search.starts)
 
 
-__all__ = ["GoalResult", "contact_set", "locator_contact", "locator_gaps", "require_full", "solve_goal", "with_goal"]
+__all__ = [
+    "GoalResult",
+    "GoalSearch",
+    "contact_set",
+    "find_goal",
+    "locator_contact",
+    "locator_gaps",
+    "named_faces",
+    "no_pose_proof",
+    "require_full",
+    "solve_goal",
+    "with_goal",
+]
