@@ -105,6 +105,8 @@ ContactModel = Callable[[Pose], tuple[FloatArray, FloatArray, FloatArray]]
 
 def _exact_model(workpiece: Workpiece, locators: Sequence[Locator]) -> ContactModel:
     shape = workpiece.shape
+    if isinstance(shape, Box | Rectangle):
+        return _box_model(shape.half, locators)
     tips = [(loc.p_world, loc.radius_m) for loc in locators]
 
     def model(pose: Pose) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -113,6 +115,36 @@ def _exact_model(workpiece: Workpiece, locators: Sequence[Locator]) -> ContactMo
         points_body = np.array([proj.point_body for proj, _ in projections]).reshape(len(tips), -1)
         normals_body = np.array([proj.normal_body for proj, _ in projections]).reshape(len(tips), -1)
         return gaps, points_body @ pose.R_world_body.T + pose.p_world, -(normals_body @ pose.R_world_body.T)
+
+    return model
+
+
+def _box_model(half: FloatArray, locators: Sequence[Locator]) -> ContactModel:
+    """The exact model of a box (rectangle), every locator at once: :meth:`Box.project` row by row."""
+    P_world = np.array([loc.p_world for loc in locators]).reshape(len(locators), -1)
+    radii = np.array([loc.radius_m for loc in locators])
+    rows = np.arange(len(locators))
+    outside_from = 1e-12 * float(half.max())  # as in the shape's projection
+
+    def model(pose: Pose) -> tuple[FloatArray, FloatArray, FloatArray]:
+        R = pose.R_world_body
+        P = (P_world - pose.p_world) @ R
+        q = np.abs(P) - half
+        sign = np.where(P >= 0.0, 1.0, -1.0)
+        outside = np.maximum(q, 0.0)
+        n_out = np.sqrt(np.einsum("ij,ij->i", outside, outside))
+        out = n_out > outside_from
+        k = np.argmax(q, axis=1)
+        points = P.copy()
+        points[rows, k] = sign[rows, k] * half[k]
+        normals = np.zeros_like(P)
+        normals[rows, k] = sign[rows, k]
+        dist = q[rows, k]
+        if np.any(out):
+            points[out] = np.clip(P[out], -half, half)
+            normals[out] = sign[out] * outside[out] / n_out[out, None]
+            dist = np.where(out, n_out, dist)
+        return dist - radii, points @ R.T + pose.p_world, -(normals @ R.T)
 
     return model
 
@@ -455,6 +487,11 @@ def _face_mismatches(
     return tuple(out)
 
 
+def _faces_touched(shape: Shape, locators: Sequence[Locator], pose: Pose) -> list[str | None]:
+    """The face of the part nearest each locator at ``pose`` (None on a shape without named faces)."""
+    return [shape.face_of(shape.project(pose.point_body_from_world(loc.p_world)).point_body) for loc in locators]
+
+
 def find_goal(
     workpiece: Workpiece, locators: Sequence[Locator], start: Pose, settings: GoalSettings = DEFAULT.goal
 ) -> GoalSearch:
@@ -464,12 +501,16 @@ def find_goal(
     2. Else starts turned about the body axes by ``settings.turns_deg`` and by the part's
        symmetry turns, ring by ring. From each start the part first slides (translation only)
        towards the locators; on a shape with named faces (box, rectangle, cylinder) each locator
-       then touches the plane of its face (``face``, else the face it is nearest there) — Gauss–
-       Newton on plane gaps is well behaved from far away — and the exact gaps polish the pose.
+       then touches the plane of its face (``face``, else the face it is nearest there; from the
+       start pose itself also the face it is nearest at the start) — Gauss–Newton on plane gaps
+       is well behaved from far away — and the exact gaps polish the pose.
     3. A pose counts when every exact |gap| ≤ ``settings.touch_gap_m`` (no penetration) and each
        locator that names a face touches that face from outside (its contact normal is the
-       face's). The first ring with such poses gives the one nearest the start in the
-       mass-weighted metric (ties: the earlier start).
+       face's). Of those found, the answer has the fewest locators without ``face`` touching
+       another face than the one they are nearest at the start, then is nearest the start in
+       the mass-weighted metric, then came from the earlier start. The search stops after the
+       first ring (or the first run) that found a pose with every locator on the face it is
+       nearest at the start.
 
     Without a located pose the answer says why: :func:`no_pose_proof`'s proof, the faces the
     locators touch instead of those they name, or that the search did not converge.
@@ -477,60 +518,73 @@ def find_goal(
     proof = no_pose_proof(workpiece, locators, settings)
     if proof:
         return GoalSearch(False, None, float("inf"), 0, 0, proof, proven=True)
+    shape = workpiece.shape
+    faces = named_faces(shape)
     exact = _exact_model(workpiece, locators)
     iterations = {"tol_m": settings.stop_gap_m, "max_iterations": settings.max_iterations, "settings": settings}
-    first = _gauss_newton(exact, workpiece, start, **iterations)  # type: ignore[arg-type]
-    mismatched = _face_mismatches(workpiece, locators, first.pose, settings) if first.converged else ()
-    if first.converged and not mismatched:
-        return GoalSearch(True, first.pose, first.max_gap_m, first.rank, 1)
-    best = first
-    touching: list[tuple[float, int, GoalResult, tuple[tuple[str, str], ...]]] = []
-    if first.converged:
-        touching.append((_distance2(workpiece, start, first.pose), 0, first, mismatched))
-    faces = named_faces(workpiece.shape)
+    seen = _faces_touched(shape, locators, start)  # each locator's face as the start shows it
+    free = [i for i, loc in enumerate(locators) if loc.face is None and seen[i] is not None]
+    Key = tuple[int, float, int]
+    found: list[tuple[Key, GoalResult]] = []
+    touching: list[tuple[Key, GoalResult, tuple[tuple[str, str], ...]]] = []
+    best: list[GoalResult] = []
+
+    def consider(result: GoalResult, order: int) -> None:
+        if not best or result.max_gap_m < best[0].max_gap_m:
+            best[:] = [result]
+        if not result.converged:
+            return
+        touched = _faces_touched(shape, locators, result.pose)
+        key = (sum(touched[i] != seen[i] for i in free), _distance2(workpiece, start, result.pose), order)
+        mismatched = _face_mismatches(workpiece, locators, result.pose, settings)
+        if mismatched:
+            touching.append((key, result, mismatched))
+        else:
+            found.append((key, result))
+
+    def answer(tried: int) -> GoalSearch:
+        key, result = min(found, key=lambda item: item[0])
+        return GoalSearch(True, result.pose, result.max_gap_m, result.rank, tried)
+
+    consider(_gauss_newton(exact, workpiece, start, **iterations), 0)  # type: ignore[arg-type]
+    if found and min(key[0] for key, _ in found) == 0:
+        return answer(1)
+    iterations["max_iterations"] = settings.search_iterations
     d = start.dimension
     c_start = com_world(start, workpiece.com_body)
     tried = 1
-    for ring in _turn_rings(d, settings):
-        found: list[tuple[float, int, GoalResult]] = []
+    for ring_index, ring in enumerate(_turn_rings(d, settings)):
         for turn in ring:
             tried += 1
             R = start.R_world_body @ turn
             candidate = Pose(R, c_start - R @ workpiece.com_body)
-            slid = _gauss_newton(exact, workpiece, candidate, translation_only=True, **iterations)  # type: ignore[arg-type]
-            pose = slid.pose
+            slid = _gauss_newton(exact, workpiece, candidate, translation_only=True, **iterations).pose  # type: ignore[arg-type]
+            assignments: list[list[str]] = []
             if faces:
-                named = [
-                    loc.face
-                    or workpiece.shape.face_of(
-                        workpiece.shape.project(pose.point_body_from_world(loc.p_world)).point_body
-                    )
-                    or faces[0]
-                    for loc in locators
-                ]
-                pose = _gauss_newton(_face_model(workpiece, locators, named), workpiece, pose, **iterations).pose  # type: ignore[arg-type]
-            result = _gauss_newton(exact, workpiece, pose, **iterations)  # type: ignore[arg-type]
-            if result.max_gap_m < best.max_gap_m:
-                best = result
-            if not result.converged:
-                continue
-            mismatched = _face_mismatches(workpiece, locators, result.pose, settings)
-            dist2 = _distance2(workpiece, start, result.pose)
-            if mismatched:
-                touching.append((dist2, tried, result, mismatched))
-            else:
-                found.append((dist2, tried, result))
+                at_slid = _faces_touched(shape, locators, slid)
+                assignments.append([loc.face or at_slid[i] or faces[0] for i, loc in enumerate(locators)])
+                if ring_index == 0:
+                    at_start = [loc.face or seen[i] or faces[0] for i, loc in enumerate(locators)]
+                    if at_start != assignments[0]:
+                        assignments.append(at_start)
+            for named in assignments:
+                planes = _face_model(workpiece, locators, named)
+                pose = _gauss_newton(planes, workpiece, slid, **iterations).pose  # type: ignore[arg-type]
+                consider(_gauss_newton(exact, workpiece, pose, **iterations), tried)  # type: ignore[arg-type]
+            if not faces:
+                consider(_gauss_newton(exact, workpiece, slid, **iterations), tried)  # type: ignore[arg-type]
         if found:
-            _, _, result = min(found, key=lambda item: (item[0], item[1]))
-            return GoalSearch(True, result.pose, result.max_gap_m, result.rank, tried)
+            return answer(tried)
+    if found:  # only the first run's
+        return answer(tried)
     if touching:
-        _, _, result, mismatched = min(touching, key=lambda item: (item[0], item[1]))
+        _, result, mismatched = min(touching, key=lambda item: item[0])
         return GoalSearch(False, result.pose, result.max_gap_m, result.rank, tried, face_mismatches=mismatched)
     reason = (
-        f"goal finding did not converge from {tried} starts (largest gap {best.max_gap_m:.3g} m at the best); "
+        f"goal finding did not converge from {tried} starts (largest gap {best[0].max_gap_m:.3g} m at the best); "
         "give workpiece.goal (the located pose)"
     )
-    return GoalSearch(False, None, best.max_gap_m, best.rank, tried, reason)
+    return GoalSearch(False, None, best[0].max_gap_m, best[0].rank, tried, reason)
 
 
 def with_goal(fixture: Fixture) -> Fixture:

@@ -538,7 +538,9 @@ class GoalSettings:
         A pose touches every locator when every |gap| is at most this [m] (a solved goal is exact:
         much tighter than :attr:`Tolerances.goal_gap_m`, which a given goal must meet).
     max_iterations : int
-        Gauss–Newton iterations per start.
+        Gauss–Newton iterations from the start pose ...
+    search_iterations : int
+        ... and per run of the wider search (a run that converges takes fewer than 30).
     max_turn_rad : float
         Largest rotation of one Gauss–Newton step [rad] ...
     max_shift_rel : float
@@ -555,6 +557,7 @@ class GoalSettings:
     stop_gap_m: float = 1e-12
     touch_gap_m: float = 1e-10
     max_iterations: int = 100
+    search_iterations: int = 40
     max_turn_rad: float = 0.2
     max_shift_rel: float = 0.5
     face_normal_cos: float = 1.0 - 1e-9
