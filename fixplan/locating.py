@@ -8,6 +8,10 @@ The goal pose solves ``gap_i(T) = 0`` for all locators with a damped Gauss–New
 on SE(3) (SE(2) in 2D): the derivative of ``gap_i`` along the world twist ``ν`` of the centre
 of mass is the contact's normal row ``G_i`` (a gap opens at the rate ``n_i·(v + ω × r_i)``), so
 each step solves ``G Δ = −g`` in the least-squares sense and retracts the pose by ``Δ``.
+:func:`solve_goal` is that iteration from one start (local); :func:`find_goal` finds the located
+pose from far starts — turned starts, a slide towards the locators, Gauss–Newton on the planes
+of the locators' faces, then on the exact gaps — and checks it, or says why there is none
+(docs/fixture-format.md).
 """
 
 from __future__ import annotations
@@ -256,11 +260,11 @@ def _gauss_newton(
     for it in range(1, max_iterations + 1):  # noqa: B007 - used after the loop
         if len(gaps) == 0 or np.max(np.abs(gaps)) <= tol_m:
             break
+        step: FloatArray = np.zeros(G.shape[1])
         if translation_only:
-            step = np.zeros(G.shape[1])
             step[:d] = -np.linalg.lstsq(G[:, :d], gaps, rcond=DEFAULT.numerics.rcond)[0]
         else:
-            step = -np.linalg.lstsq(G, gaps, rcond=DEFAULT.numerics.rcond)[0]
+            step[:] = -np.linalg.lstsq(G, gaps, rcond=DEFAULT.numerics.rcond)[0]
         # Limit rotations per step to keep far starts on the right faces.
         ang = float(np.linalg.norm(step[d:]))
         lin = float(np.linalg.norm(step[:d]))
