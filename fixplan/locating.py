@@ -475,19 +475,29 @@ def _distance2(workpiece: Workpiece, a: Pose, b: Pose) -> float:
 def _face_mismatches(
     workpiece: Workpiece, locators: Sequence[Locator], pose: Pose, settings: GoalSettings
 ) -> tuple[tuple[str, str], ...]:
-    """Locators naming a face they do not touch at ``pose`` from outside, with the face they touch."""
+    """Locators naming a face they do not touch at ``pose`` from outside, with what they touch.
+
+    On its face a locator's contact normal is the face's; a round tip against an edge or a
+    corner pushes along a normal between the faces that meet there (named in the answer).
+    """
     shape = workpiece.shape
     out = []
     for loc in locators:
         if loc.face is None:
             continue
         proj = shape.project(pose.point_body_from_world(loc.p_world))
-        face = shape.face_of(proj.point_body) or "?"
-        agree = float(proj.normal_body @ _face_normal_body(shape, loc.face, proj.point_body))
-        if face != loc.face:
-            out.append((loc.name, f"face {face!r}"))
-        elif agree < settings.face_normal_cos:
-            out.append((loc.name, f"the edge of face {face!r}"))
+        cosines = {
+            f: float(proj.normal_body @ _face_normal_body(shape, f, proj.point_body)) for f in named_faces(shape)
+        }
+        on = [f for f, c in cosines.items() if c >= settings.face_normal_cos]
+        if on == [loc.face]:
+            continue
+        if on:
+            out.append((loc.name, f"face {on[0]!r}"))
+        else:
+            near = [f for f, c in cosines.items() if c > DEFAULT.numerics.zero_rel]  # in named_faces' order
+            where = "the edge" if len(near) == 2 else "the corner" if len(near) == 3 else "the rim"
+            out.append((loc.name, f"{where} between faces {' and '.join(repr(f) for f in near)}"))
     return tuple(out)
 
 

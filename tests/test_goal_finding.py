@@ -314,3 +314,37 @@ def test_a_locator_on_another_face_than_it_names_is_reported_there() -> None:
     assert str(info.value).splitlines() == [
         "f.toml: locator.B1.face: touches face '-z' at the located pose (expected '-y')"
     ]
+
+
+def test_a_tip_on_the_edge_of_its_named_face_is_not_on_that_face() -> None:
+    """A 0.2 x 0.1 plate, B2's round tip (5 mm) against its bottom-right corner, named -y: every
+    gap is zero at the corner pose, but B2 pushes along the diagonal there, not along -y's normal;
+    no pose has B2 on the bottom face proper (its tangent from B1 meets the ball beyond the corner),
+    so the file is refused with where B2 touches."""
+    rho = 0.005
+    corner = np.array([0.2, 0.0]) + rho * np.array([1.0, -1.0]) / np.sqrt(2.0)
+    text = "\n".join(
+        [
+            "format = 1",
+            "[scene]",
+            'name = "edge"',
+            "dimension = 2",
+            "[workpiece]",
+            'shape = "rectangle"',
+            "size = [0.2, 0.1]",
+            "mass = 1.0",
+            "start = { position = [0.11, 0.06], angle_deg = 3.0 }",
+            '[[locator]]\nname = "B1"\nposition = [0.06, 0.0]\nfriction = 0.3\nface = "-y"',
+            f'[[locator]]\nname = "B2"\nposition = {_vec(corner)}\nradius = {rho}\nfriction = 0.3\nface = "-y"',
+            '[[locator]]\nname = "S"\nposition = [0.0, 0.05]\nfriction = 0.3\nface = "-x"',
+        ]
+    )
+    with pytest.raises(FixtureError) as info:
+        loads(text, source="f.toml")
+    assert str(info.value).splitlines() == [
+        "f.toml: locator.B2.face: touches the edge between faces '+x' and '-y' at the located pose (expected '-y')"
+    ]
+    fx = loads(text.replace('radius = 0.005\nfriction = 0.3\nface = "-y"', "radius = 0.005\nfriction = 0.3"))
+    assert_located(fx, Pose(np.eye(2), [0.1, 0.05]))  # unnamed, the corner contact is a located pose
+    n = contact_set(fx, "goal", ["B2"]).contacts[0].normal_world
+    assert np.allclose(n, [-np.sqrt(0.5), np.sqrt(0.5)], atol=1e-9)
