@@ -348,3 +348,23 @@ def test_a_tip_on_the_edge_of_its_named_face_is_not_on_that_face() -> None:
     assert_located(fx, Pose(np.eye(2), [0.1, 0.05]))  # unnamed, the corner contact is a located pose
     n = contact_set(fx, "goal", ["B2"]).contacts[0].normal_world
     assert np.allclose(n, [-np.sqrt(0.5), np.sqrt(0.5)], atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("position", "rpy_deg"),
+    [
+        ([0.1, 0.05, 0.2], [0.0, 0.0, 180.0]),
+        ([0.1, 0.05, 0.2], [180.0, 0.0, 0.0]),
+        ([0.15, 0.1, 0.15], [30.0, 20.0, 60.0]),
+    ],
+)
+def test_named_faces_locate_the_box_from_any_turn(position: list[float], rpy_deg: list[float]) -> None:
+    """Upside down, turned half round, or turned 60° and tilted, 15 cm up: with faces named the
+    default box is found in its corner (the half turns by the symmetry ring, after the rest)."""
+    text = DEFAULT_TEXT.replace(
+        "start = { position = [0.115, 0.06, 0.025], rpy_deg = [0.0, 0.0, 4.0] }",
+        f"start = {{ position = {position}, rpy_deg = {rpy_deg} }}",
+    )
+    fx = loads(text)
+    assert_located(fx, CORNER)
+    assert fx.goal_starts == (49 if 180.0 in rpy_deg else 2)
