@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from fixplan import limits
 from fixplan.errors import FixtureError, Issue
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
-from fixplan.locating import locator_contact, solve_goal
+from fixplan.locating import find_goal, locator_contact
 from fixplan.model import ExplicitContact, Fixture, Locator, Manipulator, SimulationSettings, Workpiece
 from fixplan.schema import Reader, shorten
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
@@ -111,6 +111,7 @@ class _Builder:
         self.tol = tol
         self.r = Reader()
         self.warnings: list[Issue] = []
+        self.goal_starts = 0  # starts goal finding tried (0: the goal is given, or the fixture is not full)
 
     def fail_if_issues(self) -> None:
         if self.r.issues:
@@ -169,7 +170,7 @@ class _Builder:
         )
         goal = self.check_geometry(fixture)
         self.fail_if_issues()
-        return replace(fixture, goal_pose=goal, warnings=tuple(self.warnings))
+        return replace(fixture, goal_pose=goal, goal_starts=self.goal_starts, warnings=tuple(self.warnings))
 
     def check_entry_count(self) -> None:
         """At most :data:`~fixplan.limits.MAX_ENTRIES` locators and contacts, refused before any is read."""
@@ -615,20 +616,21 @@ class _Builder:
                         "workpiece.goal",
                         f"locator {loc.name} does not touch at the given goal (gap {gap:.3g} m; expected |gap| ≤ {tol.goal_gap_m:g} m)",
                     )
-        else:
-            result = solve_goal(wp, locs, fixture.start)
-            if not result.converged:
-                r.error(
-                    "locator",
-                    f"no pose touches all {len(locs)} locators (largest gap {result.max_gap_m:.3g} m after {result.iterations} iteration{'s' if result.iterations != 1 else ''})",
-                )
-                return None
-            goal = result.pose
-        for loc in locs:
-            if loc.face is None:
-                continue
-            p_body = goal.point_body_from_world(loc.p_world)
-            face = wp.shape.face_of(wp.shape.project(p_body).point_body)
-            if face != loc.face:
-                r.error(f"locator.{loc.name}.face", f"touches face {face!r} at the goal (expected {loc.face!r})")
-        return goal
+            for loc in locs:
+                if loc.face is None:
+                    continue
+                p_body = goal.point_body_from_world(loc.p_world)
+                face = wp.shape.face_of(wp.shape.project(p_body).point_body)
+                if face != loc.face:
+                    r.error(f"locator.{loc.name}.face", f"touches face {face!r} at the goal (expected {loc.face!r})")
+            return goal
+        search = find_goal(wp, locs, fixture.start)
+        self.goal_starts = search.starts
+        if search.found and search.pose is not None:
+            return search.pose
+        for name, touched in search.face_mismatches:
+            expected = fixture.locator(name).face
+            r.error(f"locator.{name}.face", f"touches {touched} at the located pose (expected {expected!r})")
+        if not search.face_mismatches:
+            r.error("locator", search.message)
+        return None

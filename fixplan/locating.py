@@ -8,21 +8,27 @@ The goal pose solves ``gap_i(T) = 0`` for all locators with a damped Gauss–New
 on SE(3) (SE(2) in 2D): the derivative of ``gap_i`` along the world twist ``ν`` of the centre
 of mass is the contact's normal row ``G_i`` (a gap opens at the rate ``n_i·(v + ω × r_i)``), so
 each step solves ``G Δ = −g`` in the least-squares sense and retracts the pose by ``Δ``.
+:func:`solve_goal` is that iteration from one start (local); :func:`find_goal` finds the located
+pose from far starts — turned starts, a slide towards the locators, Gauss–Newton on the planes
+of the locators' faces, then on the exact gaps — and checks it, or says why there is none
+(docs/fixture-format.md).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import itertools
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import InfeasibleError, InputError
+from fixplan.geometry import Box, Cylinder, Polygon, Rectangle, Shape
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
 from fixplan.model import Fixture, Locator, Workpiece, require_full
-from fixplan.settings import DEFAULT
-from fixplan.spatial import Pose
+from fixplan.settings import DEFAULT, GoalSettings
+from fixplan.spatial import Pose, exp_so3, log_so3, rot2
 
 FloatArray = NDArray[np.float64]
 
@@ -94,9 +100,128 @@ def contact_set(
     return ContactSet(tuple(chosen), c, M, pose.p_world.copy())
 
 
+# -- the located pose --------------------------------------------------------------------------------
+# A contact model gives every locator's gap, contact point and inward normal (world) at a pose: the
+# exact one (the shape's signed distance), or one where each locator touches the plane of a named
+# face (a cylinder's side: the side's surface), which Gauss–Newton follows well from far away.
+ContactModel = Callable[[Pose], tuple[FloatArray, FloatArray, FloatArray]]
+
+
+def _exact_model(workpiece: Workpiece, locators: Sequence[Locator]) -> ContactModel:
+    shape = workpiece.shape
+    if isinstance(shape, Box | Rectangle):
+        return _box_model(shape.half, locators)
+    tips = [(loc.p_world, loc.radius_m) for loc in locators]
+
+    def model(pose: Pose) -> tuple[FloatArray, FloatArray, FloatArray]:
+        projections = [(shape.project(pose.point_body_from_world(p)), rho) for p, rho in tips]
+        gaps = np.array([proj.distance - rho for proj, rho in projections])
+        points_body = np.array([proj.point_body for proj, _ in projections]).reshape(len(tips), -1)
+        normals_body = np.array([proj.normal_body for proj, _ in projections]).reshape(len(tips), -1)
+        return gaps, points_body @ pose.R_world_body.T + pose.p_world, -(normals_body @ pose.R_world_body.T)
+
+    return model
+
+
+def _box_model(half: FloatArray, locators: Sequence[Locator]) -> ContactModel:
+    """The exact model of a box (rectangle), every locator at once: :meth:`Box.project` row by row."""
+    P_world = np.array([loc.p_world for loc in locators]).reshape(len(locators), -1)
+    radii = np.array([loc.radius_m for loc in locators])
+    rows = np.arange(len(locators))
+    outside_from = 1e-12 * float(half.max())  # as in the shape's projection
+
+    def model(pose: Pose) -> tuple[FloatArray, FloatArray, FloatArray]:
+        R = pose.R_world_body
+        P = (P_world - pose.p_world) @ R
+        q = np.abs(P) - half
+        sign = np.where(P >= 0.0, 1.0, -1.0)
+        outside = np.maximum(q, 0.0)
+        n_out = np.sqrt(np.einsum("ij,ij->i", outside, outside))
+        out = n_out > outside_from
+        k = np.argmax(q, axis=1)
+        points = P.copy()
+        points[rows, k] = sign[rows, k] * half[k]
+        normals = np.zeros_like(P)
+        normals[rows, k] = sign[rows, k]
+        dist = q[rows, k]
+        if np.any(out):
+            points[out] = np.clip(P[out], -half, half)
+            normals[out] = sign[out] * outside[out] / n_out[out, None]
+            dist = np.where(out, n_out, dist)
+        return dist - radii, points @ R.T + pose.p_world, -(normals @ R.T)
+
+    return model
+
+
+def named_faces(shape: Shape) -> tuple[str, ...]:
+    """The faces a locator may name (``face = "-z"``): a box's and a rectangle's sides, a cylinder's ends and side."""
+    if isinstance(shape, Box):
+        return ("+x", "-x", "+y", "-y", "+z", "-z")
+    if isinstance(shape, Rectangle):
+        return ("+x", "-x", "+y", "-y")
+    if isinstance(shape, Cylinder):
+        return ("+z", "-z", "side")
+    return ()
+
+
+def _face_axis(shape: Shape, face: str) -> tuple[int, float, float]:
+    """A planar face's body axis, its sign and its distance from the body origin [m]."""
+    k = "xyz".index(face[1])
+    sign = 1.0 if face[0] == "+" else -1.0
+    if isinstance(shape, Cylinder):
+        return k, sign, shape.length / 2.0
+    assert isinstance(shape, Box | Rectangle)
+    return k, sign, float(shape.half[k])
+
+
+def _face_normal_body(shape: Shape, face: str, point_body: FloatArray) -> FloatArray:
+    """The outward normal of ``face`` at a point on it (body axes)."""
+    if face == "side":
+        radial = np.array([point_body[0], point_body[1], 0.0])
+        return radial / max(float(np.linalg.norm(radial)), 1e-300)
+    k, sign, _ = _face_axis(shape, face)
+    normal = np.zeros(shape.dimension)
+    normal[k] = sign
+    return normal
+
+
+def _face_model(workpiece: Workpiece, locators: Sequence[Locator], faces: Sequence[str]) -> ContactModel:
+    """Each locator touching the plane of its face (a cylinder's side: the infinite side)."""
+    shape = workpiece.shape
+    d = shape.dimension
+    rows = []
+    for loc, face in zip(locators, faces, strict=True):
+        if face == "side":
+            assert isinstance(shape, Cylinder)
+            rows.append((loc.p_world, loc.radius_m, -1, 1.0, shape.radius))
+        else:
+            k, sign, offset = _face_axis(shape, face)
+            rows.append((loc.p_world, loc.radius_m, k, sign, offset))
+
+    def model(pose: Pose) -> tuple[FloatArray, FloatArray, FloatArray]:
+        gaps = np.empty(len(rows))
+        points = np.empty((len(rows), d))
+        normals = np.empty((len(rows), d))
+        for i, (p_world, rho, k, sign, offset) in enumerate(rows):
+            q = pose.point_body_from_world(p_world)
+            if k < 0:  # the cylinder's side: radial
+                u = np.array([q[0], q[1], 0.0])
+                u /= max(float(np.linalg.norm(u)), 1e-300)
+            else:
+                u = np.zeros(d)
+                u[k] = sign
+            dist = float(u @ q) - offset
+            gaps[i] = dist - rho
+            points[i] = pose.point_world_from_body(q - dist * u)
+            normals[i] = -(pose.R_world_body @ u)
+        return gaps, points, normals
+
+    return model
+
+
 @dataclass(frozen=True)
 class GoalResult:
-    """The located pose and how well every locator touches there."""
+    """The pose one Gauss–Newton run reaches and how well every locator touches there."""
 
     pose: Pose
     max_gap_m: float  # largest |gap| over the locators at ``pose``
@@ -105,28 +230,26 @@ class GoalResult:
     converged: bool
 
 
-def solve_goal(
+def _gauss_newton(
+    model: ContactModel,
     workpiece: Workpiece,
-    locators: Sequence[Locator],
     start: Pose,
     *,
-    tol_m: float = 1e-12,
-    max_iterations: int = 100,
+    tol_m: float,
+    max_iterations: int,
+    translation_only: bool = False,
+    settings: GoalSettings = DEFAULT.goal,
 ) -> GoalResult:
-    """Damped Gauss–Newton for the pose where every locator touches (see module docstring)."""
+    """Damped Gauss–Newton on ``model``'s gaps from ``start`` (see the module docstring)."""
     pose = start
+    d = start.dimension
     scale = max(workpiece.shape.bounding_radius, 1e-9)
 
-    def gaps_at(p: Pose) -> FloatArray:
-        return np.array([locator_contact(workpiece, p, loc).gap_m for loc in locators])
-
     def residual(p: Pose) -> tuple[FloatArray, FloatArray]:
-        contacts = [locator_contact(workpiece, p, loc) for loc in locators]
-        gaps = np.array([c.gap_m for c in contacts])
+        gaps, points, n = model(p)
         # the normal rows [n, r × n] of the contact Jacobians (written out: np.cross per row is slow)
-        n = np.array([c.normal_world for c in contacts]).reshape(len(contacts), -1)
-        r = np.array([c.point_world for c in contacts]).reshape(len(contacts), -1) - com_world(p, workpiece.com_body)
-        if n.shape[1] == 2:
+        r = points - com_world(p, workpiece.com_body)
+        if d == 2:
             moment = (r[:, 0] * n[:, 1] - r[:, 1] * n[:, 0])[:, None]
         else:
             moment = np.cross(r, n)
@@ -135,20 +258,23 @@ def solve_goal(
     gaps, G = residual(pose)
     it = 0
     for it in range(1, max_iterations + 1):  # noqa: B007 - used after the loop
-        if np.max(np.abs(gaps)) <= tol_m:
+        if len(gaps) == 0 or np.max(np.abs(gaps)) <= tol_m:
             break
-        step = -np.linalg.lstsq(G, gaps, rcond=DEFAULT.numerics.rcond)[0]
+        step: FloatArray = np.zeros(G.shape[1])
+        if translation_only:
+            step[:d] = -np.linalg.lstsq(G[:, :d], gaps, rcond=DEFAULT.numerics.rcond)[0]
+        else:
+            step[:] = -np.linalg.lstsq(G, gaps, rcond=DEFAULT.numerics.rcond)[0]
         # Limit rotations per step to keep far starts on the right faces.
-        d = start.dimension
         ang = float(np.linalg.norm(step[d:]))
         lin = float(np.linalg.norm(step[:d]))
-        limit = max(ang / 0.2, lin / (0.5 * scale), 1.0)
+        limit = max(ang / settings.max_turn_rad, lin / (settings.max_shift_rel * scale), 1.0)
         step /= limit
         f0 = float(gaps @ gaps)
         alpha = 1.0
         while True:
             trial = pose.retract(alpha * step, workpiece.com_body)
-            g_trial = gaps_at(trial)
+            g_trial = model(trial)[0]
             if float(g_trial @ g_trial) < f0 or alpha < DEFAULT.numerics.line_search_min_step:
                 break
             alpha /= 2.0
@@ -161,23 +287,346 @@ def solve_goal(
             break  # stalled at a least-squares minimum (more locators than the pose can satisfy)
     max_gap = float(np.max(np.abs(gaps))) if len(gaps) else 0.0
     rank = int(np.linalg.matrix_rank(G, tol=DEFAULT.numerics.rank_tol)) if len(gaps) else 0
-    return GoalResult(pose, max_gap, it, rank, converged=max_gap <= max(tol_m, 1e-10))
+    return GoalResult(pose, max_gap, it, rank, converged=max_gap <= max(tol_m, settings.touch_gap_m))
+
+
+def solve_goal(
+    workpiece: Workpiece,
+    locators: Sequence[Locator],
+    start: Pose,
+    *,
+    tol_m: float = DEFAULT.goal.stop_gap_m,
+    max_iterations: int = DEFAULT.goal.max_iterations,
+) -> GoalResult:
+    """Damped Gauss–Newton from ``start`` for a nearby pose where every locator touches (local).
+
+    The exact gaps; no check of faces. :func:`find_goal` finds the located pose from far starts.
+    """
+    return _gauss_newton(
+        _exact_model(workpiece, locators), workpiece, start, tol_m=tol_m, max_iterations=max_iterations
+    )
+
+
+@dataclass(frozen=True)
+class GoalSearch:
+    """The located pose found from a start by :func:`find_goal`, or why there is none.
+
+    Attributes
+    ----------
+    found : bool
+        A pose touches every locator (each |gap| ≤ ``GoalSettings.touch_gap_m``, none penetrating)
+        from outside, every locator that names a face on that face.
+    pose : Pose or None
+        The located pose (the nearest to the start, in the mass-weighted metric, of those found).
+    max_gap_m : float
+        Largest |gap| at ``pose``, or at the best pose reached when none was found [m].
+    rank : int
+        Rank of ``G`` at ``pose`` (6 in 3D, 3 in 2D: the locators determine the pose).
+    starts : int
+        Starts tried: 1 when Gauss–Newton from the start pose found it.
+    reason : str
+        Why there is no located pose (empty when found): a proof when ``proven``, else that the
+        search did not converge.
+    proven : bool
+        ``reason`` proves that no pose touches every locator.
+    face_mismatches : tuple of (str, str)
+        When a pose touches every locator but not on the faces the locators name: each such
+        locator's name and what it touches there (``face '+z'``, ``the edge of face '-z'``).
+    """
+
+    found: bool
+    pose: Pose | None
+    max_gap_m: float
+    rank: int
+    starts: int
+    reason: str = ""
+    proven: bool = False
+    face_mismatches: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def message(self) -> str:
+        """One line for people: why no pose is located (empty when found)."""
+        if self.found:
+            return ""
+        if self.proven:
+            return f"no pose touches every locator: {self.reason}"
+        if self.face_mismatches:
+            touched = ", ".join(f"{name} touches {what}" for name, what in self.face_mismatches)
+            return f"at the located pose {touched}, not the face named"
+        return self.reason
+
+
+def _diameter(shape: Shape) -> float:
+    """The largest distance between two points of the shape [m] (an upper bound for unknown shapes)."""
+    if isinstance(shape, Polygon):
+        V = shape.array
+        return float(np.max(np.linalg.norm(V[:, None, :] - V[None, :, :], axis=2)))
+    if isinstance(shape, Box | Rectangle):
+        return 2.0 * float(np.linalg.norm(shape.half))
+    if isinstance(shape, Cylinder):
+        return 2.0 * float(np.hypot(shape.radius, shape.length / 2.0))
+    return 2.0 * shape.bounding_radius
+
+
+def _face_width(shape: Shape, face: str) -> float | None:
+    """The largest distance between two points of a planar face [m] (None: not planar)."""
+    if face == "side":
+        return None
+    if isinstance(shape, Cylinder):
+        return 2.0 * shape.radius
+    assert isinstance(shape, Box | Rectangle)
+    k, _, _ = _face_axis(shape, face)
+    others = np.delete(np.asarray(shape.size, dtype=float), k)
+    return float(np.linalg.norm(others))
+
+
+def no_pose_proof(workpiece: Workpiece, locators: Sequence[Locator], settings: GoalSettings = DEFAULT.goal) -> str:
+    """Why no pose can touch every locator, proved from distances alone; empty when no proof is found.
+
+    Two tips farther apart than the part is wide plus their radii; two tips on opposite faces
+    closer than the faces are apart plus their radii; two tips on one face farther apart than
+    the face is wide; tips of one radius on one plane face not on one plane (a line in 2D).
+    """
+    shape = workpiece.shape
+    slack = 2.0 * settings.touch_gap_m
+    width = _diameter(shape)
+    for i, a in enumerate(locators):
+        for b in locators[i + 1 :]:
+            dist = float(np.linalg.norm(a.p_world - b.p_world))
+            radii = a.radius_m + b.radius_m
+            if dist > width + radii + slack:
+                return (
+                    f"{a.name} and {b.name} are {dist:.4g} m apart, more than the part's width {width:.4g} m "
+                    f"plus their tip radii {radii:.4g} m"
+                )
+            if a.face is None or b.face is None or "side" in (a.face, b.face):
+                continue
+            ka, sa, ha = _face_axis(shape, a.face)
+            kb, sb, hb = _face_axis(shape, b.face)
+            if ka == kb and sa != sb and dist < ha + hb + radii - slack:
+                return (
+                    f"{a.name} on face {a.face} and {b.name} on face {b.face} are {dist:.4g} m apart, less than "
+                    f"the {ha + hb:.4g} m between these faces plus their tip radii {radii:.4g} m"
+                )
+            face_width = _face_width(shape, a.face)
+            if a.face == b.face and face_width is not None:
+                reach = float(np.hypot(face_width, a.radius_m - b.radius_m))
+                if dist > reach + slack:
+                    return (
+                        f"{a.name} and {b.name} on face {a.face} are {dist:.4g} m apart, more than the face is "
+                        f"wide ({face_width:.4g} m)"
+                    )
+    d = shape.dimension
+    for face in named_faces(shape):
+        on = [loc for loc in locators if loc.face == face]
+        if face == "side" or len(on) <= d or len({loc.radius_m for loc in on}) != 1:
+            continue
+        P = np.array([loc.p_world for loc in on])
+        centred = P - P.mean(axis=0)
+        normal = np.linalg.svd(centred)[2][-1]  # of the best plane (line in 2D) through the tips
+        off = float(np.max(np.abs(centred @ normal)))
+        if off > slack:
+            where = "one plane" if d == 3 else "one line"
+            return (
+                f"{', '.join(loc.name for loc in on)} on face {face} are not on {where} ({off:.3g} m off the best one)"
+            )
+    return ""
+
+
+def _symmetry_turns(d: int) -> list[FloatArray]:
+    """The rotations mapping a box (rectangle) onto itself, but the identity: 23 in 3D, 3 in 2D."""
+    if d == 2:
+        return [rot2(np.pi / 2.0 * k) for k in (1, 2, 3)]
+    out = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            R = np.zeros((3, 3))
+            for row, (col, s) in enumerate(zip(perm, signs, strict=True)):
+                R[row, col] = s
+            if np.linalg.det(R) > 0.0 and not np.array_equal(R, np.eye(3)):
+                out.append(R)
+    return out
+
+
+def _turn_rings(d: int, settings: GoalSettings) -> list[list[FloatArray]]:
+    """The wider search's body-frame turns of the start, in rings of growing angle."""
+    rings: list[list[FloatArray]] = [[np.eye(d)]]
+    for deg in settings.turns_deg:
+        a = np.radians(deg)
+        if d == 2:
+            rings.append([rot2(a), rot2(-a)])
+        else:
+            rings.append([exp_so3(s * a * axis) for axis in np.eye(3) for s in (1.0, -1.0)])
+    rings.append(_symmetry_turns(d))
+    return rings
+
+
+def _distance2(workpiece: Workpiece, a: Pose, b: Pose) -> float:
+    """Squared mass-weighted distance from ``a`` to ``b``: ``ξᵀ M ξ``, ξ the twist of the centre of mass [kg·m²]."""
+    dc = com_world(b, workpiece.com_body) - com_world(a, workpiece.com_body)
+    if a.dimension == 3:
+        turn = log_so3(b.R_world_body @ a.R_world_body.T)
+    else:
+        turn = np.array([(b.angle_rad - a.angle_rad + np.pi) % (2.0 * np.pi) - np.pi])
+    xi = np.concatenate([dc, turn])
+    return float(xi @ mass_matrix(workpiece.mass_kg, workpiece.inertia_body, a.R_world_body) @ xi)
+
+
+def _face_mismatches(
+    workpiece: Workpiece, locators: Sequence[Locator], pose: Pose, settings: GoalSettings
+) -> tuple[tuple[str, str], ...]:
+    """Locators naming a face they do not touch at ``pose`` from outside, with what they touch.
+
+    On its face a locator's contact normal is the face's; a round tip against an edge or a
+    corner pushes along a normal between the faces that meet there (named in the answer).
+    """
+    shape = workpiece.shape
+    out = []
+    for loc in locators:
+        if loc.face is None:
+            continue
+        proj = shape.project(pose.point_body_from_world(loc.p_world))
+        cosines = {
+            f: float(proj.normal_body @ _face_normal_body(shape, f, proj.point_body)) for f in named_faces(shape)
+        }
+        on = [f for f, c in cosines.items() if c >= settings.face_normal_cos]
+        if on == [loc.face]:
+            continue
+        if on:
+            out.append((loc.name, f"face {on[0]!r}"))
+        else:
+            near = [f for f, c in cosines.items() if c > DEFAULT.numerics.zero_rel]  # in named_faces' order
+            where = "the edge" if len(near) == 2 else "the corner" if len(near) == 3 else "the rim"
+            out.append((loc.name, f"{where} between faces {' and '.join(repr(f) for f in near)}"))
+    return tuple(out)
+
+
+def _faces_touched(shape: Shape, locators: Sequence[Locator], pose: Pose) -> list[str | None]:
+    """The face of the part nearest each locator at ``pose`` (None on a shape without named faces)."""
+    return [shape.face_of(shape.project(pose.point_body_from_world(loc.p_world)).point_body) for loc in locators]
+
+
+def find_goal(
+    workpiece: Workpiece, locators: Sequence[Locator], start: Pose, settings: GoalSettings = DEFAULT.goal
+) -> GoalSearch:
+    """The located pose, where every locator touches, from any start; deterministic.
+
+    1. Gauss–Newton on the exact gaps from the start (the common case: one start).
+    2. Else starts turned about the body axes by ``settings.turns_deg`` and by the part's
+       symmetry turns, ring by ring. From each start the part first slides (translation only)
+       towards the locators; on a shape with named faces (box, rectangle, cylinder) each locator
+       then touches the plane of its face (``face``, else the face it is nearest there; from the
+       start pose itself also the face it is nearest at the start) — Gauss–Newton on plane gaps
+       is well behaved from far away — and the exact gaps polish the pose.
+    3. A pose counts when every exact |gap| ≤ ``settings.touch_gap_m`` (no penetration) and each
+       locator that names a face touches that face from outside (its contact normal is the
+       face's). Of those found, the answer has the fewest locators without ``face`` touching
+       another face than the one they are nearest at the start, then is nearest the start in
+       the mass-weighted metric, then came from the earlier start. The search stops after the
+       first ring (or the first run) that found a pose with every locator on the face it is
+       nearest at the start.
+
+    Without a located pose the answer says why: :func:`no_pose_proof`'s proof, the faces the
+    locators touch instead of those they name, or that the search did not converge.
+    """
+    proof = no_pose_proof(workpiece, locators, settings)
+    if proof:
+        return GoalSearch(False, None, float("inf"), 0, 0, proof, proven=True)
+    shape = workpiece.shape
+    faces = named_faces(shape)
+    exact = _exact_model(workpiece, locators)
+    iterations = {"tol_m": settings.stop_gap_m, "max_iterations": settings.max_iterations, "settings": settings}
+    seen = _faces_touched(shape, locators, start)  # each locator's face as the start shows it
+    free = [i for i, loc in enumerate(locators) if loc.face is None and seen[i] is not None]
+    Key = tuple[int, float, int]
+    found: list[tuple[Key, GoalResult]] = []
+    touching: list[tuple[Key, GoalResult, tuple[tuple[str, str], ...]]] = []
+    best: list[GoalResult] = []
+
+    def consider(result: GoalResult, order: int) -> None:
+        if not best or result.max_gap_m < best[0].max_gap_m:
+            best[:] = [result]
+        if not result.converged:
+            return
+        touched = _faces_touched(shape, locators, result.pose)
+        key = (sum(touched[i] != seen[i] for i in free), _distance2(workpiece, start, result.pose), order)
+        mismatched = _face_mismatches(workpiece, locators, result.pose, settings)
+        if mismatched:
+            touching.append((key, result, mismatched))
+        else:
+            found.append((key, result))
+
+    def answer(tried: int) -> GoalSearch:
+        key, result = min(found, key=lambda item: item[0])
+        return GoalSearch(True, result.pose, result.max_gap_m, result.rank, tried)
+
+    consider(_gauss_newton(exact, workpiece, start, **iterations), 0)  # type: ignore[arg-type]
+    if found and min(key[0] for key, _ in found) == 0:
+        return answer(1)
+    iterations["max_iterations"] = settings.search_iterations
+    d = start.dimension
+    c_start = com_world(start, workpiece.com_body)
+    tried = 1
+    for ring_index, ring in enumerate(_turn_rings(d, settings)):
+        for turn in ring:
+            tried += 1
+            R = start.R_world_body @ turn
+            candidate = Pose(R, c_start - R @ workpiece.com_body)
+            slid = _gauss_newton(exact, workpiece, candidate, translation_only=True, **iterations).pose  # type: ignore[arg-type]
+            assignments: list[list[str]] = []
+            if faces:
+                at_slid = _faces_touched(shape, locators, slid)
+                assignments.append([loc.face or at_slid[i] or faces[0] for i, loc in enumerate(locators)])
+                if ring_index == 0:
+                    at_start = [loc.face or seen[i] or faces[0] for i, loc in enumerate(locators)]
+                    if at_start != assignments[0]:
+                        assignments.append(at_start)
+            for named in assignments:
+                planes = _face_model(workpiece, locators, named)
+                pose = _gauss_newton(planes, workpiece, slid, **iterations).pose  # type: ignore[arg-type]
+                consider(_gauss_newton(exact, workpiece, pose, **iterations), tried)  # type: ignore[arg-type]
+            if not faces:
+                consider(_gauss_newton(exact, workpiece, slid, **iterations), tried)  # type: ignore[arg-type]
+        if found:
+            return answer(tried)
+    if found:  # only the first run's
+        return answer(tried)
+    if touching:
+        _, result, mismatched = min(touching, key=lambda item: item[0])
+        return GoalSearch(False, result.pose, result.max_gap_m, result.rank, tried, face_mismatches=mismatched)
+    reason = (
+        f"goal finding did not converge from {tried} starts (largest gap {best[0].max_gap_m:.3g} m at the best); "
+        "give workpiece.goal (the located pose)"
+    )
+    return GoalSearch(False, None, best[0].max_gap_m, best[0].rank, tried, reason)
 
 
 def with_goal(fixture: Fixture) -> Fixture:
     """``fixture`` with its located pose set again, for a model changed after loading.
 
     The given goal when there is one (``goal_given``, unchecked here), else the pose that
-    :func:`solve_goal` finds from the start pose; :class:`InfeasibleError` when no pose touches
-    every locator or the fixture is not full.
+    :func:`find_goal` finds from the start pose; :class:`InfeasibleError` saying why when it
+    finds none, or when the fixture is not full.
     """
     require_full(fixture, "the goal pose")
     if fixture.goal_given is not None:
         return replace(fixture, goal_pose=fixture.goal_given)
-    result = solve_goal(fixture.workpiece, fixture.locators, fixture.start)
-    if not result.converged:
-        raise InfeasibleError(f"{fixture.source}: no pose touches all locators (largest gap {result.max_gap_m:.3g} m)")
-    return replace(fixture, goal_pose=result.pose)
+    search = find_goal(fixture.workpiece, fixture.locators, fixture.start)
+    if not search.found or search.pose is None:
+        raise InfeasibleError(f"{fixture.source}: {search.message}")
+    return replace(fixture, goal_pose=search.pose, goal_starts=search.starts)
 
 
-__all__ = ["GoalResult", "contact_set", "locator_contact", "locator_gaps", "require_full", "solve_goal", "with_goal"]
+__all__ = [
+    "GoalResult",
+    "GoalSearch",
+    "contact_set",
+    "find_goal",
+    "locator_contact",
+    "locator_gaps",
+    "named_faces",
+    "no_pose_proof",
+    "require_full",
+    "solve_goal",
+    "with_goal",
+]

@@ -87,6 +87,7 @@ class Fixture:
     start: Pose
     goal_given: Pose | None = None  # the file's [workpiece.goal], checked at load
     goal_pose: Pose | None = None  # the located pose: the given goal or the one solved at load (full fixtures)
+    goal_starts: int = 0  # starts goal finding tried for ``goal_pose`` (0: given, or not full)
     tolerances: Tolerances = field(default=DEFAULT)
     warnings: tuple[Issue, ...] = ()  # plausibility warnings (not errors): `validate` prints them
 

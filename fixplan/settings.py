@@ -27,6 +27,8 @@ Groups
     The uncertainty a robustness study samples (:mod:`fixplan.robust`, ``fixplan robust``'s options).
 :class:`WitnessSettings`
     When a candidate motion counts as a sliding witness.
+:class:`GoalSettings`
+    Finding the located pose: Gauss–Newton's stop, when a pose touches, the wider search's starts.
 :class:`Numerics`
     Rank and pseudo-inverse cut-offs of the numerical linear algebra, Clarabel's options.
 
@@ -565,6 +567,44 @@ class PolicySettings:
 
 
 @dataclass(frozen=True)
+class GoalSettings:
+    """Finding the located (goal) pose, where every locator touches (:func:`fixplan.locating.find_goal`).
+
+    Attributes
+    ----------
+    stop_gap_m : float
+        Gauss–Newton stops when every |gap| is at most this [m].
+    touch_gap_m : float
+        A pose touches every locator when every |gap| is at most this [m] (a solved goal is exact:
+        much tighter than :attr:`Tolerances.goal_gap_m`, which a given goal must meet).
+    max_iterations : int
+        Gauss–Newton iterations from the start pose ...
+    search_iterations : int
+        ... and per run of the wider search (a run that converges takes fewer than 30).
+    max_turn_rad : float
+        Largest rotation of one Gauss–Newton step [rad] ...
+    max_shift_rel : float
+        ... and largest translation, as a fraction of the part's bounding radius.
+    face_normal_cos : float
+        A locator touches its named face when its contact normal is within ``acos`` of this of the
+        face's normal (a tip touching the face's edge or the wrong face is not on it).
+    turns_deg : tuple of float
+        The wider search's starts: the start turned by each of these angles [deg] (both ways)
+        about each body axis (3D) or in the plane (2D), nearest first, then the part's symmetry
+        turns (90°, 120°, 180°: 23 in 3D, 3 in 2D) composed with the start.
+    """
+
+    stop_gap_m: float = 1e-12
+    touch_gap_m: float = 1e-10
+    max_iterations: int = 100
+    search_iterations: int = 40
+    max_turn_rad: float = 0.2
+    max_shift_rel: float = 0.5
+    face_normal_cos: float = 1.0 - 1e-9
+    turns_deg: tuple[float, ...] = (15.0, 30.0, 45.0, 60.0)
+
+
+@dataclass(frozen=True)
 class Settings:
     """One of each group: what a profile selects."""
 
@@ -580,6 +620,7 @@ class Settings:
     witness: WitnessSettings = field(default_factory=WitnessSettings)
     robust: RobustSettings = field(default_factory=RobustSettings)
     policy: PolicySettings = field(default_factory=PolicySettings)
+    goal: GoalSettings = field(default_factory=GoalSettings)
 
     def with_(self, **changes: Any) -> Settings:
         """A copy with some groups replaced."""

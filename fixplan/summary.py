@@ -103,6 +103,10 @@ def summarize(fixture: Fixture) -> FixtureSummary:
         rank = goal_rank(fixture)
         determined = rank >= fixture.ndof
         details.append(f"goal ({goal}): {pose_text(fixture.goal)}")
+        if fixture.goal_starts:
+            n = fixture.goal_starts
+            how = "Gauss–Newton from the start pose" if n == 1 else "the start pose alone did not lead there"
+            details.append(f"goal found from {n} start{'s' if n != 1 else ''} ({how})")
         details.append(
             f"rank of G at the goal: {rank} of {fixture.ndof}: "
             + ("the locators determine the pose" if determined else "the locators do NOT determine the pose")
