@@ -544,6 +544,10 @@ class PolicySettings:
     checks_per_state : int
         Candidate transitions out of a state whose first push is checked (one cone program each),
         cheapest cost-to-go first; the first that has a non-jamming push is kept.
+    margin_candidates : int
+        Of the checked candidates within the planner's cost slack of the cheapest, at most this many
+        are compared, and the one with the most margin (least normal force on the kept contacts
+        under its push) is kept.
     max_locators : int
         Above this many locators the policy covers the plan's states and the states one contact
         away from them only (2ⁿ states otherwise).
@@ -560,6 +564,7 @@ class PolicySettings:
     backoff_m: float = 2e-3
     min_open_fraction: float = 0.5
     checks_per_state: int = 4
+    margin_candidates: int = 2
     max_locators: int = 8
     max_verifications: int = 3
     approach_samples: int = 40

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import re
 
 import numpy as np
@@ -47,7 +48,7 @@ def test_representative_poses_touch_the_state_and_open_the_rest(box):
     names = [loc.name for loc in box.locators]
     realisable = 0
     for k in range(len(names)):
-        for state in map(frozenset, __import__("itertools").combinations(names, k)):
+        for state in map(frozenset, itertools.combinations(names, k)):
             pose = representative_pose(box, box.goal, state)
             if pose is None:
                 continue
@@ -66,7 +67,7 @@ def test_representative_poses_touch_the_state_and_open_the_rest(box):
 def test_the_policy_covers_every_state_and_leads_to_the_goal(box, box_policy):
     goal = frozenset(loc.name for loc in box.locators)
     assert len(box_policy.entries) == 2 ** len(goal) - 1
-    for state, entry in box_policy.entries.items():
+    for state in box_policy.entries:
         chain = box_policy.chain(state, goal)
         assert chain is not None
         # one locator more per step, ending with every locator
@@ -97,9 +98,11 @@ def test_pre_image_pushes_move_the_part(box, box_policy):
 
     Not held, not jammed: it is the non-jamming push of the entry's first step, within the hand's limits.
     """
+    # every state the part can be in has a checked push (the reachable ones and where they lead)
+    assert all(box_policy.entries[s].checked for s in box_policy.reachable)
     checked = [e for e in box_policy.entries.values() if e.source == "pre-image" and e.checked and e.state]
-    assert len(checked) >= 40
-    for e in checked[::5]:
+    assert len(checked) >= 15
+    for e in checked[::3]:
         w = e.wrench
         assert np.linalg.norm(w[:3]) <= box.manipulator.max_force_N * (1 + 1e-9)
         assert np.linalg.norm(w[3:]) <= box.manipulator.max_torque_Nm * (1 + 1e-9)

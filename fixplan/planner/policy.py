@@ -17,11 +17,14 @@ leads on toward the goal. This module builds it, backward from the goal:
 2. **Cost-to-go.** Dynamic programming over the lattice of states, largest first:
    ``V(goal) = 0``, ``V(S) = min_t c(S, t) + V(S ∪ {t})`` with ``c`` the planner's cheap estimate
    (the least-``M``-norm step that closes ``t`` keeping ``S``, from ``S``'s representative pose).
-3. **The push.** Out of each state the candidates are checked cheapest first (at most
+3. **The push.** Out of each state the part can be in — the states reachable from the start and
+   every state the policy leads to from them — the candidates are checked cheapest first (at most
    ``checks_per_state``): is there a non-jamming push within the hand's limits for the first step
-   (one cone program, :func:`~fixplan.planner.segments.segment_wrenches`)? The first that has
-   one is kept, with its push and margin; a state with none keeps its cheapest candidate, marked
-   unchecked (the executor still tries it, and re-plans when it stalls).
+   (one cone program, :func:`~fixplan.planner.segments.segment_wrenches`)? Of those that have one
+   within the cost slack of the cheapest (at most ``margin_candidates``), the one with the most
+   margin is kept, with its push; a state with none keeps its cheapest candidate, marked
+   unchecked (the executor still tries it, and re-plans when it stalls). States the part cannot
+   be in keep their cheapest candidate unchecked.
 4. **The plan's own states** take the fine plan's transition (its guide path and pushes): the
    policy agrees with the plan wherever the plan goes.
 
@@ -314,7 +317,6 @@ def build_policy(
     ``transitions`` the fine plans of the chosen sequence, whose states take the plan's transition.
     """
     from fixplan.planner.fine import KINDS, default_kind
-    from fixplan.planner.segments import segment_wrenches
 
     t0 = time.perf_counter()
     names = [loc.name for loc in fixture.locators]
@@ -343,11 +345,26 @@ def build_policy(
     value: dict[State, float] = {goal_state: 0.0}
     entries: dict[State, PolicyEntry] = {}
     unrealisable: set[State] = set()
+    candidates: dict[State, list[tuple[float, str, str, Pose]]] = {}
+    # pass 1: cost-to-go over the whole lattice from the estimates alone (no cone program)
     for s in sorted(states, key=lambda s: (-len(s), sorted(s))):
         tr = planned_at.get(s)
         pose = tr.poses[0] if tr is not None else pose_of(s)
         if pose is None:
             unrealisable.add(s)
+            continue
+        if tr is not None:
+            # the plan's own transition: its fine path and pushes
+            rows = tr.wrenches[np.isfinite(tr.wrenches).all(axis=1)] if len(tr.wrenches) else tr.wrenches
+            margins = tr.margins_N[np.isfinite(tr.margins_N)]
+            later = value.get(s | {tr.target}, 0.0)
+            value[s] = float(tr.cost) + later if math.isfinite(float(tr.cost)) else later
+            entries[s] = PolicyEntry(
+                tuple(sorted(s)), tr.target, tr.kind if s else "free",
+                rows.mean(axis=0) if len(rows) else None,
+                float(np.min(margins)) if len(margins) else None,
+                value[s], "plan", True, tuple(tr.poses), pose,
+            )  # fmt: skip
             continue
         options: list[tuple[float, str, str, Pose]] = []
         kinds = (default_kind(fixture.dimension, len(s)),) if s else ("free",)
@@ -364,41 +381,13 @@ def build_policy(
                 # the planner's own kind first: the other one is dearer by the back-off
                 options.append((guess[0] + value[nxt] + rank * settings.backoff_m, t, kind, guess[1]))
         options.sort(key=lambda o: (o[0], o[1], o[2]))
-        if tr is not None:
-            # the plan's own transition: its fine path and pushes
-            rows = tr.wrenches[np.isfinite(tr.wrenches).all(axis=1)] if len(tr.wrenches) else tr.wrenches
-            margins = tr.margins_N[np.isfinite(tr.margins_N)]
-            later = value.get(s | {tr.target}, 0.0)
-            value[s] = float(tr.cost) + later if math.isfinite(float(tr.cost)) else later
-            entries[s] = PolicyEntry(
-                tuple(sorted(s)), tr.target, tr.kind if s else "free",
-                rows.mean(axis=0) if len(rows) else None,
-                float(np.min(margins)) if len(margins) else None,
-                value[s], "plan", True, tuple(tr.poses), pose,
-            )  # fmt: skip
-            continue
         if not options:
             continue
-        chosen: PolicyEntry | None = None
-        for cost, t, kind, end in options[: max(settings.checks_per_state, 1)]:
-            if not s:
-                chosen = PolicyEntry((), t, "free", None, None, cost, "pre-image", True, (), pose)
-                break
-            w, m, found, _ = segment_wrenches(
-                fixture, [pose, end], tuple(sorted(s)), kind, planner.acceleration_mps2,
-                friction_margin=planner.friction_margin, margin_N=planner.margin_N,
-            )  # fmt: skip
-            if found[0]:
-                chosen = PolicyEntry(
-                    tuple(sorted(s)), t, kind, np.asarray(w[0], dtype=float),
-                    float(m[0]) if math.isfinite(float(m[0])) else None, cost, "pre-image", True, (), pose,
-                )  # fmt: skip
-                break
-        if chosen is None:
-            cost, t, kind, _ = options[0]
-            chosen = PolicyEntry(tuple(sorted(s)), t, kind, None, None, cost, "pre-image", False, (), pose)
-        value[s] = chosen.cost_to_go_m
-        entries[s] = chosen
+        candidates[s] = options
+        cost, t, kind, _ = options[0]
+        value[s] = cost
+        # unchecked until pass 2 (a free state has nothing to check: the hand carries the part)
+        entries[s] = PolicyEntry(tuple(sorted(s)), t, kind, None, None, cost, "pre-image", not s, (), pose)
 
     # the states the part can be observed in from the start
     reachable = {
@@ -406,7 +395,73 @@ def build_policy(
         for s in states
         if s not in unrealisable and (start_state <= s or any(len(p - s) == 1 and s < p for p in plan_states))
     }
+
+    # pass 2: the push of every state the part can be in — the reachable ones and every state the
+    # policy leads to from them — checked with one cone program per candidate
+    checked: set[State] = set()
+    while True:
+        need: set[State] = set()
+        for s0 in reachable:
+            s1: State | None = s0
+            while s1 is not None and s1 in entries and s1 not in need:
+                need.add(s1)
+                s1 = frozenset(entries[s1].next_state)
+        todo = sorted((s for s in need - checked if s in candidates and s), key=lambda s: (-len(s), sorted(s)))
+        if not todo:
+            break
+        for s in todo:
+            checked.add(s)
+            entries[s] = _checked_entry(fixture, planner, s, entries[s].pose, candidates[s], settings)
     return Policy(entries, frozenset(reachable), frozenset(unrealisable), time.perf_counter() - t0)
+
+
+def _checked_entry(
+    fixture: Fixture,
+    planner: Any,
+    s: State,
+    pose: Pose | None,
+    options: list[tuple[float, str, str, Pose]],
+    settings: PolicySettings,
+) -> PolicyEntry:
+    """The state's transition with a non-jamming first push (cheapest first).
+
+    Among those within the cost slack, the one with the most margin; the cheapest, unchecked, when
+    none has a push.
+    """
+    from fixplan.planner.segments import segment_wrenches
+
+    found_ones: list[PolicyEntry] = []
+    best_cost = options[0][0]
+    for cost, t, kind, end in options[: max(settings.checks_per_state, 1)]:
+        if found_ones and (
+            len(found_ones) >= settings.margin_candidates or cost > DEFAULT.planner.cost_slack * best_cost
+        ):
+            break
+        w, m, found, _ = segment_wrenches(
+            fixture, [pose, end], tuple(sorted(s)), kind, planner.acceleration_mps2,
+            friction_margin=planner.friction_margin, margin_N=planner.margin_N,
+        )  # fmt: skip
+        if found[0]:
+            found_ones.append(
+                PolicyEntry(
+                    tuple(sorted(s)),
+                    t,
+                    kind,
+                    np.asarray(w[0], dtype=float),
+                    float(m[0]) if math.isfinite(float(m[0])) else None,
+                    cost,
+                    "pre-image",
+                    True,
+                    (),
+                    pose,
+                )  # fmt: skip
+            )
+    if found_ones:
+        # several ways on within the cost slack: the one with the most margin (the least normal
+        # force on the kept contacts under its push), the cheaper on a tie
+        return max(found_ones, key=lambda e: (e.margin_N or 0.0, -e.cost_to_go_m))
+    cost, t, kind, _ = options[0]
+    return PolicyEntry(tuple(sorted(s)), t, kind, None, None, cost, "pre-image", False, (), pose)
 
 
 __all__ = ["Policy", "PolicyEntry", "build_policy", "representative_pose"]
