@@ -346,6 +346,7 @@ class ExecutionSettings:
 
     control_rate_hz: float = 200.0  # wrench re-solves per second (held between solves)
     speed_mps: float = 0.04  # cruise speed
+    free_speed_mps: float = 0.1  # cruise speed in free flight (no contact kept)
     min_speed_mps: float = 0.004  # speed kept up to the very end of a transition
     accel_mps2: float = 1.0  # largest commanded acceleration
     brake_mps2: float = 0.1  # deceleration of the speed profile toward the target

@@ -693,7 +693,9 @@ class Executor:
         twist_ahead = twist + self._measured_accel(t, twist) * self._lag_s
         v_along = float(twist_ahead @ M @ nu_hat) / self.mass
         # cruise, then brake at brake_mps2 so that contact is made at about min_speed_mps
-        v_des = max(s.min_speed_mps, min(s.speed_mps, math.sqrt(2.0 * s.brake_mps2 * max(left, 0.0))))
+        # free flight (nothing to keep, nothing to jam) cruises faster; both brake alike toward the target
+        cruise = s.speed_mps if step.established else max(s.free_speed_mps, s.speed_mps)
+        v_des = max(s.min_speed_mps, min(cruise, math.sqrt(2.0 * s.brake_mps2 * max(left, 0.0))))
         # below the desired speed: speed up; up to 1.5× it: coast (the least push that keeps the
         # motion); beyond: brake (a dead band, so the loop does not chatter between push and brake)
         if v_along <= v_des:
