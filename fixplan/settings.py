@@ -217,6 +217,10 @@ class VerificationSettings:
         ... plus this per transition [s] ...
     time_max_s : float
         ... and at most this [s].
+    max_solver_error : float
+        The contact solver's largest FCLib residual (relative) over the ticks: above it the
+        verification fails ("solver"). The real-time engine stops at its sweep cap; the default
+        box's load stays within 1e-3, point tips near a face's edge reached 1.4e-2.
     """
 
     final_gap_m: float = 1e-4
@@ -228,6 +232,7 @@ class VerificationSettings:
     time_base_s: float = 2.0
     time_per_step_s: float = 0.5
     time_max_s: float = 60.0
+    max_solver_error: float = 1e-3
 
 
 @dataclass(frozen=True)

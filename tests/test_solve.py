@@ -108,3 +108,49 @@ def test_replan_from_a_part_touching_nothing():
     assert not isinstance(steps, str), steps
     assert steps[0].kind == "free" and not steps[0].established
     assert {s.target for s in steps} == {loc.name for loc in fx.locators}
+
+
+def test_reported_gaps_are_the_gaps_of_the_pose_beside_them(default_plan):
+    """The trace's and the final gaps were the engine step's own, measured at its start: one step
+    late (up to 1.6 mm in a fast run). Every sample's gaps are now its pose's, exactly."""
+    from fixplan.locating import locator_gaps
+
+    fx = fixplan.load(fixplan.default_fixture_path())
+    v = default_plan.verification
+    tr = v.trace
+    assert tr is not None and tr.gaps_m is not None
+    # the part moves between ticks (≥ 1 µm per tick somewhere), so a step-late gap would show
+    steps_m = np.linalg.norm(np.diff([p.p_world for p in tr.poses], axis=0), axis=1) / round(tr.every_s / 1e-3)
+    assert steps_m.max() > 1e-6
+    for pose, gaps in zip(tr.poses, tr.gaps_m, strict=True):
+        assert np.abs(gaps - locator_gaps(fx.workpiece, pose, fx.locators)).max() <= 1e-9
+    exact = dict(zip(tr.names, locator_gaps(fx.workpiece, v.final_pose, fx.locators), strict=True))
+    assert v.final_gaps_m == pytest.approx(exact, abs=1e-9)
+
+
+def test_replans_inside_the_loop_count_against_the_tick_budget():
+    """A re-plan runs inside a tick while simulated time stands still: its wall time is the tick's
+    (tick_max_us, deadline_misses) and the verification reports the planner's time in the loop."""
+    import time
+
+    from fixplan.planner.solve import Planner
+    from fixplan.planner.verify import verify
+
+    fx = fixplan.load(fixplan.default_fixture_path())
+    planner = Planner(fx)
+    spent = []
+
+    def replan(pose, state):
+        t0 = time.perf_counter()
+        out = planner.replan(pose, state)
+        spent.append(time.perf_counter() - t0)
+        return out
+
+    # told it starts on B1, B2 with nothing to do, the executor sees B1, B2, B3: an unplanned
+    # contact state, re-planned from inside the tick that observed it
+    v = verify(fx, frozenset({"B1", "B2"}), [], replan=replan)
+    assert v.execution.counts["replans"] == len(spent) >= 1
+    assert sum(spent) <= v.planner_wall_time_in_loop_s <= sum(spent) + 1e-3 * len(spent)
+    assert v.tick_max_us * 1e-6 >= max(spent)
+    assert v.deadline_misses >= sum(s > 1e-3 for s in spent) >= 1  # a coarse search takes far more than a tick
+    assert v.to_json()["planner_wall_time_in_loop_s"] == v.planner_wall_time_in_loop_s
