@@ -314,6 +314,9 @@ class SearchSettings:
         The check's acceleration may fall short of the requested one by this fraction ...
     off_axis_rel : float
         ... and point off its axis by this (mass-weighted) fraction.
+    unbounded_factor : float
+        When no push within the hand's limits exists, a limit is lifted to this many times its
+        value to ask whether the other alone binds (and what force or torque is needed).
     """
 
     jam_margin_rel: float = 1e-3
@@ -325,6 +328,7 @@ class SearchSettings:
     limit_rel: float = 1e-9
     along_rel: float = 1e-6
     off_axis_rel: float = 1e-4
+    unbounded_factor: float = 1e3
 
 
 @dataclass(frozen=True)
