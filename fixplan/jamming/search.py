@@ -677,7 +677,7 @@ def _too_weak(
     tau_min = _SEARCH.found_rel * F_max
     big = _SEARCH.unbounded_factor
 
-    def least(kind: str, F_lim: float, T_lim: float) -> tuple[float, float] | None:
+    def least(kind: Literal["force", "torque"], F_lim: float, T_lim: float) -> tuple[float, float] | None:
         prog, _ = _build(**build, cert=cert, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_min, least=kind)
         sol = ClarabelProgram(prog).solve(prog.b)
         if not sol.solved:
