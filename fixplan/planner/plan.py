@@ -371,7 +371,8 @@ class Verification:
     execution: ExecutionLog | None = None
     max_push_force_N: float | None = None  # on the part, averaged over 10 ms
     max_push_torque_Nm: float | None = None
-    saturated_ticks: int = 0  # ticks where the coupling asked more than the hand's limits (capped there)
+    # ticks where the coupling asked more than the hand's limits (capped there); None: not known
+    saturated_ticks: int | None = None
     # wall time of the re-plans the executor ran from inside ticks [s] (counted in the tick timing);
     # None: not known (a file without it)
     planner_wall_time_in_loop_s: float | None = None
@@ -452,7 +453,7 @@ class Verification:
             execution=None if execution is None else execution_from_json(execution, f"{where}.execution"),
             max_push_force_N=num("max_push_force"),
             max_push_torque_Nm=num("max_push_torque"),
-            saturated_ticks=count("saturated_ticks", 0) or 0,
+            saturated_ticks=count("saturated_ticks", None),
             planner_wall_time_in_loop_s=num("planner_wall_time_in_loop_s"),
             failed_checks=[str(c) for c in checks],
             extras={k: v for k, v in obj.items() if k not in known},
