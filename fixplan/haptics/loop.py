@@ -128,7 +128,10 @@ class HapticLoop:
         return np.array([pose.p_world[0], pose.p_world[1], pose.angle_rad]), nu_origin
 
     def tick(self, operator_wrench: ArrayLike) -> tuple[FloatArray, FloatArray, float]:
-        """One sample period; returns (coupling wrench on the workpiece, felt wrench, compute time [s])."""
+        """One sample period; returns (coupling wrench on the workpiece, felt wrench, compute time [s]).
+
+        The compute time is steps 2–4's; :meth:`run` adds the time the operator's command took.
+        """
         t0 = time.perf_counter()
         d = self.sim.dimension
         x_d, v_d = self.device.position(), self.device.velocity()
