@@ -299,3 +299,56 @@ def test_the_contact_set_form_gives_the_fixture_level_answer():
     if res.acceleration is not None:
         s = float(res.acceleration @ a_com) / float(a_com @ a_com)
         assert s >= 1.0 - 1e-9 and np.allclose(res.acceleration, s * a_com, atol=1e-12)
+
+
+# ---------------------------------------------------------------- D: "too weak" names the limit and the need
+def _rect_with_hand(max_force, max_torque):
+    """rect-3.toml (2D, 1 kg, μ = 0.5 on B1, B2 under the -y face) with the given hand."""
+    text = (PROBLEMS / "rect-3.toml").read_text()
+    return fixplan.loads(text + f"\n[manipulator]\nmax_force = {max_force}\nmax_torque = {max_torque}\n")
+
+
+@pytest.mark.parametrize("max_torque", [5.0, 0.3, 0.05])
+def test_too_weak_to_slide_names_the_force_and_the_least_force_needed(max_torque):
+    """Sliding along +x on B1, B2 at a = 1 m/s²: the least push tilts up by atan μ and has
+    ‖F‖ = (m a + μ m g)/√(1 + μ²) = (1 + 4.905)/√1.25 = 5.2816 N > max_force 3 N. Its moment is free
+    (the push only has to keep the part from turning), so the torque limit does not bind. The old
+    message printed the unbounded search's push (pressing as hard as 1000 × the limits allowed)."""
+    m, mu, a = 1.0, 0.5, 1.0
+    need = (m * a + mu * m * G) / np.hypot(1.0, mu)
+    res = search_wrench(_rect_with_hand(3.0, max_torque), [a, 0.0, 0.0], ["B1", "B2"])
+    assert not res.found and res.binding == ["max_force"]
+    assert res.needed_force_N == pytest.approx(need, rel=1e-7)
+    assert res.needed_torque_Nm is None  # no push within 3 N slides it, whatever its torque
+    assert f"the push needs {need:.4g} N of force, more than max_force 3 N" in res.reason
+    assert f"is within max_torque {max_torque:g} N·m" in res.reason
+    assert res.to_json()["needed_force"] == res.needed_force_N and res.to_json()["needed_torque"] is None
+
+
+def test_too_weak_to_tip_names_the_torque_and_the_least_torque_needed():
+    """naive-order-jams.toml rests on B1 alone; pivoting counter-clockwise about B1 at α = 1 rad/s²
+    needs, about B1, the moment m g r_x + I_B1 α (gravity's lever r_x; B1's force and any force
+    through B1 have none), whatever the force: 0.5436 + 0.0103 = 0.5539 N·m > max_torque 0.2 N·m.
+    The force is free (B1 can carry the weight), so the force limit (3 N) does not bind."""
+    fx = fixplan.load(PROBLEMS / "naive-order-jams.toml")
+    B1 = fixplan.contact_set(fx, "start", ["B1"]).contacts[0].point_world
+    r = fx.start.point_world_from_body(fx.workpiece.com_body) - B1
+    wp = fx.workpiece
+    I_B1 = float(np.atleast_2d(wp.inertia_body)[-1, -1]) + wp.mass_kg * float(r @ r)
+    need = wp.mass_kg * G * r[0] + I_B1 * 1.0
+    res = search_wrench(fx, [0.0, 0.0, 1.0], ["B1"], pose="start", at=B1)
+    assert not res.found and res.binding == ["max_torque"]
+    assert res.needed_torque_Nm == pytest.approx(need, rel=1e-6)
+    assert f"the push needs {need:.4g} N·m of torque, more than max_torque 0.2 N·m" in res.reason
+    assert "is within max_force 3 N" in res.reason
+
+
+def test_a_free_push_beyond_a_limit_names_that_limit():
+    """Lifting the default box at 15 m/s² opens every contact: the push is m (g + a) = 49.62 N of
+    force through the centre of mass, no torque: the force binds, the torque does not."""
+    res = search_wrench(fixplan.load(fixplan.default_fixture_path()), [0, 0, 15.0, 0, 0, 0])
+    assert not res.found and res.binding == ["max_force"]
+    assert res.needed_force_N == pytest.approx(2.0 * (G + 15.0)) and res.needed_torque_Nm == pytest.approx(
+        0.0, abs=1e-9
+    )
+    assert "needs 49.62 N of force, more than max_force 40 N" in res.reason

@@ -27,12 +27,12 @@ def test_tolerances_module_is_an_alias():
 
 
 def test_engine_settings_reach_the_simulator():
-    """The haptic profile's engine is the loop's: a 1e-6 residual and 40 sweeps; explicit arguments win."""
+    """The haptic profile's engine is the loop's: a 1e-6 residual and 200 sweeps; explicit arguments win."""
     f = fixplan.load(fixplan.default_fixture_path())
     plain = Simulator(f)
     assert plain.tolerance == f.simulation.tolerance and plain.max_iterations == settings.DEFAULT.engine.max_iterations
     sim = Simulator(f, settings=settings.HAPTIC.engine)
-    assert (sim.tolerance, sim.max_iterations) == (1e-6, 40)
+    assert (sim.tolerance, sim.max_iterations) == (1e-6, 200)
     assert Simulator(f, max_iterations=7, settings=settings.HAPTIC.engine).max_iterations == 7
 
 

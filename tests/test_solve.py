@@ -108,3 +108,112 @@ def test_replan_from_a_part_touching_nothing():
     assert not isinstance(steps, str), steps
     assert steps[0].kind == "free" and not steps[0].established
     assert {s.target for s in steps} == {loc.name for loc in fx.locators}
+
+
+def test_reported_gaps_are_the_gaps_of_the_pose_beside_them(default_plan):
+    """The trace's and the final gaps were the engine step's own, measured at its start: one step
+    late (up to 1.6 mm in a fast run). Every sample's gaps are now its pose's, exactly."""
+    from fixplan.locating import locator_gaps
+
+    fx = fixplan.load(fixplan.default_fixture_path())
+    v = default_plan.verification
+    tr = v.trace
+    assert tr is not None and tr.gaps_m is not None
+    # the part moves between ticks (≥ 1 µm per tick somewhere), so a step-late gap would show
+    steps_m = np.linalg.norm(np.diff([p.p_world for p in tr.poses], axis=0), axis=1) / round(tr.every_s / 1e-3)
+    assert steps_m.max() > 1e-6
+    for pose, gaps in zip(tr.poses, tr.gaps_m, strict=True):
+        assert np.abs(gaps - locator_gaps(fx.workpiece, pose, fx.locators)).max() <= 1e-9
+    exact = dict(zip(tr.names, locator_gaps(fx.workpiece, v.final_pose, fx.locators), strict=True))
+    assert v.final_gaps_m == pytest.approx(exact, abs=1e-9)
+
+
+def test_replans_inside_the_loop_count_against_the_tick_budget():
+    """A re-plan runs inside a tick while simulated time stands still: its wall time is the tick's
+    (tick_max_us, deadline_misses) and the verification reports the planner's time in the loop."""
+    import time
+
+    from fixplan.planner.solve import Planner
+    from fixplan.planner.verify import verify
+
+    fx = fixplan.load(fixplan.default_fixture_path())
+    planner = Planner(fx)
+    spent = []
+
+    def replan(pose, state):
+        t0 = time.perf_counter()
+        out = planner.replan(pose, state)
+        spent.append(time.perf_counter() - t0)
+        return out
+
+    # told it starts on B1, B2 with nothing to do, the executor sees B1, B2, B3: an unplanned
+    # contact state, re-planned from inside the tick that observed it
+    v = verify(fx, frozenset({"B1", "B2"}), [], replan=replan)
+    assert v.execution.counts["replans"] == len(spent) >= 1
+    assert sum(spent) <= v.planner_wall_time_in_loop_s <= sum(spent) + 1e-3 * len(spent)
+    assert v.tick_max_us * 1e-6 >= max(spent)
+    assert v.deadline_misses >= sum(s > 1e-3 for s in spent) >= 1  # a coarse search takes far more than a tick
+    assert v.to_json()["planner_wall_time_in_loop_s"] == v.planner_wall_time_in_loop_s
+
+
+# A 3-2-1 box (0.20 x 0.10 x 0.05 m, 2 kg, μ = 0.25) on point tips (radius 0) 1-2 mm from the
+# edges of their faces, started 10 mm off E1 and 1 mm off S1, S2. Near an edge the contact
+# problems are hard for NSGS: at 40 sweeps a tick, 181 of 739 steps stopped at the cap with
+# residuals up to 2e-3 and the load still "passed".
+EDGE_TIPS = """
+format = 1
+[scene]
+name = "box-edge-tips"
+dimension = 3
+gravity = [0.0, 0.0, -9.81]
+[workpiece]
+shape = "box"
+size = [0.20, 0.10, 0.05]
+mass = 2.0
+start = { position = [0.11, 0.051, 0.025], rpy_deg = [0.0, 0.0, 0.0] }
+goal = { position = [0.10, 0.05, 0.025], rpy_deg = [0.0, 0.0, 0.0] }
+[manipulator]
+max_force = 40.0
+max_torque = 2.0
+""" + "".join(
+    f'[[locator]]\nname = "{n}"\nposition = {p}\nradius = 0.0\nfriction = 0.25\nface = "{f}"\n'
+    for n, p, f in [
+        ("B1", [0.03, 0.002, 0.0], "-z"),
+        ("B2", [0.199, 0.015, 0.0], "-z"),
+        ("B3", [0.10, 0.099, 0.0], "-z"),
+        ("S1", [0.03, 0.0, 0.001], "-y"),
+        ("S2", [0.17, 0.0, 0.049], "-y"),
+        ("E1", [0.0, 0.099, 0.001], "-x"),
+    ]
+)
+
+
+def test_a_load_simulated_with_unconverged_contact_solves_fails_and_says_so():
+    """With the old budget (40 sweeps a tick) the verification fails naming the solver, how many
+    steps did not converge and the largest residual; the haptic profile's budget converges."""
+    import re
+
+    from fixplan.planner.solve import Planner, plan_steps
+    from fixplan.planner.verify import verify
+    from fixplan.settings import HAPTIC
+
+    fx = fixplan.loads(EDGE_TIPS)
+    r = solve(fx, run_verification=False)
+    assert r.sequence, r.reason
+    start = frozenset(r.sequence[0])
+    planner = Planner(fx)
+    starved = verify(fx, start, plan_steps(r.transitions), replan=planner.replan, max_sweeps=40)
+    bound = HAPTIC.verification.max_solver_error
+    assert not starved.passed and "solver" in starved.failed_checks
+    assert starved.max_solver_error > bound
+    m = re.search(
+        r"the contact solver did not converge in (\d+) of (\d+) steps \(largest residual ([\d.e-]+), expected ≤ ([\d.e-]+)\)",
+        starved.reason,
+    )
+    assert m, starved.reason
+    assert int(m[1]) == starved.unconverged_steps > 0
+    assert int(m[2]) == round(starved.duration_s / fx.simulation.timestep_s)
+    assert float(m[3]) == pytest.approx(starved.max_solver_error, rel=0.05) and float(m[4]) == bound
+    v = verify(fx, start, plan_steps(r.transitions), replan=planner.replan)
+    assert v.passed, v.reason
+    assert v.max_solver_error <= 0.1 * bound

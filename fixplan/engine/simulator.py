@@ -64,10 +64,14 @@ ContactMode = Literal["open", "sticking", "sliding", "rolling"]  # a contact aft
 
 @dataclass(frozen=True)
 class ContactReport:
-    """One locator after the last step."""
+    """One locator after the last step.
+
+    The gap is the locator's at the body's current pose (the pose a trace samples beside it);
+    the forces and the mode are the step's, which solved for the gaps at its start.
+    """
 
     name: str
-    gap_m: float  # at the start of the step [m]
+    gap_m: float  # at the pose after the step (the pose reported beside it) [m]
     normal_force_N: float
     force_world: FloatArray  # average contact force over the step, on the workpiece [N]
     spin_moment_Nm: float  # soft fingers only
@@ -115,7 +119,10 @@ class Trajectory:
     orientation: FloatArray = field(default_factory=lambda: _empty(0, 4))  # quaternion wxyz (3D) or [angle_rad] (2D)
     velocity: FloatArray = field(default_factory=lambda: _empty(0, 6))  # (v, ω) of the centre of mass
     normal_force: FloatArray = field(default_factory=lambda: _empty(0, 0))  # per locator [N]
-    gap: FloatArray = field(default_factory=lambda: _empty(0, 0))  # per locator [m]
+    # per locator [m], measured by the step that produced the sample at its start (before its
+    # position update; the first sample's: at its pose). Exact gaps at a sample's pose:
+    # fixplan.locating.locator_gaps, or Simulator.gaps_m() after the run.
+    gap: FloatArray = field(default_factory=lambda: _empty(0, 0))
     error: FloatArray = field(default_factory=lambda: _empty(0))
     iterations: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     max_penetration_m: float = 0.0
@@ -328,6 +335,7 @@ class Simulator:
 
             wp = self.fixture.workpiece
             self._gap = np.array([locator_contact(wp, self.pose, loc).gap_m for loc in self.fixture.locators])
+        self._gaps_now: tuple[int, FloatArray] | None = None  # (steps, gaps at the current pose)
 
     @property
     def pose(self) -> Pose:
@@ -440,17 +448,33 @@ class Simulator:
             if a and (fn > min_force_N or g <= max_gap_m)
         )
 
+    def gaps_m(self) -> FloatArray:
+        """Every locator's signed gap at the current pose [m] (negative: penetration).
+
+        The step's own gaps (:meth:`in_contact` uses them) are measured at its start, before the
+        position update; these are the current pose's, computed exactly
+        (:func:`fixplan.locating.locator_gaps`, once per step when asked).
+        """
+        cached = self._gaps_now
+        if cached is None or cached[0] != self.steps:
+            from fixplan.locating import locator_gaps
+
+            cached = (self.steps, locator_gaps(self.fixture.workpiece, self.pose, self.fixture.locators))
+            self._gaps_now = cached
+        return cached[1].copy()
+
     def contacts(self) -> list[ContactReport]:
-        """Per-locator gap, force and mode after the last step."""
+        """Per-locator gap (at the current pose), force and mode (the last step's)."""
         h = self.dt
         reports = []
+        gaps = self.gaps_m()
         omega = float(np.linalg.norm(np.atleast_1d(self._w)))
         for i, name in enumerate(self.names):
             Pn = float(self._P[i, 0])
             n = self._nw[i]
             d = self.dimension
             if not self._active[i] or Pn <= 0.0:
-                reports.append(ContactReport(name, float(self._gap[i]), 0.0, np.zeros(d), 0.0, "open"))
+                reports.append(ContactReport(name, float(gaps[i]), 0.0, np.zeros(d), 0.0, "open"))
                 continue
             if d == 3:
                 t1, t2 = tangent_basis(n)
@@ -464,7 +488,7 @@ class Simulator:
                 spin = 0.0
             slip_tol, spin_tol = self.settings.slip_mps, self.settings.spin_radps
             mode: ContactMode = "sliding" if slip > slip_tol else ("rolling" if omega > spin_tol else "sticking")
-            reports.append(ContactReport(name, float(self._gap[i]), Pn / h, force, spin, mode))
+            reports.append(ContactReport(name, float(gaps[i]), Pn / h, force, spin, mode))
         return reports
 
     def run(

@@ -10,8 +10,11 @@ Per tick (period ``T``, 1 ms by default):
 4. the device displays ``−w_c`` (saturated at its limits): what the user feels;
 5. the device handle is integrated under the operator's push and the displayed wrench.
 
-Each tick's compute time (steps 2–4, the part a real-time loop must finish within ``T``) is
-measured with ``time.perf_counter``; a tick longer than ``T`` is a deadline miss.
+Each tick's compute time (steps 1–4, the part a real-time loop must finish within ``T``: the
+command the operator model computes — in a verification the plan's executor, with any re-plan
+it runs — the coupling, the engine step and the display) is measured with ``time.perf_counter``;
+a tick longer than ``T`` is a deadline miss. The command's share is kept apart
+(``LoopRecord.command_s``), so a report can say how much of the loop's time was the controller's.
 """
 
 from __future__ import annotations
@@ -42,7 +45,8 @@ class LoopRecord:
     """What happened in a run of the loop, per tick."""
 
     time_s: list[float] = field(default_factory=list)
-    compute_s: list[float] = field(default_factory=list)
+    compute_s: list[float] = field(default_factory=list)  # whole tick: command + coupling + step + display
+    command_s: list[float] = field(default_factory=list)  # the operator's command alone (part of compute_s)
     coupling_wrench: list[FloatArray] = field(default_factory=list)  # on the workpiece
     felt_wrench: list[FloatArray] = field(default_factory=list)  # displayed on the device (saturated)
     device_position: list[FloatArray] = field(default_factory=list)
@@ -124,7 +128,10 @@ class HapticLoop:
         return np.array([pose.p_world[0], pose.p_world[1], pose.angle_rad]), nu_origin
 
     def tick(self, operator_wrench: ArrayLike) -> tuple[FloatArray, FloatArray, float]:
-        """One sample period; returns (coupling wrench on the workpiece, felt wrench, compute time [s])."""
+        """One sample period; returns (coupling wrench on the workpiece, felt wrench, compute time [s]).
+
+        The compute time is steps 2–4's; :meth:`run` adds the time the operator's command took.
+        """
         t0 = time.perf_counter()
         d = self.sim.dimension
         x_d, v_d = self.device.position(), self.device.velocity()
@@ -193,9 +200,13 @@ class HapticLoop:
         try:
             for i in range(n):
                 t = self.sim.time_s
-                w_c, felt, compute = self.tick(operator(t, self.device))
+                t0 = time.perf_counter()
+                command = operator(t, self.device)  # the controller's work is the tick's too
+                command_s = time.perf_counter() - t0
+                w_c, felt, compute = self.tick(command)
                 rec.time_s.append(self.sim.time_s)
-                rec.compute_s.append(compute)
+                rec.compute_s.append(command_s + compute)
+                rec.command_s.append(command_s)
                 rec.coupling_wrench.append(w_c)
                 rec.felt_wrench.append(felt)
                 rec.device_position.append(self.device.position())

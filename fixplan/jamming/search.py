@@ -133,6 +133,11 @@ class WrenchSearch:
     margin_target_met: bool | None = None  # None when no target was asked for
     jam_margin_rel: float | None = None  # balance_check's margin / ‖w_e‖_{M⁻¹} (relative distance from balance)
     confirmed: bool = False  # the classifier's motion is the requested one (kind, acceleration ≥ asked)
+    # when the hand is too weak: the least force [N] a push needs with its torque within
+    # max_torque, and the least torque [N·m] (about the body origin, or ``at``) with its force
+    # within max_force; None where no push within that limit moves the part (or not too weak)
+    needed_force_N: float | None = None
+    needed_torque_Nm: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dictionary; undefined numbers are ``None`` (never NaN or Infinity)."""
@@ -159,6 +164,8 @@ class WrenchSearch:
             "reason": self.reason,
             "binding": list(self.binding),
             "limits": {"max_force": _finite_or_none(self.limits[0]), "max_torque": _finite_or_none(self.limits[1])},
+            "needed_force": _finite_or_none(self.needed_force_N),
+            "needed_torque": _finite_or_none(self.needed_torque_Nm),
         }
 
 
@@ -448,10 +455,13 @@ def search_wrench_in(
         clf_free = Classifier(cs, w_g, tolerances=fixture.tolerances)
         return _free_push(cs, clf_free, a_hat, roles, about, w_g, F_max, T_max, notes, target)
 
-    def not_found(reason: str, binding: list[str] | None = None) -> WrenchSearch:
+    def not_found(
+        reason: str, binding: list[str] | None = None, needs: tuple[float | None, float | None] = (None, None)
+    ) -> WrenchSearch:
         return WrenchSearch(
-            False, None, None, None, roles, {}, None, reason, binding or [], (F_max, T_max), margin_target_N=target
-        )
+            False, None, None, None, roles, {}, None, reason, binding or [], (F_max, T_max), margin_target_N=target,
+            needed_force_N=needs[0], needed_torque_Nm=needs[1],
+        )  # fmt: skip
 
     y = _certificate(cs, a_hat, project=True) if certify else None
     if certify and (y is None or float(y @ cs.mass_matrix @ a_hat) <= 0.0):
@@ -477,15 +487,12 @@ def search_wrench_in(
     n = cs.ndof
     if not sol.solved or -sol.value <= _SEARCH.found_rel * F_max:
         # Diagnose: is it the limits, or the motion itself?
-        prog_free, _ = _build(**build, cert=y, F_max=1e3 * F_max, T_max=1e3 * T_max)  # type: ignore[arg-type]
+        big = _SEARCH.unbounded_factor
+        prog_free, _ = _build(**build, cert=y, F_max=big * F_max, T_max=big * T_max)  # type: ignore[arg-type]
         free = ClarabelProgram(prog_free).solve(prog_free.b)
         if free.solved and -free.value > _SEARCH.found_rel * F_max:
-            F_need = float(np.linalg.norm(free.x[: cs.dimension]))
-            return not_found(
-                f"the manipulator is too weak: this motion needs more than max_force {F_max:.4g} N or max_torque"
-                f" {T_max:.4g} N·m (unbounded search used ‖F‖ = {F_need:.4g} N){notes}",
-                ["max_force", "max_torque"],
-            )
+            reason, binding, needs = _too_weak(build, y, F_max, T_max)
+            return not_found(reason + notes, binding, needs)
         return not_found(
             "no wrench moves the part this way while keeping the contacts pressed and clear of jamming"
             " (every such push jams or opens a contact)"
@@ -599,6 +606,94 @@ def _confirm(cs: ContactSet, check: Classification, a_hat: FloatArray, roles: di
     return True, ""
 
 
+def _above(value: float, limit: float) -> str:
+    """``value`` (above ``limit``) to 4 significant digits, with more if rounding would reach ``limit``."""
+    digits = 4
+    text = f"{value:.{digits}g}"
+    while float(text) <= limit and digits < 12:
+        digits += 1
+        text = f"{value:.{digits}g}"
+    return text
+
+
+def too_weak_reason(
+    F_need: float | None,
+    F_with: float | None,
+    T_need: float | None,
+    T_with: float | None,
+    F_max: float,
+    T_max: float,
+) -> tuple[str, list[str]]:
+    """The "too weak" message and the binding limits, from the least force and the least torque.
+
+    ``F_need`` is the least force [N] a push needs with its torque within ``T_max`` (``T_with`` its
+    torque there), ``T_need`` the least torque [N·m] with the force within ``F_max`` (``F_with`` its
+    force); None: no push within that limit. A limit binds alone when the least push beyond it keeps
+    the other limit slack; otherwise both bind.
+    """
+    slack = 1 - _SEARCH.binding_rel
+    torque_alone = T_need is not None and T_need > T_max and F_with is not None and F_with < slack * F_max
+    force_alone = F_need is not None and F_need > F_max and T_with is not None and T_with < slack * T_max
+    head = "the manipulator is too weak: "
+    if torque_alone and not force_alone:
+        assert T_need is not None and F_with is not None  # for mypy: torque_alone says so
+        return (
+            head + f"the push needs {_above(T_need, T_max)} N·m of torque, more than max_torque {T_max:.4g} N·m"
+            f" (its force, {F_with:.4g} N, is within max_force {F_max:.4g} N)",
+            ["max_torque"],
+        )
+    if force_alone and not torque_alone:
+        assert F_need is not None and T_with is not None
+        return (
+            head + f"the push needs {_above(F_need, F_max)} N of force, more than max_force {F_max:.4g} N"
+            f" (its torque, {T_with:.4g} N·m, is within max_torque {T_max:.4g} N·m)",
+            ["max_force"],
+        )
+    torque = (
+        f"no push within max_force {F_max:.4g} N moves the part this way"
+        if T_need is None
+        else f"within max_force {F_max:.4g} N it needs {_above(T_need, T_max)} N·m of torque (max_torque {T_max:.4g} N·m)"
+    )
+    force = (
+        f"no push within max_torque {T_max:.4g} N·m moves it this way"
+        if F_need is None
+        else f"within max_torque {T_max:.4g} N·m it needs {_above(F_need, F_max)} N of force (max_force {F_max:.4g} N)"
+    )
+    return head + f"no push meets both limits at once: {torque}; {force}", ["max_force", "max_torque"]
+
+
+def _too_weak(
+    build: dict[str, Any], cert: FloatArray | None, F_max: float, T_max: float
+) -> tuple[str, list[str], tuple[float | None, float | None]]:
+    """Why no push within the limits exists: the least force and the least torque it needs.
+
+    Two cone programs with the search's own constraints (the motion, the contact roles and cones,
+    not jamming, every kept contact pressed by the least margin that counts as found): the least
+    ``‖F‖`` with ``‖T‖ ≤ T_max``, and the least ``‖T‖`` (about the user's point) with
+    ``‖F‖ ≤ F_max``. Returns the message, the binding limits and ``(F_need, T_need)``.
+    """
+    cs: ContactSet = build["cs"]
+    d = cs.dimension
+    tau_min = _SEARCH.found_rel * F_max
+    big = _SEARCH.unbounded_factor
+
+    def least(kind: Literal["force", "torque"], F_lim: float, T_lim: float) -> tuple[float, float] | None:
+        prog, _ = _build(**build, cert=cert, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_min, least=kind)
+        sol = ClarabelProgram(prog).solve(prog.b)
+        if not sol.solved:
+            return None
+        w_com = sol.x[: cs.ndof]
+        w_user = _about_point(cs, w_com, build["about"])
+        return float(np.linalg.norm(w_com[:d])), float(np.linalg.norm(w_user[d:]))
+
+    by_force = least("force", big * F_max, T_max)
+    by_torque = least("torque", F_max, big * T_max)
+    F_need, T_with = by_force if by_force is not None else (None, None)
+    F_with, T_need = by_torque if by_torque is not None else (None, None)
+    reason, binding = too_weak_reason(F_need, F_with, T_need, T_with, F_max, T_max)
+    return reason, binding, (F_need, T_need)
+
+
 def _free_push(
     cs: ContactSet,
     clf: Classifier,
@@ -621,12 +716,13 @@ def _free_push(
     forces = {c.name: np.zeros(c.size) for c in cs.contacts}
     met = None if target is None else True  # no kept contact: the least normal force is vacuous
     if F > F_max * (1 + _SEARCH.limit_rel) or T > T_max * (1 + _SEARCH.limit_rel):
-        binding = [k for k, over in (("max_force", F > F_max), ("max_torque", T > T_max)) if over]
-        reason = (
-            f"the manipulator is too weak: every contact opens, so the push is M a − w_g with ‖F‖ = {F:.4g} N,"
-            f" ‖T‖ = {T:.4g} N·m (max_force {F_max:.4g} N, max_torque {T_max:.4g} N·m){notes}"
-        )
-        return WrenchSearch(False, None, None, None, roles, {}, None, reason, binding, limits, margin_target_N=target)
+        # the push is determined: its force and torque are the least needed
+        reason, binding = too_weak_reason(F, F, T, T, F_max, T_max)
+        reason += f" (every contact opens: the push is M a − w_g){notes}"
+        return WrenchSearch(
+            False, None, None, None, roles, {}, None, reason, binding, limits, margin_target_N=target,
+            needed_force_N=F, needed_torque_Nm=T,
+        )  # fmt: skip
     bal = clf.classify(w_com, w_user)
     w_e_norm = clf.builder.m_inv_norm(w_com + w_g)
     jam_rel = bal.balance_residual / w_e_norm if w_e_norm > 0 and math.isfinite(bal.balance_residual) else None
@@ -681,11 +777,13 @@ def _build(
     cert: FloatArray | None,
     jam: float,
     s_max: float = math.inf,
+    least: Literal["effort", "force", "torque"] = "effort",
 ) -> tuple[ConeProgram, dict]:
     """Variables x = (w [n], f_n sliding [ks], f sticking [reduced], s, τ[, e]).
 
-    Without ``effort_margin_N`` the program maximises τ. With it, it minimises the effort
-    ``e ≥ ‖(F, T_c / L)‖`` subject to ``τ ≥ effort_margin_N``. Both keep the total wrench
+    Without ``effort_margin_N`` the program maximises τ. With it, it minimises ``e`` subject to
+    ``τ ≥ effort_margin_N``: the effort ``e ≥ ‖(F, T_c / L)‖`` (``least="effort"``), the force
+    ``e ≥ ‖F‖`` or the torque about the user's point ``e ≥ ‖T‖``. All keep the total wrench
     ``w_e = w + w_g`` a relative distance ``jam`` from static balance, certified by the motion
     ``cert`` (``ŷ``, ``‖ŷ‖_M = 1``, ``J_i ŷ ∈ K_i*``): ``ŷᵀ w_e ≥ jam ‖w_e‖_{M⁻¹}``.
     """
@@ -798,7 +896,7 @@ def _build(
         rows_b.append(np.concatenate([[float(cert @ w_g) / jam], C @ w_g]))
         cones.append(("soc", n + 1))
     c_vec = np.zeros(nx)
-    if effort:
+    if effort and least == "effort":
         # e ≥ ‖(F, T_c / L)‖ with the moment about the centre of mass (w is about the com)
         L = max(cs.max_lever_m, 1e-9)
         A_e = np.zeros((n + 1, nx))
@@ -808,6 +906,24 @@ def _build(
         rows_A.append(A_e)
         rows_b.append(np.zeros(n + 1))
         cones.append(("soc", n + 1))
+        c_vec[i_e] = 1.0
+    elif effort:
+        # e ≥ ‖F‖, or e ≥ ‖T about the user's point‖ (the moment the torque limit bounds)
+        T_rows = np.zeros((n - d, nx))
+        if d == 3:
+            T_rows[:, 3:6] = np.eye(3)
+            T_rows[:, 0:3] = skew(off)
+        else:
+            T_rows[0] = row
+        A_e = np.zeros((1 + (d if least == "force" else n - d), nx))
+        A_e[0, i_e] = -1.0
+        if least == "force":
+            A_e[1:, i_w : i_w + d] = -np.eye(d)
+        else:
+            A_e[1:] = -T_rows
+        rows_A.append(A_e)
+        rows_b.append(np.zeros(A_e.shape[0]))
+        cones.append(("soc", A_e.shape[0]))
         c_vec[i_e] = 1.0
     else:
         c_vec[i_tau] = -1.0

@@ -339,6 +339,7 @@ _VERIFICATION_KEYS = (
     ("max_push_force", "max_push_force_N"),
     ("max_push_torque", "max_push_torque_Nm"),
     ("saturated_ticks", "saturated_ticks"),
+    ("planner_wall_time_in_loop_s", "planner_wall_time_in_loop_s"),
     ("failed_checks", "failed_checks"),
     ("execution", "execution"),
     ("trace", "trace"),
@@ -371,8 +372,13 @@ class Verification:
     execution: ExecutionLog | None = None
     max_push_force_N: float | None = None  # on the part, averaged over 10 ms
     max_push_torque_Nm: float | None = None
-    saturated_ticks: int = 0  # ticks where the coupling asked more than the hand's limits (capped there)
-    failed_checks: list[str] = field(default_factory=list)  # "executor", "final gap", "penetration", "limits"
+    # ticks where the coupling asked more than the hand's limits (capped there); None: not known
+    saturated_ticks: int | None = None
+    # wall time of the re-plans the executor ran from inside ticks [s] (counted in the tick timing);
+    # None: not known (a file without it)
+    planner_wall_time_in_loop_s: float | None = None
+    # "executor", "final gap", "penetration", "solver", "limits"
+    failed_checks: list[str] = field(default_factory=list)
     extras: dict[str, Any] = field(default_factory=dict)
     present: tuple[str, ...] | None = field(default=None, repr=False)  # the keys a file had
 
@@ -448,7 +454,8 @@ class Verification:
             execution=None if execution is None else execution_from_json(execution, f"{where}.execution"),
             max_push_force_N=num("max_push_force"),
             max_push_torque_Nm=num("max_push_torque"),
-            saturated_ticks=count("saturated_ticks", 0) or 0,
+            saturated_ticks=count("saturated_ticks", None),
+            planner_wall_time_in_loop_s=num("planner_wall_time_in_loop_s"),
             failed_checks=[str(c) for c in checks],
             extras={k: v for k, v in obj.items() if k not in known},
             present=tuple(k for k in obj if k in known),

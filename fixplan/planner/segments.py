@@ -104,11 +104,11 @@ def free_wrench(fixture: Fixture, pose: Pose, a_com: FloatArray, M: FloatArray) 
     F = float(np.linalg.norm(w_o[:d]))
     F_max, T_max = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
     if F > F_max or T > T_max:
-        return (
-            False,
-            w_o,
-            f"the manipulator is too weak: free motion needs ‖F‖ = {F:.3g} N, ‖T‖ = {T:.3g} N·m (max_force {F_max:.3g} N, max_torque {T_max:.3g} N·m)",
-        )
+        from fixplan.jamming.search import too_weak_reason
+
+        # the push is determined (no contact force): its force and torque are the least needed
+        reason, _ = too_weak_reason(F, F, T, T, F_max, T_max)
+        return False, w_o, reason + " (free motion: the push is M a − w_g)"
     return True, w_o, f"free motion: ‖F‖ = {F:.3g} N, ‖T‖ = {T:.3g} N·m"
 
 
