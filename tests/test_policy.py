@@ -183,7 +183,7 @@ def test_a_part_starting_in_free_space_is_loaded(path, position, rpy, angle):
     """Free starts that failed before the policy and the approach (unplanned first contact, a fall)."""
     if position is None:
         base = fixplan.load(path)
-        position = list(base.goal.p_world + np.array([0.02, 0.03]))
+        position = list(base.goal.p_world + np.array([0.04, 0.02]))
     fx = _free_twin(path, position, rpy=rpy, angle=angle)
     assert np.min(locator_gaps(fx.workpiece, fx.start, fx.locators)) > 1e-3  # nothing touches
     r = solve(fx)
