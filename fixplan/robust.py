@@ -44,6 +44,7 @@ from fixplan.settings import DEFAULT, RobustSettings
 from fixplan.spatial import Pose
 
 if TYPE_CHECKING:
+    from fixplan.planner.policy import Policy
     from fixplan.planner.solve import PlanResult, PlanStatus
     from fixplan.planner.verify import Verification
 
@@ -210,9 +211,18 @@ def _transition(verification: Verification) -> int | None:
 
 
 def verify_sample(
-    fixture: Fixture, start_state: frozenset[str], steps: Sequence[Step], sample: int, settings: RobustSettings
+    fixture: Fixture,
+    start_state: frozenset[str],
+    steps: Sequence[Step],
+    sample: int,
+    settings: RobustSettings,
+    policy: Policy | None = None,
 ) -> Verification:
-    """Verify the nominal policy ``steps`` on the perturbed world ``sample`` (the full verification)."""
+    """Verify the nominal ``steps`` on the perturbed world ``sample`` (the full verification).
+
+    ``policy`` (the nominal plan's, :mod:`fixplan.planner.policy`) is what the executor takes from a
+    state the plan does not expect, before it re-plans in the perturbed world.
+    """
     from fixplan.planner.solve import Planner
     from fixplan.planner.verify import verify
 
@@ -222,8 +232,9 @@ def verify_sample(
         friction_margin=settings.friction_margin, margin_N=settings.margin_N,
     )  # fmt: skip
     return verify(
-        world, start_state, list(steps), settings=settings.execution_settings(), noise=noise, replan=planner.replan
-    )
+        world, start_state, list(steps), settings=settings.execution_settings(), noise=noise, replan=planner.replan,
+        policy=policy,
+    )  # fmt: skip
 
 
 def verify_on_world(
@@ -242,7 +253,7 @@ def verify_on_world(
         return result, info
     start_state = frozenset(c.name for c in contact_set(fixture, "start").contacts if c.kind == "locator")
     t0 = time.perf_counter()
-    v = verify_sample(fixture, start_state, plan_steps(result.transitions), sample, settings)
+    v = verify_sample(fixture, start_state, plan_steps(result.transitions), sample, settings, result.policy)
     timings = {**result.timings, "verify_s": time.perf_counter() - t0}
     where = f"on perturbed world {sample} (seed {settings.seed})"
     status: PlanStatus
@@ -256,12 +267,17 @@ def verify_on_world(
 
 
 def run_sample(
-    sample: int, fixture: Fixture, start_state: frozenset[str], steps: Sequence[Step], settings: RobustSettings
+    sample: int,
+    fixture: Fixture,
+    start_state: frozenset[str],
+    steps: Sequence[Step],
+    settings: RobustSettings,
+    policy: Policy | None = None,
 ) -> dict[str, Any]:
     """One Dask task: the verdict on world ``sample`` as a small dict (JSON-ready)."""
     t0 = time.perf_counter()
     try:
-        v = verify_sample(fixture, start_state, steps, sample, settings)
+        v = verify_sample(fixture, start_state, steps, sample, settings, policy)
     except (FixplanError, np.linalg.LinAlgError) as exc:
         return {
             "seed": sample, "passed": False, "transition": None, "cause": "error", "reason": str(exc),
@@ -370,7 +386,9 @@ def _robust_on(
     if result.status == "infeasible":
         return RobustResult(0, 0, [], result.status, result.reason, time.perf_counter() - t0, settings)
     seeds = list(range(settings.samples))
-    outcomes = run_tasks(client, run_sample, seeds, fixture, start_state, steps, settings, progress=progress)
+    outcomes = run_tasks(
+        client, run_sample, seeds, fixture, start_state, steps, settings, result.policy, progress=progress
+    )
     failures = [o for o in outcomes if not o["passed"]]
     return RobustResult(
         samples=len(outcomes),
