@@ -838,10 +838,18 @@ def _draw_plate_free(rng: np.random.Generator) -> _Draft | str:
         params=params,
         resting=(),
         story=story,
-        check=_check_plate,
+        check=_check_plate_free,
         free=True,
         goal_written=written,
     )
+
+
+def _check_plate_free(fixture: Fixture) -> str | None:
+    com_x = float(fixture.goal.point_world_from_body(fixture.workpiece.com_body)[0])
+    lo, hi = sorted(float(fixture.locator(n).p_world[0]) for n in ("B1", "B2"))
+    if not lo < com_x < hi:
+        return f"the centre of mass (x = {com_x:.4g} m) is not between B1 and B2 at the goal"
+    return None
 
 
 _DRAWS: dict[str, Callable[[np.random.Generator], _Draft | str]] = {
