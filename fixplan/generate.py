@@ -29,6 +29,23 @@ plate-2d
     trapezoids and pentagons). Start: slid 2–30 mm (at most a quarter of the width) along the
     bottom, away from S, and tilted 0–10° about ONE base locator it rests on: counter-clockwise
     on B1 (B2 below with a gap) or clockwise on B2 (B1 below with a gap).
+box-321-free
+    A box, footprint edges log-uniform in 4–40 cm and the height ``HEIGHT_PER_FOOTPRINT`` (0.25–4)
+    × √(a b) (flat to tall). B1, B2, B3 under -z as box-321 (no start offset), S1, S2 on the -y
+    or the +y face and E1 on the -x or the +x face (the layout mirrored, drawn per fixture),
+    point tips for a quarter of the fixtures, μ in ``FREE_FRICTION``. Start in free space:
+    tilted by roll, pitch, yaw each uniform in ±``FREE_TILT_DEG`` about the centre of mass and
+    moved along a random direction up and away from S and E (each direction cosine ≥
+    ``AWAY_MIN_COSINE``) until the nearest locator's gap is the drawn 5–80 mm (log-uniform,
+    ``START_GAP_M``); nothing touches. The goal is written in the file for half the fixtures.
+plate-2d-free
+    The plate-2d outlines, B1 and B2 on either side of the centre of mass, S on the left or the
+    right edge (the outline mirrored); start turned ±15° about the centre of mass and moved up
+    and away from S until the nearest locator is 5–80 mm away; goal written for half.
+
+The free families are checked on their goal known by construction (every gap 0 within
+``EXACT_M``, rank-full ``G``), never by searching for it. ``rotate_world=True`` (``fixplan generate
+--rotate-world``) turns any family's fixture rigidly by :func:`fixplan.twins.random_rotation`.
 """
 
 from __future__ import annotations
