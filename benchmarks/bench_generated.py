@@ -319,7 +319,7 @@ def _markdown(
         "contact-state feedback executor) loaded the part, so every plan printed as planned passes verification by",
         "construction; a plan the loop did not confirm is printed as `unverified` and counted as a failure here.",
         "Failed without proof = `unverified`, `infeasible` without `proven` (a blocking transition the path NLP did",
-        "not find rather than one the wrench search rules out), a timeout or a crash.",
+        "not find rather than one the wrench search rules out), a timeout, a crash, or a file the loader refused.",
         "",
         "Targets:",
         "",
@@ -381,7 +381,7 @@ def _markdown(
         lines.append("- not measured (no verified fixture)")
     else:
         lines += [
-            f"The first {ROBUST_PER_FAMILY} verified fixtures of each family, {ROBUST_SAMPLES} perturbed worlds each.",
+            f"The first {ROBUST_PER_FAMILY} verified fixtures of each set, {ROBUST_SAMPLES} perturbed worlds each.",
             "",
             "| set | fixture | succeeded / samples | failure causes | wall [s] |",
             "|---|---|---:|---|---:|",
