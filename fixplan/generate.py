@@ -41,7 +41,9 @@ box-321-free
 plate-2d-free
     The plate-2d outlines, B1 and B2 on either side of the centre of mass, S on the left or the
     right edge (the outline mirrored); start turned ±15° about the centre of mass and moved up
-    and away from S until the nearest locator is 5–80 mm away; goal written for half.
+    and away from S until the nearest locator is 5–80 mm away; goal written for half. The hand
+    must hold the part there: ``max_torque`` ≥ ``HOLD_MARGIN`` × the weight's moment about the
+    body origin (a polygon's origin is a corner; draws that cannot are redrawn).
 
 The free families are checked on their goal known by construction (every gap 0 within
 ``EXACT_M``, rank-full ``G``), never by searching for it. ``rotate_world=True`` (``fixplan generate
@@ -112,6 +114,7 @@ START_GAP_M = (0.005, 0.080)  # the nearest locator's gap at the start, log-unif
 FREE_TILT_DEG = 15.0  # start tilt: roll, pitch, yaw (2D: the angle) each uniform in ±this
 AWAY_MIN_COSINE = 0.2  # the start displacement's direction cosine away from each locator group, at least
 GOAL_WRITTEN_SHARE = 0.5  # share of free fixtures whose file states the goal (the others: the loader finds it)
+HOLD_MARGIN = 1.5  # free starts: max_torque ≥ this × the torque that holds the part still there (about the body origin)
 WORLD_STREAM = 1  # --rotate-world draws the rotation from default_rng([seed, index, WORLD_STREAM])
 
 # Checks every generated file passes.
@@ -814,6 +817,11 @@ def _draw_plate_free(rng: np.random.Generator) -> _Draft | str:
     s = _free_offset(workpiece, models, pose_at, target)
     if isinstance(s, str):
         return s
+    # The hand holds the part at the start (nothing else does): the weight's moment about the body
+    # origin, where the hand's torque is measured, is within its limit with HOLD_MARGIN.
+    hold = mass * GRAVITY_M_S2 * abs(float((R_tilt @ com_body)[0]))
+    if max_torque < HOLD_MARGIN * hold:
+        return f"the hand cannot hold the part at the start ({max_torque:.3g} N m < {HOLD_MARGIN} x {hold:.3g} N m)"
     goal = {"position": [float(v) for v in goal_p], "angle_deg": 0.0}
     params = {
         "kind": kind,

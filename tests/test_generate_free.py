@@ -156,6 +156,10 @@ def test_plate_2d_free_files_start_in_free_space_and_cover_the_ranges(free_plate
         assert np.all(away_cosines(com[1] - com[0], away) >= gen.AWAY_MIN_COSINE - 1e-9)
         xs = sorted(fx.locator(n).p_world[0] for n in ("B1", "B2"))
         assert xs[0] < com[0][0] < xs[1]
+        # The hand holds the part still at the start: the weight's moment about the body origin (where
+        # the hand's torque is measured) within max_torque with the drawn margin.
+        weight = fx.workpiece.mass_kg * 9.81
+        assert fx.manipulator.max_torque_Nm >= gen.HOLD_MARGIN * weight * abs(com[1][0] - fx.start.p_world[0]) - 1e-12
         edges.add(edge)
         written.add(g.params["goal_in_file"])
         point += g.params["point_tips"]
