@@ -29,6 +29,25 @@ plate-2d
     trapezoids and pentagons). Start: slid 2–30 mm (at most a quarter of the width) along the
     bottom, away from S, and tilted 0–10° about ONE base locator it rests on: counter-clockwise
     on B1 (B2 below with a gap) or clockwise on B2 (B1 below with a gap).
+box-321-free
+    A box, footprint edges log-uniform in 4–40 cm and the height ``HEIGHT_PER_FOOTPRINT`` (0.25–4)
+    × √(a b) (flat to tall). B1, B2, B3 under -z as box-321 (no start offset), S1, S2 on the -y
+    or the +y face and E1 on the -x or the +x face (the layout mirrored, drawn per fixture),
+    point tips for a quarter of the fixtures, μ in ``FREE_FRICTION``. Start in free space:
+    tilted by roll, pitch, yaw each uniform in ±``FREE_TILT_DEG`` about the centre of mass and
+    moved along a random direction up and away from S and E (each direction cosine ≥
+    ``AWAY_MIN_COSINE``) until the nearest locator's gap is the drawn 5–80 mm (log-uniform,
+    ``START_GAP_M``); nothing touches. The goal is written in the file for half the fixtures.
+plate-2d-free
+    The plate-2d outlines, B1 and B2 on either side of the centre of mass, S on the left or the
+    right edge (the outline mirrored); start turned ±15° about the centre of mass and moved up
+    and away from S until the nearest locator is 5–80 mm away; goal written for half. The hand
+    must hold the part there: ``max_torque`` ≥ ``HOLD_MARGIN`` × the weight's moment about the
+    body origin (a polygon's origin is a corner; draws that cannot are redrawn).
+
+The free families are checked on their goal known by construction (every gap 0 within
+``EXACT_M``, rank-full ``G``), never by searching for it. ``rotate_world=True`` (``fixplan generate
+--rotate-world``) turns any family's fixture rigidly by :func:`fixplan.twins.random_rotation`.
 """
 
 from __future__ import annotations
@@ -40,13 +59,14 @@ from typing import Any
 
 import numpy as np
 
+from fixplan import twins
 from fixplan.errors import FixtureError, InfeasibleError, InputError
-from fixplan.fixture import loads
-from fixplan.geometry import Polygon
+from fixplan.fixture import loads, parse_toml
+from fixplan.geometry import Box, Polygon, Rectangle
 from fixplan.locating import contact_set, locator_gaps, solve_goal
-from fixplan.model import Fixture
+from fixplan.model import Fixture, Locator, Workpiece
 from fixplan.settings import DEFAULT
-from fixplan.spatial import cross2, rot2
+from fixplan.spatial import Pose, cross2, matrix_from_rpy, rot2
 
 FAMILIES: dict[str, str] = {
     "box-321": (
@@ -56,6 +76,16 @@ FAMILIES: dict[str, str] = {
     "plate-2d": (
         "2D rectangles, trapezoids and pentagons on 2 base locators and 1 side locator (often on a slanted "
         "edge); start slid 2-30 mm along the bottom and tilted up to 10 deg, resting on one base locator"
+    ),
+    "box-321-free": (
+        "3D flat to tall boxes on 3 base, 2 side (+y or -y face) and 1 end (+x or -x face) locator, point or "
+        "spherical tips, mu 0.05-0.8; start in free space 5-80 mm from the nearest locator, moved up and away "
+        "from the side and end locators and tilted up to 15 deg about every axis; goal written in half the files"
+    ),
+    "plate-2d-free": (
+        "2D rectangles, trapezoids and pentagons on 2 base locators and 1 side locator (left or right edge), "
+        "mu 0.05-0.8; start in free space 5-80 mm from the nearest locator, moved up and away from the side "
+        "locator and tilted up to 15 deg; goal written in half the files"
     ),
 }
 
@@ -74,6 +104,18 @@ SLANT_DEG = (-30.0, 40.0)  # plate-2d side edges from vertical, positive leaning
 FORCE_PER_WEIGHT = (1.5, 8.0)  # manipulator.max_force / (m g)
 TORQUE_PER_WEIGHT_LEVER = (0.3, 3.0)  # manipulator.max_torque / (m g × half the bounding-box diagonal)
 GRAVITY_M_S2 = 9.81
+
+# The free families (box-321-free, plate-2d-free) draw the above where they do not say otherwise, and:
+HEIGHT_PER_FOOTPRINT = (0.25, 4.0)  # box-321-free: c / sqrt(a b), log-uniform (flat to tall); c in EDGE_M
+POINT_TIP_SHARE = 0.25  # share of free fixtures with point tips (radius 0); the others draw TIP_RADIUS_M
+FREE_FRICTION = (0.05, 0.8)  # per fixture, half varied per locator by ±FRICTION_SPREAD
+FREE_FORCE_PER_WEIGHT = (1.5, 6.0)  # manipulator.max_force / (m g); torque as TORQUE_PER_WEIGHT_LEVER
+START_GAP_M = (0.005, 0.080)  # the nearest locator's gap at the start, log-uniform; every gap is ≥ the lower end
+FREE_TILT_DEG = 15.0  # start tilt: roll, pitch, yaw (2D: the angle) each uniform in ±this
+AWAY_MIN_COSINE = 0.2  # the start displacement's direction cosine away from each locator group, at least
+GOAL_WRITTEN_SHARE = 0.5  # share of free fixtures whose file states the goal (the others: the loader finds it)
+HOLD_MARGIN = 1.5  # free starts: max_torque ≥ this × the torque that holds the part still there (about the body origin)
+WORLD_STREAM = 1  # --rotate-world draws the rotation from default_rng([seed, index, WORLD_STREAM])
 
 # Checks every generated file passes.
 EXACT_M = 1e-9  # resting locators touch within this at the start; nothing penetrates more
@@ -97,6 +139,9 @@ class GeneratedFixture:
         The fixture file, a header comment and the TOML.
     draws : int
         Draws it took: the earlier ``draws - 1`` failed a check and were replaced.
+    goal : dict
+        The goal pose as the file would state it (``position`` and ``rpy_deg`` or ``angle_deg``),
+        known by construction, also when the file leaves it out (free families).
     """
 
     name: str
@@ -106,11 +151,12 @@ class GeneratedFixture:
     params: dict[str, Any]
     toml_text: str
     draws: int
+    goal: dict[str, Any] | None = None  # the located pose, known by construction, in the file's form
 
 
-def fixture_name(family: str, seed: int, index: int) -> str:
-    """The name (and file stem) of fixture ``index`` of ``seed`` in ``family``."""
-    return f"{family}-s{seed}-{index:03d}"
+def fixture_name(family: str, seed: int, index: int, *, rotate_world: bool = False) -> str:
+    """The name (and file stem) of fixture ``index`` of ``seed`` in ``family`` (``-rotated``: in a rotated world)."""
+    return f"{family}-s{seed}-{index:03d}" + ("-rotated" if rotate_world else "")
 
 
 def check_family(family: str) -> None:
@@ -119,19 +165,29 @@ def check_family(family: str) -> None:
         raise InputError(f"unknown fixture family {family!r} (known: {', '.join(FAMILIES)})")
 
 
-def generate(family: str, count: int, seed: int) -> list[GeneratedFixture]:
-    """Fixtures ``0 .. count-1`` of ``family`` for ``seed`` (see the module docstring)."""
+def generate(family: str, count: int, seed: int, *, rotate_world: bool = False) -> list[GeneratedFixture]:
+    """Fixtures ``0 .. count-1`` of ``family`` for ``seed`` (see the module docstring).
+
+    ``rotate_world``: each fixture in a world turned by a random rotation (:func:`generate_one`).
+    """
     check_family(family)
     _check_int(count, "count")
-    return [generate_one(family, seed, index) for index in range(count)]
+    return [generate_one(family, seed, index, rotate_world=rotate_world) for index in range(count)]
 
 
-def generate_one(family: str, seed: int, index: int) -> GeneratedFixture:
-    """Fixture ``index`` of ``family`` for ``seed``: the first draw that passes every check."""
+def generate_one(family: str, seed: int, index: int, *, rotate_world: bool = False) -> GeneratedFixture:
+    """Fixture ``index`` of ``family`` for ``seed``: the first draw that passes every check.
+
+    ``rotate_world``: the fixture turned rigidly about the world origin (locators, start, goal,
+    gravity) by :func:`fixplan.twins.random_rotation` of ``default_rng([seed, index,
+    WORLD_STREAM])``: uniform on SO(3), a uniform angle in 2D. Its name ends in ``-rotated``,
+    its params hold ``world_rotation`` (the matrix, by rows), and its gaps at the start and goal
+    are checked against the unrotated fixture's.
+    """
     check_family(family)
     _check_int(seed, "seed")
     _check_int(index, "index")
-    name = fixture_name(family, seed, index)
+    name = fixture_name(family, seed, index, rotate_world=rotate_world)
     rng = np.random.default_rng([seed, index])
     reason = ""
     for draw in range(1, MAX_DRAWS + 1):
@@ -145,12 +201,33 @@ def generate_one(family: str, seed: int, index: int) -> GeneratedFixture:
         except FixtureError as exc:
             reason = f"the loader refused it: {exc.issues[0].key}: {exc.issues[0].message}"
             continue
-        problem = _check(fixture, draft)
+        problem = _check_free(fixture, draft) if draft.free else _check(fixture, draft)
         if problem is not None:
             reason = problem
             continue
-        text = _header(name, family, seed, index, draw, draft, fixture) + body
-        return GeneratedFixture(name, family, seed, index, dict(draft.params), text, draw)
+        params = dict(draft.params)
+        goal = dict(draft.goal)
+        head = _header(name, family, seed, index, draw, draft, fixture, rotate_world)
+        if not rotate_world:
+            text = head + (body if draft.goal_written else _render(name, draft, goal=False))
+            return GeneratedFixture(name, family, seed, index, params, text, draw, goal)
+        R = twins.random_rotation(np.random.default_rng([seed, index, WORLD_STREAM]), draft.dimension)
+        doc = twins.rotate_world(parse_toml(body, name), R)
+        problem = _check_twin(fixture, doc, name)
+        if problem is not None:
+            reason = problem
+            continue
+        goal = doc["workpiece"]["goal"]
+        if not draft.goal_written:
+            del doc["workpiece"]["goal"]
+        params["world_rotation"] = [[float(v) for v in row] for row in R]
+        rows = "; ".join(", ".join(f"{v:.12g}" for v in row) for row in R)
+        note = (
+            f"World rotated about the origin by R = [{rows}] (default_rng([{seed}, {index}, {WORLD_STREAM}])):\n"
+            "the goal, start and layout above are in the unrotated world; this file is that fixture turned by R."
+        )
+        text = twins.twin_text(head, doc, note)
+        return GeneratedFixture(name, family, seed, index, params, text, draw, goal)
     raise InfeasibleError(f"{name}: no draw passed the checks in {MAX_DRAWS} draws (last: {reason})")
 
 
@@ -176,6 +253,8 @@ class _Draft:
     resting: tuple[str, ...]  # locators that touch at the start; the others must be clear
     story: list[str]  # a few lines on the start, for the header
     check: Callable[[Fixture], str | None]  # the family's own geometric check of the loaded file
+    free: bool = False  # the start is in free space (START_GAP_M) rather than resting
+    goal_written: bool = True  # the file states the goal (free families: GOAL_WRITTEN_SHARE of them)
 
 
 def _uniform(rng: np.random.Generator, lo: float, hi: float, decimals: int) -> float:
@@ -191,19 +270,23 @@ def _offset_cap(length_m: float) -> float:
     return math.floor(min(OFFSET_M[1], OFFSET_MAX_FRACTION * length_m) * 1e4) / 1e4
 
 
-def _frictions(rng: np.random.Generator, n: int) -> tuple[float, bool, list[float]]:
+def _frictions(
+    rng: np.random.Generator, n: int, bounds: tuple[float, float] = FRICTION
+) -> tuple[float, bool, list[float]]:
     """The fixture's μ, whether it varies per locator, and the n locators' μ."""
-    mu = _uniform(rng, *FRICTION, 3)
+    mu = _uniform(rng, *bounds, 3)
     varied = bool(rng.random() < 0.5)
     if not varied:
         return mu, False, [mu] * n
     spread = rng.uniform(-FRICTION_SPREAD, FRICTION_SPREAD, n)
-    return mu, True, [round(float(np.clip(mu + s, *FRICTION)), 3) for s in spread]
+    return mu, True, [round(float(np.clip(mu + s, *bounds)), 3) for s in spread]
 
 
-def _hand(rng: np.random.Generator, weight_N: float, lever_m: float) -> tuple[float, float, float, float]:
+def _hand(
+    rng: np.random.Generator, weight_N: float, lever_m: float, force: tuple[float, float] = FORCE_PER_WEIGHT
+) -> tuple[float, float, float, float]:
     """Force and torque factors and the limits they give, weak to strong relative to the weight."""
-    kf = _uniform(rng, *FORCE_PER_WEIGHT, 3)
+    kf = _uniform(rng, *force, 3)
     kt = _uniform(rng, *TORQUE_PER_WEIGHT_LEVER, 3)
     return kf, kt, kf * weight_N, kt * weight_N * lever_m
 
@@ -354,7 +437,10 @@ def _turns_ok(vertices: list[tuple[float, float]], min_turn_deg: float = 5.0) ->
     return bool(np.all(turns >= min_turn_deg))
 
 
-def _draw_plate(rng: np.random.Generator) -> _Draft | str:
+def _plate_outline(
+    rng: np.random.Generator,
+) -> tuple[str, float, float, list[float], list[tuple[float, float]]] | str:
+    """Kind, width, height, side slants and counter-clockwise vertices of a plate (bottom edge (0, 0)-(L, 0))."""
     kind = ("rectangle", "trapezoid", "pentagon")[int(rng.integers(3))]
     L = _log_uniform(rng, *EDGE_M, 4)
     H = _log_uniform(rng, *EDGE_M, 4)
@@ -377,6 +463,14 @@ def _draw_plate(rng: np.random.Generator) -> _Draft | str:
             vertices = [(0.0, 0.0), (L, 0.0), (L - d_right, hr), (apex, H), (d_left, hl)]
         if not _turns_ok(vertices):
             return f"the {kind} is not convex with every corner turning at least 5 deg"
+    return kind, L, H, slants, vertices
+
+
+def _draw_plate(rng: np.random.Generator) -> _Draft | str:
+    outline = _plate_outline(rng)
+    if isinstance(outline, str):
+        return outline
+    kind, L, H, slants, vertices = outline
     polygon = Polygon(tuple(vertices))
     area = polygon.area
     cx = float(polygon.com_body[0])
@@ -476,7 +570,319 @@ def _check_plate(fixture: Fixture) -> str | None:
     return None
 
 
-_DRAWS: dict[str, Callable[[np.random.Generator], _Draft | str]] = {"box-321": _draw_box, "plate-2d": _draw_plate}
+# -- free-space starts: box-321-free, plate-2d-free -------------------------------------------------
+
+
+def _away_direction(rng: np.random.Generator, away: np.ndarray) -> np.ndarray:
+    """A unit direction in the cone of ``away`` (±1 per axis): every direction cosine ≥ AWAY_MIN_COSINE."""
+    while True:
+        e = np.abs(rng.standard_normal(away.shape[0]))
+        e /= np.linalg.norm(e)
+        if e.min() >= AWAY_MIN_COSINE:
+            return away * e
+
+
+def _tip(rng: np.random.Generator) -> tuple[float, bool]:
+    """A tip radius [m]: a point (0) for POINT_TIP_SHARE of the fixtures, else TIP_RADIUS_M."""
+    if rng.random() < POINT_TIP_SHARE:
+        return 0.0, True
+    return _uniform(rng, *TIP_RADIUS_M, 4), False
+
+
+def _free_offset(
+    workpiece: Workpiece, locators: list[Locator], pose_at: Callable[[float], Pose], target_m: float
+) -> float | str:
+    """The distance ``s`` along the start direction where the nearest locator's gap is ``target_m``.
+
+    ``pose_at(s)`` is the tilted part moved by ``s`` [m] along the direction; the nearest gap is
+    continuous in ``s``: bracketed by doubling, then bisected to round-off.
+    """
+
+    def nearest(s: float) -> float:
+        return float(np.min(locator_gaps(workpiece, pose_at(s), locators)))
+
+    if nearest(0.0) >= target_m:
+        return "the tilt alone clears every locator by the target gap"
+    hi = 0.01
+    while nearest(hi) < target_m:
+        hi *= 2.0
+        if hi > 4.0:
+            return "the part does not clear the locators within 4 m"
+    lo = 0.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid in (lo, hi):
+            break
+        lo, hi = (mid, hi) if nearest(mid) < target_m else (lo, mid)
+    return hi
+
+
+def _goal_story(goal: dict[str, Any], written: bool) -> str:
+    where = "written in the file" if written else "NOT written in the file (the loader finds it)"
+    pose = ", ".join(f"{k} = {_value(v)}" for k, v in goal.items())
+    return f"Goal, known by construction and {where}: {pose}."
+
+
+def _draw_box_free(rng: np.random.Generator) -> _Draft | str:
+    a, b = (_log_uniform(rng, *EDGE_M, 4) for _ in range(2))
+    aspect = _log_uniform(rng, *HEIGHT_PER_FOOTPRINT, 3)
+    c = round(aspect * math.sqrt(a * b), 4)
+    if not EDGE_M[0] <= c <= EDGE_M[1]:
+        return f"the height {c:g} m (aspect {aspect:g}) is outside {EDGE_M} m"
+    density = round(_log_uniform(rng, *DENSITY_KG_M3, 0))
+    mass = _sig(density * a * b * c, 4)
+    rho, point = _tip(rng)
+    mu, varied, mus = _frictions(rng, 6, FREE_FRICTION)
+    soft = bool(rng.random() < 0.5)
+    torsion = _uniform(rng, *TORSION_M, 4) if soft else 0.0
+    side_face = "-y" if rng.random() < 0.5 else "+y"
+    end_face = "-x" if rng.random() < 0.5 else "+x"
+
+    # The canonical layout (S on -y, E on -x) of box-321 without a start offset, then mirrored.
+    def uni(lo: float, hi: float) -> float:
+        return _uniform(rng, lo, hi, 4)
+
+    b1 = (uni(0.08 * a, 0.206 * a), uni(0.08 * b, 0.248 * b))
+    b2 = (uni(0.794 * a, 0.92 * a), uni(0.08 * b, 0.248 * b))
+    b3 = (uni(0.416 * a, 0.626 * a), uni(0.752 * b, 0.92 * b))
+    s1 = (uni(0.1 * a, 0.4 * a), uni(0.2 * c, 0.8 * c))
+    s2 = (uni(0.6 * a, 0.9 * a), uni(0.2 * c, 0.8 * c))
+    e1 = (uni(0.2 * b, 0.8 * b), uni(0.2 * c, 0.8 * c))
+    if _triangle_margin(np.array([a / 2, b / 2]), np.array([b1, b2, b3])) < 0.05 * min(a, b):
+        return "the base triangle does not hold the centre of mass with a margin"
+    weight = mass * GRAVITY_M_S2
+    half_diagonal = 0.5 * math.sqrt(a * a + b * b + c * c)
+    kf, kt, max_force, max_torque = _hand(rng, weight, half_diagonal, FREE_FORCE_PER_WEIGHT)
+    rpy = [_uniform(rng, -FREE_TILT_DEG, FREE_TILT_DEG, 2) for _ in range(3)]
+    sx = 1.0 if end_face == "-x" else -1.0  # away from E
+    sy = 1.0 if side_face == "-y" else -1.0  # away from S
+    u = _away_direction(rng, np.array([sx, sy, 1.0]))
+    target = _log_uniform(rng, *START_GAP_M, 4)
+
+    def fx(x: float) -> float:
+        return x if end_face == "-x" else round(a - x, 4)
+
+    def fy(y: float) -> float:
+        return y if side_face == "-y" else round(b - y, 4)
+
+    spots = {
+        "B1": ([fx(b1[0]), fy(b1[1]), -rho], "-z"),
+        "B2": ([fx(b2[0]), fy(b2[1]), -rho], "-z"),
+        "B3": ([fx(b3[0]), fy(b3[1]), -rho], "-z"),
+        "S1": ([fx(s1[0]), fy(-rho), s1[1]], side_face),
+        "S2": ([fx(s2[0]), fy(-rho), s2[1]], side_face),
+        "E1": ([fx(-rho), fy(e1[0]), e1[1]], end_face),
+    }
+    locators = []
+    for (name, (position, face)), mu_i in zip(spots.items(), mus, strict=True):
+        entry: dict[str, Any] = {"name": name, "position": position, "radius": rho, "friction": mu_i}
+        if soft:
+            entry["torsion"] = torsion
+        entry["face"] = face
+        locators.append(entry)
+    shape = Box((a, b, c))
+    workpiece = Workpiece(shape, mass, shape.inertia_body(mass), shape.com_body)
+    models = [Locator(e["name"], np.array(e["position"]), rho, e["friction"]) for e in locators]
+    goal_c = np.array([a / 2, b / 2, c / 2])
+    R_tilt = matrix_from_rpy(np.radians(rpy))
+    s = _free_offset(workpiece, models, lambda s: Pose(R_tilt, goal_c + s * u), target)
+    if isinstance(s, str):
+        return s
+    start_c = [float(v) for v in goal_c + s * u]
+    goal = {"position": [float(v) for v in goal_c], "rpy_deg": [0.0, 0.0, 0.0]}
+    written = bool(rng.random() < GOAL_WRITTEN_SHARE)
+    params = {
+        "size_m": [a, b, c],
+        "height_per_footprint": aspect,
+        "density_kg_m3": density,
+        "mass_kg": mass,
+        "tip_radius_m": rho,
+        "point_tips": point,
+        "friction": mu,
+        "friction_per_locator": varied,
+        "soft_fingers": soft,
+        "torsion_m": torsion,
+        "side_face": side_face,
+        "end_face": end_face,
+        "start_rpy_deg": rpy,
+        "start_direction": [round(float(v), 6) for v in u],
+        "start_distance_m": round(s, 9),
+        "nearest_gap_m": target,
+        "goal_in_file": written,
+        "force_per_weight": kf,
+        "torque_per_weight_lever": kt,
+    }
+    story = [
+        f"Goal: the box fills [0, {a:g}] x [0, {b:g}] x [0, {c:g}] m, unrotated; every locator touches a face there",
+        f"(S1, S2 on the {side_face} face, E1 on the {end_face} face).",
+        _goal_story(goal, written),
+        f"Start: in free space, tilted by rpy {rpy} deg about the centre of mass and moved {s * 1e3:.3f} mm along",
+        f"{[round(float(v), 4) for v in u]} (up, away from S and E), where the nearest locator is {target * 1e3:g} mm away.",
+    ]
+    return _Draft(
+        dimension=3,
+        shape={"shape": "box", "size": [a, b, c]},
+        mass_kg=mass,
+        start={"position": start_c, "rpy_deg": rpy},
+        goal=goal,
+        locators=locators,
+        max_force_N=max_force,
+        max_torque_Nm=max_torque,
+        params=params,
+        resting=(),
+        story=story,
+        check=_check_box_free,
+        free=True,
+        goal_written=written,
+    )
+
+
+def _check_box_free(fixture: Fixture) -> str | None:
+    size = np.asarray(fixture.workpiece.shape.size)  # type: ignore[attr-defined]
+    base = [fixture.locator(n) for n in ("B1", "B2", "B3")]
+    tri = np.array([loc.p_world[:2] for loc in base])
+    need = 0.05 * float(min(size[0], size[1]))
+    margin = _triangle_margin(fixture.goal.p_world[:2], tri)
+    if margin < need:
+        return f"the centre of mass is {margin:.3g} m inside the base triangle at the goal (need {need:.3g} m)"
+    return None
+
+
+def _draw_plate_free(rng: np.random.Generator) -> _Draft | str:
+    outline = _plate_outline(rng)
+    if isinstance(outline, str):
+        return outline
+    kind, L, H, slants, vertices = outline
+    polygon = Polygon(tuple(vertices))
+    area = polygon.area
+    cx = float(polygon.com_body[0])
+    thickness = _uniform(rng, *PLATE_THICKNESS_M, 4)
+    density = round(_log_uniform(rng, *DENSITY_KG_M3, 0))
+    mass = _sig(area * thickness * density, 4)
+    rho, point = _tip(rng)
+    mu, varied, mus = _frictions(rng, 3, FREE_FRICTION)
+    lo1, hi1 = 0.1 * L, cx - 0.08 * L
+    lo2, hi2 = cx + 0.08 * L, 0.9 * L
+    if lo1 >= hi1 or lo2 >= hi2:
+        return f"no room for the base locators (centre of mass at x = {cx:.4g} m on a {L:g} m bottom edge)"
+    x1 = _uniform(rng, lo1, hi1, 4)
+    x2 = _uniform(rng, lo2, hi2, 4)
+    t_side = _uniform(rng, 0.25, 0.75, 3)
+    side_edge = "left" if rng.random() < 0.5 else "right"
+    xs, ys = vertices[-1]
+    side_len = math.hypot(xs, ys)
+    n_out = (-ys / side_len, xs / side_len)  # outward normal of the edge vertices[-1] -> (0, 0)
+    side = [t_side * xs + rho * n_out[0], t_side * ys + rho * n_out[1]]
+    xmin, xmax = min(v[0] for v in vertices), max(v[0] for v in vertices)
+    half_diagonal = 0.5 * math.hypot(xmax - xmin, max(v[1] for v in vertices))
+    kf, kt, max_force, max_torque = _hand(rng, mass * GRAVITY_M_S2, half_diagonal, FREE_FORCE_PER_WEIGHT)
+    angle = _uniform(rng, -FREE_TILT_DEG, FREE_TILT_DEG, 2)
+    u = _away_direction(rng, np.array([1.0 if side_edge == "left" else -1.0, 1.0]))
+    target = _log_uniform(rng, *START_GAP_M, 4)
+    written = bool(rng.random() < GOAL_WRITTEN_SHARE)
+
+    # Mirrored (S on the right edge): x -> L - x for the outline (order reversed: counter-clockwise) and locators.
+    def fx(x: float) -> float:
+        return x if side_edge == "left" else round(L - x, 12)
+
+    if side_edge == "right":
+        flipped = [(fx(x), y) for x, y in vertices]
+        vertices = [flipped[0], *reversed(flipped[1:])]
+        polygon = Polygon(tuple(vertices))
+    spots = {"B1": [fx(x1), -rho], "B2": [fx(x2), -rho], "S": [fx(side[0]), side[1]]}
+    faces = ("-y", "-y", "-x" if side_edge == "left" else "+x") if kind == "rectangle" else (None, None, None)
+    locators = []
+    for (name, position), mu_i, face in zip(spots.items(), mus, faces, strict=True):
+        entry: dict[str, Any] = {"name": name, "position": position, "radius": rho, "friction": mu_i}
+        if face is not None:
+            entry["face"] = face
+        locators.append(entry)
+    if kind == "rectangle":
+        shape: dict[str, Any] = {"shape": "rectangle", "size": [L, H]}
+        model_shape: Rectangle | Polygon = Rectangle((L, H))
+        goal_p = np.array([L / 2, H / 2])
+    else:
+        shape = {"shape": "polygon", "vertices": [list(v) for v in vertices]}
+        model_shape = polygon
+        goal_p = np.zeros(2)
+    com_body = model_shape.com_body
+    workpiece = Workpiece(model_shape, mass, model_shape.inertia_body(mass), com_body)
+    models = [Locator(e["name"], np.array(e["position"]), rho, e["friction"]) for e in locators]
+    R_tilt = rot2(math.radians(angle))
+    com_goal = goal_p + com_body
+
+    def pose_at(s: float) -> Pose:
+        return Pose(R_tilt, com_goal + s * u - R_tilt @ com_body)
+
+    s = _free_offset(workpiece, models, pose_at, target)
+    if isinstance(s, str):
+        return s
+    # The hand holds the part at the start (nothing else does): the weight's moment about the body
+    # origin, where the hand's torque is measured, is within its limit with HOLD_MARGIN.
+    hold = mass * GRAVITY_M_S2 * abs(float((R_tilt @ com_body)[0]))
+    if max_torque < HOLD_MARGIN * hold:
+        return f"the hand cannot hold the part at the start ({max_torque:.3g} N m < {HOLD_MARGIN} x {hold:.3g} N m)"
+    goal = {"position": [float(v) for v in goal_p], "angle_deg": 0.0}
+    params = {
+        "kind": kind,
+        "width_m": L,
+        "height_m": H,
+        "slant_deg": slants,
+        "thickness_m": thickness,
+        "density_kg_m3": density,
+        "mass_kg": mass,
+        "tip_radius_m": rho,
+        "point_tips": point,
+        "friction": mu,
+        "friction_per_locator": varied,
+        "side_fraction": t_side,
+        "side_edge": side_edge,
+        "start_angle_deg": angle,
+        "start_direction": [round(float(v), 6) for v in u],
+        "start_distance_m": round(s, 9),
+        "nearest_gap_m": target,
+        "goal_in_file": written,
+        "force_per_weight": kf,
+        "torque_per_weight_lever": kt,
+    }
+    story = [
+        f"Goal: the bottom edge on y = 0 from x = 0 to {L:g} m, unrotated; every locator touches there (S on the {side_edge} edge).",
+        _goal_story(goal, written),
+        f"Start: in free space, turned {angle:g} deg about the centre of mass and moved {s * 1e3:.3f} mm along",
+        f"{[round(float(v), 4) for v in u]} (up, away from S), where the nearest locator is {target * 1e3:g} mm away.",
+    ]
+    return _Draft(
+        dimension=2,
+        shape=shape,
+        mass_kg=mass,
+        start={"position": [float(v) for v in pose_at(s).p_world], "angle_deg": angle},
+        goal=goal,
+        locators=locators,
+        max_force_N=max_force,
+        max_torque_Nm=max_torque,
+        params=params,
+        resting=(),
+        story=story,
+        check=_check_plate_free,
+        free=True,
+        goal_written=written,
+    )
+
+
+def _check_plate_free(fixture: Fixture) -> str | None:
+    com_x = float(fixture.goal.point_world_from_body(fixture.workpiece.com_body)[0])
+    lo, hi = sorted(float(fixture.locator(n).p_world[0]) for n in ("B1", "B2"))
+    if not lo < com_x < hi:
+        return f"the centre of mass (x = {com_x:.4g} m) is not between B1 and B2 at the goal"
+    return None
+
+
+_DRAWS: dict[str, Callable[[np.random.Generator], _Draft | str]] = {
+    "box-321": _draw_box,
+    "plate-2d": _draw_plate,
+    "box-321-free": _draw_box_free,
+    "plate-2d-free": _draw_plate_free,
+}
 
 
 # -- checks and output ------------------------------------------------------------------------------
@@ -509,6 +915,38 @@ def _check(fixture: Fixture, draft: _Draft) -> str | None:
     return draft.check(fixture)
 
 
+def _check_free(fixture: Fixture, draft: _Draft) -> str | None:
+    """Why a free-space draft is not valid, or None; its goal is checked as given, never searched for."""
+    if not fixture.is_full:
+        return f"only {len(fixture.locators)} locators"
+    wp = fixture.workpiece
+    names = [loc.name for loc in fixture.locators]
+    goal_gaps = locator_gaps(wp, fixture.goal, fixture.locators)
+    if np.max(np.abs(goal_gaps)) > EXACT_M:
+        return f"a locator does not touch at the goal (gaps {goal_gaps})"
+    start_gaps = locator_gaps(wp, fixture.start, fixture.locators)
+    if np.min(start_gaps) < START_GAP_M[0] - EXACT_M or np.min(start_gaps) > START_GAP_M[1] + EXACT_M:
+        return f"the nearest locator is {np.min(start_gaps):.6g} m away at the start (expected {START_GAP_M} m)"
+    G = contact_set(fixture, "goal", names).G
+    rank = int(np.linalg.matrix_rank(G, tol=DEFAULT.numerics.rank_tol))
+    if rank < fixture.ndof:
+        return f"rank G = {rank} < {fixture.ndof} at the goal"
+    return draft.check(fixture)
+
+
+def _check_twin(fixture: Fixture, doc: dict[str, Any], name: str) -> str | None:
+    """Why the rotated document is not the same fixture (gaps at the start and the goal), or None."""
+    try:
+        twin = loads(twins.fixture_toml(doc), source=name)
+    except FixtureError as exc:
+        return f"the loader refused the rotated fixture: {exc.issues[0].key}: {exc.issues[0].message}"
+    for a, b in ((fixture.start, twin.start), (fixture.goal, twin.goal)):
+        diff = locator_gaps(fixture.workpiece, a, fixture.locators) - locator_gaps(twin.workpiece, b, twin.locators)
+        if np.max(np.abs(diff)) > EXACT_M:
+            return f"the rotated fixture's gaps differ by {np.max(np.abs(diff)):.3g} m"
+    return None
+
+
 def _value(x: Any) -> str:
     """A TOML value: numbers with at most 12 significant digits (no binary noise such as 0.30000000000000004)."""
     if isinstance(x, bool):
@@ -527,7 +965,7 @@ def _value(x: Any) -> str:
     raise TypeError(f"cannot write {type(x).__name__} as TOML")
 
 
-def _render(name: str, draft: _Draft) -> str:
+def _render(name: str, draft: _Draft, goal: bool = True) -> str:
     gravity = [0.0, 0.0, -GRAVITY_M_S2] if draft.dimension == 3 else [0.0, -GRAVITY_M_S2]
     lines = [
         "format = 1",
@@ -541,7 +979,7 @@ def _render(name: str, draft: _Draft) -> str:
         *(f"{k} = {_value(v)}" for k, v in draft.shape.items()),
         f"mass = {_value(draft.mass_kg)}",
         f"start = {_value(draft.start)}",
-        f"goal = {_value(draft.goal)}",
+        *([f"goal = {_value(draft.goal)}"] if goal else []),
     ]
     for loc in draft.locators:
         lines += ["", "[[locator]]", *(f"{k} = {_value(v)}" for k, v in loc.items())]
@@ -554,12 +992,15 @@ def _render(name: str, draft: _Draft) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _header(name: str, family: str, seed: int, index: int, draw: int, draft: _Draft, fixture: Fixture) -> str:
+def _header(
+    name: str, family: str, seed: int, index: int, draw: int, draft: _Draft, fixture: Fixture, rotated: bool = False
+) -> str:
     gaps = locator_gaps(fixture.workpiece, fixture.start, fixture.locators)
     gap_text = ", ".join(f"{loc.name} {g * 1e3:.3f}" for loc, g in zip(fixture.locators, gaps, strict=True))
     weight = draft.mass_kg * GRAVITY_M_S2
     lines = [
-        f"{name}: generated by `fixplan generate {family} --seed {seed}` (fixture index {index}).",
+        f"{name}: generated by `fixplan generate {family} --seed {seed}{' --rotate-world' if rotated else ''}` "
+        f"(fixture index {index}).",
         f"Family {family}: {FAMILIES[family]}.",
         f"Drawn from numpy.random.default_rng([{seed}, {index}]), draw {draw} "
         f"({draw - 1} earlier draws failed a check and were replaced).",

@@ -199,7 +199,7 @@ def test_cli_list_and_bad_input():
     listed = fixplan("generate", "--list")
     assert listed.returncode == 0
     names = [line.split(":")[0] for line in listed.stdout.splitlines()]
-    assert names == ["box-321", "plate-2d"]
+    assert names == ["box-321", "plate-2d", "box-321-free", "plate-2d-free"]
     as_json = json.loads(fixplan("generate", "--list", "--json").stdout)
     assert as_json["families"] == gen.FAMILIES
     unknown = fixplan("generate", "cube", "--out", "unused")

@@ -93,10 +93,23 @@ def generate(
         Path | None, typer.Option("--out", help="Directory for FAMILY-sSEED-NNN.toml (created if absent).")
     ] = None,
     force: Annotated[bool, typer.Option("--force", help="Overwrite existing files.")] = False,
+    rotate_world: Annotated[
+        bool,
+        typer.Option(
+            "--rotate-world",
+            help="Turn each fixture rigidly (locators, start, goal, gravity) by a seeded random rotation "
+            "(uniform on SO(3); a uniform angle in 2D); files are named FAMILY-sSEED-NNN-rotated.toml.",
+        ),
+    ] = False,
     list_: Annotated[bool, typer.Option("--list", help="List the families and exit.")] = False,
     json_out: JsonOpt = False,
 ) -> None:
-    """Write seeded random fixtures of a family (box-321, plate-2d), each checked before it is written."""
+    """Write seeded random fixtures of a family, each checked before it is written.
+
+    Families: box-321 and plate-2d start resting on the base locators; box-321-free and
+    plate-2d-free start in free space (the nearest locator 5-80 mm away, tilted up to 15 deg about
+    every axis, mirrored layouts, the goal written in half the files). --list describes them.
+    """
     from fixplan.generate import FAMILIES, check_family, fixture_name
     from fixplan.generate import generate as run
 
@@ -114,10 +127,10 @@ def generate(
         raise InputError("--out DIR is required (the directory to write the fixtures into)")
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out} is a file (expected a directory)")
-    targets = [out / f"{fixture_name(family, seed, i)}.toml" for i in range(count)]
+    targets = [out / f"{fixture_name(family, seed, i, rotate_world=rotate_world)}.toml" for i in range(count)]
     for target in targets:
         _writable(target, force)
-    fixtures = run(family, count, seed)
+    fixtures = run(family, count, seed, rotate_world=rotate_world)
     for target, fx in zip(targets, fixtures, strict=True):
         write_text(target, fx.toml_text)
     if json_out:
@@ -126,4 +139,7 @@ def generate(
         ]
         _emit_json({"family": family, "seed": seed, "count": count, "out": str(out), "files": files})
     else:
-        typer.echo(f"wrote {count} {family} fixtures (seed {seed}) to {out}: {targets[0].name} .. {targets[-1].name}")
+        where = " in rotated worlds" if rotate_world else ""
+        typer.echo(
+            f"wrote {count} {family} fixtures (seed {seed}){where} to {out}: {targets[0].name} .. {targets[-1].name}"
+        )
