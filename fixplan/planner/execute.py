@@ -558,10 +558,15 @@ class Executor:
         self.log.counts["stalls"] += 1
         step = self.steps[self.index]
         state = self.states[self.index]
-        if self._retry >= s.max_retries and self.replan is not None and state not in self._policy_failed:
-            # the transition (the policy's, planned at a representative pose, or the plan's from
-            # where the part was then) does not move the part from where it is now: a fine plan
-            # from here is the last resort
+        guided = len(step.path) >= 2
+        if (
+            (self._retry >= s.max_retries or not guided)
+            and self.replan is not None
+            and state not in self._policy_failed
+        ):
+            # the transition (the plan's from where the part was then, after the re-searches; the
+            # policy's at once: it was planned at a representative pose, not where the part is)
+            # does not move the part from where it is now: a fine plan from here is the last resort
             self._policy_failed.add(state)
             why = f"{what}: {_fmt(state)} + {step.target} stalled after {self._retry} re-searches"
             self.log.event(t, "guard", why)
