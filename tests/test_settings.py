@@ -32,7 +32,7 @@ def test_engine_settings_reach_the_simulator():
     plain = Simulator(f)
     assert plain.tolerance == f.simulation.tolerance and plain.max_iterations == settings.DEFAULT.engine.max_iterations
     sim = Simulator(f, settings=settings.HAPTIC.engine)
-    assert (sim.tolerance, sim.max_iterations) == (1e-6, 200)
+    assert (sim.tolerance, sim.max_iterations) == (1e-6, 1000)
     assert Simulator(f, max_iterations=7, settings=settings.HAPTIC.engine).max_iterations == 7
 
 

@@ -189,7 +189,7 @@ max_torque = 2.0
 
 
 def test_a_load_simulated_with_unconverged_contact_solves_fails_and_says_so():
-    """With the old budget (40 sweeps a tick) the verification fails naming the solver, how many
+    """Starved (8 sweeps a tick) the verification fails naming the solver, how many
     steps did not converge and the largest residual; the haptic profile's budget converges."""
     import re
 
@@ -202,7 +202,7 @@ def test_a_load_simulated_with_unconverged_contact_solves_fails_and_says_so():
     assert r.sequence, r.reason
     start = frozenset(r.sequence[0])
     planner = Planner(fx)
-    starved = verify(fx, start, plan_steps(r.transitions), replan=planner.replan, max_sweeps=40)
+    starved = verify(fx, start, plan_steps(r.transitions), replan=planner.replan, max_sweeps=8)
     bound = HAPTIC.verification.max_solver_error
     assert not starved.passed and "solver" in starved.failed_checks
     assert starved.max_solver_error > bound
