@@ -189,6 +189,7 @@ class Executor:
         self._hold: FloatArray | None = None
         self._seen: set[str] = set()  # locators observed in contact at least once
         self._policy_failed: set[State] = set()  # states whose transition stalled and were re-planned from
+        self._path_cache: dict[int, tuple[Step, list[float], int]] = {}  # the guide's lengths, nearest knot
         self._progress: tuple[int, float, float] | None = None  # (transition, least target gap [m], since [s])
         self._arrived = False  # the current target touches: holding until the state is confirmed
         self._recover_until: float | None = None  # pressing a lost contact back until then
@@ -633,15 +634,33 @@ class Executor:
         left = gap
         nu = direct
         if not self._use_direct and len(step.path) >= 2:
-            twists = [twist_from_pose(pose, q, wp.com_body) for q in step.path]
-            dist = [mass_speed(x, M, wp.mass_kg) for x in twists]
-            j = int(np.argmin(dist))
-            ahead = min(j + 1, len(step.path) - 1)
-            seg = [
-                mass_speed(twist_from_pose(a, b_, wp.com_body), M, wp.mass_kg)
-                for a, b_ in zip(step.path[ahead:-1], step.path[ahead + 1 :], strict=True)
-            ]
-            left_path = dist[ahead] + float(sum(seg))
+            n_path = len(step.path)
+            cache = self._path_cache.get(id(step))
+            if cache is None or cache[0] is not step:
+                # the guide's segment lengths, once per step (in the metric where it starts)
+                seg_all = [
+                    mass_speed(twist_from_pose(a, b_, wp.com_body), M, wp.mass_kg)
+                    for a, b_ in zip(step.path[:-1], step.path[1:], strict=True)
+                ]
+                cache = (step, seg_all, 0)
+            # the nearest knot: searched near the last one, the whole guide when it lies at the window's edge
+            lo, hi = max(cache[2] - 3, 0), min(cache[2] + 7, n_path)
+            twists: dict[int, FloatArray] = {}
+
+            def near(lo_: int, hi_: int) -> int:
+                for k in range(lo_, hi_):
+                    if k not in twists:
+                        twists[k] = twist_from_pose(pose, step.path[k], wp.com_body)
+                return min(range(lo_, hi_), key=lambda k: (mass_speed(twists[k], M, wp.mass_kg), k))
+
+            j = near(lo, hi)
+            if (j == lo and lo > 0) or (j == hi - 1 and hi < n_path):
+                j = near(0, n_path)
+            self._path_cache = {id(step): (step, cache[1], j)}
+            ahead = min(j + 1, n_path - 1)
+            if ahead not in twists:
+                twists[ahead] = twist_from_pose(pose, step.path[ahead], wp.com_body)
+            left_path = mass_speed(twists[ahead], M, wp.mass_kg) + float(sum(cache[1][ahead:]))
             if est_cs_rows is None and ahead < len(step.path) - 2:
                 # free flight along the guide (the approach from free space may first take the
                 # part back, away from the target): follow it, nothing to keep, until its last
