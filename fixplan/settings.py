@@ -266,6 +266,9 @@ class PlannerSettings:
         kept contacts again.
     compliant_max_steps : int
         ... and takes at most this many steps.
+    ladder_max_iter : int
+        IPOPT's ``max_iter`` for the ladder's later formulations and the elastic diagnosis (the
+        first formulation keeps ``ipopt_max_iter``): a failing transition stays cheap.
     elastic_regularisation : float
         Weight of the path energy beside the slacks' sum in the elastic diagnosis of a transition
         with no path (keeps the relaxed program well posed).
@@ -289,6 +292,7 @@ class PlannerSettings:
     precheck_floor: float = 1e-6
     compliant_step_rel: float = 0.05
     compliant_max_steps: int = 200
+    ladder_max_iter: int = 150
     elastic_regularisation: float = 1e-4
     blocking_slack_m: float = 1e-6
     span_rel: float = 1e-6

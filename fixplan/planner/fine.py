@@ -258,10 +258,14 @@ class Formulation:
         default slides leaves no motion: Theorem 1).
     kept : str
         ``"feature"``: each kept contact stays on the feature it touches at the start (face
-        bounds); ``"surface"``: on the whole surface of a box or rectangle, so it may cross an edge.
+        bounds); ``"surface"``: on the whole surface of a box or rectangle, so it may cross an
+        edge (tried only when a kept contact touches another face than at the goal).
     waypoint : bool
         Two short programs chained through the compliant guess's middle pose (where the target's
         gap is half closed), each warm-started from its half of that guess.
+    monotone : bool
+        The target's gap never grows (else it only stays ≥ 0 until it closes: the part may back
+        off the target first, e.g. to turn past it on five kept contacts).
     """
 
     name: str
@@ -270,6 +274,7 @@ class Formulation:
     other_kind: bool = False
     kept: str = "feature"
     waypoint: bool = False
+    monotone: bool = True
 
 
 # The ordered ladder of formulations tried until one finds a path (one place). The first is the
@@ -282,6 +287,8 @@ LADDER: tuple[Formulation, ...] = (
     Formulation("slide instead of roll", guess="compliant", other_kind=True),
     Formulation("kept contacts across edges", guess="compliant", kept="surface"),
     Formulation("via a waypoint", guess="compliant", goal_pull=False, waypoint=True),
+    Formulation("target may open first", guess="compliant", goal_pull=False, monotone=False),
+    Formulation("slide, target may open first", guess="compliant", goal_pull=False, other_kind=True, monotone=False),
 )
 
 
@@ -395,11 +402,14 @@ def plan_transition(
             if kind is not None or base_kind != "roll" or not est:
                 continue  # the caller chose the motion; rolling where the default slides leaves no motion
             k_form = "slide"
-        if form.kept == "surface" and (not est or surface_feature(fixture) is None):
-            continue
+        if form.kept == "surface" and not _off_goal_face(prob):
+            continue  # every kept contact is on its goal face already: nothing to cross
         if form.guess == "compliant" and compliant is None:
             compliant = _compliant_guess(prob, k_form)
-        attempt = _solve_formulation(prob, form, k_form, warm_start, compliant, max_iter, tol)
+        later_iter = min(max_iter or settings.ipopt_max_iter, settings.ladder_max_iter)
+        attempt = _solve_formulation(
+            prob, form, k_form, warm_start, compliant, max_iter if first is None else later_iter, tol
+        )
         total_time += attempt.solve_time_s
         tried.append(f"{form.name}: {attempt.status}")
         first = first or attempt
@@ -559,10 +569,11 @@ def _solve_formulation(
     if form.waypoint and K >= 2 and compliant is not None:
         return _solve_via_waypoint(prob, form, kind, features, compliant, max_iter, tol)
     xi, status, iterations, solve_time = _solve_path(
-        prob, kind, features, xi_guess, goal_pull=form.goal_pull, end_gap_m=0.0, max_iter=max_iter, tol=tol
-    )
+        prob, kind, features, xi_guess, goal_pull=form.goal_pull, end_gap_m=0.0, max_iter=max_iter, tol=tol,
+        monotone=form.monotone,
+    )  # fmt: skip
     poses = [pose_from_twist(prob.start, xi[:, k], prob.com_b) for k in range(K + 1)]
-    return _checked(prob, form.name, kind, poses, xi, status, iterations, solve_time, note)
+    return _checked(prob, form.name, kind, poses, xi, status, iterations, solve_time, note, form.monotone)
 
 
 def _solve_via_waypoint(
@@ -612,6 +623,7 @@ def _checked(
     iterations: int,
     solve_time: float,
     note: str,
+    monotone: bool = True,
 ) -> _Path:
     """The exact check of a solved path: constraint violation, slip and mass-weighted length."""
     fx = prob.fixture
@@ -620,12 +632,26 @@ def _checked(
     # what the NLP enforced; the exact start gap asked 28 µm more of a generated box and
     # rejected a sound path ("a feature's closed form does not hold")
     held = {n: min(prob.start_gaps[n], _model_gap(prob, n, prob.start)) for n in prob.others}
-    violation = _violation(fx, poses, prob.est, prob.target, prob.others, prob.clearance_m, {**prob.start_gaps, **held})
+    violation = _violation(
+        fx, poses, prob.est, prob.target, prob.others, prob.clearance_m, {**prob.start_gaps, **held}, monotone
+    )
     slip = _slip(fx, poses, prob.est) if kind == "roll" else 0.0
     dxi = np.diff(xi, axis=1)
     cost = float(sum(np.sqrt(max(float(v @ prob.M0 @ v), 0.0)) for v in dxi.T) / np.sqrt(fx.workpiece.mass_kg))
     found = status in IPOPT_PATH_FOUND and violation <= fx.tolerances.touch_m
     return _Path(formulation, kind, poses, status, iterations, solve_time, violation, slip, cost, note, found)
+
+
+def _off_goal_face(prob: _Problem) -> list[str]:
+    """Kept contacts on another face of a box or rectangle than at the goal (``"B2: -y, -z at the goal"``)."""
+    if prob.goal is None or surface_feature(prob.fixture) is None:
+        return []
+    out = []
+    for n in prob.est:
+        at_goal = feature_at(prob.fixture, prob.fixture.locator(n), prob.goal).label
+        if prob.features[n].label != at_goal:
+            out.append(f"{n} touches face {prob.features[n].label} here, {at_goal} at the goal")
+    return out
 
 
 def _model_gap(prob: _Problem, name: str, pose: Pose) -> float:
@@ -652,14 +678,15 @@ def _solve_path(
     tol: float | None,
     knots: int | None = None,
     first: FloatArray | None = None,
-    elastic: bool = False,
+    elastic: Sequence[str] = (),
+    monotone: bool = True,
 ) -> tuple[FloatArray, Any, int, float]:
     """Build and solve the path program; returns twists (ndof × K+1), status, iterations, time.
 
     ``first`` is the twist of knot 0 relative to the transition's start (a chained move starts
-    where the previous one ended). ``elastic``: every constraint group (see
-    :func:`_constraint_groups`) gets a slack ≥ 0 and the objective is their sum (the target's end
-    gap stays exact); the status is then the dict of slacks per group [m].
+    where the previous one ended). ``elastic``: the constraint kinds (of :data:`CONSTRAINT_KINDS`)
+    whose groups each get a slack ≥ 0, the objective then being their sum (the other groups and
+    the target's end gap stay exact); the status is then ``(IPOPT status, {group: slack [m]})``.
     """
     import casadi as ca
 
@@ -727,7 +754,10 @@ def _solve_path(
         for n in prob.others:
             held = min(prob.clearance_m, plane_start[n], _model_gap(prob, n, start))
             add(("clearance", n), "ge", [(gap(k, n) - held) / L])
-        add(("monotone target gap", target), "ge", [(gap(k - 1, target) - gap(k, target)) / L])
+        if monotone:
+            add(("monotone target gap", target), "ge", [(gap(k - 1, target) - gap(k, target)) / L])
+        elif k < K:
+            add(("clearance", target), "ge", [gap(k, target) / L])
     end_row = (gap(K, target) - end_gap_m) / L
     add(
         ("feature bounds", target),
@@ -738,21 +768,22 @@ def _solve_path(
         for k in range(K):
             for n, row in _no_slip(ca, frames, k, est, features, locs, q_of, com_b, start, d):
                 add(("no-slip", n), "eq", [row / L])
-    keys = [g for g in groups if groups[g][1]]
+    keys = [g for g in groups if groups[g][1] and g[0] in elastic]
     eqs: list[Any] = [end_row]
     ineqs: list[Any] = []
-    S = opti.variable(len(keys)) if elastic and keys else None
-    for i, g in enumerate(keys):
-        sense, rows = groups[g]
-        if S is None:
+    for g, (sense, rows) in groups.items():
+        if g not in keys:
             (eqs if sense == "eq" else ineqs).extend(rows)
-        elif sense == "eq":
-            ineqs.extend([S[i] - r for r in rows] + [S[i] + r for r in rows])
-        else:
-            ineqs.extend([r + S[i] for r in rows])
-    opti.subject_to(ca.vertcat(*eqs) == 0)
+    S = opti.variable(len(keys)) if keys else None
     if S is not None:
+        for i, g in enumerate(keys):
+            sense, rows = groups[g]
+            if sense == "eq":
+                ineqs.extend([S[i] - r for r in rows] + [S[i] + r for r in rows])
+            else:
+                ineqs.extend([r + S[i] for r in rows])
         ineqs.append(S)
+    opti.subject_to(ca.vertcat(*eqs) == 0)
     if ineqs:
         opti.subject_to(ca.vertcat(*ineqs) >= 0)
 
@@ -792,9 +823,9 @@ def _solve_path(
     solve_time = time.perf_counter() - t0
     stats = opti.stats()
     status: Any = str(stats.get("return_status", "unknown"))
-    if S is not None:
-        s_arr = np.atleast_1d(np.asarray(s_val, dtype=float))
-        status = {g: float(s) * L for g, s in zip(keys, s_arr, strict=True)}
+    if elastic:
+        s_arr = np.atleast_1d(np.asarray(s_val, dtype=float)) if S is not None else np.zeros(0)
+        status = (status, {g: float(s) * L for g, s in zip(keys, s_arr, strict=True)})
     y_sol = np.asarray(y_val, dtype=float).reshape(nv, K)
     xi_sol = np.concatenate([y0[:, None], y_sol], axis=1) * scale[:, None]
     return xi_sol, status, int(stats.get("iter_count", 0)), solve_time
@@ -833,12 +864,20 @@ def _no_path_reason(
             f"{pairs} close{'s' if len(together) == 1 else ''} together with {target} (rank {rank} at the goal): "
             f"{head} keeping {pairs} ≥ {prob.clearance_m:g} m away {forms}"
         )
-    blockers = blocking_constraints(prob, first.kind, max_iter, tol)
+    blockers = blocking_constraints(
+        prob, first.kind, min(max_iter or prob.settings.ipopt_max_iter, prob.settings.ladder_max_iter), tol
+    )
     if not blockers:
         return f"{head} keeping the others ≥ {prob.clearance_m:g} m away {forms}"
     what = " and ".join(b.phrase(prob.clearance_m) for b in blockers)
+    if est and all(b.kind in ("clearance", "monotone target gap") for b in blockers):
+        what = f"{_state(est)} stay{'s' if len(est) == 1 else ''} touching and {what}"
     worst = blockers[0]
-    return f"{head}: {target} cannot close while {what} ({worst.blame()} blocks it) {forms}"
+    # a kept contact on another face than the goal's (a part tipped onto a base locator) cannot be
+    # seated by adding contacts: the part has to leave it
+    moved = _off_goal_face(prob)
+    note = f"; {', '.join(moved)}" if moved else ""
+    return f"{head}: {target} cannot close while {what} ({worst.blame()} blocks it{note}) {forms}"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -859,15 +898,17 @@ class Blocker:
     kind: str
     locator: str
     slack_m: float
+    feature: str = ""
 
     def phrase(self, clearance_m: float) -> str:
         """What the constraint asks, in words."""
+        on = f" its {self.feature} face" if self.feature.startswith(("+", "-")) else ""
         if self.kind == "kept contact":
-            return f"{self.locator} stays touching"
+            return f"{self.locator} stays touching{on}"
         if self.kind == "clearance":
             return f"{self.locator} stays ≥ {clearance_m * 1e3:.3g} mm away"
         if self.kind == "feature bounds":
-            return f"{self.locator} stays on its face"
+            return f"{self.locator} stays within{on or ' its face'}"
         if self.kind == "no-slip":
             return f"{self.locator} rolls without slipping"
         return f"{self.locator}'s gap never grows"
@@ -882,17 +923,29 @@ def blocking_constraints(
 ) -> list[Blocker]:
     """The constraint groups an elastic phase 1 relaxes so that the target can close, largest first.
 
-    The same program with a slack ``s_g ≥ 0`` per group (each kept contact, each other locator's
-    clearance, each locator's feature bounds, each contact's no-slip rows, the target's monotone
-    gap): ``|row| ≤ s_g`` for equalities, ``row + s_g ≥ 0`` for inequalities, only the target's end
-    gap exact, minimising ``Σ s_g`` (plus a small multiple of the path's objective). The groups left
-    with a slack above ``settings.blocking_slack_m`` are the ones that forbid the move.
+    The same program with a slack ``s_g ≥ 0`` per group: ``|row| ≤ s_g`` for equalities,
+    ``row + s_g ≥ 0`` for inequalities, the target's end gap exact, minimising ``Σ s_g`` (plus a
+    small multiple of the path's objective). First only the other locators' clearances and the
+    target's monotone gap are relaxed, the motion (kept contacts, feature bounds, no-slip) kept
+    exact: when that solves, the clearances left with a slack above
+    ``settings.blocking_slack_m`` are what forbids the move. When even that is infeasible the kept
+    motion itself cannot close the target, and every group is relaxed (each kept contact, each
+    locator's feature bounds, each contact's no-slip rows too).
     """
     guess = _compliant_guess(prob, kind)
-    _, slacks, _, _ = _solve_path(
-        prob, kind, prob.features, guess, goal_pull=False, end_gap_m=0.0, max_iter=max_iter, tol=tol, elastic=True
-    )
-    out = [Blocker(g[0], g[1], s) for g, s in slacks.items() if s > prob.settings.blocking_slack_m]
+    slacks: dict[tuple[str, str], float] = {}
+    for relaxed in (("clearance", "monotone target gap"), CONSTRAINT_KINDS):
+        _, (status, slacks), _, _ = _solve_path(
+            prob, kind, prob.features, guess, goal_pull=False, end_gap_m=0.0, max_iter=max_iter, tol=tol,
+            elastic=relaxed,
+        )  # fmt: skip
+        if status in IPOPT_PATH_FOUND:
+            break
+    out = [
+        Blocker(g[0], g[1], s, prob.features[g[1]].label)
+        for g, s in slacks.items()
+        if s > prob.settings.blocking_slack_m
+    ]
     return sorted(out, key=lambda b: -b.slack_m)
 
 
@@ -1158,6 +1211,7 @@ def _violation(
     others: list[str],
     clearance_m: float,
     start_gaps: dict[str, float],
+    monotone: bool = True,
 ) -> float:
     """Largest violation of the plan's constraints with the exact gaps [m] (knots 1..K)."""
     wp = fixture.workpiece
@@ -1170,7 +1224,7 @@ def _violation(
             worst = max(worst, abs(g[n]))
         for n in others:
             worst = max(worst, min(clearance_m, start_gaps[n]) - g[n])
-        worst = max(worst, -g[target], g[target] - prev_t)
+        worst = max(worst, -g[target], g[target] - prev_t if monotone else 0.0)
         prev_t = g[target]
         if k == K:
             worst = max(worst, abs(g[target]))
