@@ -55,13 +55,15 @@ def assert_exact_gaps(fixture, tr, established, target, clearance):
     assert abs(gaps(fixture, tr.poses[-1])[target]) <= touch
 
 
-def plan_like_the_planner(fixture, pose, established, target, **kw):
-    """Planner.evaluate's loop: each clearance in turn until a formulation finds a path."""
+def plan_like_the_planner(fixture, pose, established, target, ladder=LADDER, diagnose=True):
+    """Planner.evaluate's loop: each clearance in turn (the plain program, the ladder at the last)."""
     tr = None
     for clearance in CLEARANCES_M:
+        last = clearance == CLEARANCES_M[-1]
         tr = plan_transition(
-            fixture, pose, established, target, knots=10, friction_margin=0.1, clearance_m=clearance, **kw
-        )
+            fixture, pose, established, target, knots=10, friction_margin=0.1, clearance_m=clearance,
+            ladder=ladder if last else ladder[:1], diagnose=diagnose and last,
+        )  # fmt: skip
         if tr.ipopt_status in IPOPT_PATH_FOUND and tr.formulation != "":
             break
     return tr, clearance

@@ -63,6 +63,27 @@ constraints, which violates the constraint qualifications IPOPT relies on and ne
 (``g_i λ_i ≤ ε``) or penalty homotopies. The forces are found instead per segment, after the path,
 by the non-jamming wrench search (docs/math.md program 2 for sliding, program 3 for rolling).
 
+When there is no path
+---------------------
+The program above is the first rung of :data:`LADDER`, an ordered list of formulations tried
+until one finds a path (so a transition that plans at once costs what it always did): the
+linearised gap-closing step as the initial guess; a *compliant* guess (short linearised steps,
+each settled back onto the kept contacts: the pivot about a kept point, the turn about the axis
+through two, the slide along a face — a straight line in twist coordinates cuts through them);
+no pull toward the goal; sliding where the default rolls; kept contacts on the whole surface of
+a box, so that one may cross an edge (when one touches another face than at the goal); two short
+moves through the compliant guess's middle; and the target's gap free to open before it closes.
+``Transition.formulation`` records the rung that found the path.
+
+When none does, the reason names the cause. Locators that close together with the target
+(:func:`closing_together`: at the goal, the target's normal row is a combination of the kept
+rows and another locator's with a positive coefficient — a redundant layout, the rows' rank
+below the locator count) are named first. Otherwise :func:`blocking_constraints` re-solves in
+elastic mode (phase 1: a slack per constraint group — each other locator's clearance, the
+target's monotone gap; then, if the kept motion cannot close the target even so, each kept
+contact, feature bounds and no-slip rows too — minimising the slacks' sum) and names the groups
+left with a slack, largest first.
+
 Its pieces live apart: the closed-form surface features in :mod:`fixplan.planner.features`, the
 applied wrench of each segment in :mod:`fixplan.planner.segments`.
 """
@@ -877,7 +898,7 @@ def _no_path_reason(
     # seated by adding contacts: the part has to leave it
     moved = _off_goal_face(prob)
     note = f"; {', '.join(moved)}" if moved else ""
-    return f"{head}: {target} cannot close while {what} ({worst.blame()} blocks it{note}) {forms}"
+    return f"{head}: {target} cannot close while {what} ({worst.blame()}, blocks it{note}) {forms}"
 
 
 # ---------------------------------------------------------------------------------------------

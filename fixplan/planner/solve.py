@@ -26,7 +26,7 @@ from fixplan.locating import contact_set, solve_goal
 from fixplan.model import Fixture, require_full
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
 from fixplan.planner.execute import ExecutionSettings, Step, TransitionKind
-from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, default_kind, plan_transition
+from fixplan.planner.fine import IPOPT_PATH_FOUND, LADDER, Transition, default_kind, plan_transition
 from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.segments import segment_wrenches
 from fixplan.planner.verify import Verification, verify
@@ -216,10 +216,12 @@ class Planner:
             if key not in cache:
                 t = time.perf_counter()
                 for clearance in CLEARANCES_M:
+                    last = clearance == CLEARANCES_M[-1]  # the ladder and the diagnosis at the last only
                     tr = plan_transition(
                         self.fixture, pose_, sorted(state_), target, knots=self.knots,
                         acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
-                        margin_N=self.margin_N, clearance_m=clearance,
+                        margin_N=self.margin_N, clearance_m=clearance, ladder=LADDER if last else LADDER[:1],
+                        diagnose=last,
                     )  # fmt: skip
                     if tr.ipopt_status in IPOPT_PATH_FOUND:
                         break  # a path: its wrenches decide, not the clearance
