@@ -309,3 +309,46 @@ def test_redundant_pair_is_named():
     tr = plan_transition(fx, pose, ["B1"], "B2", knots=10, clearance_m=CLEARANCES_M[-1])
     assert not tr.success
     assert tr.reason.startswith("B3 closes together with B2 (rank 5 at the goal)"), tr.reason
+
+
+@pytest.mark.parametrize("half", [(0.1, 0.05, 0.025), (0.1, 0.05)])
+def test_surface_feature_is_the_exact_distance_across_edges(half):
+    """The whole-surface feature of a box (rectangle) gives Shape.project's distance and closest
+    point for points outside beside a face, an edge or a corner, and its normal is the distance's
+    gradient (central differences, h = 1e-7): a kept contact can follow it round an edge."""
+    from types import SimpleNamespace
+
+    import casadi as ca
+
+    from fixplan.geometry import Box, Rectangle
+    from fixplan.planner.features import surface_feature
+
+    size = tuple(2 * h for h in half)
+    shape = Box(size) if len(half) == 3 else Rectangle(size)
+    feature = surface_feature(SimpleNamespace(workpiece=SimpleNamespace(shape=shape)))
+    assert feature is not None and feature.kind == "box"
+    rng = np.random.default_rng(3)
+    h = np.array(half)
+    for _ in range(40):
+        q = rng.uniform(-1.0, 1.0, h.shape[0]) * (h + 0.02)
+        proj = shape.project(q)
+        if proj.distance <= 1e-4:
+            continue  # inside or on the surface: a kept contact's tip centre is never there
+        assert float(feature.distance(ca, ca.DM(q))) == pytest.approx(proj.distance, abs=1e-12)
+        x = np.asarray(ca.evalf(feature.point_at(ca, ca.DM(q)))).ravel()
+        np.testing.assert_allclose(x, proj.point_body, atol=1e-12)
+        n = np.asarray(ca.evalf(feature.normal_at(ca, ca.DM(q)))).ravel()
+        fd = [
+            (float(feature.distance(ca, ca.DM(q + e))) - float(feature.distance(ca, ca.DM(q - e)))) / 2e-7
+            for e in 1e-7 * np.eye(h.shape[0])
+        ]
+        np.testing.assert_allclose(n, fd, atol=1e-6)
+
+
+def test_a_ladder_that_does_not_apply_is_an_input_error(default):
+    """Sliding instead of rolling needs a default roll: on the base (three contacts) it never applies."""
+    from fixplan.errors import InputError
+    from fixplan.planner.fine import Formulation
+
+    with pytest.raises(InputError, match="no formulation of the ladder applies"):
+        plan_transition(default, default.start, ["B1", "B2", "B3"], "S1", ladder=[Formulation("x", other_kind=True)])

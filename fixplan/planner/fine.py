@@ -380,7 +380,7 @@ def plan_transition(
     ------
     InputError
         Unknown or repeated names, a target among the established, a non-touching established
-        locator, fewer than one knot, an unknown kind, an empty ladder.
+        locator, fewer than one knot, an unknown kind, a ladder with no formulation that applies.
     """
     est = tuple(established)
     names = [loc.name for loc in fixture.locators]
@@ -438,8 +438,12 @@ def plan_transition(
             path = attempt
             break
 
+    if first is None:
+        raise InputError(
+            f"no formulation of the ladder applies to {_state(est)} → {target} "
+            f"(tried to skip: {', '.join(f.name for f in ladder)}); expected one without other_kind or kept='surface'"
+        )
     if path is None:
-        assert first is not None  # the ladder is not empty
         return _failed(prob, first, _no_path_reason(prob, first, tried, diagnose, max_iter, tol))
 
     K = prob.K
