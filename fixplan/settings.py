@@ -268,6 +268,23 @@ class PlannerSettings:
         dearer (tried after the others, never dropped).
     precheck_floor : float
         ... and at least this much dearer, so that a transition guessed free is postponed too.
+    compliant_step_rel : float
+        A compliant initial guess (:mod:`fixplan.planner.fine`'s ladder) moves at most this
+        fraction of the part's bounding radius per step (mass-weighted) before settling its
+        kept contacts again.
+    compliant_max_steps : int
+        ... and takes at most this many steps.
+    ladder_max_iter : int
+        IPOPT's ``max_iter`` for the ladder's later formulations and the elastic diagnosis (the
+        first formulation keeps ``ipopt_max_iter``): a failing transition stays cheap.
+    elastic_regularisation : float
+        Weight of the path energy beside the slacks' sum in the elastic diagnosis of a transition
+        with no path (keeps the relaxed program well posed).
+    blocking_slack_m : float
+        A constraint group whose slack in that diagnosis exceeds this blocks the transition [m].
+    span_rel : float
+        A locator's normal row lies in the span of other rows when the least-squares residual is
+        below this fraction of its norm (locators that close together, rank at the goal).
     """
 
     clearances_m: tuple[float, ...] = (1e-3, 1e-4)
@@ -281,6 +298,12 @@ class PlannerSettings:
     cost_slack: float = 1.5
     precheck_penalty: float = 100.0
     precheck_floor: float = 1e-6
+    compliant_step_rel: float = 0.05
+    compliant_max_steps: int = 200
+    ladder_max_iter: int = 150
+    elastic_regularisation: float = 1e-4
+    blocking_slack_m: float = 1e-6
+    span_rel: float = 1e-6
 
     def ipopt_options(self, tol: float | None = None, max_iter: int | None = None) -> dict[str, Any]:
         """IPOPT's options for a transition (quiet), with ``tol`` and ``max_iter`` overridable."""

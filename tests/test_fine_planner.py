@@ -136,13 +136,24 @@ def test_tilted_box_rolls_about_b1_b2_onto_b3():
 
 
 def test_rolling_on_b1_b2_cannot_reach_s1():
-    """The only rolling motion on two point contacts is the pivot about their line; it brings B3
-    in long before the -y face reaches S1, so the program is infeasible and says so."""
+    """The only rolling motion on two point contacts is the pivot about their line (along x); it
+    turns the -y face onto S1 and S2 at once, so the program is infeasible and says so, naming the
+    constraint that gives way in the elastic re-solve (S2's clearance). Left to choose, the ladder
+    slides instead."""
     fx = fixplan.load(ROOT / "problems" / "box-tilted-start.toml")
-    tr = plan_transition(fx, fx.start, ["B1", "B2"], "S1", knots=8)
-    assert not tr.success
+    tr = plan_transition(fx, fx.start, ["B1", "B2"], "S1", knots=8, kind="roll")
+    assert not tr.success and tr.kind == "roll" and tr.formulation == ""
     assert tr.ipopt_status == "Infeasible_Problem_Detected"
     assert "no path" in tr.reason and "S1" in tr.reason
+    assert "slide instead of roll" not in tr.reason  # the caller chose to roll: the ladder keeps it
+    # the pivot about the B1-B2 line (along x) turns the -y face onto S1 and S2 alike: S2 closes too
+    assert "S1 cannot close while {B1, B2} stay touching and S2 stays ≥ 1 mm away" in tr.reason
+    assert "S2's clearance constraint" in tr.reason
+    free = plan_transition(fx, fx.start, ["B1", "B2"], "S1", knots=8)
+    assert free.success, free.reason
+    assert free.kind == "slide" and free.formulation == "slide instead of roll"
+    assert_plan_geometry(fx, free, ["B1", "B2"], "S1", 1e-3)
+    assert free.to_json()["formulation"] == "slide instead of roll"
 
 
 def test_weak_manipulator_fails_with_its_reason(default):

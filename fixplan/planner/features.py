@@ -28,8 +28,10 @@ class Feature:
     """One smooth piece of a convex shape's surface, in the body frame.
 
     ``kind`` is ``"plane"`` (outward normal ``normal``, offset ``offset``: the plane ``n·x = h``),
-    ``"round"`` (a ball of radius ``radius`` about the origin: sphere, disk) or ``"side"`` (the
-    lateral surface of a cylinder of radius ``radius`` about body z). ``bounds`` are linear
+    ``"round"`` (a ball of radius ``radius`` about the origin: sphere, disk), ``"side"`` (the
+    lateral surface of a cylinder of radius ``radius`` about body z) or ``"box"`` (the whole
+    surface of a box or rectangle of half extents ``half``: faces, edges and corners, for a
+    kept contact that may cross an edge, :func:`surface_feature`). ``bounds`` are linear
     inequalities ``A x ≤ b`` that keep a point on the patch (face extents, edge segment,
     cylinder length); ``disc_radius`` bounds ``‖x_xy‖`` on a cylinder end.
     """
@@ -42,11 +44,28 @@ class Feature:
     bounds_A: FloatArray | None = None
     bounds_b: FloatArray | None = None
     disc_radius: float | None = None
+    half: FloatArray | None = None
+
+    def _outside(self, ca: Any, q: Any) -> Any:
+        """``box``: the vector from the closest point of the box to ``q`` (zero inside)."""
+        h = ca.DM(self.half)
+        return ca.fmax(ca.fabs(q) - h, 0) * ca.sign(q)
 
     def distance(self, ca: Any, q: Any) -> Any:
-        """Signed distance of the body point ``q`` to the feature's surface (no tip radius)."""
+        """Signed distance of the body point ``q`` to the feature's surface (no tip radius).
+
+        ``box``: the distance from outside (0 inside); C¹ wherever ``q`` lies outside, which a
+        kept contact's tip centre does (it sits a tip radius off the surface).
+        """
         if self.kind == "plane":
             return ca.dot(ca.DM(self.normal), q) - self.offset
+        if self.kind == "box":
+            # outside: ‖v‖; inside (v = 0): the largest face-plane gap, ≤ 0 (no NaN derivative at v = 0)
+            v = self._outside(ca, q)
+            vv = ca.dot(v, v)
+            outside = vv > 0
+            inside = ca.mmax(ca.fabs(q) - ca.DM(self.half))
+            return ca.if_else(outside, ca.sqrt(ca.if_else(outside, vv, 1.0)), inside)
         if self.kind == "round":
             return ca.sqrt(ca.dot(q, q)) - self.radius
         return ca.sqrt(q[0] ** 2 + q[1] ** 2) - self.radius
@@ -55,6 +74,10 @@ class Feature:
         """Outward unit normal at the projection of ``q``."""
         if self.kind == "plane":
             return ca.DM(self.normal)
+        if self.kind == "box":
+            v = self._outside(ca, q)
+            vv = ca.dot(v, v)
+            return v / ca.sqrt(ca.if_else(vv > 0, vv, 1.0))
         if self.kind == "round":
             return q / ca.sqrt(ca.dot(q, q))
         rho = ca.sqrt(q[0] ** 2 + q[1] ** 2)
@@ -127,6 +150,20 @@ def feature_at(fixture: Fixture, locator: Locator, pose: Pose) -> Feature:
     )
 
 
+def surface_feature(fixture: Fixture) -> Feature | None:
+    """The whole surface of a box or rectangle workpiece as one feature (None for other shapes).
+
+    A kept contact written against it may slide or roll across an edge onto the next face: a part
+    tipped onto a base locator's side face comes back onto its base face that way.
+    """
+    from fixplan.geometry import Box, Rectangle
+
+    shape = fixture.workpiece.shape
+    if isinstance(shape, Box | Rectangle):
+        return Feature("box", "surface", half=np.asarray(shape.half, dtype=float).copy())
+    return None
+
+
 def _plane_features(fixture: Fixture) -> list[Feature]:
     """Every face plane of a polyhedral workpiece (box, rectangle, polygon); [] for round shapes."""
     from fixplan.geometry import Box, Polygon, Rectangle
@@ -181,4 +218,4 @@ def smooth_max(ca: Any, a: Any, b: Any, scale_m: float = SMOOTH_MAX_M) -> Any:
     return ca.fmax(a, b) + scale_m * ca.log1p(ca.exp(-ca.fabs(a - b) / scale_m)) - scale_m * np.log(2.0)
 
 
-__all__ = ["SMOOTH_MAX_M", "Feature", "clearance_features", "feature_at", "smooth_max"]
+__all__ = ["SMOOTH_MAX_M", "Feature", "clearance_features", "feature_at", "smooth_max", "surface_feature"]

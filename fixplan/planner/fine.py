@@ -63,6 +63,27 @@ constraints, which violates the constraint qualifications IPOPT relies on and ne
 (``g_i λ_i ≤ ε``) or penalty homotopies. The forces are found instead per segment, after the path,
 by the non-jamming wrench search (docs/math.md program 2 for sliding, program 3 for rolling).
 
+When there is no path
+---------------------
+The program above is the first rung of :data:`LADDER`, an ordered list of formulations tried
+until one finds a path (so a transition that plans at once costs what it always did): the
+linearised gap-closing step as the initial guess; a *compliant* guess (short linearised steps,
+each settled back onto the kept contacts: the pivot about a kept point, the turn about the axis
+through two, the slide along a face — a straight line in twist coordinates cuts through them);
+no pull toward the goal; sliding where the default rolls; kept contacts on the whole surface of
+a box, so that one may cross an edge (when one touches another face than at the goal); two short
+moves through the compliant guess's middle; and the target's gap free to open before it closes.
+``Transition.formulation`` records the rung that found the path.
+
+When none does, the reason names the cause. Locators that close together with the target
+(:func:`closing_together`: at the goal, the target's normal row is a combination of the kept
+rows and another locator's with a positive coefficient — a redundant layout, the rows' rank
+below the locator count) are named first. Otherwise :func:`blocking_constraints` re-solves in
+elastic mode (phase 1: a slack per constraint group — each other locator's clearance, the
+target's monotone gap; then, if the kept motion cannot close the target even so, each kept
+contact, feature bounds and no-slip rows too — minimising the slacks' sum) and names the groups
+left with a slack, largest first.
+
 Its pieces live apart: the closed-form surface features in :mod:`fixplan.planner.features`, the
 applied wrench of each segment in :mod:`fixplan.planner.segments`.
 """
@@ -79,8 +100,8 @@ from numpy.typing import NDArray
 
 from fixplan.errors import InputError, SolverError
 from fixplan.kinematics import mass_matrix
-from fixplan.locating import contact_set, locator_contact
-from fixplan.planner.features import Feature, clearance_features, feature_at, smooth_max
+from fixplan.locating import contact_set, locator_contact, solve_goal
+from fixplan.planner.features import Feature, clearance_features, feature_at, smooth_max, surface_feature
 from fixplan.planner.segments import segment_wrenches
 from fixplan.settings import DEFAULT, PlannerSettings
 from fixplan.spatial import Pose, log_so3, tangent_seed
@@ -125,7 +146,11 @@ class Transition:
     cost : float
         Mass-weighted path length ``Σ ‖Δξ_k‖_M / √m`` [m] (what the coarse search adds up).
     ipopt_status : str
-        IPOPT's return status (``Solve_Succeeded``, ``Infeasible_Problem_Detected``, ...).
+        IPOPT's return status (``Solve_Succeeded``, ``Infeasible_Problem_Detected``, ...) of the
+        formulation that found the path (of the first one tried when none did).
+    formulation : str
+        The rung of :data:`LADDER` that found the path (``"default"``: the plain program); ``""``
+        when none did (the reason lists each one's IPOPT status).
     """
 
     established: tuple[str, ...]
@@ -144,6 +169,7 @@ class Transition:
     max_slip_m: float = 0.0
     cost: float = float("inf")
     ipopt_iterations: int = 0
+    formulation: str = "default"
 
     @property
     def end_pose(self) -> Pose:
@@ -182,6 +208,7 @@ class Transition:
             "solve_time_s": float(self.solve_time_s),
             "ipopt_status": self.ipopt_status,
             "ipopt_iterations": int(self.ipopt_iterations),
+            "formulation": self.formulation,
         }
 
 
@@ -230,6 +257,62 @@ def default_kind(dimension: int, n_established: int) -> str:
     return "roll" if n_established < (3 if dimension == 3 else 2) else "slide"
 
 
+@dataclass(frozen=True)
+class Formulation:
+    """One way of posing a transition's path program: a rung of :data:`LADDER`.
+
+    Attributes
+    ----------
+    name : str
+        What the Transition records (``Transition.formulation``).
+    guess : str
+        The initial guess: ``"default"`` (a warm start, else the straight line toward the goal
+        stopped where the target touches, else the linearised step), ``"linearised"`` (the
+        least-``M``-norm step that closes the target's gap keeping the kept contacts, to first
+        order) or ``"compliant"`` (a chain of such short steps, each followed by settling the kept
+        contacts back to touch: a screw about the kept contacts — the rotation about the axis
+        through two kept points, about a kept contact's normal, ...).
+    goal_pull : bool
+        Whether the objective pulls the end pose toward the goal pose.
+    other_kind : bool
+        Slide where the default rolls (skipped when the caller gave ``kind``; rolling where the
+        default slides leaves no motion: Theorem 1).
+    kept : str
+        ``"feature"``: each kept contact stays on the feature it touches at the start (face
+        bounds); ``"surface"``: on the whole surface of a box or rectangle, so it may cross an
+        edge (tried only when a kept contact touches another face than at the goal).
+    waypoint : bool
+        Two short programs chained through the compliant guess's middle pose (where the target's
+        gap is half closed), each warm-started from its half of that guess.
+    monotone : bool
+        The target's gap never grows (else it only stays ≥ 0 until it closes: the part may back
+        off the target first, e.g. to turn past it on five kept contacts).
+    """
+
+    name: str
+    guess: str = "default"
+    goal_pull: bool = True
+    other_kind: bool = False
+    kept: str = "feature"
+    waypoint: bool = False
+    monotone: bool = True
+
+
+# The ordered ladder of formulations tried until one finds a path (one place). The first is the
+# plain program; the others run only when it reports no path, so the common case costs the same.
+LADDER: tuple[Formulation, ...] = (
+    Formulation("default"),
+    Formulation("linearised guess", guess="linearised"),
+    Formulation("compliant guess", guess="compliant"),
+    Formulation("compliant guess, no goal pull", guess="compliant", goal_pull=False),
+    Formulation("slide instead of roll", guess="compliant", other_kind=True),
+    Formulation("kept contacts across edges", guess="compliant", kept="surface"),
+    Formulation("via a waypoint", guess="compliant", goal_pull=False, waypoint=True),
+    Formulation("target may open first", guess="compliant", goal_pull=False, monotone=False),
+    Formulation("slide, target may open first", guess="compliant", goal_pull=False, other_kind=True, monotone=False),
+)
+
+
 def plan_transition(
     fixture: Fixture,
     start: Pose,
@@ -246,6 +329,8 @@ def plan_transition(
     friction_margin: float = 0.0,
     margin_N: float | None = None,
     settings: PlannerSettings = DEFAULT.planner,
+    ladder: Sequence[Formulation] = LADDER,
+    diagnose: bool = True,
 ) -> Transition:
     """Plan the path and wrenches that add ``target`` to the ``established`` contacts.
 
@@ -266,7 +351,7 @@ def plan_transition(
         guess, resampled to ``knots``; otherwise a straight line toward the goal pose, stopped
         where the target touches (or a linearised step toward the target without a goal).
     kind : "roll" or "slide", optional
-        Override :func:`default_kind`.
+        Override :func:`default_kind` (the ladder then keeps it).
     acceleration_mps2 : float
         Size of the desired acceleration per segment, ``sqrt(âᵀ M â / m)`` [m/s²]. With many
         contacts a very small one can be statically balanced by the search's wrench (on
@@ -276,22 +361,27 @@ def plan_transition(
         (:func:`~fixplan.jamming.search.search_wrench`).
     margin_N : float, optional
         Least normal force on the kept contacts (default: the part's weight).
+    ladder : sequence of Formulation
+        The formulations tried in turn until one finds a path (:data:`LADDER`; ``LADDER[:1]`` is
+        the plain program alone). The one that found it is ``Transition.formulation``.
+    diagnose : bool
+        When no formulation finds a path, name what blocks it: locators that close together with
+        the target (:func:`closing_together`), else the constraints an elastic re-solve has to
+        relax (:func:`blocking_constraints`).
 
     Returns
     -------
     Transition
         Always returned for a well-posed question; ``success`` is False, with the reason, when
-        IPOPT finds no path, the exact gaps violate the plan by more than ``touch_m``, or a
-        segment's wrench search fails.
+        no formulation finds a path, the exact gaps violate the plan by more than ``touch_m``, or
+        a segment's wrench search fails.
 
     Raises
     ------
     InputError
         Unknown or repeated names, a target among the established, a non-touching established
-        locator, fewer than one knot, an unknown kind.
+        locator, fewer than one knot, an unknown kind, a ladder with no formulation that applies.
     """
-    import casadi as ca
-
     est = tuple(established)
     names = [loc.name for loc in fixture.locators]
     for n in (*est, target):
@@ -307,49 +397,332 @@ def plan_transition(
         raise InputError(f"clearance_m must be ≥ 0, got {clearance_m}")
     if start.dimension != fixture.dimension:
         raise InputError(f"expected a {fixture.dimension}D start pose, got {start.dimension}D")
-    kind = kind or default_kind(fixture.dimension, len(est))
-    if kind not in KINDS:
+    if kind is not None and kind not in KINDS:
         raise InputError(f"kind must be one of {KINDS}, got {kind!r}")
+    if not ladder:
+        raise InputError("ladder must hold at least one formulation")
+    base_kind = kind or default_kind(fixture.dimension, len(est))
 
     wp = fixture.workpiece
-    d = fixture.dimension
-    nv = fixture.ndof
-    K = int(knots)
-    com_b = np.asarray(wp.com_body, dtype=float)
     tol_touch = fixture.tolerances.touch_m
     locs = {loc.name: loc for loc in fixture.locators}
-    others = [n for n in names if n not in est and n != target]
-
     start_gaps = {n: locator_contact(wp, start, locs[n]).gap_m for n in names}
     loose = [f"{n} ({start_gaps[n]:.3g} m)" for n in est if abs(start_gaps[n]) > tol_touch]
     if loose:
         raise InputError(f"established locators must touch at the start (|gap| ≤ {tol_touch:g} m): {', '.join(loose)}")
 
-    goal: Pose | None = None
-    if fixture.is_full:
-        try:
-            goal = fixture.goal
-        except Exception:  # noqa: BLE001 - no goal: fall back to the start's features
-            goal = None
-    features = {n: feature_at(fixture, locs[n], start if (n in est or goal is None) else goal) for n in names}
-    second: dict[str, Feature] = {}  # a second face for locators beside the goal's face (see clearance_features)
-    for n in names:
-        if n not in est and n != target:
-            extra = clearance_features(fixture, locs[n], start, features[n])[1:]
-            if extra:
-                second[n] = extra[0]
+    prob = _Problem.build(fixture, start, est, target, int(knots), clearance_m, settings, start_gaps)
+    tried: list[str] = []
+    first: _Path | None = None
+    path: _Path | None = None
+    compliant: FloatArray | None = None
+    total_time = 0.0  # IPOPT's time over every formulation tried
+    for form in ladder:
+        k_form = base_kind
+        if form.other_kind:
+            if kind is not None or base_kind != "roll" or not est:
+                continue  # the caller chose the motion; rolling where the default slides leaves no motion
+            k_form = "slide"
+        if form.kept == "surface" and not _off_goal_face(prob):
+            continue  # every kept contact is on its goal face already: nothing to cross
+        if form.guess == "compliant" and compliant is None:
+            compliant = _compliant_guess(prob, k_form)
+        later_iter = min(max_iter or settings.ipopt_max_iter, settings.ladder_max_iter)
+        attempt = _solve_formulation(
+            prob, form, k_form, warm_start, compliant, max_iter if first is None else later_iter, tol
+        )
+        total_time += attempt.solve_time_s
+        tried.append(f"{form.name}: {attempt.status}")
+        first = first or attempt
+        if attempt.path_found:
+            path = attempt
+            break
 
-    # --- scaling and the metric -------------------------------------------------------------
-    L = max(wp.shape.bounding_radius, 1e-6)
-    scale = np.concatenate([np.full(d, L), np.ones(nv - d)])
-    M0 = mass_matrix(wp.mass_kg, wp.inertia_body, start.R_world_body)
-    W = np.diag(scale) @ M0 @ np.diag(scale) / (wp.mass_kg * L * L)  # metric on y
+    if first is None:
+        raise InputError(
+            f"no formulation of the ladder applies to {_state(est)} → {target} "
+            f"(tried to skip: {', '.join(f.name for f in ladder)}); expected one without other_kind or kept='surface'"
+        )
+    if path is None:
+        return _failed(prob, first, _no_path_reason(prob, first, tried, diagnose, max_iter, tol))
 
-    # --- initial guess ------------------------------------------------------------------------
-    xi_guess, guess_note = _initial_guess(fixture, start, est, target, goal, warm_start, K, kind, com_b)
+    K = prob.K
+    # --- wrenches per segment -----------------------------------------------------------------
+    wrenches, margins, found, reasons = segment_wrenches(
+        fixture, path.poses, est, path.kind, acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N
+    )
+    bad = [k for k in range(K) if not found[k]]
+    via = "" if path.formulation == ladder[0].name else f" (formulation: {path.formulation})"
+    if bad:
+        k = bad[0]
+        reason = f"segment {k} of {K} ({_state(est)} → {target}): {reasons[k]}"
+        success = False
+    else:
+        margin = f"least margin {float(np.min(margins)):.3g} N" if est else "free motion, no contact to press"
+        reason = f"{path.kind} on {_state(est)} to touch {target}: {K} segments, {margin}{via}"
+        success = True
+    return Transition(
+        est,
+        target,
+        path.kind,
+        path.poses,
+        wrenches,
+        margins,
+        success,
+        reason,
+        path.violation,
+        total_time,
+        path.status,
+        found,
+        reasons,
+        path.slip,
+        path.cost if success else float("inf"),
+        path.iterations,
+        path.formulation,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# The path program
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Problem:
+    """What every formulation of one transition shares (built once)."""
+
+    fixture: Fixture
+    start: Pose
+    est: tuple[str, ...]
+    target: str
+    others: list[str]
+    K: int
+    clearance_m: float
+    settings: PlannerSettings
+    start_gaps: dict[str, float]
+    goal: Pose | None
+    features: dict[str, Feature]
+    second: dict[str, Feature]
+    scale: FloatArray
+    M0: FloatArray
+    W: FloatArray
+    com_b: FloatArray
+    L: float
+
+    @staticmethod
+    def build(
+        fixture: Fixture,
+        start: Pose,
+        est: tuple[str, ...],
+        target: str,
+        K: int,
+        clearance_m: float,
+        settings: PlannerSettings,
+        start_gaps: dict[str, float],
+    ) -> _Problem:
+        wp = fixture.workpiece
+        d, nv = fixture.dimension, fixture.ndof
+        names = [loc.name for loc in fixture.locators]
+        locs = {loc.name: loc for loc in fixture.locators}
+        goal: Pose | None = None
+        if fixture.is_full:
+            try:
+                goal = fixture.goal
+            except Exception:  # noqa: BLE001 - no goal: fall back to the start's features
+                goal = None
+        features = {n: feature_at(fixture, locs[n], start if (n in est or goal is None) else goal) for n in names}
+        second: dict[str, Feature] = {}  # a second face for locators beside the goal's face (see clearance_features)
+        for n in names:
+            if n not in est and n != target:
+                extra = clearance_features(fixture, locs[n], start, features[n])[1:]
+                if extra:
+                    second[n] = extra[0]
+        # scaling and the metric
+        L = max(wp.shape.bounding_radius, 1e-6)
+        scale = np.concatenate([np.full(d, L), np.ones(nv - d)])
+        M0 = mass_matrix(wp.mass_kg, wp.inertia_body, start.R_world_body)
+        W = np.diag(scale) @ M0 @ np.diag(scale) / (wp.mass_kg * L * L)  # metric on y
+        others = [n for n in names if n not in est and n != target]
+        com_b = np.asarray(wp.com_body, dtype=float)
+        return _Problem(
+            fixture, start, est, target, others, K, clearance_m, settings, start_gaps, goal, features, second,
+            scale, M0, W, com_b, L,
+        )  # fmt: skip
+
+
+@dataclass
+class _Path:
+    """One formulation's answer: the poses and their exact check."""
+
+    formulation: str
+    kind: str
+    poses: list[Pose]
+    status: str
+    iterations: int
+    solve_time_s: float
+    violation: float
+    slip: float
+    cost: float
+    guess_note: str
+    path_found: bool
+
+
+def _solve_formulation(
+    prob: _Problem,
+    form: Formulation,
+    kind: str,
+    warm: Transition | None,
+    compliant: FloatArray | None,
+    max_iter: int | None,
+    tol: float | None,
+) -> _Path:
+    """Solve one rung of the ladder (two chained programs for a waypoint) and check it exactly."""
+    K = prob.K
+    if form.guess == "compliant" and compliant is not None:
+        xi_guess, note = compliant, "compliant guess"
+    elif form.guess == "linearised":
+        xi_guess, note = _linearised_guess(prob, kind), "linearised step toward the target"
+    else:
+        xi_guess, note = _initial_guess(
+            prob.fixture, prob.start, prob.est, prob.target, prob.goal, warm, K, kind, prob.com_b
+        )
+    features = dict(prob.features)
+    if form.kept == "surface":
+        surface = surface_feature(prob.fixture)
+        if surface is not None:
+            features.update({n: surface for n in prob.est})
+    if form.waypoint and K >= 2 and compliant is not None:
+        return _solve_via_waypoint(prob, form, kind, features, compliant, max_iter, tol)
+    xi, status, iterations, solve_time = _solve_path(
+        prob, kind, features, xi_guess, goal_pull=form.goal_pull, end_gap_m=0.0, max_iter=max_iter, tol=tol,
+        monotone=form.monotone,
+    )  # fmt: skip
+    poses = [pose_from_twist(prob.start, xi[:, k], prob.com_b) for k in range(K + 1)]
+    return _checked(prob, form.name, kind, poses, xi, status, iterations, solve_time, note, form.monotone)
+
+
+def _solve_via_waypoint(
+    prob: _Problem,
+    form: Formulation,
+    kind: str,
+    features: dict[str, Feature],
+    compliant: FloatArray,
+    max_iter: int | None,
+    tol: float | None,
+) -> _Path:
+    """A chain of two compliant moves: to the guess's middle (target half closed), then on."""
+    K = prob.K
+    K1 = K // 2
+    fx, wp = prob.fixture, prob.fixture.workpiece
+    loc_t = fx.locator(prob.target)
+    mid = pose_from_twist(prob.start, compliant[:, K1], prob.com_b)
+    g_mid = max(float(locator_contact(wp, mid, loc_t).gap_m), 0.0)
+    xi1, st1, it1, t1 = _solve_path(
+        prob, kind, features, compliant[:, : K1 + 1], goal_pull=False, end_gap_m=g_mid, max_iter=max_iter, tol=tol,
+        knots=K1,
+    )  # fmt: skip
+    poses1 = [pose_from_twist(prob.start, xi1[:, k], prob.com_b) for k in range(K1 + 1)]
+    note = "compliant guess, via its middle"
+    if st1 not in IPOPT_PATH_FOUND:
+        pad = poses1 + [poses1[-1]] * (K - K1)
+        xi_pad = np.concatenate([xi1, np.repeat(xi1[:, -1:], K - K1, axis=1)], axis=1)
+        return _checked(prob, form.name, kind, pad, xi_pad, st1, it1, t1, note)
+    # the second move starts where the first ended: twists stay relative to the transition's start
+    rest = compliant[:, K1:] - compliant[:, K1 : K1 + 1] + xi1[:, -1:]
+    xi2, st2, it2, t2 = _solve_path(
+        prob, kind, features, rest, goal_pull=form.goal_pull, end_gap_m=0.0, max_iter=max_iter, tol=tol,
+        knots=K - K1, first=xi1[:, -1],
+    )  # fmt: skip
+    xi = np.concatenate([xi1, xi2[:, 1:]], axis=1)
+    poses = [pose_from_twist(prob.start, xi[:, k], prob.com_b) for k in range(K + 1)]
+    return _checked(prob, form.name, kind, poses, xi, st2, it1 + it2, t1 + t2, note)
+
+
+def _checked(
+    prob: _Problem,
+    formulation: str,
+    kind: str,
+    poses: list[Pose],
+    xi: FloatArray,
+    status: str,
+    iterations: int,
+    solve_time: float,
+    note: str,
+    monotone: bool = True,
+) -> _Path:
+    """The exact check of a solved path: constraint violation, slip and mass-weighted length."""
+    fx = prob.fixture
+    # the other locators are held against the model's start gaps (a lower bound of the exact
+    # ones: with a second face the smooth maximum sits up to ~0.7 SMOOTH_MAX_M below), which is
+    # what the NLP enforced; the exact start gap asked 28 µm more of a generated box and
+    # rejected a sound path ("a feature's closed form does not hold")
+    held = {n: min(prob.start_gaps[n], _model_gap(prob, n, prob.start)) for n in prob.others}
+    violation = _violation(
+        fx, poses, prob.est, prob.target, prob.others, prob.clearance_m, {**prob.start_gaps, **held}, monotone
+    )
+    slip = _slip(fx, poses, prob.est) if kind == "roll" else 0.0
+    dxi = np.diff(xi, axis=1)
+    cost = float(sum(np.sqrt(max(float(v @ prob.M0 @ v), 0.0)) for v in dxi.T) / np.sqrt(fx.workpiece.mass_kg))
+    found = status in IPOPT_PATH_FOUND and violation <= fx.tolerances.touch_m
+    return _Path(formulation, kind, poses, status, iterations, solve_time, violation, slip, cost, note, found)
+
+
+def _off_goal_face(prob: _Problem) -> list[str]:
+    """Kept contacts on another face of a box or rectangle than at the goal (``"B2: -y, -z at the goal"``)."""
+    if prob.goal is None or surface_feature(prob.fixture) is None:
+        return []
+    out = []
+    for n in prob.est:
+        at_goal = feature_at(prob.fixture, prob.fixture.locator(n), prob.goal).label
+        if prob.features[n].label != at_goal:
+            out.append(f"{n} touches face {prob.features[n].label} here, {at_goal} at the goal")
+    return out
+
+
+def _model_gap(prob: _Problem, name: str, pose: Pose) -> float:
+    """The closed-form gap the program uses for ``name`` at ``pose`` (numeric)."""
+    import casadi as ca
+
+    loc = prob.fixture.locator(name)
+    q = ca.DM(pose.point_body_from_world(loc.p_world))
+    dist = prob.features[name].distance(ca, q)
+    if name in prob.second:
+        dist = smooth_max(ca, dist, prob.second[name].distance(ca, q))
+    return float(dist) - loc.radius_m
+
+
+def _solve_path(
+    prob: _Problem,
+    kind: str,
+    features: dict[str, Feature],
+    xi_guess: FloatArray,
+    *,
+    goal_pull: bool,
+    end_gap_m: float,
+    max_iter: int | None,
+    tol: float | None,
+    knots: int | None = None,
+    first: FloatArray | None = None,
+    elastic: Sequence[str] = (),
+    monotone: bool = True,
+) -> tuple[FloatArray, Any, int, float]:
+    """Build and solve the path program; returns twists (ndof × K+1), status, iterations, time.
+
+    ``first`` is the twist of knot 0 relative to the transition's start (a chained move starts
+    where the previous one ended). ``elastic``: the constraint kinds (of :data:`CONSTRAINT_KINDS`)
+    whose groups each get a slack ≥ 0, the objective then being their sum (the other groups and
+    the target's end gap stay exact); the status is then ``(IPOPT status, {group: slack [m]})``.
+    """
+    import casadi as ca
+
+    fx, start = prob.fixture, prob.start
+    d, nv = fx.dimension, fx.ndof
+    K = prob.K if knots is None else int(knots)
+    est, target, L, scale, W, com_b = prob.est, prob.target, prob.L, prob.scale, prob.W, prob.com_b
+    locs = {loc.name: loc for loc in fx.locators}
     y_guess = xi_guess / scale[:, None]
+    y0 = np.zeros(nv) if first is None else np.asarray(first, dtype=float) / scale
 
-    # --- the NLP ------------------------------------------------------------------------------
     opti = ca.Opti()
     Y = opti.variable(nv, K)
     c0 = start.point_world_from_body(com_b)
@@ -358,7 +731,8 @@ def plan_transition(
     def knot(k: int) -> tuple[Any, Any]:
         """(R, c) at knot k as CasADi expressions (knot 0 numeric)."""
         if k == 0:
-            return ca.DM(R0), ca.DM(c0)
+            p0 = start if first is None else pose_from_twist(start, np.asarray(first, dtype=float), com_b)
+            return ca.DM(p0.R_world_body), ca.DM(p0.point_world_from_body(com_b))
         xi = ca.DM(scale) * Y[:, k - 1]
         c = ca.DM(c0) + xi[:d]
         if d == 3:
@@ -380,132 +754,362 @@ def plan_transition(
         if (k, name) not in gaps:
             q = q_of(k, name)
             dist = features[name].distance(ca, q)
-            if name in second:
-                dist = smooth_max(ca, dist, second[name].distance(ca, q))
+            if name in prob.second:
+                dist = smooth_max(ca, dist, prob.second[name].distance(ca, q))
             gaps[k, name] = dist - locs[name].radius_m
         return gaps[k, name]
 
-    # constraints are collected and handed to Opti as two vectors (one call each: scalar
-    # subject_to calls were a fifth of the transition's time)
-    eqs: list[Any] = []
-    ineqs: list[Any] = []  # each ≥ 0
-    plane_start = {n: float(gap(0, n)) for n in names}
+    # constraint groups: (kind, locator) → rows; "eq" rows are = 0, the others ≥ 0. Collected and
+    # handed to Opti as two vectors (one call each: scalar subject_to calls were a fifth of the
+    # transition's time)
+    groups: dict[tuple[str, str], tuple[str, list[Any]]] = {}
+
+    def add(group: tuple[str, str], sense: str, rows: Sequence[Any]) -> None:
+        groups.setdefault(group, (sense, []))[1].extend(rows)
+
+    plane_start = {n: float(ca.evalf(gap(0, n))) for n in prob.others}
     for k in range(1, K + 1):
         for n in est:
-            eqs.append(gap(k, n) / L)
-            ineqs.extend(e / L for e in features[n].inside(ca, features[n].point_at(ca, q_of(k, n))))
-        for n in others:
-            ineqs.append((gap(k, n) - min(clearance_m, plane_start[n])) / L)
-        ineqs.append((gap(k - 1, target) - gap(k, target)) / L)
-    eqs.append(gap(K, target) / L)
-    ineqs.extend(e / L for e in features[target].inside(ca, features[target].point_at(ca, q_of(K, target))))
+            add(("kept contact", n), "eq", [gap(k, n) / L])
+            add(
+                ("feature bounds", n),
+                "ge",
+                [e / L for e in features[n].inside(ca, features[n].point_at(ca, q_of(k, n)))],
+            )
+        for n in prob.others:
+            held = min(prob.clearance_m, plane_start[n], _model_gap(prob, n, start))
+            add(("clearance", n), "ge", [(gap(k, n) - held) / L])
+        if monotone:
+            add(("monotone target gap", target), "ge", [(gap(k - 1, target) - gap(k, target)) / L])
+        elif k < K:
+            add(("clearance", target), "ge", [gap(k, target) / L])
+    end_row = (gap(K, target) - end_gap_m) / L
+    add(
+        ("feature bounds", target),
+        "ge",
+        [e / L for e in features[target].inside(ca, features[target].point_at(ca, q_of(K, target)))],
+    )
     if kind == "roll":
         for k in range(K):
-            eqs.extend(expr / L for expr in _no_slip(ca, frames, k, est, features, locs, q_of, com_b, start, d))
-    if eqs:
-        opti.subject_to(ca.vertcat(*eqs) == 0)
+            for n, row in _no_slip(ca, frames, k, est, features, locs, q_of, com_b, start, d):
+                add(("no-slip", n), "eq", [row / L])
+    keys = [g for g in groups if groups[g][1] and g[0] in elastic]
+    eqs: list[Any] = [end_row]
+    ineqs: list[Any] = []
+    for g, (sense, rows) in groups.items():
+        if g not in keys:
+            (eqs if sense == "eq" else ineqs).extend(rows)
+    S = opti.variable(len(keys)) if keys else None
+    if S is not None:
+        for i, g in enumerate(keys):
+            sense, rows = groups[g]
+            if sense == "eq":
+                ineqs.extend([S[i] - r for r in rows] + [S[i] + r for r in rows])
+            else:
+                ineqs.extend([r + S[i] for r in rows])
+        ineqs.append(S)
+    opti.subject_to(ca.vertcat(*eqs) == 0)
     if ineqs:
         opti.subject_to(ca.vertcat(*ineqs) >= 0)
 
     # objective: K Σ ‖Δy‖²_W, normalised by the guess's end point
-    norm = float(y_guess[:, -1] @ W @ y_guess[:, -1]) or 1.0
-    dY = Y - ca.horzcat(ca.DM.zeros(nv, 1), Y[:, : K - 1])
+    y_end = y_guess[:, -1] - y0
+    norm = float(y_end @ W @ y_end) or 1.0
+    dY = Y - ca.horzcat(ca.DM(y0), Y[:, : K - 1])
     energy = ca.sum2(ca.sum1(dY * ca.mtimes(ca.DM(W), dY)))
     objective = K * energy / norm
-    if goal is not None and GOAL_PULL > 0:
+    if prob.goal is not None and GOAL_PULL > 0 and goal_pull:
         # ... plus the distance of the end pose from the goal pose (same metric): the least-energy
         # path to one locator turns the part to bring that point forward, away from the goal's
         # orientation, and the later transitions have to undo it (a generated box turned from
         # 5.6° to 11° to touch its first side locator, then to 18° when a push went astray)
-        y_goal = twist_from_pose(start, goal, com_b) / scale
+        y_goal = twist_from_pose(start, prob.goal, com_b) / scale
         e_goal = Y[:, K - 1] - ca.DM(y_goal)
         objective = objective + GOAL_PULL * ca.dot(e_goal, ca.mtimes(ca.DM(W), e_goal)) / norm
+    if S is not None:
+        objective = ca.sum1(S) + prob.settings.elastic_regularisation * objective
+        opti.set_initial(S, np.ones(len(keys)))
     opti.minimize(objective)
     opti.set_initial(Y, y_guess[:, 1:])
-    opti.solver(
-        "ipopt",
-        {"print_time": False},
-        settings.ipopt_options(tol, max_iter),
-    )
+    opti.solver("ipopt", {"print_time": False}, prob.settings.ipopt_options(tol, max_iter))
     t0 = time.perf_counter()
     try:
-        y_val = opti.solve_limited().value(Y)  # accepts hitting max_iter; the status is read below
+        sol = opti.solve_limited()  # accepts hitting max_iter; the status is read below
+        y_val = sol.value(Y)
+        s_val = sol.value(S) if S is not None else None
     except RuntimeError as exc:
         # Opti raises on every unsuccessful IPOPT return (infeasible, restoration failed, ...):
         # keep IPOPT's status and last iterate; anything without a status is a real error.
         stats = opti.stats()
         if "return_status" not in stats:
-            raise SolverError(f"IPOPT failed on {_state(est)} + {target}: {exc}", extras={"guess": guess_note}) from exc
+            raise SolverError(f"IPOPT failed on {_state(est)} + {target}: {exc}") from exc
         y_val = opti.debug.value(Y)
+        s_val = opti.debug.value(S) if S is not None else None
     solve_time = time.perf_counter() - t0
     stats = opti.stats()
-    status = str(stats.get("return_status", "unknown"))
-    iterations = int(stats.get("iter_count", 0))
-    ipopt_ok = status in IPOPT_PATH_FOUND
+    status: Any = str(stats.get("return_status", "unknown"))
+    if elastic:
+        s_arr = np.atleast_1d(np.asarray(s_val, dtype=float)) if S is not None else np.zeros(0)
+        status = (status, {g: float(s) * L for g, s in zip(keys, s_arr, strict=True)})
     y_sol = np.asarray(y_val, dtype=float).reshape(nv, K)
-    xi_sol = np.concatenate([np.zeros((nv, 1)), y_sol * scale[:, None]], axis=1)
-    poses = [pose_from_twist(start, xi_sol[:, k], com_b) for k in range(K + 1)]
+    xi_sol = np.concatenate([y0[:, None], y_sol], axis=1) * scale[:, None]
+    return xi_sol, status, int(stats.get("iter_count", 0)), solve_time
 
-    # --- exact check --------------------------------------------------------------------------
-    # the other locators are held against the model's start gaps (a lower bound of the exact
-    # ones: with a second face the smooth maximum sits up to ~0.7 SMOOTH_MAX_M below), which is
-    # what the NLP enforced; the exact start gap asked 28 µm more of a generated box and
-    # rejected a sound path ("a feature's closed form does not hold")
-    held = {n: min(start_gaps[n], plane_start[n]) for n in others}
-    violation = _violation(fixture, poses, est, target, others, clearance_m, {**start_gaps, **held})
-    slip = _slip(fixture, poses, est) if kind == "roll" else 0.0
-    dxi = np.diff(xi_sol, axis=1)
-    cost = float(sum(np.sqrt(max(float(v @ M0 @ v), 0.0)) for v in dxi.T) / np.sqrt(wp.mass_kg))
 
-    def failed(reason: str) -> Transition:
-        """A transition with no path (or an unsound one): no wrenches, infinite cost."""
-        return Transition(
-            est, target, kind, poses, np.full((K, nv), np.nan), np.full(K, np.nan), False, reason, violation,
-            solve_time, status, np.zeros(K, dtype=bool), [], slip, float("inf"), iterations,
-        )  # fmt: skip
+def _failed(prob: _Problem, first: _Path, reason: str) -> Transition:
+    """A transition with no path (or an unsound one): no wrenches, infinite cost; the first rung's poses."""
+    K, nv = prob.K, prob.fixture.ndof
+    return Transition(
+        prob.est, prob.target, first.kind, first.poses, np.full((K, nv), np.nan), np.full(K, np.nan), False, reason,
+        first.violation, first.solve_time_s, first.status, np.zeros(K, dtype=bool), [], first.slip, float("inf"),
+        first.iterations, "",
+    )  # fmt: skip
 
-    if not ipopt_ok:
-        return failed(
-            f"no path from {_state(est)} to touch {target} keeping the others ≥ {clearance_m:g} m away "
-            f"(IPOPT: {status}, {guess_note})"
-        )
-    if violation > tol_touch:
-        return failed(
-            f"the planned poses violate the contacts by {violation:.3g} m with the exact gaps (allowed {tol_touch:g} m): "
+
+def _no_path_reason(
+    prob: _Problem, first: _Path, tried: list[str], diagnose: bool, max_iter: int | None, tol: float | None
+) -> str:
+    """Why no formulation found a path, naming the blocking locators and constraint kinds."""
+    est, target = prob.est, prob.target
+    tol_touch = prob.fixture.tolerances.touch_m
+    head = f"no path from {_state(est)} to touch {target}"
+    forms = f"(IPOPT: {'; '.join(tried)}; first guess: {first.guess_note})"
+    if first.status in IPOPT_PATH_FOUND and len(tried) == 1:
+        return (
+            f"the planned poses violate the contacts by {first.violation:.3g} m with the exact gaps (allowed {tol_touch:g} m): "
             "a feature's closed form does not hold along the path"
         )
+    if not diagnose:
+        return f"{head} keeping the others ≥ {prob.clearance_m:g} m away {forms}"
+    together = closing_together(prob.fixture, est, target)
+    if together:
+        rank = together[0].rank
+        pairs = ", ".join(c.locator for c in together)
+        return (
+            f"{pairs} close{'s' if len(together) == 1 else ''} together with {target} (rank {rank} at the goal): "
+            f"{head} keeping {pairs} ≥ {prob.clearance_m:g} m away {forms}"
+        )
+    blockers = blocking_constraints(
+        prob, first.kind, min(max_iter or prob.settings.ipopt_max_iter, prob.settings.ladder_max_iter), tol
+    )
+    if not blockers:
+        return f"{head} keeping the others ≥ {prob.clearance_m:g} m away {forms}"
+    what = " and ".join(b.phrase(prob.clearance_m) for b in blockers)
+    if est and all(b.kind in ("clearance", "monotone target gap") for b in blockers):
+        what = f"{_state(est)} stay{'s' if len(est) == 1 else ''} touching and {what}"
+    worst = blockers[0]
+    # a kept contact on another face than the goal's (a part tipped onto a base locator) cannot be
+    # seated by adding contacts: the part has to leave it
+    moved = _off_goal_face(prob)
+    note = f"; {', '.join(moved)}" if moved else ""
+    return f"{head}: {target} cannot close while {what} ({worst.blame()}, blocks it{note}) {forms}"
 
-    # --- wrenches per segment -----------------------------------------------------------------
-    wrenches, margins, found, reasons = segment_wrenches(
-        fixture, poses, est, kind, acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N
-    )
-    bad = [k for k in range(K) if not found[k]]
-    if bad:
-        k = bad[0]
-        reason = f"segment {k} of {K} ({_state(est)} → {target}): {reasons[k]}"
-        success = False
+
+# ---------------------------------------------------------------------------------------------
+# What blocks a transition
+# ---------------------------------------------------------------------------------------------
+
+CONSTRAINT_KINDS = ("kept contact", "clearance", "feature bounds", "no-slip", "monotone target gap")
+
+
+@dataclass(frozen=True)
+class Blocker:
+    """A constraint group an elastic re-solve had to relax for the target to close.
+
+    ``kind`` is one of :data:`CONSTRAINT_KINDS`, ``locator`` the locator it belongs to, ``slack_m``
+    how far it had to give way [m] (the largest over the path's knots).
+    """
+
+    kind: str
+    locator: str
+    slack_m: float
+    feature: str = ""
+
+    def phrase(self, clearance_m: float) -> str:
+        """What the constraint asks, in words."""
+        on = f" its {self.feature} face" if self.feature.startswith(("+", "-")) else ""
+        if self.kind == "kept contact":
+            return f"{self.locator} stays touching{on}"
+        if self.kind == "clearance":
+            return f"{self.locator} stays ≥ {clearance_m * 1e3:.3g} mm away"
+        if self.kind == "feature bounds":
+            return f"{self.locator} stays within{on or ' its face'}"
+        if self.kind == "no-slip":
+            return f"{self.locator} rolls without slipping"
+        return f"{self.locator}'s gap never grows"
+
+    def blame(self) -> str:
+        """Which constraint gives way, and by how much."""
+        return f"{self.locator}'s {self.kind} constraint, relaxed by {self.slack_m * 1e3:.3g} mm"
+
+
+def blocking_constraints(
+    prob: _Problem, kind: str, max_iter: int | None = None, tol: float | None = None
+) -> list[Blocker]:
+    """The constraint groups an elastic phase 1 relaxes so that the target can close, largest first.
+
+    The same program with a slack ``s_g ≥ 0`` per group: ``|row| ≤ s_g`` for equalities,
+    ``row + s_g ≥ 0`` for inequalities, the target's end gap exact, minimising ``Σ s_g`` (plus a
+    small multiple of the path's objective). First only the other locators' clearances and the
+    target's monotone gap are relaxed, the motion (kept contacts, feature bounds, no-slip) kept
+    exact: when that solves, the clearances left with a slack above
+    ``settings.blocking_slack_m`` are what forbids the move. When even that is infeasible the kept
+    motion itself cannot close the target, and every group is relaxed (each kept contact, each
+    locator's feature bounds, each contact's no-slip rows too).
+    """
+    guess = _compliant_guess(prob, kind)
+    slacks: dict[tuple[str, str], float] = {}
+    for relaxed in (("clearance", "monotone target gap"), CONSTRAINT_KINDS):
+        _, (status, slacks), _, _ = _solve_path(
+            prob, kind, prob.features, guess, goal_pull=False, end_gap_m=0.0, max_iter=max_iter, tol=tol,
+            elastic=relaxed,
+        )  # fmt: skip
+        if status in IPOPT_PATH_FOUND:
+            break
+    out = [
+        Blocker(g[0], g[1], s, prob.features[g[1]].label)
+        for g, s in slacks.items()
+        if s > prob.settings.blocking_slack_m
+    ]
+    return sorted(out, key=lambda b: -b.slack_m)
+
+
+@dataclass(frozen=True)
+class ClosingTogether:
+    """A locator whose gap closes together with a target's while the kept contacts touch.
+
+    At the goal the target's normal row ``G_t`` is ``Σ a_i G_i + c G_o`` over the kept rows and
+    the other locator's row with ``c > 0`` (and not in the kept rows' span alone): every motion
+    that keeps the kept contacts changes the target's gap ``c`` times as much as the other's, so
+    both reach 0 together. ``rank`` is the rank of every locator's normal rows at the goal.
+    """
+
+    locator: str
+    ratio: float
+    rank: int
+
+
+def closing_together(
+    fixture: Fixture, established: Sequence[str], target: str, pose: Pose | None = None
+) -> list[ClosingTogether]:
+    """The locators that close together with ``target`` while ``established`` stay touching.
+
+    Evaluated at ``pose`` (default: the goal; [] when the fixture has no goal). A redundant layout
+    (two side locators that always close together, base locators placed so that closing one closes
+    another) has every locator's normal rows of rank below the dof count there; the coarse search
+    can plan such a pair as one transition.
+    """
+    if pose is None:
+        if not fixture.is_full:
+            return []
+        try:
+            pose = fixture.goal
+        except Exception:  # noqa: BLE001 - no goal, nothing to compare
+            return []
+    names = [loc.name for loc in fixture.locators]
+    cs = contact_set(fixture, pose, names)
+    rows = {n: cs.G[i] for i, n in enumerate(names)}
+    tol = DEFAULT.planner.span_rel
+    rank = int(np.linalg.matrix_rank(cs.G, tol=tol * max(float(np.abs(cs.G).max()), 1.0)))
+    t = rows[target]
+    kept = np.array([rows[n] for n in established]).reshape(len(established), fixture.ndof)
+
+    def residual(A: FloatArray) -> tuple[float, FloatArray]:
+        if A.shape[0] == 0:
+            return float(np.linalg.norm(t)), np.zeros(0)
+        coef = np.linalg.lstsq(A.T, t, rcond=None)[0]
+        return float(np.linalg.norm(A.T @ coef - t)), coef
+
+    scale = float(np.linalg.norm(t)) or 1.0
+    if residual(kept)[0] <= tol * scale:
+        return []  # the target's gap cannot change at all while the kept ones touch: another cause
+    out = []
+    for n in names:
+        if n in established or n == target:
+            continue
+        r, coef = residual(np.vstack([kept, rows[n][None, :]]))
+        if r <= tol * scale and coef[-1] > 0:
+            out.append(ClosingTogether(n, float(coef[-1]), rank))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Initial guesses
+# ---------------------------------------------------------------------------------------------
+
+
+def _step_rows(fixture: Fixture, pose: Pose, est: tuple[str, ...], target: str, kind: str) -> tuple[Any, FloatArray]:
+    """(contact set, rows A) of the linearised step: the kept contacts' rows, then the target's normal."""
+    cs = contact_set(fixture, pose, [*est, target])
+    if kind == "roll":
+        n_rows = sum(c.size for c in cs.contacts[:-1])
+        A = np.vstack([cs.J[:n_rows], cs.G[-1:]])
     else:
-        margin = f"least margin {float(np.min(margins)):.3g} N" if est else "free motion, no contact to press"
-        reason = f"{kind} on {_state(est)} to touch {target}: {K} segments, {margin}"
-        success = True
-    return Transition(
-        est,
-        target,
-        kind,
-        poses,
-        wrenches,
-        margins,
-        success,
-        reason,
-        violation,
-        solve_time,
-        status,
-        found,
-        reasons,
-        slip,
-        cost if success else float("inf"),
-        iterations,
-    )
+        A = cs.G[: len(est) + 1]
+    return cs, A
+
+
+def _least_step(cs: Any, A: FloatArray, gap_m: float) -> FloatArray:
+    """The least-``M``-norm twist with ``A ξ = (0, …, 0, −gap)``."""
+    b = np.zeros(A.shape[0])
+    b[-1] = -gap_m
+    Minv = cs.M_inv
+    return Minv @ A.T @ np.linalg.pinv(A @ Minv @ A.T, rcond=DEFAULT.numerics.rcond) @ b
+
+
+def _linearised_guess(prob: _Problem, kind: str) -> FloatArray:
+    """The linearised gap-closing step, as a straight line of K segments."""
+    gap_t = prob.start_gaps[prob.target]
+    cs, A = _step_rows(prob.fixture, prob.start, prob.est, prob.target, kind)
+    end = _least_step(cs, A, gap_t)
+    return np.outer(end, np.linspace(0.0, 1.0, prob.K + 1))
+
+
+def _compliant_guess(prob: _Problem, kind: str) -> FloatArray:
+    """Short linearised steps toward the target, each settled back onto the kept contacts.
+
+    The path follows the kept contacts' manifold (a pivot about a kept point, a turn about the
+    axis through two, a slide along a kept face), where a straight line in twist coordinates cuts
+    through them. Resampled by length to ``K + 1`` knots.
+    """
+    fx, start, est, target = prob.fixture, prob.start, prob.est, prob.target
+    wp = fx.workpiece
+    tol_touch = fx.tolerances.touch_m
+    kept = [fx.locator(n) for n in est]
+    loc_t = fx.locator(target)
+    step_max = prob.settings.compliant_step_rel * prob.L
+    pose = start
+    g_t = prob.start_gaps[target]
+    poses = [start]
+    for _ in range(prob.settings.compliant_max_steps):
+        if g_t <= tol_touch:
+            break
+        cs, A = _step_rows(fx, pose, est, target, kind)
+        xi = _least_step(cs, A, g_t)
+        size = float(np.sqrt(max(float(xi @ cs.mass_matrix @ xi), 0.0) / wp.mass_kg))
+        if not np.isfinite(size) or size <= 0.0:
+            break
+        if size > step_max:
+            xi = xi * (step_max / size)
+        new = pose.retract(xi, prob.com_b)
+        if kept:
+            settled = solve_goal(wp, kept, new, tol_m=prob.settings.settle_tol_m)
+            if not settled.converged:
+                break
+            new = settled.pose
+        g_new = float(locator_contact(wp, new, loc_t).gap_m)
+        if not g_new < g_t:
+            break  # no progress: the kept contacts stop the target here
+        poses.append(new)
+        pose, g_t = new, g_new
+    xs = np.array([twist_from_pose(start, p, prob.com_b) for p in poses]).T
+    if xs.shape[1] < 2:
+        return np.zeros((fx.ndof, prob.K + 1))
+    steps = np.sqrt(np.maximum(np.einsum("ik,ij,jk->k", np.diff(xs, axis=1), prob.M0, np.diff(xs, axis=1)), 0.0))
+    s = np.concatenate([[0.0], np.cumsum(steps)])
+    s = s / s[-1] if s[-1] > 0 else np.linspace(0.0, 1.0, len(s))
+    s_new = np.linspace(0.0, 1.0, prob.K + 1)
+    return np.array([np.interp(s_new, s, row) for row in xs])
 
 
 def _state(est: tuple[str, ...]) -> str:
@@ -523,8 +1127,8 @@ def _no_slip(
     com_b: FloatArray,
     start: Pose,
     d: int,
-) -> list[Any]:
-    """First-order no-slip rows of segment k: ``t·(R_kᵀ Δ(material point)) = 0`` (body frame).
+) -> list[tuple[str, Any]]:
+    """First-order no-slip rows of segment k (each with its locator): ``t·(R_kᵀ Δ(material point)) = 0`` (body frame).
 
     In 3D two rolling contacts leave one motion (the axis through both points), and the
     tangents along that axis are dependent: the second contact keeps only the tangent across it.
@@ -550,7 +1154,7 @@ def _no_slip(
         x_b, n_b, disp = points[n]
         if d == 2:
             t = ca.vertcat(-n_b[1], n_b[0])
-            out.append(ca.dot(t, disp))
+            out.append((n, ca.dot(t, disp)))
             continue
         n0 = _numeric_normal(features[n], start, locs[n])
         a = tangent_seed(n0)
@@ -563,8 +1167,8 @@ def _no_slip(
         t1 = t1 / ca.sqrt(ca.dot(t1, t1))
         t2 = ca.cross(n_b, t1)
         if not (axis_b is not None and j == 1):
-            out.append(ca.dot(t1, disp))
-        out.append(ca.dot(t2, disp))
+            out.append((n, ca.dot(t1, disp)))
+        out.append((n, ca.dot(t2, disp)))
     return out
 
 
@@ -632,6 +1236,7 @@ def _violation(
     others: list[str],
     clearance_m: float,
     start_gaps: dict[str, float],
+    monotone: bool = True,
 ) -> float:
     """Largest violation of the plan's constraints with the exact gaps [m] (knots 1..K)."""
     wp = fixture.workpiece
@@ -644,7 +1249,7 @@ def _violation(
             worst = max(worst, abs(g[n]))
         for n in others:
             worst = max(worst, min(clearance_m, start_gaps[n]) - g[n])
-        worst = max(worst, -g[target], g[target] - prev_t)
+        worst = max(worst, -g[target], g[target] - prev_t if monotone else 0.0)
         prev_t = g[target]
         if k == K:
             worst = max(worst, abs(g[target]))
@@ -666,7 +1271,14 @@ def _slip(fixture: Fixture, poses: list[Pose], est: tuple[str, ...]) -> float:
 
 
 __all__ = [
+    "CONSTRAINT_KINDS",
+    "LADDER",
+    "Blocker",
+    "ClosingTogether",
+    "Formulation",
     "Transition",
+    "blocking_constraints",
+    "closing_together",
     "default_kind",
     "plan_transition",
     "pose_from_twist",

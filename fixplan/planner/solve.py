@@ -27,7 +27,7 @@ from fixplan.model import Fixture, require_full
 from fixplan.planner.approach import Approach, plan_approach
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
 from fixplan.planner.execute import ExecutionSettings, Step, TransitionKind
-from fixplan.planner.fine import IPOPT_PATH_FOUND, Transition, default_kind, plan_transition
+from fixplan.planner.fine import IPOPT_PATH_FOUND, LADDER, Transition, default_kind, plan_transition
 from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.policy import Policy, build_policy
 from fixplan.planner.segments import segment_wrenches
@@ -214,14 +214,18 @@ class Planner:
         self.set_aside: dict[tuple[frozenset[str], str], str] = {}
         # fine plans by (state, target, start pose): a search after a transition was set aside
         # reuses every fine plan that starts where an earlier one did
-        self._cache: dict[tuple[tuple[str, ...], str, bytes], Transition] = {}
+        self._cache: dict[tuple[tuple[str, ...], str, bytes, bool], Transition] = {}
+        self.full_ladder = False  # the fine planner's whole ladder of formulations (second pass)
 
     def plan_from(self, pose: Pose, state: frozenset[str], order: Sequence[str] | None = None) -> CoarsePlan:
         """The cheapest monotone sequence from ``state`` at ``pose`` to every locator."""
         cache = self._cache
 
         def evaluate(pose_: Pose, state_: frozenset[str], target: str) -> Transition:
-            key = (tuple(sorted(state_)), target, _pose_key(pose_))
+            key = (tuple(sorted(state_)), target, _pose_key(pose_), self.full_ladder)
+            plain = cache.get((*key[:3], False))
+            if plain is not None and plain.success:
+                return plain  # the second pass keeps what the plain program found
             why = self.set_aside.get((frozenset(state_), target))
             if why is not None:
                 return _set_aside(self.fixture, pose_, state_, target, why)
@@ -231,11 +235,17 @@ class Planner:
                 # contacts in 3D leaves one rotation, which often cannot)
                 g = self.guess(pose_, state_, target) if state_ else None
                 kind = None if g is None else g[2]
+                if self.full_ladder and kind == default_kind(self.fixture.dimension, len(state_)):
+                    kind = None  # the ladder may then try the other kind too
                 for clearance in CLEARANCES_M:
+                    # the ladder of formulations and the diagnosis at the last clearance, and only
+                    # in the second pass (a failing transition costs 2-9 s with them)
+                    full = self.full_ladder and clearance == CLEARANCES_M[-1]
                     tr = plan_transition(
                         self.fixture, pose_, sorted(state_), target, knots=self.knots,
                         acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
                         margin_N=self.margin_N, clearance_m=clearance, kind=kind,
+                        ladder=LADDER if full else LADDER[:1], diagnose=full,
                     )  # fmt: skip
                     if tr.ipopt_status in IPOPT_PATH_FOUND:
                         break  # a path: its wrenches decide, not the clearance
@@ -243,10 +253,26 @@ class Planner:
                 self.fine_time_s += time.perf_counter() - t
             return cache[key]
 
-        return search(
+        # first the plain program for every transition; only when no sequence is found that way,
+        # the whole ladder (other guesses, the other kind, a waypoint, ...) and the diagnosis of
+        # what blocks each transition that still fails
+        self.full_ladder = False
+        first = search(
             state, self.names, pose, evaluate, order=order, progress=self.progress,
             estimate=self.estimate, precheck=self.precheck,
         )  # fmt: skip
+        if first.found:
+            return first
+        self.full_ladder = True
+        try:
+            second = search(
+                state, self.names, pose, evaluate, order=order, progress=self.progress,
+                estimate=self.estimate, precheck=self.precheck,
+            )  # fmt: skip
+        finally:
+            self.full_ladder = False
+        second.attempts = [*first.attempts, *(a for a in second.attempts if a not in first.attempts)]
+        return second
 
     def guess(self, pose: Pose, state: frozenset[str], target: str) -> tuple[float, Pose, str] | None:
         """A cheap guess of a transition: (mass-weighted length [m], end pose, kind of motion).
