@@ -367,7 +367,7 @@ def build_policy(
             )  # fmt: skip
             continue
         options: list[tuple[float, str, str, Pose]] = []
-        kinds = (default_kind(fixture.dimension, len(s)),) if s else ("free",)
+        kinds: tuple[str, ...] = (default_kind(fixture.dimension, len(s)),) if s else ("free",)
         if s:
             kinds += tuple(k for k in KINDS if k not in kinds)
         for t in sorted(goal_state - s):
@@ -411,7 +411,9 @@ def build_policy(
             break
         for s in todo:
             checked.add(s)
-            entries[s] = _checked_entry(fixture, planner, s, entries[s].pose, candidates[s], settings)
+            here = entries[s].pose
+            if here is not None:
+                entries[s] = _checked_entry(fixture, planner, s, here, candidates[s], settings)
     return Policy(entries, frozenset(reachable), frozenset(unrealisable), time.perf_counter() - t0)
 
 
@@ -419,7 +421,7 @@ def _checked_entry(
     fixture: Fixture,
     planner: Any,
     s: State,
-    pose: Pose | None,
+    pose: Pose,
     options: list[tuple[float, str, str, Pose]],
     settings: PolicySettings,
 ) -> PolicyEntry:
