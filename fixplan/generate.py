@@ -85,7 +85,7 @@ FAMILIES: dict[str, str] = {
     "plate-2d-free": (
         "2D rectangles, trapezoids and pentagons on 2 base locators and 1 side locator (left or right edge), "
         "mu 0.05-0.8; start in free space 5-80 mm from the nearest locator, moved up and away from the side "
-        "locator and tilted up to 15 deg; goal written in half the files"
+        "locator and tilted up to 15 deg; goal written in half the rectangles and every polygon"
     ),
 }
 
@@ -779,7 +779,10 @@ def _draw_plate_free(rng: np.random.Generator) -> _Draft | str:
     angle = _uniform(rng, -FREE_TILT_DEG, FREE_TILT_DEG, 2)
     u = _away_direction(rng, np.array([1.0 if side_edge == "left" else -1.0, 1.0]))
     target = _log_uniform(rng, *START_GAP_M, 4)
-    written = bool(rng.random() < GOAL_WRITTEN_SHARE)
+    # a polygon's edges have no names a locator's `face` could give: without its goal a file may
+    # have another located pose (a trapezoid resting its slanted edge on B1 and S closes every gap
+    # at full rank), so polygons always state it; rectangles in GOAL_WRITTEN_SHARE of the files
+    written = bool(rng.random() < GOAL_WRITTEN_SHARE) or kind != "rectangle"
 
     # Mirrored (S on the right edge): x -> L - x for the outline (order reversed: counter-clockwise) and locators.
     def fx(x: float) -> float:

@@ -538,7 +538,10 @@ def find_goal(
     iterations = {"tol_m": settings.stop_gap_m, "max_iterations": settings.max_iterations, "settings": settings}
     seen = _faces_touched(shape, locators, start)  # each locator's face as the start shows it
     free = [i for i, loc in enumerate(locators) if loc.face is None and seen[i] is not None]
-    Key = tuple[int, float, int]
+    Key = tuple[int, int, float, int]
+    # a located pose determines the part: of several, one where G has the rank the locators can
+    # give (a trapezoid's B1 and S touching one slanted edge also close every gap, at rank 2 of 3)
+    full_rank = min(len(locators), 6 if start.dimension == 3 else 3)
     found: list[tuple[Key, GoalResult]] = []
     touching: list[tuple[Key, GoalResult, tuple[tuple[str, str], ...]]] = []
     best: list[GoalResult] = []
@@ -549,7 +552,12 @@ def find_goal(
         if not result.converged:
             return
         touched = _faces_touched(shape, locators, result.pose)
-        key = (sum(touched[i] != seen[i] for i in free), _distance2(workpiece, start, result.pose), order)
+        key = (
+            full_rank - result.rank,
+            sum(touched[i] != seen[i] for i in free),
+            _distance2(workpiece, start, result.pose),
+            order,
+        )
         mismatched = _face_mismatches(workpiece, locators, result.pose, settings)
         if mismatched:
             touching.append((key, result, mismatched))
@@ -561,7 +569,7 @@ def find_goal(
         return GoalSearch(True, result.pose, result.max_gap_m, result.rank, tried)
 
     consider(_gauss_newton(exact, workpiece, start, **iterations), 0)  # type: ignore[arg-type]
-    if found and min(key[0] for key, _ in found) == 0:
+    if found and min(key[:2] for key, _ in found) == (0, 0):
         return answer(1)
     iterations["max_iterations"] = settings.search_iterations
     d = start.dimension
@@ -587,9 +595,9 @@ def find_goal(
                 consider(_gauss_newton(exact, workpiece, pose, **iterations), tried)  # type: ignore[arg-type]
             if not faces:
                 consider(_gauss_newton(exact, workpiece, slid, **iterations), tried)  # type: ignore[arg-type]
-        if found:
+        if found and min(key[0] for key, _ in found) == 0:
             return answer(tried)
-    if found:  # only the first run's
+    if found:  # only the first run's, or only rank-deficient poses
         return answer(tried)
     if touching:
         _, result, mismatched = min(touching, key=lambda item: item[0])

@@ -167,13 +167,6 @@ def test_plate_2d_free_files_start_in_free_space_and_cover_the_ranges(free_plate
     assert point >= 2 and min(angles) < -5 and max(angles) > 5
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the loader's goal finder (locating.solve_goal, damped Gauss-Newton from the start) is local: from a "
-    "start 5-80 mm away and tilted up to 15 deg it converges to another pose or to none for many goal-less "
-    "free fixtures: seed 2024, box-321-free 8 of 13 goal-less files refused (no pose found or wrong faces), "
-    "plate-2d-free 2 of 16 refused and 1 (a trapezoid) located 24 mm and 12 deg away; the goal finder is being rebuilt",
-)
 @pytest.mark.parametrize("family", ["box-321-free", "plate-2d-free"])
 def test_goal_less_free_files_are_located_at_the_known_goal(family):
     missed = []
