@@ -263,6 +263,9 @@ class PlannerSettings:
         A warm start is reused when it starts within this of the start pose [m, rad].
     cost_slack : float
         The coarse search re-ranks when a transition costs more than this factor over its guess.
+    lazy_slack : float
+        The lazy search accepts a sequence whose fine-planned cost is within this factor of the
+        best estimate of any other (1: the cheapest, as far as the learned estimates tell).
     precheck_penalty : float
         A transition that fails its cheap cone check before the fine plan is made this many times
         dearer (tried after the others, never dropped).
@@ -296,6 +299,7 @@ class PlannerSettings:
     settle_tol_m: float = 1e-10
     same_pose_m: float = 1e-9
     cost_slack: float = 1.5
+    lazy_slack: float = 1.0
     precheck_penalty: float = 100.0
     precheck_floor: float = 1e-6
     compliant_step_rel: float = 0.05

@@ -312,11 +312,11 @@ class Executor:
             why = f"unplanned contact state {_fmt(P)} in transition {self.index + 1} (planned {_fmt(self.states[self.index + 1]) if self.index + 1 < len(self.states) else 'the goal'})"
         self._recover_until = None
         self.log.event(t, "guard", why)
-        if self._follow_policy(t, P, why):
+        if self._follow_policy(t, P, why, pose):
             return
         self._replan(t, pose, P, why, "lost contact" if lost else "unplanned contact")
 
-    def _follow_policy(self, t: float, state: State, why: str) -> bool:
+    def _follow_policy(self, t: float, state: State, why: str, pose: Pose) -> bool:
         """Take the policy's transitions from ``state`` (no planner call); False when it has none.
 
         A state the policy already led into and that stalled is not taken again from the policy:
@@ -324,7 +324,7 @@ class Executor:
         """
         if self.policy is None or state in self._policy_failed:
             return False
-        chain = self.policy.chain(state, self.goal_state)
+        chain = self.policy.chain_from(self.fixture, state, pose, self.goal_state)
         if not chain:
             return False
         self.log.counts["policy_switches"] += 1
@@ -440,7 +440,7 @@ class Executor:
                 self._recover_until = None
                 P = self._observed if self._observed is not None else frozenset()
                 self.log.event(t, "guard", f"{self._recover_why}; not restored by pressing")
-                if not self._follow_policy(t, P, self._recover_why):
+                if not self._follow_policy(t, P, self._recover_why, pose):
                     self._replan(t, pose, P, self._recover_why, "lost contact")
                 if self.done:
                     return self._applied

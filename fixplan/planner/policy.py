@@ -203,6 +203,51 @@ class Policy:
             s = frozenset(e.next_state)
         return steps
 
+    def chain_from(self, fixture: Fixture, state: State, pose: Pose, goal: State) -> list[Step] | None:
+        """The policy's steps from ``state`` with the part at ``pose``: the first chosen where it is.
+
+        The value of the next states is the policy's cost-to-go; the first step's own cost is the
+        gap-closing step from ``pose`` (not from the state's representative pose): of the ways on,
+        the one with the least step from here plus cost-to-go from where it leads. A part that
+        lost a base locator and tipped up closes that locator again rather than one the
+        representative pose found nearer. The plan's own transition keeps its guide path when it
+        is the one chosen.
+        """
+        from fixplan.planner.execute import Step
+        from fixplan.planner.fine import KINDS, default_kind
+
+        s = frozenset(state)
+        if s == goal:
+            return []
+        best: tuple[float, str, str] | None = None
+        kinds: tuple[str, ...] = (default_kind(fixture.dimension, len(s)),) if s else ("free",)
+        if s:
+            kinds += tuple(k for k in KINDS if k not in kinds)
+        for t in sorted(goal - s):
+            nxt = s | {t}
+            later = 0.0 if nxt == goal else (self.entries[nxt].cost_to_go_m if nxt in self.entries else None)
+            if later is None or not math.isfinite(later):
+                continue
+            for rank, kind in enumerate(kinds):
+                step = gap_closing_step(fixture, pose, s, t, kind)
+                if step is None:
+                    continue
+                cost = step[0] + later + rank * DEFAULT.policy.backoff_m
+                if best is None or (cost, t, kind) < best:
+                    best = (cost, t, kind)
+                break  # the other kind only when this one cannot close the gap
+        if best is None:
+            return self.chain(s, goal)
+        _, t, kind = best
+        entry = self.entries.get(s)
+        first = (
+            entry.step()
+            if entry is not None and entry.target == t and (entry.motion == kind or entry.source == "plan")
+            else Step(tuple(sorted(s)), t, kind, ())  # type: ignore[arg-type]
+        )
+        rest = self.chain(s | {t}, goal)
+        return None if rest is None else [first, *rest]
+
     @property
     def coverage(self) -> dict[str, Any]:
         """States with a checked transition / states reachable."""
