@@ -205,3 +205,18 @@ def test_a_part_starting_in_free_space_is_loaded(path, position, rpy, angle):
     # the part never fell: it stayed within a part's size of the fixture
     heights = [p.p_world[-1] for p in v.trace.poses]
     assert min(heights) >= fx.goal.p_world[-1] - 0.01
+
+
+def test_a_plan_files_policy_naming_unknown_locators_is_refused(box):
+    """A policy entry is checked against the fixture like the transitions: bad input, not a crash."""
+    from fixplan.errors import InputError
+    from fixplan.planner.plan import plan_for_fixture
+
+    data = solve(box, run_verification=False).to_json()
+    data["policy"][2]["target"] = "ZZ"
+    with pytest.raises(InputError, match="names locators ZZ"):
+        plan_for_fixture(data, box, "plan.json")
+    data["policy"][2]["target"] = "S1"
+    data["policy"][2]["state"] = ["B1", "Q9"]
+    with pytest.raises(InputError, match="names locators Q9"):
+        plan_for_fixture(data, box, "plan.json")

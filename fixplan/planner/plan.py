@@ -794,6 +794,13 @@ def check_names(data: Any, fixture: Fixture, source: str) -> None:
             mentioned += _names([tr["added"]], f"{source}: transitions[{i}].added")
     for i, s in enumerate(data.get("sequence") or []):
         mentioned += _names(s, f"{source}: sequence[{i}]")
+    policy = data.get("policy")
+    if isinstance(policy, list):
+        for i, entry in enumerate(policy):
+            if isinstance(entry, dict):
+                mentioned += _names(entry.get("state", []), f"{source}: policy[{i}].state")
+                if isinstance(entry.get("target"), str):
+                    mentioned.append(entry["target"])
     verification = data.get("verification")
     trace = verification.get("trace") if isinstance(verification, dict) else None
     if trace is not None:
