@@ -952,20 +952,7 @@ def _check_twin(fixture: Fixture, doc: dict[str, Any], name: str) -> str | None:
 
 def _value(x: Any) -> str:
     """A TOML value: numbers with at most 12 significant digits (no binary noise such as 0.30000000000000004)."""
-    if isinstance(x, bool):
-        return "true" if x else "false"
-    if isinstance(x, int | np.integer):
-        return str(int(x))
-    if isinstance(x, float | np.floating):
-        v = float(f"{float(x):.12g}")
-        return repr(v + 0.0)  # + 0.0 turns -0.0 into 0.0
-    if isinstance(x, str):
-        return '"' + x.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(x, list | tuple | np.ndarray):
-        return "[" + ", ".join(_value(v) for v in x) + "]"
-    if isinstance(x, dict):
-        return "{ " + ", ".join(f"{k} = {_value(v)}" for k, v in x.items()) + " }"
-    raise TypeError(f"cannot write {type(x).__name__} as TOML")
+    return twins.toml_value(x, digits=12)
 
 
 def _render(name: str, draft: _Draft, goal: bool = True) -> str:

@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from fixplan.errors import InfeasibleError, InputError
+from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.geometry import Box, Cylinder, Polygon, Rectangle, Shape
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
 from fixplan.model import Fixture, Locator, Workpiece, require_full
@@ -170,7 +170,8 @@ def _face_axis(shape: Shape, face: str) -> tuple[int, float, float]:
     sign = 1.0 if face[0] == "+" else -1.0
     if isinstance(shape, Cylinder):
         return k, sign, shape.length / 2.0
-    assert isinstance(shape, Box | Rectangle)
+    if not isinstance(shape, Box | Rectangle):
+        raise FixplanError(f"a {type(shape).__name__} has no planar face {face!r}")
     return k, sign, float(shape.half[k])
 
 
@@ -192,7 +193,8 @@ def _face_model(workpiece: Workpiece, locators: Sequence[Locator], faces: Sequen
     rows = []
     for loc, face in zip(locators, faces, strict=True):
         if face == "side":
-            assert isinstance(shape, Cylinder)
+            if not isinstance(shape, Cylinder):
+                raise FixplanError(f"a {type(shape).__name__} has no side face")
             rows.append((loc.p_world, loc.radius_m, -1, 1.0, shape.radius))
         else:
             k, sign, offset = _face_axis(shape, face)
@@ -374,7 +376,8 @@ def _face_width(shape: Shape, face: str) -> float | None:
         return None
     if isinstance(shape, Cylinder):
         return 2.0 * shape.radius
-    assert isinstance(shape, Box | Rectangle)
+    if not isinstance(shape, Box | Rectangle):
+        raise FixplanError(f"a {type(shape).__name__} has no planar face {face!r}")
     k, _, _ = _face_axis(shape, face)
     others = np.delete(np.asarray(shape.size, dtype=float), k)
     return float(np.linalg.norm(others))

@@ -188,23 +188,28 @@ def _mirror_body(wp: dict[str, Any], dim: int, axis: int) -> None:
 # -- text ------------------------------------------------------------------------------------------
 
 
-def _toml_value(x: Any) -> str:
-    """A TOML value, floats in full precision (``repr``: the shortest text that reads back to the same float)."""
+def toml_value(x: Any, digits: int | None = None) -> str:
+    """A TOML value, floats in full precision or rounded to ``digits`` significant digits.
+
+    Full precision is ``repr``: the shortest text that reads back to the same float; the rounding
+    keeps binary noise such as 0.30000000000000004 out of generated files.
+    """
     if isinstance(x, bool):
         return "true" if x else "false"
     if isinstance(x, int | np.integer):
         return str(int(x))
     if isinstance(x, float | np.floating):
-        v = float(x) + 0.0  # -0.0 written as 0.0
+        v = float(x) if digits is None else float(f"{float(x):.{digits}g}")
+        v += 0.0  # -0.0 written as 0.0
         if not math.isfinite(v):
             raise InputError(f"cannot write {v} in a fixture file (expected a finite number)")
         return repr(v)
     if isinstance(x, str):
         return '"' + x.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(x, list | tuple | np.ndarray):
-        return "[" + ", ".join(_toml_value(v) for v in x) + "]"
+        return "[" + ", ".join(toml_value(v, digits) for v in x) + "]"
     if isinstance(x, dict):
-        return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in x.items()) + " }"
+        return "{ " + ", ".join(f"{k} = {toml_value(v, digits)}" for k, v in x.items()) + " }"
     raise InputError(f"cannot write {type(x).__name__} in a fixture file")
 
 
@@ -213,12 +218,12 @@ def fixture_toml(doc: Mapping[str, Any]) -> str:
     scalars = [k for k, v in doc.items() if not isinstance(v, dict | list) or (isinstance(v, list) and not _tables(v))]
     tables = [k for k, v in doc.items() if isinstance(v, dict)]
     arrays = [k for k, v in doc.items() if isinstance(v, list) and _tables(v)]
-    lines = [f"{k} = {_toml_value(doc[k])}" for k in scalars]
+    lines = [f"{k} = {toml_value(doc[k])}" for k in scalars]
     for k in tables:
-        lines += ["", f"[{k}]", *(f"{kk} = {_toml_value(vv)}" for kk, vv in doc[k].items())]
+        lines += ["", f"[{k}]", *(f"{kk} = {toml_value(vv)}" for kk, vv in doc[k].items())]
     for k in arrays:
         for entry in doc[k]:
-            lines += ["", f"[[{k}]]", *(f"{kk} = {_toml_value(vv)}" for kk, vv in entry.items())]
+            lines += ["", f"[[{k}]]", *(f"{kk} = {toml_value(vv)}" for kk, vv in entry.items())]
     return "\n".join(lines) + "\n"
 
 

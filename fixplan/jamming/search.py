@@ -635,15 +635,13 @@ def too_weak_reason(
     torque_alone = T_need is not None and T_need > T_max and F_with is not None and F_with < slack * F_max
     force_alone = F_need is not None and F_need > F_max and T_with is not None and T_with < slack * T_max
     head = "the manipulator is too weak: "
-    if torque_alone and not force_alone:
-        assert T_need is not None and F_with is not None  # for mypy: torque_alone says so
+    if torque_alone and not force_alone and T_need is not None and F_with is not None:
         return (
             head + f"the push needs {_above(T_need, T_max)} N·m of torque, more than max_torque {T_max:.4g} N·m"
             f" (its force, {F_with:.4g} N, is within max_force {F_max:.4g} N)",
             ["max_torque"],
         )
-    if force_alone and not torque_alone:
-        assert F_need is not None and T_with is not None
+    if force_alone and not torque_alone and F_need is not None and T_with is not None:
         return (
             head + f"the push needs {_above(F_need, F_max)} N of force, more than max_force {F_max:.4g} N"
             f" (its torque, {T_with:.4g} N·m, is within max_torque {T_max:.4g} N·m)",

@@ -47,7 +47,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import InputError
-from fixplan.locating import contact_set
+from fixplan.locating import contact_set, locator_contact
 from fixplan.planner.fine import twist_from_pose
 from fixplan.settings import DEFAULT, ExecutionNoise, ExecutionSettings
 from fixplan.spatial import Pose, shift_twist, shift_wrench
@@ -531,8 +531,6 @@ class Executor:
         """
         s = self.settings
         step = self.steps[self.index]
-        from fixplan.locating import locator_contact
-
         gap = float(locator_contact(self.fixture.workpiece, pose, self.fixture.locator(step.target)).gap_m)
         if self._progress is None or self._progress[0] != self.index or gap < self._progress[1] - s.progress_m:
             self._progress = (self.index, gap, t)

@@ -214,28 +214,23 @@ class Policy:
         is the one chosen.
         """
         from fixplan.planner.execute import Step
-        from fixplan.planner.fine import KINDS, default_kind
 
         s = frozenset(state)
         if s == goal:
             return []
+        later = {
+            t: 0.0 if s | {t} == goal else self.entries[s | {t}].cost_to_go_m
+            for t in goal - s
+            if s | {t} == goal or s | {t} in self.entries
+        }
         best: tuple[float, str, str] | None = None
-        kinds: tuple[str, ...] = (default_kind(fixture.dimension, len(s)),) if s else ("free",)
-        if s:
-            kinds += tuple(k for k in KINDS if k not in kinds)
-        for t in sorted(goal - s):
-            nxt = s | {t}
-            later = 0.0 if nxt == goal else (self.entries[nxt].cost_to_go_m if nxt in self.entries else None)
-            if later is None or not math.isfinite(later):
-                continue
-            for rank, kind in enumerate(kinds):
-                step = gap_closing_step(fixture, pose, s, t, kind)
-                if step is None:
-                    continue
-                cost = step[0] + later + rank * DEFAULT.policy.backoff_m
-                if best is None or (cost, t, kind) < best:
-                    best = (cost, t, kind)
-                break  # the other kind only when this one cannot close the gap
+        seen: set[str] = set()
+        for cost, t, kind, _, _ in ways_on(fixture, pose, s, later):
+            if t in seen:
+                continue  # the other kind only when the planner's own cannot close the gap
+            seen.add(t)
+            if best is None or (cost, t, kind) < best:
+                best = (cost, t, kind)
         if best is None:
             return self.chain(s, goal)
         _, t, kind = best
@@ -347,6 +342,45 @@ def gap_closing_step(fixture: Fixture, pose: Pose, state: State, target: str, ki
     return length, pose.retract(step, wp.com_body)
 
 
+def motion_kinds(dimension: int, n_kept: int) -> tuple[str, ...]:
+    """The kinds of motion tried out of a state with ``n_kept`` contacts, the fine planner's own first.
+
+    ``free`` from no contact; else the planner's default (:func:`~fixplan.planner.fine.default_kind`)
+    and then the other one.
+    """
+    from fixplan.planner.fine import KINDS, default_kind
+
+    if not n_kept:
+        return ("free",)
+    first = default_kind(dimension, n_kept)
+    return (first, *(k for k in KINDS if k != first))
+
+
+def ways_on(
+    fixture: Fixture,
+    pose: Pose,
+    state: State,
+    later: dict[str, float],
+    settings: PolicySettings = DEFAULT.policy,
+) -> list[tuple[float, str, str, Pose, int]]:
+    """The transitions out of ``state`` at ``pose``, priced: ``(cost, target, kind, end pose, rank)``.
+
+    One per target of ``later`` (its cost-to-go [m] from the state it leads to) and kind of
+    :func:`motion_kinds` whose first-order step closes the gap (:func:`gap_closing_step`); ``cost``
+    is the step's length plus the cost-to-go, the other kind (``rank`` 1) dearer by the back-off.
+    In target order, the planner's own kind first.
+    """
+    out = []
+    for t in sorted(later):
+        if not math.isfinite(later[t]):
+            continue
+        for rank, kind in enumerate(motion_kinds(fixture.dimension, len(state))):
+            step = gap_closing_step(fixture, pose, state, t, kind)
+            if step is not None:
+                out.append((step[0] + later[t] + rank * settings.backoff_m, t, kind, step[1], rank))
+    return out
+
+
 def build_policy(
     fixture: Fixture,
     planner: Any,
@@ -361,8 +395,6 @@ def build_policy(
     its options set the push's acceleration, friction margin and least normal force);
     ``transitions`` the fine plans of the chosen sequence, whose states take the plan's transition.
     """
-    from fixplan.planner.fine import KINDS, default_kind
-
     t0 = time.perf_counter()
     names = [loc.name for loc in fixture.locators]
     goal_state: State = frozenset(names)
@@ -411,20 +443,8 @@ def build_policy(
                 value[s], "plan", True, tuple(tr.poses), pose,
             )  # fmt: skip
             continue
-        options: list[tuple[float, str, str, Pose]] = []
-        kinds: tuple[str, ...] = (default_kind(fixture.dimension, len(s)),) if s else ("free",)
-        if s:
-            kinds += tuple(k for k in KINDS if k not in kinds)
-        for t in sorted(goal_state - s):
-            nxt = s | {t}
-            if nxt not in value:
-                continue
-            for rank, kind in enumerate(kinds):
-                guess = gap_closing_step(fixture, pose, s, t, kind)
-                if guess is None:
-                    continue
-                # the planner's own kind first: the other one is dearer by the back-off
-                options.append((guess[0] + value[nxt] + rank * settings.backoff_m, t, kind, guess[1]))
+        to_go = {t: value[s | {t}] for t in goal_state - s if s | {t} in value}
+        options = [(cost, t, kind, end) for cost, t, kind, end, _ in ways_on(fixture, pose, s, to_go, settings)]
         options.sort(key=lambda o: (o[0], o[1], o[2]))
         if not options:
             continue
@@ -511,4 +531,12 @@ def _checked_entry(
     return PolicyEntry(tuple(sorted(s)), t, kind, None, None, cost, "pre-image", False, (), pose)
 
 
-__all__ = ["Policy", "PolicyEntry", "build_policy", "representative_pose"]
+__all__ = [
+    "Policy",
+    "PolicyEntry",
+    "build_policy",
+    "gap_closing_step",
+    "motion_kinds",
+    "representative_pose",
+    "ways_on",
+]

@@ -282,11 +282,9 @@ class Planner:
         contacts, sliding their normal rows); the other kind when that one cannot close the gap.
         No IPOPT, no cone program.
         """
-        from fixplan.planner.policy import gap_closing_step
+        from fixplan.planner.policy import gap_closing_step, motion_kinds
 
-        first = default_kind(self.fixture.dimension, len(state)) if state else "free"
-        kinds = [first] + ([k for k in ("roll", "slide") if k != first] if state else [])
-        for kind in kinds:
+        for kind in motion_kinds(self.fixture.dimension, len(state)):
             step = gap_closing_step(self.fixture, pose, state, target, kind)
             if step is not None:
                 return step[0], step[1], kind
