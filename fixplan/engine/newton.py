@@ -78,6 +78,7 @@ from fixplan.engine.nsgs import (
     kernel_arrays,
     stalled,
 )
+from fixplan.engine.polish import jacobian_blocks  # the Jacobian blocks, shared with the step's dense polish
 
 DEFAULT_MAX_STEPS = 100
 """Default cap on Newton steps."""
@@ -119,59 +120,6 @@ def natural_map_kernel(indptr, indices, data, q, mu, offsets, dims, rho, r, u, p
             phi[o + a] = v
             total += v * v
     return math.sqrt(total)
-
-
-@numba.njit(cache=True, error_model="numpy")
-def jacobian_blocks(mu, offsets, dims, rho, r, u, A, C):
-    """Blocks ``A_j = I − P'_j`` and ``C_j = ρ_j P'_j B_j`` (padded ``(n_c, 4, 4)``) at ``r``."""
-    x = np.empty(4)
-    g = np.zeros(4)
-    P = np.zeros((4, 4))
-    for j in range(offsets.shape[0]):
-        o = offsets[j]
-        d = dims[j]
-        m = mu[j]
-        ut = 0.0
-        for a in range(1, d):
-            ut += u[o + a] * u[o + a]
-        ut = math.sqrt(ut)
-        for a in range(d):
-            x[a] = r[o + a] - rho[j] * u[o + a]
-            g[a] = u[o + a] / ut if (a > 0 and ut > 0.0) else 0.0
-        x[0] -= rho[j] * m * ut
-        xn = x[0]
-        t = 0.0
-        for a in range(1, d):
-            t += x[a] * x[a]
-        t = math.sqrt(t)
-        for a in range(d):
-            for b in range(d):
-                P[a, b] = 0.0
-        if m * t <= -xn:
-            pass  # polar cone: P' = 0
-        elif t <= m * xn and m > 0.0:
-            for a in range(d):
-                P[a, a] = 1.0  # inside the cone: P' = I
-        else:
-            s = 1.0 / (1.0 + m * m)
-            pn = (xn + m * t) * s
-            P[0, 0] = s
-            for a in range(1, d):
-                e_a = x[a] / t if t > 0.0 else 0.0
-                P[0, a] = m * e_a * s
-                P[a, 0] = m * e_a * s
-                for b in range(1, d):
-                    e_b = x[b] / t if t > 0.0 else 0.0
-                    ident = 1.0 if a == b else 0.0
-                    P[a, b] = m * m * e_a * e_b * s
-                    if t > 0.0:
-                        P[a, b] += (m * pn / t) * (ident - e_a * e_b)
-        for a in range(d):
-            for b in range(d):
-                A[j, a, b] = (1.0 if a == b else 0.0) - P[a, b]
-                # (P B)_ab = P_ab + P_a0 μ g_b   (B = I + μ e_n gᵀ)
-                C[j, a, b] = rho[j] * (P[a, b] + P[a, 0] * m * g[b])
-    return 0
 
 
 # --------------------------------------------------------------------------- the iteration

@@ -20,7 +20,9 @@ One call advances one rigid workpiece among fixed spherical-tip locators by one 
    the linear extrapolation of its last two impulses, projected on its cone), stopped on the
    FCLib residual (natural map), ``max_iter`` only a cap. A 3D contact tries the closed-form
    open and strict-stick regimes, then the sliding regime by Newton on the slip direction
-   started from its current impulse (:func:`slide3_newton`), then the general solver.
+   started from its current impulse (:func:`slide3_newton`), then the general solver. Where the
+   sweeps reach their cap, a nonsmooth Newton polish of the whole step's problem
+   (:func:`fixplan.engine.polish.newton_polish`) continues from the sweep's iterate.
 5. **Update**: ``ν⁺ = ν_free + M⁻¹ Jᵀ P``; ``c⁺ = c + h v⁺``; ``R⁺ = exp(h ω̂⁺) R``.
 6. **Position post-stabilisation** (Cline & Pai): if an active contact penetrates at the new
    pose, the pose alone is moved by the ``M``-smallest displacement ``Δ = M⁻¹ Gᵀ λ`` with
@@ -61,6 +63,10 @@ from fixplan.engine.linalg import mm, mm3_into, mtv, mtv3_into, mv, mv3_into
 from fixplan.engine.local import WORKSPACE_SIZE, project_cone_into
 from fixplan.engine.nsgs import nsgs_dense
 from fixplan.engine.outcome import STATUS_NONFINITE, STATUS_NOT_CONVERGED, STATUS_OK
+from fixplan.engine.polish import newton_polish
+
+POLISH_STEPS = 30
+"""Cap on the Newton steps of :func:`~fixplan.engine.polish.newton_polish` after NSGS reached its sweep cap."""
 
 
 @njit(cache=True)
@@ -166,6 +172,11 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
     err, iters, converged, failures = nsgs_dense(
         W, q, mus, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has_inv, np.empty(m), scratch
     )
+    if not converged and math.isfinite(err):
+        # Gauss–Seidel stalled (two contacts sliding on their cone boundaries in a corner):
+        # nonsmooth Newton from its iterate, kept only where it lowers the residual
+        err, extra, converged = newton_polish(W, q, mus, offsets, sizes, nc, m, P, tol, POLISH_STEPS)
+        iters += extra
     dnu = mv(MinvJt, P)
     nu = nu_free + dnu
     u = mv(W, P) + q
@@ -458,6 +469,11 @@ def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, lo
     err, iters, converged, failures = nsgs_dense(
         W, q, mus, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has_inv, u, scratch
     )
+    if not converged and math.isfinite(err):
+        # Gauss–Seidel stalled: nonsmooth Newton from its iterate (module polish), kept only
+        # where it lowers the residual
+        err, extra, converged = newton_polish(W, q, mus, offsets, sizes, nc, m, P, tol, POLISH_STEPS)
+        iters += extra
     finite = math.isfinite(err)
     for a in range(6):
         acc = 0.0
