@@ -108,6 +108,9 @@ class EngineSettings:
         NSGS stopping residual; None: the fixture's ``[simulation] tolerance``.
     max_iterations : int
         Cap on NSGS sweeps per step (the stop is the residual).
+    polish_steps : int
+        Cap on the nonsmooth Newton steps (and proximal rounds) that continue a step whose sweeps
+        reached their cap (:mod:`fixplan.engine.polish`; 0: none).
     margin_m : float
         Contact detection margin [m]: a locator this far from the surface enters the step's
         contact problem.
@@ -121,6 +124,7 @@ class EngineSettings:
 
     tolerance: float | None = None
     max_iterations: int = 2000
+    polish_steps: int = 30
     margin_m: float = 1e-4
     slip_mps: float = 1e-7
     spin_radps: float = 1e-6
@@ -406,6 +410,12 @@ class ExecutionSettings:
     smoothing_s: float = 0.02  # first-order lag on the applied push (0: none)
     hold_fraction: float = 0.25  # at the goal, each locator is pressed by this fraction of the weight
     speed_limit_factor: float = 25.0  # speed beyond this × the cruise speed (and ≥ 1 m/s) is divergence
+    # a pressed locator whose contact normal (in the part's frame) makes less than this cosine with
+    # its normal at the goal presses another face of the part (a side tip under the base)
+    wrong_face_cos: float = 0.5
+    release_gap_m: float = 2e-3  # a part lifted off a wrong-face contact is free once every gap is this
+    release_s: float = 1.5  # the lift may take at most this long
+    carry_torque_fraction: float = 0.5  # a carried part's spin is stopped with up to this fraction of the hand's torque
 
 
 @dataclass(frozen=True)

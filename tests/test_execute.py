@@ -339,3 +339,87 @@ def test_the_measured_acceleration_is_the_twists_rate_between_solves():
     assert not np.any(ex._measured_accel(0.0, tw0))
     assert np.allclose(ex._measured_accel(0.005, tw1), (tw1 - tw0) / 0.005)
     assert not np.any(ex._measured_accel(1.0, tw0))  # after a gap: no estimate
+
+
+# -- a locator pressed on the wrong face -------------------------------------------------------------
+def _beside_b2(fx):
+    """The default box moved so that its -y face rests against B2's tip, its bottom 10 mm below B2's top.
+
+    B2's sphere (centre y = 0.015, z = −0.005, radius 5 mm) then touches the −y face from outside:
+    its contact normal in the part's frame is +y (into the part), 90° from the −z face it presses
+    at the goal. (B3 would overlap the lowered part: the pose only exercises the face test.)
+    """
+    goal = fx.goal_pose
+    b2 = fx.locator("B2")
+    half_y = 0.05
+    dy = (b2.p_world[1] + b2.radius_m + half_y) - goal.p_world[1]
+    return Pose(goal.R_world_body, goal.p_world + np.array([0.0, dy, -0.010]))
+
+
+def test_a_locator_on_another_face_than_at_the_goal_is_named():
+    fx, ex = _box_executor()
+    assert ex.wrong_faces(fx.goal_pose, frozenset(loc.name for loc in fx.locators)) == []
+    assert ex.wrong_faces(fx.start, frozenset({"B1", "B2", "B3"})) == []  # the start rests on the base
+    pose = _beside_b2(fx)
+    assert abs(fixplan.locating.locator_contact(fx.workpiece, pose, fx.locator("B2")).gap_m) < 1e-12
+    assert ex.wrong_faces(pose, frozenset({"B2"})) == [("B2", "face '-y'")]
+    assert ex.wrong_faces(pose, frozenset({"E1"})) == []  # E1 still presses its own face
+    assert ex.wrong_faces(pose, frozenset()) == []  # only pressed locators are judged
+
+
+def _rect_on_s1():
+    """rect-3's plate set down on its side locator: S1's point tip under the bottom face, 50 mm above B1 and B2."""
+    fx = _rect()
+    calls = []
+
+    def replan(pose, state):
+        calls.append(state)
+        return [Step((), "B1", "free", (pose, pose))]
+
+    steps = [Step(("B1", "B2"), "S1", "slide", (fx.start, fx.start))]
+    ex = Executor(fx, frozenset({"B1", "B2"}), steps, ExecutionSettings(), replan=replan)
+    return fx, ex, Pose.from_angle_deg([0.05, 0.10], 0.0), calls
+
+
+def test_a_part_on_a_wrong_face_is_lifted_off_then_replanned_from_free_space():
+    fx, ex, pose, calls = _rect_on_s1()
+    gaps = fixplan.locating.locator_gaps(fx.workpiece, pose, fx.locators)
+    assert gaps[2] == pytest.approx(0.0, abs=1e-12) and min(gaps[:2]) > 0.04
+    assert ex.wrong_faces(pose, frozenset({"S1"})) == [("S1", "face '-y'")]
+    t = _feed(ex, fx, [({"S1"}, 20)], pose=pose, twist=np.zeros(3))
+    assert ex.log.counts["wrong_face"] == 1 and not calls
+    assert any(k == "guard" and "S1 presses face '-y'" in m and "lifting" in m for _, k, m in ex.log.events)
+    # the lift: the hand carries the 1 kg plate and accelerates it from rest toward the cruise
+    # speed along S1's normal into the part (+y), closed in speed_time_s, without turning it
+    s = ex.settings
+    a = min(s.speed_mps / s.speed_time_s, s.accel_mps2)
+    assert np.allclose(ex.wrench, [0.0, 1.0 * (G + a), 0.0], atol=1e-9)
+    # every locator 2 mm away: re-planned from free space, once
+    off = Pose.from_angle_deg([0.05, 0.103], 0.0)
+    _feed(ex, fx, [((), 20)], t0=t, pose=off, twist=np.zeros(3))
+    assert calls == [frozenset()]
+    assert ex.states[0] == frozenset() and ex.steps[0].kind == "free"
+
+
+def test_a_part_that_cannot_be_lifted_off_fails_with_the_reason():
+    fx, ex, pose, calls = _rect_on_s1()
+    ex.settings = ExecutionSettings(release_s=0.05)
+    _feed(ex, fx, [({"S1"}, 100)], pose=pose, twist=np.zeros(3))  # the observed pose never changes
+    assert ex.done and ex.log.failure_kind == "stall" and not calls
+    assert "S1 presses face '-y'" in ex.log.reason and "could not lift the part off" in ex.log.reason
+
+
+def test_replanning_a_part_knocked_free_starts_with_the_approach():
+    from fixplan.planner.policy import representative_pose
+    from fixplan.planner.solve import Planner
+
+    fx = fixplan.load(fixplan.default_fixture_path())
+    free = Pose(fx.goal_pose.R_world_body, fx.goal_pose.p_world + np.array([0.03, 0.04, 0.03]))
+    steps = Planner(fx).replan(free, frozenset())
+    assert not isinstance(steps, str), steps
+    first = steps[0]
+    assert first.kind == "free" and first.established == ()
+    assert np.allclose(first.path[0].p_world, free.p_world)
+    staging = representative_pose(fx, fx.goal_pose, frozenset())
+    # the guide passes through the staging pose (the free state's pre-image) before the first contact
+    assert min(np.linalg.norm(p.p_world - staging.p_world) for p in first.path) < 1e-9

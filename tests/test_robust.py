@@ -302,3 +302,22 @@ def test_solve_batch(tmp_path):
     rows = {Path(f["file"]).name: f for f in strict_json(proc.stdout)["fixtures"]}
     assert rows["broken.toml"]["status"] == "invalid" and "scene" in rows["broken.toml"]["reason"]
     assert fixplan("solve", "--batch", str(tmp_path / "nope")).returncode == 2
+
+
+def test_a_world_where_the_part_slips_onto_a_wrong_face_is_recovered():
+    # world 60 of the default fixture (default uncertainty): B2 starts 1.6 mm from the base's edge;
+    # in the first transition the part slips off it and B2 ends up pressing the -y face. Before
+    # the executor lifted such a part off and approached again, every re-plan failed ("B2 cannot
+    # close while B2 stays touching its -y face") and the sample failed.
+    from fixplan import default_fixture_path
+    from fixplan.robust import nominal_plan
+
+    fx = load(default_fixture_path())
+    settings = RobustSettings()
+    result, start_state, steps = nominal_plan(fx, settings)
+    v = verify_sample(fx, start_state, steps, 60, settings, result.policy)
+    events = [m for _, k, m in v.execution.events if k == "guard"]
+    assert any("B2 presses face '-y'" in m and "lifting" in m for m in events), events
+    assert v.passed, v.reason
+    assert v.execution.counts["wrong_face"] >= 1
+    assert max(v.final_gaps_m.values()) <= 1e-4

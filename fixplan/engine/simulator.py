@@ -245,6 +245,9 @@ class Simulator:
         Newton restitution coefficient; default ``[simulation] restitution``.
     max_iterations : int, optional
         Cap on NSGS sweeps per step (the stop is the residual); default ``settings.max_iterations``.
+    polish_steps : int, optional
+        Cap on the Newton steps of the polish of a step whose sweeps reached their cap
+        (:mod:`fixplan.engine.polish`; 0: none); default ``settings.polish_steps``.
     margin_m : float, optional
         Contact detection margin [m]; default ``settings.margin_m``.
     settings : EngineSettings
@@ -260,6 +263,7 @@ class Simulator:
         *,
         restitution: float | None = None,
         max_iterations: int | None = None,
+        polish_steps: int | None = None,
         margin_m: float | None = None,
         strict: bool = False,
         settings: EngineSettings = DEFAULT.engine,
@@ -281,6 +285,7 @@ class Simulator:
             raise InputError(f"tolerance must be positive, got {tolerance}")
         self.settings = settings
         self.max_iterations = int(max_iterations if max_iterations is not None else settings.max_iterations)
+        self.polish_steps = int(settings.polish_steps if polish_steps is None else polish_steps)
         self.margin_m = float(margin_m if margin_m is not None else settings.margin_m)
         self.strict = strict
         wp = fixture.workpiece
@@ -392,7 +397,7 @@ class Simulator:
             err, iters, status, failures, pen = _step3_into(
                 self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
                 self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu, self._tors, h, f, tau,
-                self.restitution, margin, self.tolerance, self.max_iterations, self._P, self._active, self._P_prev,
+                self.restitution, margin, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active, self._P_prev,
                 self._active_prev, self._gap, self._u, self._nw, self._bound,
             )  # fmt: skip
         else:
@@ -400,7 +405,7 @@ class Simulator:
             out = _step2(
                 theta, self._p, self._v, self._w, self._mass, float(self._Ib[0, 0]), self._com_b,
                 self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu,
-                h, f, tau, self.restitution, margin, self.tolerance, self.max_iterations, self._P, self._active,
+                h, f, tau, self.restitution, margin, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active,
                 self._bound,
             )  # fmt: skip
             rot, p, v2, w2, P, active, gap, u, n_w, _pt, err, iters, status, failures, pen = out
@@ -612,7 +617,7 @@ class Simulator:
                 n, every, first, self.time_s, self._R, self._p, self._v, self._w, self._mass, self._Ib,
                 self._Ib_inv, self._com_b, self._kind, self._params, self._verts, self._enorm, self._loc_p,
                 self._loc_r, self._mu, self._tors, self.dt, gravity_f, times, table, self.restitution,
-                self.margin_m, self._bound, self.tolerance, self.max_iterations, self._P, self._active,
+                self.margin_m, self._bound, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active,
                 self._P_prev, self._active_prev, self._gap, self._u, self._nw,
             )  # fmt: skip
         theta = math.atan2(self._R[1, 0], self._R[0, 0])
@@ -620,7 +625,7 @@ class Simulator:
             n, every, first, self.time_s, theta, self._p, self._v, float(self._w), self._mass,
             float(self._Ib[0, 0]), self._com_b, self._kind, self._params, self._verts, self._enorm,
             self._loc_p, self._loc_r, self._mu, self.dt, gravity_f, times, table, self.restitution,
-            self.margin_m, self._bound, self.tolerance, self.max_iterations, self._P, self._active, self._gap,
+            self.margin_m, self._bound, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active, self._gap,
         )  # fmt: skip
         (rt, rp, rori, rnu, rfn, rgap, rerr, rit, th, p2, v2, w2, P2, act2, gap2, u2, nw2,
          t_end, k_done, status_k, pen, worst_k, l_err, l_it) = out  # fmt: skip

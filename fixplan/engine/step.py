@@ -65,9 +65,6 @@ from fixplan.engine.nsgs import nsgs_dense
 from fixplan.engine.outcome import STATUS_NONFINITE, STATUS_NOT_CONVERGED, STATUS_OK
 from fixplan.engine.polish import newton_polish
 
-POLISH_STEPS = 30
-"""Cap on the Newton steps of :func:`~fixplan.engine.polish.newton_polish` after NSGS reached its sweep cap."""
-
 
 @njit(cache=True)
 def _normal_bias(q_n, un_old, gap, h, restitution):
@@ -101,7 +98,7 @@ def _pgs_lcp(A, b, x, n, iterations):
 
 @njit(cache=True)
 def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r, mu,
-          h, f_ext, tau_ext, restitution, margin, tol, max_iter, P_warm, warm_active, bound_m):  # fmt: skip
+          h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_steps, P_warm, warm_active, bound_m):  # fmt: skip
     """One planar step, ``ν = (vx, vy, ω)``: :func:`step3_ws` with 2-row contacts (allocating its arrays)."""
     k = loc_p.shape[0]
     cs, sn = math.cos(theta), math.sin(theta)
@@ -175,7 +172,7 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
     if not converged and math.isfinite(err):
         # Gauss–Seidel stalled (two contacts sliding on their cone boundaries in a corner):
         # nonsmooth Newton from its iterate, kept only where it lowers the residual
-        err, extra, converged = newton_polish(W, q, mus, offsets, sizes, nc, m, P, tol, POLISH_STEPS)
+        err, extra, converged = newton_polish(W, q, mus, offsets, sizes, nc, m, P, tol, polish_steps)
         iters += extra
     dnu = mv(MinvJt, P)
     nu = nu_free + dnu
@@ -306,7 +303,7 @@ def workspace3(k):
 
 @njit(cache=True)
 def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors,
-             h, f_ext, tau_ext, restitution, margin, tol, max_iter, P_full, active_full, P_prev, active_prev,
+             h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_steps, P_full, active_full, P_prev, active_prev,
              gap_full, u_full, n_full, bound_m, ws):  # fmt: skip
     """One 3D step on caller-owned buffers (the algorithm of the module docstring, no allocation).
 
@@ -472,7 +469,7 @@ def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, lo
     if not converged and math.isfinite(err):
         # Gauss–Seidel stalled: nonsmooth Newton from its iterate (module polish), kept only
         # where it lowers the residual
-        err, extra, converged = newton_polish(W, q, mus, offsets, sizes, nc, m, P, tol, POLISH_STEPS)
+        err, extra, converged = newton_polish(W, q, mus, offsets, sizes, nc, m, P, tol, polish_steps)
         iters += extra
     finite = math.isfinite(err)
     for a in range(6):
@@ -594,7 +591,7 @@ def _schedule_index(times, t, k):
 
 @njit(cache=True)
 def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p,
-         loc_r, mu, tors, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter,
+         loc_r, mu, tors, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, polish_steps,
          P, active, P_prev, active_prev, gap, u, n_w):  # fmt: skip
     """``n_steps`` of :func:`step3_ws` under a wrench schedule, compiled end to end.
 
@@ -660,7 +657,7 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
         margin = margin_m + 2.0 * h * speed
         err, iters, st, failures, pen = step3_ws(
             R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors,
-            h, f_ext, tau, restitution, margin, tol, max_iter, P, active, P_prev, active_prev, gap, u, n_w, bound, ws)  # fmt: skip
+            h, f_ext, tau, restitution, margin, tol, max_iter, polish_steps, P, active, P_prev, active_prev, gap, u, n_w, bound, ws)  # fmt: skip
         if st == STATUS_NONFINITE:
             status = st
             break
@@ -691,19 +688,19 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
 
 @njit(cache=True)
 def step3_into(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, h, f_ext,
-               tau_ext, restitution, margin, tol, max_iter, P, active, P_prev, active_prev, gap, u, n_w, bound):  # fmt: skip
+               tau_ext, restitution, margin, tol, max_iter, polish_steps, P, active, P_prev, active_prev, gap, u, n_w, bound):  # fmt: skip
     """One :func:`step3_ws` for Python callers (:meth:`Simulator.step`), with its own workspace.
 
     Same in-place contract and returns as :func:`step3_ws`.
     """
     ws = workspace3(loc_p.shape[0])
     return step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, h,
-                    f_ext, tau_ext, restitution, margin, tol, max_iter, P, active, P_prev, active_prev, gap, u, n_w, bound, ws)  # fmt: skip
+                    f_ext, tau_ext, restitution, margin, tol, max_iter, polish_steps, P, active, P_prev, active_prev, gap, u, n_w, bound, ws)  # fmt: skip
 
 
 @njit(cache=True)
 def run2(n_steps, record_every, first, t_start, theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r,
-         mu, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, P, active, gap_in):  # fmt: skip
+         mu, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, polish_steps, P, active, gap_in):  # fmt: skip
     """``n_steps`` of :func:`step2` under a wrench schedule ``(Fx, Fy, Mz)`` about the body origin.
 
     The planar counterpart of :func:`run3` (same schedule, margin and recording rules). Returns
@@ -755,7 +752,7 @@ def run2(n_steps, record_every, first, t_start, theta, p, v, w, mass, Izz, com_b
         speed = math.sqrt(v[0] * v[0] + v[1] * v[1]) + abs(w) * bound
         margin = margin_m + 2.0 * h * speed
         out = step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r, mu,
-                    h, f_ext, tau, restitution, margin, tol, max_iter, P, active, bound)  # fmt: skip
+                    h, f_ext, tau, restitution, margin, tol, max_iter, polish_steps, P, active, bound)  # fmt: skip
         th2, p2, v2, w2, P2, act2, gap, u2, nw2, _pt, err, iters, st, failures, pen = out
         if st == STATUS_NONFINITE:
             status = st

@@ -96,6 +96,7 @@ class ExecutionLog:
             "skipped_states": 0,
             "recovered": 0,
             "policy_switches": 0,
+            "wrong_face": 0,
         }
     )
     observed: list[tuple[str, ...]] = field(default_factory=list)  # debounced pressed sets, in order
@@ -208,6 +209,8 @@ class Executor:
             np.max(np.linalg.norm([loc.p_world - self._home for loc in fixture.locators], axis=1), initial=0.0)
         )
         self._far_m = 3.0 * (reach + fixture.workpiece.shape.bounding_radius)
+        self._goal_normals = _goal_normals_body(fixture)
+        self._release: tuple[str, float] | None = None  # (why, since): lifting the part off a wrong face
 
     # -- plan bookkeeping ----------------------------------------------------------------------
     def _set_plan(self, start_state: State, steps: list[Step]) -> None:
@@ -264,6 +267,10 @@ class Executor:
     def _on_new_state(self, t: float, pose: Pose) -> None:
         P = self._observed
         if P is None:
+            return
+        if self._release is not None:
+            return  # lifting the part off: contacts come and go until it is free
+        if self._check_faces(t, pose, P):
             return
         later = [j for j in range(self.index + 1, len(self.states)) if self.states[j] == P]
         if later:
@@ -418,6 +425,13 @@ class Executor:
             self._on_new_state(t, pose)
             if self.done:
                 return self._applied
+        if self._release is None and tick % self.every == 0 and self._observed:
+            # a part may also roll onto another face while its pressed set stays the same
+            self._check_faces(t, pose, self._observed)
+        if self._release is not None:
+            if tick % self.every == 0:
+                self._lift(t, pose, twist, M)
+            return self._applied
         at_goal = self.index >= len(self.steps)
         # at rest with everything pressed: done
         if at_goal and self._observed == self.goal_state and speed < self.settings.stall_speed_mps * 10:
@@ -470,6 +484,109 @@ class Executor:
                 self._solve(t, pose, twist, M)
             self._target = self._with_noise(self.wrench)
         return self._applied
+
+    def wrong_faces(self, pose: Pose, pressed: State) -> list[tuple[str, str]]:
+        """Pressed locators that press another face of the part than at the goal, with that face.
+
+        A locator's contact normal in the part's frame is compared with its normal at the goal
+        (cosine below ``wrong_face_cos``): a side tip under the base, a base tip against a side
+        face. No plan from such a state reaches the goal without first leaving it ("B2 cannot
+        close while B2 stays touching its -y face"). Shapes without named faces: none.
+        """
+        if not self._goal_normals:
+            return []
+        shape = self.fixture.workpiece.shape
+        out = []
+        for loc in self.fixture.locators:
+            n_goal = self._goal_normals.get(loc.name)
+            if n_goal is None or loc.name not in pressed:
+                continue
+            proj = shape.project(pose.point_body_from_world(loc.p_world))
+            if float(np.asarray(proj.normal_body) @ n_goal) < self.settings.wrong_face_cos:
+                face = shape.face_of(proj.point_body)
+                out.append((loc.name, f"face {face!r}" if face else "another face"))
+        return out
+
+    def _check_faces(self, t: float, pose: Pose, pressed: State) -> bool:
+        """Start lifting the part off when it presses a locator on the wrong face; True if it does."""
+        if self._release is not None or self.replan is None:
+            return False
+        wrong = self.wrong_faces(pose, pressed)
+        if not wrong:
+            return False
+        where = ", ".join(f"{n} presses {f}" for n, f in wrong)
+        why = f"{where}, not the face it touches at the goal (transition {self.index + 1})"
+        self.log.counts["wrong_face"] += 1
+        self.log.event(t, "guard", f"{why}: lifting the part off, then approaching again")
+        self._release = (why, t)
+        self._recover_until = None
+        return True
+
+    def _lift(self, t: float, pose: Pose, twist: FloatArray, M: FloatArray) -> None:
+        """Carry the part straight off every locator it touches, then re-plan from free space.
+
+        The hand carries the part (free flight, the whole twist controlled) along the sum of the
+        near locators' contact normals (or against gravity when they cancel) at the cruise speed,
+        keeping its orientation, until every locator is ``release_gap_m`` away; the re-plan then
+        starts with the approach from free space (:meth:`Planner.replan` of an empty state).
+        """
+        from fixplan.locating import locator_gaps
+        from fixplan.planner.segments import free_wrench
+
+        s = self.settings
+        why, since = self._release  # type: ignore[misc]  # only called while releasing
+        fx = self.fixture
+        wp = fx.workpiece
+        d = fx.dimension
+        gaps = locator_gaps(wp, pose, fx.locators)
+        if float(np.min(gaps)) >= s.release_gap_m:
+            self._release = None
+            self.log.event(t, "released", f"every locator at least {s.release_gap_m:g} m away")
+            self._observed = frozenset()
+            self._replan(t, pose, frozenset(), why, "unplanned contact")
+            return
+        if t - since > s.release_s:
+            self._fail(t, f"{why}; could not lift the part off it within {s.release_s:g} s", "stall")
+            return
+        push = np.zeros(d)
+        for loc, g in zip(fx.locators, gaps, strict=True):
+            if g < s.release_gap_m:
+                push += locator_contact(wp, pose, loc).normal_world
+        up = -np.asarray(fx.gravity, dtype=float)
+        up = up / (np.linalg.norm(up) or 1.0)
+        if float(np.linalg.norm(push)) < 0.5:
+            push = push + up
+        direction = push / float(np.linalg.norm(push))
+        twist_ahead = twist + self._measured_accel(t, twist) * self._lag_s
+        desired = np.concatenate([direction * s.speed_mps, np.zeros(self.ndof - d)])
+        a_com = self._carry_accel((desired - twist_ahead) / s.speed_time_s, M, s.accel_mps2)
+        self.log.counts["solves"] += 1
+        ok, w, reason = free_wrench(fx, pose, a_com, M)
+        if ok:
+            self._accept(w)
+        else:
+            self._reject(t, reason)
+        self._target = self._with_noise(self.wrench)
+
+    def _carry_accel(self, a_com: FloatArray, M: FloatArray, cap_mps2: float) -> FloatArray:
+        """The acceleration a carrying hand asks: translation capped at ``cap_mps2``, turning by the hand's torque.
+
+        The translation is what the plan's speed profile bounds; the turning is the hand's
+        grip: a part that arrives spinning (5–10 rad/s after it slipped off a locator) is
+        stopped with up to ``carry_torque_fraction`` of the hand's torque limit. Capping both
+        together by ``cap_mps2`` left a 2 kg box 0.12 N·m against its spin, and it tumbled on.
+        """
+        d = self.fixture.dimension
+        lin, ang = a_com[:d], a_com[d:]
+        n_lin = float(np.linalg.norm(lin))
+        if n_lin > cap_mps2:
+            lin = lin * (cap_mps2 / n_lin)
+        torque = M[d:, d:] @ ang
+        T = float(np.linalg.norm(torque))
+        T_cap = self.settings.carry_torque_fraction * self.T_max
+        if T > T_cap:
+            ang = ang * (T_cap / T)
+        return np.concatenate([lin, ang])
 
     def carry_wrench(self, pose: Pose) -> FloatArray:
         """The push that holds the part still in free space at ``pose`` (gravity's opposite, about the body origin)."""
@@ -757,11 +874,7 @@ class Executor:
             # free flight: the hand controls the whole twist, not only its part along the motion
             # (a part that fell off a contact kept falling while the push only set its speed
             # toward the target: 1 m/s within 0.7 s); the velocity error is closed in speed_time_s
-            a_com = (nu_hat * v_des - twist_ahead) / s.speed_time_s
-            size = mass_speed(a_com, M, self.mass)
-            cap = s.accel_mps2 * boost
-            if size > cap:
-                a_com = a_com * (cap / size)
+            a_com = self._carry_accel((nu_hat * v_des - twist_ahead) / s.speed_time_s, M, s.accel_mps2 * boost)
             ok, w, why = free_wrench(self.fixture, pose, a_com, M)
             if ok:
                 self._accept(w)
@@ -892,6 +1005,24 @@ class Executor:
     def _reject(self, t: float, reason: str) -> None:
         self.log.counts["failed_solves"] += 1
         self._last_reason = reason
+
+
+def _goal_normals_body(fixture: Fixture) -> dict[str, FloatArray]:
+    """Each locator's contact normal at the goal, in the part's frame (flat-faced parts only, else empty).
+
+    A round part's normal turns with the part about its axis (a cylinder turned 60° in its
+    V-block is still located): only boxes, rectangles and polygons have faces to be wrong about.
+    """
+    from fixplan.geometry import Box, Polygon, Rectangle
+
+    shape = fixture.workpiece.shape
+    goal = fixture.goal_pose
+    if goal is None or not isinstance(shape, Box | Rectangle | Polygon):
+        return {}
+    return {
+        loc.name: np.asarray(shape.project(goal.point_body_from_world(loc.p_world)).normal_body, dtype=float)
+        for loc in fixture.locators
+    }
 
 
 def _fmt(state: State | Sequence[str]) -> str:

@@ -335,11 +335,25 @@ class Planner:
             if not settled.converged:
                 return f"no pose near the observed one keeps {{{', '.join(sorted(state))}}} touching"
             start = settled.pose
+        # a part knocked free (or lifted off a locator it pressed on the wrong face) is first carried
+        # to the staging pose, as a free start is: its first contacts are then the planned ones
+        approach = None
+        if not state and fx.goal_pose is not None:
+            from dataclasses import replace
+
+            approach = plan_approach(replace(fx, start=pose))
+            if approach is not None:
+                start = approach.staging
         try:
             coarse = self.plan_from(start, state)
         except InputError as exc:
             return str(exc)
-        return plan_steps(coarse.transitions) if coarse.found else coarse.reason
+        if not coarse.found:
+            return coarse.reason
+        transitions = list(coarse.transitions)
+        if approach is not None and transitions:
+            transitions[0] = with_approach(fx, transitions[0], approach)
+        return plan_steps(transitions)
 
 
 def with_approach(fixture: Fixture, tr: Transition, approach: Approach) -> Transition:
