@@ -3,11 +3,11 @@
 States are the sets of touched locators. From the state at the start pose, every transition adds
 one locator (contacts increase monotonically) until all are touched — a lattice of at most 2ⁿ
 states. Where geometry makes several locators touch at the same instant (a redundant layout: two
-end locators at one height-apart pair of points that any motion keeping the base seated moves
-alike), the transition adds that *group* at once: ``group(state, target)`` names it (the fine
-planner's rank test, :func:`~fixplan.planner.fine.closing_group`), the edge is named by the
-group's first locator and leads to ``state ∪ group``, and no edge adds one of them alone. Each transition is priced by a fine plan (``evaluate``): its cost, or a failure with the
-reason. Dijkstra's algorithm over the lattice finds the cheapest complete sequence; a fixed
+end locators one above the other, whose gaps any motion keeping the base seated changes alike),
+the transition adds that *group* at once: ``group(state, target)`` names it (the fine planner's
+rank test, :func:`~fixplan.planner.fine.closing_group`), the edge is named by the group's first
+locator and leads to ``state ∪ group``, and no edge adds one of them alone. Each transition is
+priced by a fine plan (``evaluate``): its cost, or a failure with the reason. Dijkstra's algorithm over the lattice finds the cheapest complete sequence; a fixed
 ``order`` restricts the search to that one sequence. The result records every transition that
 was tried and why each failed, so a user can see why an order was not chosen.
 
