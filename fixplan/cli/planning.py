@@ -194,7 +194,8 @@ def solve(
             verdict = "ok" if a.success else f"fails: {a.reason}"
             if a.stage == "precheck":
                 verdict = f"cheap check fails, tried after the others: {a.reason}"
-            typer.echo(f"  tried {{{', '.join(a.established)}}} + {a.target}: {verdict}", err=True)
+            added = "{" + ",".join(a.added) + "}" if a.together else a.target
+            typer.echo(f"  tried {{{', '.join(a.established)}}} + {added}: {verdict}", err=True)
 
     result = run_solve(
         fixture,
@@ -254,7 +255,7 @@ def _print_plan(plan: Plan, fixture: Fixture) -> None:
             rob = "-" if tr.friction_robustness is None else f"±{tr.friction_robustness:.2g}"
             table.add_row(
                 str(i),
-                f"{{{','.join(tr.from_state)}}} + {tr.added}",
+                f"{{{','.join(tr.from_state)}}} + {tr.added_label}",
                 tr.motion,
                 w,
                 margin,

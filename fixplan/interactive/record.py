@@ -436,7 +436,7 @@ def verify_plan_file(fixture: Fixture, data: dict[str, Any], *, source: str = "p
             raise InputError(
                 f"{source}: transitions[{i}].motion: expected one of {', '.join(get_args(TransitionKind))}, got {tr.motion!r}"
             )
-        steps.append(Step(tr.from_state, tr.added, cast(TransitionKind, tr.motion), tr.poses))
+        steps.append(Step(tr.from_state, tr.added, cast(TransitionKind, tr.motion), tr.poses, tr.together))
     touching = contact_set(fixture, "start")
     start_state = frozenset(c.name for c in touching.contacts if c.kind == "locator")
     # the plan's policy (solve --json's "policy"), as solve verified it: the executor takes it from

@@ -2,8 +2,12 @@
 
 States are the sets of touched locators. From the state at the start pose, every transition adds
 one locator (contacts increase monotonically) until all are touched — a lattice of at most 2ⁿ
-states. Each transition is priced by a fine plan (``evaluate``): its cost, or a failure with the
-reason. Dijkstra's algorithm over the lattice finds the cheapest complete sequence; a fixed
+states. Where geometry makes several locators touch at the same instant (a redundant layout: two
+end locators one above the other, whose gaps any motion keeping the base seated changes alike),
+the transition adds that *group* at once: ``group(state, target)`` names it (the fine planner's
+rank test, :func:`~fixplan.planner.fine.closing_group`), the edge is named by the group's first
+locator and leads to ``state ∪ group``, and no edge adds one of them alone. Each transition is
+priced by a fine plan (``evaluate``): its cost, or a failure with the reason. Dijkstra's algorithm over the lattice finds the cheapest complete sequence; a fixed
 ``order`` restricts the search to that one sequence. The result records every transition that
 was tried and why each failed, so a user can see why an order was not chosen.
 
@@ -48,6 +52,9 @@ Estimate = Callable[[Pose, State, str], "tuple[float, Pose] | None"]
 # a cheap necessary check of a transition from the pose it would start at, before its fine plan:
 # None when it passes, else why not (e.g. no non-jamming push at the first poses of the guess)
 Precheck = Callable[[Pose, State, str], "str | None"]
+# the locators a transition adds with ``target`` (sorted, ``target`` among them): ``(target,)`` unless
+# geometry closes others at the same instant
+Group = Callable[[State, str], "tuple[str, ...]"]
 # how much dearer a transition that failed its precheck is made: it is tried after the others
 PRECHECK_PENALTY = DEFAULT.planner.precheck_penalty
 
@@ -64,6 +71,11 @@ class Attempt:
     # "fine": its fine plan was run; "precheck": only the cheap check before it, which failed (the
     # transition was then tried after the others, and appears again if it was fine-planned)
     stage: str = "fine"
+    together: tuple[str, ...] = ()  # the locators added with the target (closing together with it)
+
+    @property
+    def added(self) -> tuple[str, ...]:
+        return (self.target, *self.together)
 
 
 @dataclass
@@ -71,7 +83,7 @@ class CoarsePlan:
     """The chosen sequence of states, the fine plans along it, and everything that was tried."""
 
     found: bool
-    sequence: list[tuple[str, ...]]  # states from the first contact to all locators, one more each step
+    sequence: list[tuple[str, ...]]  # states from the first contact to all locators, one (group) more each step
     transitions: list[Any]  # the fine plans along the sequence
     cost: float
     attempts: list[Attempt] = field(default_factory=list)
@@ -80,6 +92,20 @@ class CoarsePlan:
 
 def _key(state: State) -> tuple[str, ...]:
     return tuple(sorted(state))
+
+
+def _single(state: State, target: str) -> tuple[str, ...]:
+    return (target,)
+
+
+def _together(group: Group, state: State, target: str) -> tuple[str, ...]:
+    """The locators added with ``target`` (not ``target`` itself)."""
+    return tuple(n for n in group(state, target) if n != target)
+
+
+def _leads(group: Group, state: State, goal: State) -> list[str]:
+    """The targets out of ``state``: each locator not touched yet, one per group (its first)."""
+    return [t for t in sorted(goal - state) if min(group(state, t)) == t]
 
 
 def search(
@@ -92,6 +118,7 @@ def search(
     progress: Callable[[Attempt], None] | None = None,
     estimate: Estimate | None = None,
     precheck: Precheck | None = None,
+    group: Group | None = None,
 ) -> CoarsePlan:
     """Cheapest monotone sequence of contact states from ``start_state`` to all locators.
 
@@ -103,9 +130,13 @@ def search(
     ``precheck`` (lazy search only) is run on a transition of the best sequence before its fine
     plan; one that fails it is not dropped but made :data:`PRECHECK_PENALTY` times dearer, so the
     search first tries the sequences that pass and still fine-plans this one when they all fail.
+
+    ``group`` names the locators a transition adds with its target (default: the target alone);
+    a fixed ``order`` must then name a group's locators one after the other.
     """
+    grp = group or _single
     if estimate is not None and order is None:
-        return _lazy_search(start_state, all_locators, start_pose, evaluate, estimate, progress, precheck)
+        return _lazy_search(start_state, all_locators, start_pose, evaluate, estimate, progress, precheck, grp)
     goal: State = frozenset(all_locators)
     unknown = start_state - goal
     if unknown:
@@ -129,30 +160,46 @@ def search(
 
     def evaluated(state: State, target: str, pose: Pose) -> tuple[float, Pose, Any] | None:
         result = evaluate(pose, state, target)
-        _record(attempts, progress, state, target, result)
+        _record(attempts, progress, state, target, result, _together(grp, state, target))
         return (float(result.cost), result.end_pose, result) if result.success else None
 
     def candidates(state: State) -> list[str]:
         if order is not None:
-            return [order[len(state) - len(start_state)]]
-        return sorted(goal - state)
+            i = len(state) - len(start_state)
+            t = order[i]
+            together = grp(state, t)
+            if set(together) != set(order[i : i + len(together)]):
+                # geometry closes these at the same instant: the order must name them together
+                why = (
+                    f"{', '.join(together)} close together from {{{', '.join(sorted(state))}}} "
+                    f"(a redundant layout): --order must name them one after the other"
+                )
+                _log(attempts, progress, Attempt(_key(state), t, False, float("inf"), why))
+                return []
+            return [t]
+        return _leads(grp, state, goal)
 
-    path = _dijkstra(start_state, goal, start_pose, evaluated, candidates)
+    path = _dijkstra(start_state, goal, start_pose, evaluated, candidates, grp)
     if path is None:
         return CoarsePlan(False, [], [], float("inf"), attempts, _no_sequence(attempts))
     transitions = [result for _, _, result in path]
-    return _plan(start_state, path, transitions, attempts)
+    return _plan(start_state, path, transitions, attempts, grp)
 
 
 def _record(
-    attempts: list[Attempt], progress: Callable[[Attempt], None] | None, state: State, target: str, result: Any
+    attempts: list[Attempt],
+    progress: Callable[[Attempt], None] | None,
+    state: State,
+    target: str,
+    result: Any,
+    together: tuple[str, ...] = (),
 ) -> None:
     _log(
         attempts,
         progress,
         Attempt(
             _key(state), target, bool(result.success), float(result.cost) if result.success else float("inf"),
-            result.reason,
+            result.reason, "fine", together,
         ),
     )  # fmt: skip
 
@@ -168,7 +215,8 @@ def _no_sequence(attempts: list[Attempt]) -> str:
     reason = "no sequence of transitions reaches every locator"
     if failures:
         last = failures[-1]
-        reason += f"; e.g. adding {last.target} to {{{', '.join(last.established)}}} fails: {last.reason}"
+        what = "{" + ", ".join(last.added) + "}" if last.together else last.target
+        reason += f"; e.g. adding {what} to {{{', '.join(last.established)}}} fails: {last.reason}"
     return reason
 
 
@@ -181,12 +229,14 @@ def _dijkstra(
     start_pose: Pose,
     weight: Weight,
     candidates: Callable[[State], list[str]],
+    group: Group = _single,
 ) -> list[tuple[State, str, Any]] | None:
     """Cheapest path through the lattice: ``(state, target, payload)`` per transition, or None.
 
     ``weight(state, target, pose)`` gives a transition's cost, end pose and payload (None: no
     such transition); a state's pose is the end pose of the cheapest transition that reached it.
-    Ties are broken by the sorted state names (deterministic).
+    A transition leads to ``state ∪ group(state, target)``. Ties are broken by the sorted state
+    names (deterministic).
     """
     best: dict[State, float] = {start_state: 0.0}
     came_from: dict[State, tuple[State, str, Any]] = {}
@@ -205,7 +255,7 @@ def _dijkstra(
             w = weight(state, target, pose_at[state])
             if w is None:
                 continue
-            nxt = state | {target}
+            nxt = state | {target} | set(group(state, target))
             if nxt not in settled and cost + w[0] < best.get(nxt, float("inf")):
                 best[nxt] = cost + w[0]
                 came_from[nxt] = (state, target, w[2])
@@ -224,9 +274,13 @@ def _dijkstra(
 
 
 def _plan(
-    start_state: State, path: list[tuple[State, str, Any]], transitions: list[Any], attempts: list[Attempt]
+    start_state: State,
+    path: list[tuple[State, str, Any]],
+    transitions: list[Any],
+    attempts: list[Attempt],
+    group: Group = _single,
 ) -> CoarsePlan:
-    states = [start_state] + [s | {t} for s, t, _ in path]
+    states = [start_state] + [s | {t} | set(group(s, t)) for s, t, _ in path]
     sequence = [_key(s) for s in states if s]  # the free state is not part of the sequence
     return CoarsePlan(True, sequence, transitions, float(sum(float(t.cost) for t in transitions)), attempts, "")
 
@@ -239,6 +293,7 @@ def _lazy_search(
     estimate: Estimate,
     progress: Callable[[Attempt], None] | None,
     precheck: Precheck | None = None,
+    group: Group = _single,
 ) -> CoarsePlan:
     """LazySP over the lattice: fine-plan only the transitions on the current best sequence."""
     goal: State = frozenset(all_locators)
@@ -271,7 +326,7 @@ def _lazy_search(
         return total
 
     def best() -> tuple[list[tuple[State, str, Any]] | None, float]:
-        path = _dijkstra(start_state, goal, start_pose, weight, lambda state: sorted(goal - state))
+        path = _dijkstra(start_state, goal, start_pose, weight, lambda state: _leads(group, state, goal), group)
         return path, (float("inf") if path is None else cost_of(path))
 
     slack = DEFAULT.planner.lazy_slack
@@ -297,12 +352,16 @@ def _lazy_search(
                             max(PRECHECK_PENALTY * guess[0], guess[0] + DEFAULT.planner.precheck_floor),
                             guess[1],
                         )
-                        _log(attempts, progress, Attempt(_key(state), target, False, float("inf"), why, "precheck"))
+                        _log(
+                            attempts, progress,
+                            Attempt(_key(state), target, False, float("inf"), why, "precheck",
+                                    _together(group, state, target)),
+                        )  # fmt: skip
                         complete = False
                         break
                 result = evaluate(pose, state, target)
                 done[key] = result
-                _record(attempts, progress, state, target, result)
+                _record(attempts, progress, state, target, result, _together(group, state, target))
                 guess = guessed.get(key)
                 if not result.success:
                     complete = False
@@ -321,5 +380,5 @@ def _lazy_search(
                         break
             pose = done[key].end_pose
         if complete:
-            return _plan(start_state, path, [done[(s, t)] for s, t, _ in path], attempts)
+            return _plan(start_state, path, [done[(s, t)] for s, t, _ in path], attempts, group)
     return CoarsePlan(False, [], [], float("inf"), attempts, "the lazy search did not settle (too many rounds)")

@@ -74,9 +74,18 @@ class Step:
     target: str
     kind: TransitionKind
     path: tuple[Pose, ...]  # guide poses, the first near where the transition starts, the last where target touches
+    together: tuple[str, ...] = ()  # locators closing at the same instant (a redundant layout): pressed too
+
+    @property
+    def added(self) -> tuple[str, ...]:
+        """The target and the locators closing together with it: the step is done when all touch."""
+        return (self.target, *self.together)
 
     def to_json(self) -> dict[str, Any]:
-        return {"established": list(self.established), "target": self.target, "kind": self.kind}
+        out: dict[str, Any] = {"established": list(self.established), "target": self.target, "kind": self.kind}
+        if self.together:
+            out["together"] = list(self.together)
+        return out
 
 
 @dataclass
@@ -217,7 +226,7 @@ class Executor:
         self.steps = steps
         self.states: list[State] = [start_state]
         for st in steps:
-            self.states.append(frozenset(st.established) | {st.target})
+            self.states.append(frozenset(st.established) | set(st.added))
         self.index = 0  # current transition (== len(steps): holding at the goal)
         self._hold = None
         self._arrived = False
@@ -304,8 +313,8 @@ class Executor:
         if lost:
             self.log.counts["lost_contact"] += 1
             why = f"lost contact with {', '.join(lost)} in transition {self.index + 1}"
-            target = self.steps[self.index].target if self.index < len(self.steps) else None
-            if self._recover_until is None and (P - current) <= {target}:
+            added = set(self.steps[self.index].added) if self.index < len(self.steps) else set()
+            if self._recover_until is None and (P - current) <= added:
                 # first press the part back into what it left (a part that rocks off a contact
                 # on impact settles back): re-plan only if that does not restore the state
                 self._recover_until = t + self.settings.recover_s
@@ -464,10 +473,10 @@ class Executor:
             # the target touched: stop driving at once and press into the new state's contacts
             # (the push that brought the part here would carry it on, or tip it back)
             step = self.steps[self.index]
-            arrived = step.target in pressed and set(step.established) <= pressed
+            arrived = set(step.added) <= pressed and set(step.established) <= pressed
             if arrived and not self._arrived:
                 self._arrived = True
-                self.wrench = self.hold_wrench(pose, [*step.established, step.target])
+                self.wrench = self.hold_wrench(pose, [*step.established, *step.added])
                 self._target = self._with_noise(self.wrench)
                 return self._applied
             if not arrived:

@@ -151,6 +151,10 @@ class Transition:
     formulation : str
         The rung of :data:`LADDER` that found the path (``"default"``: the plain program); ``""``
         when none did (the reason lists each one's IPOPT status).
+    together : tuple of str
+        The locators that close together with ``target`` (:func:`closing_group`: a redundant
+        layout where geometry makes them touch at the same instant); they touch at the last knot
+        too, and the transition is ``established → established + {target} + together``.
     """
 
     established: tuple[str, ...]
@@ -170,6 +174,12 @@ class Transition:
     cost: float = float("inf")
     ipopt_iterations: int = 0
     formulation: str = "default"
+    together: tuple[str, ...] = ()
+
+    @property
+    def added(self) -> tuple[str, ...]:
+        """Every locator the transition adds: the target, then those closing together with it."""
+        return (self.target, *self.together)
 
     @property
     def end_pose(self) -> Pose:
@@ -209,6 +219,7 @@ class Transition:
             "ipopt_status": self.ipopt_status,
             "ipopt_iterations": int(self.ipopt_iterations),
             "formulation": self.formulation,
+            "together": list(self.together),
         }
 
 
@@ -331,6 +342,7 @@ def plan_transition(
     settings: PlannerSettings = DEFAULT.planner,
     ladder: Sequence[Formulation] = LADDER,
     diagnose: bool = True,
+    together: Sequence[str] = (),
 ) -> Transition:
     """Plan the path and wrenches that add ``target`` to the ``established`` contacts.
 
@@ -368,6 +380,12 @@ def plan_transition(
         When no formulation finds a path, name what blocks it: locators that close together with
         the target (:func:`closing_together`), else the constraints an elastic re-solve has to
         relax (:func:`blocking_constraints`).
+    together : sequence of str
+        Locators that close together with ``target`` (:func:`closing_group`): planned as one
+        transition. Their gaps stay ≥ 0 at every knot (no clearance: geometry closes them with
+        the target, a second equality would only repeat the target's) and must touch at the last
+        knot with the exact gaps (|gap| ≤ ``touch_m``). The wrench search is the target's: every
+        locator of the group is open along each segment, pressed only at the end.
 
     Returns
     -------
@@ -383,14 +401,19 @@ def plan_transition(
         locator, fewer than one knot, an unknown kind, a ladder with no formulation that applies.
     """
     est = tuple(established)
+    group = tuple(together)
     names = [loc.name for loc in fixture.locators]
-    for n in (*est, target):
+    for n in (*est, target, *group):
         if n not in names:
             raise InputError(f"unknown locator {n!r} (known: {', '.join(names)})")
     if len(set(est)) != len(est):
         raise InputError(f"established locators repeat: {', '.join(est)}")
     if target in est:
         raise InputError(f"target {target!r} is already established")
+    if len(set((target, *group))) != len(group) + 1 or set(group) & set(est):
+        raise InputError(
+            f"together must name other locators than the target and the established ones, got {', '.join(group)}"
+        )
     if knots < 1:
         raise InputError(f"knots must be ≥ 1, got {knots}")
     if not clearance_m >= 0.0:
@@ -411,7 +434,7 @@ def plan_transition(
     if loose:
         raise InputError(f"established locators must touch at the start (|gap| ≤ {tol_touch:g} m): {', '.join(loose)}")
 
-    prob = _Problem.build(fixture, start, est, target, int(knots), clearance_m, settings, start_gaps)
+    prob = _Problem.build(fixture, start, est, target, int(knots), clearance_m, settings, start_gaps, group)
     tried: list[str] = []
     first: _Path | None = None
     path: _Path | None = None
@@ -440,7 +463,7 @@ def plan_transition(
 
     if first is None:
         raise InputError(
-            f"no formulation of the ladder applies to {_state(est)} → {target} "
+            f"no formulation of the ladder applies to {_state(est)} → {_added(target, group)} "
             f"(tried to skip: {', '.join(f.name for f in ladder)}); expected one without other_kind or kept='surface'"
         )
     if path is None:
@@ -455,11 +478,11 @@ def plan_transition(
     via = "" if path.formulation == ladder[0].name else f" (formulation: {path.formulation})"
     if bad:
         k = bad[0]
-        reason = f"segment {k} of {K} ({_state(est)} → {target}): {reasons[k]}"
+        reason = f"segment {k} of {K} ({_state(est)} → {_added(target, group)}): {reasons[k]}"
         success = False
     else:
         margin = f"least margin {float(np.min(margins)):.3g} N" if est else "free motion, no contact to press"
-        reason = f"{path.kind} on {_state(est)} to touch {target}: {K} segments, {margin}{via}"
+        reason = f"{path.kind} on {_state(est)} to touch {_added(target, group)}: {K} segments, {margin}{via}"
         success = True
     return Transition(
         est,
@@ -479,6 +502,7 @@ def plan_transition(
         path.cost if success else float("inf"),
         path.iterations,
         path.formulation,
+        group,
     )
 
 
@@ -508,6 +532,11 @@ class _Problem:
     W: FloatArray
     com_b: FloatArray
     L: float
+    together: tuple[str, ...] = ()  # locators closing together with the target (gap ≥ 0, touch at the end)
+    # kept contacts whose normal row at the goal is a combination of the other kept ones' (a group
+    # added together earlier): their gap equality would repeat the others' (more equalities than
+    # unknowns: IPOPT's Not_Enough_Degrees_Of_Freedom), so they are kept as gap ≥ 0 and checked exactly
+    dependent: tuple[str, ...] = ()
 
     @staticmethod
     def build(
@@ -519,6 +548,7 @@ class _Problem:
         clearance_m: float,
         settings: PlannerSettings,
         start_gaps: dict[str, float],
+        together: tuple[str, ...] = (),
     ) -> _Problem:
         wp = fixture.workpiece
         d, nv = fixture.dimension, fixture.ndof
@@ -533,7 +563,7 @@ class _Problem:
         features = {n: feature_at(fixture, locs[n], start if (n in est or goal is None) else goal) for n in names}
         second: dict[str, Feature] = {}  # a second face for locators beside the goal's face (see clearance_features)
         for n in names:
-            if n not in est and n != target:
+            if n not in est and n != target and n not in together:
                 extra = clearance_features(fixture, locs[n], start, features[n])[1:]
                 if extra:
                     second[n] = extra[0]
@@ -542,11 +572,11 @@ class _Problem:
         scale = np.concatenate([np.full(d, L), np.ones(nv - d)])
         M0 = mass_matrix(wp.mass_kg, wp.inertia_body, start.R_world_body)
         W = np.diag(scale) @ M0 @ np.diag(scale) / (wp.mass_kg * L * L)  # metric on y
-        others = [n for n in names if n not in est and n != target]
+        others = [n for n in names if n not in est and n != target and n not in together]
         com_b = np.asarray(wp.com_body, dtype=float)
         return _Problem(
             fixture, start, est, target, others, K, clearance_m, settings, start_gaps, goal, features, second,
-            scale, M0, W, com_b, L,
+            scale, M0, W, com_b, L, together, dependent_kept(fixture, est),
         )  # fmt: skip
 
 
@@ -658,8 +688,9 @@ def _checked(
     # rejected a sound path ("a feature's closed form does not hold")
     held = {n: min(prob.start_gaps[n], _model_gap(prob, n, prob.start)) for n in prob.others}
     violation = _violation(
-        fx, poses, prob.est, prob.target, prob.others, prob.clearance_m, {**prob.start_gaps, **held}, monotone
-    )
+        fx, poses, prob.est, prob.target, prob.others, prob.clearance_m, {**prob.start_gaps, **held}, monotone,
+        prob.together,
+    )  # fmt: skip
     slip = _slip(fx, poses, prob.est) if kind == "roll" else 0.0
     dxi = np.diff(xi, axis=1)
     cost = float(sum(np.sqrt(max(float(v @ prob.M0 @ v), 0.0)) for v in dxi.T) / np.sqrt(fx.workpiece.mass_kg))
@@ -770,7 +801,7 @@ def _solve_path(
     plane_start = {n: float(ca.evalf(gap(0, n))) for n in prob.others}
     for k in range(1, K + 1):
         for n in est:
-            add(("kept contact", n), "eq", [gap(k, n) / L])
+            add(("kept contact", n), "ge" if n in prob.dependent else "eq", [gap(k, n) / L])
             add(
                 ("feature bounds", n),
                 "ge",
@@ -779,6 +810,10 @@ def _solve_path(
         for n in prob.others:
             held = min(prob.clearance_m, plane_start[n], _model_gap(prob, n, start))
             add(("clearance", n), "ge", [(gap(k, n) - held) / L])
+        for n in prob.together:
+            # closing with the target: never through the part, touching where the target does
+            # (geometry makes its gap a fixed multiple of the target's; no second end equality)
+            add(("closing together", n), "ge", [gap(k, n) / L])
         if monotone:
             add(("monotone target gap", target), "ge", [(gap(k - 1, target) - gap(k, target)) / L])
         elif k < K:
@@ -862,7 +897,7 @@ def _failed(prob: _Problem, first: _Path, reason: str) -> Transition:
     return Transition(
         prob.est, prob.target, first.kind, first.poses, np.full((K, nv), np.nan), np.full(K, np.nan), False, reason,
         first.violation, first.solve_time_s, first.status, np.zeros(K, dtype=bool), [], first.slip, float("inf"),
-        first.iterations, "",
+        first.iterations, "", prob.together,
     )  # fmt: skip
 
 
@@ -872,7 +907,7 @@ def _no_path_reason(
     """Why no formulation found a path, naming the blocking locators and constraint kinds."""
     est, target = prob.est, prob.target
     tol_touch = prob.fixture.tolerances.touch_m
-    head = f"no path from {_state(est)} to touch {target}"
+    head = f"no path from {_state(est)} to touch {_added(target, prob.together)}"
     forms = f"(IPOPT: {'; '.join(tried)}; first guess: {first.guess_note})"
     if first.status in IPOPT_PATH_FOUND and len(tried) == 1:
         return (
@@ -881,7 +916,7 @@ def _no_path_reason(
         )
     if not diagnose:
         return f"{head} keeping the others ≥ {prob.clearance_m:g} m away {forms}"
-    together = closing_together(prob.fixture, est, target)
+    together = [c for c in closing_together(prob.fixture, est, target) if c.locator not in prob.together]
     if together:
         rank = together[0].rank
         pairs = ", ".join(c.locator for c in together)
@@ -989,48 +1024,124 @@ class ClosingTogether:
     rank: int
 
 
-def closing_together(
-    fixture: Fixture, established: Sequence[str], target: str, pose: Pose | None = None
-) -> list[ClosingTogether]:
-    """The locators that close together with ``target`` while ``established`` stay touching.
+@dataclass(frozen=True)
+class GoalRows:
+    """Every locator's normal row at one pose (the goal) and their rank: the rank test's input.
 
-    Evaluated at ``pose`` (default: the goal; [] when the fixture has no goal). A redundant layout
-    (two side locators that always close together, base locators placed so that closing one closes
-    another) has every locator's normal rows of rank below the dof count there; the coarse search
-    can plan such a pair as one transition.
+    Built once per fixture (:func:`goal_rows`) so that the coarse search can ask
+    :func:`closing_group` of every transition of its lattice without a contact set each time.
     """
+
+    names: tuple[str, ...]
+    G: FloatArray
+    rank: int
+
+    def row(self, name: str) -> FloatArray:
+        return self.G[self.names.index(name)]
+
+
+def goal_rows(fixture: Fixture, pose: Pose | None = None) -> GoalRows | None:
+    """The normal rows of every locator at ``pose`` (default: the goal; None without a goal)."""
     if pose is None:
         if not fixture.is_full:
-            return []
+            return None
         try:
             pose = fixture.goal
         except Exception:  # noqa: BLE001 - no goal, nothing to compare
-            return []
-    names = [loc.name for loc in fixture.locators]
-    cs = contact_set(fixture, pose, names)
-    rows = {n: cs.G[i] for i, n in enumerate(names)}
+            return None
+    names = tuple(loc.name for loc in fixture.locators)
+    G = np.asarray(contact_set(fixture, pose, list(names)).G, dtype=float)
     tol = DEFAULT.planner.span_rel
-    rank = int(np.linalg.matrix_rank(cs.G, tol=tol * max(float(np.abs(cs.G).max()), 1.0)))
-    t = rows[target]
-    kept = np.array([rows[n] for n in established]).reshape(len(established), fixture.ndof)
+    rank = int(np.linalg.matrix_rank(G, tol=tol * max(float(np.abs(G).max()), 1.0)))
+    return GoalRows(names, G, rank)
+
+
+def closing_together(
+    fixture: Fixture,
+    established: Sequence[str],
+    target: str,
+    pose: Pose | None = None,
+    rows: GoalRows | None = None,
+) -> list[ClosingTogether]:
+    """The locators that close together with ``target`` while ``established`` stay touching.
+
+    Evaluated at ``pose`` (default: the goal; [] when the fixture has no goal), or on ``rows``
+    from :func:`goal_rows`. A redundant layout (two side locators that always close together,
+    base locators placed so that closing one closes another) has every locator's normal rows of
+    rank below the locator count there; the coarse search plans such a group as one transition
+    (:func:`closing_group`).
+    """
+    if rows is None:
+        rows = goal_rows(fixture, pose)
+        if rows is None:
+            return []
+    tol = DEFAULT.planner.span_rel
+    t = rows.row(target)
+    kept = np.array([rows.row(n) for n in established]).reshape(len(established), fixture.ndof)
 
     def residual(A: FloatArray) -> tuple[float, FloatArray]:
         if A.shape[0] == 0:
             return float(np.linalg.norm(t)), np.zeros(0)
-        coef = np.linalg.lstsq(A.T, t, rcond=None)[0]
+        coef = np.asarray(np.linalg.lstsq(A.T, t, rcond=None)[0], dtype=float)
         return float(np.linalg.norm(A.T @ coef - t)), coef
 
     scale = float(np.linalg.norm(t)) or 1.0
     if residual(kept)[0] <= tol * scale:
         return []  # the target's gap cannot change at all while the kept ones touch: another cause
     out = []
-    for n in names:
+    for n in rows.names:
         if n in established or n == target:
             continue
-        r, coef = residual(np.vstack([kept, rows[n][None, :]]))
+        r, coef = residual(np.vstack([kept, rows.row(n)[None, :]]))
         if r <= tol * scale and coef[-1] > 0:
-            out.append(ClosingTogether(n, float(coef[-1]), rank))
+            out.append(ClosingTogether(n, float(coef[-1]), rows.rank))
     return out
+
+
+def dependent_kept(fixture: Fixture, established: Sequence[str], rows: GoalRows | None = None) -> tuple[str, ...]:
+    """The kept locators whose normal row at the goal is a combination of the earlier kept ones'.
+
+    After a group that closed together (E1 and E2 with the base seated) both stay touching, and
+    the second's gap follows from the others': asking it to stay 0 too repeats a constraint.
+    """
+    if len(established) < 2:
+        return ()
+    if rows is None:
+        rows = goal_rows(fixture)
+        if rows is None:
+            return ()
+    tol = DEFAULT.planner.span_rel
+    basis: list[FloatArray] = []
+    out = []
+    for n in established:
+        r = rows.row(n)
+        if basis:
+            A = np.array(basis)
+            coef = np.linalg.lstsq(A.T, r, rcond=None)[0]
+            if float(np.linalg.norm(A.T @ coef - r)) <= tol * (float(np.linalg.norm(r)) or 1.0):
+                out.append(n)
+                continue
+        basis.append(r)
+    return tuple(out)
+
+
+def closing_group(
+    fixture: Fixture, established: Sequence[str], target: str, rows: GoalRows | None = None
+) -> tuple[str, ...]:
+    """``target`` and every locator that geometry makes touch at the same instant (sorted).
+
+    The closure of :func:`closing_together` from ``established``: ``(target,)`` alone in a layout
+    whose normal rows are independent; ``("E1", "E2")`` for two end locators that any motion
+    keeping the base seated moves alike. The coarse search adds such a group in one transition.
+    """
+    group = {target}
+    todo = [target]
+    while todo:
+        for c in closing_together(fixture, established, todo.pop(), rows=rows):
+            if c.locator not in group:
+                group.add(c.locator)
+                todo.append(c.locator)
+    return tuple(sorted(group))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1114,6 +1225,11 @@ def _compliant_guess(prob: _Problem, kind: str) -> FloatArray:
 
 def _state(est: tuple[str, ...]) -> str:
     return "{" + ", ".join(est) + "}" if est else "free"
+
+
+def _added(target: str, together: Sequence[str] = ()) -> str:
+    """``E1``, or ``{E1, E2}`` for a group closing together."""
+    return "{" + ", ".join((target, *together)) + "}" if together else target
 
 
 def _no_slip(
@@ -1237,8 +1353,12 @@ def _violation(
     clearance_m: float,
     start_gaps: dict[str, float],
     monotone: bool = True,
+    together: Sequence[str] = (),
 ) -> float:
-    """Largest violation of the plan's constraints with the exact gaps [m] (knots 1..K)."""
+    """Largest violation of the plan's constraints with the exact gaps [m] (knots 1..K).
+
+    The locators closing together with the target must not penetrate, and touch at the last knot.
+    """
     wp = fixture.workpiece
     worst = 0.0
     K = len(poses) - 1
@@ -1250,9 +1370,11 @@ def _violation(
         for n in others:
             worst = max(worst, min(clearance_m, start_gaps[n]) - g[n])
         worst = max(worst, -g[target], g[target] - prev_t if monotone else 0.0)
+        for n in together:
+            worst = max(worst, -g[n])
         prev_t = g[target]
         if k == K:
-            worst = max(worst, abs(g[target]))
+            worst = max(worst, abs(g[target]), *(abs(g[n]) for n in together))
     return float(worst)
 
 
@@ -1276,10 +1398,14 @@ __all__ = [
     "Blocker",
     "ClosingTogether",
     "Formulation",
+    "GoalRows",
     "Transition",
     "blocking_constraints",
+    "closing_group",
     "closing_together",
     "default_kind",
+    "dependent_kept",
+    "goal_rows",
     "plan_transition",
     "pose_from_twist",
     "twist_from_pose",

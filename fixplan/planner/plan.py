@@ -500,6 +500,11 @@ class PlannedTransition:
     survives (None: nothing to slip). ``motion`` is ``free`` from no contact, else the fine planner's
     kind (``slide`` or ``roll``). ``extras`` keeps the keys of a file that are not fields (a recorded
     session's ``pushes``, ``t_start_s``, ``lost``).
+
+    ``added`` is the locator the transition closes; ``together`` the locators that geometry closes
+    at the same instant (a redundant layout, planned as one transition: ``{B1,B2,B3,S1,S2} +
+    {E1,E2}``). In the file ``"added"`` is then the list of them all, ``["E1", "E2"]``; a transition
+    that adds one locator keeps the string, ``"E1"``.
     """
 
     from_state: tuple[str, ...]
@@ -518,6 +523,17 @@ class PlannedTransition:
     # in memory only (not in the file): the fine plan's wrench per segment (K, ndof) and its kind of motion
     segment_wrenches: FloatArray | None = field(default=None, repr=False)
     kind: str | None = field(default=None, repr=False)
+    together: tuple[str, ...] = ()
+
+    @property
+    def added_names(self) -> tuple[str, ...]:
+        """Every locator the transition adds (``()`` for a recorded transition that added none)."""
+        return () if self.added is None else (self.added, *self.together)
+
+    @property
+    def added_label(self) -> str:
+        """``E1``, or ``{E1,E2}`` for a group closing together (what the CLI and reports print)."""
+        return "{" + ",".join(self.added_names) + "}" if self.together else str(self.added)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, PlannedTransition):
@@ -534,7 +550,7 @@ class PlannedTransition:
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"from": list(self.from_state), "to": list(self.to_state)}
         if self.added is not None:
-            out["added"] = self.added
+            out["added"] = list(self.added_names) if self.together else self.added
         out.update(
             {
                 "motion": self.motion,
@@ -555,13 +571,23 @@ class PlannedTransition:
         if not isinstance(obj, dict):
             raise InputError(f"{where}: expected an object, got {_short(obj)}")
         before = tuple(_names(obj.get("from", []), f"{where}.from"))
-        added: str | None = obj.get("added")
-        if added is not None and not isinstance(added, str):
-            _names([added], f"{where}.added")
+        raw = obj.get("added")
+        together: tuple[str, ...] = ()
+        if isinstance(raw, list):
+            # a group closing together: ["E1", "E2"]
+            group = _names(raw, f"{where}.added")
+            if not group:
+                raise InputError(f"{where}.added: expected a locator name or a non-empty list of them, got []")
+            added: str | None = group[0]
+            together = tuple(group[1:])
+        else:
+            added = raw
+            if added is not None and not isinstance(added, str):
+                _names([added], f"{where}.added")
         if "to" in obj:
             after = tuple(_names(obj["to"], f"{where}.to"))
         else:
-            after = tuple(sorted([*before, added])) if added else before
+            after = tuple(sorted([*before, added, *together])) if added else before
         # a hand-written plan without durations replays at 1 s per transition
         duration = obj.get("time_s", 1.0)
         if not _is_number(duration) or duration < 0:
@@ -598,6 +624,7 @@ class PlannedTransition:
             solve_time_s=num("solve_time_s"),
             poses=poses,
             extras={k: v for k, v in obj.items() if k not in known},
+            together=together,
         )
 
 
@@ -612,21 +639,26 @@ class TriedTransition:
     # "fine": its fine plan ran; "precheck": only the cheap cone check before it, which failed (the
     # search then tried the transition after the others)
     stage: str = "fine"
+    together: tuple[str, ...] = ()  # locators closing at the same instant (then "add" is a list)
 
     def to_json(self) -> dict[str, Any]:
-        return {"from": list(self.from_state), "add": self.added, "ok": self.ok, "reason": self.reason,
+        add: str | list[str] = [self.added, *self.together] if self.together else self.added
+        return {"from": list(self.from_state), "add": add, "ok": self.ok, "reason": self.reason,
                 "stage": self.stage}  # fmt: skip
 
     @classmethod
     def from_json(cls, obj: Any, where: str = "tried") -> TriedTransition:
         if not isinstance(obj, dict):
             raise InputError(f"{where}: expected an object, got {_short(obj)}")
+        add = obj.get("add", "")
+        group = _names(add, f"{where}.add") if isinstance(add, list) else [str(add)]
         return cls(
             tuple(_names(obj.get("from", []), f"{where}.from")),
-            str(obj.get("add", "")),
+            group[0] if group else "",
             bool(obj.get("ok", False)),
             str(obj.get("reason", "")),
             str(obj.get("stage", "fine")),
+            tuple(group[1:]),
         )
 
 
@@ -710,7 +742,9 @@ class Plan:
             "transitions": [tr.to_json() for tr in self.transitions],
             "tried": [a.to_json() for a in self.tried],
             "proven": self.proven,
-            "certificate": [{"from": list(a.from_state), "add": a.added, "reason": a.reason} for a in self.certificate],
+            "certificate": [
+                {k: v for k, v in a.to_json().items() if k in ("from", "add", "reason")} for a in self.certificate
+            ],
             "verification": None if self.verification is None else self.verification.to_json(),
             "policy": None if self.policy is None else self.policy.to_json(),
             "coverage": None if self.policy is None else self.policy.coverage,
@@ -791,7 +825,8 @@ def check_names(data: Any, fixture: Fixture, source: str) -> None:
             raise InputError(f"{source}: transitions[{i}]: expected an object, got {_short(tr)}")
         mentioned += [*_names(tr.get("from", []), f"{source}: transitions[{i}].from")]
         if "added" in tr:
-            mentioned += _names([tr["added"]], f"{source}: transitions[{i}].added")
+            added = tr["added"]
+            mentioned += _names(added if isinstance(added, list) else [added], f"{source}: transitions[{i}].added")
     for i, s in enumerate(data.get("sequence") or []):
         mentioned += _names(s, f"{source}: sequence[{i}]")
     policy = data.get("policy")
@@ -886,7 +921,7 @@ def knot_timeline(plan: Plan, fixture: Fixture, source: str = "plan") -> Timelin
             raise InputError(f"{where}.poses: expected the planned knot poses, got []")
         wrench = np.zeros(fixture.ndof) if tr.wrench is None else tr.wrench
         before = tr.from_state
-        after = tuple(sorted([*before, tr.added])) if tr.added else before
+        after = tuple(sorted([*before, *tr.added_names])) if tr.added else before
         n = len(tr.poses)
         for k, pose in enumerate(tr.poses):
             if i > 0 and k == 0:

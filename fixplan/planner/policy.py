@@ -93,6 +93,9 @@ class PolicyEntry:
         the gap-closing motion at the pose the part is in).
     pose : Pose or None
         The representative pose the entry was computed at.
+    together : tuple of str
+        Locators that close at the same instant as ``target`` (a redundant layout: the plan's
+        group transition); ``"together"`` in the file, only when there are any.
     """
 
     state: tuple[str, ...]
@@ -105,16 +108,17 @@ class PolicyEntry:
     checked: bool
     path: tuple[Pose, ...] = field(default=(), repr=False)
     pose: Pose | None = field(default=None, repr=False)
+    together: tuple[str, ...] = ()
 
     @property
     def next_state(self) -> tuple[str, ...]:
-        return tuple(sorted([*self.state, self.target]))
+        return tuple(sorted([*self.state, self.target, *self.together]))
 
     def step(self) -> Step:
         """The executor's step for this entry."""
         from fixplan.planner.execute import Step
 
-        return Step(tuple(self.state), self.target, self.motion, tuple(self.path))  # type: ignore[arg-type]
+        return Step(tuple(self.state), self.target, self.motion, tuple(self.path), self.together)  # type: ignore[arg-type]
 
     def to_json(self) -> dict[str, Any]:
         def num(x: float | None) -> float | None:
@@ -130,7 +134,7 @@ class PolicyEntry:
             "cost_to_go_m": num(self.cost_to_go_m),
             "source": self.source,
             "checked": self.checked,
-        }
+        } | ({"together": list(self.together)} if self.together else {})
 
     @classmethod
     def from_json(cls, obj: Any, where: str = "policy") -> PolicyEntry:
@@ -166,9 +170,17 @@ class PolicyEntry:
         if source not in ("plan", "pre-image"):
             raise InputError(f"{where}.source: expected plan or pre-image, got {source!r}")
         ctg = num("cost_to_go_m")
+        together = obj.get("together", [])
+        if (
+            not isinstance(together, list)
+            or not all(isinstance(n, str) for n in together)
+            or {target, *state} & set(together)
+        ):
+            raise InputError(f"{where}.together: expected a list of locator names not in the state nor the target")
         return cls(
             tuple(sorted(state)), target, str(motion), wrench, num("margin_N"),
             float("inf") if ctg is None else ctg, source, bool(obj.get("checked", wrench is not None)),
+            together=tuple(together),
         )  # fmt: skip
 
 
@@ -434,13 +446,13 @@ def build_policy(
             # the plan's own transition: its fine path and pushes
             rows = tr.wrenches[np.isfinite(tr.wrenches).all(axis=1)] if len(tr.wrenches) else tr.wrenches
             margins = tr.margins_N[np.isfinite(tr.margins_N)]
-            later = value.get(s | {tr.target}, 0.0)
+            later = value.get(s | {tr.target} | set(tr.together), 0.0)
             value[s] = float(tr.cost) + later if math.isfinite(float(tr.cost)) else later
             entries[s] = PolicyEntry(
                 tuple(sorted(s)), tr.target, tr.kind if s else "free",
                 rows.mean(axis=0) if len(rows) else None,
                 float(np.min(margins)) if len(margins) else None,
-                value[s], "plan", True, tuple(tr.poses), pose,
+                value[s], "plan", True, tuple(tr.poses), pose, tuple(tr.together),
             )  # fmt: skip
             continue
         to_go = {t: value[s | {t}] for t in goal_state - s if s | {t} in value}

@@ -1,7 +1,8 @@
 """``fixplan solve``: plan the loading of a full fixture, then verify the plan in the haptic loop.
 
 1. The start state is the set of locators touching at the start pose.
-2. The coarse search (:mod:`.coarse`) adds one locator per transition, pricing each with a fine
+2. The coarse search (:mod:`.coarse`) adds one locator per transition (a group of them where
+   geometry closes them at the same instant: :func:`~.fine.closing_group`), pricing each with a fine
    plan (:mod:`.fine`: CasADi path + non-jamming wrench per segment); the cost is the
    mass-weighted path length plus a penalty on thin margins.
 3. Unless ``verify=False``, the chosen plan is run through the simulated haptic loop
@@ -27,7 +28,16 @@ from fixplan.model import Fixture, require_full
 from fixplan.planner.approach import Approach, plan_approach
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
 from fixplan.planner.execute import ExecutionSettings, Step, TransitionKind
-from fixplan.planner.fine import IPOPT_PATH_FOUND, LADDER, Transition, default_kind, plan_transition
+from fixplan.planner.fine import (
+    IPOPT_PATH_FOUND,
+    LADDER,
+    GoalRows,
+    Transition,
+    closing_group,
+    default_kind,
+    goal_rows,
+    plan_transition,
+)
 from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.policy import Policy, build_policy
 from fixplan.planner.segments import segment_wrenches
@@ -98,8 +108,9 @@ class PlanResult:
             transitions.append(
                 PlannedTransition(
                     from_state=tuple(tr.established),
-                    to_state=tuple(sorted([*tr.established, tr.target])),
+                    to_state=tuple(sorted([*tr.established, *tr.added])),
                     added=tr.target,
+                    together=tuple(tr.together),
                     motion=tr.kind if tr.established else "free",
                     wrench=rows.mean(axis=0) if len(rows) else None,
                     # the least normal force on the kept contacts; None from no contact (nothing to press)
@@ -121,11 +132,13 @@ class PlanResult:
             sequence=tuple(tuple(s) for s in self.sequence),
             transitions=tuple(transitions),
             tried=tuple(
-                TriedTransition(tuple(a.established), a.target, a.success, a.reason, a.stage) for a in self.attempts
+                TriedTransition(tuple(a.established), a.target, a.success, a.reason, a.stage, a.together)
+                for a in self.attempts
             ),
             proven=self.proven,
             certificate=tuple(
-                TriedTransition(tuple(a.established), a.target, False, a.reason) for a in self.certificate
+                TriedTransition(tuple(a.established), a.target, False, a.reason, together=a.together)
+                for a in self.certificate
             )
             if infeasible
             else (),
@@ -156,6 +169,7 @@ def plan_steps(transitions: Sequence[Transition]) -> list[Step]:
             tr.target,
             cast(TransitionKind, tr.kind) if tr.established else "free",
             tuple(tr.poses),
+            tuple(tr.together),
         )
         for tr in transitions
     ]
@@ -216,6 +230,22 @@ class Planner:
         # reuses every fine plan that starts where an earlier one did
         self._cache: dict[tuple[tuple[str, ...], str, bytes, bool], Transition] = {}
         self.full_ladder = False  # the fine planner's whole ladder of formulations (second pass)
+        # the rank test of closing_group, on the goal's normal rows (built once; None: no goal)
+        self._rows: GoalRows | None = goal_rows(fixture)
+        self._groups: dict[tuple[frozenset[str], str], tuple[str, ...]] = {}
+
+    def group(self, state: frozenset[str], target: str) -> tuple[str, ...]:
+        """The locators that touch at the same instant as ``target`` from ``state`` (sorted, with it).
+
+        :func:`~fixplan.planner.fine.closing_group` on the goal's normal rows: ``(target,)`` unless
+        the layout is redundant there (two end locators that the seated base moves alike).
+        """
+        key = (frozenset(state), target)
+        if key not in self._groups:
+            self._groups[key] = (
+                (target,) if self._rows is None else closing_group(self.fixture, sorted(state), target, self._rows)
+            )
+        return self._groups[key]
 
     def plan_from(self, pose: Pose, state: frozenset[str], order: Sequence[str] | None = None) -> CoarsePlan:
         """The cheapest monotone sequence from ``state`` at ``pose`` to every locator."""
@@ -246,6 +276,7 @@ class Planner:
                         acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
                         margin_N=self.margin_N, clearance_m=clearance, kind=kind,
                         ladder=LADDER if full else LADDER[:1], diagnose=full,
+                        together=[n for n in self.group(state_, target) if n != target],
                     )  # fmt: skip
                     if tr.ipopt_status in IPOPT_PATH_FOUND:
                         break  # a path: its wrenches decide, not the clearance
@@ -259,7 +290,7 @@ class Planner:
         self.full_ladder = False
         first = search(
             state, self.names, pose, evaluate, order=order, progress=self.progress,
-            estimate=self.estimate, precheck=self.precheck,
+            estimate=self.estimate, precheck=self.precheck, group=self.group,
         )  # fmt: skip
         if first.found:
             return first
@@ -267,7 +298,7 @@ class Planner:
         try:
             second = search(
                 state, self.names, pose, evaluate, order=order, progress=self.progress,
-                estimate=self.estimate, precheck=self.precheck,
+                estimate=self.estimate, precheck=self.precheck, group=self.group,
             )  # fmt: skip
         finally:
             self.full_ladder = False
@@ -401,7 +432,7 @@ def failed_transition(transitions: Sequence[Transition], observed: Sequence[Sequ
     """The index of the first planned transition whose end state the simulated load never reached."""
     seen = {frozenset(s) for s in observed}
     for i, tr in enumerate(transitions):
-        if frozenset(tr.established) | {tr.target} not in seen:
+        if frozenset(tr.established) | set(tr.added) not in seen:
             return i
     return len(transitions) - 1
 

@@ -306,7 +306,7 @@ def plan_figure(result: Plan | PlanResult, fixture: Fixture, *, dpi: float = 100
         ax.text(
             0.5 * (starts[i] + starts[i + 1]),
             len(names) - 0.45,
-            f"+{tr.added} ({tr.planned_kind})",
+            f"+{tr.added_label} ({tr.planned_kind})",
             ha="center",
             va="bottom",
             fontsize=7,

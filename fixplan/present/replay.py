@@ -112,7 +112,8 @@ def policy_lines(plan: Plan) -> tuple[str, ...]:
     for e in plan.policy.to_json():
         state = "{" + ", ".join(e["state"]) + "}" if e["state"] else "free"
         mark = "" if e["checked"] else " (no push found)"
-        rows.append(f"{state} → +{e['target']} ({e['motion']}, {e['source']}){mark}")
+        added = "{" + ", ".join([e["target"], *e["together"]]) + "}" if e.get("together") else e["target"]
+        rows.append(f"{state} → +{added} ({e['motion']}, {e['source']}){mark}")
     return (head, *rows)
 
 

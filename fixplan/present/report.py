@@ -46,11 +46,13 @@ def report_markdown(result: Plan | PlanResult, fixture: Fixture, figures: Sequen
             "|---:|---|---|---|---|---:|---:|---:|---:|---:|",
         ]
         for i, tr in enumerate(payload["transitions"], 1):
+            # a group closing together is a list of names: {E1, E2}
+            added = "{" + ", ".join(tr["added"]) + "}" if isinstance(tr["added"], list) else tr["added"]
             w = "–" if tr["wrench"] is None else ", ".join(f"{x:.3g}" for x in tr["wrench"])
             margin = "–" if tr["margin"] is None else f"{tr['margin']:.3g}"
             rob = "–" if tr["friction_robustness"] is None else f"±{tr['friction_robustness']:.2g}"
             lines.append(
-                f"| {i} | {{{', '.join(tr['from'])}}} | {tr['added']} | {tr['motion']} | {w} | {margin} | {rob} | "
+                f"| {i} | {{{', '.join(tr['from'])}}} | {added} | {tr['motion']} | {w} | {margin} | {rob} | "
                 f"{tr['time_s']:.2f} | {tr['path_length_m']:.4g} | {tr['max_constraint_violation_m']:.1e} |"
             )
         lines += [
