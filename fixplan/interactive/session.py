@@ -971,6 +971,8 @@ class HapticSession:
         gc.collect()
         gc.freeze()  # long-lived objects out of the collector's way: collections stay short
         try:
+            if self.clock == "wall" and isinstance(self.handle, UdpHandle):
+                self._await_device()  # the wall clock starts with the device's first pose
             next_t = time.perf_counter()
             while not self._stop.is_set() and self.status is None:
                 if self.realtime:
@@ -1024,6 +1026,13 @@ class HapticSession:
             gc.unfreeze()
             sys.setswitchinterval(old_interval)
             self._ended.set()
+
+    def _await_device(self) -> None:
+        """Answer HELLOs (with CONFIG) until the device's first pose, or the session is stopped."""
+        handle = self.handle
+        while not self._stop.is_set() and isinstance(handle, UdpHandle) and handle.last_pose is None:
+            handle.wait_readable(0.1)
+            handle.read(time.perf_counter())
 
     def _guide_loop(self, verdict: bool = False) -> None:
         if self.realtime:
