@@ -200,3 +200,33 @@ def test_device_sim_cli_says_fixplan_is_gone_in_one_line_and_exits_1(box):
     assert len(gone) == 1 and "Traceback" not in p.stderr
     bad = subprocess.run([*CLI, "device-sim", "--peer-timeout", "-1"], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "--peer-timeout" in bad.stderr
+
+
+def test_a_wall_clock_udp_session_starts_its_clock_with_the_devices_first_pose(box):
+    """No tick (no session time) before a device has said HELLO and sent a pose; then the session runs.
+
+    Before, the clock ran from start(): the part sat under a limp coupling and the device joined a
+    session already seconds old, its handle where the part had started (a jerk on the part).
+    """
+    from fixplan.interactive.handles import UdpHandle
+
+    handle = UdpHandle("127.0.0.1", 0, box.ndof)
+    s = HapticSession(box, handle, realtime=False, synchronous=True, guidance=False, until_goal=False,
+                      duration_s=0.05)  # fmt: skip
+    s.start()
+    try:
+        assert not s.wait(1.0)  # a second of wall time: nothing happened
+        assert s.sim.time_s == 0.0 and s.stats().ticks == 0
+        dev = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        dev.settimeout(10.0)
+        dev.connect(("127.0.0.1", handle.port))
+        dev.send(protocol.encode_hello(None))
+        config = protocol.decode_config(dev.recv(65536))
+        x0 = np.asarray(config["x0"], dtype=float)
+        dev.send(protocol.encode_pose(1, 0.0, x0, np.zeros(box.ndof), box.ndof))
+        assert s.wait(60.0)  # then the 50 ms of session run (generous: a busy machine)
+        dev.close()
+    finally:
+        s.stop()
+        handle.close()
+    assert s.sim.time_s == pytest.approx(0.05)
