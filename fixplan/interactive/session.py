@@ -863,7 +863,9 @@ class HapticSession:
                 new = guide.answer(answer_within_s)
             else:
                 new = guide.update(snap, self._push_recent.copy())
-        except InputError as exc:  # a guidance process is gone: the session goes on without its advice
+        except InputError as exc:  # a guidance process is gone (or never answered): the session goes on without it
+            if isinstance(guide, RemoteGuide):
+                guide.close()
             with self._guidance_lock:
                 if verdict:
                     self.verdict_guide = None
