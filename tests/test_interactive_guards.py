@@ -1,4 +1,4 @@
-"""The haptic session's guards (issue 21 §1): a part that leaves the fixture ends the session, the
+"""The haptic session's guards: a part that leaves the fixture ends the session, the
 coupling is capped without ``[manipulator]``, the guidance answers before the clock starts, and
 ``device-sim`` ends when fixplan stops answering.
 
