@@ -175,6 +175,21 @@ class HapticRigSettings:
         The loop sleeps only when the next tick is more than this away [s] ...
     wake_early_s : float
         ... and wakes this long before it, spinning the rest [s].
+    coupling_force_weights : float
+        A haptic session on a fixture without ``[manipulator]`` limits caps the coupling force at
+        this many times the part's weight ``m |g|`` [N] (the planner's guidance is planned within
+        the same cap) ...
+    coupling_torque_weights : float
+        ... and its torque at this many times ``m |g|`` × the part's bounding radius [N·m].
+    guide_ready_s : float
+        The wall-clock session waits at most this long [s] for the guidance processes' first
+        answers (start-up, imports, the first plan) before its clock starts; then it starts
+        without them, saying so.
+    guide_nice : int
+        The guidance (planner) process asks for this nice value: a busy core shares with it
+        about 10:1 (refused without permission: it keeps its niceness).
+    peer_timeout_s : float
+        ``fixplan device-sim`` ends (exit 1, one line) when fixplan has not answered for this long [s].
     """
 
     stiffness_per_kg: float = 1000.0
@@ -197,6 +212,11 @@ class HapticRigSettings:
     switch_interval_s: float = 2e-4
     spin_s: float = 2e-4
     wake_early_s: float = 1.5e-4
+    coupling_force_weights: float = 4.0
+    coupling_torque_weights: float = 4.0
+    guide_ready_s: float = 300.0
+    guide_nice: int = -10
+    peer_timeout_s: float = 2.0
 
 
 @dataclass(frozen=True)
@@ -416,6 +436,7 @@ class ExecutionSettings:
     release_gap_m: float = 2e-3  # a part lifted off a wrong-face contact is free once every gap is this
     release_s: float = 1.5  # the lift may take at most this long
     carry_torque_fraction: float = 0.5  # a carried part's spin is stopped with up to this fraction of the hand's torque
+    reach_factor: float = 3.0  # the part this × (farthest locator + bounding radius) from its start has diverged
 
 
 @dataclass(frozen=True)

@@ -69,13 +69,18 @@ def device_sim(
     token: Annotated[
         str | None, typer.Option("--token", help="The token of 'fixplan haptic --host H --token T'.")
     ] = None,
+    peer_timeout: Annotated[
+        float | None,
+        typer.Option("--peer-timeout", help="End (exit 1) when fixplan has not answered for S seconds (default 2)."),
+    ] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """A simulated haptic device with a human-like operator, over the UDP bridge (exit 0 when fixplan reports the goal)."""
     from fixplan.interactive.commands import run_device_sim
 
     code = run_device_sim(host=host, port=port, noise=noise, delay_ms=delay_ms, duration=duration, push=push,
-                          seed=seed, json_out=json_out, lockstep=lockstep, wait_s=wait, token=token)  # fmt: skip
+                          seed=seed, json_out=json_out, lockstep=lockstep, wait_s=wait, token=token,
+                          peer_timeout_s=peer_timeout)  # fmt: skip
     if code:
         raise typer.Exit(code)
 

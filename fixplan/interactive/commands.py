@@ -101,6 +101,7 @@ def run_haptic(
         url = app.start()
         where = f"udp:{handle.port}" if isinstance(handle, UdpHandle) else kind
         _echo(f"fixplan haptic: {url} ({fixture.name}, device {where}; Ctrl-C ends the session)")
+        _echo(f"fixplan haptic: {session.cap_note}")
         if not no_browser:
             import webbrowser
 
@@ -122,6 +123,7 @@ def run_haptic(
         "duration_s": result.duration_s,
         "sequence": [list(s) for _, s in result.states],
         "loop": {**result.stats.to_json(), "scheduling": session.scheduling, **session.guidance_rates()},
+        "coupling_cap": {"force_N": session.F_max, "torque_Nm": session.T_max, "note": session.cap_note},
         "bridge": result.bridge,
     }
     if record is not None:
@@ -164,6 +166,7 @@ def run_device_sim(
     lockstep: bool = False,
     wait_s: float = 60.0,
     token: str | None = None,
+    peer_timeout_s: float | None = None,
 ) -> int:
     """The simulated device; 0 when fixplan reported the goal."""
     from fixplan.interactive.device_sim import DeviceSim
@@ -179,7 +182,8 @@ def run_device_sim(
     if not (math.isfinite(wait_s) and 0 < wait_s <= 3600):
         raise InputError(f"--wait must be within (0, 3600] s, got {wait_s}")
     sim = DeviceSim(host, port, noise=noise, delay_ms=delay_ms, duration_s=duration, push=w, seed=seed,
-                    lockstep=lockstep, connect_timeout_s=wait_s, token=token)  # fmt: skip
+                    lockstep=lockstep, connect_timeout_s=wait_s, token=token,
+                    **({} if peer_timeout_s is None else {"peer_timeout_s": peer_timeout_s}))  # fmt: skip
     try:
         cfg = sim.connect()
         if w is not None and w.shape[0] != int(cfg["ndof"]):
@@ -189,6 +193,8 @@ def run_device_sim(
         res = sim.run()
     finally:
         sim.close()
+    if res.peer_gone_s is not None:  # one line, on stderr also with --json
+        _echo(f"device-sim: fixplan stopped answering ({res.peer_gone_s:.1f} s without an answer): ending")
     if json_out:
         sys.stdout.write(json.dumps(res.to_json(), indent=2) + "\n")
     else:

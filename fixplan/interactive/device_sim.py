@@ -11,6 +11,9 @@ CONFIG, those of :func:`~fixplan.planner.verify.haptic_rig`):
 
 ``push`` replaces the guidance by a constant wrench (a person insisting on a push: a jam demo).
 Each POSE carries the device's clock; each answer echoes it, so the round trip is measured here.
+When fixplan has not answered for ``peer_timeout_s`` (``--peer-timeout``, 2 s by default) it is
+taken to be gone: the run ends (``fixplan device-sim`` says so in one line and exits 1, as for any
+run that did not see the goal).
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from numpy.typing import NDArray
 from fixplan.errors import InputError
 from fixplan.interactive import protocol
 from fixplan.interactive.handles import Handle
+from fixplan.settings import HAPTIC
 
 FloatArray = NDArray[np.float64]
 
@@ -46,6 +50,7 @@ class DeviceSimResult:
     last_flags: int = 0
     late_cycles: int = 0  # cycles that started more than one period late
     scheduling: str = "normal"
+    peer_gone_s: float | None = None  # fixplan stopped answering: ended after this long without an answer
 
     @property
     def rtt_mean_ms(self) -> float:
@@ -63,6 +68,7 @@ class DeviceSimResult:
             "sent": self.sent, "received": self.received, "dropped": self.dropped, "goal": self.goal,
             "ended": self.ended, "duration_s": self.duration_s, "rtt_mean_ms": fin(self.rtt_mean_ms),
             "rtt_p99_ms": fin(self.rtt_p99_ms), "late_cycles": self.late_cycles, "scheduling": self.scheduling,
+            "peer_gone_s": self.peer_gone_s,
         }  # fmt: skip
 
 
@@ -162,6 +168,7 @@ class DeviceSim:
         connect_timeout_s: float = 60.0,
         lockstep: bool = False,
         token: str | None = None,
+        peer_timeout_s: float = HAPTIC.haptic.peer_timeout_s,
     ):
         for name, value, lo in (("--noise", noise, 0.0), ("--delay-ms", delay_ms, 0.0)):
             if not (math.isfinite(value) and value >= lo):
@@ -172,6 +179,8 @@ class DeviceSim:
             raise InputError(f"--delay-ms must be at most 2000 ms, got {delay_ms}")
         if duration_s is not None and not (math.isfinite(duration_s) and duration_s > 0):
             raise InputError(f"--duration must be a positive number of seconds, got {duration_s}")
+        if not (math.isfinite(peer_timeout_s) and peer_timeout_s > 0):
+            raise InputError(f"--peer-timeout must be a positive number of seconds, got {peer_timeout_s}")
         if not (0 < port <= 65535):
             raise InputError(f"--port must be 1..65535, got {port}")
         self.addr = (host, port)
@@ -184,6 +193,7 @@ class DeviceSim:
         self.lockstep = lockstep
         self.token = token
         self.connect_timeout_s = connect_timeout_s
+        self.peer_timeout_s = peer_timeout_s
         self.config: dict[str, Any] = {}
         try:
             self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -239,11 +249,14 @@ class DeviceSim:
         seq = 0
         t0 = time.perf_counter()
         next_t = t0
+        last_answer = t0  # fixplan answered the HELLO just now
         while True:
             if self.lockstep:
                 # the device clock: one period per exchange, as fast as fixplan answers (no wall clock)
-                if seq and not self._await_answer(seq):
+                if seq and not self._await_answer(seq, self.peer_timeout_s):
+                    res.peer_gone_s = time.perf_counter() - last_answer
                     break
+                last_answer = time.perf_counter()
                 t = seq * T
             else:
                 next_t += T
@@ -269,6 +282,7 @@ class DeviceSim:
                     res.dropped += 1
                     continue
                 res.received += 1
+                last_answer = time.perf_counter()
                 res.rtt_s.append(time.perf_counter() - t0 - ans.t_echo_s)
                 if ans.seq <= last_seq:
                     res.dropped += 1
@@ -283,6 +297,9 @@ class DeviceSim:
                 if ans.flags & protocol.FLAG_ENDED:
                     res.ended = True
             if res.ended or (self.duration_s is not None and t >= self.duration_s):
+                break
+            if time.perf_counter() - last_answer > self.peer_timeout_s:  # fixplan is gone (or stopped answering)
+                res.peer_gone_s = time.perf_counter() - last_answer
                 break
             dev.advance(t, felt, part, suggested)
             seq += 1

@@ -42,7 +42,7 @@ from fixplan.interactive import _kernels, protocol
 from fixplan.interactive.handles import Handle, UdpHandle
 from fixplan.jamming.classify import MODES as CLASSIFY_MODES
 from fixplan.model import Fixture
-from fixplan.settings import DEFAULT, HAPTIC, Settings
+from fixplan.settings import DEFAULT, HAPTIC, HapticRigSettings, Settings
 from fixplan.spatial import Pose, exp_so3, rot2
 
 FloatArray = NDArray[np.float64]
@@ -160,6 +160,40 @@ def pose_from_coordinates(x: FloatArray, R0: FloatArray, dimension: int) -> Pose
     if dimension == 3:
         return Pose(exp_so3(x[3:6]) @ R0, np.array(x[:3], dtype=float))
     return Pose(rot2(float(x[2])), np.array(x[:2], dtype=float))
+
+
+def coupling_cap(fixture: Fixture, rig: HapticRigSettings) -> tuple[float, float, str]:
+    """The coupling's force [N] and torque [N·m] caps, and where they come from, in words.
+
+    The ``[manipulator]`` limits when the file gives them; else ``coupling_force_weights`` × the
+    part's weight ``m |g|`` and ``coupling_torque_weights`` × ``m |g|`` × its bounding radius.
+    """
+    wp = fixture.workpiece
+    weight_N = wp.mass_kg * (float(np.linalg.norm(fixture.gravity)) or 9.81)
+    r_m = wp.shape.bounding_radius
+    F, T = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
+    notes = []
+    if not math.isfinite(F):
+        F = rig.coupling_force_weights * weight_N
+        notes.append(f"{rig.coupling_force_weights:g} m|g| = {F:.4g} N")
+    if not math.isfinite(T):
+        T = rig.coupling_torque_weights * weight_N * r_m
+        notes.append(f"{rig.coupling_torque_weights:g} m|g| × bounding radius {r_m:.3g} m = {T:.4g} N·m")
+    if notes:
+        return F, T, f"coupling capped at {F:.4g} N, {T:.4g} N·m (no [manipulator] limits: {'; '.join(notes)})"
+    return F, T, f"coupling capped at {F:.4g} N, {T:.4g} N·m (the [manipulator] limits)"
+
+
+def capped_fixture(fixture: Fixture, F_max: float, T_max: float) -> Fixture:
+    """``fixture`` with the hand's limits at the coupling's cap (what the guidance may ask)."""
+    from dataclasses import replace
+
+    from fixplan.model import Manipulator
+
+    m = fixture.manipulator
+    if m.max_force_N == F_max and m.max_torque_Nm == T_max:
+        return fixture
+    return replace(fixture, manipulator=Manipulator(max_force_N=F_max, max_torque_Nm=T_max))
 
 
 class Guide:
@@ -294,7 +328,18 @@ def _guide_worker(conn: Any, fixture: Fixture, start_state: frozenset[str], tick
         # a classification is 1–2 ms, 25 times a second: above the other processes (a browser
         # rendering in software took it down to 5 Hz), below the loop and the display
         real_time_priority(5)
+    else:
+        # the planner is not a deadline: it asks for a larger share of a busy core than the
+        # other users' processes (guide_nice), not for real-time priority (a re-plan computes for seconds)
+        try:
+            os.nice(HAPTIC.haptic.guide_nice)
+        except OSError:
+            pass
     guide = Guide(fixture, start_state, tick_s=tick_s, role=role)
+    if role == "plan":  # import what the planner needs before the clock starts
+        import fixplan.planner.execute
+        import fixplan.planner.policy
+        import fixplan.planner.solve  # noqa: F401
     while True:
         try:
             msg = conn.recv()
@@ -332,10 +377,21 @@ class RemoteGuide:
         self.note = "planning"
 
     def update(self, snap: Snapshot, push_now: FloatArray) -> Guidance:
+        self.post(snap, push_now)
+        return self.answer()
+
+    def post(self, snap: Snapshot, push_now: FloatArray) -> None:
+        """Send a snapshot (its answer is read by :meth:`answer`)."""
         self._conn.send((snap, push_now))
+
+    def answer(self, within_s: float | None = None) -> Guidance:
+        """The answer to the last snapshot posted; :class:`InputError` when the process ended or did not answer in time."""
+        deadline = None if within_s is None else time.perf_counter() + within_s
         while not self._conn.poll(0.5):
             if not self._proc.is_alive():
                 raise InputError("the guidance process ended")
+            if deadline is not None and time.perf_counter() > deadline:
+                raise InputError(f"the guidance process did not answer within {within_s:g} s")
         out: Guidance = self._conn.recv()
         return out
 
@@ -388,10 +444,9 @@ class HapticSession:
         max_sweeps: int | None = None,
         profile: Settings = HAPTIC,
     ):
-        from fixplan.jamming.search import hand_limits
         from fixplan.locating import contact_set
         from fixplan.model import require_full
-        from fixplan.planner.execute import ExecutionSettings
+        from fixplan.planner.execute import DivergenceGuard, ExecutionSettings
         from fixplan.planner.verify import haptic_rig, pose_coordinates
 
         require_full(fixture, "a haptic session")
@@ -417,7 +472,9 @@ class HapticSession:
         self.ndof = fixture.ndof
         self.R0 = fixture.start.R_world_body.copy()
         self.x0 = pose_coordinates(fixture.start, self.R0)
-        self.F_max, self.T_max, _ = hand_limits(fixture)
+        self.F_max, self.T_max, self.cap_note = coupling_cap(fixture, profile.haptic)
+        # the guidance plans within the same cap (a push the coupling cannot deliver is no advice)
+        self.guide_fixture = capped_fixture(fixture, self.F_max, self.T_max)
         self.rig = haptic_rig(fixture, self.sim, self.x0, self.F_max, self.T_max, profile.haptic)
         c = self.rig.loop.coupling
         d = self.dimension
@@ -430,7 +487,10 @@ class HapticSession:
         self.stiffness_scale_max = self._passive_scale_max()
         settings = ExecutionSettings()
         wp = fixture.workpiece
-        self.weight_N = wp.mass_kg * (float(np.linalg.norm(fixture.gravity)) or 9.81)
+        g = float(np.linalg.norm(fixture.gravity)) or 9.81
+        self.weight_N = wp.mass_kg * g
+        # the executor's guard of the fixture's neighbourhood; a person's push may be the whole cap
+        self.guard = DivergenceGuard.for_fixture(fixture, settings, accel_mps2=self.F_max / wp.mass_kg + g)
         self.threshold_N = max(settings.press_fraction * self.weight_N, 1e-6)
         self.contact_gap_m = settings.contact_gap_m
         self.dwell_s = settings.dwell_s
@@ -447,7 +507,7 @@ class HapticSession:
         self._guidance_on = guidance
         self.guide: Guide | RemoteGuide | None = None
         if guidance and synchronous:
-            self.guide = Guide(fixture, self.start_state, tick_s=self.trace_every * self.period_s)
+            self.guide = Guide(self.guide_fixture, self.start_state, tick_s=self.trace_every * self.period_s)
         self._auto = bool(auto) or handle is None
         self._auto_dev = self._auto_device(self.x0, np.zeros(self.ndof))
         self._x_d = self.x0.copy()
@@ -561,7 +621,7 @@ class HapticSession:
         self._settled_since = self._jammed_since = None
         self.goal_reached_at = None
         if isinstance(self.guide, Guide):
-            self.guide = Guide(self.fixture, self.start_state, tick_s=self.guide.tick_s)
+            self.guide = Guide(self.guide_fixture, self.start_state, tick_s=self.guide.tick_s)
         elif isinstance(self.guide, RemoteGuide):
             self._restart_guide = True
         # the recording starts afresh from the start pose (what came before is not a way to load the part)
@@ -644,6 +704,9 @@ class HapticSession:
             push = self.guidance.push if self.guidance.push is not None else np.zeros(self.ndof)
             dev.advance(self.period_s, self.rig.operator_wrench(push, dev))
         self._coords = self.coordinates()
+        why = self.guard.check(sim.pose, self._speed())
+        if why is not None:  # fell off the locators, or blew up: end now, the recording keeps what led there
+            self._end(f"the part left the fixture at t = {sim.time_s:.3f} s (divergence guard): {why}")
         self._push_recent += 0.1 * (w_c - self._push_recent)
         self._acc_w += w_c
         self._acc_f += felt
@@ -784,16 +847,25 @@ class HapticSession:
         )
         self.snapshot = snap
 
-    def _run_guide(self, snap: Snapshot, verdict: bool = False) -> None:
-        """One guidance answer merged into :attr:`guidance`: the plan's fields, or (``verdict``) the verdict's."""
+    def _run_guide(self, snap: Snapshot, verdict: bool = False, answer_within_s: float | None = None) -> None:
+        """One guidance answer merged into :attr:`guidance`: the plan's fields, or (``verdict``) the verdict's.
+
+        ``answer_within_s``: the snapshot was already posted (:meth:`RemoteGuide.post`); wait this
+        long for its answer, else go on without that guidance.
+        """
         from dataclasses import replace
 
         guide = self.verdict_guide if verdict else self.guide
         if guide is None:
             return
         try:
-            new = guide.update(snap, self._push_recent.copy())
-        except InputError as exc:  # a guidance process is gone: the session goes on without its advice
+            if answer_within_s is not None and isinstance(guide, RemoteGuide):
+                new = guide.answer(answer_within_s)
+            else:
+                new = guide.update(snap, self._push_recent.copy())
+        except InputError as exc:  # a guidance process is gone (or never answered): the session goes on without it
+            if isinstance(guide, RemoteGuide):
+                guide.close()
             with self._guidance_lock:
                 if verdict:
                     self.verdict_guide = None
@@ -901,6 +973,8 @@ class HapticSession:
         gc.collect()
         gc.freeze()  # long-lived objects out of the collector's way: collections stay short
         try:
+            if self.clock == "wall" and isinstance(self.handle, UdpHandle):
+                self._await_device()  # the wall clock starts with the device's first pose
             next_t = time.perf_counter()
             while not self._stop.is_set() and self.status is None:
                 if self.realtime:
@@ -943,9 +1017,9 @@ class HapticSession:
                     self._misses += 1
             if self.status is None:
                 self._end(None)
-                if self.handle is not None and self.snapshot is not None:  # tell the device it ended
-                    x_w, v_w = self.coordinates()
-                    self.handle.display(self.snapshot.felt_wrench, self._answer(self.snapshot.felt_wrench, x_w, v_w))
+            if self.handle is not None and self.snapshot is not None:  # tell the device it ended, however it did
+                x_w, v_w = self.coordinates()
+                self.handle.display(self.snapshot.felt_wrench, self._answer(self.snapshot.felt_wrench, x_w, v_w))
             last = self.snapshot
             if last is not None:  # the final state, with the last contact forces, flagged as ended
                 self._publish(last.coupling_wrench, last.felt_wrench, last.pressed, normals=last.normal_forces_N,
@@ -954,6 +1028,13 @@ class HapticSession:
             gc.unfreeze()
             sys.setswitchinterval(old_interval)
             self._ended.set()
+
+    def _await_device(self) -> None:
+        """Answer HELLOs (with CONFIG) until the device's first pose, or the session is stopped."""
+        handle = self.handle
+        while not self._stop.is_set() and isinstance(handle, UdpHandle) and handle.last_pose is None:
+            handle.wait_readable(0.1)
+            handle.read(time.perf_counter())
 
     def _guide_loop(self, verdict: bool = False) -> None:
         if self.realtime:
@@ -969,7 +1050,7 @@ class HapticSession:
             if not verdict and self._restart_guide and isinstance(self.guide, RemoteGuide):
                 self._restart_guide = False
                 self.guide.close()
-                self.guide = RemoteGuide(self.fixture, self.start_state, tick_s=self.guide.tick_s)
+                self.guide = RemoteGuide(self.guide_fixture, self.start_state, tick_s=self.guide.tick_s)
             snap = self.snapshot
             if snap is None or snap is last:
                 time.sleep(0.002)
@@ -991,8 +1072,18 @@ class HapticSession:
         """Start the loop (and the guidance) in their own threads."""
         self._warm_up()
         if self._guidance_on and not self.synchronous and self.guide is None:
-            self.guide = RemoteGuide(self.fixture, self.start_state, tick_s=GUIDE_PERIOD_S, role="plan")
-            self.verdict_guide = RemoteGuide(self.fixture, self.start_state, tick_s=GUIDE_PERIOD_S, role="verdict")
+            # both processes start now and make their first answer (imports, the first plan and the
+            # policy: seconds) before the clock starts: the guidance is never late on the wall clock
+            self.guide = RemoteGuide(self.guide_fixture, self.start_state, tick_s=GUIDE_PERIOD_S, role="plan")
+            self.verdict_guide = RemoteGuide(
+                self.guide_fixture, self.start_state, tick_s=GUIDE_PERIOD_S, role="verdict"
+            )
+            snap = self.snapshot
+            if snap is not None:
+                for guide in (self.guide, self.verdict_guide):
+                    guide.post(snap, self._push_recent.copy())
+                self._run_guide(snap, answer_within_s=self.rig_settings.guide_ready_s)
+                self._run_guide(snap, verdict=True, answer_within_s=self.rig_settings.guide_ready_s)
         if self.synchronous and self.guide is not None and self.snapshot is not None:
             self._run_guide(self.snapshot)  # plan before the first tick
         self._thread = threading.Thread(target=self._loop, name="fixplan-haptic-loop", daemon=True)

@@ -152,6 +152,53 @@ def project_keeping(nu: FloatArray, A: FloatArray | None, M_inv: FloatArray) -> 
     return nu - M_inv @ A.T @ np.linalg.pinv(A @ M_inv @ A.T, rcond=DEFAULT.numerics.rcond) @ (A @ nu)
 
 
+@dataclass(frozen=True)
+class DivergenceGuard:
+    """Where a simulated load has left the fixture: the one definition the executor and the haptic session use.
+
+    The part never needs to leave the fixture's neighbourhood: beyond ``far_m`` (``reach_factor`` ×
+    (the farthest locator from the start position + the part's bounding radius)) of where it
+    started, or faster than ``v_limit_mps`` (``speed_limit_factor`` × the cruise speed, and at
+    least 1 m/s: a speed no push of the plan causes), the load has diverged (the part fell off the
+    locators, or the simulation blew up).
+    """
+
+    home_world: FloatArray  # the part's start position [m]
+    far_m: float
+    v_limit_mps: float
+
+    @classmethod
+    def for_fixture(
+        cls, fixture: Fixture, settings: ExecutionSettings | None = None, *, accel_mps2: float | None = None
+    ) -> DivergenceGuard:
+        """The guard of ``fixture``'s neighbourhood.
+
+        ``accel_mps2``: the largest acceleration the push can cause (a person's push is not the
+        plan's cruise): the speed limit is then at least ``√(2 a far_m)``, what that acceleration
+        reaches over the whole neighbourhood.
+        """
+        s = settings or ExecutionSettings()
+        home = np.array(fixture.start.p_world, dtype=float)
+        reach = float(np.max(np.linalg.norm([loc.p_world - home for loc in fixture.locators], axis=1), initial=0.0))
+        far_m = s.reach_factor * (reach + fixture.workpiece.shape.bounding_radius)
+        v_limit = max(s.speed_limit_factor * s.speed_mps, 1.0)
+        if accel_mps2 is not None:
+            v_limit = max(v_limit, math.sqrt(2.0 * accel_mps2 * far_m))
+        return cls(home, far_m, v_limit)
+
+    def check(self, pose: Pose, speed_mps: float) -> str | None:
+        """None while the part is near the fixture at a speed a push can cause; else why not, in words."""
+        p = np.asarray(pose.p_world, dtype=float)
+        if not (np.all(np.isfinite(p)) and math.isfinite(speed_mps)):
+            return "the state is not finite"
+        away = float(np.linalg.norm(p - self.home_world))
+        if away > self.far_m:
+            return f"the part is {away:.3g} m from where it started (limit {self.far_m:.3g} m)"
+        if speed_mps > self.v_limit_mps:
+            return f"speed {speed_mps:.3g} m/s, beyond what the push can cause (limit {self.v_limit_mps:.3g} m/s)"
+        return None
+
+
 class Executor:
     """The plan as a feedback policy; :meth:`command` is called once per tick with the observed state."""
 
@@ -211,13 +258,9 @@ class Executor:
         from fixplan.jamming.search import hand_limits
 
         self.F_max, self.T_max, _ = hand_limits(fixture)
-        self.v_limit = max(s.speed_limit_factor * s.speed_mps, 1.0)
-        # the part never needs to leave the fixture's neighbourhood
-        self._home = fixture.start.p_world.copy()
-        reach = float(
-            np.max(np.linalg.norm([loc.p_world - self._home for loc in fixture.locators], axis=1), initial=0.0)
-        )
-        self._far_m = 3.0 * (reach + fixture.workpiece.shape.bounding_radius)
+        self.guard = DivergenceGuard.for_fixture(fixture, s)
+        self.v_limit = self.guard.v_limit_mps
+        self._far_m = self.guard.far_m
         self._goal_normals = _goal_normals_body(fixture)
         self._release: tuple[str, float] | None = None  # (why, since): lifting the part off a wrong face
 
@@ -413,21 +456,10 @@ class Executor:
             return self._applied
         M = self._mass_matrix(pose)
         speed = mass_speed(twist, M, self.mass)
-        away = float(np.linalg.norm(pose.p_world - self._home))
-        if away > self._far_m:
+        why = self.guard.check(pose, speed)
+        if why is not None:
             self._fail(
-                t,
-                f"the simulated load diverged at t = {t:.3f} s (transition {self.index + 1}): the part is {away:.3g} m "
-                f"from where it started (limit {self._far_m:.3g} m)",
-                "diverged",
-            )
-            return self._applied
-        if speed > self.v_limit:
-            self._fail(
-                t,
-                f"the simulated load diverged at t = {t:.3f} s (transition {self.index + 1}): speed {speed:.3g} m/s, "
-                f"beyond what the push can cause (limit {self.v_limit:.3g} m/s)",
-                "diverged",
+                t, f"the simulated load diverged at t = {t:.3f} s (transition {self.index + 1}): {why}", "diverged"
             )
             return self._applied
         if self._observe(t, pressed):
