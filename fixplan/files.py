@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import codecs
 import errno
+import hashlib
 import os
 import stat
 from collections.abc import Callable, Sequence
@@ -73,6 +74,15 @@ def read_user_text(path: Path, *, expected: str, max_bytes: int = MAX_FILE_BYTES
     if len(data) > max_bytes:
         raise UnreadableFile(path, f"is larger than the limit of {max_bytes} bytes (expected {expected})")
     return decode_text(path, data, expected=expected)
+
+
+def file_sha256(path: Path, *, max_bytes: int = MAX_FILE_BYTES) -> str:
+    """The SHA-256 (hex) of a user's file bytes, as read (at most ``max_bytes``); :class:`UnreadableFile` if it cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            return hashlib.sha256(fh.read(max_bytes + 1)).hexdigest()
+    except OSError as exc:
+        raise UnreadableFile(path, exc.strerror or str(exc)) from None
 
 
 def decode_text(path: Path, data: bytes, *, expected: str) -> str:

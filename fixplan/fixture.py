@@ -62,6 +62,78 @@ def load(path: str | Path, tolerances: Tolerances = DEFAULT) -> Fixture:
     return loads(read_fixture_text(path), source=str(path), base_dir=path.parent, tolerances=tolerances)
 
 
+# -- the fixture a plan file names ------------------------------------------------------------------
+_SHA256 = re.compile(r"[0-9a-f]{64}")
+
+
+def fixture_stamp(path: str | Path) -> dict[str, str]:
+    """The keys by which a plan file names its fixture: ``fixture`` and ``fixture_sha256``.
+
+    ``fixture`` is the path resolved to an absolute one (so that the plan can be verified from
+    any folder); ``fixture_sha256`` the SHA-256 of the file's bytes, so that an edited file is
+    noticed (:func:`fixture_of_plan`).
+    """
+    from fixplan.files import file_sha256
+
+    path = Path(path)
+    return {"fixture": str(path.resolve()), "fixture_sha256": file_sha256(path)}
+
+
+def fixture_of_plan(data: Any, plan: Path, given: Path | None) -> tuple[Path, str | None]:
+    """The fixture file to verify a plan file's object against, and a warning to print (or None).
+
+    ``given`` (``--fixture``) wins; a differing hash only warns. Else the file the plan names
+    (``fixture``: absolute, or relative to the working folder or to the plan's folder), refused
+    when it is missing or its bytes changed since the plan was made. A plan that names no fixture
+    (written before plans named theirs) is read for the bundled box, with a warning.
+
+    Raises
+    ------
+    InputError
+        The named file is missing or was edited, or the keys are malformed; the message says how
+        to go on (``--fixture FILE`` or solve again).
+    """
+    from shlex import quote
+
+    from fixplan.errors import InputError
+    from fixplan.files import file_sha256
+
+    obj = data if isinstance(data, dict) else {}
+    named, digest = obj.get("fixture"), obj.get("fixture_sha256")
+    if named is not None and not (isinstance(named, str) and named):
+        raise InputError(f"{plan}: fixture: expected the fixture file's path, got {shorten(repr(named))}")
+    if digest is not None and not (isinstance(digest, str) and _SHA256.fullmatch(digest)):
+        raise InputError(f"{plan}: fixture_sha256: expected 64 lowercase hex digits, got {shorten(repr(digest))}")
+    if given is not None:
+        note = None
+        if digest is not None and given.is_file() and file_sha256(given) != digest:
+            same = named is not None and Path(named).resolve() == given.resolve()
+            was = "changed since the plan was made" if same else f"is not the fixture the plan was made for ({named})"
+            note = f"warning: {given} {was}: verifying {plan} against it as it is now"
+        return given, note
+    if named is None:
+        return default_fixture_path(), (
+            f"warning: {plan} names no fixture (a plan written before plans named theirs): verifying it against the "
+            "bundled box; pass its fixture with --fixture FILE"
+        )
+    candidates = [Path(named)]
+    if not Path(named).is_absolute():
+        candidates.append(plan.parent / named)
+    found = next((c for c in candidates if c.is_file()), None)
+    if found is None:
+        raise InputError(
+            f"{plan}: the plan names the fixture {named}, which is not there (moved or deleted?): "
+            "pass the fixture with --fixture FILE"
+        )
+    if digest is not None and (now := file_sha256(found)) != digest:
+        raise InputError(
+            f"{plan}: the fixture {found} changed since the plan was made (SHA-256 {digest[:12]}… then, "
+            f"{now[:12]}… now): solve it again ('fixplan solve {quote(str(found))} --out {quote(str(plan))} --force'), "
+            f"or verify the plan against the file as it is now with --fixture {quote(str(found))}"
+        )
+    return found, None
+
+
 def read_fixture_text(path: Path) -> str:
     """The text of a fixture file: a regular UTF-8 file within the size limit, else :class:`FixtureError`."""
     from fixplan.files import UnreadableFile, read_user_text

@@ -149,6 +149,7 @@ def solve(
     With --perturb-seed K the loop runs on perturbed world K of 'fixplan robust' instead of the
     nominal one. With --batch DIR: exit 0 only if every file is planned.
     """
+    from fixplan.fixture import default_fixture_path, fixture_stamp
     from fixplan.planner.solve import solve as run_solve
     from fixplan.present.plots import figure_path, save_plan_figure
     from fixplan.present.report import report_markdown
@@ -170,6 +171,8 @@ def solve(
             friction_margin=friction_margin,
         )  # fmt: skip
     fixture = _load(file)
+    # the plan names its fixture (path and hash of the bytes read) so that 'fixplan verify PLAN' finds it
+    stamp = fixture_stamp(file if file is not None else default_fixture_path())
     figure = None if report is None else figure_path(report)
     # every output is checked before any is created (or any work done), and no two are one file
     check_distinct([("FILE", file), ("--out", out), ("--report", report), ("the report's figure", figure)])
@@ -210,7 +213,7 @@ def solve(
         from fixplan.robust import verify_on_world
 
         result, perturbation = verify_on_world(fixture, result, perturb_seed, perturb)
-    plan = result.plan
+    plan = result.plan.with_extras(**stamp)
     if perturbation is not None:
         plan = plan.with_extras(perturbation=perturbation)
     payload = plan.to_json()

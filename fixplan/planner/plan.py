@@ -776,7 +776,11 @@ class Plan:
         )
 
 
-_LEADING = ("source", "fixture")  # a recorded session's keys that come first in its file
+_LEADING = (
+    "source",
+    "fixture",
+    "fixture_sha256",
+)  # the keys that come first in a file: what made it, for which fixture
 
 
 # -- a plan for a fixture --------------------------------------------------------------------------
