@@ -776,11 +776,8 @@ class Plan:
         )
 
 
-_LEADING = (
-    "source",
-    "fixture",
-    "fixture_sha256",
-)  # the keys that come first in a file: what made it, for which fixture
+# the keys that come first in a file: what made it (a recorded session), for which fixture
+_LEADING = ("source", "fixture", "fixture_sha256")
 
 
 # -- a plan for a fixture --------------------------------------------------------------------------
