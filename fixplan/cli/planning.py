@@ -22,7 +22,7 @@ from fixplan.cli._app import (
     _writable,
     app,
 )
-from fixplan.errors import InputError
+from fixplan.errors import InputError, one_line
 from fixplan.files import check_distinct, write_output, write_text
 from fixplan.settings import DEFAULT
 
@@ -248,23 +248,23 @@ def _print_plan(plan: Plan, fixture: Fixture) -> None:
     from rich.table import Table
 
     if plan.transitions:
+        # the push gets a line of its own below the table: six numbers in a cell were cut at 80 columns;
+        # narrow terminals wrap the other cells instead of cutting them
         table = Table(title=f"{fixture.name}: loading plan")
-        for col in ("#", "from + added", "motion", "push (mean)", "least margin [N]", "friction δ", "time [s]"):
-            table.add_column(col)
+        for col in ("#", "from + added", "motion", "least margin [N]", "friction δ", "time [s]"):
+            table.add_column(col, overflow="fold")
         for i, tr in enumerate(plan.transitions, 1):
-            w = "-" if tr.wrench is None else ",".join(f"{x:.3g}" for x in tr.wrench)
             margin = "-" if tr.margin_N is None else f"{tr.margin_N:.3g}"
             rob = "-" if tr.friction_robustness is None else f"±{tr.friction_robustness:.2g}"
             table.add_row(
-                str(i),
-                f"{{{','.join(tr.from_state)}}} + {tr.added}",
-                tr.motion,
-                w,
-                margin,
-                rob,
-                f"{tr.time_s:.2f}",
+                str(i), f"{{{','.join(tr.from_state)}}} + {tr.added}", tr.motion, margin, rob, f"{tr.time_s:.2f}"
             )
         _console().print(table)
+        axes = "Fx, Fy, Fz, Tx, Ty, Tz" if fixture.dimension == 3 else "Fx, Fy, Mz"
+        typer.echo(f"push (mean over the transition) [{axes}; N, N·m]:")
+        for i, tr in enumerate(plan.transitions, 1):
+            w = "none (no contact to push against)" if tr.wrench is None else ", ".join(f"{x:.3g}" for x in tr.wrench)
+            typer.echo(f"  {i}: {w}")
     if not plan.transitions and plan.status != "infeasible":
         typer.echo(f"{fixture.name}: the part starts located (every locator touches): there is nothing to plan")
     typer.echo(f"status: {plan.status}" + (f" — {plan.reason}" if plan.reason else ""))
@@ -309,12 +309,19 @@ def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | No
         _emit_json({"fixtures": rows})
     else:
         table = Table(title=f"{directory}: {len(rows)} fixtures")
-        for col in ("file", "status", "sequence", "reason", "time [s]"):
-            table.add_column(col)
-        for r in rows:
+        # file names stay whole (the rows must be told apart); the other cells wrap, never cut; the
+        # reasons, long sentences, follow the table, one line each
+        names = [Path(r["file"]).name for r in rows]
+        table.add_column("file", no_wrap=True, min_width=max(map(len, names), default=4))
+        for col in ("status", "sequence", "time [s]"):
+            table.add_column(col, overflow="fold")
+        for name, r in zip(names, rows, strict=True):
             seq = " → ".join("{" + ",".join(s) + "}" for s in r["sequence"]) or "-"
-            table.add_row(Path(r["file"]).name, r["status"], seq, r["reason"] or "", f"{r['time_s']:.1f}")
+            table.add_row(name, r["status"], seq, f"{r['time_s']:.1f}")
         _console().print(table)
+        for name, r in zip(names, rows, strict=True):
+            if r["reason"]:
+                typer.echo(one_line(f"{name}: {r['reason']}"))
         planned = sum(r["status"] == "planned" for r in rows)
         typer.echo(f"{planned} of {len(rows)} planned")
     if any(r["status"] != "planned" for r in rows):
