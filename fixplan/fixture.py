@@ -48,6 +48,24 @@ _DATA = Path(__file__).resolve().parent / "data"
 NAME_PATTERN = re.compile(rf"[\w+\-]{{1,{limits.MAX_NAME_LENGTH}}}")
 NAME_RULE = f"a name of 1 to {limits.MAX_NAME_LENGTH} letters, digits, '_', '-' or '+' (no spaces, commas, dots or control characters)"
 _SIZE = limits.SIZE
+UNITS_HINT = "sizes are in metres; did you write millimetres?"
+
+
+def _scaled(shape: Shape, k: float) -> Shape | None:
+    """``shape`` with every length times ``k`` (None for a shape not scaled here: polygon, mesh)."""
+    if isinstance(shape, Box):
+        return Box(tuple(k * x for x in shape.size))  # type: ignore[arg-type]
+    if isinstance(shape, Rectangle):
+        return Rectangle(tuple(k * x for x in shape.size))  # type: ignore[arg-type]
+    if isinstance(shape, Sphere):
+        return Sphere(k * shape.radius)
+    if isinstance(shape, Disk):
+        return Disk(k * shape.radius)
+    if isinstance(shape, Cylinder):
+        return Cylinder(k * shape.radius, k * shape.length)
+    return None
+
+
 _VERTEX = limits.Range("a vertex coordinate", "m", -limits.LENGTH_MAX_M, limits.LENGTH_MAX_M)
 
 
@@ -280,28 +298,53 @@ class _Builder:
         shape: Shape | None = None
         used = {"shape", "mass", "inertia", "start", "goal"}
         if kind == "box":
-            size = r.vector(t, "size", "workpiece.size", 3, required=True, dimension_hint=3, bounds=_SIZE)
+            size = r.vector(
+                t, "size", "workpiece.size", 3, required=True, dimension_hint=3, bounds=_SIZE, too_large=UNITS_HINT
+            )
             used.add("size")
             if size is not None and self.positive_all(size, "workpiece.size", "edge lengths > 0"):
                 shape = Box(tuple(size))  # type: ignore[arg-type]
         elif kind == "rectangle":
-            size = r.vector(t, "size", "workpiece.size", 2, required=True, dimension_hint=2, bounds=_SIZE)
+            size = r.vector(
+                t, "size", "workpiece.size", 2, required=True, dimension_hint=2, bounds=_SIZE, too_large=UNITS_HINT
+            )
             used.add("size")
             if size is not None and self.positive_all(size, "workpiece.size", "side lengths > 0"):
                 shape = Rectangle(tuple(size))  # type: ignore[arg-type]
         elif kind in ("sphere", "disk"):
             radius = r.number(
-                t, "radius", "workpiece.radius", required=True, exclusive_minimum=0.0, bounds=_SIZE, what="a radius"
+                t,
+                "radius",
+                "workpiece.radius",
+                required=True,
+                exclusive_minimum=0.0,
+                bounds=_SIZE,
+                what="a radius",
+                too_large=UNITS_HINT,
             )
             used.add("radius")
             if radius is not None:
                 shape = Sphere(radius) if kind == "sphere" else Disk(radius)
         elif kind == "cylinder":
             radius = r.number(
-                t, "radius", "workpiece.radius", required=True, exclusive_minimum=0.0, bounds=_SIZE, what="a radius"
+                t,
+                "radius",
+                "workpiece.radius",
+                required=True,
+                exclusive_minimum=0.0,
+                bounds=_SIZE,
+                what="a radius",
+                too_large=UNITS_HINT,
             )
             length = r.number(
-                t, "length", "workpiece.length", required=True, exclusive_minimum=0.0, bounds=_SIZE, what="a length"
+                t,
+                "length",
+                "workpiece.length",
+                required=True,
+                exclusive_minimum=0.0,
+                bounds=_SIZE,
+                what="a length",
+                too_large=UNITS_HINT,
             )
             used |= {"radius", "length"}
             if radius is not None and length is not None:
@@ -367,6 +410,29 @@ class _Builder:
                     "units are metres and kilograms (is the file in millimetres or grams?)",
                 )
             )
+
+    def check_units(self, fixture: Fixture) -> None:
+        """Tips inside the part that would clear it were its sizes in cm or mm: say that sizes are in metres.
+
+        Each scale is tried on the shape alone (the locators and poses as written): a file whose
+        sizes alone are in centimetres has every tip outside once they are read as such, and the
+        nearest within the part's width (a tip pushed a little into a part in metres is not).
+        """
+        wp, tol = fixture.workpiece, self.tol
+        for factor, unit in ((1e2, "centimetres"), (1e3, "millimetres")):
+            shape = _scaled(wp.shape, 1.0 / factor)
+            if shape is None:
+                return
+            scaled = Workpiece(shape, wp.mass_kg, wp.inertia_body, shape.com_body)
+            gaps = [locator_contact(scaled, fixture.start, loc).gap_m for loc in fixture.locators]
+            # ... and the nearest tip near the part read so (a fixture holds its part), not metres away
+            if min(gaps) >= -tol.penetration_m and min(gaps) <= 2.0 * shape.bounding_radius:
+                self.r.error(
+                    "workpiece",
+                    f"the locators are inside the part, and would not be were its sizes in {unit}: "
+                    f"sizes are in metres; did you write {unit}?",
+                )
+                return
 
     def positive_all(self, values: list[float], path: str, what: str) -> bool:
         bad = [i for i, v in enumerate(values) if v <= 0]
@@ -665,6 +731,9 @@ class _Builder:
                         f"expected ≥ {reach:g} m, the sum of the tip radii)",
                     )
         wp = fixture.workpiece
+        inside = [loc for loc in locs if locator_contact(wp, fixture.start, loc).gap_m < -tol.penetration_m]
+        if inside:
+            self.check_units(fixture)
         for loc in locs:
             gap = locator_contact(wp, fixture.start, loc).gap_m
             if gap < -tol.penetration_m:

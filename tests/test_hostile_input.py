@@ -290,7 +290,10 @@ def test_millimetre_file(capsys, tmp_path: Path) -> None:
     mm = tmp_path / "mm.toml"
     mm.write_text(BOX.replace("size = [0.20, 0.10, 0.05]", "size = [200.0, 100.0, 50.0]"))
     code, _, err = run(capsys, "validate", mm)
-    assert code == 2 and f"{mm}: workpiece.size[0]: got 200 (expected a length [m] in [0.0001, 100])" in err
+    assert code == 2 and err == (
+        f"{mm}: workpiece.size[0]: got 200 (expected a length [m] in [0.0001, 100]; "
+        "sizes are in metres; did you write millimetres?)\n"
+    )
     # sizes that fit the range but not the mass: 2 kg in 20 x 10 x 5 m is 2e-3 kg/m³
     big = tmp_path / "big.toml"
     big.write_text(
