@@ -237,14 +237,14 @@ def solve(
             typer.echo(
                 f"perturbed world {perturb_seed} (seed {seed}): friction {mu}; start {json.dumps(perturbation['start'])}"
             )
-        _print_plan(plan, fixture)
+        _print_plan(plan, fixture, {"accel": accel, "friction_margin": friction_margin})
         if written:
             typer.echo("wrote " + ", ".join(str(p) for p in written))
     if not plan.ok:
         raise typer.Exit(1)
 
 
-def _print_plan(plan: Plan, fixture: Fixture) -> None:
+def _print_plan(plan: Plan, fixture: Fixture, options: dict[str, float] | None = None) -> None:
     from rich.table import Table
 
     if plan.transitions:
@@ -268,6 +268,13 @@ def _print_plan(plan: Plan, fixture: Fixture) -> None:
     if not plan.transitions and plan.status != "infeasible":
         typer.echo(f"{fixture.name}: the part starts located (every locator touches): there is nothing to plan")
     typer.echo(f"status: {plan.status}" + (f" — {plan.reason}" if plan.reason else ""))
+    if plan.status == "infeasible" and "too weak" in plan.reason and options is not None:
+        # the force named is the push the planner asked for, not the least that moves the part
+        typer.echo(
+            f"note: that force is for a push that accelerates the part at {options['accel']:g} m/s² (--accel) and "
+            f"works for friction in μ(1 ± {options['friction_margin']:g}) (--friction-margin); a slower, less robust "
+            "push needs less: '--accel 0.01 --friction-margin 0' shows the least"
+        )
     v = plan.verification
     if v is not None:
         ex = v.execution
