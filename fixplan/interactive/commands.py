@@ -209,8 +209,6 @@ def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
     if not isinstance(data, dict):
         raise InputError(f"{plan}: not a fixplan plan (expected a JSON object)")
     path, note = fixture_of_plan(data, plan, fixture_path)  # the fixture the plan names (path, hash)
-    if note:
-        _echo(f"fixplan: {note}")
     fixture = load(path)
     try:
         v = verify_plan_file(fixture, data, source=str(plan))
@@ -218,6 +216,8 @@ def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
         if "another fixture" not in str(exc) or fixture_path is not None:
             raise
         raise InputError(f"{exc} (pass the plan's fixture with --fixture FILE)") from None
+    if note:  # after the plan was read: bad input stays one line
+        _echo(f"fixplan: {note}")
     if json_out:
         out = v.to_json()
         out.pop("trace", None)
