@@ -113,7 +113,7 @@ def test_fclib_cli_exit_codes(fclib_dir, tmp_path):
     ],
 )
 def test_a_repeated_option_is_refused_not_dropped(capsys, monkeypatch, tmp_path, args, message):
-    # issue 21 §6: click kept the last --wrench and dropped the others silently
+    # click kept the last --wrench and dropped the others silently
     monkeypatch.chdir(tmp_path)  # where a command that is not refused would write its outputs
     rc = main(args)
     err = capsys.readouterr().err

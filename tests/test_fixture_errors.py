@@ -181,7 +181,7 @@ def _issues(tmp_path, text: str) -> list[str]:
 
 
 def test_every_bad_element_of_a_vector_is_reported(tmp_path):
-    # issue 21 §6: a size in millimetres reported only size[0]
+    # a size in millimetres once reported only size[0]
     lines = _issues(tmp_path, GOOD.replace("size = [0.2, 0.1, 0.05]", 'size = [300, 200, "x"]'))
     assert [line.split(":")[0] for line in lines] == ["workpiece.size[0]", "workpiece.size[1]", "workpiece.size[2]"]
     assert "got 300" in lines[0] and "got 200" in lines[1] and "got the string 'x'" in lines[2]

@@ -138,7 +138,7 @@ def _solve(capsys, *args: str) -> None:
     if rc != 2:
         data = json.loads(out, parse_constant=_strict)
         assert isinstance(data, dict)
-        # the plan names its fixture (issue 21 §4): resolved path and SHA-256 of its bytes, first
+        # the plan names its fixture: resolved path and SHA-256 of its bytes, first
         assert list(data)[:2] == ["fixture", "fixture_sha256"]
         assert data["fixture"] == str(Path(args[0]).resolve())
         assert data["fixture_sha256"] == hashlib.sha256(Path(args[0]).read_bytes()).hexdigest()

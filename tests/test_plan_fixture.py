@@ -1,6 +1,6 @@
 """A plan file names its fixture (path and SHA-256 of the bytes), so that ``fixplan verify PLAN`` finds it later.
 
-Issue 21 §4: a plan written by ``solve --out`` was verified against the bundled box ("the plan is
+Once, a plan written by ``solve --out`` was verified against the bundled box ("the plan is
 for another fixture") because it did not name its fixture.
 """
 

@@ -9,7 +9,7 @@
 - every ``fixplan`` command the README shows parses (options and values), the quickstart's
   table row is what ``classify`` prints, the JSON example's ``solve_time_s`` is within
   :data:`SOLVE_TIME_FACTOR` of a real first call, the default fixture's comment gives its computed
-  gaps, and ``mesh`` is not offered as supported (issue 21 §6).
+  gaps, and ``mesh`` is not offered as supported.
 """
 
 from __future__ import annotations
@@ -128,7 +128,7 @@ def test_fclib_sample_solves_and_carries_the_weight() -> None:
     assert np.max(np.abs(out["velocity"])) < 1e-8  # held: no contact velocity
 
 
-# -- the README's commands and numbers against a real run (issue 21 §6) -------------------------------
+# -- the README's commands and numbers against a real run ------------------------------------------
 SOLVE_TIME_FACTOR = 10.0  # the README's first-call solve_time_s, within this factor of a real first call
 
 

@@ -1,4 +1,4 @@
-"""What ``fixplan solve`` prints and reports (issue 21 §6 papercuts).
+"""What ``fixplan solve`` prints and reports (papercuts a new user met).
 
 At 80 columns ``solve``'s table cut the push column (``-16.4,-5.1…``), and ``solve --batch``
 cut the file names, so that four ``gen-plate-2d-s…`` rows could not be told apart. The report
