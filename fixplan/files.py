@@ -7,14 +7,18 @@ what the file seems to be (HDF5, UTF-16, binary) instead of a ``UnicodeDecodeErr
 Outputs: a path is writable when nothing is there, or a regular file is there and the user said
 ``--force``. A path that is a directory, a device (``/dev/full``), a pipe or a dangling symbolic
 link is refused (the link would create a file outside the folder the user named), and several
-outputs of one command must be distinct files. Write errors name the path and the reason.
+outputs of one command must be distinct files (compared by inode, so a hard link to an input is
+refused too). An output is written to a temporary file beside it and renamed onto it, never
+through a link onto another file. Write errors name the path and the reason.
 """
 
 from __future__ import annotations
 
 import codecs
 import errno
+import hashlib
 import os
+import secrets
 import stat
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -73,6 +77,15 @@ def read_user_text(path: Path, *, expected: str, max_bytes: int = MAX_FILE_BYTES
     if len(data) > max_bytes:
         raise UnreadableFile(path, f"is larger than the limit of {max_bytes} bytes (expected {expected})")
     return decode_text(path, data, expected=expected)
+
+
+def file_sha256(path: Path, *, max_bytes: int = MAX_FILE_BYTES) -> str:
+    """The SHA-256 (hex) of a user's file bytes, as read (at most ``max_bytes``); :class:`UnreadableFile` if it cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            return hashlib.sha256(fh.read(max_bytes + 1)).hexdigest()
+    except OSError as exc:
+        raise UnreadableFile(path, exc.strerror or str(exc)) from None
 
 
 def decode_text(path: Path, data: bytes, *, expected: str) -> str:
@@ -145,14 +158,16 @@ def check_distinct(outputs: Sequence[tuple[str, Path | None]]) -> None:
 
     ``outputs`` lists ``(option, path)`` pairs, inputs first; ``None`` paths are skipped.
     """
-    seen: dict[Path, str] = {}
+    seen: dict[object, str] = {}
     for option, path in outputs:
         if path is None:
             continue
-        key = Path(os.path.abspath(path))
+        key: object = Path(os.path.abspath(path))
         try:
-            key = key.resolve()
-        except OSError:  # pragma: no cover - a loop of links: compare as written
+            key = Path(os.path.abspath(path)).resolve()
+            info = os.stat(key)
+            key = (info.st_dev, info.st_ino)  # an existing file: by inode, so a hard link is the same file
+        except OSError:  # not there yet (or a loop of links): by its resolved path
             pass
         if key in seen:
             raise InputError(
@@ -162,14 +177,27 @@ def check_distinct(outputs: Sequence[tuple[str, Path | None]]) -> None:
 
 
 def write_output(path: Path, write: Callable[[Path], T]) -> T:
-    """Run ``write(path)``; turn a failure (disk full, permission) into one line naming the path."""
+    """Run ``write`` on a temporary file beside ``path``, then rename it onto ``path``.
+
+    The rename replaces the directory entry, so an output that is a link (hard or symbolic) to
+    an input never writes through it onto the input, and a failed write leaves no half file. The
+    temporary name keeps the suffix (writers pick their format by it). A failure (disk full,
+    permission) is one line naming the path.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp{path.suffix}")
     try:
-        return write(path)
+        result = write(tmp)
+        os.replace(tmp, path)
+        return result
     except OSError as exc:
         reason = exc.strerror or str(exc)
         if exc.errno == errno.ENOSPC:
             reason = "no space left on the device"
         raise InputError(f"cannot write {path}: {reason}") from None
+    finally:
+        if tmp.exists():
+            tmp.unlink()
 
 
 def write_text(path: Path, text: str) -> None:

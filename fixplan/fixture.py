@@ -48,6 +48,24 @@ _DATA = Path(__file__).resolve().parent / "data"
 NAME_PATTERN = re.compile(rf"[\w+\-]{{1,{limits.MAX_NAME_LENGTH}}}")
 NAME_RULE = f"a name of 1 to {limits.MAX_NAME_LENGTH} letters, digits, '_', '-' or '+' (no spaces, commas, dots or control characters)"
 _SIZE = limits.SIZE
+UNITS_HINT = "sizes are in metres; did you write millimetres?"
+
+
+def _scaled(shape: Shape, k: float) -> Shape | None:
+    """``shape`` with every length times ``k`` (None for a shape not scaled here: polygon, mesh)."""
+    if isinstance(shape, Box):
+        return Box(tuple(k * x for x in shape.size))  # type: ignore[arg-type]
+    if isinstance(shape, Rectangle):
+        return Rectangle(tuple(k * x for x in shape.size))  # type: ignore[arg-type]
+    if isinstance(shape, Sphere):
+        return Sphere(k * shape.radius)
+    if isinstance(shape, Disk):
+        return Disk(k * shape.radius)
+    if isinstance(shape, Cylinder):
+        return Cylinder(k * shape.radius, k * shape.length)
+    return None
+
+
 _VERTEX = limits.Range("a vertex coordinate", "m", -limits.LENGTH_MAX_M, limits.LENGTH_MAX_M)
 
 
@@ -60,6 +78,78 @@ def load(path: str | Path, tolerances: Tolerances = DEFAULT) -> Fixture:
     """Read and validate a fixture file; raise :class:`FixtureError` listing every problem."""
     path = Path(path)
     return loads(read_fixture_text(path), source=str(path), base_dir=path.parent, tolerances=tolerances)
+
+
+# -- the fixture a plan file names ------------------------------------------------------------------
+_SHA256 = re.compile(r"[0-9a-f]{64}")
+
+
+def fixture_stamp(path: str | Path) -> dict[str, str]:
+    """The keys by which a plan file names its fixture: ``fixture`` and ``fixture_sha256``.
+
+    ``fixture`` is the path resolved to an absolute one (so that the plan can be verified from
+    any folder); ``fixture_sha256`` the SHA-256 of the file's bytes, so that an edited file is
+    noticed (:func:`fixture_of_plan`).
+    """
+    from fixplan.files import file_sha256
+
+    path = Path(path)
+    return {"fixture": str(path.resolve()), "fixture_sha256": file_sha256(path)}
+
+
+def fixture_of_plan(data: Any, plan: Path, given: Path | None) -> tuple[Path, str | None]:
+    """The fixture file to verify a plan file's object against, and a warning to print (or None).
+
+    ``given`` (``--fixture``) wins; a differing hash only warns. Else the file the plan names
+    (``fixture``: absolute, or relative to the working folder or to the plan's folder), refused
+    when it is missing or its bytes changed since the plan was made. A plan that names no fixture
+    (written before plans named theirs) is read for the bundled box, with a warning.
+
+    Raises
+    ------
+    InputError
+        The named file is missing or was edited, or the keys are malformed; the message says how
+        to go on (``--fixture FILE`` or solve again).
+    """
+    from shlex import quote
+
+    from fixplan.errors import InputError
+    from fixplan.files import file_sha256
+
+    obj = data if isinstance(data, dict) else {}
+    named, digest = obj.get("fixture"), obj.get("fixture_sha256")
+    if named is not None and not (isinstance(named, str) and named):
+        raise InputError(f"{plan}: fixture: expected the fixture file's path, got {shorten(repr(named))}")
+    if digest is not None and not (isinstance(digest, str) and _SHA256.fullmatch(digest)):
+        raise InputError(f"{plan}: fixture_sha256: expected 64 lowercase hex digits, got {shorten(repr(digest))}")
+    if given is not None:
+        note = None
+        if digest is not None and given.is_file() and file_sha256(given) != digest:
+            same = named is not None and Path(named).resolve() == given.resolve()
+            was = "changed since the plan was made" if same else f"is not the fixture the plan was made for ({named})"
+            note = f"warning: {given} {was}: verifying {plan} against it as it is now"
+        return given, note
+    if named is None:
+        return default_fixture_path(), (
+            f"warning: {plan} names no fixture (a plan written before plans named theirs): verifying it against the "
+            "bundled box; pass its fixture with --fixture FILE"
+        )
+    candidates = [Path(named)]
+    if not Path(named).is_absolute():
+        candidates.append(plan.parent / named)
+    found = next((c for c in candidates if c.is_file()), None)
+    if found is None:
+        raise InputError(
+            f"{plan}: the plan names the fixture {named}, which is not there (moved or deleted?): "
+            "pass the fixture with --fixture FILE"
+        )
+    if digest is not None and (now := file_sha256(found)) != digest:
+        raise InputError(
+            f"{plan}: the fixture {found} changed since the plan was made (SHA-256 {digest[:12]}… then, "
+            f"{now[:12]}… now): solve it again ('fixplan solve {quote(str(found))} --out {quote(str(plan))} --force'), "
+            f"or verify the plan against the file as it is now with --fixture {quote(str(found))}"
+        )
+    return found, None
 
 
 def read_fixture_text(path: Path) -> str:
@@ -208,28 +298,53 @@ class _Builder:
         shape: Shape | None = None
         used = {"shape", "mass", "inertia", "start", "goal"}
         if kind == "box":
-            size = r.vector(t, "size", "workpiece.size", 3, required=True, dimension_hint=3, bounds=_SIZE)
+            size = r.vector(
+                t, "size", "workpiece.size", 3, required=True, dimension_hint=3, bounds=_SIZE, too_large=UNITS_HINT
+            )
             used.add("size")
             if size is not None and self.positive_all(size, "workpiece.size", "edge lengths > 0"):
                 shape = Box(tuple(size))  # type: ignore[arg-type]
         elif kind == "rectangle":
-            size = r.vector(t, "size", "workpiece.size", 2, required=True, dimension_hint=2, bounds=_SIZE)
+            size = r.vector(
+                t, "size", "workpiece.size", 2, required=True, dimension_hint=2, bounds=_SIZE, too_large=UNITS_HINT
+            )
             used.add("size")
             if size is not None and self.positive_all(size, "workpiece.size", "side lengths > 0"):
                 shape = Rectangle(tuple(size))  # type: ignore[arg-type]
         elif kind in ("sphere", "disk"):
             radius = r.number(
-                t, "radius", "workpiece.radius", required=True, exclusive_minimum=0.0, bounds=_SIZE, what="a radius"
+                t,
+                "radius",
+                "workpiece.radius",
+                required=True,
+                exclusive_minimum=0.0,
+                bounds=_SIZE,
+                what="a radius",
+                too_large=UNITS_HINT,
             )
             used.add("radius")
             if radius is not None:
                 shape = Sphere(radius) if kind == "sphere" else Disk(radius)
         elif kind == "cylinder":
             radius = r.number(
-                t, "radius", "workpiece.radius", required=True, exclusive_minimum=0.0, bounds=_SIZE, what="a radius"
+                t,
+                "radius",
+                "workpiece.radius",
+                required=True,
+                exclusive_minimum=0.0,
+                bounds=_SIZE,
+                what="a radius",
+                too_large=UNITS_HINT,
             )
             length = r.number(
-                t, "length", "workpiece.length", required=True, exclusive_minimum=0.0, bounds=_SIZE, what="a length"
+                t,
+                "length",
+                "workpiece.length",
+                required=True,
+                exclusive_minimum=0.0,
+                bounds=_SIZE,
+                what="a length",
+                too_large=UNITS_HINT,
             )
             used |= {"radius", "length"}
             if radius is not None and length is not None:
@@ -295,6 +410,29 @@ class _Builder:
                     "units are metres and kilograms (is the file in millimetres or grams?)",
                 )
             )
+
+    def check_units(self, fixture: Fixture) -> None:
+        """Tips inside the part that would clear it were its sizes in cm or mm: say that sizes are in metres.
+
+        Each scale is tried on the shape alone (the locators and poses as written): a file whose
+        sizes alone are in centimetres has every tip outside once they are read as such, and the
+        nearest within the part's width (a tip pushed a little into a part in metres is not).
+        """
+        wp, tol = fixture.workpiece, self.tol
+        for factor, unit in ((1e2, "centimetres"), (1e3, "millimetres")):
+            shape = _scaled(wp.shape, 1.0 / factor)
+            if shape is None:
+                return
+            scaled = Workpiece(shape, wp.mass_kg, wp.inertia_body, shape.com_body)
+            gaps = [locator_contact(scaled, fixture.start, loc).gap_m for loc in fixture.locators]
+            # ... and the nearest tip near the part read so (a fixture holds its part), not metres away
+            if min(gaps) >= -tol.penetration_m and min(gaps) <= 2.0 * shape.bounding_radius:
+                self.r.error(
+                    "workpiece",
+                    f"the locators are inside the part, and would not be were its sizes in {unit}: "
+                    f"sizes are in metres; did you write {unit}?",
+                )
+                return
 
     def positive_all(self, values: list[float], path: str, what: str) -> bool:
         bad = [i for i, v in enumerate(values) if v <= 0]
@@ -593,6 +731,9 @@ class _Builder:
                         f"expected ≥ {reach:g} m, the sum of the tip radii)",
                     )
         wp = fixture.workpiece
+        inside = [loc for loc in locs if locator_contact(wp, fixture.start, loc).gap_m < -tol.penetration_m]
+        if inside:
+            self.check_units(fixture)
         for loc in locs:
             gap = locator_contact(wp, fixture.start, loc).gap_m
             if gap < -tol.penetration_m:

@@ -96,7 +96,9 @@ class Reader:
         maximum: float | None = None,
         bounds: Range | None = None,
         what: str = "a number",
+        too_large: str | None = None,
     ) -> float | None:
+        """A number of ``table``; ``too_large`` is a hint added when it is above ``bounds`` (units)."""
         if name not in table:
             if required:
                 self.error(path, f"missing (expected {what})")
@@ -122,7 +124,8 @@ class Reader:
             self.error(path, f"got {value:g} (expected {what} ≤ {maximum:g})")
             return None
         if bounds is not None and not bounds.contains(value):
-            self.error(path, f"got {value:g} (expected {bounds.expected()})")
+            hint = f"; {too_large}" if too_large and value > bounds.high else ""
+            self.error(path, f"got {value:g} (expected {bounds.expected()}{hint})")
             return None
         return value
 
@@ -175,7 +178,12 @@ class Reader:
         what: str = "numbers",
         dimension_hint: int | None = None,
         bounds: Range | None = None,
+        too_large: str | None = None,
     ) -> list[float] | None:
+        """A list of ``length`` numbers; every bad element is reported, and then None is returned.
+
+        ``too_large`` is a hint added (once) to the first element above ``bounds`` (units).
+        """
         if name not in table:
             if required:
                 self.error(path, f"missing (expected {length} {what})")
@@ -188,25 +196,28 @@ class Reader:
             hint = f" for a {dimension_hint}D scene" if dimension_hint else ""
             self.error(path, f"got {len(value)} numbers (expected {length}{hint})")
             return None
-        out = []
+        out: list[float] = []
+        hinted = too_large is None
         for i, x in enumerate(value):
+            where = f"{path}[{i}]"
             if not _is_number(x):
-                self.error(f"{path}[{i}]", f"got {_kind(x)} (expected a number)")
-                return None
+                self.error(where, f"got {_kind(x)} (expected a number)")
+                continue
             v = _as_float(x)
             if v is None:
-                self.error(
-                    f"{path}[{i}]", f"got {_kind(x)}, too large for a float (expected {_expected('a number', bounds)})"
-                )
-                return None
+                self.error(where, f"got {_kind(x)}, too large for a float (expected {_expected('a number', bounds)})")
+                continue
             if not math.isfinite(v):
-                self.error(f"{path}[{i}]", f"got {x} (expected a finite number)")
-                return None
+                self.error(where, f"got {x} (expected a finite number)")
+                continue
             if bounds is not None and not bounds.contains(v):
-                self.error(f"{path}[{i}]", f"got {v:g} (expected {bounds.expected()})")
-                return None
+                hint = ""
+                if not hinted and v > bounds.high:
+                    hint, hinted = f"; {too_large}", True
+                self.error(where, f"got {v:g} (expected {bounds.expected()}{hint})")
+                continue
             out.append(v)
-        return out
+        return out if len(out) == length else None
 
 
 def _expected(what: str, bounds: Range | None) -> str:

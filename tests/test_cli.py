@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 from conftest import PROBLEMS, run_cli
 
+from fixplan.cli import main
+
 fixplan = run_cli
 
 
@@ -99,3 +101,25 @@ def test_fclib_cli_exit_codes(fclib_dir, tmp_path):
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
     proc = fixplan("fclib", str(path), "--solver", "nope")
     assert proc.returncode == 2 and "known solvers" in proc.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["classify", "--wrench", "1,0,0,0,0,0", "--wrench=2,0,0,0,0,0"], "--wrenches FILE"),
+        (["map", "--wrench", "1,0,0,0,0,0", "--axes", "Fx,Tz", "--wrench", "3,0,0,0,0,0"], "expected it once"),
+        (["simulate", "--duration", "0.01", "--duration", "0.02"], "--duration is given 2 times ('0.01', '0.02')"),
+        (["solve", "--out", "a.json", "--out", "b.json"], "--out is given 2 times"),
+    ],
+)
+def test_a_repeated_option_is_refused_not_dropped(capsys, monkeypatch, tmp_path, args, message):
+    # click kept the last --wrench and dropped the others silently
+    monkeypatch.chdir(tmp_path)  # where a command that is not refused would write its outputs
+    rc = main(args)
+    err = capsys.readouterr().err
+    assert rc == 2 and message in err and len(err.strip().splitlines()) == 1
+
+
+def test_repeated_flags_and_values_that_look_like_options_are_not_refused(capsys):
+    rc = main(["classify", "--wrench", "0,0,-5,0,0,0", "--json", "--json"])
+    assert rc == 0 and json.loads(capsys.readouterr().out)["results"][0]["mode"]

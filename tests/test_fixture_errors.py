@@ -170,3 +170,68 @@ def test_cli_bad_input_is_one_line_and_exit_2(args):
     assert proc.returncode == 2, proc.stderr
     assert "Traceback" not in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+
+
+def _issues(tmp_path, text: str) -> list[str]:
+    path = tmp_path / "f.toml"
+    path.write_text(text)
+    with pytest.raises(FixtureError) as info:
+        fixplan.load(path)
+    return [line.removeprefix(f"{path}: ") for line in str(info.value).splitlines()]
+
+
+def test_every_bad_element_of_a_vector_is_reported(tmp_path):
+    # a size in millimetres once reported only size[0]
+    lines = _issues(tmp_path, GOOD.replace("size = [0.2, 0.1, 0.05]", 'size = [300, 200, "x"]'))
+    assert [line.split(":")[0] for line in lines] == ["workpiece.size[0]", "workpiece.size[1]", "workpiece.size[2]"]
+    assert "got 300" in lines[0] and "got 200" in lines[1] and "got the string 'x'" in lines[2]
+    # the units hint is given once, on the first element too large
+    assert sum("did you write millimetres?" in line for line in lines) == 1
+    assert "sizes are in metres; did you write millimetres?" in lines[0]
+
+
+@pytest.mark.parametrize(
+    ("text", "key"),
+    [
+        (GOOD.replace('shape = "box"\nsize = [0.2, 0.1, 0.05]', 'shape = "sphere"\nradius = 250'), "workpiece.radius"),
+        (GOOD.replace('shape = "box"\nsize = [0.2, 0.1, 0.05]', 'shape = "cylinder"\nradius = 0.02\nlength = 150'),
+         "workpiece.length"),
+    ],
+)  # fmt: skip
+def test_a_length_in_millimetres_gets_the_units_hint(tmp_path, text, key):
+    lines = _issues(tmp_path, text)
+    assert any(line.startswith(f"{key}: ") and "did you write millimetres?" in line for line in lines), lines
+
+
+@pytest.mark.parametrize(("size", "unit"), [("20, 10, 5", "centimetres"), ("200, 100, 50", "millimetres")])
+def test_sizes_in_cm_or_mm_with_the_rest_in_metres_get_the_units_hint(tmp_path, size, unit):
+    # the tips are inside the part by metres; read in cm (or mm), the same sizes clear every tip.
+    # 200 mm is above the length range: that element gets the hint instead (GOOD's 0.2 m edge)
+    lines = _issues(tmp_path, GOOD.replace("size = [0.2, 0.1, 0.05]", f"size = [{size}]"))
+    assert sum("did you write" in line for line in lines) == 1
+    hinted = next(line for line in lines if "did you write" in line)
+    assert f"sizes are in metres; did you write {unit}?" in hinted
+    if unit == "centimetres":
+        assert hinted.startswith("workpiece: the locators are inside the part")
+        assert any("inside the workpiece" in line for line in lines)
+    else:
+        assert hinted.startswith("workpiece.size[0]: got 200")
+
+
+def test_a_part_in_mm_within_the_length_range_gets_the_units_hint(tmp_path):
+    # a 60 x 40 x 20 mm part: every edge is a valid length in metres, the tips are inside it
+    text = (
+        GOOD.replace("size = [0.2, 0.1, 0.05]", "size = [60, 40, 20]")
+        .replace("position = [0.1, 0.05, 0.025]", "position = [0.03, 0.02, 0.01]")
+        .replace("position = [0.05, 0.03, -0.001]", "position = [0.03, 0.02, -0.001]")
+    )
+    lines = _issues(tmp_path, text)
+    assert lines[0] == (
+        "workpiece: the locators are inside the part, and would not be were its sizes in millimetres: "
+        "sizes are in metres; did you write millimetres?"
+    )
+
+
+def test_a_small_penetration_gets_no_units_hint(tmp_path):
+    lines = _issues(tmp_path, GOOD.replace("position = [0.05, 0.03, -0.001]", "position = [0.05, 0.03, 0.01]"))
+    assert not any("did you write" in line for line in lines)

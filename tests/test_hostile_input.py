@@ -290,7 +290,10 @@ def test_millimetre_file(capsys, tmp_path: Path) -> None:
     mm = tmp_path / "mm.toml"
     mm.write_text(BOX.replace("size = [0.20, 0.10, 0.05]", "size = [200.0, 100.0, 50.0]"))
     code, _, err = run(capsys, "validate", mm)
-    assert code == 2 and f"{mm}: workpiece.size[0]: got 200 (expected a length [m] in [0.0001, 100])" in err
+    assert code == 2 and err == (
+        f"{mm}: workpiece.size[0]: got 200 (expected a length [m] in [0.0001, 100]; "
+        "sizes are in metres; did you write millimetres?)\n"
+    )
     # sizes that fit the range but not the mass: 2 kg in 20 x 10 x 5 m is 2e-3 kg/m³
     big = tmp_path / "big.toml"
     big.write_text(
@@ -381,3 +384,33 @@ def test_margins_are_range_checked(capsys) -> None:
     assert code == 2 and err == "fixplan: --min-margin is 1e+300 (expected a force [N] in [0, 1e+06])\n"
     code, _, err = run(capsys, "solve", "--margin", "1e300", "--no-verify")
     assert code == 2 and "--margin" in err and "1000000" in err and len(err.splitlines()) == 1
+
+
+def test_a_hard_link_to_the_input_is_refused_as_an_output(capsys, tmp_path: Path) -> None:
+    # a hard link has its own path: comparing resolved paths let 'solve FILE --out LINK --force' eat FILE
+    fixture = tmp_path / "box.toml"
+    fixture.write_text(BOX)
+    link = tmp_path / "plan.json"
+    os.link(fixture, link)
+    code, _, err = run(capsys, "solve", fixture, "--out", link, "--force", "--no-verify")
+    assert code == 2 and f"--out {link} is the same file as FILE {fixture}" in err
+    assert fixture.read_text() == BOX
+
+
+def test_outputs_are_renamed_into_place_never_written_through_a_link(tmp_path: Path) -> None:
+    target = tmp_path / "someone-elses.txt"
+    target.write_text("keep me")
+    link = tmp_path / "out.txt"
+    link.symlink_to(target)
+    write_output(link, lambda p: p.write_text("new"))
+    assert target.read_text() == "keep me"  # the link was replaced, not written through
+    assert not link.is_symlink() and link.read_text() == "new"
+
+    # a failed write leaves neither a half file nor its temporary beside it
+    def half(p: Path) -> None:
+        p.write_text("half")
+        raise OSError(errno.EIO, "Input/output error")
+
+    with pytest.raises(InputError, match="cannot write"):
+        write_output(tmp_path / "x.csv", half)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.txt", "someone-elses.txt"]

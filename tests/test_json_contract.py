@@ -7,6 +7,7 @@ Exit 3 (internal error) is a failure; so is any output that Python's strict pars
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -135,7 +136,12 @@ def _solve(capsys, *args: str) -> None:
         pytest.xfail(SOLVE_NAN)
     assert rc in (0, 1, 2), f"exit {rc}: {err.strip()}"
     if rc != 2:
-        assert isinstance(json.loads(out, parse_constant=_strict), dict)
+        data = json.loads(out, parse_constant=_strict)
+        assert isinstance(data, dict)
+        # the plan names its fixture: resolved path and SHA-256 of its bytes, first
+        assert list(data)[:2] == ["fixture", "fixture_sha256"]
+        assert data["fixture"] == str(Path(args[0]).resolve())
+        assert data["fixture_sha256"] == hashlib.sha256(Path(args[0]).read_bytes()).hexdigest()
 
 
 @pytest.mark.parametrize("path", FULL, ids=lambda p: p.stem)

@@ -5,7 +5,11 @@
   plan takes seconds and ``tests/test_solve.py`` runs one);
 - ``sim.state`` has ``.pose`` and ``.twist``; the certificate table names every certificate the
   classifier can return, ``zero-wrench`` included;
-- the FCLib sample in ``examples/`` solves, and its normal impulses carry the weight.
+- the FCLib sample in ``examples/`` solves, and its normal impulses carry the weight;
+- every ``fixplan`` command the README shows parses (options and values), the quickstart's
+  table row is what ``classify`` prints, the JSON example's ``solve_time_s`` is within
+  :data:`SOLVE_TIME_FACTOR` of a real first call, the default fixture's comment gives its computed
+  gaps, and ``mesh`` is not offered as supported.
 """
 
 from __future__ import annotations
@@ -122,3 +126,99 @@ def test_fclib_sample_solves_and_carries_the_weight() -> None:
     assert r[:, 0].sum() == pytest.approx(fx.workpiece.mass_kg * 9.81 * 1e-3, rel=1e-6)  # m g h [N·s]
     assert np.all(r[:, 0] > 0)
     assert np.max(np.abs(out["velocity"])) < 1e-8  # held: no contact velocity
+
+
+# -- the README's commands and numbers against a real run ------------------------------------------
+SOLVE_TIME_FACTOR = 10.0  # the README's first-call solve_time_s, within this factor of a real first call
+
+
+def test_classify_json_example_solve_time_is_a_first_call_within_a_factor() -> None:
+    # the example once showed 0.0004 s: a warm call's time, 1000 times below what a user's first call prints
+    block = next(b for b in _blocks("json") if '"certificate": "sliding-witness"' in b)
+    shown = json.loads(block)["results"][0]["solve_time_s"]
+    proc = fixplan_cli("classify", "--wrench", "6,0,0,0,0,0", "--json")
+    got = json.loads(proc.stdout)["results"][0]["solve_time_s"]
+    assert shown / SOLVE_TIME_FACTOR <= got <= shown * SOLVE_TIME_FACTOR, (shown, got)
+    assert f"a factor of {SOLVE_TIME_FACTOR:g} either way" in README
+
+
+def _readme_commands() -> list[list[str]]:
+    """Every ``fixplan ...`` command the README shows: in code blocks (``$``-prompted or plain) and in
+    inline code, without placeholders (``[--opt]``, ``FILE``, ``...``)."""
+    import shlex
+
+    lines = [line for lang in ("sh", "text") for b in _blocks(lang) for line in b.splitlines()]
+    lines += re.findall(r"`((?:\.venv/bin/)?fixplan [^`]+)`", README.replace("\n", " "))
+    commands = []
+    for line in lines:
+        line = line.split("#")[0].strip().removeprefix("$ ").removesuffix("&").strip()
+        line = line.removeprefix(".venv/bin/")
+        if not line.startswith("fixplan ") or re.search(r"\[|\.\.\.|…|\b[A-Z]{2,}\b|\bK\b|\bP\b", line):
+            continue
+        commands.append(shlex.split(line)[1:])
+    return commands
+
+
+def test_every_readme_command_parses() -> None:
+    import typer.main
+
+    from fixplan.cli import app
+
+    group = typer.main.get_command(app)
+    commands = _readme_commands()
+    assert len(commands) >= 15, commands  # the README shows many; a broken extraction finds few
+    bad = []
+    for args in commands:
+        name, rest = args[0], args[1:]
+        if name.startswith("-"):  # fixplan --version
+            assert name in {"--version", "--help"}, args
+            continue
+        if rest and rest[-1].startswith("--") and name in group.commands:  # type: ignore[attr-defined]
+            # prose names an option without its value ("`fixplan solve --out`"): parse the rest
+            flags = {o for p in group.commands[name].params if getattr(p, "is_flag", False) for o in p.opts}  # type: ignore[attr-defined]
+            rest = rest if rest[-1] in flags else rest[:-1]
+        if name not in group.commands:  # type: ignore[attr-defined]
+            bad.append(f"fixplan {' '.join(args)}: no command {name!r}")
+            continue
+        if not rest:  # prose names the command ("`fixplan verify` replays ..."): it exists
+            continue
+        try:
+            group.commands[name].make_context(name, list(rest), resilient_parsing=False)  # type: ignore[attr-defined]
+        except Exception as exc:  # noqa: BLE001 - a click usage error names what is wrong
+            bad.append(f"fixplan {' '.join(args)}: {exc}")
+    assert not bad, "\n".join(bad)
+
+
+def test_the_quickstart_classify_block_is_what_the_command_prints() -> None:
+    block = next(b for b in _blocks("text") if "$ .venv/bin/fixplan classify --wrench 6,0,0,0,0,0" in b)
+    proc = fixplan_cli("classify", "--wrench", "6,0,0,0,0,0")
+    assert proc.returncode == 0, proc.stderr
+    row = next(line for line in block.splitlines() if line.startswith("│ 1 "))
+    assert [c.strip() for c in row.split("│")[1:-1]] in [
+        [c.strip() for c in line.split("│")[1:-1]] for line in proc.stdout.splitlines() if line.startswith("│ 1 ")
+    ], proc.stdout
+
+
+def test_the_default_fixture_comment_gives_its_computed_gaps() -> None:
+    from fixplan.fixture import default_fixture_path
+    from fixplan.locating import locator_gaps
+
+    path = default_fixture_path()
+    comment = "".join(line for line in path.read_text(encoding="utf-8").splitlines() if line.startswith("#"))
+    quoted = {name: float(mm) for mm, name in re.findall(r"([\d.]+) mm to (\w+)", comment.replace("#", ""))}
+    fx = fixplan.load(path)
+    gaps = dict(zip([loc.name for loc in fx.locators], locator_gaps(fx.workpiece, fx.start, fx.locators), strict=True))
+    open_ = {n for n, g in gaps.items() if g > fx.tolerances.touch_m}
+    assert set(quoted) == open_ == {"S1", "S2", "E1"}
+    for name, mm in quoted.items():
+        assert gaps[name] * 1e3 == pytest.approx(mm, abs=0.05), name  # to the digit shown
+
+
+def test_the_fixture_section_does_not_offer_mesh_as_supported(tmp_path) -> None:
+    section = README[README.index("## Fixture files") :].split("\n## ")[0]
+    assert "`mesh` with `file` is planned, not yet supported" in section
+    # ... and that is what the loader says
+    text = (ROOT / "problems" / "box-3-2-1.toml").read_text().replace('shape = "box"', 'shape = "mesh"\nfile = "p.stl"')
+    (tmp_path / "m.toml").write_text(text)
+    with pytest.raises(fixplan.FixtureError, match="mesh workpieces are not supported yet"):
+        fixplan.load(tmp_path / "m.toml")

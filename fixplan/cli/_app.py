@@ -184,6 +184,44 @@ def _json_default(x: Any) -> Any:
     raise TypeError(type(x))
 
 
+def _repeated_option(args: list[str]) -> str | None:
+    """The message for an option that takes a value given twice to one command, else None.
+
+    Click keeps the last value and drops the others silently (``--wrench A --wrench B`` would
+    classify B alone): a repeated option is refused instead, naming the values given.
+    """
+    command = typer.main.get_command(app)
+    commands = getattr(command, "commands", {})
+    rest = list(args)
+    while rest and rest[0].startswith("-"):  # root options (--version, --help)
+        rest.pop(0)
+    if not rest or rest[0] not in commands:
+        return None
+    valued: dict[str, str] = {}  # every spelling of an option that takes one value -> its first name
+    for param in commands[rest[0]].params:
+        opts = [*getattr(param, "opts", ()), *getattr(param, "secondary_opts", ())]
+        if opts and opts[0].startswith("-") and not (getattr(param, "is_flag", False) or param.multiple):
+            valued.update({o: param.opts[0] for o in param.opts})
+    seen: dict[str, list[str]] = {}
+    tokens = iter(rest[1:])
+    for token in tokens:
+        if token == "--":
+            break
+        name, eq, value = token.partition("=")
+        if name not in valued:
+            continue
+        if not eq:
+            value = next(tokens, "")
+        seen.setdefault(valued[name], []).append(value)
+    for name, values in seen.items():
+        if len(values) > 1:
+            shown = ", ".join(_shown(v) for v in values)
+            several = name == "--wrench" and "--wrenches" in valued  # classify reads many from a file
+            way = "; to classify several wrenches, list them in a CSV file for --wrenches FILE" if several else ""
+            return f"{name} is given {len(values)} times ({shown}): expected it once{way}"
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: run the app and turn every expected failure into one line and exit 2."""
     import warnings
@@ -191,6 +229,9 @@ def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else list(argv)
     if not args:  # bare `fixplan`: the help, on stdout, as `fixplan --help` prints it
         args = ["--help"]
+    if (repeated := _repeated_option(args)) is not None:
+        _err(repeated)
+        return 2
     try:
         # numpy's RuntimeWarnings (overflow, invalid value) are not messages for users: results are
         # checked for finiteness where they leave fixplan (strict JSON, the solvers' own checks)

@@ -323,7 +323,7 @@ def map_(
 ) -> None:
     """Classify a grid of pushes over two wrench components and draw the jamming diagram."""
     from fixplan.mapping import jamming_map
-    from fixplan.present.maps import save_map
+    from fixplan.present.maps import save_map, save_map_csv
 
     fixture = _load(file)
     names_all = AXES_3D if fixture.dimension == 3 else AXES_2D
@@ -368,7 +368,8 @@ def map_(
         progress=not json_out,
         axis_names=(ax[0], ax[1]),
     )
-    write_output(png, lambda p: save_map(result, p, csv_path))
+    write_output(png, lambda p: save_map(result, p))
+    write_output(csv_path, lambda p: save_map_csv(result, p))
     counts = result.counts()
     summary: dict[str, Any] = {
         "png": str(png),

@@ -22,7 +22,7 @@ from fixplan.cli._app import (
     _writable,
     app,
 )
-from fixplan.errors import InputError
+from fixplan.errors import InputError, one_line
 from fixplan.files import check_distinct, write_output, write_text
 from fixplan.settings import DEFAULT
 
@@ -149,6 +149,7 @@ def solve(
     With --perturb-seed K the loop runs on perturbed world K of 'fixplan robust' instead of the
     nominal one. With --batch DIR: exit 0 only if every file is planned.
     """
+    from fixplan.fixture import default_fixture_path, fixture_stamp
     from fixplan.planner.solve import solve as run_solve
     from fixplan.present.plots import figure_path, save_plan_figure
     from fixplan.present.report import report_markdown
@@ -170,6 +171,8 @@ def solve(
             friction_margin=friction_margin,
         )  # fmt: skip
     fixture = _load(file)
+    # the plan names its fixture (path and hash of the bytes read) so that 'fixplan verify PLAN' finds it
+    stamp = fixture_stamp(file if file is not None else default_fixture_path())
     figure = None if report is None else figure_path(report)
     # every output is checked before any is created (or any work done), and no two are one file
     check_distinct([("FILE", file), ("--out", out), ("--report", report), ("the report's figure", figure)])
@@ -211,7 +214,7 @@ def solve(
         from fixplan.robust import verify_on_world
 
         result, perturbation = verify_on_world(fixture, result, perturb_seed, perturb)
-    plan = result.plan
+    plan = result.plan.with_extras(**stamp)
     if perturbation is not None:
         plan = plan.with_extras(perturbation=perturbation)
     payload = plan.to_json()
@@ -235,37 +238,49 @@ def solve(
             typer.echo(
                 f"perturbed world {perturb_seed} (seed {seed}): friction {mu}; start {json.dumps(perturbation['start'])}"
             )
-        _print_plan(plan, fixture)
+        _print_plan(plan, fixture, {"accel": accel, "friction_margin": friction_margin})
         if written:
             typer.echo("wrote " + ", ".join(str(p) for p in written))
     if not plan.ok:
         raise typer.Exit(1)
 
 
-def _print_plan(plan: Plan, fixture: Fixture) -> None:
+def _print_plan(plan: Plan, fixture: Fixture, options: dict[str, float] | None = None) -> None:
     from rich.table import Table
 
     if plan.transitions:
+        # the push gets a line of its own below the table: six numbers in a cell were cut at 80 columns;
+        # narrow terminals wrap the other cells instead of cutting them
         table = Table(title=f"{fixture.name}: loading plan")
-        for col in ("#", "from + added", "motion", "push (mean)", "least margin [N]", "friction δ", "time [s]"):
-            table.add_column(col)
+        for col in ("#", "from + added", "motion", "least margin [N]", "friction δ", "time [s]"):
+            table.add_column(col, overflow="fold")
         for i, tr in enumerate(plan.transitions, 1):
-            w = "-" if tr.wrench is None else ",".join(f"{x:.3g}" for x in tr.wrench)
             margin = "-" if tr.margin_N is None else f"{tr.margin_N:.3g}"
             rob = "-" if tr.friction_robustness is None else f"±{tr.friction_robustness:.2g}"
             table.add_row(
                 str(i),
                 f"{{{','.join(tr.from_state)}}} + {tr.added_label}",
                 tr.motion,
-                w,
                 margin,
                 rob,
                 f"{tr.time_s:.2f}",
             )
         _console().print(table)
+        axes = "Fx, Fy, Fz, Tx, Ty, Tz" if fixture.dimension == 3 else "Fx, Fy, Mz"
+        typer.echo(f"push (mean over the transition) [{axes}; N, N·m]:")
+        for i, tr in enumerate(plan.transitions, 1):
+            w = "none (no contact to push against)" if tr.wrench is None else ", ".join(f"{x:.3g}" for x in tr.wrench)
+            typer.echo(f"  {i}: {w}")
     if not plan.transitions and plan.status != "infeasible":
         typer.echo(f"{fixture.name}: the part starts located (every locator touches): there is nothing to plan")
     typer.echo(f"status: {plan.status}" + (f" — {plan.reason}" if plan.reason else ""))
+    if plan.status == "infeasible" and "too weak" in plan.reason and options is not None:
+        # the force named is the push the planner asked for, not the least that moves the part
+        typer.echo(
+            f"note: that force is for a push that accelerates the part at {options['accel']:g} m/s² (--accel) and "
+            f"works for friction in μ(1 ± {options['friction_margin']:g}) (--friction-margin); a slower, less robust "
+            "push needs less: '--accel 0.01 --friction-margin 0' shows the least"
+        )
     v = plan.verification
     if v is not None:
         ex = v.execution
@@ -307,12 +322,19 @@ def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | No
         _emit_json({"fixtures": rows})
     else:
         table = Table(title=f"{directory}: {len(rows)} fixtures")
-        for col in ("file", "status", "sequence", "reason", "time [s]"):
-            table.add_column(col)
-        for r in rows:
+        # file names stay whole (the rows must be told apart); the other cells wrap, never cut; the
+        # reasons, long sentences, follow the table, one line each
+        names = [Path(r["file"]).name for r in rows]
+        table.add_column("file", no_wrap=True, min_width=max(map(len, names), default=4))
+        for col in ("status", "sequence", "time [s]"):
+            table.add_column(col, overflow="fold")
+        for name, r in zip(names, rows, strict=True):
             seq = " → ".join("{" + ",".join(s) + "}" for s in r["sequence"]) or "-"
-            table.add_row(Path(r["file"]).name, r["status"], seq, r["reason"] or "", f"{r['time_s']:.1f}")
+            table.add_row(name, r["status"], seq, f"{r['time_s']:.1f}")
         _console().print(table)
+        for name, r in zip(names, rows, strict=True):
+            if r["reason"]:
+                typer.echo(one_line(f"{name}: {r['reason']}"))
         planned = sum(r["status"] == "planned" for r in rows)
         typer.echo(f"{planned} of {len(rows)} planned")
     if any(r["status"] != "planned" for r in rows):

@@ -208,16 +208,22 @@ def run_device_sim(
 def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
     """Re-run a plan file in the haptic loop; 0 when it passes."""
     from fixplan.files import read_plan_json
-    from fixplan.fixture import default_fixture_path, load
+    from fixplan.fixture import fixture_of_plan, load
     from fixplan.interactive.record import verify_plan_file
 
     data = read_plan_json(plan, expected="a plan JSON ('fixplan solve --out' or 'fixplan haptic --record')")  # ≤ 1 MiB
     if not isinstance(data, dict):
         raise InputError(f"{plan}: not a fixplan plan (expected a JSON object)")
-    if fixture_path is None and isinstance(data.get("fixture"), str) and Path(data["fixture"]).is_file():
-        fixture_path = Path(data["fixture"])
-    fixture = load(fixture_path if fixture_path is not None else default_fixture_path())
-    v = verify_plan_file(fixture, data, source=str(plan))
+    path, note = fixture_of_plan(data, plan, fixture_path)  # the fixture the plan names (path, hash)
+    fixture = load(path)
+    try:
+        v = verify_plan_file(fixture, data, source=str(plan))
+    except InputError as exc:
+        if "another fixture" not in str(exc) or fixture_path is not None:
+            raise
+        raise InputError(f"{exc} (pass the plan's fixture with --fixture FILE)") from None
+    if note:  # after the plan was read: bad input stays one line
+        _echo(f"fixplan: {note}")
     if json_out:
         out = v.to_json()
         out.pop("trace", None)

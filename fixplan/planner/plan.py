@@ -810,7 +810,8 @@ class Plan:
         )
 
 
-_LEADING = ("source", "fixture")  # a recorded session's keys that come first in its file
+# the keys that come first in a file: what made it (a recorded session), for which fixture
+_LEADING = ("source", "fixture", "fixture_sha256")
 
 
 # -- a plan for a fixture --------------------------------------------------------------------------

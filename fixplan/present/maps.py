@@ -61,9 +61,14 @@ def save_map(result: JammingMap, png: Path, csv_path: Path | None = None) -> Non
     fig.tight_layout()
     fig.savefig(png)
     if csv_path is not None:
-        with open(csv_path, "w", newline="") as fh:
-            writer = csv.writer(fh)
-            writer.writerow([result.axis_names[0], result.axis_names[1], "mode", "margin"])
-            for j, yv in enumerate(result.y):
-                for i, xv in enumerate(result.x):
-                    writer.writerow([f"{xv:.9g}", f"{yv:.9g}", result.modes[j, i], f"{result.margins[j, i]:.6g}"])
+        save_map_csv(result, csv_path)
+
+
+def save_map_csv(result: JammingMap, csv_path: Path) -> None:
+    """Write the grid as CSV: one row per point (the two axes, the mode, the margin)."""
+    with open(csv_path, "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow([result.axis_names[0], result.axis_names[1], "mode", "margin"])
+        for j, yv in enumerate(result.y):
+            for i, xv in enumerate(result.x):
+                writer.writerow([f"{xv:.9g}", f"{yv:.9g}", result.modes[j, i], f"{result.margins[j, i]:.6g}"])

@@ -63,12 +63,23 @@ def report_markdown(result: Plan | PlanResult, fixture: Fixture, figures: Sequen
         ]
         lines.append("")
     failed = [a for a in payload["tried"] if not a["ok"]]
-    lines += ["## Transitions tried", "", f"{len(payload['tried'])} priced, {len(failed)} failed.", ""]
+    # a transition priced twice (the cheap check, then the path) is listed once, with its last reason:
+    # the same "too weak" six times over three transitions told the reader nothing more
+    last: dict[tuple[tuple[str, ...], str], str] = {}
     for a in failed:
-        lines.append(f"- {{{', '.join(a['from'])}}} + {a['add']}: {a['reason']}")
+        last[(tuple(a["from"]), a["add"])] = a["reason"]
+    lines += [
+        "## Transitions tried",
+        "",
+        f"{len(payload['tried'])} priced, {len(failed)} failed ({len(last)} distinct transitions).",
+        "",
+    ]
+    lines += [f"- {{{', '.join(frm)}}} + {add}: {reason}" for (frm, add), reason in last.items()]
     v = payload["verification"]
     lines += ["", "## Verification (simulated haptic loop, 1 kHz, contact-state feedback executor)", ""]
-    if v is None:
+    if v is None and plan.status == "infeasible":
+        lines.append("Not run: there is no plan to run in the loop.")
+    elif v is None:
         lines.append("Not run (`--no-verify`).")
     else:
 
