@@ -14,7 +14,7 @@ Per set the report gives the share verified (``planned``: the simulated haptic l
 the part), proven infeasible (``infeasible`` with ``proven``: every blocking transition
 certified by its wrench search) and failed without proof (``unverified``, an unproven
 ``infeasible``, a timeout or a crash), the median and p95 of the whole process, and every
-failure with its reason. Targets (issue 20), every family: verified ≥ 97 %, failed without proof
+failure with its reason. Targets, every family: verified ≥ 97 %, failed without proof
 ≤ 2 %; 3D median ≤ 3 s and p95 ≤ 10 s; 2D median ≤ 1 s.
 
 When ``fixplan robust`` exists, the first ``ROBUST_PER_FAMILY`` verified fixtures of each family
@@ -59,7 +59,7 @@ SETS = (
 COUNT, QUICK_COUNT = 40, 8
 TIMEOUT_S = 180.0
 ROBUST_PER_FAMILY, ROBUST_SAMPLES, ROBUST_SEED, ROBUST_TIMEOUT_S = 5, 10, 0, 900.0
-# issue 20's targets, every family (the free ones and their held-out seeds too)
+# the targets, every family (the free ones and their held-out seeds too)
 TARGET_VERIFIED = 0.97
 TARGET_FAILED = 0.02
 TARGETS_S = {
