@@ -288,3 +288,45 @@ def test_polygon_edges_are_computed_once_and_cannot_be_changed() -> None:
     assert np.allclose(np.linalg.norm(N, axis=1), 1.0) and np.allclose(np.einsum("ij,ij->i", E, N), 0.0)
     with pytest.raises(ValueError):
         N[0, 0] = 1.0
+
+
+def test_one_wrench_one_verdict_whatever_the_batch():
+    """A wrench's verdict does not depend on the batch it is classified in, nor on its place there.
+
+    The witness search draws random starts; one generator shared by a whole batch gave the i-th
+    wrench starts that depended on the wrenches before it (the demo map's (Fx −4.8718, Tz 0.02564)
+    was indeterminate in the 40 × 40 map and slides alone). 2000 wrenches around the demo map's
+    plane and off it, classified in order, in chunks on two processes, reversed, shuffled, and 200
+    of them one at a time.
+    """
+    import numpy as np
+
+    import fixplan
+    from fixplan.jamming import classify
+
+    fx = fixplan.load(fixplan.default_fixture_path())
+    rng = np.random.default_rng(7)
+    # the demo map's 40 × 40 grid (`fixplan map --axes Fx,Tz --range -10:10,-1:1 --n 40`), in its order
+    grid = np.array([[fx_, 0, 0, 0, 0, tz] for tz in np.linspace(-1, 1, 40) for fx_ in np.linspace(-10, 10, 40)])
+    extra = rng.normal(size=(400, 6)) * [8, 8, 8, 0.5, 0.5, 0.5]
+    W = np.vstack([grid, extra])
+    assert W.shape[0] == 2000
+
+    def modes(batch, jobs=1):
+        return [c.mode for c in classify(fx, batch, jobs=jobs)]
+
+    forward = modes(W)
+    assert modes(W, jobs=2) == forward  # in chunks on two worker processes
+    assert modes(grid, jobs=2) == forward[:1600]  # the map's batch, in the map's chunks
+    backward = modes(W[::-1])[::-1]
+    perm = rng.permutation(W.shape[0])
+    shuffled = np.empty(W.shape[0], dtype=object)
+    shuffled[perm] = modes(W[perm])
+    assert forward == backward
+    assert forward == list(shuffled)
+    idx = np.random.default_rng(7).permutation(W.shape[0])[:200]
+    assert [classify(fx, W[i], jobs=1)[0].mode for i in idx] == [forward[i] for i in idx]
+    # the demo map's point
+    i = 20 * 40 + 10
+    assert np.allclose(W[i], [-4.871794871794872, 0, 0, 0, 0, 0.02564102564102564])
+    assert forward[i] == classify(fx, W[i], jobs=1)[0].mode == "slides"
