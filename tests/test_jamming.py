@@ -330,3 +330,81 @@ def test_one_wrench_one_verdict_whatever_the_batch():
     i = 20 * 40 + 10
     assert np.allclose(W[i], [-4.871794871794872, 0, 0, 0, 0, 0.02564102564102564])
     assert forward[i] == classify(fx, W[i], jobs=1)[0].mode == "slides"
+
+
+WEDGE_BLOCK = """
+format = 1
+[scene]
+name = "block-5kg"
+dimension = 3
+gravity = [0.0, 0.0, -9.81]
+[workpiece]
+shape = "box"
+size = [0.20, 0.10, 0.05]
+mass = 5.0
+start = { position = [0.10, 0.05, 0.025], rpy_deg = [0.0, 0.0, 0.0] }
+[[locator]]
+name = "B1"
+position = [0.035, 0.015, -0.005]
+radius = 0.005
+friction = 0.2
+[[locator]]
+name = "B2"
+position = [0.165, 0.015, -0.005]
+radius = 0.005
+friction = 0.2
+[[locator]]
+name = "B3"
+position = [0.10, 0.085, -0.005]
+radius = 0.005
+friction = 0.2
+[[locator]]
+name = "S1"
+position = [0.04, -0.005, 0.025]
+radius = 0.005
+friction = 0.2
+[[locator]]
+name = "S2"
+position = [0.16, -0.005, 0.025]
+radius = 0.005
+friction = 0.2
+[[locator]]
+name = "E1"
+position = [-0.005, 0.05, 0.025]
+radius = 0.005
+friction = 0.2
+"""
+
+
+@pytest.mark.parametrize("push_N", [9.9, 10.0])
+def test_a_jam_that_rests_on_wedging_forces_says_so(push_N):
+    # a 5 kg block at its goal on three base locators (μ = 0.2: μ m g = 9.81 N) pushed along +x:
+    # above 9.81 N the base alone cannot hold it, but a "balance" exists with the side locators
+    # pressed (+y) against base friction (−y) and their friction resisting the push — forces that
+    # nothing presses (the push is along x, gravity along z)
+    import fixplan
+    from fixplan.jamming import classify
+
+    fx = fixplan.loads(WEDGE_BLOCK)
+    w = [push_N, 0, 0, 0, 0, 0]
+    c = classify(fx, w, jobs=1)[0]
+    assert c.mode == "jammed" and c.certificate == "wedging", (c.mode, c.certificate, c.reason)
+    assert "S1, S2" in c.reason and "unloaded the push slides" in c.reason
+    # the other reading: the loaded contacts alone
+    alone = classify(fx, w, ["B1", "B2", "B3"], jobs=1)[0]
+    assert alone.mode == "slides"
+    # the balance indeed loads the side locators, and only through internal forces: their normal
+    # forces sum to a y-force that base friction cancels
+    side = sum(c.contact_forces[n][0] for n in ("S1", "S2"))
+    assert side > 1e-3
+
+
+def test_a_push_below_the_friction_limit_is_held_by_the_base_not_by_wedging():
+    import fixplan
+    from fixplan.jamming import classify
+
+    fx = fixplan.loads(WEDGE_BLOCK)
+    c = classify(fx, [9.0, 0, 0, 0, 0, 0], jobs=1)[0]  # 9 N < μ m g = 9.81 N: the base's friction holds it
+    assert c.mode == "jammed" and c.certificate == "static-balance"
+    into = classify(fx, [-10.0, -10.0, 0, 0, 0, 0], jobs=1)[0]  # into the corner: the locators carry it
+    assert into.mode == "held"

@@ -103,8 +103,12 @@ def _classify_table(fixture, results, names) -> None:  # type: ignore[no-untyped
     table.add_column("decided by")
     for i, r in enumerate(results, 1):
         margin = f"{r.balance_residual:.3g}" if math.isfinite(r.balance_residual) else "-"
-        table.add_row(str(i), ",".join(f"{x:g}" for x in r.wrench), r.mode, margin, r.certificate)
+        mode = f"{r.mode} (by wedging)" if r.certificate == "wedging" else r.mode
+        table.add_row(str(i), ",".join(f"{x:g}" for x in r.wrench), mode, margin, r.certificate)
     _console().print(table)
+    for i, r in enumerate(results, 1):
+        if r.certificate == "wedging":
+            typer.echo(one_line(f"{i}: {r.reason}"))
 
 
 def _classify_summary(fixture, results, names, out: Path | None) -> None:  # type: ignore[no-untyped-def]

@@ -161,6 +161,40 @@ class Classifier:
         self._names = cs.names
         self._sizes = [int(k) for k in cs.sizes]
         self._offsets = [int(o) for o in cs.offsets]
+        self._loaded: dict[tuple[int, ...], Classifier] = {}  # the loaded contacts' classifiers (see _wedging)
+
+    def _wedging(
+        self, f_n: FloatArray, wrench_com: FloatArray, wrench_given: ArrayLike | None
+    ) -> tuple[list[str], Classification] | None:
+        """The other reading of a jam that rests on forces nothing presses, or None.
+
+        The contacts the push and gravity press are those the normal-force fit of step 1 loads
+        (``f_n > 0``). When a static balance exists but the others carry normal force in it, the
+        balance rests on internal (wedging) forces — a rigid body's indeterminacy: a 5 kg block
+        pushed along its side locators by 10 N (μ m g = 9.81 N) "balanced" with 0.7 N and 1.2 N on
+        the side locators. The same wrench is then classified on the loaded contacts alone; if
+        that does not jam, both readings are returned (the mode stays ``jammed``: the planner
+        avoids such pushes, a preloaded part may wedge).
+        """
+        k = len(self.cs)
+        if k < 2:
+            return None
+        big = float(np.max(f_n, initial=0.0))
+        loaded = tuple(i for i in range(k) if f_n[i] > DEFAULT_SETTINGS.numerics.zero_rel * max(big, 1.0))
+        if not loaded or len(loaded) == k:
+            return None
+        sub = self._loaded.get(loaded)
+        if sub is None:
+            cs = self.cs
+            sub_cs = ContactSet(
+                tuple(cs.contacts[i] for i in loaded), cs.com_world, cs.mass_matrix, cs.body_origin_world
+            )
+            sub = Classifier(sub_cs, self.gravity, tolerances=self.tol, backend=self.backend)
+            self._loaded[loaded] = sub
+        other = sub.classify(wrench_com, wrench_given)
+        if other.mode in ("jammed", "held"):
+            return None
+        return [self._names[i] for i in range(k) if i not in loaded], other
 
     # -- programs ------------------------------------------------------------------------------
     def _solve(self, kind: str, w_hat: FloatArray) -> tuple[ConeSolution, FloatArray]:
@@ -262,6 +296,19 @@ class Classifier:
                 **residuals,
             )
         if margin <= tol.balance_rel:
+            wedged = self._wedging(f_n, w_applied, wrench_given)
+            if wedged is not None:
+                unloaded, other = wedged
+                return result(
+                    "jammed",
+                    margin * scale,
+                    lam,
+                    "wedging",
+                    f"balanced only with friction and with normal forces at {', '.join(unloaded)} that the push and "
+                    f"gravity do not press (internal, wedging forces of a rigid body: indeterminate); with "
+                    f"{'it' if len(unloaded) == 1 else 'them'} unloaded the push {other.mode}",
+                    **residuals,
+                )
             return result(
                 "jammed",
                 margin * scale,
