@@ -1,8 +1,8 @@
-"""Kernels compiled ahead of time: numba's own code for the 2D path, loaded without numba.
+"""Kernels compiled ahead of time: numba's own code for the solve path, loaded without numba.
 
 Why. A ``fixplan solve`` of a 2D plate spent about as long starting numba as planning: its
 import (0.27 s) and, on the first kernel loaded from the on-disk cache, the set-up of its typing
-and lowering registries (0.45 s), in every process. ``python -m fixplan.cli.precompile`` (run by
+and lowering registries (0.45 s), in every process (a 3D solve the same, a fifth of its time). ``python -m fixplan.cli.precompile`` (run by
 ``make install``) therefore also compiles the kernels of :data:`EXPORTS` with ``numba.pycc``
 into one extension module beside this file, ``fixplan/_aot<suffix>``, and writes
 ``fixplan/_aot.json``: for every export, the argument types it was compiled for. Those types are
@@ -45,13 +45,19 @@ EXTENSION = "_aot"  # the module fixplan._aot
 MANIFEST = PACKAGE_DIR / "_aot.json"
 ENV = "FIXPLAN_KERNELS"  # "jit" forces numba's dispatchers
 
-# The kernels the 2D solve path calls from Python (planning: the jamming classifier's NNLS and
-# the witness system; verification: the engine's planar step and its compiled loop).
+# The kernels the solve paths call from Python (planning: the jamming classifier's NNLS and
+# the witness system, its Newton and fixed-point starts; verification: the engine's planar step
+# and its compiled loop, the spatial step and the haptic loop's spatial coupling). A 3D solve
+# that reached any of the last four through numba paid its start (about 0.8 s) in every process.
 EXPORTS: tuple[tuple[str, str], ...] = (
     ("fixplan.engine.step", "step2"),
     ("fixplan.engine.step", "run2"),
     ("fixplan.jamming._classify_kernels", "nnls"),
     ("fixplan.jamming._witness_kernels", "system"),
+    ("fixplan.jamming._witness_kernels", "newton"),
+    ("fixplan.jamming._witness_kernels", "fixed_point"),
+    ("fixplan.engine.step", "step3_into"),
+    ("fixplan.haptics._kernels", "coupling3"),
 )
 
 fallbacks: dict[str, int] = {}  # "module.name" -> calls that matched no compiled variant

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.geometry import Box, Cylinder, Polygon, Rectangle, Shape
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
-from fixplan.model import Fixture, Locator, Workpiece, require_full
+from fixplan.model import ExplicitContact, Fixture, Locator, Workpiece, require_full
 from fixplan.settings import DEFAULT, GoalSettings
 from fixplan.spatial import Pose, exp_so3, log_so3, rot2
 
@@ -79,22 +79,26 @@ def contact_set(
     if not isinstance(pose, Pose):
         raise InputError(f"pose must be 'start', 'goal' or a Pose, got {pose!r}")
     wp = fixture.workpiece
-    all_contacts = [locator_contact(wp, pose, loc) for loc in fixture.locators]
-    all_contacts += [
-        Contact(c.name, c.point_world, c.normal_world, c.friction, c.torsion_m, 0.0, "explicit")
-        for c in fixture.contacts
-    ]
+
+    def explicit(c: ExplicitContact) -> Contact:
+        return Contact(c.name, c.point_world, c.normal_world, c.friction, c.torsion_m, 0.0, "explicit")
+
     if names is None:
         tol = fixture.tolerances.touch_m
+        all_contacts = [locator_contact(wp, pose, loc) for loc in fixture.locators]
+        all_contacts += [explicit(c) for c in fixture.contacts]
         chosen = [c for c in all_contacts if c.kind == "explicit" or c.gap_m <= tol]
     else:
-        by_name = {c.name: c for c in all_contacts}
-        unknown = [n for n in names if n not in by_name]
+        # only the named contacts are computed (an explicit contact wins over a locator of its name)
+        locators = {loc.name: loc for loc in fixture.locators}
+        explicits = {c.name: c for c in fixture.contacts}
+        known = dict.fromkeys([*locators, *explicits])
+        unknown = [n for n in names if n not in known]
         if unknown:
-            raise InputError(f"unknown contact {unknown[0]!r} (known: {', '.join(by_name)})")
+            raise InputError(f"unknown contact {unknown[0]!r} (known: {', '.join(known)})")
         if len(set(names)) != len(names):
             raise InputError(f"contact names repeat: {', '.join(names)}")
-        chosen = [by_name[n] for n in names]
+        chosen = [explicit(explicits[n]) if n in explicits else locator_contact(wp, pose, locators[n]) for n in names]
     c = com_world(pose, wp.com_body)
     M = mass_matrix(wp.mass_kg, wp.inertia_body, pose.R_world_body)
     return ContactSet(tuple(chosen), c, M, pose.p_world.copy())

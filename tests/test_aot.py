@@ -168,6 +168,33 @@ def test_the_witness_system_equals_the_jit_bit_for_bit(rng: np.random.Generator)
 
 
 @needs_build
+def test_the_witness_newton_and_fixed_point_equal_the_jit_bit_for_bit(rng: np.random.Generator) -> None:
+    """The 3D classifier's two starts of the sliding witness (Newton, fixed point), AOT vs JIT."""
+    from fixplan.jamming.sliding import Rows
+    from fixplan.locating import contact_set
+
+    K = "fixplan.jamming._witness_kernels"
+    aot_newton, jit_newton = aot.kernel(K, "newton"), _jit(K, "newton")
+    aot_fixed, jit_fixed = aot.kernel(K, "fixed_point"), _jit(K, "fixed_point")
+    assert isinstance(aot_newton, aot._AotKernel) and isinstance(aot_fixed, aot._AotKernel)
+    for name in ("box-3-2-1.toml", "gen-box-321-s2026-000.toml", *PLATES_2D[:2]):
+        fx = fixplan.load(PROBLEMS / name)
+        cs = contact_set(fx, fx.goal_pose, [loc.name for loc in fx.locators])
+        rows = Rows(cs)
+        k = len(cs)
+        for _ in range(10):
+            w = rng.normal(size=cs.ndof)
+            fixed_args = (rows.M, rows.Jall, rows.off, rows.size, rows.mu_arr, rows.Dm, w)
+            z0 = rng.normal(size=cs.ndof + k)
+            assert np.array_equal(aot_fixed(*fixed_args, z0, 5), jit_fixed(*fixed_args, z0, 5))
+            roles = rng.integers(0, 3, size=k).astype(np.int64)
+            nz = cs.ndof + int(np.sum(np.where(roles == 0, 1, np.where(roles == 1, rows.size, 0))))
+            z = rng.normal(size=nz)
+            assert np.array_equal(aot_newton(*fixed_args, z, roles, 20), jit_newton(*fixed_args, z, roles, 20))
+    assert not any(key.startswith(K) for key in aot.fallbacks)
+
+
+@needs_build
 @pytest.mark.parametrize("name", PLATES_2D)
 def test_a_2d_simulation_steps_and_runs_identically(monkeypatch, name: str) -> None:
     """Simulator.step (the haptic loop's call) and Simulator.run (the compiled loop), AOT vs JIT."""
@@ -219,10 +246,12 @@ def _without_wall_clock(value):
 
 
 @needs_build
-def test_a_2d_solve_runs_without_numba_and_answers_as_the_jit_does() -> None:
+@pytest.mark.parametrize("name", ["gen-plate-2d-s2026-000.toml", "gen-box-321-s2026-000.toml"])
+def test_a_solve_runs_without_numba_and_answers_as_the_jit_does(name: str) -> None:
+    """2D and 3D: planning, the policy and the haptic verification (spatial step and coupling)."""
     import os
 
-    path = PROBLEMS / "gen-plate-2d-s2026-000.toml"
+    path = PROBLEMS / name
     env = {k: v for k, v in os.environ.items() if k != aot.ENV}
     out_aot, err_aot = _solve_json(path, env)
     out_jit, err_jit = _solve_json(path, {**env, aot.ENV: "jit"})

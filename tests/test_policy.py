@@ -220,3 +220,45 @@ def test_a_plan_files_policy_naming_unknown_locators_is_refused(box):
     data["policy"][2]["state"] = ["B1", "Q9"]
     with pytest.raises(InputError, match="names locators Q9"):
         plan_for_fixture(data, box, "plan.json")
+
+
+def test_a_rebuild_reuses_the_checked_pushes_and_answers_as_a_fresh_build(box, monkeypatch):
+    """The planner's memo: a second policy for the same plan runs no cone program and equals a fresh one."""
+    import fixplan.planner.segments as segments
+
+    calls = []
+    real = segments.segment_wrenches
+
+    def counted(*args, **kwargs):
+        calls.append(args[2])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(segments, "segment_wrenches", counted)
+    base = frozenset({"B1", "B2", "B3"})
+    planner = Planner(box)
+    first = build_policy(box, planner, base)
+    checks = len(calls)
+    assert checks >= 5 and planner.policy_memo
+    again = build_policy(box, planner, base)
+    assert len(calls) == checks  # every push answered from the memo
+    fresh = build_policy(box, Planner(box), base)
+    assert len(calls) == 2 * checks
+    for other in (again, fresh):
+        assert other.entries.keys() == first.entries.keys()
+        assert other.reachable == first.reachable and other.unrealisable == first.unrealisable
+        for s, e in first.entries.items():
+            o = other.entries[s]
+            assert (o.target, o.motion, o.checked, o.source, o.margin_N) == (
+                e.target,
+                e.motion,
+                e.checked,
+                e.source,
+                e.margin_N,
+            )
+            assert o.cost_to_go_m == e.cost_to_go_m
+            assert (o.wrench is None) == (e.wrench is None)
+            if e.wrench is not None:
+                assert np.array_equal(o.wrench, e.wrench)
+            assert (o.pose is None) == (e.pose is None)
+            if e.pose is not None:
+                assert np.array_equal(o.pose.p_world, e.pose.p_world)

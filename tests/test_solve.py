@@ -7,7 +7,7 @@ import pytest
 from conftest import PROBLEMS, run_cli
 
 import fixplan
-from fixplan.planner.solve import solve
+from fixplan.planner.solve import Planner, solve
 
 
 @pytest.fixture(scope="module")
@@ -223,3 +223,20 @@ def test_a_load_simulated_with_unconverged_contact_solves_fails_and_says_so():
     polished = verify(fx, start, plan_steps(r.transitions), replan=planner.replan, max_sweeps=8)
     assert polished.passed, polished.reason
     assert polished.max_solver_error <= 0.1 * bound
+
+
+def test_a_repeated_precheck_is_answered_from_the_planner_and_equals_a_fresh_one():
+    """Guesses and prechecks are pure functions of (state, target, pose): asked again, none is recomputed."""
+    fx = fixplan.load(fixplan.default_fixture_path())
+    state = frozenset({"B1", "B2", "B3"})
+    planner = Planner(fx)
+    answers = {t: planner.precheck(fx.start, state, t) for t in ("S1", "S2", "E1")}
+    assert planner.prechecks == 3
+    assert {t: planner.precheck(fx.start, state, t) for t in answers} == answers
+    assert planner.prechecks == 3  # nothing recomputed
+    fresh = Planner(fx)
+    assert {t: fresh.precheck(fx.start, state, t) for t in answers} == answers
+    for t in answers:
+        g, h = planner.guess(fx.start, state, t), fresh.guess(fx.start, state, t)
+        assert g is not None and h is not None
+        assert g[0] == h[0] and g[2] == h[2] and np.array_equal(g[1].p_world, h[1].p_world)

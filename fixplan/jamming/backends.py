@@ -19,7 +19,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from fixplan.jamming.programs import ConeProgram, cone_violation_of
@@ -43,11 +42,13 @@ class ConeSolution:
     cone_violation: float | None  # largest violation of the program's cones at x; None: no answer to measure
 
 
-def _clarabel_cones(program: ConeProgram) -> list:
+@functools.lru_cache(maxsize=256)
+def _clarabel_cones(cones: tuple[tuple[str, int], ...]) -> list:
+    """Clarabel's cone objects for a program's ``cones`` (shared: Clarabel copies them into each solver)."""
     import clarabel
 
     out = []
-    for kind, dim in program.cones:
+    for kind, dim in cones:
         if kind == "nonneg":
             out.append(clarabel.NonnegativeConeT(dim))
         elif kind == "soc":
@@ -57,8 +58,12 @@ def _clarabel_cones(program: ConeProgram) -> list:
     return out
 
 
+@functools.lru_cache(maxsize=8)
 def clarabel_settings(eps: float):
-    """Clarabel settings for the jamming programs (quiet, tight tolerances)."""
+    """Clarabel settings for the jamming programs (quiet, tight tolerances).
+
+    One object per ``eps``, shared: Clarabel copies the settings into each solver it builds.
+    """
     import clarabel
 
     s = clarabel.DefaultSettings()
@@ -72,24 +77,36 @@ def clarabel_settings(eps: float):
     return s
 
 
-@functools.lru_cache(maxsize=64)
-def _zero_csc(n: int) -> sp.csc_matrix:
-    """The ``n × n`` zero matrix (the programs are linear: ``P = 0``); shared, never modified."""
-    return sp.csc_matrix((n, n))
+class CscArrays:
+    """A compressed-sparse-column matrix as Clarabel reads it: ``data``, ``indices``, ``indptr``, ``shape``.
 
-
-def csc_from_dense(A: FloatArray) -> sp.csc_matrix:
-    """``scipy.sparse.csc_matrix(A)`` for a dense ``A``, built directly (the same arrays, ~3× faster).
-
-    The search builds two or three tiny programs per call, hundreds of calls per plan; scipy's
-    conversion through COO was the largest share of their setup.
+    The arrays ``scipy.sparse.csc_matrix`` would hold (canonical: sorted, no duplicates), without
+    building one: scipy's constructor checks were the largest share of a tiny program's set-up
+    (the search builds five programs per call, hundreds of calls per plan), and not importing
+    ``scipy.sparse`` saves a tenth of a second per process.
     """
+
+    __slots__ = ("data", "indices", "indptr", "shape")
+    has_canonical_format = True
+
+    def __init__(self, data: FloatArray, indices: NDArray[np.int32], indptr: NDArray[np.int32], shape: tuple[int, int]):
+        self.data, self.indices, self.indptr, self.shape = data, indices, indptr, shape
+
+
+@functools.lru_cache(maxsize=64)
+def _zero_csc(n: int) -> CscArrays:
+    """The ``n × n`` zero matrix (the programs are linear: ``P = 0``); shared, never modified."""
+    return CscArrays(np.zeros(0), np.zeros(0, dtype=np.int32), np.zeros(n + 1, dtype=np.int32), (n, n))
+
+
+def csc_from_dense(A: FloatArray) -> CscArrays:
+    """The arrays of ``scipy.sparse.csc_matrix(A)`` for a dense ``A``, built directly (same arrays, bit for bit)."""
     At = A.T
     nonzero = At != 0.0
     indptr = np.zeros(A.shape[1] + 1, dtype=np.int32)
     np.cumsum(nonzero.sum(axis=1), out=indptr[1:])
     indices = np.nonzero(nonzero)[1].astype(np.int32)
-    return sp.csc_matrix((At[nonzero], indices, indptr), shape=A.shape)
+    return CscArrays(At[nonzero], indices, indptr, (int(A.shape[0]), int(A.shape[1])))
 
 
 class ClarabelProgram:
@@ -102,7 +119,7 @@ class ClarabelProgram:
         n = program.A.shape[1]
         self._P = _zero_csc(n)
         self._A = csc_from_dense(np.asarray(program.A, dtype=np.float64))
-        self._cones = _clarabel_cones(program)
+        self._cones = _clarabel_cones(tuple(program.cones))
         self._settings = clarabel_settings(eps)
         self._solver = clarabel.DefaultSolver(
             self._P, program.c, self._A, program.b.copy(), self._cones, self._settings

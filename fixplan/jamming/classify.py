@@ -144,11 +144,9 @@ class Classifier:
         self._normal_matrix = np.ascontiguousarray(b.C @ cs.G.T)  # NNLS: min ‖C(w + Gᵀ f_n)‖, f_n ≥ 0
         A = self._normal_matrix  # fixplan.nnls's default dual tolerance, once
         self._nnls_tol = 10.0 * np.finfo(float).eps * max(A.shape) * max(float(np.abs(A).sum(axis=0).max()), 1.0)
-        self._projectors: dict[str, FloatArray] = {
-            "balance": b.projector(None),
-            "maintain": b.projector(b.N_maintain),
-            "roll": b.projector(b.N_roll),
-        }
+        # the programs' projectors, each built on first use: a wrench classified "held" needs none,
+        # a moving one (the search's check) only "balance" (an SVD and a QR saved per contact set)
+        self._projectors: dict[str, FloatArray] = {}
         self._programs: dict[str, ClarabelProgram] = {}
         self._witness = WitnessSearch(
             cs,
@@ -197,9 +195,18 @@ class Classifier:
         return [self._names[i] for i in range(k) if i not in loaded], other
 
     # -- programs ------------------------------------------------------------------------------
+    def _projector(self, kind: str) -> FloatArray:
+        """The projector of program ``kind``: identity for "balance", else off the kept or rolling motions."""
+        P = self._projectors.get(kind)
+        if P is None:
+            b = self.builder
+            P = b.projector({"balance": None, "maintain": b.N_maintain, "roll": b.N_roll}[kind])
+            self._projectors[kind] = P
+        return P
+
     def _solve(self, kind: str, w_hat: FloatArray) -> tuple[ConeSolution, FloatArray]:
         """Least residual of program ``kind`` for ŵ; returns the solution and the full λ."""
-        P = self._projectors[kind]
+        P = self._projector(kind)
         if self.backend == "cvxpy":
             from fixplan.jamming.cvx import least_residual
 
@@ -215,7 +222,7 @@ class Classifier:
 
     def _residual_of(self, kind: str, w_hat: FloatArray, lam: FloatArray) -> float:
         """The program's value recomputed from the forces (never trust a solver's own number)."""
-        P = self._projectors[kind]
+        P = self._projector(kind)
         return float(np.linalg.norm(P @ self.builder.C @ (w_hat + self.cs.J.T @ lam)))
 
     # -- the verdict ---------------------------------------------------------------------------

@@ -238,16 +238,24 @@ def _polar_rows(cs: ContactSet) -> tuple[FloatArray, tuple[tuple[str, int], ...]
     return Q, lay.cones
 
 
-def _certificate(cs: ContactSet, target: FloatArray, *, project: bool) -> FloatArray | None:
+def _certificate(
+    cs: ContactSet, target: FloatArray, *, project: bool, shared: dict[str, Any] | None = None
+) -> FloatArray | None:
     """A unit (``‖ŷ‖_M = 1``) motion ``ŷ`` with ``J_i ŷ ∈ K_i*`` at every contact, or None.
 
     ``project=True``: the ``M``-projection of the acceleration ``target`` onto that cone.
     ``project=False``: the direction maximising ``ŷᵀ target`` for the wrench ``target`` (the
     dual of the classifier's margin program: its optimum *is* the margin).
+    ``shared``: a dictionary kept by the caller across calls on the same ``cs``, which then
+    computes ``M``'s Cholesky factor and the polar rows once.
     """
     n = cs.ndof
-    L = np.linalg.cholesky(cs.mass_matrix)
-    Q, cones = _polar_rows(cs)
+    shared = {} if shared is None else shared
+    if "polar" not in shared:
+        shared["L"] = np.linalg.cholesky(cs.mass_matrix)
+        shared["polar"] = _polar_rows(cs)
+    L = shared["L"]
+    Q, cones = shared["polar"]
     nx = n + 1
     A_soc = np.zeros((n + 1, nx))
     b_soc = np.zeros(n + 1)
@@ -463,7 +471,8 @@ def search_wrench_in(
             needed_force_N=needs[0], needed_torque_Nm=needs[1],
         )  # fmt: skip
 
-    y = _certificate(cs, a_hat, project=True) if certify else None
+    polar: dict[str, Any] = {}  # the certificates' factors of cs, computed once
+    y = _certificate(cs, a_hat, project=True, shared=polar) if certify else None
     if certify and (y is None or float(y @ cs.mass_matrix @ a_hat) <= 0.0):
         return not_found(
             "every push that produces this motion can also be balanced by the contact forces (M a is a contact"
@@ -481,6 +490,7 @@ def search_wrench_in(
         about=about,
         jam=jam_margin_rel,
         s_max=max_accel_factor,
+        shared={},  # the builds' common parts (one contact set, one set of roles)
     )
     prog, meta = _build(**build, cert=y, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
     sol = ClarabelProgram(prog).solve(prog.b)
@@ -500,7 +510,7 @@ def search_wrench_in(
     x, tau = sol.x, float(-sol.value)
     # a better certificate: the classifier's own dual direction for the wrench found (the
     # optimum above stays feasible with it, so τ cannot drop)
-    y2 = _certificate(cs, x[:n] + w_g, project=False) if certify else None
+    y2 = _certificate(cs, x[:n] + w_g, project=False, shared=polar) if certify else None
     if y2 is not None:
         prog2, meta2 = _build(**build, cert=y2, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
         sol2 = ClarabelProgram(prog2).solve(prog2.b)
@@ -776,6 +786,7 @@ def _build(
     jam: float,
     s_max: float = math.inf,
     least: Literal["effort", "force", "torque"] = "effort",
+    shared: dict[str, Any] | None = None,
 ) -> tuple[ConeProgram, dict]:
     """Variables x = (w [n], f_n sliding [ks], f sticking [reduced], s, τ[, e]).
 
@@ -784,12 +795,18 @@ def _build(
     ``e ≥ ‖F‖`` or the torque about the user's point ``e ≥ ‖T‖``. All keep the total wrench
     ``w_e = w + w_g`` a relative distance ``jam`` from static balance, certified by the motion
     ``cert`` (``ŷ``, ``‖ŷ‖_M = 1``, ``J_i ŷ ∈ K_i*``): ``ŷᵀ w_e ≥ jam ‖w_e‖_{M⁻¹}``.
+    ``shared``: a dictionary kept by the caller across builds with the same ``cs`` and ``roles``
+    (one search), which then computes the sticking contacts' layout and ``L⁻¹`` once.
     """
     n, d = cs.ndof, cs.dimension
+    shared = {} if shared is None else shared
     slide = [i for i, c in enumerate(cs.contacts) if roles[c.name] == "sliding"]
     stick = [i for i, c in enumerate(cs.contacts) if roles[c.name] == "sticking"]
-    stick_cs = ContactSet(tuple(cs.contacts[i] for i in stick), cs.com_world, cs.mass_matrix, cs.body_origin_world)
-    lay = force_layout(stick_cs) if stick else None
+    if "stick_cs" not in shared:
+        stick_cs = ContactSet(tuple(cs.contacts[i] for i in stick), cs.com_world, cs.mass_matrix, cs.body_origin_world)
+        shared["stick_cs"] = stick_cs
+        shared["lay"] = force_layout(stick_cs) if stick else None
+    stick_cs, lay = shared["stick_cs"], shared["lay"]
     nf_stick = lay.nf if lay else 0
     ks = len(slide)
     i_w, i_fn, i_fs = 0, n, n + ks
@@ -886,7 +903,9 @@ def _build(
         cones.append(("nonneg", 2))
     if cert is not None:
         # not jamming: (ŷᵀ w_e / jam, C w_e) ∈ SOC, C = L⁻¹ (‖C x‖ = ‖x‖_{M⁻¹})
-        C = np.linalg.inv(np.linalg.cholesky(cs.mass_matrix))
+        if "C" not in shared:
+            shared["C"] = np.linalg.inv(np.linalg.cholesky(cs.mass_matrix))
+        C = shared["C"]
         A_j = np.zeros((n + 1, nx))
         A_j[0, i_w : i_w + n] = -cert / jam
         A_j[1:, i_w : i_w + n] = -C

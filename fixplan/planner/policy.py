@@ -406,8 +406,13 @@ def build_policy(
     ``planner`` is a :class:`~fixplan.planner.solve.Planner` (its ``estimate`` prices a transition,
     its options set the push's acceleration, friction margin and least normal force);
     ``transitions`` the fine plans of the chosen sequence, whose states take the plan's transition.
+    A planner with a ``policy_memo`` dictionary keeps there the representative poses and the
+    checked pushes, which a rebuild for another plan of the same fixture (after a transition was
+    set aside) reuses wherever the inputs are the same.
     """
     t0 = time.perf_counter()
+    memo = getattr(planner, "policy_memo", None)
+    memo = {} if not isinstance(memo, dict) else memo
     names = [loc.name for loc in fixture.locators]
     goal_state: State = frozenset(names)
     goal = fixture.goal
@@ -428,7 +433,10 @@ def build_policy(
 
     def pose_of(s: State) -> Pose | None:
         if s not in poses:
-            poses[s] = representative_pose(fixture, goal, s, settings)
+            key = ("pose", s, _pose_bytes(goal), settings)
+            if key not in memo:
+                memo[key] = representative_pose(fixture, goal, s, settings)
+            poses[s] = memo[key]
         return poses[s]
 
     value: dict[State, float] = {goal_state: 0.0}
@@ -490,8 +498,22 @@ def build_policy(
             checked.add(s)
             here = entries[s].pose
             if here is not None:
-                entries[s] = _checked_entry(fixture, planner, s, here, candidates[s], settings)
+                tried = candidates[s][: max(settings.checks_per_state, 1)]
+                key = (
+                    "check",
+                    s,
+                    _pose_bytes(here),
+                    tuple((c, t, k, _pose_bytes(e)) for c, t, k, e in tried),
+                    settings,
+                )
+                if key not in memo:
+                    memo[key] = _checked_entry(fixture, planner, s, here, candidates[s], settings)
+                entries[s] = memo[key]
     return Policy(entries, frozenset(reachable), frozenset(unrealisable), time.perf_counter() - t0)
+
+
+def _pose_bytes(pose: Pose) -> bytes:
+    return pose.p_world.tobytes() + np.asarray(pose.R_world_body).tobytes()
 
 
 def _checked_entry(

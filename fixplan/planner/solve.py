@@ -229,6 +229,12 @@ class Planner:
         # fine plans by (state, target, start pose): a search after a transition was set aside
         # reuses every fine plan that starts where an earlier one did
         self._cache: dict[tuple[tuple[str, ...], str, bytes, bool], Transition] = {}
+        # guesses and prechecks by (state, target, pose): pure functions of them, asked again by
+        # every round of the lazy search, by its second pass and by every search after a set-aside
+        self._guesses: dict[tuple[tuple[str, ...], str, bytes], tuple[float, Pose, str] | None] = {}
+        self._prechecked: dict[tuple[tuple[str, ...], str, bytes], str | None] = {}
+        # the policy's representative poses and checked pushes (see policy.build_policy)
+        self.policy_memo: dict[tuple[Any, ...], Any] = {}
         self.full_ladder = False  # the fine planner's whole ladder of formulations (second pass)
         # the rank test of closing_group, on the goal's normal rows (built once; None: no goal)
         self._rows: GoalRows | None = goal_rows(fixture)
@@ -311,15 +317,21 @@ class Planner:
         The least-``M``-norm step that closes the target's gap keeping the established contacts,
         to first order, in the fine planner's kind of motion (rolling keeps every row of the kept
         contacts, sliding their normal rows); the other kind when that one cannot close the gap.
-        No IPOPT, no cone program.
+        No IPOPT, no cone program. Remembered per (state, target, pose).
         """
         from fixplan.planner.policy import gap_closing_step, motion_kinds
 
+        key = (tuple(sorted(state)), target, _pose_key(pose))
+        if key in self._guesses:
+            return self._guesses[key]
+        found: tuple[float, Pose, str] | None = None
         for kind in motion_kinds(self.fixture.dimension, len(state)):
             step = gap_closing_step(self.fixture, pose, state, target, kind)
             if step is not None:
-                return step[0], step[1], kind
-        return None
+                found = (step[0], step[1], kind)
+                break
+        self._guesses[key] = found
+        return found
 
     def estimate(self, pose: Pose, state: frozenset[str], target: str) -> tuple[float, Pose] | None:
         """The lazy search's estimate: :meth:`guess` without its kind."""
@@ -333,7 +345,7 @@ class Planner:
         :meth:`guess` step at ``pose``, in the guess's kind of motion? None when there is (or
         nothing to check: no kept contact), else the search's reason. The fine plan may still find
         another way (its path bends), so the lazy search only tries such a transition later; it
-        never drops it.
+        never drops it. Remembered per (state, target, pose).
         """
         if not state:
             return None
@@ -341,15 +353,20 @@ class Planner:
         if guess is None:
             return None
         est = tuple(sorted(state))
+        key = (est, target, _pose_key(pose))
+        if key in self._prechecked:
+            return self._prechecked[key]
         self.prechecks += 1
         _, _, found, reasons = segment_wrenches(
             self.fixture, [pose, guess[1]], est, guess[2],
             self.acceleration_mps2, friction_margin=self.friction_margin, margin_N=self.margin_N,
         )  # fmt: skip
-        if found[0]:
-            return None
-        self.precheck_failures += 1
-        return reasons[0] if reasons else "no non-jamming push for the first step"
+        why = None
+        if not found[0]:
+            self.precheck_failures += 1
+            why = reasons[0] if reasons else "no non-jamming push for the first step"
+        self._prechecked[key] = why
+        return why
 
     def replan(self, pose: Pose, state: frozenset[str]) -> list[Step] | str:
         """The executor's guard: a new policy from the observed state, or why there is none."""
