@@ -67,7 +67,7 @@ def test_polish_solves_the_corner_where_gauss_seidel_stalls(case):
     assert not stalled.converged and stalled.error > 1e-4  # what the step met before the polish
     P, err, _, ok = _polish(W, q, mu, stalled.reaction)
     assert ok and err <= TOL
-    assert fclib_error(problem, P) == pytest.approx(err, rel=1e-9, abs=1e-15)  # the independent residual
+    assert fclib_error(problem, P) == pytest.approx(err, rel=1e-9, abs=1e-12)  # the independent residual
     # the contact laws, checked directly: r in the cone, De Saxcé's modified velocity in the dual
     # cone, complementary
     u = W @ P + q
@@ -104,8 +104,8 @@ def test_polish_never_raises_the_residual(seed, nc, dim):
     before = fclib_error(problem, start)
     P, err, _, _ = _polish(W, q, mu, start, tol=1e-12)
     assert np.all(np.isfinite(P))
-    assert err <= before * (1 + 1e-12) + 1e-15
-    assert fclib_error(problem, P) == pytest.approx(err, rel=1e-9, abs=1e-15)
+    assert err <= before * (1 + 1e-9) + 1e-12  # compiled and NumPy residuals agree to round-off
+    assert fclib_error(problem, P) == pytest.approx(err, rel=1e-9, abs=1e-12)  # round-off of W P + q
 
 
 def test_polish_converges_on_most_random_problems():
