@@ -60,7 +60,6 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from fixplan.engine.budget import Budget
-from fixplan.engine.local import project_cone_into
 from fixplan.engine.nsgs import (
     DEFAULT_TOL,
     STATUS_CONVERGED,
@@ -78,7 +77,10 @@ from fixplan.engine.nsgs import (
     kernel_arrays,
     stalled,
 )
-from fixplan.engine.polish import jacobian_blocks  # the Jacobian blocks, shared with the step's dense polish
+from fixplan.engine.polish import (  # the Jacobian blocks and the natural map, shared with the step's dense polish
+    jacobian_blocks,
+    natural_map_rows,
+)
 
 DEFAULT_MAX_STEPS = 100
 """Default cap on Newton steps."""
@@ -101,25 +103,7 @@ MIN_STEP = 2.0**-12
 def natural_map_kernel(indptr, indices, data, q, mu, offsets, dims, rho, r, u, phi):
     """``Φ_ρ(r)`` into ``phi`` and ``u = W r + q`` into ``u``; returns ``‖Φ_ρ(r)‖₂``."""
     _spmv(indptr, indices, data, r, q, u)
-    x = np.empty(4)
-    p = np.empty(4)
-    total = 0.0
-    for j in range(offsets.shape[0]):
-        o = offsets[j]
-        d = dims[j]
-        ut = 0.0
-        for a in range(1, d):
-            ut += u[o + a] * u[o + a]
-        ut = math.sqrt(ut)
-        for a in range(d):
-            x[a] = r[o + a] - rho[j] * u[o + a]
-        x[0] -= rho[j] * mu[j] * ut
-        project_cone_into(x[:d], mu[j], p[:d])
-        for a in range(d):
-            v = r[o + a] - p[a]
-            phi[o + a] = v
-            total += v * v
-    return math.sqrt(total)
+    return natural_map_rows(mu, offsets, dims, rho, r, u, phi, np.empty(4), np.empty(4))
 
 
 # --------------------------------------------------------------------------- the iteration

@@ -105,17 +105,16 @@ def jacobian_blocks(mu, offsets, dims, rho, r, u, A, C):
     return 0
 
 
-@njit(cache=True)
-def _natural_map_dense(W, q, mu, offsets, sizes, nc, m, rho, r, u, phi, x, p):
-    """``u = W r + q`` and ``Φ_ρ(r)`` into ``u``, ``phi`` (leading ``m`` rows); returns ``‖Φ‖₂``."""
-    for a in range(m):
-        acc = q[a]
-        for b in range(m):
-            acc += W[a, b] * r[b]
-        u[a] = acc
+@njit(cache=True, error_model="numpy")
+def natural_map_rows(mu, offsets, dims, rho, r, u, phi, x, p):
+    """``Φ_ρ(r)`` into ``phi`` from ``u = W r + q`` already computed (one contact per entry of ``offsets``).
+
+    ``x`` and ``p`` are scratch vectors of length 4. Returns ``‖Φ_ρ(r)‖₂``. Shared by the sparse
+    iteration of :mod:`fixplan.engine.newton` and the dense polish here.
+    """
     total = 0.0
-    for j in range(nc):
-        o, d = offsets[j], sizes[j]
+    for j in range(offsets.shape[0]):
+        o, d = offsets[j], dims[j]
         ut = 0.0
         for a in range(1, d):
             ut += u[o + a] * u[o + a]
@@ -129,6 +128,23 @@ def _natural_map_dense(W, q, mu, offsets, sizes, nc, m, rho, r, u, phi, x, p):
             phi[o + a] = v
             total += v * v
     return math.sqrt(total)
+
+
+@njit(cache=True)
+def _dense_u(W, q, r, m, u):
+    """``u = W r + q`` on the leading ``m`` rows."""
+    for a in range(m):
+        acc = q[a]
+        for b in range(m):
+            acc += W[a, b] * r[b]
+        u[a] = acc
+
+
+@njit(cache=True)
+def _natural_map_dense(W, q, mu, offsets, sizes, nc, m, rho, r, u, phi, x, p):
+    """``u = W r + q`` and ``Φ_ρ(r)`` into ``u``, ``phi`` (leading ``m`` rows); returns ``‖Φ‖₂``."""
+    _dense_u(W, q, r, m, u)
+    return natural_map_rows(mu[:nc], offsets[:nc], sizes[:nc], rho, r, u, phi, x, p)
 
 
 @njit(cache=True)
@@ -169,11 +185,7 @@ def _lu_solve(M, b, n):
 @njit(cache=True)
 def _residual(W, q, mu, offsets, sizes, nc, m, r, u, x, pr):
     """FCLib residual of ``r`` on ``u = W r + q`` (``u`` written)."""
-    for a in range(m):
-        acc = q[a]
-        for b in range(m):
-            acc += W[a, b] * r[b]
-        u[a] = acc
+    _dense_u(W, q, r, m, u)
     return fclib_error_rows(q, mu, offsets, sizes, nc, m, r, u, x, pr)
 
 
