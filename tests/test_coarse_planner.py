@@ -135,3 +135,58 @@ def test_a_failed_precheck_never_drops_a_transition():
     )  # fmt: skip
     assert plan.found and plan.sequence == [("B1",), ("B1", "C"), ("B1", "B2", "C")]
     assert flagged in calls
+
+
+@dataclass(frozen=True)
+class FakePath:
+    """A transition priced by its path alone (``wrenches_checked`` False until confirmed)."""
+
+    success: bool
+    reason: str
+    cost: float
+    end_pose: Pose
+    wrenches_checked: bool = False
+
+
+def test_pushes_are_searched_only_along_the_chosen_sequence_and_a_failed_one_reroutes():
+    """Paths price every transition; the pushes (``confirm``) run only on the best sequence.
+
+    From {B1} to {B1, B2, C}: C-then-B2 costs 5.0·1.1 + 1.0·1.2 = 6.7, B2-then-C 7.1. With exact
+    estimates the search prices C-then-B2's two paths and confirms them; B2-then-C is never
+    confirmed. When the pushes of {B1, C} + B2 fail (a jam along its path), the search re-routes
+    to B2-then-C (7.1), confirms its two transitions, and never confirms anything else.
+    """
+    costs = {"B2": 1.0, "C": 5.0}
+    for push_fails, sequence, cost, confirmed in (
+        (set(), [("B1",), ("B1", "C"), ("B1", "B2", "C")], 6.7, [(("B1",), "C"), (("B1", "C"), "B2")]),
+        (
+            {(("B1", "C"), "B2")},
+            [("B1",), ("B1", "B2"), ("B1", "B2", "C")],
+            7.1,
+            [(("B1",), "C"), (("B1", "C"), "B2"), (("B1",), "B2"), (("B1", "B2"), "C")],
+        ),
+    ):
+        scripted_eval = scripted(costs)
+
+        def evaluate(pose, state, target, _s=scripted_eval):
+            r = _s(pose, state, target)
+            return FakePath(r.success, "a path", r.cost, r.end_pose)
+
+        calls = []
+
+        def confirm(pose, state, target, result, _fails=push_fails, _calls=calls):
+            key = (tuple(sorted(state)), target)
+            _calls.append(key)
+            if key in _fails:
+                return FakePath(False, "segment 0: every push jams", float("inf"), result.end_pose, True)
+            return FakePath(True, "pushes found", result.cost, result.end_pose, True)
+
+        plan = search(
+            frozenset({"B1"}), ["B1", "B2", "C"], START, evaluate, estimate=_exact_estimate(costs), confirm=confirm
+        )
+        assert plan.found and plan.sequence == sequence
+        assert plan.cost == pytest.approx(cost)
+        assert calls == confirmed
+        assert all(t.wrenches_checked and t.success for t in plan.transitions)
+        stages = {(a.established, a.target): a.stage for a in plan.attempts}
+        assert all(stages[k] == "fine" for k in confirmed)

@@ -197,6 +197,8 @@ def solve(
             verdict = "ok" if a.success else f"fails: {a.reason}"
             if a.stage == "precheck":
                 verdict = f"cheap check fails, tried after the others: {a.reason}"
+            elif a.stage == "path":
+                verdict = "a path (its pushes are searched if its sequence is chosen)"
             added = "{" + ",".join(a.added) + "}" if a.together else a.target
             typer.echo(f"  tried {{{', '.join(a.established)}}} + {added}: {verdict}", err=True)
 

@@ -52,6 +52,9 @@ Estimate = Callable[[Pose, State, str], "tuple[float, Pose] | None"]
 # a cheap necessary check of a transition from the pose it would start at, before its fine plan:
 # None when it passes, else why not (e.g. no non-jamming push at the first poses of the guess)
 Precheck = Callable[[Pose, State, str], "str | None"]
+# completes a priced transition whose fine plan stopped at the path (its wrenches searched only now,
+# once its sequence is the chosen one): (pose, state, target, result) -> the completed result
+Confirm = Callable[[Pose, State, str, Any], TransitionResult]
 # the locators a transition adds with ``target`` (sorted, ``target`` among them): ``(target,)`` unless
 # geometry closes others at the same instant
 Group = Callable[[State, str], "tuple[str, ...]"]
@@ -69,7 +72,8 @@ class Attempt:
     cost: float
     reason: str
     # "fine": its fine plan was run; "precheck": only the cheap check before it, which failed (the
-    # transition was then tried after the others, and appears again if it was fine-planned)
+    # transition was then tried after the others, and appears again if it was fine-planned);
+    # "path": its fine path was found, the pushes along it are searched only if its sequence is chosen
     stage: str = "fine"
     together: tuple[str, ...] = ()  # the locators added with the target (closing together with it)
 
@@ -119,6 +123,7 @@ def search(
     estimate: Estimate | None = None,
     precheck: Precheck | None = None,
     group: Group | None = None,
+    confirm: Confirm | None = None,
 ) -> CoarsePlan:
     """Cheapest monotone sequence of contact states from ``start_state`` to all locators.
 
@@ -133,10 +138,18 @@ def search(
 
     ``group`` names the locators a transition adds with its target (default: the target alone);
     a fixed ``order`` must then name a group's locators one after the other.
+
+    ``confirm`` (lazy search only): ``evaluate`` may price a transition by its path alone (a
+    result with ``wrenches_checked`` False); once a sequence made of priced transitions is the
+    best one, ``confirm`` completes each of them in order (the pushes along the path), and a
+    failure sends the search on as any failed transition does. The pushes of transitions priced
+    and then left are never searched.
     """
     grp = group or _single
     if estimate is not None and order is None:
-        return _lazy_search(start_state, all_locators, start_pose, evaluate, estimate, progress, precheck, grp)
+        return _lazy_search(
+            start_state, all_locators, start_pose, evaluate, estimate, progress, precheck, grp, confirm
+        )  # fmt: skip
     goal: State = frozenset(all_locators)
     unknown = start_state - goal
     if unknown:
@@ -160,6 +173,8 @@ def search(
 
     def evaluated(state: State, target: str, pose: Pose) -> tuple[float, Pose, Any] | None:
         result = evaluate(pose, state, target)
+        if confirm is not None and not getattr(result, "wrenches_checked", True):
+            result = confirm(pose, state, target, result)  # every transition out of a settled state counts
         _record(attempts, progress, state, target, result, _together(grp, state, target))
         return (float(result.cost), result.end_pose, result) if result.success else None
 
@@ -199,7 +214,7 @@ def _record(
         progress,
         Attempt(
             _key(state), target, bool(result.success), float(result.cost) if result.success else float("inf"),
-            result.reason, "fine", together,
+            result.reason, "fine" if getattr(result, "wrenches_checked", True) else "path", together,
         ),
     )  # fmt: skip
 
@@ -294,6 +309,7 @@ def _lazy_search(
     progress: Callable[[Attempt], None] | None,
     precheck: Precheck | None = None,
     group: Group = _single,
+    confirm: Confirm | None = None,
 ) -> CoarsePlan:
     """LazySP over the lattice: fine-plan only the transitions on the current best sequence."""
     goal: State = frozenset(all_locators)
@@ -304,6 +320,7 @@ def _lazy_search(
     done: dict[tuple[State, str], Any] = {}  # evaluated transitions
     guessed: dict[tuple[State, str], tuple[float, Pose] | None] = {}
     prechecked: set[tuple[State, str]] = set()
+    suspect: set[tuple[State, str]] = set()  # transitions whose cheap check failed
 
     def weight(state: State, target: str, pose: Pose) -> tuple[float, Pose, Any] | None:
         key = (state, target)
@@ -347,6 +364,7 @@ def _lazy_search(
                     guess = guessed.get(key)
                     why = None if guess is None else precheck(pose, state, target)
                     if guess is not None and why is not None:
+                        suspect.add(key)
                         # the cheap check fails: try the other sequences first, this one later
                         guessed[key] = (
                             max(PRECHECK_PENALTY * guess[0], guess[0] + DEFAULT.planner.precheck_floor),
@@ -360,6 +378,10 @@ def _lazy_search(
                         complete = False
                         break
                 result = evaluate(pose, state, target)
+                if confirm is not None and key in suspect and not getattr(result, "wrenches_checked", True):
+                    # its cheap check failed: the pushes along the path are likely to fail too, so
+                    # they are searched now rather than after the sequences that build on it
+                    result = confirm(pose, state, target, result)
                 done[key] = result
                 _record(attempts, progress, state, target, result, _together(group, state, target))
                 guess = guessed.get(key)
@@ -379,6 +401,18 @@ def _lazy_search(
                         complete = False
                         break
             pose = done[key].end_pose
+        if complete and confirm is not None:
+            # the best sequence is priced: complete its transitions (the pushes along each path)
+            pose = start_pose
+            for state, target, _ in path:
+                key = (state, target)
+                if not getattr(done[key], "wrenches_checked", True):
+                    done[key] = confirm(pose, state, target, done[key])
+                    _record(attempts, progress, state, target, done[key], _together(group, state, target))
+                    if not done[key].success:
+                        complete = False
+                        break
+                pose = done[key].end_pose
         if complete:
             return _plan(start_state, path, [done[(s, t)] for s, t, _ in path], attempts, group)
     return CoarsePlan(False, [], [], float("inf"), attempts, "the lazy search did not settle (too many rounds)")

@@ -92,7 +92,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -151,6 +151,9 @@ class Transition:
     formulation : str
         The rung of :data:`LADDER` that found the path (``"default"``: the plain program); ``""``
         when none did (the reason lists each one's IPOPT status).
+    wrenches_checked : bool
+        False for a path whose segments' wrenches are not searched yet (``success`` then says
+        only that a path exists; :func:`with_wrenches` completes it).
     together : tuple of str
         The locators that close together with ``target`` (:func:`closing_group`: a redundant
         layout where geometry makes them touch at the same instant); they touch at the last knot
@@ -175,6 +178,7 @@ class Transition:
     ipopt_iterations: int = 0
     formulation: str = "default"
     together: tuple[str, ...] = ()
+    wrenches_checked: bool = True  # False: the path alone (``plan_transition(..., wrenches=False)``)
 
     @property
     def added(self) -> tuple[str, ...]:
@@ -343,6 +347,7 @@ def plan_transition(
     ladder: Sequence[Formulation] = LADDER,
     diagnose: bool = True,
     together: Sequence[str] = (),
+    wrenches: bool = True,
 ) -> Transition:
     """Plan the path and wrenches that add ``target`` to the ``established`` contacts.
 
@@ -386,6 +391,10 @@ def plan_transition(
         the target, a second equality would only repeat the target's) and must touch at the last
         knot with the exact gaps (|gap| ≤ ``touch_m``). The wrench search is the target's: every
         locator of the group is open along each segment, pressed only at the end.
+    wrenches : bool
+        False: stop at the path (``wrenches_checked`` False, ``success`` meaning a path exists);
+        :func:`with_wrenches` later searches its segments' wrenches. A search over sequences
+        prices many transitions it then leaves: only those of the chosen sequence need wrenches.
 
     Returns
     -------
@@ -469,41 +478,55 @@ def plan_transition(
     if path is None:
         return _failed(prob, first, _no_path_reason(prob, first, tried, diagnose, max_iter, tol))
 
-    K = prob.K
-    # --- wrenches per segment -----------------------------------------------------------------
+    pending = Transition(
+        est, target, path.kind, path.poses, np.full((prob.K, fixture.ndof), np.nan), np.full(prob.K, np.nan),
+        True, f"{path.kind} on {_state(est)} to touch {_added(target, group)}: a path, wrenches not searched yet",
+        path.violation, total_time, path.status, np.zeros(prob.K, dtype=bool), [], path.slip, path.cost,
+        path.iterations, path.formulation, group, wrenches_checked=False,
+    )  # fmt: skip
+    if not wrenches:
+        return pending
+    return with_wrenches(
+        fixture, pending, acceleration_mps2=acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N,
+        plain=ladder[0].name,
+    )  # fmt: skip
+
+
+def with_wrenches(
+    fixture: Fixture,
+    transition: Transition,
+    *,
+    acceleration_mps2: float = 1.0,
+    friction_margin: float = 0.0,
+    margin_N: float | None = None,
+    plain: str = "default",
+) -> Transition:
+    """Complete a path (``plan_transition(..., wrenches=False)``) with each segment's wrench.
+
+    The same search :func:`plan_transition` runs; a transition already checked (or without a
+    path) is returned as it is. ``plain`` names the ladder's first rung (the reason names any other).
+    """
+    tr = transition
+    if tr.wrenches_checked or not tr.success:
+        return tr
+    est, target, group, K = tr.established, tr.target, tr.together, tr.knots
     wrenches, margins, found, reasons = segment_wrenches(
-        fixture, path.poses, est, path.kind, acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N
+        fixture, tr.poses, est, tr.kind, acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N
     )
     bad = [k for k in range(K) if not found[k]]
-    via = "" if path.formulation == ladder[0].name else f" (formulation: {path.formulation})"
+    via = "" if tr.formulation == plain else f" (formulation: {tr.formulation})"
     if bad:
         k = bad[0]
         reason = f"segment {k} of {K} ({_state(est)} → {_added(target, group)}): {reasons[k]}"
         success = False
     else:
         margin = f"least margin {float(np.min(margins)):.3g} N" if est else "free motion, no contact to press"
-        reason = f"{path.kind} on {_state(est)} to touch {_added(target, group)}: {K} segments, {margin}{via}"
+        reason = f"{tr.kind} on {_state(est)} to touch {_added(target, group)}: {K} segments, {margin}{via}"
         success = True
-    return Transition(
-        est,
-        target,
-        path.kind,
-        path.poses,
-        wrenches,
-        margins,
-        success,
-        reason,
-        path.violation,
-        total_time,
-        path.status,
-        found,
-        reasons,
-        path.slip,
-        path.cost if success else float("inf"),
-        path.iterations,
-        path.formulation,
-        group,
-    )
+    return replace(
+        tr, wrenches=wrenches, margins_N=margins, success=success, reason=reason, found=found,
+        segment_reasons=reasons, cost=tr.cost if success else float("inf"), wrenches_checked=True,
+    )  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------
@@ -722,6 +745,11 @@ def _model_gap(prob: _Problem, name: str, pose: Pose) -> float:
     return float(dist) - loc.radius_m
 
 
+def _numeric(ca: Any, expr: Any) -> float:
+    """A constant CasADi expression's value (knot 0's gaps are built from numbers only)."""
+    return float(ca.DM(expr)) if not isinstance(expr, ca.SX | ca.MX) else float(ca.evalf(expr))
+
+
 def _solve_path(
     prob: _Problem,
     kind: str,
@@ -754,8 +782,9 @@ def _solve_path(
     y_guess = xi_guess / scale[:, None]
     y0 = np.zeros(nv) if first is None else np.asarray(first, dtype=float) / scale
 
-    opti = ca.Opti()
-    Y = opti.variable(nv, K)
+    # SX symbols and one nlpsol, not Opti: Opti builds MX graphs that IPOPT then evaluates through
+    # the MX virtual machine; the same program in SX builds and evaluates 2-3x faster
+    Y = ca.SX.sym("Y", nv, K)
     c0 = start.point_world_from_body(com_b)
     R0 = start.R_world_body
 
@@ -773,22 +802,46 @@ def _solve_path(
             R = ca.vertcat(ca.horzcat(ca.cos(th), -ca.sin(th)), ca.horzcat(ca.sin(th), ca.cos(th)))
         return R, c
 
-    frames = [knot(k) for k in range(K + 1)]
+    frames = [knot(0)] + ([knot(k) for k in range(1, K + 1)] if kind == "roll" else [])
 
     def q_of(k: int, name: str) -> Any:
         R, c = frames[k]
         return ca.mtimes(R.T, ca.DM(locs[name].p_world) - c) + ca.DM(com_b)
 
-    gaps: dict[tuple[int, str], Any] = {}
+    def gap_of(q: Any, name: str) -> Any:
+        dist = features[name].distance(ca, q)
+        if name in prob.second:
+            dist = smooth_max(ca, dist, prob.second[name].distance(ca, q))
+        return dist - locs[name].radius_m
+
+    # every knot's rows are the same function of its twist: built once on a symbol and called per
+    # knot (one call, not the hundreds of scalar operations that rebuilding them took)
+    gap_names = [*est, *prob.others, *prob.together, target]
+    bound_names = [*est, target]
+    y_sym = ca.SX.sym("y", nv)
+    xi_sym = ca.DM(scale) * y_sym
+    if d == 3:
+        R_sym = ca.mtimes(_exp_so3_ca(ca, xi_sym[3:6]), ca.DM(R0))
+    else:
+        th_sym = start.angle_rad + xi_sym[2]
+        R_sym = ca.vertcat(ca.horzcat(ca.cos(th_sym), -ca.sin(th_sym)), ca.horzcat(ca.sin(th_sym), ca.cos(th_sym)))
+    c_sym = ca.DM(c0) + xi_sym[:d]
+
+    def q_sym(name: str) -> Any:
+        return ca.mtimes(R_sym.T, ca.DM(locs[name].p_world) - c_sym) + ca.DM(com_b)
+
+    bounds_sym = [ca.vertcat(*features[n].inside(ca, features[n].point_at(ca, q_sym(n)))) for n in bound_names]
+    knot_rows = ca.Function("knot_rows", [y_sym], [gap_of(q_sym(n), n) for n in gap_names] + bounds_sym)
+    per_knot: list[Any] = [None] + [knot_rows(Y[:, k - 1]) for k in range(1, K + 1)]
+    gap_index = {n: i for i, n in enumerate(gap_names)}
+    bound_index = {n: len(gap_names) + i for i, n in enumerate(bound_names)}
 
     def gap(k: int, name: str) -> Any:
-        if (k, name) not in gaps:
-            q = q_of(k, name)
-            dist = features[name].distance(ca, q)
-            if name in prob.second:
-                dist = smooth_max(ca, dist, prob.second[name].distance(ca, q))
-            gaps[k, name] = dist - locs[name].radius_m
-        return gaps[k, name]
+        return gap_of(q_of(0, name), name) if k == 0 else per_knot[k][gap_index[name]]
+
+    def bound_rows(k: int, name: str) -> list[Any]:
+        rows = per_knot[k][bound_index[name]]
+        return [rows[i] for i in range(rows.shape[0])]
 
     # constraint groups: (kind, locator) → rows; "eq" rows are = 0, the others ≥ 0. Collected and
     # handed to Opti as two vectors (one call each: scalar subject_to calls were a fifth of the
@@ -798,18 +851,14 @@ def _solve_path(
     def add(group: tuple[str, str], sense: str, rows: Sequence[Any]) -> None:
         groups.setdefault(group, (sense, []))[1].extend(rows)
 
-    plane_start = {n: float(ca.evalf(gap(0, n))) for n in prob.others}
+    plane_start = {n: _numeric(ca, gap(0, n)) for n in prob.others}
+    held = {n: min(prob.clearance_m, plane_start[n], _model_gap(prob, n, start)) for n in prob.others}
     for k in range(1, K + 1):
         for n in est:
             add(("kept contact", n), "ge" if n in prob.dependent else "eq", [gap(k, n) / L])
-            add(
-                ("feature bounds", n),
-                "ge",
-                [e / L for e in features[n].inside(ca, features[n].point_at(ca, q_of(k, n)))],
-            )
+            add(("feature bounds", n), "ge", [e / L for e in bound_rows(k, n)])
         for n in prob.others:
-            held = min(prob.clearance_m, plane_start[n], _model_gap(prob, n, start))
-            add(("clearance", n), "ge", [(gap(k, n) - held) / L])
+            add(("clearance", n), "ge", [(gap(k, n) - held[n]) / L])
         for n in prob.together:
             # closing with the target: never through the part, touching where the target does
             # (geometry makes its gap a fixed multiple of the target's; no second end equality)
@@ -819,11 +868,7 @@ def _solve_path(
         elif k < K:
             add(("clearance", target), "ge", [gap(k, target) / L])
     end_row = (gap(K, target) - end_gap_m) / L
-    add(
-        ("feature bounds", target),
-        "ge",
-        [e / L for e in features[target].inside(ca, features[target].point_at(ca, q_of(K, target)))],
-    )
+    add(("feature bounds", target), "ge", [e / L for e in bound_rows(K, target)])
     if kind == "roll":
         for k in range(K):
             for n, row in _no_slip(ca, frames, k, est, features, locs, q_of, com_b, start, d):
@@ -834,7 +879,7 @@ def _solve_path(
     for g, (sense, rows) in groups.items():
         if g not in keys:
             (eqs if sense == "eq" else ineqs).extend(rows)
-    S = opti.variable(len(keys)) if keys else None
+    S = ca.SX.sym("S", len(keys)) if keys else None
     if S is not None:
         for i, g in enumerate(keys):
             sense, rows = groups[g]
@@ -843,9 +888,8 @@ def _solve_path(
             else:
                 ineqs.extend([r + S[i] for r in rows])
         ineqs.append(S)
-    opti.subject_to(ca.vertcat(*eqs) == 0)
-    if ineqs:
-        opti.subject_to(ca.vertcat(*ineqs) >= 0)
+    g_eq, g_ge = ca.vertcat(*eqs), (ca.vertcat(*ineqs) if ineqs else ca.SX(0, 1))
+    n_eq, n_ge = int(g_eq.numel()), int(g_ge.numel())
 
     # objective: K Σ ‖Δy‖²_W, normalised by the guess's end point
     y_end = y_guess[:, -1] - y0
@@ -861,32 +905,35 @@ def _solve_path(
         y_goal = twist_from_pose(start, prob.goal, com_b) / scale
         e_goal = Y[:, K - 1] - ca.DM(y_goal)
         objective = objective + GOAL_PULL * ca.dot(e_goal, ca.mtimes(ca.DM(W), e_goal)) / norm
+    x0 = y_guess[:, 1:].reshape(-1, order="F")  # ca.vec stacks columns
+    x_sym = ca.vec(Y)
     if S is not None:
         objective = ca.sum1(S) + prob.settings.elastic_regularisation * objective
-        opti.set_initial(S, np.ones(len(keys)))
-    opti.minimize(objective)
-    opti.set_initial(Y, y_guess[:, 1:])
-    opti.solver("ipopt", {"print_time": False}, prob.settings.ipopt_options(tol, max_iter))
+        x_sym = ca.vertcat(x_sym, S)
+        x0 = np.concatenate([x0, np.ones(len(keys))])
+    solver = ca.nlpsol(
+        "fine_path", "ipopt", {"x": x_sym, "f": objective, "g": ca.vertcat(g_eq, g_ge)},
+        {"print_time": False, "error_on_fail": False, "ipopt": prob.settings.ipopt_options(tol, max_iter)},
+    )  # fmt: skip
     t0 = time.perf_counter()
     try:
-        sol = opti.solve_limited()  # accepts hitting max_iter; the status is read below
-        y_val = sol.value(Y)
-        s_val = sol.value(S) if S is not None else None
+        sol = solver(
+            x0=x0, lbg=np.zeros(n_eq + n_ge), ubg=np.concatenate([np.zeros(n_eq), np.full(n_ge, np.inf)])
+        )  # fmt: skip
     except RuntimeError as exc:
-        # Opti raises on every unsuccessful IPOPT return (infeasible, restoration failed, ...):
-        # keep IPOPT's status and last iterate; anything without a status is a real error.
-        stats = opti.stats()
-        if "return_status" not in stats:
-            raise SolverError(f"IPOPT failed on {_state(est)} + {target}: {exc}") from exc
-        y_val = opti.debug.value(Y)
-        s_val = opti.debug.value(S) if S is not None else None
+        raise SolverError(f"IPOPT failed on {_state(est)} + {target}: {exc}") from exc
     solve_time = time.perf_counter() - t0
-    stats = opti.stats()
+    stats = solver.stats()
+    if "return_status" not in stats:
+        raise SolverError(f"IPOPT failed on {_state(est)} + {target}: no status ({stats.get('return_status')})")
+    x_val = np.asarray(sol["x"], dtype=float).ravel()
+    y_val = x_val[: nv * K]
+    s_val = x_val[nv * K :]
     status: Any = str(stats.get("return_status", "unknown"))
     if elastic:
         s_arr = np.atleast_1d(np.asarray(s_val, dtype=float)) if S is not None else np.zeros(0)
         status = (status, {g: float(s) * L for g, s in zip(keys, s_arr, strict=True)})
-    y_sol = np.asarray(y_val, dtype=float).reshape(nv, K)
+    y_sol = np.asarray(y_val, dtype=float).reshape(nv, K, order="F")
     xi_sol = np.concatenate([y0[:, None], y_sol], axis=1) * scale[:, None]
     return xi_sol, status, int(stats.get("iter_count", 0)), solve_time
 

@@ -637,7 +637,8 @@ class TriedTransition:
     ok: bool
     reason: str
     # "fine": its fine plan ran; "precheck": only the cheap cone check before it, which failed (the
-    # search then tried the transition after the others)
+    # search then tried the transition after the others); "path": its path was found, its pushes
+    # not searched (its sequence was not the one chosen)
     stage: str = "fine"
     together: tuple[str, ...] = ()  # locators closing at the same instant (then "add" is a list)
 

@@ -37,6 +37,7 @@ from fixplan.planner.fine import (
     default_kind,
     goal_rows,
     plan_transition,
+    with_wrenches,
 )
 from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.policy import Policy, build_policy
@@ -283,6 +284,7 @@ class Planner:
                         margin_N=self.margin_N, clearance_m=clearance, kind=kind,
                         ladder=LADDER if full else LADDER[:1], diagnose=full,
                         together=[n for n in self.group(state_, target) if n != target],
+                        wrenches=False,
                     )  # fmt: skip
                     if tr.ipopt_status in IPOPT_PATH_FOUND:
                         break  # a path: its wrenches decide, not the clearance
@@ -290,13 +292,27 @@ class Planner:
                 self.fine_time_s += time.perf_counter() - t
             return cache[key]
 
+        def confirm(pose_: Pose, state_: frozenset[str], target: str, tr: Transition) -> Transition:
+            """The pushes along a priced path (only for the transitions of a chosen sequence)."""
+            key = (tuple(sorted(state_)), target, _pose_key(pose_), self.full_ladder)
+            t = time.perf_counter()
+            done = with_wrenches(
+                self.fixture, tr, acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
+                margin_N=self.margin_N, plain=LADDER[0].name,
+            )  # fmt: skip
+            self.fine_time_s += time.perf_counter() - t
+            for k in (key, (*key[:3], not self.full_ladder)):
+                if cache.get(k) is tr:
+                    cache[k] = done
+            return done
+
         # first the plain program for every transition; only when no sequence is found that way,
         # the whole ladder (other guesses, the other kind, a waypoint, ...) and the diagnosis of
         # what blocks each transition that still fails
         self.full_ladder = False
         first = search(
             state, self.names, pose, evaluate, order=order, progress=self.progress,
-            estimate=self.estimate, precheck=self.precheck, group=self.group,
+            estimate=self.estimate, precheck=self.precheck, group=self.group, confirm=confirm,
         )  # fmt: skip
         if first.found:
             return first
@@ -304,7 +320,7 @@ class Planner:
         try:
             second = search(
                 state, self.names, pose, evaluate, order=order, progress=self.progress,
-                estimate=self.estimate, precheck=self.precheck, group=self.group,
+                estimate=self.estimate, precheck=self.precheck, group=self.group, confirm=confirm,
             )  # fmt: skip
         finally:
             self.full_ladder = False
