@@ -799,6 +799,7 @@ def _solve_path(
         groups.setdefault(group, (sense, []))[1].extend(rows)
 
     plane_start = {n: float(ca.evalf(gap(0, n))) for n in prob.others}
+    floors = _plane_obstacles(prob)
     for k in range(1, K + 1):
         for n in est:
             add(("kept contact", n), "ge" if n in prob.dependent else "eq", [gap(k, n) / L])
@@ -814,6 +815,11 @@ def _solve_path(
             # closing with the target: never through the part, touching where the target does
             # (geometry makes its gap a fixed multiple of the target's; no second end equality)
             add(("closing together", n), "ge", [gap(k, n) / L])
+        for name, n_w, offset, B, held in floors:
+            # the part's collision points stay on the free side of every plane obstacle (a floor)
+            R, c = frames[k]
+            X = ca.mtimes(R, ca.DM(B)) + ca.repmat(c, 1, B.shape[1])
+            add(("obstacle", name), "ge", [((ca.mtimes(ca.DM(n_w).T, X) - ca.DM(offset + held).T).T) / L])
         if monotone:
             add(("monotone target gap", target), "ge", [(gap(k - 1, target) - gap(k, target)) / L])
         elif k < K:
@@ -889,6 +895,32 @@ def _solve_path(
     y_sol = np.asarray(y_val, dtype=float).reshape(nv, K)
     xi_sol = np.concatenate([y0[:, None], y_sol], axis=1) * scale[:, None]
     return xi_sol, status, int(stats.get("iter_count", 0)), solve_time
+
+
+def _plane_obstacles(prob: _Problem) -> list[tuple[str, FloatArray, float, FloatArray, FloatArray]]:
+    """The plane obstacles as clearance rows: ``(name, normal, n·o + radius, points about the CoM (d × n), held)``.
+
+    A collision point ``b`` (:mod:`fixplan.geometry.collision`) is at ``c + R (b − com)``; its gap
+    to the plane ``n·x − n·o − ρ`` must stay ≥ ``held`` = min(0, its gap at the start) (a part
+    that starts on the floor may stay there; none passes through it). Box obstacles are left to
+    the engine (a box's gap is not smooth across its edges).
+    """
+    from fixplan.geometry.collision import collision_points
+
+    fx = prob.fixture
+    planes = [ob for ob in fx.obstacles if ob.is_plane]
+    if not planes:
+        return []
+    pts, radii = collision_points(fx.workpiece.shape, DEFAULT.engine.rim_points)
+    B = (pts - prob.com_b).T
+    c0 = prob.start.point_world_from_body(prob.com_b)
+    out = []
+    for ob in planes:
+        n_w = ob.R_world_obstacle[:, -1]
+        offset = float(n_w @ ob.o_world)
+        g0 = n_w @ (prob.start.R_world_body @ B + c0[:, None]) - offset - radii
+        out.append((ob.name, n_w, offset, B, radii + np.minimum(g0, 0.0)))
+    return out
 
 
 def _failed(prob: _Problem, first: _Path, reason: str) -> Transition:
