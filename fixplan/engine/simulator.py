@@ -82,6 +82,18 @@ class ContactReport:
 
 
 @dataclass(frozen=True)
+class ObstacleReport:
+    """One collision-only body (``[[obstacle]]``) after the last step: not a locator, never in contact states."""
+
+    name: str
+    gap_m: float  # the part's least gap to it at the current pose [m]
+    force_world: FloatArray  # its average force on the workpiece over the last step [N]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"name": self.name, "gap": self.gap_m, "force": [float(x) for x in self.force_world]}
+
+
+@dataclass(frozen=True)
 class StepInfo:
     """How the last step's contact problem was solved."""
 
@@ -525,15 +537,22 @@ class Simulator:
 
     def obstacle_force_world(self) -> FloatArray:
         """The total force the collision-only bodies exerted on the part in the last step [N], world axes."""
+        return sum((r.force_world for r in self.obstacles()), np.zeros(self.dimension))
+
+    def obstacles(self) -> list[ObstacleReport]:
+        """Per collision-only body: the part's least gap to it (current pose) and its force (the last step's)."""
         d, h, kl = self.dimension, self.dt, self._k_loc
-        total = np.zeros(d)
-        for i in range(kl, self._k):
-            if not self._active[i] or self._P[i, 0] <= 0.0:
-                continue
-            n = self._nw[i]
-            t = tangent_basis(n)
-            total += (self._P[i, 0] * n + self._P[i, 1:d] @ t) / h
-        return total
+        gaps = self._obstacle_gaps()
+        out = []
+        for j, ob in enumerate(self.fixture.obstacles):
+            rows = np.flatnonzero(self._slots[:, d + 1] == j)
+            force = np.zeros(d)
+            for i in rows + kl:
+                if self._active[i] and self._P[i, 0] > 0.0:
+                    n = self._nw[i]
+                    force += (self._P[i, 0] * n + self._P[i, 1:d] @ tangent_basis(n)) / h
+            out.append(ObstacleReport(ob.name, float(gaps[rows].min(initial=np.inf)), force))
+        return out
 
     def run(
         self,
