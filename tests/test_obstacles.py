@@ -394,3 +394,67 @@ def test_obstacles_round_trip_through_a_rotated_twin():
     (floor,) = twin.obstacles
     assert np.allclose(floor.R_world_obstacle[:, 2], R @ [0.0, 0.0, 1.0])
     assert np.allclose(floor.o_world @ floor.R_world_obstacle[:, 2], -0.01)
+
+
+# -- the planner -----------------------------------------------------------------------------------
+
+WALLED = textwrap.dedent(
+    """
+    format = 1
+    [scene]
+    name = "walled"
+    dimension = 2
+    gravity = [0.0, 0.0]
+    [workpiece]
+    shape = "rectangle"
+    size = [0.2, 0.1]
+    mass = 1.0
+    start = { position = [0.5, 0.05], angle_deg = 10.0 }
+    [[locator]]
+    name = "T"
+    position = [-0.002, 0.05]
+    radius = 0.001
+    friction = 0.3
+    """
+)
+
+
+def test_fine_paths_never_cross_a_plane_obstacle():
+    """The only way to the target locator crosses the line x = 0.3: with that line as an obstacle there is no
+    path; without it the same transition plans. A floor under the path (y = −0.05, clear) changes nothing, and
+    every knot keeps the part's corners above it."""
+    from fixplan.planner.fine import plan_transition
+
+    bare = fixplan.loads(WALLED)
+    free = plan_transition(bare, bare.start, (), "T", diagnose=False)
+    assert free.success
+    wall = '[[obstacle]]\nname = "wall"\nshape = "line"\npoint = [0.3, 0.0]\nnormal = [1.0, 0.0]\n'
+    walled = fixplan.loads(WALLED + wall)
+    blocked = plan_transition(walled, walled.start, (), "T", diagnose=False)
+    assert not blocked.success
+    floor = '[[obstacle]]\nname = "floor"\nshape = "line"\npoint = [0.0, -0.05]\nnormal = [0.0, 1.0]\n'
+    floored = fixplan.loads(WALLED + floor)
+    tr = plan_transition(floored, floored.start, (), "T", diagnose=False)
+    assert tr.success
+    corners, _ = collision_points(Rectangle((0.2, 0.1)), 0)
+    assert min(float(min((p.R_world_body @ corners.T)[1] + p.p_world[1])) for p in tr.poses) >= -0.05 - 1e-9
+
+
+@pytest.mark.parametrize("family", ["box-321", "plate-2d", "box-321-free", "plate-2d-free"])
+def test_generate_floor_adds_only_a_floor_under_the_same_draw(family):
+    """--floor: the same file plus one [[obstacle]] plane normal to gravity, 10 mm (0.1 mm steps) below the
+    part's lowest point at its start and goal; the goal pose and the locators are unchanged."""
+    from fixplan.generate import generate_one
+
+    plain = generate_one(family, 2026, 1)
+    floored = generate_one(family, 2026, 1, floor=True)
+    head, tail = floored.toml_text.split("\n[[obstacle]]\n")
+    assert head == plain.toml_text and floored.params == plain.params
+    a, b = fixplan.loads(plain.toml_text), fixplan.loads(floored.toml_text)
+    (floor,) = b.obstacles
+    d = b.dimension
+    assert floor.is_plane and np.allclose(floor.R_world_obstacle[:, -1], np.eye(d)[d - 1])
+    assert np.allclose(a.goal.p_world, b.goal.p_world) and a.names == b.names
+    pts, _ = collision_points(b.workpiece.shape, 0)
+    low = min(float(pose.point_world_from_body(p)[d - 1]) for pose in (b.start, b.goal) for p in pts)
+    assert low - 0.0101 <= floor.o_world[d - 1] <= low - 0.01

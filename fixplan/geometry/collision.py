@@ -92,7 +92,7 @@ def polytope_overlap_m(verts_a: FloatArray, axes_a: FloatArray, verts_b: FloatAr
         for a in axes_a:
             for b in axes_b:
                 c = np.cross(a, b)
-                if np.linalg.norm(c) > 1e-9:
+                if np.linalg.norm(c) > 1e-12:  # parallel axes: no new direction
                     axes.append(c / np.linalg.norm(c))
     depth = np.inf
     for ax in axes:
