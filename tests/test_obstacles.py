@@ -458,3 +458,26 @@ def test_generate_floor_adds_only_a_floor_under_the_same_draw(family):
     pts, _ = collision_points(b.workpiece.shape, 0)
     low = min(float(pose.point_world_from_body(p)[d - 1]) for pose in (b.start, b.goal) for p in pts)
     assert low - 0.0101 <= floor.o_world[d - 1] <= low - 0.01
+
+
+def test_the_approach_from_free_space_keeps_clear_of_the_floor():
+    """A free start with a floor (generate --floor): the approach exists as without the floor, and no pose of it
+    puts a corner below the floor; with the floor raised between the start and the staging pose (the start above
+    it, the staging pose in it) there is no approach."""
+    from fixplan.generate import generate_one
+    from fixplan.planner.approach import _obstacle_gaps, plan_approach
+
+    gen = generate_one("box-321-free", 2026, 0, floor=True)
+    fx = fixplan.loads(gen.toml_text)
+    plain = plan_approach(fixplan.loads(gen.toml_text.split("\n[[obstacle]]\n")[0]))
+    with_floor = plan_approach(fx)
+    assert plain is not None and with_floor is not None
+    assert len(with_floor.poses) == len(plain.poses)
+    assert min(float(_obstacle_gaps(fx, p).min()) for p in with_floor.poses) >= 0.0
+    # the floor 12.5 mm higher: the start is still above it (1.8 mm), the staging pose 0.5 mm into it
+    from dataclasses import replace
+
+    (floor,) = fx.obstacles
+    raised = replace(fx, obstacles=(replace(floor, o_world=floor.o_world + [0.0, 0.0, 0.0125]),))
+    assert _obstacle_gaps(raised, raised.start)[0] > 0.0 > _obstacle_gaps(raised, with_floor.staging)[0]
+    assert plan_approach(raised) is None

@@ -815,11 +815,11 @@ def _solve_path(
             # closing with the target: never through the part, touching where the target does
             # (geometry makes its gap a fixed multiple of the target's; no second end equality)
             add(("closing together", n), "ge", [gap(k, n) / L])
-        for name, n_w, offset, B, held in floors:
+        for name, n_w, offset, B, floor_m in floors:
             # the part's collision points stay on the free side of every plane obstacle (a floor)
             R, c = frames[k]
             X = ca.mtimes(R, ca.DM(B)) + ca.repmat(c, 1, B.shape[1])
-            add(("obstacle", name), "ge", [((ca.mtimes(ca.DM(n_w).T, X) - ca.DM(offset + held).T).T) / L])
+            add(("obstacle", name), "ge", [((ca.mtimes(ca.DM(n_w).T, X) - ca.DM(offset + floor_m).T).T) / L])
         if monotone:
             add(("monotone target gap", target), "ge", [(gap(k - 1, target) - gap(k, target)) / L])
         elif k < K:
