@@ -228,7 +228,7 @@ def test_cylinder_lands_on_a_base_plate_box():
     assert traj.max_penetration_m <= 1e-6
 
 
-# -- the issue: the default fixture has a floor ---------------------------------------------------
+# -- the report: the default fixture has a floor --------------------------------------------------
 
 
 def test_pushed_off_its_locators_the_default_box_lands_on_the_floor():
@@ -256,7 +256,7 @@ def test_pushed_off_its_locators_the_default_box_lands_on_the_floor():
 
 
 def test_simulate_cli_keeps_the_default_box_above_its_floor():
-    """The issue's command line: the box ends on the floor (z = −0.01 + 0.025), not 2.34 m below it."""
+    """The reported command line: the box ends on the floor (z = −0.01 + 0.025), not 2.34 m below it."""
     out = subprocess.run(
         [sys.executable, "-m", "fixplan.cli", "simulate", "--wrench", "6,0,0,0,0,0", "--duration", "1", "--json"],
         capture_output=True,
