@@ -27,9 +27,13 @@ from numpy.typing import NDArray
 from fixplan import limits
 from fixplan.errors import FixtureError, Issue
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
+from fixplan.geometry.collision import BOX as OBSTACLE_BOX
+from fixplan.geometry.collision import PLANE as OBSTACLE_PLANE
+from fixplan.geometry.collision import collision_points, obstacle_gap, plane_frame, polytope_overlap_m
 from fixplan.locating import find_goal, locator_contact
-from fixplan.model import ExplicitContact, Fixture, Locator, Manipulator, SimulationSettings, Workpiece
+from fixplan.model import ExplicitContact, Fixture, Locator, Manipulator, Obstacle, SimulationSettings, Workpiece
 from fixplan.schema import Reader, shorten
+from fixplan.settings import DEFAULT as DEFAULT_SETTINGS
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
 from fixplan.settings import Tolerances
 from fixplan.spatial import Pose
@@ -49,6 +53,8 @@ NAME_PATTERN = re.compile(rf"[\w+\-]{{1,{limits.MAX_NAME_LENGTH}}}")
 NAME_RULE = f"a name of 1 to {limits.MAX_NAME_LENGTH} letters, digits, '_', '-' or '+' (no spaces, commas, dots or control characters)"
 _SIZE = limits.SIZE
 UNITS_HINT = "sizes are in metres; did you write millimetres?"
+OBSTACLE_SHAPES = {3: ("plane", "box"), 2: ("line", "rectangle")}
+OBSTACLE_FRICTION = 0.3  # an [[obstacle]] without friction: a steel plate, dry
 
 
 def _scaled(shape: Shape, k: float) -> Shape | None:
@@ -209,7 +215,9 @@ class _Builder:
 
     def build(self) -> Fixture:
         r, data = self.r, self.data
-        r.unknown_keys(data, ("format", "scene", "workpiece", "locator", "contact", "manipulator", "simulation"), "")
+        r.unknown_keys(
+            data, ("format", "scene", "workpiece", "locator", "contact", "obstacle", "manipulator", "simulation"), ""
+        )
         fmt = r.integer(data, "format", "format", required=True, allowed=(1,))
         del fmt
         scene = r.table(data, "scene", "scene", required=True) or {}
@@ -236,6 +244,7 @@ class _Builder:
         workpiece, start, goal = self.workpiece(wp_table, dim)
         locators = self.locators(dim, workpiece)
         contacts = self.explicit_contacts(dim)
+        obstacles = self.obstacles(dim)
         manipulator = self.manipulator()
         simulation = self.simulation()
         names = [loc.name for loc in locators] + [c.name for c in contacts]
@@ -257,8 +266,10 @@ class _Builder:
             start=start,
             goal_given=goal,
             tolerances=self.tol,
+            obstacles=tuple(obstacles),
         )
         goal = self.check_geometry(fixture)
+        self.check_obstacles(fixture, goal)
         self.fail_if_issues()
         return replace(fixture, goal_pose=goal, goal_starts=self.goal_starts, warnings=tuple(self.warnings))
 
@@ -502,8 +513,10 @@ class _Builder:
         return np.diag(vals)
 
     def pose(self, t: dict, key: str, dim: int, *, required: bool) -> Pose | None:
+        return self._pose_table(t, key, f"workpiece.{key}", dim, required=required)
+
+    def _pose_table(self, t: dict, key: str, path: str, dim: int, *, required: bool) -> Pose | None:
         r = self.r
-        path = f"workpiece.{key}"
         tab = r.table(t, key, path, required=required)
         if tab is None:
             return None
@@ -644,6 +657,113 @@ class _Builder:
             n = np.array(normal) / np.linalg.norm(normal)
             out.append(ExplicitContact(name, np.array(point), n, mu, torsion))  # type: ignore[arg-type]
         return out
+
+    def obstacles(self, dim: int) -> list[Obstacle]:
+        """``[[obstacle]]``: collision-only bodies (a floor plane, a base plate box; 2D: line, rectangle)."""
+        r = self.r
+        out: list[Obstacle] = []
+        seen = set(self.all_names)
+        entries = r.tables(self.data, "obstacle", "obstacle")
+        if len(entries) > limits.MAX_ENTRIES:
+            r.error("obstacle", f"{len(entries)} [[obstacle]] entries (expected at most {limits.MAX_ENTRIES})")
+            return out
+        plane, box = OBSTACLE_SHAPES[dim]
+        for i, entry in enumerate(entries):
+            path, _ = self._entry_path("obstacle", entry, i, seen)
+            kind = entry.get("shape")
+            if kind == "mesh":
+                r.error(f"{path}.shape", "mesh obstacles come later, with CAD meshes (expected plane or box for now)")
+                continue
+            r.unknown_keys(entry, ("name", "shape", "point", "normal", "size", "pose", "friction"), path)
+            name = self._name(entry, path, seen)
+            kind = r.string(entry, "shape", f"{path}.shape", required=True, choices=(plane, box))
+            mu = r.number(
+                entry, "friction", f"{path}.friction", default=OBSTACLE_FRICTION, minimum=0.0,
+                bounds=limits.FRICTION, what="a friction coefficient",
+            )  # fmt: skip
+            for key in ("size", "pose") if kind == plane else ("point", "normal") if kind == box else ():
+                if key in entry:
+                    r.error(
+                        f"{path}.{key}",
+                        f"not a key of a {kind} (expected {'point, normal' if kind == plane else 'size, pose'})",
+                    )
+            frame = None
+            half = np.zeros(0)
+            if kind == plane:
+                point = r.vector(
+                    entry, "point", f"{path}.point", dim, required=True, dimension_hint=dim, bounds=limits.COORDINATE
+                )
+                normal = r.vector(
+                    entry, "normal", f"{path}.normal", dim, required=True, dimension_hint=dim, bounds=limits.NORMAL
+                )
+                if normal is not None:
+                    scale = float(np.max(np.abs(normal)))
+                    if scale <= 1e-12:
+                        r.error(f"{path}.normal", "got a zero vector (expected the direction of the free side)")
+                        normal = None
+                if point is not None and normal is not None:
+                    frame = plane_frame(np.array(point), np.array(normal) / scale)
+            elif kind == box:
+                size = r.vector(
+                    entry,
+                    "size",
+                    f"{path}.size",
+                    dim,
+                    required=True,
+                    dimension_hint=dim,
+                    bounds=_SIZE,
+                    too_large=UNITS_HINT,
+                )
+                pose = self._pose_table(entry, "pose", f"{path}.pose", dim, required=True)
+                if size is not None and pose is not None:
+                    frame, half = (pose.R_world_body, pose.p_world), np.array(size) / 2.0
+            if name is None or mu is None or frame is None or kind is None:
+                continue
+            out.append(Obstacle(name, kind, frame[0], frame[1], half, mu))
+        return out
+
+    def check_obstacles(self, fixture: Fixture, goal: Pose | None) -> None:
+        """The part clear of every obstacle at the start and at the located pose (within the penetration tolerance)."""
+        if not fixture.obstacles:
+            return
+        wp, tol, dim = fixture.workpiece, self.tol, fixture.dimension
+        pts, radii = collision_points(wp.shape, DEFAULT_SETTINGS.engine.rim_points)
+        for ob in fixture.obstacles:
+            code = OBSTACLE_PLANE if ob.is_plane else OBSTACLE_BOX
+            for what, pose in (("start pose", fixture.start), ("located pose", goal)):
+                if pose is None:
+                    continue
+                gap = min(
+                    obstacle_gap(code, ob.R_world_obstacle, ob.o_world, ob.half_m, pose.point_world_from_body(b), rho)[
+                        0
+                    ]
+                    for b, rho in zip(pts, radii, strict=True)
+                )
+                if not ob.is_plane and isinstance(wp.shape, Box | Rectangle | Polygon):
+                    # a box part against a box: the separating-axis test (a plate through the part's middle)
+                    corners, _ = collision_points(
+                        Box(tuple(2 * ob.half_m)) if dim == 3 else Rectangle(tuple(2 * ob.half_m)), 0
+                    )  # type: ignore[arg-type]
+                    axes_b = ob.R_world_obstacle.T
+                    if isinstance(wp.shape, Polygon):
+                        E = np.roll(wp.shape.array, -1, axis=0) - wp.shape.array
+                        axes_a = (
+                            np.stack([E[:, 1], -E[:, 0]], axis=1)
+                            / np.linalg.norm(E, axis=1)[:, None]
+                            @ pose.R_world_body.T
+                        )
+                    else:
+                        axes_a = pose.R_world_body.T
+                    depth = polytope_overlap_m(
+                        pts @ pose.R_world_body.T + pose.p_world, axes_a, corners @ axes_b + ob.o_world, axes_b
+                    )
+                    gap = min(gap, -depth)
+                if gap < -tol.penetration_m:
+                    self.r.error(
+                        f"obstacle.{ob.name}",
+                        f"the part at its {what} is inside this collision-only body by {-gap:.3g} m (expected it clear: "
+                        "an obstacle never locates, so it must lie beyond the part where the locators hold it)",
+                    )
 
     def manipulator(self) -> Manipulator:
         r = self.r

@@ -63,6 +63,7 @@ from fixplan import twins
 from fixplan.errors import FixtureError, InfeasibleError, InputError
 from fixplan.fixture import loads, parse_toml
 from fixplan.geometry import Box, Polygon, Rectangle
+from fixplan.geometry.collision import collision_points
 from fixplan.locating import contact_set, locator_gaps, solve_goal
 from fixplan.model import Fixture, Locator, Workpiece
 from fixplan.settings import DEFAULT
@@ -116,6 +117,7 @@ AWAY_MIN_COSINE = 0.2  # the start displacement's direction cosine away from eac
 GOAL_WRITTEN_SHARE = 0.5  # share of free fixtures whose file states the goal (the others: the loader finds it)
 HOLD_MARGIN = 1.5  # free starts: max_torque ≥ this × the torque that holds the part still there (about the body origin)
 WORLD_STREAM = 1  # --rotate-world draws the rotation from default_rng([seed, index, WORLD_STREAM])
+FLOOR_BELOW_M = 0.01  # --floor: a collision-only floor this far below the part's lowest point at start and goal
 
 # Checks every generated file passes.
 EXACT_M = 1e-9  # resting locators touch within this at the start; nothing penetrates more
@@ -165,24 +167,32 @@ def check_family(family: str) -> None:
         raise InputError(f"unknown fixture family {family!r} (known: {', '.join(FAMILIES)})")
 
 
-def generate(family: str, count: int, seed: int, *, rotate_world: bool = False) -> list[GeneratedFixture]:
+def generate(
+    family: str, count: int, seed: int, *, rotate_world: bool = False, floor: bool = False
+) -> list[GeneratedFixture]:
     """Fixtures ``0 .. count-1`` of ``family`` for ``seed`` (see the module docstring).
 
     ``rotate_world``: each fixture in a world turned by a random rotation (:func:`generate_one`).
+    ``floor``: each with a collision-only floor under it (:func:`generate_one`).
     """
     check_family(family)
     _check_int(count, "count")
-    return [generate_one(family, seed, index, rotate_world=rotate_world) for index in range(count)]
+    return [generate_one(family, seed, index, rotate_world=rotate_world, floor=floor) for index in range(count)]
 
 
-def generate_one(family: str, seed: int, index: int, *, rotate_world: bool = False) -> GeneratedFixture:
+def generate_one(
+    family: str, seed: int, index: int, *, rotate_world: bool = False, floor: bool = False
+) -> GeneratedFixture:
     """Fixture ``index`` of ``family`` for ``seed``: the first draw that passes every check.
 
     ``rotate_world``: the fixture turned rigidly about the world origin (locators, start, goal,
     gravity) by :func:`fixplan.twins.random_rotation` of ``default_rng([seed, index,
     WORLD_STREAM])``: uniform on SO(3), a uniform angle in 2D. Its name ends in ``-rotated``,
     its params hold ``world_rotation`` (the matrix, by rows), and its gaps at the start and goal
-    are checked against the unrotated fixture's.
+    are checked against the unrotated fixture's. ``floor``: the same draw (same layout, same
+    random stream) plus an ``[[obstacle]]`` plane normal to gravity, :data:`FLOOR_BELOW_M` below
+    the part's lowest point at its start and goal (collision only: it never locates, so the
+    verdicts and plans are those without it unless a push drives the part onto it).
     """
     check_family(family)
     _check_int(seed, "seed")
@@ -208,8 +218,10 @@ def generate_one(family: str, seed: int, index: int, *, rotate_world: bool = Fal
         params = dict(draft.params)
         goal = dict(draft.goal)
         head = _header(name, family, seed, index, draw, draft, fixture, rotate_world)
+        extra = _floor_block(fixture) if floor else ""
+        body += extra
         if not rotate_world:
-            text = head + (body if draft.goal_written else _render(name, draft, goal=False))
+            text = head + (body if draft.goal_written else _render(name, draft, goal=False) + extra)
             return GeneratedFixture(name, family, seed, index, params, text, draw, goal)
         R = twins.random_rotation(np.random.default_rng([seed, index, WORLD_STREAM]), draft.dimension)
         doc = twins.rotate_world(parse_toml(body, name), R)
@@ -948,6 +960,23 @@ def _check_twin(fixture: Fixture, doc: dict[str, Any], name: str) -> str | None:
         if np.max(np.abs(diff)) > EXACT_M:
             return f"the rotated fixture's gaps differ by {np.max(np.abs(diff)):.3g} m"
     return None
+
+
+def _floor_block(fixture: Fixture) -> str:
+    """An ``[[obstacle]]`` floor normal to gravity, :data:`FLOOR_BELOW_M` below the part at its start and goal."""
+    d = fixture.dimension
+    pts, radii = collision_points(fixture.workpiece.shape, DEFAULT.engine.rim_points)
+    low = min(
+        float(pose.point_world_from_body(b)[d - 1] - r)
+        for pose in (fixture.start, fixture.goal)
+        for b, r in zip(pts, radii, strict=True)
+    )
+    level = math.floor((low - FLOOR_BELOW_M) * 1e4) / 1e4  # 0.1 mm steps, rounded down (further away)
+    point = [0.0] * (d - 1) + [level]
+    normal = [0.0] * (d - 1) + [1.0]
+    lines = ["", "[[obstacle]]", 'name = "floor"', f'shape = "{"plane" if d == 3 else "line"}"']
+    lines += [f"point = {_value(point)}", f"normal = {_value(normal)}", "friction = 0.3"]
+    return "\n".join(lines) + "\n"
 
 
 def _value(x: Any) -> str:

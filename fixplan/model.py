@@ -45,6 +45,30 @@ class ExplicitContact:
 
 
 @dataclass(frozen=True)
+class Obstacle:
+    """A fixed body for collision only (a floor, a base plate, the fixture's body): never a locator.
+
+    The part may touch it and it pushes back with Coulomb friction in the engine, but it is not
+    a locator: it takes no part in contact states, the goal pose or the rank of ``G``.
+    ``kind``: ``"plane"`` or ``"box"`` (2D: ``"line"`` or ``"rectangle"``). A plane's frame has
+    its origin on the plane and its last axis along the normal, towards the free side; a box is
+    centred on its frame's origin with half extents ``half_m`` along its axes
+    (:mod:`fixplan.geometry.collision`).
+    """
+
+    name: str
+    kind: str
+    R_world_obstacle: FloatArray
+    o_world: FloatArray
+    half_m: FloatArray  # box / rectangle half extents [m]; empty for a plane / line
+    friction: float
+
+    @property
+    def is_plane(self) -> bool:
+        return self.kind in ("plane", "line")
+
+
+@dataclass(frozen=True)
 class Manipulator:
     """What the hand or robot can exert on the workpiece."""
 
@@ -90,6 +114,7 @@ class Fixture:
     goal_starts: int = 0  # starts goal finding tried for ``goal_pose`` (0: given, or not full)
     tolerances: Tolerances = field(default=DEFAULT)
     warnings: tuple[Issue, ...] = ()  # plausibility warnings (not errors): `validate` prints them
+    obstacles: tuple[Obstacle, ...] = ()  # collision-only bodies ([[obstacle]]): never locators
 
     @property
     def ndof(self) -> int:
@@ -143,6 +168,7 @@ __all__ = [
     "Fixture",
     "Locator",
     "Manipulator",
+    "Obstacle",
     "SimulationSettings",
     "Workpiece",
     "require_full",

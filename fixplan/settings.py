@@ -120,6 +120,9 @@ class EngineSettings:
         ... and rolling (not sticking) above this body angular speed [rad/s].
     fclib_tolerance : float
         Target FCLib residual of ``fixplan fclib`` (natural map, relative).
+    rim_points : int
+        Points on each rim of a cylinder that meet collision-only bodies (``[[obstacle]]``,
+        :mod:`fixplan.geometry.collision`): the rims' inscribed polygons.
     """
 
     tolerance: float | None = None
@@ -129,6 +132,7 @@ class EngineSettings:
     slip_mps: float = 1e-7
     spin_radps: float = 1e-6
     fclib_tolerance: float = 1e-8
+    rim_points: int = 16
 
 
 @dataclass(frozen=True)

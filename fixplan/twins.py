@@ -163,6 +163,22 @@ def _map_world(doc: Mapping[str, Any], dim: int, A: FloatArray, t: FloatArray, f
     for entry in out.get("contact") or []:
         entry["point"] = point(entry["point"])
         entry["normal"] = direction(entry["normal"])
+    for entry in out.get("obstacle") or []:  # planes map as a point and a normal, boxes as a pose
+        if "point" in entry:
+            entry["point"] = point(entry["point"])
+        if "normal" in entry:
+            entry["normal"] = direction(entry["normal"])
+        if isinstance(entry.get("pose"), dict):
+            pose = entry["pose"]
+            R_box = A @ _pose_matrix(pose, dim)
+            if np.linalg.det(R_box) < 0:  # a mirrored box is the same box: flip one of its (symmetric) axes
+                R_box = R_box @ np.diag([-1.0] + [1.0] * (dim - 1))
+            box: dict[str, Any] = {"position": point(pose.get("position", [0.0] * dim))}
+            if dim == 3:
+                box["rpy_deg"] = [float(v) for v in np.degrees(rpy_from_matrix(R_box))]
+            else:
+                box["angle_deg"] = math.degrees(math.atan2(R_box[1, 0], R_box[0, 0]))
+            entry["pose"] = box
     return out
 
 

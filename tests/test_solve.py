@@ -76,6 +76,26 @@ def test_fixture_located_at_start_needs_no_transition():
     assert max(abs(g) for g in r.verification.final_gaps_m.values()) <= 1e-4
 
 
+def test_the_default_plan_and_its_load_stay_above_the_floor(default_plan):
+    """The default fixture has a floor 10 mm below the located box (collision only): every planned
+    knot and every traced pose of the verified load keep all eight corners above it, and the floor
+    is never part of a contact state."""
+    from fixplan.geometry.collision import collision_points
+
+    fx = fixplan.load(fixplan.default_fixture_path())
+    (floor,) = fx.obstacles
+    corners, _ = collision_points(fx.workpiece.shape, 0)
+
+    def lowest(pose):
+        return float(min((pose.R_world_body @ corners.T)[2] + pose.p_world[2]))
+
+    poses = [p for tr in default_plan.transitions for p in tr.poses]
+    poses += list(default_plan.verification.trace.poses)
+    assert min(lowest(p) for p in poses) >= floor.o_world[2] + 1e-3  # it never even comes near
+    names = {loc.name for loc in fx.locators}
+    assert all(set(s) <= names for s in default_plan.verification.observed_sequence)
+
+
 def test_verification_trace_balances_forces_at_rest(default_plan):
     """At the end the part is at rest in its locators: contact forces + coupling force + weight = 0."""
     fx = fixplan.load(fixplan.default_fixture_path())

@@ -493,5 +493,8 @@ def simulate(
     )
     for c in outcome.contacts:
         typer.echo(f"  {c.name:6s} {c.mode:9s} gap {c.gap_m: .3e} m  normal force {c.normal_force_N:.4g} N")
+    for o in outcome.obstacles:
+        push_N = float(np.linalg.norm(o.force_world))
+        typer.echo(f"  {o.name:6s} obstacle  gap {o.gap_m: .3e} m  force {push_N:.4g} N (collision only)")
     if target is not None:
         typer.echo(f"wrote {target}")

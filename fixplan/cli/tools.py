@@ -101,6 +101,14 @@ def generate(
             "(uniform on SO(3); a uniform angle in 2D); files are named FAMILY-sSEED-NNN-rotated.toml.",
         ),
     ] = False,
+    floor: Annotated[
+        bool,
+        typer.Option(
+            "--floor",
+            help="Add a collision-only floor ([[obstacle]] plane normal to gravity) 10 mm below the part's "
+            "lowest point at its start and goal; the layouts and draws are those without it.",
+        ),
+    ] = False,
     list_: Annotated[bool, typer.Option("--list", help="List the families and exit.")] = False,
     json_out: JsonOpt = False,
 ) -> None:
@@ -130,7 +138,7 @@ def generate(
     targets = [out / f"{fixture_name(family, seed, i, rotate_world=rotate_world)}.toml" for i in range(count)]
     for target in targets:
         _writable(target, force)
-    fixtures = run(family, count, seed, rotate_world=rotate_world)
+    fixtures = run(family, count, seed, rotate_world=rotate_world, floor=floor)
     for target, fx in zip(targets, fixtures, strict=True):
         write_text(target, fx.toml_text)
     if json_out:

@@ -7,7 +7,8 @@ Moreau–Jean step of :mod:`.step`; the rest of this package solves one contact 
 - :mod:`.simulator` — the :class:`Simulator`, its trajectories and contact reports;
 - :mod:`.step` — the compiled time step (2D, 3D) and the compiled multi-step loops;
 - :mod:`.encode` — each shape as a kind code and parameter arrays for the kernels (no numba);
-- :mod:`.detect` — gap, contact point and normal of a locator tip against each shape;
+- :mod:`.detect` — gap, contact point and normal of a locator tip against each shape, and of
+  the part's collision points against collision-only bodies (``[[obstacle]]``);
 - :mod:`.linalg` — small dense products and inverses without BLAS;
 - :mod:`.local` — the exact one-contact solvers and their closed-form shortcuts;
 - :mod:`.nsgs` — the contact problem, its solution, and nonsmooth Gauss–Seidel (sparse for

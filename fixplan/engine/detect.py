@@ -215,3 +215,65 @@ def query3(kind, params, verts, enorm, R, p, q0, q1, q2, pb, point, normal):
     pb[0], pb[1], pb[2] = _frame3(R, p, q0, q1, q2)
     dist = project(kind, params, verts, enorm, pb, point, normal)
     return _to_world3(R, p, dist, point[0], point[1], point[2], normal[0], normal[1], normal[2])
+
+
+# Collision-only bodies ([[obstacle]], :mod:`fixplan.geometry.collision`): a collision point of the
+# part (``slots`` row: body point, radius, obstacle index) against a fixed plane or box (``obs``
+# row: kind, origin, rotation row-major, half extents). The compiled twin of
+# :func:`fixplan.geometry.collision.obstacle_gap`; ``tests/engine/test_obstacles.py`` pins them.
+
+
+@njit(cache=True)
+def obstacle_query3(obs, slots, j, R, p):
+    """Collision point ``j`` against its obstacle at the body pose ``(R, p)``: ``(gap, n, x)``, world axes.
+
+    ``n`` is the obstacle's outward normal (it pushes the part along it), ``x`` the contact point
+    on the part.
+    """
+    b0, b1, b2, rho = slots[j, 0], slots[j, 1], slots[j, 2], slots[j, 3]
+    o = int(slots[j, 4])
+    x0 = p[0] + (R[0, 0] * b0 + R[0, 1] * b1 + R[0, 2] * b2)
+    x1 = p[1] + (R[1, 0] * b0 + R[1, 1] * b1 + R[1, 2] * b2)
+    x2 = p[2] + (R[2, 0] * b0 + R[2, 1] * b1 + R[2, 2] * b2)
+    d0, d1, d2 = x0 - obs[o, 1], x1 - obs[o, 2], x2 - obs[o, 3]
+    l0 = obs[o, 4] * d0 + obs[o, 7] * d1 + obs[o, 10] * d2
+    l1 = obs[o, 5] * d0 + obs[o, 8] * d1 + obs[o, 11] * d2
+    l2 = obs[o, 6] * d0 + obs[o, 9] * d1 + obs[o, 12] * d2
+    if obs[o, 0] == 0.0:  # a plane: its local z is the signed distance
+        dist, m0, m1, m2 = l2, 0.0, 0.0, 1.0
+    else:
+        dist, _x0, _x1, _x2, m0, m1, m2 = _box3(l0, l1, l2, obs[o, 13], obs[o, 14], obs[o, 15])
+    n0 = obs[o, 4] * m0 + obs[o, 5] * m1 + obs[o, 6] * m2
+    n1 = obs[o, 7] * m0 + obs[o, 8] * m1 + obs[o, 9] * m2
+    n2 = obs[o, 10] * m0 + obs[o, 11] * m1 + obs[o, 12] * m2
+    return dist - rho, n0, n1, n2, x0 - rho * n0, x1 - rho * n1, x2 - rho * n2
+
+
+@njit(cache=True)
+def obstacle_query2(obs, slots, j, R, p):
+    """:func:`obstacle_query3` in the plane: ``(gap, n0, n1, x0, x1)``."""
+    b0, b1, rho = slots[j, 0], slots[j, 1], slots[j, 2]
+    o = int(slots[j, 3])
+    x0 = p[0] + (R[0, 0] * b0 + R[0, 1] * b1)
+    x1 = p[1] + (R[1, 0] * b0 + R[1, 1] * b1)
+    d0, d1 = x0 - obs[o, 1], x1 - obs[o, 2]
+    l0 = obs[o, 3] * d0 + obs[o, 5] * d1
+    l1 = obs[o, 4] * d0 + obs[o, 6] * d1
+    if obs[o, 0] == 0.0:  # a line: its local y is the signed distance
+        dist, m0, m1 = l1, 0.0, 1.0
+    else:
+        h0, h1 = obs[o, 7], obs[o, 8]
+        q0, q1 = abs(l0) - h0, abs(l1) - h1
+        s0 = 1.0 if l0 >= 0.0 else -1.0
+        s1 = 1.0 if l1 >= 0.0 else -1.0
+        e0, e1 = max(q0, 0.0), max(q1, 0.0)
+        n_out = math.sqrt(e0 * e0 + e1 * e1)
+        if n_out > 0.0:
+            dist, m0, m1 = n_out, s0 * e0 / n_out, s1 * e1 / n_out
+        elif q0 >= q1:
+            dist, m0, m1 = q0, s0, 0.0
+        else:
+            dist, m0, m1 = q1, 0.0, s1
+    n0 = obs[o, 3] * m0 + obs[o, 4] * m1
+    n1 = obs[o, 5] * m0 + obs[o, 6] * m1
+    return dist - rho, n0, n1, x0 - rho * n0, x1 - rho * n1

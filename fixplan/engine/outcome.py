@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
-    from fixplan.engine.simulator import ContactReport, Simulator, Trajectory
+    from fixplan.engine.simulator import ContactReport, ObstacleReport, Simulator, Trajectory
     from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]
@@ -43,6 +43,7 @@ class RunOutcome:
     mean_iterations: float
     tolerance: float
     wall_time_s: float
+    obstacles: tuple[ObstacleReport, ...] = ()  # collision-only bodies: gap and force, never contacts
 
     @property
     def converged(self) -> bool:
@@ -66,6 +67,7 @@ class RunOutcome:
             mean_iterations=float(np.mean(traj.iterations)) if len(traj.iterations) else 0.0,
             tolerance=sim.tolerance,
             wall_time_s=traj.wall_time_s,
+            obstacles=tuple(sim.obstacles()),
         )
 
     def to_json(self) -> dict[str, Any]:
@@ -76,6 +78,7 @@ class RunOutcome:
             "velocity": {"linear": [float(x) for x in self.v_com], "angular": [float(x) for x in self.w]},
             "max_penetration": self.max_penetration_m,
             "contacts": [c.to_json() for c in self.contacts],
+            "obstacles": [o.to_json() for o in self.obstacles],
             "solver": {
                 "max_error": self.max_error,
                 "mean_iterations": self.mean_iterations,

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fixplan.aot import kernel
-from fixplan.engine.encode import encode
+from fixplan.engine.encode import encode, encode_obstacles
 from fixplan.engine.outcome import STATUS_NONFINITE, STATUS_NOT_CONVERGED, STATUS_OK
 from fixplan.errors import InputError, SolverError
 from fixplan.model import Fixture
@@ -79,6 +79,18 @@ class ContactReport:
 
     def to_json(self) -> dict[str, Any]:
         return {"name": self.name, "gap": self.gap_m, "normal_force": self.normal_force_N, "mode": self.mode}
+
+
+@dataclass(frozen=True)
+class ObstacleReport:
+    """One collision-only body (``[[obstacle]]``) after the last step: not a locator, never in contact states."""
+
+    name: str
+    gap_m: float  # the part's least gap to it at the current pose [m]
+    force_world: FloatArray  # its average force on the workpiece over the last step [N]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"name": self.name, "gap": self.gap_m, "force": [float(x) for x in self.force_world]}
 
 
 @dataclass(frozen=True)
@@ -296,8 +308,12 @@ class Simulator:
         self._names_t = tuple(self.names)
         self._loc_p = np.ascontiguousarray([loc.p_world for loc in locs], dtype=float)
         self._loc_r = np.array([loc.radius_m for loc in locs])
-        self._mu = np.array([loc.friction for loc in locs])
-        self._tors = np.array([loc.torsion_m for loc in locs])
+        # collision-only bodies: the part's collision points against each, contacts after the
+        # locators in the kernels' arrays (mu, tors, P, gaps ...), never in names or reports
+        self._obs, self._slots, slot_mu = encode_obstacles(fixture, settings.rim_points)
+        self._k_loc = len(locs)
+        self._mu = np.concatenate([[loc.friction for loc in locs], slot_mu])
+        self._tors = np.concatenate([[loc.torsion_m for loc in locs], np.zeros(len(slot_mu))])
         self._mass = wp.mass_kg
         self._Ib = np.ascontiguousarray(wp.inertia_body, dtype=float)
         self._Ib_inv = np.linalg.inv(self._Ib)
@@ -305,7 +321,7 @@ class Simulator:
         self._bound = wp.shape.bounding_radius + float(np.abs(self._com_b).max(initial=0.0))
         self.time_s = 0.0
         self.steps = 0
-        k = len(locs)
+        k = self._k = len(self._mu)
         self._P = np.zeros((k, 4))
         self._active = np.zeros(k, dtype=np.bool_)
         self._u = np.zeros((k, 4))
@@ -330,16 +346,18 @@ class Simulator:
         self._v = nu[:d].copy()
         self._w = nu[d:].copy() if d == 3 else float(nu[2])
         # a new state makes the previous step's impulses meaningless as a warm start
-        self._P = np.zeros((len(self.names), 4))
-        self._active = np.zeros(len(self.names), dtype=np.bool_)
-        self._P_prev = np.zeros((len(self.names), 4))  # the step before (3D: extrapolated warm start)
-        self._active_prev = np.zeros(len(self.names), dtype=np.bool_)
+        self._P = np.zeros((self._k, 4))
+        self._active = np.zeros(self._k, dtype=np.bool_)
+        self._P_prev = np.zeros((self._k, 4))  # the step before (3D: extrapolated warm start)
+        self._active_prev = np.zeros(self._k, dtype=np.bool_)
         if pose is not None:
             # gaps at the new pose (until a step measures them): a report before any step is true
             from fixplan.locating import locator_contact
 
             wp = self.fixture.workpiece
-            self._gap = np.array([locator_contact(wp, self.pose, loc).gap_m for loc in self.fixture.locators])
+            self._gap = np.concatenate(
+                [[locator_contact(wp, self.pose, loc).gap_m for loc in self.fixture.locators], self._obstacle_gaps()]
+            )
         self._gaps_now: tuple[int, FloatArray] | None = None  # (steps, gaps at the current pose)
 
     @property
@@ -396,7 +414,8 @@ class Simulator:
         if self.dimension == 3:
             err, iters, status, failures, pen = _step3_into(
                 self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
-                self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu, self._tors, h, f, tau,
+                self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu, self._tors, self._obs,
+                self._slots, h, f, tau,
                 self.restitution, margin, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active, self._P_prev,
                 self._active_prev, self._gap, self._u, self._nw, self._bound,
             )  # fmt: skip
@@ -404,8 +423,8 @@ class Simulator:
             theta = math.atan2(self._R[1, 0], self._R[0, 0])
             out = _step2(
                 theta, self._p, self._v, self._w, self._mass, float(self._Ib[0, 0]), self._com_b,
-                self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu,
-                h, f, tau, self.restitution, margin, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active,
+                self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu, self._obs,
+                self._slots, h, f, tau, self.restitution, margin, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active,
                 self._bound,
             )  # fmt: skip
             rot, p, v2, w2, P, active, gap, u, n_w, _pt, err, iters, status, failures, pen = out
@@ -431,14 +450,15 @@ class Simulator:
             int(failures),
             float(pen),
             self._names_t,
-            self._active.copy(),
+            self._active[: self._k_loc].copy(),
         )
         return self.last
 
     def pressed(self, min_force_N: float = 1e-9) -> tuple[str, ...]:
         """Names of the locators that pushed on the workpiece in the last step (normal force > min)."""
-        f = self._P[:, 0] / self.dt
-        return tuple(n for n, a, fn in zip(self.names, self._active, f, strict=True) if a and fn > min_force_N)
+        kl = self._k_loc
+        f = self._P[:kl, 0] / self.dt
+        return tuple(n for n, a, fn in zip(self.names, self._active[:kl], f, strict=True) if a and fn > min_force_N)
 
     def in_contact(self, min_force_N: float, max_gap_m: float) -> tuple[str, ...]:
         """Locators in contact after the last step.
@@ -446,10 +466,11 @@ class Simulator:
         In contact: pressing (normal force > ``min_force_N``) or touching (gap at the start of the
         step ≤ ``max_gap_m``, e.g. a contact that friction leaves unloaded).
         """
-        f = self._P[:, 0] / self.dt
+        kl = self._k_loc
+        f = self._P[:kl, 0] / self.dt
         return tuple(
             n
-            for n, a, fn, g in zip(self.names, self._active, f, self._gap, strict=True)
+            for n, a, fn, g in zip(self.names, self._active[:kl], f, self._gap[:kl], strict=True)
             if a and (fn > min_force_N or g <= max_gap_m)
         )
 
@@ -495,6 +516,43 @@ class Simulator:
             mode: ContactMode = "sliding" if slip > slip_tol else ("rolling" if omega > spin_tol else "sticking")
             reports.append(ContactReport(name, float(gaps[i]), Pn / h, force, spin, mode))
         return reports
+
+    # -- collision-only bodies ---------------------------------------------------------------------
+    def _obstacle_gaps(self) -> FloatArray:
+        """Gap of every collision point to its obstacle at the current pose [m] (NumPy reference)."""
+        from fixplan.geometry.collision import obstacle_gap
+
+        d, pose = self.dimension, self.pose
+        out = np.empty(self._slots.shape[0])
+        for j, row in enumerate(self._slots):
+            ob = self._obs[int(row[d + 1])]
+            R = ob[1 + d : 1 + d + d * d].reshape(d, d)
+            x = pose.point_world_from_body(row[:d])
+            out[j] = obstacle_gap(int(ob[0]), R, ob[1 : 1 + d], ob[1 + d + d * d :], x, float(row[d]))[0]
+        return out
+
+    def obstacle_gap_m(self) -> float:
+        """The least gap of the part to any collision-only body at the current pose [m] (inf: none)."""
+        return float(self._obstacle_gaps().min(initial=np.inf))
+
+    def obstacle_force_world(self) -> FloatArray:
+        """The total force the collision-only bodies exerted on the part in the last step [N], world axes."""
+        return sum((r.force_world for r in self.obstacles()), np.zeros(self.dimension))
+
+    def obstacles(self) -> list[ObstacleReport]:
+        """Per collision-only body: the part's least gap to it (current pose) and its force (the last step's)."""
+        d, h, kl = self.dimension, self.dt, self._k_loc
+        gaps = self._obstacle_gaps()
+        out = []
+        for j, ob in enumerate(self.fixture.obstacles):
+            rows = np.flatnonzero(self._slots[:, d + 1] == j)
+            force = np.zeros(d)
+            for i in rows + kl:
+                if self._active[i] and self._P[i, 0] > 0.0:
+                    n = self._nw[i]
+                    force += (self._P[i, 0] * n + self._P[i, 1:d] @ tangent_basis(n)) / h
+            out.append(ObstacleReport(ob.name, float(gaps[rows].min(initial=np.inf)), force))
+        return out
 
     def run(
         self,
@@ -579,8 +637,9 @@ class Simulator:
             out = self._call_kernel(n, every, done == 0, times, table, gravity_f)
             rt, rp, rori, rnu, rfn, rgap, rerr, rit, t_end, k_done, status_k, pen, worst_k, l_err, l_it = out
             wall += time.perf_counter() - t0
-            samples.add(time=rt, position=rp, orientation=rori, velocity=rnu, normal_force=rfn, gap=rgap,
-                        error=rerr, iterations=rit)  # fmt: skip
+            kl = self._k_loc  # the locators' columns (obstacle contacts follow them)
+            samples.add(time=rt, position=rp, orientation=rori, velocity=rnu, normal_force=rfn[:, :kl],
+                        gap=rgap[:, :kl], error=rerr, iterations=rit)  # fmt: skip
             self.time_s = float(t_end)
             self.steps += int(k_done)
             done += int(k_done)
@@ -604,7 +663,7 @@ class Simulator:
         if n_steps > 0:
             self.last = StepInfo(
                 float(last_err), int(last_it), status == STATUS_OK, None, float(self.max_penetration_m),
-                self._names_t, self._active.copy(),
+                self._names_t, self._active[: self._k_loc].copy(),
             )  # fmt: skip
         return traj
 
@@ -616,7 +675,7 @@ class Simulator:
             return _run3(  # type: ignore[no-any-return]
                 n, every, first, self.time_s, self._R, self._p, self._v, self._w, self._mass, self._Ib,
                 self._Ib_inv, self._com_b, self._kind, self._params, self._verts, self._enorm, self._loc_p,
-                self._loc_r, self._mu, self._tors, self.dt, gravity_f, times, table, self.restitution,
+                self._loc_r, self._mu, self._tors, self._obs, self._slots, self.dt, gravity_f, times, table, self.restitution,
                 self.margin_m, self._bound, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active,
                 self._P_prev, self._active_prev, self._gap, self._u, self._nw,
             )  # fmt: skip
@@ -624,7 +683,7 @@ class Simulator:
         out = _run2(
             n, every, first, self.time_s, theta, self._p, self._v, float(self._w), self._mass,
             float(self._Ib[0, 0]), self._com_b, self._kind, self._params, self._verts, self._enorm,
-            self._loc_p, self._loc_r, self._mu, self.dt, gravity_f, times, table, self.restitution,
+            self._loc_p, self._loc_r, self._mu, self._obs, self._slots, self.dt, gravity_f, times, table, self.restitution,
             self.margin_m, self._bound, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active, self._gap,
         )  # fmt: skip
         (rt, rp, rori, rnu, rfn, rgap, rerr, rit, th, p2, v2, w2, P2, act2, gap2, u2, nw2,
@@ -644,5 +703,6 @@ class Simulator:
             ori = np.array([math.atan2(self._R[1, 0], self._R[0, 0])])
         samples.add(
             time=[self.time_s], position=self._p.copy(), orientation=ori, velocity=self.twist,
-            normal_force=np.where(self._active, self._P[:, 0] / self.dt, 0.0), gap=self._gap.copy(),
+            normal_force=np.where(self._active, self._P[:, 0] / self.dt, 0.0)[: self._k_loc],
+            gap=self._gap[: self._k_loc].copy(),
         )  # fmt: skip

@@ -57,7 +57,7 @@ import numpy as np
 from numba import njit
 
 from fixplan._spatial_kernels import exp_so3_into, quat_into, shifted_moment2, shifted_moment3, tangents3
-from fixplan.engine.detect import box_query3, project, query3
+from fixplan.engine.detect import box_query3, obstacle_query2, obstacle_query3, project, query3
 from fixplan.engine.encode import BOX
 from fixplan.engine.linalg import mm, mm3_into, mtv, mtv3_into, mv, mv3_into
 from fixplan.engine.local import WORKSPACE_SIZE, project_cone_into
@@ -97,10 +97,14 @@ def _pgs_lcp(A, b, x, n, iterations):
 
 
 @njit(cache=True)
-def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r, mu,
+def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, obs, slots,
           h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_steps, P_warm, warm_active, bound_m):  # fmt: skip
-    """One planar step, ``ν = (vx, vy, ω)``: :func:`step3_ws` with 2-row contacts (allocating its arrays)."""
-    k = loc_p.shape[0]
+    """One planar step, ``ν = (vx, vy, ω)``: :func:`step3_ws` with 2-row contacts (allocating its arrays).
+
+    Contacts: the locators, then the collision points ``slots`` against ``obs`` (``mu`` covers both).
+    """
+    k = mu.shape[0]
+    k_loc = loc_p.shape[0]
     cs, sn = math.cos(theta), math.sin(theta)
     R = np.array([[cs, -sn], [sn, cs]])
     c = p + mv(R, com_b)
@@ -110,11 +114,14 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
     active = np.zeros(k, dtype=np.bool_)
     point = np.empty(2)
     normal = np.empty(2)
-    for i in range(k):
+    for i in range(k_loc):
         pb = mtv(R, loc_p[i] - p)
         gap[i] = project(kind, params, verts, enorm, pb, point, normal) - loc_r[i]
         n_w[i] = -mv(R, normal)
         pt_w[i] = p + mv(R, point)
+        active[i] = gap[i] <= margin
+    for i in range(k_loc, k):  # collision points against obstacles (none: no iteration)
+        gap[i], n_w[i, 0], n_w[i, 1], pt_w[i, 0], pt_w[i, 1] = obstacle_query2(obs, slots, i - k_loc, R, p)
         active[i] = gap[i] <= margin
     v_free = v + h * f_ext / mass
     w_free = w + h * tau_ext / Izz
@@ -215,10 +222,15 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
         worst = 0.0
         for jj in range(nc):
             i = idx[jj]
-            pb = mtv(Rn, loc_p[i] - p_new)
-            g[jj] = project(kind, params, verts, enorm, pb, point, normal) - loc_r[i]
-            nn = -mv(Rn, normal)
-            r = p_new + mv(Rn, point) - c_new
+            if i >= k_loc:
+                g[jj], nn0, nn1, x0, x1 = obstacle_query2(obs, slots, i - k_loc, Rn, p_new)
+                nn = np.array([nn0, nn1])
+                r = np.array([x0 - c_new[0], x1 - c_new[1]])
+            else:
+                pb = mtv(Rn, loc_p[i] - p_new)
+                g[jj] = project(kind, params, verts, enorm, pb, point, normal) - loc_r[i]
+                nn = -mv(Rn, normal)
+                r = p_new + mv(Rn, point) - c_new
             G[jj, 0:2] = nn
             G[jj, 2] = r[0] * nn[1] - r[1] * nn[0]
             worst = min(worst, g[jj])
@@ -302,7 +314,7 @@ def workspace3(k):
 
 
 @njit(cache=True)
-def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors,
+def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, obs, slots,
              h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_steps, P_full, active_full, P_prev, active_prev,
              gap_full, u_full, n_full, bound_m, ws):  # fmt: skip
     """One 3D step on caller-owned buffers (the algorithm of the module docstring, no allocation).
@@ -312,11 +324,15 @@ def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, lo
     are updated in place, ``gap_full`` (start-of-step gaps),
     ``u_full`` (contact velocities) and ``n_full`` (normals) are written. After a non-finite
     result only ``gap_full`` is written and the state is kept. ``ws`` is :func:`workspace3`.
+    Contacts ``0 … k_loc − 1`` are the locators (``loc_p``), the rest (``mu`` and ``tors`` are
+    that much longer) the collision points ``slots`` against the collision-only bodies ``obs``
+    (:func:`fixplan.engine.detect.obstacle_query3`): the same contact law, another detection.
     Returns ``(error, iterations, status, failed local solves, penetration)``.
     """
     (gap, n_w, pt_w, active, J, MinvJt, W, q, P, u, idx, offsets, sizes, mus, diag, inv, has_inv,
      V, Ms, scratch, G, MinvGt, A, g, lam, six) = ws  # fmt: skip
-    k = loc_p.shape[0]
+    k = mu.shape[0]
+    k_loc = loc_p.shape[0]
     c = V[0]
     pb = V[1]
     point = V[2]
@@ -337,13 +353,17 @@ def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, lo
     mv3_into(R, com_b, tmp)
     for a in range(3):
         c[a] = p[a] + tmp[a]
-    for i in range(k):
+    for i in range(k_loc):
         if kind == BOX:
             res = box_query3(params, R, p, loc_p[i, 0], loc_p[i, 1], loc_p[i, 2])
         else:
             res = query3(kind, params, verts, enorm, R, p, loc_p[i, 0], loc_p[i, 1], loc_p[i, 2], pb, point, normal)
         dist, n_w[i, 0], n_w[i, 1], n_w[i, 2], pt_w[i, 0], pt_w[i, 1], pt_w[i, 2] = res
         gap[i] = dist - loc_r[i]
+        active[i] = gap[i] <= margin
+    for i in range(k_loc, k):  # collision points against obstacles (none: no iteration)
+        res = obstacle_query3(obs, slots, i - k_loc, R, p)
+        gap[i], n_w[i, 0], n_w[i, 1], n_w[i, 2], pt_w[i, 0], pt_w[i, 1], pt_w[i, 2] = res
         active[i] = gap[i] <= margin
     # free motion, angular-momentum form
     for a in range(3):
@@ -510,14 +530,19 @@ def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, lo
         worst = 0.0
         for jj in range(nc):
             i = idx[jj]
-            if kind == BOX:
+            if i >= k_loc:
+                res = obstacle_query3(obs, slots, i - k_loc, R_new, p_new)
+                rho = 0.0
+            elif kind == BOX:
                 res = box_query3(params, R_new, p_new, loc_p[i, 0], loc_p[i, 1], loc_p[i, 2])
+                rho = loc_r[i]
             else:
                 res = query3(
                     kind, params, verts, enorm, R_new, p_new, loc_p[i, 0], loc_p[i, 1], loc_p[i, 2], pb, point, normal
                 )
+                rho = loc_r[i]
             dist, nn0, nn1, nn2, x0, x1, x2 = res
-            g[jj] = dist - loc_r[i]
+            g[jj] = dist - rho
             r0 = x0 - c_new[0]
             r1 = x1 - c_new[1]
             r2 = x2 - c_new[2]
@@ -591,7 +616,7 @@ def _schedule_index(times, t, k):
 
 @njit(cache=True)
 def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p,
-         loc_r, mu, tors, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, polish_steps,
+         loc_r, mu, tors, obs, slots, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, polish_steps,
          P, active, P_prev, active_prev, gap, u, n_w):  # fmt: skip
     """``n_steps`` of :func:`step3_ws` under a wrench schedule, compiled end to end.
 
@@ -604,9 +629,10 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
     taken every ``record_every`` steps and at the last, preceded by the initial state when
     ``first`` (time, position, quaternion, twist, normal forces, gaps; residual and sweeps per
     recorded step) and ``(t, steps done, status, max penetration,
-    worst residual, last residual, last sweeps)``.
+    worst residual, last residual, last sweeps)``. Contacts as :func:`step3_ws` (locators, then
+    collision points against obstacles); the samples hold every one.
     """
-    k = loc_p.shape[0]
+    k = mu.shape[0]
     ws = workspace3(k)
     n_rec = n_steps // record_every + 2
     rec_t = np.zeros(n_rec)
@@ -656,7 +682,7 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
         )
         margin = margin_m + 2.0 * h * speed
         err, iters, st, failures, pen = step3_ws(
-            R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors,
+            R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, obs, slots,
             h, f_ext, tau, restitution, margin, tol, max_iter, polish_steps, P, active, P_prev, active_prev, gap, u, n_w, bound, ws)  # fmt: skip
         if st == STATUS_NONFINITE:
             status = st
@@ -687,27 +713,27 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
 
 
 @njit(cache=True)
-def step3_into(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, h, f_ext,
+def step3_into(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, obs, slots, h, f_ext,
                tau_ext, restitution, margin, tol, max_iter, polish_steps, P, active, P_prev, active_prev, gap, u, n_w, bound):  # fmt: skip
     """One :func:`step3_ws` for Python callers (:meth:`Simulator.step`), with its own workspace.
 
     Same in-place contract and returns as :func:`step3_ws`.
     """
-    ws = workspace3(loc_p.shape[0])
-    return step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, h,
+    ws = workspace3(mu.shape[0])
+    return step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, obs, slots, h,
                     f_ext, tau_ext, restitution, margin, tol, max_iter, polish_steps, P, active, P_prev, active_prev, gap, u, n_w, bound, ws)  # fmt: skip
 
 
 @njit(cache=True)
 def run2(n_steps, record_every, first, t_start, theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r,
-         mu, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, polish_steps, P, active, gap_in):  # fmt: skip
+         mu, obs, slots, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, polish_steps, P, active, gap_in):  # fmt: skip
     """``n_steps`` of :func:`step2` under a wrench schedule ``(Fx, Fy, Mz)`` about the body origin.
 
     The planar counterpart of :func:`run3` (same schedule, margin and recording rules). Returns
     the samples, then ``(θ, p, v, ω, P, active, gap, u, n_w, t, steps done, status, max
     penetration, worst residual, last residual, last sweeps)``.
     """
-    k = loc_p.shape[0]
+    k = mu.shape[0]
     n_rec = n_steps // record_every + 2
     rec_t = np.zeros(n_rec)
     rec_p = np.zeros((n_rec, 2))
@@ -751,7 +777,7 @@ def run2(n_steps, record_every, first, t_start, theta, p, v, w, mass, Izz, com_b
         tau = shifted_moment2(F0, F1, wrenches[ks, 2], r0, r1)  # about the centre of mass
         speed = math.sqrt(v[0] * v[0] + v[1] * v[1]) + abs(w) * bound
         margin = margin_m + 2.0 * h * speed
-        out = step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r, mu,
+        out = step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, obs, slots,
                     h, f_ext, tau, restitution, margin, tol, max_iter, polish_steps, P, active, bound)  # fmt: skip
         th2, p2, v2, w2, P2, act2, gap, u2, nw2, _pt, err, iters, st, failures, pen = out
         if st == STATUS_NONFINITE:

@@ -14,7 +14,9 @@ The path there is free motion (no contact to keep): the straight line in ``(c, R
 start to the staging pose when every locator stays clear along it, else a detour through a
 *waypoint* on the staging pose's back-off line, far enough out that every locator is at least as
 far as at the start (the part is taken back, turned, and brought in along the back-off motion).
-Every pose of the path is checked with the exact gaps; None when neither path is clear.
+Every pose of the path is checked with the exact gaps, and against the collision-only bodies
+(``[[obstacle]]``: no collision point of the part deeper than at the start); None when neither
+path is clear.
 """
 
 from __future__ import annotations
@@ -67,6 +69,23 @@ def _length(fixture: Fixture, poses: list[Pose]) -> float:
     )
 
 
+def _obstacle_gaps(fixture: Fixture, pose: Pose) -> np.ndarray:
+    """The part's least gap to each collision-only body at ``pose`` [m] (:mod:`fixplan.geometry.collision`)."""
+    from fixplan.geometry.collision import BOX, PLANE, collision_points, obstacle_gap
+
+    pts, radii = collision_points(fixture.workpiece.shape, DEFAULT.engine.rim_points)
+    X = pts @ pose.R_world_body.T + pose.p_world
+    return np.array(
+        [
+            min(
+                obstacle_gap(PLANE if ob.is_plane else BOX, ob.R_world_obstacle, ob.o_world, ob.half_m, x, r)[0]
+                for x, r in zip(X, radii, strict=True)
+            )
+            for ob in fixture.obstacles
+        ]
+    )
+
+
 def plan_approach(fixture: Fixture, settings: PolicySettings = DEFAULT.policy) -> Approach | None:
     """The free path from ``fixture.start`` to the staging pose (see the module docstring)."""
     from fixplan.planner.policy import representative_pose
@@ -86,7 +105,12 @@ def plan_approach(fixture: Fixture, settings: PolicySettings = DEFAULT.policy) -
     clear = 0.5 * min(float(np.min(start_gaps)), stage_gap)
     n = settings.approach_samples
 
+    floor = np.minimum(_obstacle_gaps(fixture, start), 0.0) - fixture.tolerances.penetration_m
+
     def least(poses: list[Pose]) -> float:
+        """The least locator gap along ``poses``; −inf where one goes into an obstacle."""
+        if fixture.obstacles and any(np.any(_obstacle_gaps(fixture, p) < floor) for p in poses):
+            return -np.inf
         return float(min(np.min(locator_gaps(wp, p, fixture.locators)) for p in poses))
 
     direct = _line(start, staging, wp.com_body, n)

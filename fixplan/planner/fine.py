@@ -831,7 +831,14 @@ def _solve_path(
         return ca.mtimes(R_sym.T, ca.DM(locs[name].p_world) - c_sym) + ca.DM(com_b)
 
     bounds_sym = [ca.vertcat(*features[n].inside(ca, features[n].point_at(ca, q_sym(n)))) for n in bound_names]
-    knot_rows = ca.Function("knot_rows", [y_sym], [gap_of(q_sym(n), n) for n in gap_names] + bounds_sym)
+    floors = _plane_obstacles(prob)
+    floors_sym = []
+    for _name, n_w, offset, B, floor_m in floors:
+        X = ca.mtimes(R_sym, ca.DM(B)) + ca.repmat(c_sym, 1, B.shape[1])
+        floors_sym.append((ca.mtimes(ca.DM(n_w).T, X) - ca.DM(offset + floor_m).T).T)
+    knot_rows = ca.Function(
+        "knot_rows", [y_sym], [gap_of(q_sym(n), n) for n in gap_names] + bounds_sym + floors_sym
+    )  # fmt: skip
     per_knot: list[Any] = [None] + [knot_rows(Y[:, k - 1]) for k in range(1, K + 1)]
     gap_index = {n: i for i, n in enumerate(gap_names)}
     bound_index = {n: len(gap_names) + i for i, n in enumerate(bound_names)}
@@ -841,6 +848,12 @@ def _solve_path(
 
     def bound_rows(k: int, name: str) -> list[Any]:
         rows = per_knot[k][bound_index[name]]
+        return [rows[i] for i in range(rows.shape[0])]
+
+    floor_index = {f[0]: len(gap_names) + len(bound_names) + i for i, f in enumerate(floors)}
+
+    def obstacle_rows(k: int, name: str) -> list[Any]:
+        rows = per_knot[k][floor_index[name]]
         return [rows[i] for i in range(rows.shape[0])]
 
     # constraint groups: (kind, locator) → rows; "eq" rows are = 0, the others ≥ 0. Collected and
@@ -863,6 +876,9 @@ def _solve_path(
             # closing with the target: never through the part, touching where the target does
             # (geometry makes its gap a fixed multiple of the target's; no second end equality)
             add(("closing together", n), "ge", [gap(k, n) / L])
+        for name, _n_w, _offset, _B, _floor_m in floors:
+            # the part's collision points stay on the free side of every plane obstacle (a floor)
+            add(("obstacle", name), "ge", [e / L for e in obstacle_rows(k, name)])
         if monotone:
             add(("monotone target gap", target), "ge", [(gap(k - 1, target) - gap(k, target)) / L])
         elif k < K:
@@ -936,6 +952,32 @@ def _solve_path(
     y_sol = np.asarray(y_val, dtype=float).reshape(nv, K, order="F")
     xi_sol = np.concatenate([y0[:, None], y_sol], axis=1) * scale[:, None]
     return xi_sol, status, int(stats.get("iter_count", 0)), solve_time
+
+
+def _plane_obstacles(prob: _Problem) -> list[tuple[str, FloatArray, float, FloatArray, FloatArray]]:
+    """The plane obstacles as clearance rows: ``(name, normal, n·o + radius, points about the CoM (d × n), held)``.
+
+    A collision point ``b`` (:mod:`fixplan.geometry.collision`) is at ``c + R (b − com)``; its gap
+    to the plane ``n·x − n·o − ρ`` must stay ≥ ``held`` = min(0, its gap at the start) (a part
+    that starts on the floor may stay there; none passes through it). Box obstacles are left to
+    the engine (a box's gap is not smooth across its edges).
+    """
+    from fixplan.geometry.collision import collision_points
+
+    fx = prob.fixture
+    planes = [ob for ob in fx.obstacles if ob.is_plane]
+    if not planes:
+        return []
+    pts, radii = collision_points(fx.workpiece.shape, DEFAULT.engine.rim_points)
+    B = (pts - prob.com_b).T
+    c0 = prob.start.point_world_from_body(prob.com_b)
+    out = []
+    for ob in planes:
+        n_w = ob.R_world_obstacle[:, -1]
+        offset = float(n_w @ ob.o_world)
+        g0 = n_w @ (prob.start.R_world_body @ B + c0[:, None]) - offset - radii
+        out.append((ob.name, n_w, offset, B, radii + np.minimum(g0, 0.0)))
+    return out
 
 
 def _failed(prob: _Problem, first: _Path, reason: str) -> Transition:

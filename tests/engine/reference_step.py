@@ -9,14 +9,18 @@ their own). Same algorithm, same order of operations; slow.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
 from fixplan.engine import residual
 from fixplan.engine.local import solve_cone, solve_coulomb_2d
 from fixplan.engine.nsgs import build_problem
+from fixplan.geometry.collision import BOX, PLANE, collision_points, obstacle_gap
 from fixplan.kinematics import Contact
 from fixplan.locating import locator_contact
 from fixplan.model import Fixture
+from fixplan.settings import DEFAULT
 from fixplan.spatial import Pose, exp_so3, rot2
 
 
@@ -27,15 +31,33 @@ def fclib_error(W, q, mu, offsets, sizes, P):
     return residual.fclib_error(build_problem(W, q, mu, np.asarray(sizes), torsion_radius=1.0), P)
 
 
+def obstacle_contacts(fixture: Fixture, pose: Pose) -> list[SimpleNamespace]:
+    """The part's collision points against each [[obstacle]] (in the engine's order: per obstacle, per point)."""
+    pts, radii = collision_points(fixture.workpiece.shape, DEFAULT.engine.rim_points)
+    out = []
+    for ob in fixture.obstacles:
+        kind = PLANE if ob.is_plane else BOX
+        for j, (b, rho) in enumerate(zip(pts, radii, strict=True)):
+            gap, n, x = obstacle_gap(
+                kind, ob.R_world_obstacle, ob.o_world, ob.half_m, pose.point_world_from_body(b), rho
+            )
+            out.append(SimpleNamespace(name=f"{ob.name}#{j}", point_world=x, normal_world=n, friction=ob.friction,
+                                       torsion_m=0.0, gap_m=gap))  # fmt: skip
+    return out
+
+
 def reference_step(fixture: Fixture, pose: Pose, twist: np.ndarray, P_warm: np.ndarray, warm_active: np.ndarray,
                    f_ext: np.ndarray, tau_ext, h: float, restitution: float, margin: float, tol: float,
                    max_iter: int):  # fmt: skip
-    """One step; returns (pose, twist, P_full (k×4), active, error, iterations)."""
+    """One step; returns (pose, twist, P_full (k×4), active, error, iterations).
+
+    Contacts: the locators, then the part's collision points against each obstacle (as the engine).
+    """
     wp = fixture.workpiece
     d = fixture.dimension
     R, p = pose.R_world_body, pose.p_world
     c = p + R @ wp.com_body
-    contacts = [locator_contact(wp, pose, loc) for loc in fixture.locators]
+    contacts = [locator_contact(wp, pose, loc) for loc in fixture.locators] + obstacle_contacts(fixture, pose)
     active = np.array([ct.gap_m <= margin for ct in contacts])
     v, w = twist[:d], twist[d:]
     m = wp.mass_kg
