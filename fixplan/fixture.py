@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from fixplan import limits
 from fixplan.errors import FixtureError, Issue
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
-from fixplan.locating import find_goal, locator_contact
+from fixplan.locating import find_goal, locator_contact, settle_free_motions, with_free_motions
 from fixplan.model import ExplicitContact, Fixture, Locator, Manipulator, SimulationSettings, Workpiece
 from fixplan.schema import Reader, shorten
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
@@ -258,9 +258,11 @@ class _Builder:
             goal_given=goal,
             tolerances=self.tol,
         )
+        fixture = with_free_motions(fixture)  # fewer locators that leave only the part's symmetry free
         goal = self.check_geometry(fixture)
         self.fail_if_issues()
-        return replace(fixture, goal_pose=goal, goal_starts=self.goal_starts, warnings=tuple(self.warnings))
+        fixture = replace(fixture, goal_pose=goal, goal_starts=self.goal_starts, warnings=tuple(self.warnings))
+        return settle_free_motions(fixture)
 
     def check_entry_count(self) -> None:
         """At most :data:`~fixplan.limits.MAX_ENTRIES` locators and contacts, refused before any is read."""
