@@ -662,11 +662,25 @@ def _spans(rows: FloatArray, within: FloatArray) -> bool:
 def _direction_text(u: FloatArray) -> str:
     """``x`` for a world axis, else the unit vector (sign: largest component positive)."""
     u = u / np.linalg.norm(u)
+    u = np.where(np.abs(u) <= DEFAULT.numerics.zero_rel, 0.0, u)
     k = int(np.argmax(np.abs(u)))
     u = u if u[k] > 0 else -u
     if abs(u[k]) > 1.0 - DEFAULT.numerics.zero_rel:
         return "xyz"[k]
     return "(" + ", ".join(f"{x:.3g}" for x in u) + ")"
+
+
+def _translations_text(T: FloatArray, d: int) -> str:
+    """The translations spanned by the rows of ``T`` (orthonormal, ``(k, d)``), for people."""
+    if len(T) == d:
+        return "every translation"
+    if len(T) == 1:
+        return f"translation along {_direction_text(T[0])}"
+    normal = np.cross(T[0], T[1])  # 3D, two of three: the plane normal to the one that is held
+    k = int(np.argmax(np.abs(normal)))
+    if abs(normal[k]) > 1.0 - DEFAULT.numerics.zero_rel:
+        return f"translation in the {'xyz'.replace('xyz'[k], '')[0]}-{'xyz'.replace('xyz'[k], '')[1]} plane"
+    return f"translation normal to {_direction_text(normal)}"
 
 
 def describe_motions(fixture: Fixture, pose: Pose, free_world: FloatArray) -> str:
@@ -700,8 +714,9 @@ def describe_motions(fixture: Fixture, pose: Pose, free_world: FloatArray) -> st
         u, sv, vh = np.linalg.svd(rest[:, d:])
         turning = int(np.sum(sv > DEFAULT.numerics.rank_tol))
         c = com_world(pose, fixture.workpiece.com_body)
-        for a in u[:, turning:].T:
-            parts.append(f"translation along {_direction_text(a @ rest[:, :d])}")
+        if turning < len(rest):
+            T = np.linalg.qr((u[:, turning:].T @ rest[:, :d]).T)[0].T
+            parts.append(_translations_text(T, d))
         for a in u[:, :turning].T:
             twist = a @ rest
             v, w = twist[:d], twist[d:]
