@@ -37,7 +37,7 @@ from fixplan.model import (
     symmetry_motions_body,
 )
 from fixplan.settings import DEFAULT, GoalSettings
-from fixplan.spatial import Pose, exp_so3, log_so3, rot2
+from fixplan.spatial import Pose, exp_so3, log_so3, rot2, skew
 
 FloatArray = NDArray[np.float64]
 
@@ -670,6 +670,12 @@ def _direction_text(u: FloatArray) -> str:
     return "(" + ", ".join(f"{x:.3g}" for x in u) + ")"
 
 
+def _point_text(p: FloatArray, scale_m: float) -> str:
+    """``(0.04, 0, 0.05) m``: a point, components below round-off of the part's size shown as 0."""
+    q = np.where(np.abs(p) <= DEFAULT.numerics.zero_rel * scale_m, 0.0, p)
+    return "(" + ", ".join(f"{x:.3g}" for x in q) + ") m"
+
+
 def _translations_text(T: FloatArray, d: int) -> str:
     """The translations spanned by the rows of ``T`` (orthonormal, ``(k, d)``), for people."""
     if len(T) == d:
@@ -681,6 +687,22 @@ def _translations_text(T: FloatArray, d: int) -> str:
     if abs(normal[k]) > 1.0 - DEFAULT.numerics.zero_rel:
         return f"translation in the {'xyz'.replace('xyz'[k], '')[0]}-{'xyz'.replace('xyz'[k], '')[1]} plane"
     return f"translation normal to {_direction_text(normal)}"
+
+
+def _common_point(turns: FloatArray, d: int, c: FloatArray) -> FloatArray | None:
+    """The point every row of ``turns`` (3D twists of the centre ``c``) turns about, if there is one.
+
+    A turn ``ω`` about a point ``p`` moves ``c`` at ``v = ω × (c − p)``: ``p − c`` solves
+    ``−[ω]× (p − c) = v`` for every row at once, or there is no common point (None).
+    """
+    if d != 3:
+        return None
+    A = np.vstack([-skew(t[3:]) for t in turns])
+    b = np.concatenate([t[:3] for t in turns])
+    x = np.linalg.lstsq(A, b, rcond=DEFAULT.numerics.rcond)[0]
+    if float(np.linalg.norm(A @ x - b)) > DEFAULT.numerics.zero_rel * max(1.0, float(np.linalg.norm(b))):
+        return None
+    return np.asarray(c + x)
 
 
 def describe_motions(fixture: Fixture, pose: Pose, free_world: FloatArray) -> str:
@@ -714,21 +736,31 @@ def describe_motions(fixture: Fixture, pose: Pose, free_world: FloatArray) -> st
         u, sv, vh = np.linalg.svd(rest[:, d:])
         turning = int(np.sum(sv > DEFAULT.numerics.rank_tol))
         c = com_world(pose, fixture.workpiece.com_body)
+        scale = fixture.workpiece.shape.bounding_radius + float(np.linalg.norm(c))
         if turning < len(rest):
             T = np.linalg.qr((u[:, turning:].T @ rest[:, :d]).T)[0].T
             parts.append(_translations_text(T, d))
-        for a in u[:, :turning].T:
-            twist = a @ rest
+        turns = u[:, :turning].T @ rest
+        point = _common_point(turns, d, c) if turning > 1 else None
+        if point is not None:
+            where = _point_text(point, scale)
+            if turning == 3:
+                parts.append(f"every rotation about {where}")
+            else:
+                normal = np.cross(turns[0, d:], turns[1, d:])
+                parts.append(f"rotation about any axis through {where} normal to {_direction_text(normal)}")
+            turns = turns[:0]
+        for twist in turns:
             v, w = twist[:d], twist[d:]
             if d == 2:
                 p = c + np.array([-v[1], v[0]]) / w[0]
-                parts.append("rotation about (" + ", ".join(f"{x:.3g}" for x in p) + ") m")
+                parts.append(f"rotation about {_point_text(p, scale)}")
                 continue
             ww = float(w @ w)
             p = c + np.cross(w, v) / ww
             pitch = float(w @ v) / ww
-            where = f"an axis along {_direction_text(w)} through (" + ", ".join(f"{x:.3g}" for x in p) + ") m"
-            if abs(pitch) > DEFAULT.numerics.zero_rel * fixture.workpiece.shape.bounding_radius:
+            where = f"an axis along {_direction_text(w)} through {_point_text(p, scale)}"
+            if abs(pitch) > DEFAULT.numerics.zero_rel * scale:
                 parts.append(f"a screw motion about {where} (pitch {pitch:.3g} m/rad)")
             else:
                 parts.append(f"rotation about {where}")
