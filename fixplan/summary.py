@@ -69,11 +69,12 @@ class FixtureSummary:
     def note(self) -> str:
         """``, goal given and checked`` / ``, goal computed`` / empty: the tail of validate's ok line.
 
-        A part located up to its symmetry adds what is free: ``, goal computed, spin free``.
+        A part located up to its symmetry adds what is free: ``, goal computed, spin free`` (a
+        cylinder, a disk), ``, rotation free`` (a sphere).
         """
         if self.goal is None:
             return ""
-        spin = ", spin free" if self.free else ""
+        spin = ", spin free" if self.free == 1 else ", rotation free" if self.free else ""
         return ", goal " + ("given and checked" if self.goal == "given" else "computed") + spin
 
 

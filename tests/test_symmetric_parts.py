@@ -230,3 +230,47 @@ def test_a_rotated_world_twin_gets_the_same_plan(shifted_plan):
 def test_the_located_start_needs_no_plan():
     r = solve(load(CYLINDER_5), run_verification=False)
     assert r.status == "unverified" and [tuple(s) for s in r.sequence] == [("E1", "L1", "L2", "R1", "R2")]
+
+
+# a ball in a three-point seat, normals 45° from vertical through the centre: rank G = 3, every
+# turn about the centre free. Seated: centre above the seat's middle at z = 0.038787 + R cos 45° = 0.06.
+SPHERE_3 = """format = 1
+[scene]
+name = "sphere-3"
+dimension = 3
+gravity = [0.0, 0.0, -9.81]
+[workpiece]
+shape = "sphere"
+radius = 0.03
+mass = 0.5
+start = { position = [0.004, 0.0, 0.068], rpy_deg = [10.0, 20.0, 30.0] }
+[[locator]]
+name = "A"
+position = [0.021213203, 0.0, 0.038786797]
+radius = 0.0
+friction = 0.3
+[[locator]]
+name = "B"
+position = [-0.010606602, 0.018371173, 0.038786797]
+radius = 0.0
+friction = 0.3
+[[locator]]
+name = "C"
+position = [-0.010606602, -0.018371173, 0.038786797]
+radius = 0.0
+friction = 0.3
+"""
+
+
+@pytest.mark.slow
+def test_a_sphere_on_three_locators_is_located_and_planned_up_to_its_turns():
+    fx = loads(SPHERE_3, source="sphere-3")
+    assert fx.is_full and fx.free_motions.shape == (3, 6)
+    np.testing.assert_allclose(fx.goal.p_world, [0.0, 0.0, 0.021213203 + 0.038786797], atol=1e-8)
+    np.testing.assert_allclose(fx.goal.R_world_body, fx.start.R_world_body, atol=EXACT)  # every turn kept
+    r = solve(fx)
+    assert r.status == "planned", r.reason
+    assert [len(s) for s in r.sequence] == [1, 2, 3]  # from free space, one locator at a time
+    v = r.verification
+    assert v is not None and max(abs(g) for g in v.final_gaps_m.values()) <= FINAL_GAP_M
+    assert np.linalg.norm(v.final_pose.p_world - fx.goal.p_world) <= FINAL_GAP_M
