@@ -30,7 +30,7 @@ from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sph
 from fixplan.geometry.collision import BOX as OBSTACLE_BOX
 from fixplan.geometry.collision import PLANE as OBSTACLE_PLANE
 from fixplan.geometry.collision import collision_points, obstacle_gap, plane_frame, polytope_overlap_m
-from fixplan.locating import find_goal, locator_contact
+from fixplan.locating import find_goal, locator_contact, settle_free_motions, with_free_motions
 from fixplan.model import ExplicitContact, Fixture, Locator, Manipulator, Obstacle, SimulationSettings, Workpiece
 from fixplan.schema import Reader, shorten
 from fixplan.settings import DEFAULT as DEFAULT_SETTINGS
@@ -268,10 +268,12 @@ class _Builder:
             tolerances=self.tol,
             obstacles=tuple(obstacles),
         )
+        fixture = with_free_motions(fixture)  # fewer locators that leave only the part's symmetry free
         goal = self.check_geometry(fixture)
         self.check_obstacles(fixture, goal)
         self.fail_if_issues()
-        return replace(fixture, goal_pose=goal, goal_starts=self.goal_starts, warnings=tuple(self.warnings))
+        fixture = replace(fixture, goal_pose=goal, goal_starts=self.goal_starts, warnings=tuple(self.warnings))
+        return settle_free_motions(fixture)
 
     def check_entry_count(self) -> None:
         """At most :data:`~fixplan.limits.MAX_ENTRIES` locators and contacts, refused before any is read."""

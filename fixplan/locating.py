@@ -26,9 +26,18 @@ from numpy.typing import NDArray
 from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.geometry import Box, Cylinder, Polygon, Rectangle, Shape
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
-from fixplan.model import ExplicitContact, Fixture, Locator, Workpiece, require_full
+from fixplan.model import (
+    ExplicitContact,
+    Fixture,
+    Locator,
+    Workpiece,
+    nearest_symmetric_pose,
+    require_full,
+    symmetry_axes_body,
+    symmetry_motions_body,
+)
 from fixplan.settings import DEFAULT, GoalSettings
-from fixplan.spatial import Pose, exp_so3, log_so3, rot2
+from fixplan.spatial import Pose, exp_so3, log_so3, rot2, skew
 
 FloatArray = NDArray[np.float64]
 
@@ -616,32 +625,228 @@ def find_goal(
     return GoalSearch(False, None, best[0].max_gap_m, best[0].rank, tried, reason)
 
 
+# -- motions the locators leave free ------------------------------------------------------------------
+def free_motions_at(fixture: Fixture, pose: Pose) -> FloatArray:
+    """The twists that keep every locator's gap at ``pose`` to first order: the null space of ``G``.
+
+    ``G`` is every locator's normal row at ``pose`` (touching or not); the answer is ``(k, ndof)``
+    orthonormal rows, world axes, twists of the centre of mass; ``k = ndof − rank G`` (singular
+    values at most ``NumericsSettings.rank_tol`` count as zero, as in :func:`fixplan.summary.goal_rank`).
+    """
+    ndof = fixture.ndof
+    names = [loc.name for loc in fixture.locators]
+    if not names:
+        return np.eye(ndof)
+    G = contact_set(fixture, pose, names).G
+    if not np.all(np.isfinite(G)):
+        return np.eye(ndof)
+    _, sv, vh = np.linalg.svd(G)
+    rank = int(np.sum(sv > DEFAULT.numerics.rank_tol))
+    return np.ascontiguousarray(vh[rank:])
+
+
+def _orthonormal_rows(rows: FloatArray) -> FloatArray:
+    """Orthonormal rows spanning ``rows`` (independent), each turned to point along its original."""
+    q, r = np.linalg.qr(np.asarray(rows, dtype=float).T)
+    return np.ascontiguousarray((q * np.where(np.diag(r) < 0.0, -1.0, 1.0)).T)
+
+
+def _spans(rows: FloatArray, within: FloatArray) -> bool:
+    """Whether every row of ``rows`` lies in the span of ``within`` (orthonormal rows)."""
+    if len(rows) == 0:
+        return True
+    rest = rows - (rows @ within.T) @ within
+    return float(np.max(np.abs(rest), initial=0.0)) <= DEFAULT.numerics.zero_rel * max(1.0, float(np.max(np.abs(rows))))
+
+
+def _direction_text(u: FloatArray) -> str:
+    """``x`` for a world axis, else the unit vector (sign: largest component positive)."""
+    u = u / np.linalg.norm(u)
+    u = np.where(np.abs(u) <= DEFAULT.numerics.zero_rel, 0.0, u)
+    k = int(np.argmax(np.abs(u)))
+    u = u if u[k] > 0 else -u
+    if abs(u[k]) > 1.0 - DEFAULT.numerics.zero_rel:
+        return "xyz"[k]
+    return "(" + ", ".join(f"{x:.3g}" for x in u) + ")"
+
+
+def _point_text(p: FloatArray, scale_m: float) -> str:
+    """``(0.04, 0, 0.05) m``: a point, components below round-off of the part's size shown as 0."""
+    q = np.where(np.abs(p) <= DEFAULT.numerics.zero_rel * scale_m, 0.0, p)
+    return "(" + ", ".join(f"{x:.3g}" for x in q) + ") m"
+
+
+def _translations_text(T: FloatArray, d: int) -> str:
+    """The translations spanned by the rows of ``T`` (orthonormal, ``(k, d)``), for people."""
+    if len(T) == d:
+        return "every translation"
+    if len(T) == 1:
+        return f"translation along {_direction_text(T[0])}"
+    normal = np.cross(T[0], T[1])  # 3D, two of three: the plane normal to the one that is held
+    k = int(np.argmax(np.abs(normal)))
+    if abs(normal[k]) > 1.0 - DEFAULT.numerics.zero_rel:
+        return f"translation in the {'xyz'.replace('xyz'[k], '')[0]}-{'xyz'.replace('xyz'[k], '')[1]} plane"
+    return f"translation normal to {_direction_text(normal)}"
+
+
+def _common_point(turns: FloatArray, d: int, c: FloatArray) -> FloatArray | None:
+    """The point every row of ``turns`` (3D twists of the centre ``c``) turns about, if there is one.
+
+    A turn ``ω`` about a point ``p`` moves ``c`` at ``v = ω × (c − p)``: ``p − c`` solves
+    ``−[ω]× (p − c) = v`` for every row at once, or there is no common point (None).
+    """
+    if d != 3:
+        return None
+    A = np.vstack([-skew(t[3:]) for t in turns])
+    b = np.concatenate([t[:3] for t in turns])
+    x = np.linalg.lstsq(A, b, rcond=DEFAULT.numerics.rcond)[0]
+    if float(np.linalg.norm(A @ x - b)) > DEFAULT.numerics.zero_rel * max(1.0, float(np.linalg.norm(b))):
+        return None
+    return np.asarray(c + x)
+
+
+def describe_motions(fixture: Fixture, pose: Pose, free_world: FloatArray) -> str:
+    """The motions ``free_world`` (rows: world twists of the centre of mass) spans, for people.
+
+    The part's symmetry first (``the spin about the cylinder's axis``), then translations
+    (``translation along x``), then rotations about an axis (``rotation about an axis along y
+    through (0, 0, 0.05) m``; a screw motion with its pitch).
+    """
+    d = fixture.dimension
+    if len(free_world) == fixture.ndof:
+        return "every motion (no locator constrains the part)"
+    parts: list[str] = []
+    rest = np.asarray(free_world, dtype=float).reshape(-1, fixture.ndof)
+    sym = symmetry_motions_body(fixture.workpiece)
+    if len(sym):
+        sym_world = replace(fixture, free_motions_body=sym).free_motions_world(pose)
+        sym_world = _orthonormal_rows(sym_world)
+        if _spans(sym_world, rest):
+            shape = fixture.workpiece.shape.name
+            parts.append(
+                f"the spin about the {shape}'s axis"
+                if len(symmetry_axes_body(fixture.workpiece.shape)) == 1
+                else f"every turn of the {shape} about its centre"
+            )
+            rest = rest - (rest @ sym_world.T) @ sym_world
+            u, sv, vh = np.linalg.svd(rest)
+            rest = vh[: int(np.sum(sv > DEFAULT.numerics.rank_tol))]
+    if len(rest):
+        # translations: the combinations of the rows without a turn
+        u, sv, vh = np.linalg.svd(rest[:, d:])
+        turning = int(np.sum(sv > DEFAULT.numerics.rank_tol))
+        c = com_world(pose, fixture.workpiece.com_body)
+        scale = fixture.workpiece.shape.bounding_radius + float(np.linalg.norm(c))
+        if turning < len(rest):
+            T = np.linalg.qr((u[:, turning:].T @ rest[:, :d]).T)[0].T
+            parts.append(_translations_text(T, d))
+        turns = u[:, :turning].T @ rest
+        point = _common_point(turns, d, c) if turning > 1 else None
+        if point is not None:
+            where = _point_text(point, scale)
+            if turning == 3:
+                parts.append(f"every rotation about {where}")
+            else:
+                normal = np.cross(turns[0, d:], turns[1, d:])
+                parts.append(f"rotation about any axis through {where} normal to {_direction_text(normal)}")
+            turns = turns[:0]
+        for twist in turns:
+            v, w = twist[:d], twist[d:]
+            if d == 2:
+                p = c + np.array([-v[1], v[0]]) / w[0]
+                parts.append(f"rotation about {_point_text(p, scale)}")
+                continue
+            ww = float(w @ w)
+            p = c + np.cross(w, v) / ww
+            pitch = float(w @ v) / ww
+            where = f"an axis along {_direction_text(w)} through {_point_text(p, scale)}"
+            if abs(pitch) > DEFAULT.numerics.zero_rel * scale:
+                parts.append(f"a screw motion about {where} (pitch {pitch:.3g} m/rad)")
+            else:
+                parts.append(f"rotation about {where}")
+    return ", ".join(parts) if parts else "no motion"
+
+
+def with_free_motions(fixture: Fixture) -> Fixture:
+    """``fixture`` with its free motions: fewer locators than a full fixture that leave only the part's symmetry free.
+
+    Five locators on a cylinder that leave only its spin (three on a sphere, two on a disk) locate
+    it up to that spin: the answer has :attr:`~fixplan.model.Fixture.free_motions_body` (the
+    symmetry, :func:`~fixplan.model.symmetry_motions_body`) and is full. Otherwise a fixture that
+    is not full gets :attr:`~fixplan.model.Fixture.unlocated`: what its locators leave free at the
+    start (:func:`describe_motions`). Judged at the start pose, every locator's normal row;
+    :func:`settle_free_motions` checks again at the located pose.
+    """
+    need = 6 if fixture.dimension == 3 else 3
+    if len(fixture.locators) >= need or fixture.free_motions_body is not None:
+        return fixture
+    free = free_motions_at(fixture, fixture.start)
+    sym = symmetry_motions_body(fixture.workpiece)
+    if len(sym) and len(free) == len(sym):
+        sym = _orthonormal_rows(sym)
+        if _spans(replace(fixture, free_motions_body=sym).free_motions_world(fixture.start), free):
+            return replace(fixture, free_motions_body=sym, unlocated="")
+    return replace(fixture, unlocated=describe_motions(fixture, fixture.start, free))
+
+
+def settle_free_motions(fixture: Fixture) -> Fixture:
+    """A fixture located up to its symmetry, once its located pose is known.
+
+    A computed goal takes the start's spin: of the located poses (the goal turned about the
+    symmetry axis) the one nearest the start (:func:`~fixplan.model.nearest_symmetric_pose`); a
+    given goal is kept as given. When the locators leave more than the symmetry free at the goal,
+    the fixture is not full after all: no goal, and :attr:`~fixplan.model.Fixture.unlocated` says
+    what is free there.
+    """
+    if fixture.free_motions_body is None or fixture.goal_pose is None:
+        return fixture
+    goal = fixture.goal_pose
+    if fixture.goal_given is None:
+        goal = nearest_symmetric_pose(fixture.workpiece.shape, goal, fixture.start)
+    free = free_motions_at(fixture, goal)
+    if len(free) == len(fixture.free_motions):
+        return replace(fixture, goal_pose=goal)
+    return replace(
+        fixture,
+        free_motions_body=None,
+        goal_pose=None,
+        goal_starts=0,
+        unlocated=describe_motions(fixture, goal, free) + " (at the pose where every locator touches)",
+    )
+
+
 def with_goal(fixture: Fixture) -> Fixture:
     """``fixture`` with its located pose set again, for a model changed after loading.
 
     The given goal when there is one (``goal_given``, unchecked here), else the pose that
     :func:`find_goal` finds from the start pose; :class:`InfeasibleError` saying why when it
-    finds none, or when the fixture is not full.
+    finds none, or when the fixture is not full. A part located up to its symmetry
+    (:func:`with_free_motions`) takes the start's spin (:func:`settle_free_motions`).
     """
+    fixture = with_free_motions(fixture)
     require_full(fixture, "the goal pose")
     if fixture.goal_given is not None:
-        return replace(fixture, goal_pose=fixture.goal_given)
+        return settle_free_motions(replace(fixture, goal_pose=fixture.goal_given))
     search = find_goal(fixture.workpiece, fixture.locators, fixture.start)
     if not search.found or search.pose is None:
         raise InfeasibleError(f"{fixture.source}: {search.message}")
-    return replace(fixture, goal_pose=search.pose, goal_starts=search.starts)
+    return settle_free_motions(replace(fixture, goal_pose=search.pose, goal_starts=search.starts))
 
 
 __all__ = [
     "GoalResult",
     "GoalSearch",
     "contact_set",
+    "describe_motions",
     "find_goal",
+    "free_motions_at",
     "locator_contact",
     "locator_gaps",
     "named_faces",
     "no_pose_proof",
     "require_full",
+    "settle_free_motions",
     "solve_goal",
+    "with_free_motions",
     "with_goal",
 ]

@@ -13,10 +13,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import InfeasibleError, Issue
-from fixplan.geometry import Shape
+from fixplan.geometry import Cylinder, Disk, Shape, Sphere
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
 from fixplan.settings import Tolerances
-from fixplan.spatial import Pose
+from fixplan.spatial import Pose, exp_so3, rot2, skew
 
 FloatArray = NDArray[np.float64]
 
@@ -115,6 +115,12 @@ class Fixture:
     tolerances: Tolerances = field(default=DEFAULT)
     warnings: tuple[Issue, ...] = ()  # plausibility warnings (not errors): `validate` prints them
     obstacles: tuple[Obstacle, ...] = ()  # collision-only bodies ([[obstacle]]): never locators
+    # (k, ndof): twists (v, ω) of the centre of mass in body axes that keep every locator touching at
+    # the located pose and map the part onto itself (a cylinder's spin about its axis). Set at load
+    # (:func:`fixplan.locating.with_free_motions`) when fewer locators than a full fixture leave only
+    # these free: such a fixture is located up to them, and planning leaves them free. None: none.
+    free_motions_body: FloatArray | None = None
+    unlocated: str = ""  # a fixture that is not full: the motions its locators leave free, for people
 
     @property
     def ndof(self) -> int:
@@ -122,8 +128,34 @@ class Fixture:
 
     @property
     def is_full(self) -> bool:
-        """Six locators in 3D, three in 2D: enough to locate the part."""
-        return len(self.locators) >= (6 if self.dimension == 3 else 3)
+        """The locators locate the part: six in 3D, three in 2D, or fewer that leave only the part's symmetry free."""
+        return len(self.locators) >= (6 if self.dimension == 3 else 3) or self.free_motions_body is not None
+
+    @property
+    def free_motions(self) -> FloatArray:
+        """:attr:`free_motions_body`, or an empty ``(0, ndof)`` array: the motions planning leaves free."""
+        if self.free_motions_body is None:
+            return np.zeros((0, self.ndof))
+        return self.free_motions_body
+
+    def free_motions_world(self, pose: Pose) -> FloatArray:
+        """The free motions at ``pose`` as world-axes twists of the centre of mass, ``(k, ndof)`` (orthonormal rows)."""
+        free = self.free_motions
+        d = self.dimension
+        v_world = free[:, :d] @ pose.R_world_body.T
+        w_world = free[:, d:] @ pose.R_world_body.T if d == 3 else free[:, d:]
+        return np.hstack([v_world, w_world])
+
+    def goal_near(self, pose: Pose) -> Pose:
+        """The located pose nearest ``pose`` modulo the free motions (:attr:`goal` without them).
+
+        With a free spin the located poses are a family (the goal turned about the symmetry axis);
+        this is its member at the least rotation angle from ``pose``: ``pose``'s spin carried over.
+        """
+        goal = self.goal
+        if self.free_motions_body is None:
+            return goal
+        return nearest_symmetric_pose(self.workpiece.shape, goal, pose)
 
     @property
     def names(self) -> list[str]:
@@ -153,13 +185,68 @@ class Fixture:
         raise KeyError(name)
 
 
+def symmetry_axes_body(shape: Shape) -> FloatArray:
+    """The axes (body, through the body origin) about which turning maps ``shape`` onto itself, ``(k, 3)``.
+
+    A cylinder: its own axis (body z); a sphere: all three body axes; a disk (2D): its centre
+    (one row ``[0, 0, 1]``). Other shapes: none (a box's symmetry is discrete, it locates).
+    """
+    if isinstance(shape, Cylinder):
+        return np.array([[0.0, 0.0, 1.0]])
+    if isinstance(shape, Sphere):
+        return np.eye(3)
+    if isinstance(shape, Disk):
+        return np.array([[0.0, 0.0, 1.0]])
+    return np.zeros((0, 3))
+
+
+def symmetry_motions_body(workpiece: Workpiece) -> FloatArray:
+    """The part's continuous symmetry as twists ``(v, ω)`` of its centre of mass in body axes, ``(k, ndof)``.
+
+    A turn ``ω`` about an axis through the body origin moves the centre of mass ``c`` at ``ω × c``.
+    """
+    axes = symmetry_axes_body(workpiece.shape)
+    c = np.zeros(3)
+    c[: len(workpiece.com_body)] = workpiece.com_body
+    if workpiece.shape.dimension == 2:
+        return np.array([[-a[2] * c[1], a[2] * c[0], a[2]] for a in axes]).reshape(len(axes), 3)
+    return np.array([[*np.cross(a, c), *a] for a in axes]).reshape(len(axes), 6)
+
+
+def nearest_symmetric_pose(shape: Shape, pose: Pose, near: Pose) -> Pose:
+    """``pose`` turned about the shape's symmetry axes (:func:`symmetry_axes_body`) to the least rotation from ``near``.
+
+    Closed forms: a disk takes ``near``'s angle, a sphere ``near``'s rotation; a cylinder turns by
+    θ about its axis ``a`` (``K = [a]×``, ``A = R_nearᵀ R``): ``tr(A exp(θ K))`` is largest at
+    ``θ = atan2(tr(A K), −tr(A K²))``. The body origin (on every axis) stays where it is.
+    """
+    axes = symmetry_axes_body(shape)
+    if len(axes) == 0:
+        return pose
+    if pose.dimension == 2:
+        return Pose(rot2(near.angle_rad), pose.p_world)
+    if len(axes) == 3:
+        return Pose(near.R_world_body, pose.p_world)
+    K = skew(axes[0])
+    A = near.R_world_body.T @ pose.R_world_body
+    theta = float(np.arctan2(np.trace(A @ K), -np.trace(A @ K @ K)))
+    return Pose(pose.R_world_body @ exp_so3(theta * axes[0]), pose.p_world)
+
+
 def require_full(fixture: Fixture, what: str) -> None:
-    """Raise a clear error when ``what`` needs a full fixture (6 locators in 3D, 3 in 2D)."""
+    """Raise a clear error when ``what`` needs a full fixture (6 locators in 3D, 3 in 2D, or fewer on a symmetric part).
+
+    Fewer locators will do when they leave only the part's symmetry free (five on a cylinder: its
+    spin); the message names the motions the locators leave free (:attr:`Fixture.unlocated`).
+    """
     need = 6 if fixture.dimension == 3 else 3
-    if len(fixture.locators) < need:
+    if not fixture.is_full:
+        sym = len(symmetry_axes_body(fixture.workpiece.shape))
+        fewer = f", or {need - sym} that leave only the {fixture.workpiece.shape.name}'s symmetry free" if sym else ""
+        free = f": its locators leave free {fixture.unlocated}" if fixture.unlocated else ""
         raise InfeasibleError(
-            f"{what} needs a full fixture ({need} locators in {fixture.dimension}D); "
-            f"{fixture.source} has {len(fixture.locators)}"
+            f"{what} needs a full fixture ({need} locators in {fixture.dimension}D{fewer}); "
+            f"{fixture.source} has {len(fixture.locators)}{free}"
         )
 
 
@@ -171,5 +258,8 @@ __all__ = [
     "Obstacle",
     "SimulationSettings",
     "Workpiece",
+    "nearest_symmetric_pose",
     "require_full",
+    "symmetry_axes_body",
+    "symmetry_motions_body",
 ]

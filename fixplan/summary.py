@@ -58,18 +58,24 @@ class FixtureSummary:
     ndof: int
     warnings: tuple[Issue, ...]
     details: tuple[str, ...]
+    free: int = 0  # motions left free by the part's symmetry (a cylinder's spin: 1)
 
     @property
     def determines_pose(self) -> bool | None:
         """Whether the locators determine the pose at the goal (None without a goal)."""
-        return None if self.rank is None else self.rank >= self.ndof
+        return None if self.rank is None else self.rank >= self.ndof - self.free
 
     @property
     def note(self) -> str:
-        """``, goal given and checked`` / ``, goal computed`` / empty: the tail of validate's ok line."""
+        """``, goal given and checked`` / ``, goal computed`` / empty: the tail of validate's ok line.
+
+        A part located up to its symmetry adds what is free: ``, goal computed, spin free`` (a
+        cylinder, a disk), ``, rotation free`` (a sphere).
+        """
         if self.goal is None:
             return ""
-        return ", goal " + ("given and checked" if self.goal == "given" else "computed")
+        spin = ", spin free" if self.free == 1 else ", rotation free" if self.free else ""
+        return ", goal " + ("given and checked" if self.goal == "given" else "computed") + spin
 
 
 def summarize(fixture: Fixture) -> FixtureSummary:
@@ -101,15 +107,29 @@ def summarize(fixture: Fixture) -> FixtureSummary:
     if fixture.is_full:
         goal = "given" if fixture.goal_given is not None else "computed"
         rank = goal_rank(fixture)
-        determined = rank >= fixture.ndof
+        free = len(fixture.free_motions)  # the part's symmetry, left free (a cylinder's spin)
+        determined = rank >= fixture.ndof - free
         details.append(f"goal ({goal}): {pose_text(fixture.goal)}")
         if fixture.goal_starts:
             n = fixture.goal_starts
             how = "Gauss–Newton from the start pose" if n == 1 else "the start pose alone did not lead there"
             details.append(f"goal found from {n} start{'s' if n != 1 else ''} ({how})")
+        if free:
+            from fixplan.locating import describe_motions
+
+            what = describe_motions(fixture, fixture.goal, fixture.free_motions_world(fixture.goal))
+            details.append(f"free at the goal: {what} (the part's symmetry; the goal keeps the start's)")
         details.append(
             f"rank of G at the goal: {rank} of {fixture.ndof}: "
-            + ("the locators determine the pose" if determined else "the locators do NOT determine the pose")
+            + (
+                (
+                    "the locators determine the pose up to the part's symmetry"
+                    if free
+                    else "the locators determine the pose"
+                )
+                if determined
+                else "the locators do NOT determine the pose"
+            )
         )
         if not determined:
             warnings.append(
@@ -122,4 +142,8 @@ def summarize(fixture: Fixture) -> FixtureSummary:
     else:
         need = 6 if d == 3 else 3
         details.append(f"no goal: {len(fixture.locators)} locators, a full fixture has {need} (analysis only)")
-    return FixtureSummary(kind, goal, gaps, rank, fixture.ndof, tuple(warnings), tuple(details))
+        if fixture.unlocated:
+            details.append(f"free: {fixture.unlocated}")
+    return FixtureSummary(
+        kind, goal, gaps, rank, fixture.ndof, tuple(warnings), tuple(details), len(fixture.free_motions)
+    )

@@ -154,7 +154,7 @@ def test_solve_with_verification_2d(capsys):
 
 
 def test_solve_refuses_a_partial_fixture(capsys):
-    rc, data = run_json(capsys, "solve", str(PROBLEMS / "cylinder-5.toml"))
+    rc, data = run_json(capsys, "solve", str(PROBLEMS / "box-3-supports.toml"))
     assert rc == 2 and data is None
 
 
@@ -164,7 +164,7 @@ def test_solve_on_a_perturbed_world(capsys):
 
 
 # ---------------------------------------------------------------------------------- robust
-@pytest.mark.parametrize("name", ["rect-3.toml", "cylinder-5.toml"])
+@pytest.mark.parametrize("name", ["rect-3.toml", "box-3-supports.toml"])
 def test_robust(capsys, name):
     rc, data = run_json(capsys, "robust", str(PROBLEMS / name), "--samples", "2")
     assert (rc, data is None) == ((0, False) if name == "rect-3.toml" else (2, True))

@@ -110,12 +110,12 @@ def _check_plan(entry, fx, r):
 def test_validate_checks_plan_entries(tmp_path):
     import shutil
 
-    for name in ("box-3-2-1.toml", "cylinder-5.toml"):
+    for name in ("box-3-2-1.toml", "box-3-supports.toml"):
         shutil.copy(PROBLEMS / name, tmp_path / name)
     table = tmp_path / "expected.toml"
     table.write_text(
         '[[plan]]\nfile = "box-3-2-1.toml"\nstatus = "maybe"\nwhy = "x"\n'
-        '[[plan]]\nfile = "cylinder-5.toml"\nstatus = "planned"\nfirst = ["L1", "Q9"]\nwhy = "x"\n'
+        '[[plan]]\nfile = "box-3-supports.toml"\nstatus = "planned"\nfirst = ["B1", "Q9"]\nwhy = "x"\n'
         '[[plan]]\nfile = "box-3-2-1.toml"\nstatus = "infeasible"\nverified = true\nbinding = "max_speed"\nwhy = "x"\n'
         '[[plan]]\nfile = "box-3-2-1.toml"\nstatus = "planned"\nwhy = "x"\nxfail_reason = 3\n'
     )

@@ -185,7 +185,7 @@ def solve(
         from fixplan.summary import goal_rank
 
         rank = goal_rank(fixture)
-        if rank < fixture.ndof:
+        if rank < fixture.ndof - len(fixture.free_motions):  # a symmetric part's spin is free by design
             _err(
                 f"warning: {fixture.source}: the locators do not determine the pose (rank G = {rank} < "
                 f"{fixture.ndof}): a plan loads the part against them, but it can still move while touching all"

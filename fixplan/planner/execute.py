@@ -835,7 +835,8 @@ class Executor:
             # gap alone, toward the located pose, at most as fast as the closing motion (closing
             # the gap greedily rolled a tilted box on one base locator further from the goal)
             keep_target = cs.G[-1:] if est_cs_rows is None else np.vstack([est_cs_rows, cs.G[-1:]])
-            toward = project_keeping(twist_from_pose(pose, fx.goal_pose, wp.com_body), keep_target, M_inv)
+            # (the located pose nearest this one: a part's free spin is not turned back)
+            toward = project_keeping(twist_from_pose(pose, fx.goal_near(pose), wp.com_body), keep_target, M_inv)
             size_t, size_d = mass_speed(toward, M, wp.mass_kg), mass_speed(direct, M, wp.mass_kg)
             if size_t > 1e-15:
                 nu = direct + toward * min(1.0, size_d / size_t)

@@ -580,7 +580,7 @@ class _Problem:
         goal: Pose | None = None
         if fixture.is_full:
             try:
-                goal = fixture.goal
+                goal = fixture.goal_near(start)  # modulo the part's symmetry: the start's spin kept
             except Exception:  # noqa: BLE001 - no goal: fall back to the start's features
                 goal = None
         features = {n: feature_at(fixture, locs[n], start if (n in est or goal is None) else goal) for n in names}
