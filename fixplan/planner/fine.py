@@ -788,21 +788,8 @@ def _solve_path(
     c0 = start.point_world_from_body(com_b)
     R0 = start.R_world_body
 
-    def knot(k: int) -> tuple[Any, Any]:
-        """(R, c) at knot k as CasADi expressions (knot 0 numeric)."""
-        if k == 0:
-            p0 = start if first is None else pose_from_twist(start, np.asarray(first, dtype=float), com_b)
-            return ca.DM(p0.R_world_body), ca.DM(p0.point_world_from_body(com_b))
-        xi = ca.DM(scale) * Y[:, k - 1]
-        c = ca.DM(c0) + xi[:d]
-        if d == 3:
-            R = ca.mtimes(_exp_so3_ca(ca, xi[3:6]), ca.DM(R0))
-        else:
-            th = start.angle_rad + xi[2]
-            R = ca.vertcat(ca.horzcat(ca.cos(th), -ca.sin(th)), ca.horzcat(ca.sin(th), ca.cos(th)))
-        return R, c
-
-    frames = [knot(0)] + ([knot(k) for k in range(1, K + 1)] if kind == "roll" else [])
+    p_first = start if first is None else pose_from_twist(start, np.asarray(first, dtype=float), com_b)
+    frames = [(ca.DM(p_first.R_world_body), ca.DM(p_first.point_world_from_body(com_b)))]  # knot 0, numeric
 
     def q_of(k: int, name: str) -> Any:
         R, c = frames[k]
@@ -818,14 +805,19 @@ def _solve_path(
     # knot (one call, not the hundreds of scalar operations that rebuilding them took)
     gap_names = [*est, *prob.others, *prob.together, target]
     bound_names = [*est, target]
+
+    def frame_of(y: Any) -> tuple[Any, Any]:
+        """(R, c) of the scaled twist ``y`` from the transition's start (symbolic)."""
+        xi = ca.DM(scale) * y
+        if d == 3:
+            R = ca.mtimes(_exp_so3_ca(ca, xi[3:6]), ca.DM(R0))
+        else:
+            th = start.angle_rad + xi[2]
+            R = ca.vertcat(ca.horzcat(ca.cos(th), -ca.sin(th)), ca.horzcat(ca.sin(th), ca.cos(th)))
+        return R, ca.DM(c0) + xi[:d]
+
     y_sym = ca.SX.sym("y", nv)
-    xi_sym = ca.DM(scale) * y_sym
-    if d == 3:
-        R_sym = ca.mtimes(_exp_so3_ca(ca, xi_sym[3:6]), ca.DM(R0))
-    else:
-        th_sym = start.angle_rad + xi_sym[2]
-        R_sym = ca.vertcat(ca.horzcat(ca.cos(th_sym), -ca.sin(th_sym)), ca.horzcat(ca.sin(th_sym), ca.cos(th_sym)))
-    c_sym = ca.DM(c0) + xi_sym[:d]
+    R_sym, c_sym = frame_of(y_sym)
 
     def q_sym(name: str) -> Any:
         return ca.mtimes(R_sym.T, ca.DM(locs[name].p_world) - c_sym) + ca.DM(com_b)
@@ -839,7 +831,7 @@ def _solve_path(
     knot_rows = ca.Function(
         "knot_rows", [y_sym], [gap_of(q_sym(n), n) for n in gap_names] + bounds_sym + floors_sym
     )  # fmt: skip
-    per_knot: list[Any] = [None] + [knot_rows(Y[:, k - 1]) for k in range(1, K + 1)]
+    per_knot: list[Any] = [None] + [knot_rows.call([Y[:, k - 1]]) for k in range(1, K + 1)]
     gap_index = {n: i for i, n in enumerate(gap_names)}
     bound_index = {n: len(gap_names) + i for i, n in enumerate(bound_names)}
 
@@ -886,8 +878,19 @@ def _solve_path(
     end_row = (gap(K, target) - end_gap_m) / L
     add(("feature bounds", target), "ge", [e / L for e in bound_rows(K, target)])
     if kind == "roll":
+        # a segment's no-slip rows are one function of its two knots' twists (knot 0: y0)
+        y_a, y_b = ca.SX.sym("ya", nv), ca.SX.sym("yb", nv)
+        pair = [frame_of(y_a), frame_of(y_b)]
+
+        def q_pair(k: int, name: str) -> Any:
+            R, c = pair[k]
+            return ca.mtimes(R.T, ca.DM(locs[name].p_world) - c) + ca.DM(com_b)
+
+        rows_ns = _no_slip(ca, pair, 0, est, features, locs, q_pair, com_b, start, d)
+        no_slip = ca.Function("no_slip", [y_a, y_b], [row for _, row in rows_ns])
+        ys = [ca.DM(y0)] + [Y[:, k] for k in range(K)]
         for k in range(K):
-            for n, row in _no_slip(ca, frames, k, est, features, locs, q_of, com_b, start, d):
+            for (n, _), row in zip(rows_ns, no_slip.call([ys[k], ys[k + 1]]), strict=True):
                 add(("no-slip", n), "eq", [row / L])
     keys = [g for g in groups if groups[g][1] and g[0] in elastic]
     eqs: list[Any] = [end_row]
