@@ -28,7 +28,7 @@ from fixplan.settings import DEFAULT
 
 if TYPE_CHECKING:
     from fixplan.model import Fixture
-    from fixplan.planner.plan import Plan
+    from fixplan.planner.plan import Plan, Verification
 
 # -- the perturbed world of `fixplan robust` (and `solve --perturb-seed`) -------------------------
 SeedOpt = Annotated[int, typer.Option("--seed", help="Base seed of the perturbed worlds (sample k: rng([seed, k])).")]
@@ -297,6 +297,8 @@ def _print_plan(plan: Plan, fixture: Fixture, options: dict[str, float] | None =
         parts.append(f"max penetration {v.max_penetration_m:.2e} m")
         if v.max_push_force_N is not None:
             parts.append(f"push on the part ≤ {v.max_push_force_N:.3g} N, {v.max_push_torque_Nm:.3g} N·m")
+        if v.peak_force_fraction is not None:
+            parts.append(_headroom_line(v))
         if v.tick_mean_us is not None:
             parts.append(
                 f"tick compute mean {v.tick_mean_us:.0f} µs; {v.deadline_misses} ticks took longer than the 1 ms "
@@ -304,6 +306,19 @@ def _print_plan(plan: Plan, fixture: Fixture, options: dict[str, float] | None =
             )
         typer.echo("; ".join(parts))
     typer.echo(f"time: {plan.timings.get('total_s', 0.0):.2f} s")
+
+
+def _headroom_line(v: Verification) -> str:
+    """The executor's peak push as fractions of the hand's limits, and the ticks above the headroom."""
+    frac = v.limit_fraction if v.limit_fraction is not None else 1.0
+    text = (
+        f"commanded push peaks at {v.peak_force_fraction:.0%} of max_force, {v.peak_torque_fraction:.0%} of max_torque "
+        f"(headroom: within {frac:.0%}; {v.ticks_above_fraction} ticks above it"
+    )
+    ex = v.execution
+    if ex is not None and ex.beyond_fraction_solves:
+        text += f", {ex.beyond_fraction_solves} solves found no push inside it"
+    return text + ")"
 
 
 def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | None, friction_margin: float,

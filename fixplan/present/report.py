@@ -86,6 +86,9 @@ def report_markdown(result: Plan | PlanResult, fixture: Fixture, figures: Sequen
         def num(x: float | None, fmt: str) -> str:
             return "–" if x is None else format(x, fmt)
 
+        def pct(x: float | None) -> str:
+            return "–" if x is None else f"{x:.0%}"
+
         gaps = [abs(g) for g in v["final_gaps"].values()]
         lines += [
             f"- result: **{'passed' if v['passed'] else 'failed'}** — {v['reason']}",
@@ -93,6 +96,9 @@ def report_markdown(result: Plan | PlanResult, fixture: Fixture, figures: Sequen
             f"- final gaps ≤ {num(max(gaps) if gaps else None, '.2e')} m; max penetration {v['max_penetration']:.2e} m",
             f"- push on the part ≤ {num(v['max_push_force'], '.3g')} N, {num(v['max_push_torque'], '.3g')} N·m "
             f"(10 ms mean; {num(v.get('saturated_ticks'), 'd')} ticks capped at the hand's limits)",
+            f"- commanded push (the executor's, every tick) peaks at {pct(v.get('peak_force_fraction'))} of max_force "
+            f"and {pct(v.get('peak_torque_fraction'))} of max_torque; headroom kept: within "
+            f"{pct(v.get('limit_fraction'))} of the limits, {num(v.get('ticks_above_fraction'), 'd')} ticks above it",
             f"- tick compute (the executor's command, any re-plan inside it, and the engine step): mean "
             f"{num(v['tick_mean_us'], '.0f')} µs, max {num(v['tick_max_us'], '.0f')} µs; "
             f"{num(v['deadline_misses'], 'd')} ticks over the 1 ms period; re-planning inside the loop "
