@@ -252,17 +252,24 @@ def _print_plan(plan: Plan, fixture: Fixture, options: dict[str, float] | None =
         # the push gets a line of its own below the table: six numbers in a cell were cut at 80 columns;
         # narrow terminals wrap the other cells instead of cutting them
         table = Table(title=f"{fixture.name}: loading plan")
-        for col in ("#", "from + added", "motion", "least margin [N]", "friction δ", "time [s]"):
+        for col in ("#", "from + added", "motion", "least margin [N]", "friction δ", "peak push [%]", "time [s]"):
             table.add_column(col, overflow="fold")
         for i, tr in enumerate(plan.transitions, 1):
             margin = "-" if tr.margin_N is None else f"{tr.margin_N:.3g}"
             rob = "-" if tr.friction_robustness is None else f"±{tr.friction_robustness:.2g}"
+            # the largest planned push as a fraction of the hand's limits: force, torque
+            peak = (
+                "-"
+                if tr.peak_force_fraction is None or tr.peak_torque_fraction is None
+                else f"{100 * tr.peak_force_fraction:.0f}, {100 * tr.peak_torque_fraction:.0f}"
+            )
             table.add_row(
                 str(i),
                 f"{{{','.join(tr.from_state)}}} + {tr.added_label}",
                 tr.motion,
                 margin,
                 rob,
+                peak,
                 f"{tr.time_s:.2f}",
             )
         _console().print(table)

@@ -572,7 +572,11 @@ def search_wrench_in(
         else:
             notes += " (the least-effort program did not solve: the best-margin push is returned)"
         if target is None and wanted > tau_best * (1 + _TARGET_REL):
-            notes += f" (default margin m|g| = {wanted:.4g} N not reachable: best {floor_sig(tau_best)} N used)"
+            within_text = f" within {frac:.0%} of the hand's limits" if within and frac < 1.0 else ""
+            notes += (
+                f" (default margin m|g| = {wanted:.4g} N not reachable{within_text}: best {floor_sig(tau_best)} N used;"
+                " a smaller --min-margin asks for a lighter push)"
+            )
     w_com = x[:n]
     s = float(x[meta["s"]])
     lam = meta["expand"](x)

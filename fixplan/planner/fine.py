@@ -102,7 +102,7 @@ from fixplan.errors import InputError, SolverError
 from fixplan.kinematics import mass_matrix
 from fixplan.locating import contact_set, locator_contact, solve_goal
 from fixplan.planner.features import Feature, clearance_features, feature_at, smooth_max, surface_feature
-from fixplan.planner.segments import segment_wrenches
+from fixplan.planner.segments import needed_scale, segment_wrenches
 from fixplan.settings import DEFAULT, PlannerSettings
 from fixplan.spatial import Pose, log_so3, tangent_seed
 
@@ -155,6 +155,11 @@ class Transition:
         The locators that close together with ``target`` (:func:`closing_group`: a redundant
         layout where geometry makes them touch at the same instant); they touch at the last knot
         too, and the transition is ``established → established + {target} + together``.
+    needed_scale : float or None
+        Where the hand is too weak for some segment: the least factor by which one of its limits
+        must grow for every segment to have a push (the most demanding segment's
+        :func:`~fixplan.planner.segments.needed_scale`; its reason is the transition's). None
+        otherwise.
     """
 
     established: tuple[str, ...]
@@ -175,6 +180,7 @@ class Transition:
     ipopt_iterations: int = 0
     formulation: str = "default"
     together: tuple[str, ...] = ()
+    needed_scale: float | None = None
 
     @property
     def added(self) -> tuple[str, ...]:
@@ -471,13 +477,23 @@ def plan_transition(
 
     K = prob.K
     # --- wrenches per segment -----------------------------------------------------------------
+    needs: list[tuple[float | None, float | None]] = []
     wrenches, margins, found, reasons = segment_wrenches(
-        fixture, path.poses, est, path.kind, acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N
-    )
+        fixture, path.poses, est, path.kind, acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N,
+        needs=needs,
+    )  # fmt: skip
     bad = [k for k in range(K) if not found[k]]
     via = "" if path.formulation == ladder[0].name else f" (formulation: {path.formulation})"
+    scale = None
     if bad:
-        k = bad[0]
+        # where the hand is too weak, the most demanding segment says what the transition needs
+        from fixplan.jamming.search import hand_limits
+
+        F_max, T_max, _ = hand_limits(fixture)
+        scales = {k: needed_scale(needs[k], F_max, T_max) for k in bad}
+        weak = {k: x for k, x in scales.items() if x is not None}
+        k = max(weak, key=lambda j: (weak[j], -j)) if weak else bad[0]
+        scale = weak.get(k)
         reason = f"segment {k} of {K} ({_state(est)} → {_added(target, group)}): {reasons[k]}"
         success = False
     else:
@@ -503,6 +519,7 @@ def plan_transition(
         path.iterations,
         path.formulation,
         group,
+        scale,
     )
 
 

@@ -546,6 +546,10 @@ class PlannedTransition:
     segment_wrenches: FloatArray | None = field(default=None, repr=False)
     kind: str | None = field(default=None, repr=False)
     together: tuple[str, ...] = ()
+    # the largest planned push over the segments as fractions of the hand's limits (‖F‖ / max_force,
+    # ‖T‖ / max_torque); None: not known (a file without them, no segment with a push)
+    peak_force_fraction: float | None = None
+    peak_torque_fraction: float | None = None
 
     @property
     def added_names(self) -> tuple[str, ...]:
@@ -586,6 +590,9 @@ class PlannedTransition:
                 "poses": [p.to_json() for p in self.poses],
             }
         )
+        if self.peak_force_fraction is not None:
+            out["peak_force_fraction"] = self.peak_force_fraction
+            out["peak_torque_fraction"] = self.peak_torque_fraction
         return {**out, **self.extras}
 
     @classmethod
@@ -632,6 +639,7 @@ class PlannedTransition:
 
         known = {"from", "to", "added", "motion", "wrench", "margin", "friction_robustness", "time_s"}
         known |= {"path_length_m", "max_constraint_violation_m", "solve_time_s", "poses"}
+        known |= {"peak_force_fraction", "peak_torque_fraction"}
         return cls(
             from_state=before,
             to_state=after,
@@ -647,6 +655,8 @@ class PlannedTransition:
             poses=poses,
             extras={k: v for k, v in obj.items() if k not in known},
             together=together,
+            peak_force_fraction=num("peak_force_fraction"),
+            peak_torque_fraction=num("peak_torque_fraction"),
         )
 
 

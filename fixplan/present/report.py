@@ -42,8 +42,8 @@ def report_markdown(result: Plan | PlanResult, fixture: Fixture, figures: Sequen
         lines += [
             "## Transitions",
             "",
-            "| # | from | added | motion | mean wrench [N, N·m] | least margin [N] | friction δ | time [s] | path [m] | max gap violation [m] |",
-            "|---:|---|---|---|---|---:|---:|---:|---:|---:|",
+            "| # | from | added | motion | mean wrench [N, N·m] | least margin [N] | friction δ | peak push [% of max_force, max_torque] | time [s] | path [m] | max gap violation [m] |",
+            "|---:|---|---|---|---|---:|---:|---:|---:|---:|---:|",
         ]
         for i, tr in enumerate(payload["transitions"], 1):
             # a group closing together is a list of names: {E1, E2}
@@ -51,15 +51,23 @@ def report_markdown(result: Plan | PlanResult, fixture: Fixture, figures: Sequen
             w = "–" if tr["wrench"] is None else ", ".join(f"{x:.3g}" for x in tr["wrench"])
             margin = "–" if tr["margin"] is None else f"{tr['margin']:.3g}"
             rob = "–" if tr["friction_robustness"] is None else f"±{tr['friction_robustness']:.2g}"
+            peak = (
+                "–"
+                if tr.get("peak_force_fraction") is None
+                else f"{tr['peak_force_fraction']:.0%}, {tr['peak_torque_fraction']:.0%}"
+            )
             lines.append(
-                f"| {i} | {{{', '.join(tr['from'])}}} | {added} | {tr['motion']} | {w} | {margin} | {rob} | "
+                f"| {i} | {{{', '.join(tr['from'])}}} | {added} | {tr['motion']} | {w} | {margin} | {rob} | {peak} | "
                 f"{tr['time_s']:.2f} | {tr['path_length_m']:.4g} | {tr['max_constraint_violation_m']:.1e} |"
             )
         lines += [
             "",
             "Least margin: the least normal force on the kept contacts along the transition (– from no contact). "
             "Friction δ: the largest δ (of 0.05, 0.1, 0.2, 0.3, 0.5) for which the first push still moves the part "
-            "with friction anywhere in μ(1 ± δ) within the hand's limits.",
+            "with friction anywhere in μ(1 ± δ) within the hand's limits. "
+            "Peak push: the largest planned push over the transition's segments, as percentages of max_force and "
+            "max_torque; the pushes are sought within 80 % of them first (`settings.search.limit_fraction`) and "
+            "exceed it only where no non-jamming push exists inside.",
         ]
         lines.append("")
     failed = [a for a in payload["tried"] if not a["ok"]]
