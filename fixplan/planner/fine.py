@@ -499,6 +499,7 @@ def plan_transition(
     else:
         margin = f"least margin {float(np.min(margins)):.3g} N" if est else "free motion, no contact to press"
         reason = f"{path.kind} on {_state(est)} to touch {_added(target, group)}: {K} segments, {margin}{via}"
+        reason += _beyond_headroom(fixture, wrenches)
         success = True
     return Transition(
         est,
@@ -520,6 +521,31 @@ def plan_transition(
         path.formulation,
         group,
         scale,
+    )
+
+
+def _beyond_headroom(fixture: Fixture, wrenches: FloatArray) -> str:
+    """``"; 2 of 10 segments need more than 80 % of the hand's limits ..."``, or ``""``.
+
+    The segments' searches keep within ``settings.search.limit_fraction`` of the limits wherever a
+    non-jamming push exists inside; the pushes beyond it are those where none does.
+    """
+    from fixplan.jamming.search import hand_limits
+
+    F_max, T_max, _ = hand_limits(fixture)
+    frac = DEFAULT.search.limit_fraction
+    d = fixture.dimension
+    rows = wrenches[np.isfinite(wrenches).all(axis=1)]
+    if not len(rows) or frac >= 1.0:
+        return ""
+    cap = frac * (1.0 + DEFAULT.search.binding_rel)
+    over = (np.linalg.norm(rows[:, :d], axis=1) > cap * F_max) | (np.linalg.norm(rows[:, d:], axis=1) > cap * T_max)
+    n = int(np.count_nonzero(over))
+    if not n:
+        return ""
+    return (
+        f"; {n} of {len(wrenches)} segments push beyond {frac:.0%} of the hand's limits"
+        " (no non-jamming push exists inside there)"
     )
 
 
