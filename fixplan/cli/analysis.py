@@ -293,10 +293,10 @@ def search(
             if result.binding:
                 typer.echo("binding limits: " + ", ".join(result.binding))
             if result.force_fraction is not None and result.torque_fraction is not None:
-                inside = "within" if result.within_fraction else "beyond (none exists inside)"
+                head = f"{result.limit_fraction:.0%} headroom"
+                where = f"within the {head}" if result.within_fraction else f"beyond the {head}: none exists inside it"
                 typer.echo(
-                    f"push: {result.force_fraction:.0%} of max_force, {result.torque_fraction:.0%} of max_torque "
-                    f"({inside} the {result.limit_fraction:.0%} headroom)"
+                    f"push: {result.force_fraction:.0%} of max_force, {result.torque_fraction:.0%} of max_torque ({where})"
                 )
         typer.echo(result.reason)
     if not result.found or result.margin_target_met is False:
