@@ -153,7 +153,7 @@ def test_a_task_beyond_the_headroom_still_plans_and_says_so():
     assert 0 < int(np.count_nonzero((f > above) | (t > above))) <= data["ticks_above_fraction"]
 
 
-# ---------------------------------------------------------------- §6: the infeasible reason
+# ---------------------------------------------------------------- the infeasible reason
 def test_needed_scale_is_the_least_growth_of_one_limit():
     assert needed_scale((6.0, None), 3.0, 2.0) == pytest.approx(2.0)  # force alone binds
     assert needed_scale((None, 3.0), 3.0, 2.0) == pytest.approx(1.5)  # torque alone
@@ -166,7 +166,7 @@ def test_no_sequence_quotes_the_least_demanding_failure():
     b = Attempt(("B1",), "S1", False, math.inf, "S1 needs 6 N", "fine", (), 2.0)
     c = Attempt(("B1",), "S2", False, math.inf, "no path", "fine")
     why = _no_sequence([b, a, c])
-    assert "least demanding failure is adding S1 to {B1}: S1 needs 6 N" in why
+    assert "the least demanding is: adding S1 to {B1} fails: S1 needs 6 N" in why
     assert "e.g. adding S2 to {B1} fails: no path" in _no_sequence([c])
 
 
@@ -198,7 +198,7 @@ def test_infeasible_reason_quotes_the_least_demanding_candidate():
     fine = [a for a in r.attempts if a.stage == "fine" and not a.success]
     assert len({a.target for a in fine}) == 3 and all(a.needed_scale is not None for a in fine)
     least = min(fine, key=lambda a: a.needed_scale)
-    assert f"least demanding failure is adding {least.target} to {{B1, B2, B3}}: {least.reason}" in r.reason
+    assert f"the least demanding is: adding {least.target} to {{B1, B2, B3}} fails: {least.reason}" in r.reason
     quoted = float(r.reason.split("the push needs ")[1].split(" N")[0])
     assert quoted == pytest.approx(least.needed_scale * 3.0, rel=1e-3)
     assert all(quoted <= a.needed_scale * 3.0 * (1 + 1e-3) for a in fine)

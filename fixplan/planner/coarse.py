@@ -229,8 +229,8 @@ def _no_sequence(attempts: list[Attempt]) -> str:
         least = min(weak, key=lambda a: a.needed_scale)  # type: ignore[arg-type, return-value]
         what = "{" + ", ".join(least.added) + "}" if least.together else least.target
         return (
-            reason + f"; the least demanding failure is adding {what} to {{{', '.join(least.established)}}}: "
-            f"{least.reason}"
+            reason + f"; of the failed transitions the least demanding is: adding {what} to "
+            f"{{{', '.join(least.established)}}} fails: {least.reason}"
         )
     last = failures[-1]
     what = "{" + ", ".join(last.added) + "}" if last.together else last.target
