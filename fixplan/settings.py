@@ -375,6 +375,11 @@ class SearchSettings:
     unbounded_factor : float
         When no push within the hand's limits exists, a limit is lifted to this many times its
         value to ask whether the other alone binds (and what force or torque is needed).
+    limit_fraction : float
+        Headroom: the push is sought within this fraction of the hand's force and torque limits
+        first (the coupling's transients, tracking errors and noise then stay within the hand);
+        only where no non-jamming push exists inside it does the search use the whole limits, and
+        it says so. 1 disables the headroom.
     """
 
     jam_margin_rel: float = 1e-3
@@ -387,6 +392,7 @@ class SearchSettings:
     along_rel: float = 1e-6
     off_axis_rel: float = 1e-4
     unbounded_factor: float = 1e3
+    limit_fraction: float = 0.8
 
 
 @dataclass(frozen=True)

@@ -163,7 +163,10 @@ def test_weak_manipulator_fails_with_its_reason(default):
     weak = fixplan.loads(text.replace("max_force = 40.0", "max_force = 0.5"))
     tr = plan_transition(weak, weak.start, ["B1", "B2", "B3"], "S1", knots=6)
     assert not tr.success
-    assert "too weak" in tr.reason and "segment 0" in tr.reason
+    # every segment fails; the reason quotes the most demanding one (what the transition needs)
+    assert "too weak" in tr.reason and "segment " in tr.reason
+    quoted = float(tr.reason.split("the push needs ")[1].split(" N")[0])
+    assert tr.needed_scale == pytest.approx(quoted / 0.5, rel=1e-3) and quoted > 0.25 * 2 * 9.81 / np.hypot(1, 0.25)
     assert not tr.found.any() and np.isnan(tr.wrenches).all()
     assert tr.max_constraint_violation_m <= TOUCH  # the path itself is fine
     assert tr.cost == float("inf")

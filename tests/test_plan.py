@@ -123,7 +123,7 @@ def test_the_plan_json_keys_are_the_cli_contract(box_unverified):
     ]  # fmt: skip
     assert list(data["transitions"][0]) == [
         "from", "to", "added", "motion", "wrench", "margin", "friction_robustness", "time_s", "path_length_m",
-        "max_constraint_violation_m", "solve_time_s", "poses",
+        "max_constraint_violation_m", "solve_time_s", "poses", "peak_force_fraction", "peak_torque_fraction",
     ]  # fmt: skip
 
 

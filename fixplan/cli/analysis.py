@@ -247,9 +247,10 @@ def search(
         str,
         typer.Option(
             "--objective",
-            help="margin: the largest least normal force; effort: the least push keeping each contact pressed by ≥ --min-margin.",
+            help="effort (default): the least push keeping each kept contact pressed by ≥ --min-margin; "
+            "margin: the largest least normal force (presses as hard as the hand's headroom allows).",
         ),
-    ] = "margin",
+    ] = "effort",
     min_margin: Annotated[
         float | None,
         typer.Option(
@@ -291,6 +292,12 @@ def search(
             typer.echo("contacts: " + ", ".join(f"{k} {v}" for k, v in result.contact_roles.items()))
             if result.binding:
                 typer.echo("binding limits: " + ", ".join(result.binding))
+            if result.force_fraction is not None and result.torque_fraction is not None:
+                head = f"{result.limit_fraction:.0%} headroom"
+                where = f"within the {head}" if result.within_fraction else f"beyond the {head}: none exists inside it"
+                typer.echo(
+                    f"push: {result.force_fraction:.0%} of max_force, {result.torque_fraction:.0%} of max_torque ({where})"
+                )
         typer.echo(result.reason)
     if not result.found or result.margin_target_met is False:
         raise typer.Exit(1)

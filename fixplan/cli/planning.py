@@ -28,7 +28,7 @@ from fixplan.settings import DEFAULT
 
 if TYPE_CHECKING:
     from fixplan.model import Fixture
-    from fixplan.planner.plan import Plan
+    from fixplan.planner.plan import Plan, Verification
 
 # -- the perturbed world of `fixplan robust` (and `solve --perturb-seed`) -------------------------
 SeedOpt = Annotated[int, typer.Option("--seed", help="Base seed of the perturbed worlds (sample k: rng([seed, k])).")]
@@ -254,17 +254,24 @@ def _print_plan(plan: Plan, fixture: Fixture, options: dict[str, float] | None =
         # the push gets a line of its own below the table: six numbers in a cell were cut at 80 columns;
         # narrow terminals wrap the other cells instead of cutting them
         table = Table(title=f"{fixture.name}: loading plan")
-        for col in ("#", "from + added", "motion", "least margin [N]", "friction δ", "time [s]"):
+        for col in ("#", "from + added", "motion", "least margin [N]", "friction δ", "peak push [%]", "time [s]"):
             table.add_column(col, overflow="fold")
         for i, tr in enumerate(plan.transitions, 1):
             margin = "-" if tr.margin_N is None else f"{tr.margin_N:.3g}"
             rob = "-" if tr.friction_robustness is None else f"±{tr.friction_robustness:.2g}"
+            # the largest planned push as a fraction of the hand's limits: force, torque
+            peak = (
+                "-"
+                if tr.peak_force_fraction is None or tr.peak_torque_fraction is None
+                else f"{100 * tr.peak_force_fraction:.0f}, {100 * tr.peak_torque_fraction:.0f}"
+            )
             table.add_row(
                 str(i),
                 f"{{{','.join(tr.from_state)}}} + {tr.added_label}",
                 tr.motion,
                 margin,
                 rob,
+                peak,
                 f"{tr.time_s:.2f}",
             )
         _console().print(table)
@@ -299,6 +306,8 @@ def _print_plan(plan: Plan, fixture: Fixture, options: dict[str, float] | None =
         parts.append(f"max penetration {v.max_penetration_m:.2e} m")
         if v.max_push_force_N is not None:
             parts.append(f"push on the part ≤ {v.max_push_force_N:.3g} N, {v.max_push_torque_Nm:.3g} N·m")
+        if v.peak_force_fraction is not None:
+            parts.append(_headroom_line(v))
         if v.tick_mean_us is not None:
             parts.append(
                 f"tick compute mean {v.tick_mean_us:.0f} µs; {v.deadline_misses} ticks took longer than the 1 ms "
@@ -306,6 +315,19 @@ def _print_plan(plan: Plan, fixture: Fixture, options: dict[str, float] | None =
             )
         typer.echo("; ".join(parts))
     typer.echo(f"time: {plan.timings.get('total_s', 0.0):.2f} s")
+
+
+def _headroom_line(v: Verification) -> str:
+    """The executor's peak push as fractions of the hand's limits, and the ticks above the headroom."""
+    frac = v.limit_fraction if v.limit_fraction is not None else 1.0
+    text = (
+        f"commanded push peaks at {v.peak_force_fraction:.0%} of max_force, {v.peak_torque_fraction:.0%} of max_torque "
+        f"(headroom: within {frac:.0%}; {v.ticks_above_fraction} ticks above it"
+    )
+    ex = v.execution
+    if ex is not None and ex.beyond_fraction_solves:
+        text += f", {ex.beyond_fraction_solves} solves found no push inside it"
+    return text + ")"
 
 
 def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | None, friction_margin: float,

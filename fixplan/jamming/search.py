@@ -138,6 +138,26 @@ class WrenchSearch:
     # within max_force; None where no push within that limit moves the part (or not too weak)
     needed_force_N: float | None = None
     needed_torque_Nm: float | None = None
+    # headroom: the push is sought within ``limit_fraction`` of the hand's limits first;
+    # ``within_fraction`` says whether the one returned is (None: no push returned)
+    limit_fraction: float = 1.0
+    within_fraction: bool | None = None
+
+    @property
+    def force_fraction(self) -> float | None:
+        """‖F‖ of the push as a fraction of ``max_force`` (None: no push)."""
+        if self.wrench is None or not math.isfinite(self.limits[0]):
+            return None
+        d = 3 if self.wrench.shape[0] == 6 else 2
+        return float(np.linalg.norm(self.wrench[:d])) / self.limits[0]
+
+    @property
+    def torque_fraction(self) -> float | None:
+        """‖T‖ of the push (about the point it is reported about) as a fraction of ``max_torque``."""
+        if self.wrench is None or not math.isfinite(self.limits[1]):
+            return None
+        d = 3 if self.wrench.shape[0] == 6 else 2
+        return float(np.linalg.norm(self.wrench[d:])) / self.limits[1]
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dictionary; undefined numbers are ``None`` (never NaN or Infinity)."""
@@ -166,6 +186,10 @@ class WrenchSearch:
             "limits": {"max_force": _finite_or_none(self.limits[0]), "max_torque": _finite_or_none(self.limits[1])},
             "needed_force": _finite_or_none(self.needed_force_N),
             "needed_torque": _finite_or_none(self.needed_torque_Nm),
+            "limit_fraction": float(self.limit_fraction),
+            "within_fraction": self.within_fraction,
+            "force_fraction": _finite_or_none(self.force_fraction),
+            "torque_fraction": _finite_or_none(self.torque_fraction),
         }
 
 
@@ -324,6 +348,7 @@ def search_wrench(
     slip_twist: ArrayLike | None = None,
     certify: bool = True,
     confirm: bool = True,
+    limit_fraction: float | None = None,
 ) -> WrenchSearch:
     """The applied wrench that moves the part with acceleration ≥ ``motion``, without jamming.
 
@@ -362,6 +387,12 @@ def search_wrench(
     asked is one friction would hold at rest, and that is what is wanted. ``found`` then means the
     program solved.
 
+    ``limit_fraction`` (default ``settings.search.limit_fraction``, 0.8) is the headroom kept to
+    the hand's limits: every program is first solved with ``‖F‖ ≤ f F_max`` and ``‖T‖ ≤ f T_max``,
+    and only when no non-jamming push exists inside them with the whole limits; the reason then
+    says so and ``within_fraction`` is false. ``force_fraction`` and ``torque_fraction`` give the
+    push found as fractions of the limits.
+
     ``confirm=False`` skips the classifier's independent check of the wrench found (its balance
     check and ``check``, both ``None`` then; ``confirmed`` is ``False``): the wrench is still
     certified by the program's own constraint. For a feedback loop that re-solves the push many
@@ -399,6 +430,7 @@ def search_wrench(
         slip_com=slip_com,
         certify=certify,
         confirm=confirm,
+        limit_fraction=limit_fraction,
     )
 
 
@@ -432,6 +464,7 @@ def search_wrench_in(
     slip_com: ArrayLike | None = None,
     certify: bool = True,
     confirm: bool = True,
+    limit_fraction: float | None = None,
 ) -> WrenchSearch:
     """:func:`search_wrench` for a contact set already built, with the motion of the centre of mass.
 
@@ -452,6 +485,9 @@ def search_wrench_in(
     slip = None if slip_com is None else np.asarray(slip_com, dtype=float)
     if slip is not None and (slip.shape != (cs.ndof,) or not np.all(np.isfinite(slip))):
         raise InputError(f"slip_twist expects {cs.ndof} finite numbers, got {list(np.atleast_1d(slip))}")
+    frac = _SEARCH.limit_fraction if limit_fraction is None else float(limit_fraction)
+    if not (0.0 < frac <= 1.0):
+        raise InputError(f"limit_fraction must lie in (0, 1], got {limit_fraction}")
     roles, directions = _roles(cs, a_hat, _SEARCH.role_rel, slip)
     wp = fixture.workpiece
     g = float(np.linalg.norm(fixture.gravity)) or 9.81
@@ -461,14 +497,14 @@ def search_wrench_in(
     kept = [i for i, c in enumerate(cs.contacts) if roles[c.name] != "opening"]
     if not kept:
         clf_free = Classifier(cs, w_g, tolerances=fixture.tolerances)
-        return _free_push(cs, clf_free, a_hat, roles, about, w_g, F_max, T_max, notes, target)
+        return _free_push(cs, clf_free, a_hat, roles, about, w_g, F_max, T_max, notes, target, frac)
 
     def not_found(
         reason: str, binding: list[str] | None = None, needs: tuple[float | None, float | None] = (None, None)
     ) -> WrenchSearch:
         return WrenchSearch(
             False, None, None, None, roles, {}, None, reason, binding or [], (F_max, T_max), margin_target_N=target,
-            needed_force_N=needs[0], needed_torque_Nm=needs[1],
+            needed_force_N=needs[0], needed_torque_Nm=needs[1], limit_fraction=frac,
         )  # fmt: skip
 
     polar: dict[str, Any] = {}  # the certificates' factors of cs, computed once
@@ -492,8 +528,16 @@ def search_wrench_in(
         s_max=max_accel_factor,
         shared={},  # the builds' common parts (one contact set, one set of roles)
     )
-    prog, meta = _build(**build, cert=y, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
+    # headroom: first within the fraction of the limits, the whole limits only when nothing moves
+    # the part inside it (one more program then)
+    F_lim, T_lim = frac * F_max, frac * T_max
+    prog, meta = _build(**build, cert=y, F_max=F_lim, T_max=T_lim)  # type: ignore[arg-type]
     sol = ClarabelProgram(prog).solve(prog.b)
+    within = bool(sol.solved and -sol.value > _SEARCH.found_rel * F_max)
+    if not within and frac < 1.0:
+        F_lim, T_lim = F_max, T_max
+        prog, meta = _build(**build, cert=y, F_max=F_lim, T_max=T_lim)  # type: ignore[arg-type]
+        sol = ClarabelProgram(prog).solve(prog.b)
     n = cs.ndof
     if not sol.solved or -sol.value <= _SEARCH.found_rel * F_max:
         # Diagnose: is it the limits, or the motion itself?
@@ -512,7 +556,7 @@ def search_wrench_in(
     # optimum above stays feasible with it, so τ cannot drop)
     y2 = _certificate(cs, x[:n] + w_g, project=False, shared=polar) if certify else None
     if y2 is not None:
-        prog2, meta2 = _build(**build, cert=y2, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
+        prog2, meta2 = _build(**build, cert=y2, F_max=F_lim, T_max=T_lim)  # type: ignore[arg-type]
         sol2 = ClarabelProgram(prog2).solve(prog2.b)
         if sol2.solved and -sol2.value >= tau:
             x, tau, meta, y = sol2.x, float(-sol2.value), meta2, y2
@@ -520,7 +564,7 @@ def search_wrench_in(
     if objective == "effort":
         wanted = wp.mass_kg * g if target is None else target
         tau_req = wanted if wanted < tau * (1 - _TARGET_REL) else tau * (1 - _TARGET_REL)
-        prog_e, meta_e = _build(**build, cert=y, F_max=F_max, T_max=T_max, effort_margin_N=tau_req)  # type: ignore[arg-type]
+        prog_e, meta_e = _build(**build, cert=y, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_req)  # type: ignore[arg-type]
         sol_e = ClarabelProgram(prog_e).solve(prog_e.b)
         if sol_e.solved:
             x, meta = sol_e.x, meta_e
@@ -528,7 +572,11 @@ def search_wrench_in(
         else:
             notes += " (the least-effort program did not solve: the best-margin push is returned)"
         if target is None and wanted > tau_best * (1 + _TARGET_REL):
-            notes += f" (default margin m|g| = {wanted:.4g} N not reachable: best {floor_sig(tau_best)} N used)"
+            within_text = f" within {frac:.0%} of the hand's limits" if within and frac < 1.0 else ""
+            notes += (
+                f" (default margin m|g| = {wanted:.4g} N not reachable{within_text}: best {floor_sig(tau_best)} N used;"
+                " a smaller --min-margin asks for a lighter push)"
+            )
     w_com = x[:n]
     s = float(x[meta["s"]])
     lam = meta["expand"](x)
@@ -539,6 +587,8 @@ def search_wrench_in(
         binding.append("max_force")
     if abs(float(np.linalg.norm(w_user[cs.dimension :])) - T_max) <= _SEARCH.binding_rel * T_max:
         binding.append("max_torque")
+    if not within and frac < 1.0:
+        notes += _beyond_fraction(w_user, cs.dimension, F_max, T_max, frac)
 
     met = None if target is None else bool(tau_best >= target * (1 - _TARGET_REL))
     if not confirm:
@@ -549,7 +599,7 @@ def search_wrench_in(
             reason = f"margin target {target:.4g} N not met: best {_short_of(tau_best, target)} N; " + reason
         return WrenchSearch(
             True, w_user, tau, s * a_hat, roles, forces, None, reason, binding, (F_max, T_max),
-            margin_target_N=target, margin_target_met=met,
+            margin_target_N=target, margin_target_met=met, limit_fraction=frac, within_fraction=within,
         )  # fmt: skip
     clf_all = Classifier(cs, w_g, tolerances=fixture.tolerances)
     bal = clf_all.classify(w_com, w_user)
@@ -587,6 +637,18 @@ def search_wrench_in(
         margin_target_met=met,
         jam_margin_rel=jam_rel,
         confirmed=confirmed and not bal.balanced,
+        limit_fraction=frac,
+        within_fraction=within,
+    )
+
+
+def _beyond_fraction(w_user: FloatArray, d: int, F_max: float, T_max: float, frac: float) -> str:
+    """The note of a push that needs more than ``frac`` of the hand's limits (none inside exists)."""
+    f = float(np.linalg.norm(w_user[:d])) / F_max
+    t = float(np.linalg.norm(w_user[d:])) / T_max
+    return (
+        f" (no non-jamming push within {frac:.0%} of the hand's limits: this one uses {f:.0%} of max_force"
+        f" and {t:.0%} of max_torque)"
     )
 
 
@@ -713,6 +775,7 @@ def _free_push(
     T_max: float,
     notes: str,
     target: float | None,
+    frac: float = 1.0,
 ) -> WrenchSearch:
     """Every contact opens: no contact force, the push is ``w = M â − w_g`` (checked, not optimised)."""
     d = cs.dimension
@@ -729,11 +792,15 @@ def _free_push(
         reason += f" (every contact opens: the push is M a − w_g){notes}"
         return WrenchSearch(
             False, None, None, None, roles, {}, None, reason, binding, limits, margin_target_N=target,
-            needed_force_N=F, needed_torque_Nm=T,
+            needed_force_N=F, needed_torque_Nm=T, limit_fraction=frac,
         )  # fmt: skip
     bal = clf.classify(w_com, w_user)
     w_e_norm = clf.builder.m_inv_norm(w_com + w_g)
     jam_rel = bal.balance_residual / w_e_norm if w_e_norm > 0 and math.isfinite(bal.balance_residual) else None
+    # the push is determined: inside the headroom or not, it is the only one
+    within = F <= frac * F_max * (1 + _SEARCH.limit_rel) and T <= frac * T_max * (1 + _SEARCH.limit_rel)
+    if not within:
+        notes += _beyond_fraction(w_user, d, F_max, T_max, frac)
     if bal.balanced:
         reason = f"every contact opens, but M a − w_g is statically balanced ({bal.mode}): it would not move the part"
     else:
@@ -754,6 +821,8 @@ def _free_push(
         margin_target_met=met,
         jam_margin_rel=jam_rel,
         confirmed=not bal.balanced,
+        limit_fraction=frac,
+        within_fraction=within,
     )
 
 

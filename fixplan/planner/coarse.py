@@ -76,6 +76,8 @@ class Attempt:
     # "path": its fine path was found, the pushes along it are searched only if its sequence is chosen
     stage: str = "fine"
     together: tuple[str, ...] = ()  # the locators added with the target (closing together with it)
+    # where the hand is too weak: the least factor one of its limits must grow by (None otherwise)
+    needed_scale: float | None = None
 
     @property
     def added(self) -> tuple[str, ...]:
@@ -215,6 +217,7 @@ def _record(
         Attempt(
             _key(state), target, bool(result.success), float(result.cost) if result.success else float("inf"),
             result.reason, "fine" if getattr(result, "wrenches_checked", True) else "path", together,
+            getattr(result, "needed_scale", None),
         ),
     )  # fmt: skip
 
@@ -226,13 +229,28 @@ def _log(attempts: list[Attempt], progress: Callable[[Attempt], None] | None, at
 
 
 def _no_sequence(attempts: list[Attempt]) -> str:
+    """Why no sequence: the least demanding failure where the hand is too weak, else the last one.
+
+    A transition the hand is too weak for carries the least factor its limits must grow by
+    (:attr:`Attempt.needed_scale`); of those that failed, the one needing the least is the one a
+    stronger hand would unlock first, and its reason names the force or torque it needs and the
+    limit that binds.
+    """
     failures = [a for a in attempts if not a.success and a.stage == "fine"]
     reason = "no sequence of transitions reaches every locator"
-    if failures:
-        last = failures[-1]
-        what = "{" + ", ".join(last.added) + "}" if last.together else last.target
-        reason += f"; e.g. adding {what} to {{{', '.join(last.established)}}} fails: {last.reason}"
-    return reason
+    if not failures:
+        return reason
+    weak = [a for a in failures if a.needed_scale is not None]
+    if weak:
+        least = min(weak, key=lambda a: a.needed_scale)  # type: ignore[arg-type, return-value]
+        what = "{" + ", ".join(least.added) + "}" if least.together else least.target
+        return (
+            reason + f"; of the failed transitions the least demanding is: adding {what} to "
+            f"{{{', '.join(least.established)}}} fails: {least.reason}"
+        )
+    last = failures[-1]
+    what = "{" + ", ".join(last.added) + "}" if last.together else last.target
+    return reason + f"; e.g. adding {what} to {{{', '.join(last.established)}}} fails: {last.reason}"
 
 
 Weight = Callable[[State, str, Pose], "tuple[float, Pose, Any] | None"]

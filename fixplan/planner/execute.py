@@ -116,6 +116,9 @@ class ExecutionLog:
     transition_at_end: int = 0
     max_command_force_N: float = 0.0
     max_command_torque_Nm: float = 0.0
+    # wrench solves that found no non-jamming push within the headroom (limit_fraction of the
+    # hand's limits) and used more
+    beyond_fraction_solves: int = 0
 
     def event(self, t: float, kind: str, message: str) -> None:
         self.events.append((t, kind, message))
@@ -129,6 +132,7 @@ class ExecutionLog:
             "events": [{"time_s": t, "kind": k, "message": m} for t, k, m in self.events],
             "max_command_force_N": self.max_command_force_N,
             "max_command_torque_Nm": self.max_command_torque_Nm,
+            "beyond_fraction_solves": self.beyond_fraction_solves,
         }
 
 
@@ -258,11 +262,14 @@ class Executor:
         from fixplan.jamming.search import hand_limits
 
         self.F_max, self.T_max, _ = hand_limits(fixture)
+        # headroom: pushes are sought within this fraction of the limits first (the search's own)
+        self.limit_fraction = DEFAULT.search.limit_fraction
         self.guard = DivergenceGuard.for_fixture(fixture, s)
         self.v_limit = self.guard.v_limit_mps
         self._far_m = self.guard.far_m
         self._goal_normals = _goal_normals_body(fixture)
         self._release: tuple[str, float] | None = None  # (why, since): lifting the part off a wrong face
+        self._beyond_noted = -1  # the transition in which a push beyond the headroom was last reported
 
     # -- plan bookkeeping ----------------------------------------------------------------------
     def _set_plan(self, start_state: State, steps: list[Step]) -> None:
@@ -627,6 +634,18 @@ class Executor:
         T_cap = self.settings.carry_torque_fraction * self.T_max
         if T > T_cap:
             ang = ang * (T_cap / T)
+        # headroom: the carrying force m a − m g within limit_fraction of max_force where holding
+        # the part still is (the largest share s of the acceleration that keeps it there; ‖m s a − m g‖
+        # is convex in s, so bisection from the hold finds it)
+        m = float(M[0, 0])
+        g_lin = np.asarray(self.fixture.gravity_wrench()[:d], dtype=float)
+        F_cap = self.limit_fraction * self.F_max
+        if float(np.linalg.norm(m * lin - g_lin)) > F_cap >= float(np.linalg.norm(g_lin)):
+            lo, hi = 0.0, 1.0
+            for _ in range(40):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if float(np.linalg.norm(m * mid * lin - g_lin)) <= F_cap else (lo, mid)
+            lin = lin * lo
         return np.concatenate([lin, ang])
 
     def carry_wrench(self, pose: Pose) -> FloatArray:
@@ -646,7 +665,8 @@ class Executor:
 
         The contact forces that carry gravity (least squares, ≥ 0) plus ``hold_fraction`` of the
         weight pressed into every locator: ``w = r − τ Σ_i G_iᵀ``, with ``r`` the part of gravity
-        the locators cannot carry; τ is reduced until the push is within the hand's limits.
+        the locators cannot carry; τ is reduced until the push is within ``limit_fraction`` of the
+        hand's limits (the headroom every push keeps where it can).
         """
         from fixplan.nnls import nnls
 
@@ -659,11 +679,12 @@ class Executor:
         tau = self.settings.hold_fraction * self.weight_N
         com = cs.com_world
         d = fx.dimension
+        F_cap, T_cap = self.limit_fraction * self.F_max, self.limit_fraction * self.T_max
         w_o = np.zeros(self.ndof)
         for _ in range(30):
             w_c = r - tau * G.sum(axis=0)
             w_o = shift_wrench(w_c, com, pose.p_world)
-            if np.linalg.norm(w_o[:d]) <= self.F_max and np.linalg.norm(w_o[d:]) <= self.T_max:
+            if np.linalg.norm(w_o[:d]) <= F_cap and np.linalg.norm(w_o[d:]) <= T_cap:
                 break
             tau *= 0.7
         return w_o
@@ -945,6 +966,7 @@ class Executor:
             self._reject(t, str(exc))
             return
         if res.found and res.wrench is not None:
+            self._note_fraction(t, res)
             w = np.asarray(res.wrench, dtype=float)
             if brake > 0.0:
                 w = (1.0 - brake) * w + brake * self.hold_wrench(pose, step.established)
@@ -1034,8 +1056,23 @@ class Executor:
             return False
         if not (res.found and res.wrench is not None):
             return False
+        self._note_fraction(t, res)
         self._accept(np.asarray(res.wrench, dtype=float))
         return True
+
+    def _note_fraction(self, t: float, res: Any) -> None:
+        """Count a push found beyond the headroom, and say so once per transition."""
+        if res.within_fraction is not False:
+            return
+        self.log.beyond_fraction_solves += 1
+        if self._beyond_noted != self.index:
+            self._beyond_noted = self.index
+            self.log.event(
+                t,
+                "limits",
+                f"transition {self.index + 1}: no non-jamming push within {self.limit_fraction:.0%} of the hand's "
+                f"limits here; using {res.force_fraction:.0%} of max_force and {res.torque_fraction:.0%} of max_torque",
+            )
 
     def _accept(self, w: FloatArray) -> None:
         self.wrench = np.asarray(w, dtype=float).copy()

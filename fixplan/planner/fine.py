@@ -102,7 +102,7 @@ from fixplan.errors import InputError, SolverError
 from fixplan.kinematics import mass_matrix
 from fixplan.locating import contact_set, locator_contact, solve_goal
 from fixplan.planner.features import Feature, clearance_features, feature_at, smooth_max, surface_feature
-from fixplan.planner.segments import segment_wrenches
+from fixplan.planner.segments import needed_scale, segment_wrenches
 from fixplan.settings import DEFAULT, PlannerSettings
 from fixplan.spatial import Pose, log_so3, tangent_seed
 
@@ -158,6 +158,11 @@ class Transition:
         The locators that close together with ``target`` (:func:`closing_group`: a redundant
         layout where geometry makes them touch at the same instant); they touch at the last knot
         too, and the transition is ``established → established + {target} + together``.
+    needed_scale : float or None
+        Where the hand is too weak for some segment: the least factor by which one of its limits
+        must grow for every segment to have a push (the most demanding segment's
+        :func:`~fixplan.planner.segments.needed_scale`; its reason is the transition's). None
+        otherwise.
     """
 
     established: tuple[str, ...]
@@ -178,6 +183,7 @@ class Transition:
     ipopt_iterations: int = 0
     formulation: str = "default"
     together: tuple[str, ...] = ()
+    needed_scale: float | None = None
     wrenches_checked: bool = True  # False: the path alone (``plan_transition(..., wrenches=False)``)
 
     @property
@@ -510,23 +516,60 @@ def with_wrenches(
     if tr.wrenches_checked or not tr.success:
         return tr
     est, target, group, K = tr.established, tr.target, tr.together, tr.knots
+    needs: list[tuple[float | None, float | None]] = []
     wrenches, margins, found, reasons = segment_wrenches(
-        fixture, tr.poses, est, tr.kind, acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N
-    )
+        fixture, tr.poses, est, tr.kind, acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N,
+        needs=needs,
+    )  # fmt: skip
     bad = [k for k in range(K) if not found[k]]
     via = "" if tr.formulation == plain else f" (formulation: {tr.formulation})"
+    scale = None
     if bad:
-        k = bad[0]
+        # where the hand is too weak, the most demanding segment says what the transition needs
+        from fixplan.jamming.search import hand_limits
+
+        F_max, T_max, _ = hand_limits(fixture)
+        scales = {k: needed_scale(needs[k], F_max, T_max) for k in bad}
+        weak = {k: x for k, x in scales.items() if x is not None}
+        k = max(weak, key=lambda j: (weak[j], -j)) if weak else bad[0]
+        scale = weak.get(k)
         reason = f"segment {k} of {K} ({_state(est)} → {_added(target, group)}): {reasons[k]}"
         success = False
     else:
         margin = f"least margin {float(np.min(margins)):.3g} N" if est else "free motion, no contact to press"
         reason = f"{tr.kind} on {_state(est)} to touch {_added(target, group)}: {K} segments, {margin}{via}"
+        reason += _beyond_headroom(fixture, wrenches)
         success = True
     return replace(
         tr, wrenches=wrenches, margins_N=margins, success=success, reason=reason, found=found,
         segment_reasons=reasons, cost=tr.cost if success else float("inf"), wrenches_checked=True,
+        needed_scale=scale,
     )  # fmt: skip
+
+
+def _beyond_headroom(fixture: Fixture, wrenches: FloatArray) -> str:
+    """``"; 2 of 10 segments need more than 80 % of the hand's limits ..."``, or ``""``.
+
+    The segments' searches keep within ``settings.search.limit_fraction`` of the limits wherever a
+    non-jamming push exists inside; the pushes beyond it are those where none does.
+    """
+    from fixplan.jamming.search import hand_limits
+
+    F_max, T_max, _ = hand_limits(fixture)
+    frac = DEFAULT.search.limit_fraction
+    d = fixture.dimension
+    rows = wrenches[np.isfinite(wrenches).all(axis=1)]
+    if not len(rows) or frac >= 1.0:
+        return ""
+    cap = frac * (1.0 + DEFAULT.search.binding_rel)
+    over = (np.linalg.norm(rows[:, :d], axis=1) > cap * F_max) | (np.linalg.norm(rows[:, d:], axis=1) > cap * T_max)
+    n = int(np.count_nonzero(over))
+    if not n:
+        return ""
+    return (
+        f"; {n} of {len(wrenches)} segments push beyond {frac:.0%} of the hand's limits"
+        " (no non-jamming push exists inside there)"
+    )
 
 
 # ---------------------------------------------------------------------------------------------

@@ -180,6 +180,9 @@ class Timeline:
         plan's mean wrench), about the body origin, world axes.
     felt_wrench : (T, ndof) array or None
         What the haptic device displayed to the user (saturated).
+    command_wrench : (T, ndof) array or None
+        The executor's push at the sample (what the hand was asked to apply; the coupling's wrench
+        follows it with the coupling's lag), about the body origin, world axes.
     every_s : float or None
         The sampling step of a recorded timeline [s] (None for planned knots).
     """
@@ -194,6 +197,7 @@ class Timeline:
     coupling_wrench: FloatArray | None = None
     felt_wrench: FloatArray | None = None
     every_s: float | None = None
+    command_wrench: FloatArray | None = None
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -221,6 +225,7 @@ class Timeline:
             else {n: _rows(self.forces_world_N[:, i]) for i, n in enumerate(self.names)},
             "coupling_wrench": None if self.coupling_wrench is None else _rows(self.coupling_wrench),
             "felt_wrench": None if self.felt_wrench is None else _rows(self.felt_wrench),
+            **({} if self.command_wrench is None else {"command_wrench": _rows(self.command_wrench)}),
             "pressed": [list(s) for s in self.pressed],
         }
 
@@ -300,6 +305,7 @@ class Timeline:
             coupling_wrench=coupling,
             felt_wrench=wrenches("felt_wrench"),
             every_s=every,
+            command_wrench=wrenches("command_wrench"),
         )
 
     @classmethod
@@ -339,6 +345,10 @@ _VERIFICATION_KEYS = (
     ("max_push_force", "max_push_force_N"),
     ("max_push_torque", "max_push_torque_Nm"),
     ("saturated_ticks", "saturated_ticks"),
+    ("limit_fraction", "limit_fraction"),
+    ("peak_force_fraction", "peak_force_fraction"),
+    ("peak_torque_fraction", "peak_torque_fraction"),
+    ("ticks_above_fraction", "ticks_above_fraction"),
     ("planner_wall_time_in_loop_s", "planner_wall_time_in_loop_s"),
     ("failed_checks", "failed_checks"),
     ("execution", "execution"),
@@ -377,6 +387,13 @@ class Verification:
     # wall time of the re-plans the executor ran from inside ticks [s] (counted in the tick timing);
     # None: not known (a file without it)
     planner_wall_time_in_loop_s: float | None = None
+    # the headroom: the fraction of the hand's limits the executor's pushes keep within where they
+    # can, the peak ‖F‖ / max_force and ‖T‖ / max_torque of its push over the ticks, and the ticks
+    # where either exceeded the fraction; None: not known (a file without them)
+    limit_fraction: float | None = None
+    peak_force_fraction: float | None = None
+    peak_torque_fraction: float | None = None
+    ticks_above_fraction: int | None = None
     # "executor", "final gap", "penetration", "solver", "limits"
     failed_checks: list[str] = field(default_factory=list)
     extras: dict[str, Any] = field(default_factory=dict)
@@ -456,6 +473,10 @@ class Verification:
             max_push_torque_Nm=num("max_push_torque"),
             saturated_ticks=count("saturated_ticks", None),
             planner_wall_time_in_loop_s=num("planner_wall_time_in_loop_s"),
+            limit_fraction=num("limit_fraction"),
+            peak_force_fraction=num("peak_force_fraction"),
+            peak_torque_fraction=num("peak_torque_fraction"),
+            ticks_above_fraction=count("ticks_above_fraction", None),
             failed_checks=[str(c) for c in checks],
             extras={k: v for k, v in obj.items() if k not in known},
             present=tuple(k for k in obj if k in known),
@@ -484,6 +505,7 @@ def execution_from_json(obj: Any, where: str = "execution") -> ExecutionLog:
         failure_kind=obj.get("failure_kind"),
         max_command_force_N=float(obj.get("max_command_force_N", 0.0)),
         max_command_torque_Nm=float(obj.get("max_command_torque_Nm", 0.0)),
+        beyond_fraction_solves=int(obj.get("beyond_fraction_solves", 0)),
     )
     log.counts = {str(k): int(v) for k, v in counts.items()}
     return log
@@ -524,6 +546,10 @@ class PlannedTransition:
     segment_wrenches: FloatArray | None = field(default=None, repr=False)
     kind: str | None = field(default=None, repr=False)
     together: tuple[str, ...] = ()
+    # the largest planned push over the segments as fractions of the hand's limits (‖F‖ / max_force,
+    # ‖T‖ / max_torque); None: not known (a file without them, no segment with a push)
+    peak_force_fraction: float | None = None
+    peak_torque_fraction: float | None = None
 
     @property
     def added_names(self) -> tuple[str, ...]:
@@ -564,6 +590,9 @@ class PlannedTransition:
                 "poses": [p.to_json() for p in self.poses],
             }
         )
+        if self.peak_force_fraction is not None:
+            out["peak_force_fraction"] = self.peak_force_fraction
+            out["peak_torque_fraction"] = self.peak_torque_fraction
         return {**out, **self.extras}
 
     @classmethod
@@ -610,6 +639,7 @@ class PlannedTransition:
 
         known = {"from", "to", "added", "motion", "wrench", "margin", "friction_robustness", "time_s"}
         known |= {"path_length_m", "max_constraint_violation_m", "solve_time_s", "poses"}
+        known |= {"peak_force_fraction", "peak_torque_fraction"}
         return cls(
             from_state=before,
             to_state=after,
@@ -625,6 +655,8 @@ class PlannedTransition:
             poses=poses,
             extras={k: v for k, v in obj.items() if k not in known},
             together=together,
+            peak_force_fraction=num("peak_force_fraction"),
+            peak_torque_fraction=num("peak_torque_fraction"),
         )
 
 

@@ -40,8 +40,14 @@ def segment_wrenches(
     *,
     friction_margin: float = 0.0,
     margin_N: float | None = None,
+    needs: list[tuple[float | None, float | None]] | None = None,
 ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], list[str]]:
-    """The non-jamming wrench search for every segment (see the module docstring)."""
+    """The non-jamming wrench search for every segment (see the module docstring).
+
+    ``needs``, when given, is filled with one ``(force [N], torque [N·m])`` per segment: the least
+    a push needs where the hand is too weak (:attr:`WrenchSearch.needed_force_N`, ``None`` where
+    that limit does not bind or the segment has a push), for the planner's reasons.
+    """
     from fixplan.jamming.search import search_wrench_in
 
     wp = fixture.workpiece
@@ -50,7 +56,9 @@ def segment_wrenches(
     margins = np.full(K, np.nan)
     found = np.zeros(K, dtype=bool)
     reasons: list[str] = []
+    need: list[tuple[float | None, float | None]] = []
     for k in range(K):
+        need.append((None, None))
         a, b = poses[k], poses[k + 1]
         cs = contact_set(fixture, a, list(est))
         if d == 3:
@@ -73,6 +81,10 @@ def segment_wrenches(
             ok, wr, why = free_wrench(fixture, a, a_com, M)
             found[k], reasons = ok, [*reasons, why]
             wrenches[k] = wr
+            if not ok:  # the push is determined: it is the least needed (with the other limit kept, if it is)
+                F, T = float(np.linalg.norm(wr[:d])), float(np.linalg.norm(wr[d:]))
+                F_max, T_max = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
+                need[k] = (F if T <= T_max else None, T if F <= F_max else None)
             continue
         try:
             # the contact set and the motion of the centre of mass as they are (built once)
@@ -89,10 +101,26 @@ def segment_wrenches(
             continue
         found[k] = res.found
         reasons.append(res.reason)
+        need[k] = (res.needed_force_N, res.needed_torque_Nm)
         if res.found and res.wrench is not None:
             wrenches[k] = res.wrench
             margins[k] = res.margin_N
+    if needs is not None:
+        needs.extend(need)
     return wrenches, margins, found, reasons
+
+
+def needed_scale(need: tuple[float | None, float | None], F_max: float, T_max: float) -> float | None:
+    """The least factor one of the hand's limits must grow by for a push to exist (None: not too weak).
+
+    ``need`` is ``(least force with the torque within T_max, least torque with the force within
+    F_max)`` (:func:`~fixplan.jamming.search.search_wrench`'s ``needed_force_N``,
+    ``needed_torque_Nm``): raising ``max_force`` to the first, or ``max_torque`` to the second,
+    is enough; the smaller ratio is the transition's demand.
+    """
+    F_need, T_need = need
+    ratios = [x / lim for x, lim in ((F_need, F_max), (T_need, T_max)) if x is not None and x > lim]
+    return min(ratios) if ratios else None
 
 
 def free_wrench(fixture: Fixture, pose: Pose, a_com: FloatArray, M: FloatArray) -> tuple[bool, FloatArray, str]:
@@ -112,4 +140,4 @@ def free_wrench(fixture: Fixture, pose: Pose, a_com: FloatArray, M: FloatArray) 
     return True, w_o, f"free motion: ‖F‖ = {F:.3g} N, ‖T‖ = {T:.3g} N·m"
 
 
-__all__ = ["free_wrench", "segment_wrenches"]
+__all__ = ["free_wrench", "needed_scale", "segment_wrenches"]

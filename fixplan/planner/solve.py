@@ -72,6 +72,9 @@ class PlanResult:
     timings: dict[str, float] = field(default_factory=dict)
     friction_robustness: list[float] = field(default_factory=list)  # per transition: largest δ of ROBUST_GRID
     policy: Policy | None = None  # the next transition from every contact state (planner/policy.py)
+    # the hand's force [N] and torque [N·m] limits the pushes were planned within (the search's,
+    # with its defaults when the file has none); None: not known
+    hand_limits: tuple[float, float] | None = None
 
     @property
     def ok(self) -> bool:
@@ -106,6 +109,7 @@ class PlanResult:
         for tr, T, rob in zip(self.transitions, self.durations_s, robust, strict=True):
             rows = tr.wrenches[np.isfinite(tr.wrenches).all(axis=1)] if len(tr.wrenches) else tr.wrenches
             margins = tr.margins_N[np.isfinite(tr.margins_N)]
+            peak_F, peak_T = _peak_fractions(rows, self.hand_limits)
             transitions.append(
                 PlannedTransition(
                     from_state=tuple(tr.established),
@@ -124,6 +128,8 @@ class PlanResult:
                     poses=tuple(tr.poses),
                     segment_wrenches=np.atleast_2d(np.asarray(tr.wrenches, dtype=float)),
                     kind=tr.kind,
+                    peak_force_fraction=peak_F,
+                    peak_torque_fraction=peak_T,
                 )
             )
         infeasible = self.status == "infeasible"
@@ -150,6 +156,18 @@ class PlanResult:
 
     def to_json(self) -> dict[str, Any]:
         return self.plan.to_json()
+
+
+def _peak_fractions(rows: np.ndarray, limits: tuple[float, float] | None) -> tuple[float | None, float | None]:
+    """The largest planned ‖F‖ / max_force and ‖T‖ / max_torque over a transition's segment pushes."""
+    if limits is None or not len(rows):
+        return None, None
+    d = 3 if rows.shape[1] == 6 else 2
+    F_max, T_max = limits
+    return (
+        float(np.max(np.linalg.norm(rows[:, :d], axis=1))) / F_max,
+        float(np.max(np.linalg.norm(rows[:, d:], axis=1))) / T_max,
+    )
 
 
 def _wrench_certificate(reason: str) -> bool:
@@ -566,10 +584,18 @@ def solve(
         result = first
         result.reason += "; the next-best sequences failed too"
     result.attempts = attempts
+    result.hand_limits = _hand_limits(fixture)
     timings["fine_s"] = planner.fine_time_s
     timings["total_s"] = time.perf_counter() - t0
     result.timings = timings
     return result
+
+
+def _hand_limits(fixture: Fixture) -> tuple[float, float]:
+    from fixplan.jamming.search import hand_limits
+
+    F_max, T_max, _ = hand_limits(fixture)
+    return F_max, T_max
 
 
 def _status(verification: Verification | None, note: str) -> tuple[PlanStatus, str]:

@@ -18,6 +18,11 @@ workpiece (feedforward ``w + b ẋ`` plus PD on the handle). The engine runs at 
 - the push on the part stays within the manipulator's limits (averaged over 10 ms, 5 % slack
   for the coupling's transients).
 
+The executor's push at every tick (what the hand is asked for) is measured against the headroom
+its searches keep (``settings.search.limit_fraction`` of the limits):
+``peak_force_fraction``, ``peak_torque_fraction`` and ``ticks_above_fraction``; the trace carries
+it as ``command_wrench``.
+
 A failure says where (transition, time) and why; divergence (non-finite state, a speed beyond
 what the push can cause) stops the run with that reason.
 
@@ -31,7 +36,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -54,7 +59,7 @@ from fixplan.planner.execute import (
 from fixplan.planner.fine import twist_from_pose
 from fixplan.planner.plan import Timeline, Verification
 from fixplan.planner.policy import Policy
-from fixplan.settings import HAPTIC, HapticRigSettings, Settings
+from fixplan.settings import DEFAULT, HAPTIC, HapticRigSettings, Settings
 from fixplan.spatial import Pose, log_so3
 
 FloatArray = NDArray[np.float64]
@@ -214,9 +219,13 @@ def verify(
     threshold = executor.threshold_N
     contact_gap_m = executor.settings.contact_gap_m
 
+    commands: list[FloatArray] = []  # the executor's push, every tick (what the hand is asked for)
+
     def operator(tt: float, device: SimulatedDevice) -> FloatArray:
         pressed = frozenset(sim.in_contact(threshold, contact_gap_m))
-        return rig.operator_wrench(executor.command(tt, sim.pose, sim.twist, pressed), device)
+        w = executor.command(tt, sim.pose, sim.twist, pressed)
+        commands.append(np.array(w, dtype=float))
+        return rig.operator_wrench(w, device)
 
     if time_limit_s is None:
         # generous: every transition at the slowest speed the executor keeps, plus settling
@@ -244,6 +253,7 @@ def verify(
             execution=executor.log,
             saturated_ticks=loop.saturated_ticks,
             planner_wall_time_in_loop_s=planner_s[0],
+            **headroom(commands, d, F_max, T_max, executor.limit_fraction),
         )
     log = executor.log
     if log.outcome == "running":
@@ -298,11 +308,17 @@ def verify(
             f"the push on the part exceeded the manipulator's limits: ‖F‖ up to {push_F:.3g} N (max_force {F_max:.3g} N), "
             f"‖T‖ up to {push_T:.3g} N·m (max_torque {T_max:.3g} N·m), averaged over {vs.limit_window_s * 1e3:g} ms"
         )
+    measures = loop_measures(rec, sim, trace_every)
+    if measures["trace"] is not None and len(commands) == len(rec.coupling_wrench):
+        # the executor's push at the trace's ticks, beside the coupling's
+        ticks = [k for k, _, _, _ in rec.trace]
+        measures["trace"] = replace(measures["trace"], command_wrench=np.array([commands[k] for k in ticks]))
     return Verification(
         passed=not reasons,
         reason="; ".join(reasons) if reasons else "every check passed",
         failed_checks=checks,
-        **loop_measures(rec, sim, trace_every),
+        **measures,
+        **headroom(commands, d, F_max, T_max, executor.limit_fraction),
         observed_sequence=list(log.observed),
         final_gaps_m=gaps,
         execution=log,
@@ -311,6 +327,28 @@ def verify(
         saturated_ticks=loop.saturated_ticks,
         planner_wall_time_in_loop_s=planner_s[0],
     )
+
+
+def headroom(commands: Sequence[FloatArray], d: int, F_max: float, T_max: float, fraction: float) -> dict[str, Any]:
+    """The :class:`Verification` fields of the hand's headroom, from the executor's push at every tick.
+
+    ``peak_force_fraction`` = max ‖F‖ / ``F_max``, ``peak_torque_fraction`` = max ‖T‖ / ``T_max``
+    (the moment about the body origin, as the limit bounds it), and ``ticks_above_fraction``: the
+    ticks where either exceeds ``fraction`` (beyond the search's binding tolerance).
+    """
+    if not commands:
+        return {"limit_fraction": fraction, "peak_force_fraction": None, "peak_torque_fraction": None,
+                "ticks_above_fraction": 0}  # fmt: skip
+    W = np.asarray(commands, dtype=float)
+    f = np.linalg.norm(W[:, :d], axis=1) / F_max
+    t = np.linalg.norm(W[:, d:], axis=1) / T_max
+    above = fraction * (1.0 + DEFAULT.search.binding_rel)
+    return {
+        "limit_fraction": fraction,
+        "peak_force_fraction": float(f.max()),
+        "peak_torque_fraction": float(t.max()),
+        "ticks_above_fraction": int(np.count_nonzero((f > above) | (t > above))),
+    }
 
 
 def _timed(replan: Replan, total_s: list[float]) -> Replan:

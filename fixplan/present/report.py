@@ -42,8 +42,8 @@ def report_markdown(result: Plan | PlanResult, fixture: Fixture, figures: Sequen
         lines += [
             "## Transitions",
             "",
-            "| # | from | added | motion | mean wrench [N, N·m] | least margin [N] | friction δ | time [s] | path [m] | max gap violation [m] |",
-            "|---:|---|---|---|---|---:|---:|---:|---:|---:|",
+            "| # | from | added | motion | mean wrench [N, N·m] | least margin [N] | friction δ | peak push [% of max_force, max_torque] | time [s] | path [m] | max gap violation [m] |",
+            "|---:|---|---|---|---|---:|---:|---:|---:|---:|---:|",
         ]
         for i, tr in enumerate(payload["transitions"], 1):
             # a group closing together is a list of names: {E1, E2}
@@ -51,15 +51,23 @@ def report_markdown(result: Plan | PlanResult, fixture: Fixture, figures: Sequen
             w = "–" if tr["wrench"] is None else ", ".join(f"{x:.3g}" for x in tr["wrench"])
             margin = "–" if tr["margin"] is None else f"{tr['margin']:.3g}"
             rob = "–" if tr["friction_robustness"] is None else f"±{tr['friction_robustness']:.2g}"
+            peak = (
+                "–"
+                if tr.get("peak_force_fraction") is None
+                else f"{tr['peak_force_fraction']:.0%}, {tr['peak_torque_fraction']:.0%}"
+            )
             lines.append(
-                f"| {i} | {{{', '.join(tr['from'])}}} | {added} | {tr['motion']} | {w} | {margin} | {rob} | "
+                f"| {i} | {{{', '.join(tr['from'])}}} | {added} | {tr['motion']} | {w} | {margin} | {rob} | {peak} | "
                 f"{tr['time_s']:.2f} | {tr['path_length_m']:.4g} | {tr['max_constraint_violation_m']:.1e} |"
             )
         lines += [
             "",
             "Least margin: the least normal force on the kept contacts along the transition (– from no contact). "
             "Friction δ: the largest δ (of 0.05, 0.1, 0.2, 0.3, 0.5) for which the first push still moves the part "
-            "with friction anywhere in μ(1 ± δ) within the hand's limits.",
+            "with friction anywhere in μ(1 ± δ) within the hand's limits. "
+            "Peak push: the largest planned push over the transition's segments, as percentages of max_force and "
+            "max_torque; the pushes are sought within 80 % of them first (`settings.search.limit_fraction`) and "
+            "exceed it only where no non-jamming push exists inside.",
         ]
         lines.append("")
     failed = [a for a in payload["tried"] if not a["ok"]]
@@ -86,6 +94,9 @@ def report_markdown(result: Plan | PlanResult, fixture: Fixture, figures: Sequen
         def num(x: float | None, fmt: str) -> str:
             return "–" if x is None else format(x, fmt)
 
+        def pct(x: float | None) -> str:
+            return "–" if x is None else f"{x:.0%}"
+
         gaps = [abs(g) for g in v["final_gaps"].values()]
         lines += [
             f"- result: **{'passed' if v['passed'] else 'failed'}** — {v['reason']}",
@@ -93,6 +104,9 @@ def report_markdown(result: Plan | PlanResult, fixture: Fixture, figures: Sequen
             f"- final gaps ≤ {num(max(gaps) if gaps else None, '.2e')} m; max penetration {v['max_penetration']:.2e} m",
             f"- push on the part ≤ {num(v['max_push_force'], '.3g')} N, {num(v['max_push_torque'], '.3g')} N·m "
             f"(10 ms mean; {num(v.get('saturated_ticks'), 'd')} ticks capped at the hand's limits)",
+            f"- commanded push (the executor's, every tick) peaks at {pct(v.get('peak_force_fraction'))} of max_force "
+            f"and {pct(v.get('peak_torque_fraction'))} of max_torque; headroom kept: within "
+            f"{pct(v.get('limit_fraction'))} of the limits, {num(v.get('ticks_above_fraction'), 'd')} ticks above it",
             f"- tick compute (the executor's command, any re-plan inside it, and the engine step): mean "
             f"{num(v['tick_mean_us'], '.0f')} µs, max {num(v['tick_max_us'], '.0f')} µs; "
             f"{num(v['deadline_misses'], 'd')} ticks over the 1 ms period; re-planning inside the loop "
