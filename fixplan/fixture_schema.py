@@ -19,14 +19,16 @@ shape and mass) stay in :mod:`fixplan.fixture`.
 
 Adding a table (``[[obstacle]]``): declare ``class Obstacle(Table)`` with its fields, add
 ``obstacle: Annotated[tuple[Obstacle, ...], TablesOf("obstacle")] = Field((), description=...)``
-to :class:`FixtureFile`, build the model object from it in :mod:`fixplan.fixture`, then run
-``fixplan schema --out docs/fixture.schema.json`` and paste ``markdown_reference()`` into the
-docs (``tests/test_fixture_schema.py`` says what is stale).
+to :class:`FixtureFile`, build the model object from it in :mod:`fixplan.fixture`, show the
+keys in the example of ``docs/fixture-format.md``, and run ``python tools/fixture_docs.py
+--write`` (the JSON Schema and the key table; ``tests/test_fixture_schema.py`` says what is stale).
 """
 
 from __future__ import annotations
 
 import math
+import re
+import sys
 from collections.abc import Callable, Iterable, Mapping
 from typing import Annotated, Any, ClassVar, NoReturn
 
@@ -36,6 +38,7 @@ from pydantic_core import InitErrorDetails, PydanticCustomError, core_schema
 from fixplan import limits
 from fixplan.errors import Issue, shorten
 from fixplan.limits import Range
+from fixplan.model import SimulationSettings
 from fixplan.schema import _as_float, _is_number, _kind
 
 SCHEMA_ID = "https://fixplan.dev/fixture.schema.json"
@@ -58,6 +61,7 @@ FACES = {
 }
 MAX_SCENE_NAME = 200
 NAME_CHARS = r"[\w+\-]"
+_NAME = re.compile(f"{NAME_CHARS}{{1,{limits.MAX_NAME_LENGTH}}}")
 NAME_RULE = f"a name of 1 to {limits.MAX_NAME_LENGTH} letters, digits, '_', '-' or '+' (no spaces, commas, dots or control characters)"
 UNITS_HINT = "sizes are in metres; did you write millimetres?"
 VERTEX = Range("a vertex coordinate", "m", -limits.LENGTH_MAX_M, limits.LENGTH_MAX_M)
@@ -228,7 +232,8 @@ class Direction(Vector):
         return tuple(values)
 
     def schema(self) -> dict[str, Any]:
-        return super().schema() | {"not": {"items": {"const": 0}}}
+        finite = {"type": "number", "minimum": -sys.float_info.max, "maximum": sys.float_info.max}
+        return super().schema() | {"items": finite, "not": {"items": {"const": 0}}}
 
 
 class Integer(Value):
@@ -303,9 +308,7 @@ class Name(Value):
 
 def is_name(value: Any) -> bool:
     """A valid locator or contact name (entries are addressed by it in messages)."""
-    import re
-
-    return isinstance(value, str) and re.fullmatch(f"{NAME_CHARS}{{1,{limits.MAX_NAME_LENGTH}}}", value) is not None
+    return isinstance(value, str) and _NAME.fullmatch(value) is not None
 
 
 class ShapeName(Value):
@@ -499,7 +502,7 @@ class Table(BaseModel):
             errors += [(tuple(e["loc"]), _message(e)) for e in exc.errors() if e["type"] != "missing"]
             result = None
         if errors:
-            order = {key: i for i, key in enumerate(cls.model_fields)}
+            order = {key: i for i, key in enumerate(keys)}  # unknown keys first, then the keys as declared
             errors.sort(key=lambda e: order.get(str(e[0][0]), -1) if e[0] else -1)
             raise _errors(cls.__name__, errors)
         return result
@@ -572,7 +575,7 @@ class Workpiece(Table):
         common = {"shape", "mass", "inertia", "start", "goal"}
         kind = data.get("shape")
         dim = context.get("dimension") or 3
-        if kind not in (SHAPES_3D if dim == 3 else SHAPES_2D):
+        if not isinstance(kind, str) or kind not in (SHAPES_3D if dim == 3 else SHAPES_2D):
             return common, []
         used = common | set(SHAPE_KEYS[kind])
         errors: list[tuple[tuple, str]] = [
@@ -637,18 +640,21 @@ class Manipulator(Table):
     )
 
 
+_SIMULATION = SimulationSettings()  # the defaults, as the model has them
+
+
 class Simulation(Table):
     """``[simulation]``: defaults of the simulation, overridable on the command line."""
 
     timestep: Annotated[float, Number("a time step [s]", limits.TIMESTEP, exclusive_minimum=0.0, maximum=1.0)] = Field(
-        1e-3, description="Time step of the simulation."
+        _SIMULATION.timestep_s, description="Time step of the simulation."
     )
     restitution: Annotated[float, Number("a restitution coefficient", limits.RESTITUTION, minimum=0.0, maximum=1.0)] = (
-        Field(0.0, description="Restitution coefficient.")
+        Field(_SIMULATION.restitution, description="Restitution coefficient.")
     )
     tolerance: Annotated[
         float, Number("a solver tolerance", limits.SOLVER_TOLERANCE, exclusive_minimum=0.0, maximum=1.0)
-    ] = Field(1e-8, description="Contact solver residual.")
+    ] = Field(_SIMULATION.tolerance, description="Contact solver residual.")
 
 
 class FixtureFile(Table):
@@ -676,10 +682,11 @@ class FixtureFile(Table):
                 continue
             for i, entry in enumerate(entries):
                 name = entry.get("name") if isinstance(entry, dict) else None
-                if is_name(name) and name in seen:
+                if not isinstance(name, str) or not is_name(name):
+                    continue  # an invalid name has its own message
+                if name in seen:
                     errors.append(((kind, i, "name"), f"{name!r} is used twice (expected unique names)"))
-                elif is_name(name):
-                    seen.add(name)
+                seen.add(name)
         return set(cls.model_fields), errors
 
 
@@ -727,6 +734,8 @@ def _tidy(node: Any) -> Any:
                 continue
             if key == "$ref" and isinstance(value, str):
                 value = value.replace("#/$defs/", "#/definitions/")
+            if key == "description" and isinstance(value, str):  # editors render Markdown, not reST
+                value = value.replace("``", "`")
             out["definitions" if key == "$defs" else key] = _tidy(value)
         return out
     if isinstance(node, list):
@@ -758,8 +767,13 @@ def _dimension_rules() -> list[dict[str, Any]]:
 
     rules = []
     for dim, shapes in ((2, SHAPES_2D), (3, SHAPES_3D)):
-        pose = {"properties": {"position": vectors(dim)}, "not": {"required": ["rpy_deg" if dim == 2 else "angle_deg"]}}
-        entry = {"properties": {"position": vectors(dim), "point": vectors(dim), "normal": vectors(dim)}}
+        pose: dict[str, Any] = {
+            "properties": {"position": vectors(dim)},
+            "not": {"required": ["rpy_deg" if dim == 2 else "angle_deg"]},
+        }
+        entry: dict[str, Any] = {
+            "properties": {"position": vectors(dim), "point": vectors(dim), "normal": vectors(dim)}
+        }
         if dim == 2:
             entry["not"] = {"required": ["torsion"]}
         then = {
@@ -809,43 +823,83 @@ def schema_text() -> str:
 
 
 def _tables() -> list[tuple[str, type[Table]]]:
-    out: list[tuple[str, type[Table]]] = [("", FixtureFile)]
-    for key, field in FixtureFile.model_fields.items():
-        for t in (field.annotation, *getattr(field.annotation, "__args__", ())):
-            for inner in (t, *getattr(t, "__args__", ())):
-                if isinstance(inner, type) and issubclass(inner, Table):
-                    out.append((key, inner))
-    out += [("workpiece.start", Pose), ("workpiece.goal", Pose)]
+    """Every table with its dotted prefix, in the order of the file: ``("workpiece.start", Pose)``."""
+    out: list[tuple[str, type[Table]]] = []
+
+    def visit(prefix: str, table: type[Table]) -> None:
+        out.append((prefix, table))
+        for key, field in table.model_fields.items():
+            inner = _table_of(field.annotation)
+            if inner is not None:
+                visit(f"{prefix}.{key}" if prefix else key, inner)
+
+    visit("", FixtureFile)
     return out
+
+
+def _table_of(annotation: Any) -> type[Table] | None:
+    """The table a field holds (``Pose | None``, ``tuple[Locator, ...]``), or None for a value."""
+    if isinstance(annotation, type) and issubclass(annotation, Table):
+        return annotation
+    for arg in getattr(annotation, "__args__", ()):
+        found = _table_of(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def _kind_of(table: type[Table], key: str) -> str:
+    field = table.model_fields[key]
+    inner = _table_of(field.annotation)
+    if inner is not None:
+        return "tables `[[…]]`" if "tuple" in str(field.annotation) else "table"
+    value = table.value_of(key)
+    schema = value.schema() if value is not None else {}
+    if not schema:
+        return ""
+    if "anyOf" in schema:
+        return "3 numbers (2D: a number)"
+    if schema.get("type") == "array":
+        if schema.get("items", {}).get("type") == "array":
+            return "list of [x, y]"
+        n, m = schema.get("minItems"), schema.get("maxItems")
+        return f"{n} numbers" if n == m else f"{n} or {m} numbers (the dimension)"
+    return str(schema.get("type", ""))
 
 
 def _range(value: Value | None) -> str:
     schema = value.schema() if value is not None else {}
     if "enum" in schema:
-        return " \\| ".join(str(v) for v in schema["enum"])
+        return ", ".join(str(v) for v in schema["enum"])
     items = schema.get("items", schema)
-    low = items.get("minimum", items.get("exclusiveMinimum"))
-    high = items.get("maximum")
+    low, high = items.get("minimum", items.get("exclusiveMinimum")), items.get("maximum")
+    if high == sys.float_info.max:
+        return "any finite, not all 0"
     if low is None and high is None:
         return ""
-    left = "(" if "exclusiveMinimum" in items and "minimum" not in items else "["
-    return f"{left}{low if low is not None else '-∞'}, {high if high is not None else '∞'}]"
+    left = "(" if "minimum" not in items else "["
+    return f"{left}{low:g}, {high:g}]" if high is not None else f"{left}{low:g}, ∞)"
+
+
+def _default(default: Any) -> str:
+    if isinstance(default, tuple):
+        return "[" + ", ".join(f"{x:g}" for x in default) + "]" if default else ""
+    if isinstance(default, float):
+        return f"{default:g}"
+    return "" if default is None else str(default)
 
 
 def markdown_reference() -> str:
-    """The key reference table of ``docs/fixture-format.md``: every key with its unit, range, default."""
-    rows = ["| key | unit | range | default | description |", "|---|---|---|---|---|"]
+    """The key reference table of ``docs/fixture-format.md``: every key with its type, unit, range, default."""
+    rows = ["| key | type | unit | range | default | description |", "|---|---|---|---|---|---|"]
     for prefix, table in _tables():
         for key, field in table.model_fields.items():
             value = table.value_of(key)
             path = f"{prefix}.{key}" if prefix else key
             unit = (value.schema() if value else {}).get("x-unit", "")
-            default = "required" if field.is_required() else ("" if field.default in (None, ()) else f"{field.default}")
-            if isinstance(field.default, tuple):
-                default = "[" + ", ".join(f"{x:g}" for x in field.default) + "]"
-            elif isinstance(field.default, float):
-                default = f"{field.default:g}"
-            rows.append(f"| `{path}` | {unit} | {_range(value)} | {default} | {field.description or ''} |")
+            default = "required" if field.is_required() else _default(field.default)
+            text = (field.description or "").replace("|", "\\|")
+            rows.append(f"| `{path}` | {_kind_of(table, key)} | {unit} | {_range(value)} | {default} | {text} |")
     return "\n".join(rows) + "\n"
 
 
