@@ -6,7 +6,9 @@ The located pose is computed here, at load, and stored in the model as ``goal_po
 Every problem in a file is reported, each as ``FILE: dotted.key.path: what is wrong (what was
 expected)``, by raising one :class:`~fixplan.errors.FixtureError` that carries them all.
 Locators and contacts are addressed by name in key paths (``locator.P1.position``) when the
-name is valid, else by index (``locator[2].position``).
+name is valid, else by index (``locator[2].position``). Each key is declared, and checked on its
+own, in :mod:`fixplan.fixture_schema`; what needs the whole model (an inertia possible for the
+shape and mass, the locators against the part, the goal pose) is checked here.
 
 Keys added to the spec (documented in the README): none yet besides what the spec lists.
 """

@@ -663,6 +663,8 @@ class Simulation(Table):
 class FixtureFile(Table):
     """A fixture file: ``docs/fixture-format.md``."""
 
+    named: ClassVar[tuple[str, ...]] = ("locator", "contact")  # arrays of tables whose names are unique across all
+
     format: Annotated[int, Integer((1,))] = Field(description="The file format's version.")
     scene: Scene = Field(description="The scene: its name, dimension and gravity.")
     workpiece: Workpiece = Field(description="The part to load: its shape, mass and poses (body frame).")
@@ -679,7 +681,7 @@ class FixtureFile(Table):
     def rules(cls, data: Mapping[str, Any], context: Mapping[str, Any]) -> tuple[set[str], list[tuple[tuple, str]]]:
         errors: list[tuple[tuple, str]] = []
         seen: set[str] = set()
-        for kind in ("locator", "contact"):
+        for kind in cls.named:
             entries = data.get(kind)
             if not isinstance(entries, list):
                 continue
@@ -716,12 +718,12 @@ _NO_PLUGINS = "PYDANTIC_DISABLE_PLUGINS"
 
 
 def key_path(loc: tuple[int | str, ...], data: Any) -> str:
-    """``locator.B1.position[2]``: entries of an array of tables by name when they have a valid one."""
+    """``locator.B1.position[2]``: an entry of an array of tables by its name when it has a valid one."""
     out, node = "", data
     for part in loc:
         if isinstance(part, int):
             entry = node[part] if isinstance(node, list) and part < len(node) else None
-            name = entry.get("name") if isinstance(entry, dict) and out in ("locator", "contact") else None
+            name = entry.get("name") if isinstance(entry, dict) else None
             out += f".{name}" if is_name(name) else f"[{part}]"
             node = entry
         else:
