@@ -43,7 +43,6 @@ from fixplan.limits import Range
 from fixplan.model import SimulationSettings
 from fixplan.schema import _as_float, _is_number, _kind
 
-SCHEMA_ID = "https://fixplan.dev/fixture.schema.json"
 SHAPES_3D = ("box", "cylinder", "sphere", "mesh")
 SHAPES_2D = ("rectangle", "disk", "polygon")
 # the keys each shape reads besides the common ones; a key of another shape is "not used"
@@ -835,7 +834,6 @@ def json_schema() -> dict[str, Any]:
     schema["allOf"] = _dimension_rules()
     head = {
         "$schema": "http://json-schema.org/draft-07/schema#",
-        "$id": SCHEMA_ID,
         "title": "fixplan fixture file",
         "description": "A fixture file of fixplan (docs/fixture-format.md). Units are SI; angles in degrees. "
         "Checks of the whole model (a locator inside the part, goal finding) are fixplan validate's.",
