@@ -6,7 +6,9 @@ The located pose is computed here, at load, and stored in the model as ``goal_po
 Every problem in a file is reported, each as ``FILE: dotted.key.path: what is wrong (what was
 expected)``, by raising one :class:`~fixplan.errors.FixtureError` that carries them all.
 Locators and contacts are addressed by name in key paths (``locator.P1.position``) when the
-name is valid, else by index (``locator[2].position``).
+name is valid, else by index (``locator[2].position``). Each key is declared, and checked on its
+own, in :mod:`fixplan.fixture_schema`; what needs the whole model (an inertia possible for the
+shape and mass, the locators against the part, the goal pose) is checked here.
 
 Keys added to the spec (documented in the README): none yet besides what the spec lists.
 """
@@ -17,15 +19,15 @@ import re
 import sys
 import tomllib
 from dataclasses import replace
-from functools import cached_property
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from fixplan import limits
+from fixplan import fixture_schema, limits
 from fixplan.errors import FixtureError, Issue
+from fixplan.fixture_schema import validate_document
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
 from fixplan.geometry.collision import BOX as OBSTACLE_BOX
 from fixplan.geometry.collision import PLANE as OBSTACLE_PLANE
@@ -40,21 +42,8 @@ from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]
 
-SHAPES_3D = ("box", "cylinder", "sphere", "mesh")
-SHAPES_2D = ("rectangle", "disk", "polygon")
-FACES = {
-    "box": ("+x", "-x", "+y", "-y", "+z", "-z"),
-    "rectangle": ("+x", "-x", "+y", "-y"),
-    "cylinder": ("+z", "-z", "side"),
-}
+SHAPES_3D, SHAPES_2D, FACES = fixture_schema.SHAPES_3D, fixture_schema.SHAPES_2D, fixture_schema.FACES
 _DATA = Path(__file__).resolve().parent / "data"
-# Locator and contact names appear in one-line messages, CSV headers and comma-separated --contacts
-NAME_PATTERN = re.compile(rf"[\w+\-]{{1,{limits.MAX_NAME_LENGTH}}}")
-NAME_RULE = f"a name of 1 to {limits.MAX_NAME_LENGTH} letters, digits, '_', '-' or '+' (no spaces, commas, dots or control characters)"
-_SIZE = limits.SIZE
-UNITS_HINT = "sizes are in metres; did you write millimetres?"
-OBSTACLE_SHAPES = {3: ("plane", "box"), 2: ("line", "rectangle")}
-OBSTACLE_FRICTION = 0.3  # an [[obstacle]] without friction: a steel plate, dry
 
 
 def _scaled(shape: Shape, k: float) -> Shape | None:
@@ -70,9 +59,6 @@ def _scaled(shape: Shape, k: float) -> Shape | None:
     if isinstance(shape, Cylinder):
         return Cylinder(k * shape.radius, k * shape.length)
     return None
-
-
-_VERTEX = limits.Range("a vertex coordinate", "m", -limits.LENGTH_MAX_M, limits.LENGTH_MAX_M)
 
 
 def default_fixture_path() -> Path:
@@ -198,7 +184,12 @@ def loads(
 
 
 class _Builder:
-    """Reads one parsed TOML document into a Fixture, collecting every issue."""
+    """Reads one parsed TOML document into a Fixture, collecting every issue.
+
+    The keys are checked by their declarations (:mod:`fixplan.fixture_schema`); what needs the
+    whole model (an inertia possible for the shape and mass, the locators against the part,
+    the goal) is checked here.
+    """
 
     def __init__(self, data: dict[str, Any], source: str, base_dir: Path, tol: Tolerances):
         self.data = data
@@ -214,59 +205,48 @@ class _Builder:
             raise FixtureError(self.source, self.r.issues)
 
     def build(self) -> Fixture:
-        r, data = self.r, self.data
-        r.unknown_keys(
-            data, ("format", "scene", "workpiece", "locator", "contact", "obstacle", "manipulator", "simulation"), ""
-        )
-        fmt = r.integer(data, "format", "format", required=True, allowed=(1,))
-        del fmt
-        scene = r.table(data, "scene", "scene", required=True) or {}
-        r.unknown_keys(scene, ("name", "dimension", "gravity"), "scene")
-        name = r.string(scene, "name", "scene.name", required=True) or "?"
-        if not name.isprintable() or len(name) > 200:
-            r.error("scene.name", "expected a printable name of at most 200 characters (no newlines or control codes)")
-            name = "?"
-        dim = (
-            r.integer(scene, "dimension", "scene.dimension", required=False, allowed=(2, 3))
-            if "dimension" in scene
-            else 3
-        )
-        if dim is None:
-            # Without a valid dimension nothing else can be checked meaningfully.
-            raise FixtureError(self.source, r.issues)
-        default_g = [0.0, 0.0, -9.81] if dim == 3 else [0.0, -9.81]
-        gravity = r.vector(
-            scene, "gravity", "scene.gravity", dim, default=default_g, dimension_hint=dim, bounds=limits.GRAVITY
-        )
-
+        r = self.r
         self.check_entry_count()
-        wp_table = r.table(data, "workpiece", "workpiece", required=True) or {}
-        workpiece, start, goal = self.workpiece(wp_table, dim)
-        locators = self.locators(dim, workpiece)
-        contacts = self.explicit_contacts(dim)
-        obstacles = self.obstacles(dim)
-        manipulator = self.manipulator()
-        simulation = self.simulation()
-        names = [loc.name for loc in locators] + [c.name for c in contacts]
-        if not names and not r.issues:
+        dim = _dimension_of(self.data)
+        kind = _shape_of(self.data, dim)
+        doc, issues = validate_document(self.data, dim, kind)
+        if dim is None:  # without a valid dimension nothing but the scene can be checked meaningfully
+            raise FixtureError(self.source, [i for i in issues if re.split(r"[.\[]", i.key)[0] not in _PER_DIMENSION])
+        r.issues.extend(issues)
+        if kind == "mesh":
+            r.error("workpiece.shape", "mesh workpieces are not supported yet (expected box, cylinder or sphere)")
+        if doc is not None and not doc.locator and not doc.contact and not r.issues:
             r.error("locator", "no [[locator]] or [[contact]] entries (expected at least one)")
         self.fail_if_issues()
-        if workpiece is None or start is None or gravity is None:  # pragma: no cover - issues were recorded
-            raise FixtureError(self.source, [Issue("workpiece", "could not be read")])
+        assert doc is not None  # noqa: S101 - no issues means the document was read
+        workpiece = self.workpiece(doc.workpiece, dim)
+        self.fail_if_issues()
+        scene, wp = doc.scene, doc.workpiece
+        gravity = scene.gravity or ((0.0, 0.0, -9.81) if dim == 3 else (0.0, -9.81))
+        manipulator, simulation = doc.manipulator, doc.simulation
         fixture = Fixture(
             source=self.source,
-            name=name,
+            name=scene.name,
             dimension=dim,
             gravity=np.array(gravity),
             workpiece=workpiece,
-            locators=tuple(locators),
-            contacts=tuple(contacts),
-            manipulator=manipulator,
-            simulation=simulation,
-            start=start,
-            goal_given=goal,
+            locators=tuple(
+                Locator(e.name, np.array(e.position), e.radius, e.friction, e.torsion, e.face) for e in doc.locator
+            ),
+            contacts=tuple(
+                ExplicitContact(e.name, np.array(e.point), _unit(e.normal), e.friction, e.torsion) for e in doc.contact
+            ),
+            manipulator=Manipulator(
+                _or_inf(manipulator.max_force if manipulator else None),
+                _or_inf(manipulator.max_torque if manipulator else None),
+            ),
+            simulation=SimulationSettings(simulation.timestep, simulation.restitution, simulation.tolerance)
+            if simulation
+            else SimulationSettings(),
+            start=_pose(wp.start, dim) if wp.start is not None else Pose.identity(dim),
+            goal_given=_pose(wp.goal, dim) if wp.goal is not None else None,
             tolerances=self.tol,
-            obstacles=tuple(obstacles),
+            obstacles=tuple(self.obstacle(e, dim) for e in doc.obstacle),
         )
         fixture = with_free_motions(fixture)  # fewer locators that leave only the part's symmetry free
         goal = self.check_geometry(fixture)
@@ -277,6 +257,12 @@ class _Builder:
 
     def check_entry_count(self) -> None:
         """At most :data:`~fixplan.limits.MAX_ENTRIES` locators and contacts, refused before any is read."""
+        obstacles = self.data.get("obstacle")
+        if isinstance(obstacles, list) and len(obstacles) > limits.MAX_ENTRIES:
+            raise FixtureError(
+                self.source,
+                [Issue("obstacle", f"{len(obstacles)} [[obstacle]] entries (expected at most {limits.MAX_ENTRIES})")],
+            )
         count = sum(len(v) for k in ("locator", "contact") if isinstance(v := self.data.get(k), list))
         if count > limits.MAX_ENTRIES:
             raise FixtureError(
@@ -290,101 +276,84 @@ class _Builder:
                 ],
             )
 
-    # -- workpiece ---------------------------------------------------------------------------
-    def workpiece(self, t: dict, dim: int) -> tuple[Workpiece | None, Pose | None, Pose | None]:
-        r = self.r
-        shapes = SHAPES_3D if dim == 3 else SHAPES_2D
-        allowed = ("shape", "size", "radius", "length", "vertices", "file", "mass", "inertia", "start", "goal")
-        r.unknown_keys(t, allowed, "workpiece")
-        if not t and "workpiece" not in self.data:
-            return None, None, None
-        kind = t.get("shape")
-        other = SHAPES_2D if dim == 3 else SHAPES_3D
-        if isinstance(kind, str) and kind in other:
-            r.error(
-                "workpiece.shape",
-                f"got {kind!r}, a {5 - dim}D shape (expected one of: {', '.join(shapes)} for a {dim}D scene)",
-            )
-            kind = None
+    # -- obstacles ---------------------------------------------------------------------------
+    def obstacle(self, e: fixture_schema.Obstacle, dim: int) -> Obstacle:
+        """``[[obstacle]]`` of a valid table: a plane (line) or a box (rectangle) in the world."""
+        if e.shape == fixture_schema.OBSTACLE_SHAPES[dim][0]:
+            frame = plane_frame(np.array(e.point), _unit(e.normal))
+            half = np.zeros(0)
         else:
-            kind = r.string(t, "shape", "workpiece.shape", required=True, choices=shapes)
-        shape: Shape | None = None
-        used = {"shape", "mass", "inertia", "start", "goal"}
-        if kind == "box":
-            size = r.vector(
-                t, "size", "workpiece.size", 3, required=True, dimension_hint=3, bounds=_SIZE, too_large=UNITS_HINT
-            )
-            used.add("size")
-            if size is not None and self.positive_all(size, "workpiece.size", "edge lengths > 0"):
-                shape = Box(tuple(size))  # type: ignore[arg-type]
-        elif kind == "rectangle":
-            size = r.vector(
-                t, "size", "workpiece.size", 2, required=True, dimension_hint=2, bounds=_SIZE, too_large=UNITS_HINT
-            )
-            used.add("size")
-            if size is not None and self.positive_all(size, "workpiece.size", "side lengths > 0"):
-                shape = Rectangle(tuple(size))  # type: ignore[arg-type]
-        elif kind in ("sphere", "disk"):
-            radius = r.number(
-                t,
-                "radius",
-                "workpiece.radius",
-                required=True,
-                exclusive_minimum=0.0,
-                bounds=_SIZE,
-                what="a radius",
-                too_large=UNITS_HINT,
-            )
-            used.add("radius")
-            if radius is not None:
-                shape = Sphere(radius) if kind == "sphere" else Disk(radius)
-        elif kind == "cylinder":
-            radius = r.number(
-                t,
-                "radius",
-                "workpiece.radius",
-                required=True,
-                exclusive_minimum=0.0,
-                bounds=_SIZE,
-                what="a radius",
-                too_large=UNITS_HINT,
-            )
-            length = r.number(
-                t,
-                "length",
-                "workpiece.length",
-                required=True,
-                exclusive_minimum=0.0,
-                bounds=_SIZE,
-                what="a length",
-                too_large=UNITS_HINT,
-            )
-            used |= {"radius", "length"}
-            if radius is not None and length is not None:
-                shape = Cylinder(radius, length)
-        elif kind == "polygon":
-            used.add("vertices")
-            shape = self.polygon(t)
-        elif kind == "mesh":
-            used.add("file")
-            r.error("workpiece.shape", "mesh workpieces are not supported yet (expected box, cylinder or sphere)")
-        if kind is not None:
-            for key in t:
-                if key not in used and key in allowed:
-                    r.error(f"workpiece.{key}", f"not used by shape {kind!r} (remove it)")
-        mass = r.number(
-            t, "mass", "workpiece.mass", required=True, exclusive_minimum=0.0, bounds=limits.MASS, what="a mass [kg]"
-        )
-        inertia = self.inertia(t, dim)
-        start = self.pose(t, "start", dim, required=False) or Pose.identity(dim)
-        goal = self.pose(t, "goal", dim, required=False)
-        if shape is None or mass is None:
-            return None, start, goal
-        if inertia is not None and not self.check_inertia(inertia, shape, mass):
-            return None, start, goal
-        I_b = inertia if inertia is not None else shape.inertia_body(mass)
+            pose = _pose(e.pose, dim)
+            frame, half = (pose.R_world_body, pose.p_world), np.array(e.size) / 2.0
+        return Obstacle(e.name, e.shape, frame[0], frame[1], half, e.friction)
+
+    def check_obstacles(self, fixture: Fixture, goal: Pose | None) -> None:
+        """The part clear of every obstacle at the start and at the located pose (within the penetration tolerance)."""
+        if not fixture.obstacles:
+            return
+        wp, tol, dim = fixture.workpiece, self.tol, fixture.dimension
+        pts, radii = collision_points(wp.shape, DEFAULT_SETTINGS.engine.rim_points)
+        for ob in fixture.obstacles:
+            code = OBSTACLE_PLANE if ob.is_plane else OBSTACLE_BOX
+            for what, pose in (("start pose", fixture.start), ("located pose", goal)):
+                if pose is None:
+                    continue
+                gap = min(
+                    obstacle_gap(code, ob.R_world_obstacle, ob.o_world, ob.half_m, pose.point_world_from_body(b), rho)[
+                        0
+                    ]
+                    for b, rho in zip(pts, radii, strict=True)
+                )
+                if not ob.is_plane and isinstance(wp.shape, Box | Rectangle | Polygon):
+                    # a box part against a box: the separating-axis test (a plate through the part's middle)
+                    corners, _ = collision_points(
+                        Box(tuple(2 * ob.half_m)) if dim == 3 else Rectangle(tuple(2 * ob.half_m)), 0
+                    )  # type: ignore[arg-type]
+                    axes_b = ob.R_world_obstacle.T
+                    if isinstance(wp.shape, Polygon):
+                        E = np.roll(wp.shape.array, -1, axis=0) - wp.shape.array
+                        axes_a = (
+                            np.stack([E[:, 1], -E[:, 0]], axis=1)
+                            / np.linalg.norm(E, axis=1)[:, None]
+                            @ pose.R_world_body.T
+                        )
+                    else:
+                        axes_a = pose.R_world_body.T
+                    depth = polytope_overlap_m(
+                        pts @ pose.R_world_body.T + pose.p_world, axes_a, corners @ axes_b + ob.o_world, axes_b
+                    )
+                    gap = min(gap, -depth)
+                if gap < -tol.penetration_m:
+                    self.r.error(
+                        f"obstacle.{ob.name}",
+                        f"the part at its {what} is inside this collision-only body by {-gap:.3g} m (expected it clear: "
+                        "an obstacle never locates, so it must lie beyond the part where the locators hold it)",
+                    )
+
+    # -- workpiece ---------------------------------------------------------------------------
+    def workpiece(self, wp: fixture_schema.Workpiece, dim: int) -> Workpiece:
+        """The workpiece of a valid table; an inertia impossible for its shape and mass is an issue."""
+        shape: Shape
+        if wp.shape == "box":
+            shape = Box(wp.size)  # type: ignore[arg-type]
+        elif wp.shape == "rectangle":
+            shape = Rectangle(wp.size)  # type: ignore[arg-type]
+        elif wp.shape == "sphere":
+            shape = Sphere(wp.radius)  # type: ignore[arg-type]
+        elif wp.shape == "disk":
+            shape = Disk(wp.radius)  # type: ignore[arg-type]
+        elif wp.shape == "cylinder":
+            shape = Cylinder(wp.radius, wp.length)  # type: ignore[arg-type]
+        else:
+            shape = Polygon(wp.vertices)  # type: ignore[arg-type]
+        mass = wp.mass
+        if wp.inertia is None:
+            inertia = shape.inertia_body(mass)
+        else:
+            inertia = np.array([[wp.inertia]]) if dim == 2 else np.diag(wp.inertia)
+            self.check_inertia(inertia, shape, mass)
         self.check_density(shape, mass, dim)
-        return Workpiece(shape, mass, I_b, shape.com_body), start, goal
+        return Workpiece(shape, mass, inertia, shape.com_body)
 
     def check_inertia(self, inertia: FloatArray, shape: Shape, mass: float) -> bool:
         """A given inertia within what a rigid body of this shape and mass can have (see :mod:`fixplan.limits`)."""
@@ -446,390 +415,6 @@ class _Builder:
                     f"sizes are in metres; did you write {unit}?",
                 )
                 return
-
-    def positive_all(self, values: list[float], path: str, what: str) -> bool:
-        bad = [i for i, v in enumerate(values) if v <= 0]
-        for i in bad:
-            self.r.error(f"{path}[{i}]", f"got {values[i]:g} (expected {what})")
-        return not bad
-
-    def polygon(self, t: dict) -> Polygon | None:
-        r = self.r
-        if "vertices" not in t:
-            r.error("workpiece.vertices", "missing (expected a list of [x, y] vertices, counter-clockwise)")
-            return None
-        raw = t["vertices"]
-        if not isinstance(raw, list) or len(raw) < 3:
-            r.error("workpiece.vertices", "expected at least 3 [x, y] vertices, counter-clockwise")
-            return None
-        verts = []
-        for i, _ in enumerate(raw):
-            v = r.vector(
-                {"v": raw[i]}, "v", f"workpiece.vertices[{i}]", 2, required=True, dimension_hint=2, bounds=_VERTEX
-            )
-            if v is None:
-                return None
-            verts.append(v)
-        V = np.array(verts)
-        E = np.roll(V, -1, axis=0) - V
-        if np.any(np.linalg.norm(E, axis=1) <= 1e-12):
-            r.error("workpiece.vertices", "two consecutive vertices coincide (expected distinct vertices)")
-            return None
-        cross = E[:, 0] * np.roll(E, -1, axis=0)[:, 1] - E[:, 1] * np.roll(E, -1, axis=0)[:, 0]
-        if np.all(cross < 0):
-            r.error("workpiece.vertices", "vertices are clockwise (expected counter-clockwise)")
-            return None
-        if not np.all(cross > 0):
-            r.error(
-                "workpiece.vertices", "polygon is not strictly convex (expected a convex polygon, counter-clockwise)"
-            )
-            return None
-        extent = float(np.min(V.max(axis=0) - V.min(axis=0)))
-        if extent < _SIZE.low:
-            r.error("workpiece.vertices", f"the polygon is {extent:.3g} m across (expected a width {_SIZE.expected()})")
-            return None
-        return Polygon(tuple((float(v[0]), float(v[1])) for v in verts))
-
-    def inertia(self, t: dict, dim: int) -> FloatArray | None:
-        r = self.r
-        if "inertia" not in t:
-            return None
-        if dim == 2:
-            izz = r.number(t, "inertia", "workpiece.inertia", exclusive_minimum=0.0, what="Izz [kg·m²]")
-            return None if izz is None else np.array([[izz]])
-        vals = r.vector(
-            t, "inertia", "workpiece.inertia", 3, what="principal moments [Ixx, Iyy, Izz]", dimension_hint=3
-        )
-        if vals is None:
-            return None
-        a, b, c = vals
-        if min(vals) <= 0.0:
-            r.error("workpiece.inertia", f"got {vals} (expected a positive-definite inertia: every moment > 0)")
-            return None
-        if a + b < c or a + c < b or b + c < a:
-            r.error(
-                "workpiece.inertia",
-                f"got {vals} (expected moments satisfying the triangle inequality, as any rigid body does)",
-            )
-            return None
-        return np.diag(vals)
-
-    def pose(self, t: dict, key: str, dim: int, *, required: bool) -> Pose | None:
-        return self._pose_table(t, key, f"workpiece.{key}", dim, required=required)
-
-    def _pose_table(self, t: dict, key: str, path: str, dim: int, *, required: bool) -> Pose | None:
-        r = self.r
-        tab = r.table(t, key, path, required=required)
-        if tab is None:
-            return None
-        if dim == 3:
-            r.unknown_keys(tab, ("position", "rpy_deg"), path)
-            pos = r.vector(
-                tab, "position", f"{path}.position", 3, required=True, dimension_hint=3, bounds=limits.COORDINATE
-            )
-            rpy = r.vector(
-                tab, "rpy_deg", f"{path}.rpy_deg", 3, default=[0.0, 0.0, 0.0], dimension_hint=3, bounds=limits.ANGLE
-            )
-            if pos is None or rpy is None:
-                return None
-            return Pose.from_rpy_deg(pos, rpy)
-        r.unknown_keys(tab, ("position", "angle_deg"), path)
-        pos = r.vector(
-            tab, "position", f"{path}.position", 2, required=True, dimension_hint=2, bounds=limits.COORDINATE
-        )
-        ang = r.number(tab, "angle_deg", f"{path}.angle_deg", default=0.0, bounds=limits.ANGLE, what="an angle [deg]")
-        if pos is None or ang is None:
-            return None
-        return Pose.from_angle_deg(pos, ang)
-
-    # -- locators and contacts ------------------------------------------------------------------
-    def _entry_path(self, kind: str, entry: dict, index: int, seen: set[str]) -> tuple[str, str | None]:
-        """``locator.NAME`` for an entry with a valid name (even a duplicate), else ``locator[INDEX]``."""
-        name = entry.get("name")
-        if isinstance(name, str) and NAME_PATTERN.fullmatch(name):
-            return f"{kind}.{name}", name
-        return f"{kind}[{index}]", None
-
-    def locators(self, dim: int, workpiece: Workpiece | None) -> list[Locator]:
-        r = self.r
-        out: list[Locator] = []
-        seen: set[str] = set()
-        for i, entry in enumerate(r.tables(self.data, "locator", "locator")):
-            path, _ = self._entry_path("locator", entry, i, seen)
-            r.unknown_keys(entry, ("name", "position", "radius", "friction", "torsion", "face"), path)
-            name = self._name(entry, path, seen)
-            pos = r.vector(
-                entry, "position", f"{path}.position", dim, required=True, dimension_hint=dim, bounds=limits.COORDINATE
-            )
-            radius = r.number(
-                entry,
-                "radius",
-                f"{path}.radius",
-                default=0.0,
-                minimum=0.0,
-                bounds=limits.TIP_RADIUS,
-                what="a tip radius [m]",
-            )
-            mu = r.number(
-                entry,
-                "friction",
-                f"{path}.friction",
-                required=True,
-                minimum=0.0,
-                bounds=limits.FRICTION,
-                what="a friction coefficient",
-            )
-            torsion = self._torsion(entry, path, dim)
-            face = None
-            if "face" in entry:
-                kind = workpiece.shape.name if workpiece is not None else None
-                faces = FACES.get(kind or "", ())
-                if kind is not None and not faces:
-                    r.error(f"{path}.face", f"shape {kind!r} has no named faces (expected no face hint)")
-                elif kind is not None:
-                    face = r.string(entry, "face", f"{path}.face", choices=faces)
-            if None in (name, pos, radius, mu, torsion):
-                continue
-            out.append(Locator(name, np.array(pos), radius, mu, torsion, face))  # type: ignore[arg-type]
-        return out
-
-    def _name(self, entry: dict, path: str, seen: set[str]) -> str | None:
-        name = entry.get("name")
-        if name is None:
-            self.r.error(f"{path}.name", "missing (expected a unique name)")
-            return None
-        if not isinstance(name, str) or not name.strip():
-            self.r.error(f"{path}.name", "expected a non-empty string")
-            return None
-        if not NAME_PATTERN.fullmatch(name):
-            self.r.error(f"{path}.name", f"got {shorten(name)} (expected {NAME_RULE})")
-            return None
-        if name in seen:
-            self.r.error(f"{path}.name", f"{name!r} is used twice (expected unique names)")
-            return None
-        seen.add(name)
-        self.all_names.add(name)
-        return name
-
-    @cached_property
-    def all_names(self) -> set[str]:
-        return set()
-
-    def _torsion(self, entry: dict, path: str, dim: int) -> float | None:
-        if "torsion" not in entry:
-            return 0.0
-        if dim == 2:
-            self.r.error(f"{path}.torsion", "torsional friction is 3D only (remove it in a 2D scene)")
-            return None
-        return self.r.number(
-            entry, "torsion", f"{path}.torsion", minimum=0.0, bounds=limits.TORSION, what="a torsional radius [m]"
-        )
-
-    def explicit_contacts(self, dim: int) -> list[ExplicitContact]:
-        r = self.r
-        out: list[ExplicitContact] = []
-        seen = set(self.all_names)
-        for i, entry in enumerate(r.tables(self.data, "contact", "contact")):
-            path, _ = self._entry_path("contact", entry, i, seen)
-            r.unknown_keys(entry, ("name", "point", "normal", "friction", "torsion"), path)
-            name = self._name(entry, path, seen)
-            point = r.vector(
-                entry, "point", f"{path}.point", dim, required=True, dimension_hint=dim, bounds=limits.COORDINATE
-            )
-            normal = r.vector(entry, "normal", f"{path}.normal", dim, required=True, dimension_hint=dim)
-            if normal is not None:
-                scale = float(np.max(np.abs(normal)))  # normalised in two steps: [1e300, 1e300] does not overflow
-                if scale <= 1e-12 or not np.isfinite(np.linalg.norm(np.array(normal) / scale)):
-                    r.error(f"{path}.normal", "got a zero vector (expected a direction)")
-                    normal = None
-                else:
-                    normal = list(np.array(normal) / scale)
-            mu = r.number(
-                entry,
-                "friction",
-                f"{path}.friction",
-                required=True,
-                minimum=0.0,
-                bounds=limits.FRICTION,
-                what="a friction coefficient",
-            )
-            torsion = self._torsion(entry, path, dim)
-            if name is None or point is None or normal is None or mu is None or torsion is None:
-                continue
-            n = np.array(normal) / np.linalg.norm(normal)
-            out.append(ExplicitContact(name, np.array(point), n, mu, torsion))  # type: ignore[arg-type]
-        return out
-
-    def obstacles(self, dim: int) -> list[Obstacle]:
-        """``[[obstacle]]``: collision-only bodies (a floor plane, a base plate box; 2D: line, rectangle)."""
-        r = self.r
-        out: list[Obstacle] = []
-        seen = set(self.all_names)
-        entries = r.tables(self.data, "obstacle", "obstacle")
-        if len(entries) > limits.MAX_ENTRIES:
-            r.error("obstacle", f"{len(entries)} [[obstacle]] entries (expected at most {limits.MAX_ENTRIES})")
-            return out
-        plane, box = OBSTACLE_SHAPES[dim]
-        for i, entry in enumerate(entries):
-            path, _ = self._entry_path("obstacle", entry, i, seen)
-            kind = entry.get("shape")
-            if kind == "mesh":
-                r.error(f"{path}.shape", "mesh obstacles come later, with CAD meshes (expected plane or box for now)")
-                continue
-            r.unknown_keys(entry, ("name", "shape", "point", "normal", "size", "pose", "friction"), path)
-            name = self._name(entry, path, seen)
-            kind = r.string(entry, "shape", f"{path}.shape", required=True, choices=(plane, box))
-            mu = r.number(
-                entry, "friction", f"{path}.friction", default=OBSTACLE_FRICTION, minimum=0.0,
-                bounds=limits.FRICTION, what="a friction coefficient",
-            )  # fmt: skip
-            for key in ("size", "pose") if kind == plane else ("point", "normal") if kind == box else ():
-                if key in entry:
-                    r.error(
-                        f"{path}.{key}",
-                        f"not a key of a {kind} (expected {'point, normal' if kind == plane else 'size, pose'})",
-                    )
-            frame = None
-            half = np.zeros(0)
-            if kind == plane:
-                point = r.vector(
-                    entry, "point", f"{path}.point", dim, required=True, dimension_hint=dim, bounds=limits.COORDINATE
-                )
-                normal = r.vector(
-                    entry, "normal", f"{path}.normal", dim, required=True, dimension_hint=dim, bounds=limits.NORMAL
-                )
-                if normal is not None:
-                    scale = float(np.max(np.abs(normal)))
-                    if scale <= 1e-12:
-                        r.error(f"{path}.normal", "got a zero vector (expected the direction of the free side)")
-                        normal = None
-                if point is not None and normal is not None:
-                    frame = plane_frame(np.array(point), np.array(normal) / scale)
-            elif kind == box:
-                size = r.vector(
-                    entry,
-                    "size",
-                    f"{path}.size",
-                    dim,
-                    required=True,
-                    dimension_hint=dim,
-                    bounds=_SIZE,
-                    too_large=UNITS_HINT,
-                )
-                pose = self._pose_table(entry, "pose", f"{path}.pose", dim, required=True)
-                if size is not None and pose is not None:
-                    frame, half = (pose.R_world_body, pose.p_world), np.array(size) / 2.0
-            if name is None or mu is None or frame is None or kind is None:
-                continue
-            out.append(Obstacle(name, kind, frame[0], frame[1], half, mu))
-        return out
-
-    def check_obstacles(self, fixture: Fixture, goal: Pose | None) -> None:
-        """The part clear of every obstacle at the start and at the located pose (within the penetration tolerance)."""
-        if not fixture.obstacles:
-            return
-        wp, tol, dim = fixture.workpiece, self.tol, fixture.dimension
-        pts, radii = collision_points(wp.shape, DEFAULT_SETTINGS.engine.rim_points)
-        for ob in fixture.obstacles:
-            code = OBSTACLE_PLANE if ob.is_plane else OBSTACLE_BOX
-            for what, pose in (("start pose", fixture.start), ("located pose", goal)):
-                if pose is None:
-                    continue
-                gap = min(
-                    obstacle_gap(code, ob.R_world_obstacle, ob.o_world, ob.half_m, pose.point_world_from_body(b), rho)[
-                        0
-                    ]
-                    for b, rho in zip(pts, radii, strict=True)
-                )
-                if not ob.is_plane and isinstance(wp.shape, Box | Rectangle | Polygon):
-                    # a box part against a box: the separating-axis test (a plate through the part's middle)
-                    corners, _ = collision_points(
-                        Box(tuple(2 * ob.half_m)) if dim == 3 else Rectangle(tuple(2 * ob.half_m)), 0
-                    )  # type: ignore[arg-type]
-                    axes_b = ob.R_world_obstacle.T
-                    if isinstance(wp.shape, Polygon):
-                        E = np.roll(wp.shape.array, -1, axis=0) - wp.shape.array
-                        axes_a = (
-                            np.stack([E[:, 1], -E[:, 0]], axis=1)
-                            / np.linalg.norm(E, axis=1)[:, None]
-                            @ pose.R_world_body.T
-                        )
-                    else:
-                        axes_a = pose.R_world_body.T
-                    depth = polytope_overlap_m(
-                        pts @ pose.R_world_body.T + pose.p_world, axes_a, corners @ axes_b + ob.o_world, axes_b
-                    )
-                    gap = min(gap, -depth)
-                if gap < -tol.penetration_m:
-                    self.r.error(
-                        f"obstacle.{ob.name}",
-                        f"the part at its {what} is inside this collision-only body by {-gap:.3g} m (expected it clear: "
-                        "an obstacle never locates, so it must lie beyond the part where the locators hold it)",
-                    )
-
-    def manipulator(self) -> Manipulator:
-        r = self.r
-        t = r.table(self.data, "manipulator", "manipulator", required=False)
-        if t is None:
-            return Manipulator()
-        r.unknown_keys(t, ("max_force", "max_torque"), "manipulator")
-        f = r.number(
-            t,
-            "max_force",
-            "manipulator.max_force",
-            default=float("inf"),
-            exclusive_minimum=0.0,
-            bounds=limits.MAX_FORCE,
-            what="a force [N]",
-        )
-        m = r.number(
-            t,
-            "max_torque",
-            "manipulator.max_torque",
-            default=float("inf"),
-            exclusive_minimum=0.0,
-            bounds=limits.MAX_TORQUE,
-            what="a torque [N·m]",
-        )
-        return Manipulator(f if f is not None else float("inf"), m if m is not None else float("inf"))
-
-    def simulation(self) -> SimulationSettings:
-        r = self.r
-        t = r.table(self.data, "simulation", "simulation", required=False)
-        if t is None:
-            return SimulationSettings()
-        r.unknown_keys(t, ("timestep", "restitution", "tolerance"), "simulation")
-        h = r.number(
-            t,
-            "timestep",
-            "simulation.timestep",
-            default=1e-3,
-            exclusive_minimum=0.0,
-            maximum=1.0,
-            bounds=limits.TIMESTEP,
-            what="a time step [s]",
-        )
-        e = r.number(
-            t,
-            "restitution",
-            "simulation.restitution",
-            default=0.0,
-            minimum=0.0,
-            maximum=1.0,
-            bounds=limits.RESTITUTION,
-            what="a restitution coefficient",
-        )
-        tol = r.number(
-            t,
-            "tolerance",
-            "simulation.tolerance",
-            default=1e-8,
-            exclusive_minimum=0.0,
-            maximum=1.0,
-            bounds=limits.SOLVER_TOLERANCE,
-            what="a solver tolerance",
-        )
-        return SimulationSettings(h or 1e-3, e or 0.0, tol or 1e-8)
 
     # -- checks that need the whole model -------------------------------------------------------------
     def check_geometry(self, fixture: Fixture) -> Pose | None:
@@ -897,3 +482,39 @@ class _Builder:
         if not search.face_mismatches:
             r.error("locator", search.message)
         return None
+
+
+_PER_DIMENSION = ("workpiece", "locator", "contact")  # tables whose keys need the scene's dimension
+
+
+def _dimension_of(data: dict[str, Any]) -> int | None:
+    """``scene.dimension`` (3 when absent), None when it is not 2 or 3 (the schema says so)."""
+    scene = data.get("scene")
+    if not isinstance(scene, dict) or "dimension" not in scene:
+        return 3
+    dim = scene["dimension"]
+    return dim if type(dim) is int and dim in (2, 3) else None
+
+
+def _shape_of(data: dict[str, Any], dim: int | None) -> str | None:
+    """``workpiece.shape`` when it is a shape of the scene's dimension (locator faces are checked against it)."""
+    wp = data.get("workpiece")
+    kind = wp.get("shape") if isinstance(wp, dict) else None
+    return kind if kind in (SHAPES_3D if dim == 3 else SHAPES_2D) else None
+
+
+def _pose(pose: fixture_schema.Pose, dim: int) -> Pose:
+    if dim == 3:
+        return Pose.from_rpy_deg(list(pose.position), list(pose.rpy_deg))
+    return Pose.from_angle_deg(list(pose.position), pose.angle_deg)
+
+
+def _unit(v: tuple[float, ...]) -> FloatArray:
+    """``v`` normalised in two steps (``[1e300, 1e300]`` does not overflow)."""
+    a = np.array(v, dtype=float)
+    a = a / np.max(np.abs(a))
+    return a / np.linalg.norm(a)
+
+
+def _or_inf(x: float | None) -> float:
+    return float("inf") if x is None else x

@@ -33,7 +33,21 @@ _LAYER_LIST: list[tuple[str, list[str]]] = [
     # shapes and their distances
     ("geometry", ["geometry"]),
     # the fixture file -> validated model; contact frames, Jacobians; locators touching
-    ("model", ["schema", "model", "fixture", "kinematics", "locating", "limits", "files", "summary", "twins"]),
+    (
+        "model",
+        [
+            "schema",
+            "fixture_schema",
+            "model",
+            "fixture",
+            "kinematics",
+            "locating",
+            "limits",
+            "files",
+            "summary",
+            "twins",
+        ],
+    ),
     # the contact dynamics engine and the jamming cone programs: physics, no planning
     ("mechanics", ["engine", "simulator", "jamming"]),
     # the planner (coarse, fine, executor, verification) and the simulated haptic rig it runs in

@@ -1,4 +1,4 @@
-"""Tools beside the planner: fclib (solve an FCLib problem), generate (seeded random fixtures)."""
+"""Tools beside the planner: fclib (solve an FCLib problem), generate (seeded random fixtures), schema."""
 
 from __future__ import annotations
 
@@ -151,3 +151,27 @@ def generate(
         typer.echo(
             f"wrote {count} {family} fixtures (seed {seed}){where} to {out}: {targets[0].name} .. {targets[-1].name}"
         )
+
+
+@app.command()
+def schema(
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="Write the schema to this file (docs/fixture.schema.json is the shipped copy)."),
+    ] = None,
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing file.")] = False,
+) -> None:
+    """Print the JSON Schema of fixture files (draft-07), for TOML editors (Taplo, Even Better TOML) and tools.
+
+    Every key with its type, unit, range, default and description, as fixplan validate reads it;
+    checks of the whole fixture (a locator inside the part, goal finding) are validate's alone.
+    """
+    from fixplan.fixture_schema import schema_text
+
+    text = schema_text()
+    if out is None:
+        typer.echo(text, nl=False)
+        return
+    _writable(out, force)
+    write_text(out, text)
+    typer.echo(f"wrote {out}")
