@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install precompile demo test fuzz bench lint gallery clean
+.PHONY: install precompile demo test fuzz bench lint gallery gallery-notebooks lab clean
 
 install: $(STAMP)
 
@@ -67,6 +67,19 @@ gallery: install
 	cp out/gallery/plan.png docs/gallery/plan.png
 	@# fixplan haptic: a scripted gizmo session and a jammed push, photographed in headless Chromium
 	$(BIN)/python -m fixplan.interactive.gallery docs/gallery
+	$(MAKE) gallery-notebooks
+
+# The notebooks run in place, in full mode, with their outputs (text and PNG figures) stored, so
+# that GitHub and a reader see the plots; volatile metadata is dropped so that re-running gives
+# small diffs (tools/notebooks.py says what changes). `make test` runs them again without writing.
+gallery-notebooks: install
+	$(BIN)/python tools/notebooks.py
+
+# JupyterLab on notebooks/, for this checkout's fixplan (editable install). It listens on
+# 127.0.0.1 only and keeps Jupyter's token: open the URL with the token that it prints. As root
+# (a container) Jupyter refuses to start unless told --allow-root, which changes nothing else.
+lab: install
+	$(BIN)/jupyter lab --ServerApp.ip=127.0.0.1 --ServerApp.root_dir=notebooks $$([ "$$(id -u)" = 0 ] && echo --allow-root)
 
 lint: install
 	$(BIN)/ruff check fixplan tests benchmarks tools
