@@ -41,8 +41,13 @@ demo: install
 	$(BIN)/fixplan classify --wrenches fixplan/data/demo_wrenches.csv
 	$(BIN)/fixplan map --axes Fx,Tz --range -10:10,-1:1 --n 40 --out out/demo-map.png --force
 
+# The suite runs in parallel processes (pytest-xdist), one per core up to four (TEST_WORKERS=1 for
+# one): its time goes to single-threaded numerics and to waiting on subprocesses. --dist loadfile
+# keeps each test file in one process, so that its module-scoped fixtures are built once.
+TEST_WORKERS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); [ "$$n" -gt 4 ] && n=4; echo $$n)
+
 test: install
-	$(BIN)/python -m pytest -q --durations=15 tests
+	$(BIN)/python -m pytest -q --durations=15 -n $(TEST_WORKERS) --dist loadfile tests
 	FIXPLAN_SHORT=1 MPLBACKEND=Agg $(BIN)/python -m pytest -q --nbmake notebooks
 
 # The fuzz suite's long budget (tests/fuzz; `make test` runs a short derandomized one): 20x the
