@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install precompile demo test fuzz bench lint gallery clean
+.PHONY: install precompile demo test fuzz bench lint gallery gallery-notebooks lab clean
 
 install: $(STAMP)
 
@@ -41,8 +41,13 @@ demo: install
 	$(BIN)/fixplan classify --wrenches fixplan/data/demo_wrenches.csv
 	$(BIN)/fixplan map --axes Fx,Tz --range -10:10,-1:1 --n 40 --out out/demo-map.png --force
 
+# The suite runs in parallel processes (pytest-xdist), one per core up to four (TEST_WORKERS=1 for
+# one): its time goes to single-threaded numerics and to waiting on subprocesses. --dist loadfile
+# keeps each test file in one process, so that its module-scoped fixtures are built once.
+TEST_WORKERS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); [ "$$n" -gt 4 ] && n=4; echo $$n)
+
 test: install
-	$(BIN)/python -m pytest -q --durations=15 tests
+	$(BIN)/python -m pytest -q --durations=15 -n $(TEST_WORKERS) --dist loadfile tests
 	FIXPLAN_SHORT=1 MPLBACKEND=Agg $(BIN)/python -m pytest -q --nbmake notebooks
 
 # The fuzz suite's long budget (tests/fuzz; `make test` runs a short derandomized one): 20x the
@@ -67,6 +72,19 @@ gallery: install
 	cp out/gallery/plan.png docs/gallery/plan.png
 	@# fixplan haptic: a scripted gizmo session and a jammed push, photographed in headless Chromium
 	$(BIN)/python -m fixplan.interactive.gallery docs/gallery
+	$(MAKE) gallery-notebooks
+
+# The notebooks run in place, in full mode, with their outputs (text and PNG figures) stored, so
+# that GitHub and a reader see the plots; volatile metadata is dropped so that re-running gives
+# small diffs (tools/notebooks.py says what changes). `make test` runs them again without writing.
+gallery-notebooks: install
+	$(BIN)/python tools/notebooks.py
+
+# JupyterLab on notebooks/, for this checkout's fixplan (editable install). It listens on
+# 127.0.0.1 only and keeps Jupyter's token: open the URL with the token that it prints. As root
+# (a container) Jupyter refuses to start unless told --allow-root, which changes nothing else.
+lab: install
+	$(BIN)/jupyter lab --ServerApp.ip=127.0.0.1 --ServerApp.root_dir=notebooks $$([ "$$(id -u)" = 0 ] && echo --allow-root)
 
 lint: install
 	$(BIN)/ruff check fixplan tests benchmarks tools

@@ -79,6 +79,33 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(0)
 
 
+# -- plans solved once per session ---------------------------------------------------------------
+# Several modules read the same plans; each is solved once for the whole run (a verified solve of
+# the default box takes seconds) instead of once per module or per test. The tests only read them;
+# a test that edits a plan's JSON edits its own copy.
+@pytest.fixture(scope="session")
+def default_fixture() -> fixplan.Fixture:
+    return fixplan.load(fixplan.default_fixture_path())
+
+
+@pytest.fixture(scope="session")
+def default_plan(default_fixture: fixplan.Fixture):  # -> PlanResult
+    """``fixplan.solve`` of the default box, verified in the simulated haptic loop."""
+    return fixplan.solve(default_fixture)
+
+
+@pytest.fixture(scope="session")
+def default_plan_unverified(default_fixture: fixplan.Fixture):  # -> PlanResult
+    """``fixplan.solve(..., run_verification=False)`` of the default box."""
+    return fixplan.solve(default_fixture, run_verification=False)
+
+
+@pytest.fixture(scope="session")
+def jams_plan():  # -> PlanResult
+    """``fixplan.solve`` of ``problems/naive-order-jams.toml`` (2D, on B1 alone), verified."""
+    return fixplan.solve(fixplan.load(PROBLEMS / "naive-order-jams.toml"))
+
+
 @pytest.fixture(scope="session")
 def shared_dir() -> Path:
     """The ../shared folder beside the checkout; tests that need it skip without it."""

@@ -37,9 +37,9 @@ def plate():
 
 
 @pytest.fixture(scope="module")
-def plate_result(plate):
-    """A 2D plan with a roll and a slide, verified in the haptic loop."""
-    result = solve(plate)
+def plate_result(jams_plan):
+    """A 2D plan with a roll and a slide, verified in the haptic loop (``plate``'s)."""
+    result = jams_plan
     assert result.ok and result.transitions, result.reason
     return result
 

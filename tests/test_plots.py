@@ -35,8 +35,8 @@ def fixture():
 
 
 @pytest.fixture(scope="module")
-def verified(fixture):
-    result = solve(fixture)
+def verified(jams_plan):
+    result = jams_plan  # solve(fixture), shared with other modules
     assert result.ok and result.verification is not None and result.verification.trace is not None
     return result
 

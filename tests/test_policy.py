@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import json
 import re
 
 import numpy as np
@@ -110,8 +111,8 @@ def test_pre_image_pushes_move_the_part(box, box_policy):
         assert c.mode not in ("held", "jammed"), (e.state, e.target, c.mode)
 
 
-def test_the_policy_round_trips_through_the_plan_file(box):
-    r = solve(box, run_verification=False)
+def test_the_policy_round_trips_through_the_plan_file(default_plan_unverified):
+    r = default_plan_unverified
     data = r.to_json()
     assert data["coverage"]["fraction"] == 1.0 and len(data["policy"]) == 63
     again = Plan.from_json(data)
@@ -207,12 +208,12 @@ def test_a_part_starting_in_free_space_is_loaded(path, position, rpy, angle):
     assert min(heights) >= fx.goal.p_world[-1] - 0.01
 
 
-def test_a_plan_files_policy_naming_unknown_locators_is_refused(box):
+def test_a_plan_files_policy_naming_unknown_locators_is_refused(box, default_plan_unverified):
     """A policy entry is checked against the fixture like the transitions: bad input, not a crash."""
     from fixplan.errors import InputError
     from fixplan.planner.plan import plan_for_fixture
 
-    data = solve(box, run_verification=False).to_json()
+    data = json.loads(json.dumps(default_plan_unverified.to_json()))  # a copy: the plan is shared
     data["policy"][2]["target"] = "ZZ"
     with pytest.raises(InputError, match="names locators ZZ"):
         plan_for_fixture(data, box, "plan.json")

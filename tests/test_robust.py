@@ -126,11 +126,11 @@ def test_bad_settings_are_refused():
 
 
 # -- verdicts --------------------------------------------------------------------------------------
-def test_zero_uncertainty_verifies_exactly_like_solve():
-    from fixplan.planner.solve import plan_steps, solve
+def test_zero_uncertainty_verifies_exactly_like_solve(jams_plan):
+    from fixplan.planner.solve import plan_steps
 
     fx = load(JAMS)
-    nominal = solve(fx)
+    nominal = jams_plan  # solve(fx)
     zero = RobustSettings(mu_spread=0, pose_sigma_m=0, pose_sigma_deg=0, locator_sigma_m=0, force_noise=0, latency_s=0)
     steps = plan_steps(nominal.transitions)
     v = verify_sample(fx, frozenset({"B1"}), steps, 0, zero)

@@ -10,11 +10,6 @@ import fixplan
 from fixplan.planner.solve import Planner, solve
 
 
-@pytest.fixture(scope="module")
-def default_plan():
-    return solve(fixplan.load(fixplan.default_fixture_path()))
-
-
 def test_default_fixture_plans_and_verifies(default_plan):
     r = default_plan
     assert r.status == "planned" and r.ok, r.reason

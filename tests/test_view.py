@@ -30,9 +30,9 @@ def box():
 
 
 @pytest.fixture(scope="module")
-def solved_plan(box, tmp_path_factory):
+def solved_plan(default_plan, tmp_path_factory):
     """A real plan of the default box with its verification trace, written like 'fixplan solve --out'."""
-    result = fixplan.solve(box)
+    result = default_plan
     assert result.ok, result.reason
     path = tmp_path_factory.mktemp("plan") / "plan.json"
     path.write_text(json.dumps(result.to_json()))
