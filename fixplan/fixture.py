@@ -280,9 +280,11 @@ class _Builder:
     def obstacle(self, e: fixture_schema.Obstacle, dim: int) -> Obstacle:
         """``[[obstacle]]`` of a valid table: a plane (line) or a box (rectangle) in the world."""
         if e.shape == fixture_schema.OBSTACLE_SHAPES[dim][0]:
+            assert e.point is not None and e.normal is not None  # noqa: S101 - the table's rules require them
             frame = plane_frame(np.array(e.point), _unit(e.normal))
             half = np.zeros(0)
         else:
+            assert e.pose is not None and e.size is not None  # noqa: S101 - the table's rules require them
             pose = _pose(e.pose, dim)
             frame, half = (pose.R_world_body, pose.p_world), np.array(e.size) / 2.0
         return Obstacle(e.name, e.shape, frame[0], frame[1], half, e.friction)
