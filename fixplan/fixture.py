@@ -218,7 +218,8 @@ class _Builder:
         if doc is not None and not doc.locator and not doc.contact and not r.issues:
             r.error("locator", "no [[locator]] or [[contact]] entries (expected at least one)")
         self.fail_if_issues()
-        assert doc is not None  # noqa: S101 - no issues means the document was read
+        if doc is None:  # no issue and no document: a reader fault, still one line and exit 2
+            raise FixtureError(self.source, [Issue("", "the file could not be read as a fixture (no issue was found)")])
         workpiece = self.workpiece(doc.workpiece, dim)
         self.fail_if_issues()
         scene, wp = doc.scene, doc.workpiece
@@ -279,13 +280,16 @@ class _Builder:
     # -- obstacles ---------------------------------------------------------------------------
     def obstacle(self, e: fixture_schema.Obstacle, dim: int) -> Obstacle:
         """``[[obstacle]]`` of a valid table: a plane (line) or a box (rectangle) in the world."""
-        if e.shape == fixture_schema.OBSTACLE_SHAPES[dim][0]:
-            assert e.point is not None and e.normal is not None  # noqa: S101 - the table's rules require them
-            frame = plane_frame(np.array(e.point), _unit(e.normal))
+        plane = e.shape == fixture_schema.OBSTACLE_SHAPES[dim][0]
+        if (e.point is None or e.normal is None) if plane else (e.pose is None or e.size is None):
+            # the table's rules require these keys; a model built otherwise is refused the same way
+            need = "point and normal" if plane else "size and pose"
+            raise FixtureError(self.source, [Issue(f"obstacle.{e.name}", f"a {e.shape} needs {need}")])
+        if plane:
+            frame = plane_frame(np.array(e.point), _unit(e.normal))  # type: ignore[arg-type]
             half = np.zeros(0)
         else:
-            assert e.pose is not None and e.size is not None  # noqa: S101 - the table's rules require them
-            pose = _pose(e.pose, dim)
+            pose = _pose(e.pose, dim)  # type: ignore[arg-type]
             frame, half = (pose.R_world_body, pose.p_world), np.array(e.size) / 2.0
         return Obstacle(e.name, e.shape, frame[0], frame[1], half, e.friction)
 

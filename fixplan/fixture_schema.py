@@ -30,6 +30,7 @@ import math
 import os
 import re
 import sys
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from typing import Annotated, Any, ClassVar, NoReturn
@@ -82,7 +83,7 @@ def _unit(bounds: Range | None) -> dict[str, Any]:
 
 
 # -- one key's value: the types a field is annotated with ------------------------------------------
-class Value:
+class Value(ABC):
     """What a key holds: its check (with the message's words) and its JSON Schema.
 
     ``dimension`` limits the key to 2D or 3D scenes; in the other one it is an unknown key, or
@@ -92,24 +93,33 @@ class Value:
     dimension: int | None = None
     other_dimension: str | None = None
 
+    @abstractmethod
     def expected(self, dim: int | None) -> str:
         """The words after "missing (expected ...)"."""
-        raise NotImplementedError
 
-    def check(self, value: Any, info: ValidationInfo) -> Any:
-        raise NotImplementedError
-
+    @abstractmethod
     def schema(self) -> dict[str, Any]:
-        raise NotImplementedError
-
-    def __get_pydantic_core_schema__(self, source: Any, handler: Any) -> core_schema.CoreSchema:
-        return core_schema.with_info_plain_validator_function(self.check)
+        """The key's JSON Schema."""
 
     def __get_pydantic_json_schema__(self, schema: Any, handler: Any) -> dict[str, Any]:
         return self.schema()
 
 
-class Number(Value):
+class PlainValue(Value):
+    """A value read by one function of the raw TOML value (:meth:`check`).
+
+    The other values (vectors, vertex lists, inertia) wrap pydantic's own validation in their core schema.
+    """
+
+    @abstractmethod
+    def check(self, value: Any, info: ValidationInfo) -> Any:
+        """The value as read, or a validation error with the message's words."""
+
+    def __get_pydantic_core_schema__(self, source: Any, handler: Any) -> core_schema.CoreSchema:
+        return core_schema.with_info_plain_validator_function(self.check)
+
+
+class Number(PlainValue):
     """A finite number; ``bounds`` its valid range and unit, ``too_large`` a hint when above it."""
 
     def __init__(
@@ -237,7 +247,7 @@ class Direction(Vector):
         return super().schema() | {"items": finite, "not": {"items": {"const": 0}}}
 
 
-class Integer(Value):
+class Integer(PlainValue):
     """One of a few integers (``format = 1``, ``dimension = 2 | 3``)."""
 
     def __init__(self, allowed: tuple[int, ...]):
@@ -255,7 +265,7 @@ class Integer(Value):
         return {"type": "integer", "enum": list(self.allowed)}
 
 
-class Text(Value):
+class Text(PlainValue):
     """A non-empty string, one of ``choices`` when given."""
 
     def __init__(self, choices: tuple[str, ...] | None = None, *, what: str = "a string"):
@@ -290,7 +300,7 @@ class SceneName(Text):
         return super().schema() | {"maxLength": MAX_SCENE_NAME}
 
 
-class Name(Value):
+class Name(PlainValue):
     """A locator's or contact's name: it appears in messages, CSV headers and ``--contacts A,B``."""
 
     def expected(self, dim: int | None) -> str:
@@ -312,7 +322,7 @@ def is_name(value: Any) -> bool:
     return isinstance(value, str) and _NAME.fullmatch(value) is not None
 
 
-class ShapeName(Value):
+class ShapeName(PlainValue):
     """``workpiece.shape``: one of the shapes of the scene's dimension."""
 
     def expected(self, dim: int | None) -> str:
@@ -332,7 +342,7 @@ class ShapeName(Value):
         return {"type": "string", "enum": [*SHAPES_3D, *SHAPES_2D]}
 
 
-class Face(Value):
+class Face(PlainValue):
     """A locator's face hint: a face of the workpiece's shape."""
 
     def expected(self, dim: int | None) -> str:
@@ -663,7 +673,7 @@ OBSTACLE_SHAPES = {3: ("plane", "box"), 2: ("line", "rectangle")}
 OBSTACLE_FRICTION = 0.3  # an [[obstacle]] without friction: a steel plate, dry
 
 
-class ObstacleShape(Value):
+class ObstacleShape(PlainValue):
     """``obstacle.shape``: a plane or a box (2D: a line or a rectangle); meshes come later."""
 
     def expected(self, dim: int | None) -> str:
