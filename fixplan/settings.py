@@ -299,6 +299,11 @@ class PlannerSettings:
         dearer (tried after the others, never dropped).
     precheck_floor : float
         ... and at least this much dearer, so that a transition guessed free is postponed too.
+    carry_cost : float
+        A transition's mass-weighted length is priced ``1 + carry_cost × f``, with ``f`` the share
+        of gravity its kept contacts' normals cannot carry at its start (1 in free space or on
+        walls, 0 on a seated base): the search seats the part on what holds its weight first
+        where paths are otherwise alike. 0 prices length alone.
     compliant_step_rel : float
         A compliant initial guess (:mod:`fixplan.planner.fine`'s ladder) moves at most this
         fraction of the part's bounding radius per step (mass-weighted) before settling its
@@ -329,6 +334,7 @@ class PlannerSettings:
     cost_slack: float = 1.5
     lazy_slack: float = 1.0
     precheck_penalty: float = 100.0
+    carry_cost: float = 1.0
     precheck_floor: float = 1e-6
     compliant_step_rel: float = 0.05
     compliant_max_steps: int = 200
@@ -380,6 +386,10 @@ class SearchSettings:
         first (the coupling's transients, tracking errors and noise then stay within the hand);
         only where no non-jamming push exists inside it does the search use the whole limits, and
         it says so. 1 disables the headroom.
+    headroom_margin_gain : float
+        Where the margin found within ``limit_fraction`` stays below the weight m|g| (or the
+        margin asked for), the whole limits are tried as well; their push is kept when it presses
+        the kept contacts this many times harder (or reaches the weight).
     """
 
     jam_margin_rel: float = 1e-3
@@ -393,6 +403,7 @@ class SearchSettings:
     off_axis_rel: float = 1e-4
     unbounded_factor: float = 1e3
     limit_fraction: float = 0.8
+    headroom_margin_gain: float = 1.5
 
 
 @dataclass(frozen=True)

@@ -534,6 +534,17 @@ def search_wrench_in(
     prog, meta = _build(**build, cert=y, F_max=F_lim, T_max=T_lim)  # type: ignore[arg-type]
     sol = ClarabelProgram(prog).solve(prog.b)
     within = bool(sol.solved and -sol.value > _SEARCH.found_rel * F_max)
+    # the headroom must not cost the contacts their hold: where the margin inside the fraction
+    # stays below the weight m|g| (or the target asked for), the whole limits are tried too and
+    # kept when they press the kept contacts clearly harder
+    weight_N = wp.mass_kg * g if target is None else target
+    tau_within = float(-sol.value) if within else 0.0
+    lifted = False
+    if within and frac < 1.0 and tau_within < weight_N * (1 - _TARGET_REL):
+        prog_f, meta_f = _build(**build, cert=y, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
+        sol_f = ClarabelProgram(prog_f).solve(prog_f.b)
+        if sol_f.solved and -sol_f.value > min(tau_within * _SEARCH.headroom_margin_gain, weight_N):
+            prog, meta, sol, F_lim, T_lim, lifted = prog_f, meta_f, sol_f, F_max, T_max, True
     if not within and frac < 1.0:
         F_lim, T_lim = F_max, T_max
         prog, meta = _build(**build, cert=y, F_max=F_lim, T_max=T_lim)  # type: ignore[arg-type]
@@ -589,6 +600,9 @@ def search_wrench_in(
         binding.append("max_torque")
     if not within and frac < 1.0:
         notes += _beyond_fraction(w_user, cs.dimension, F_max, T_max, frac)
+    elif lifted:
+        notes += _lifted_fraction(w_user, cs.dimension, F_max, T_max, frac, tau_within)
+        within = False
 
     met = None if target is None else bool(tau_best >= target * (1 - _TARGET_REL))
     if not confirm:
@@ -649,6 +663,16 @@ def _beyond_fraction(w_user: FloatArray, d: int, F_max: float, T_max: float, fra
     return (
         f" (no non-jamming push within {frac:.0%} of the hand's limits: this one uses {f:.0%} of max_force"
         f" and {t:.0%} of max_torque)"
+    )
+
+
+def _lifted_fraction(w_user: FloatArray, d: int, F_max: float, T_max: float, frac: float, tau_within: float) -> str:
+    """The note of a push beyond ``frac`` of the limits because inside it the margin stays below the weight."""
+    f = float(np.linalg.norm(w_user[:d])) / F_max
+    t = float(np.linalg.norm(w_user[d:])) / T_max
+    return (
+        f" (within {frac:.0%} of the hand's limits the kept contacts are pressed by only {floor_sig(tau_within)} N,"
+        f" less than the weight: this push uses {f:.0%} of max_force and {t:.0%} of max_torque)"
     )
 
 

@@ -102,7 +102,7 @@ from fixplan.errors import InputError, SolverError
 from fixplan.kinematics import mass_matrix
 from fixplan.locating import contact_set, locator_contact, solve_goal
 from fixplan.planner.features import Feature, clearance_features, feature_at, smooth_max, surface_feature
-from fixplan.planner.segments import needed_scale, segment_wrenches
+from fixplan.planner.segments import carry_factor, needed_scale, segment_wrenches
 from fixplan.settings import DEFAULT, PlannerSettings
 from fixplan.spatial import Pose, log_so3, tangent_seed
 
@@ -760,6 +760,7 @@ def _checked(
     slip = _slip(fx, poses, prob.est) if kind == "roll" else 0.0
     dxi = np.diff(xi, axis=1)
     cost = float(sum(np.sqrt(max(float(v @ prob.M0 @ v), 0.0)) for v in dxi.T) / np.sqrt(fx.workpiece.mass_kg))
+    cost *= carry_factor(fx, prob.start, prob.est)  # the same price as the coarse guess's
     found = status in IPOPT_PATH_FOUND and violation <= fx.tolerances.touch_m
     return _Path(formulation, kind, poses, status, iterations, solve_time, violation, slip, cost, note, found)
 

@@ -48,6 +48,7 @@ from numpy.typing import NDArray
 
 from fixplan.errors import InputError
 from fixplan.locating import contact_set, locator_gaps, solve_goal
+from fixplan.planner.segments import carry_factor
 from fixplan.settings import DEFAULT, PolicySettings
 from fixplan.spatial import Pose
 
@@ -326,7 +327,7 @@ def gap_closing_step(fixture: Fixture, pose: Pose, state: State, target: str, ki
     """The least-``M``-norm step that closes ``target``'s gap keeping ``state`` (to first order).
 
     ``kind`` ``slide`` keeps the kept contacts' normal rows, ``roll`` every row (no slip), ``free``
-    none. Returns (mass-weighted length [m], end pose), or None when that motion cannot close the
+    none. Returns (mass-weighted length [m] times the carry factor of :func:`~fixplan.planner.segments.carry_factor`, end pose), or None when that motion cannot close the
     gap (the target's row is not reachable with the kept rows, e.g. rolling on two contacts in 3D
     leaves one rotation, which may not approach the target).
     """
@@ -351,6 +352,7 @@ def gap_closing_step(fixture: Fixture, pose: Pose, state: State, target: str, ki
     if gap > 0 and abs(float(cs.G[-1] @ step) + gap) > 0.5 * gap:
         return None
     length = float(np.sqrt(max(float(step @ cs.mass_matrix @ step), 0.0) / wp.mass_kg))
+    length *= carry_factor(fixture, pose, est)  # priced as the fine plan prices it
     return length, pose.retract(step, wp.com_body)
 
 

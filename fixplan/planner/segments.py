@@ -141,3 +141,39 @@ def free_wrench(fixture: Fixture, pose: Pose, a_com: FloatArray, M: FloatArray) 
 
 
 __all__ = ["free_wrench", "needed_scale", "segment_wrenches"]
+
+
+def carried_fraction(fixture: Fixture, pose: Pose, names: tuple[str, ...] | list[str]) -> float:
+    """The share of gravity the hand must carry at ``pose`` when the kept contacts' normals carry what they can.
+
+    0 on a seated base (its normal forces hold the weight), 1 in free space or against walls only
+    (the hand, or friction, carries it all). Measured in the ``M⁻¹``-norm of wrenches about the
+    centre of mass (the acceleration gravity would cause): the least such norm of
+    ``−w_g − Gᵀf`` over normal forces ``f ≥ 0``, over that of ``w_g``. 0 without gravity.
+    """
+    from fixplan.nnls import nnls
+
+    w_g = fixture.gravity_wrench()
+    if not np.any(w_g):
+        return 0.0
+    if not names:
+        return 1.0
+    cs = contact_set(fixture, pose, list(names))
+    L = np.linalg.cholesky(cs.M_inv)  # M⁻¹ = L Lᵀ: ‖w‖_{M⁻¹} = ‖Lᵀ w‖
+    A = L.T @ cs.G.T
+    b = -(L.T @ w_g)
+    f, _ = nnls(A, b)
+    r = float(np.linalg.norm(b - A @ f))
+    return min(1.0, r / float(np.linalg.norm(b)))
+
+
+def carry_factor(fixture: Fixture, pose: Pose, names: tuple[str, ...] | list[str]) -> float:
+    """A transition's cost factor: ``1 + carry_cost × carried_fraction`` (settings.planner.carry_cost).
+
+    A move with the weight on the locators asks the hand only for the push; a move in the air or
+    along walls asks it to carry the part as well (or leans on friction to). Pricing the carried
+    share makes the coarse search seat the part on what holds its weight first where the paths
+    are otherwise alike (a thin box hung on its end and side locators and slid down them lost
+    its walls and fell).
+    """
+    return 1.0 + DEFAULT.planner.carry_cost * carried_fraction(fixture, pose, names)
