@@ -301,8 +301,8 @@ class PlannerSettings:
         ... and at least this much dearer, so that a transition guessed free is postponed too.
     carry_cost : float
         A transition's mass-weighted length is priced ``1 + carry_cost × f``, with ``f`` the share
-        of gravity its kept contacts' normals cannot carry at its start (1 in free space or on
-        walls, 0 on a seated base): the search seats the part on what holds its weight first
+        of the weight its kept contacts' normals cannot carry at its start (1 in free space or on
+        walls, 0 resting on base locators): the search seats the part on what holds its weight first
         where paths are otherwise alike. 0 prices length alone.
     compliant_step_rel : float
         A compliant initial guess (:mod:`fixplan.planner.fine`'s ladder) moves at most this

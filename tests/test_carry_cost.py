@@ -3,12 +3,12 @@
 rect-3.toml (2D, 1 kg rectangle 0.20 × 0.10 m, centre of mass at (0.10, 0.05) at the start,
 B1, B2 under it at x = 0.05, 0.15, S1 on its -x face at height 0.05, μ = 0.5, g = 9.81).
 
-Carried share (``planner.segments.carried_fraction``): the least ``M⁻¹``-norm of ``−w_g − Gᵀf``
-over normal forces ``f ≥ 0``, over that of ``w_g``. One base contact a horizontal lever ``a``
-from the centre of mass (normal +y, moment −a about it): with ``M = diag(m, m, I)`` the best
-``f = W/(1 + k)``, ``k = m a²/I``, and the share is ``√(k/(1 + k))``. Here ``I = m(w² + h²)/12
-= 0.05/12`` and ``a = 0.05``: ``k = 0.6``, share ``√(0.375)``. Two base contacts either side:
-0. The side wall alone: 1 (its normal is horizontal). Free: 1. No gravity: 0.
+Carried share (``planner.segments.carried_fraction``): the least ``‖−m g − Σ f_i n_i‖`` over
+normal forces ``f ≥ 0``, over ``m|g|``. Resting on B1 or B2 alone, or both: 0 (a vertical normal
+carries the whole weight; the hand balances the moment). The side wall alone: 1 (its normal is
+horizontal). Free: 1. No gravity: 0. The part turned by θ and resting on one corner-free face
+contact: the normal is θ off the vertical, the best ``f = W cos θ`` leaves ``W sin θ``: ``sin θ``.
+Gravity along −x instead: S1 carries all, the base nothing.
 
 Headroom lifted (``jamming.search``): the part on S1 alone, pushed up at 1 m/s². Sliding up the
 wall, friction ``μN`` points down, so a push pressing ``N`` into the wall has
@@ -29,6 +29,7 @@ import fixplan
 from fixplan.jamming import search_wrench
 from fixplan.planner.segments import carried_fraction, carry_factor
 from fixplan.settings import DEFAULT
+from fixplan.spatial import Pose
 
 TEXT = (PROBLEMS / "rect-3.toml").read_text()
 
@@ -46,16 +47,26 @@ def _wall_margin(cap_N: float, m: float = 1.0, a: float = 1.0, g: float = 9.81, 
 def test_carried_share_closed_forms():
     fx = _rect()
     pose = fx.start
-    k = 1.0 * 0.05**2 / (0.05 / 12.0)
-    assert carried_fraction(fx, pose, ["B1"]) == pytest.approx(math.sqrt(k / (1 + k)), rel=1e-9)
-    assert carried_fraction(fx, pose, ["B2"]) == pytest.approx(math.sqrt(k / (1 + k)), rel=1e-9)
-    assert carried_fraction(fx, pose, ["B1", "B2"]) == pytest.approx(0.0, abs=1e-9)
+    assert carried_fraction(fx, pose, ["B1"]) == pytest.approx(0.0, abs=1e-12)
+    assert carried_fraction(fx, pose, ["B1", "B2"]) == pytest.approx(0.0, abs=1e-12)
     assert carried_fraction(fx, pose, ["S1"]) == pytest.approx(1.0, rel=1e-12)
+    assert carried_fraction(fx, pose, ["S1", "B2"]) == pytest.approx(0.0, abs=1e-12)
     assert carried_fraction(fx, pose, []) == 1.0
     weightless = fixplan.loads(TEXT.replace("gravity = [0.0, -9.81]", "gravity = [0.0, 0.0]"))
     assert carried_fraction(weightless, pose, ["S1"]) == 0.0
     assert carry_factor(fx, pose, ["S1"]) == pytest.approx(1.0 + DEFAULT.planner.carry_cost)
-    assert carry_factor(fx, pose, ["B1", "B2"]) == pytest.approx(1.0, abs=1e-9)
+    assert carry_factor(fx, pose, ["B1", "B2"]) == pytest.approx(1.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("theta_deg", [5.0, 20.0, -40.0])
+def test_carried_share_of_a_tilted_contact_is_the_sine_of_its_tilt(theta_deg):
+    """The rectangle turned by θ, its -y face 1 cm above B1 with B1 under the face's middle (the
+    centre at B1 + 0.06 (−sin θ, cos θ)): B1's normal is θ off the vertical, the share sin |θ|."""
+    fx = _rect()
+    th = math.radians(theta_deg)
+    pose = Pose.from_angle_deg([0.05 - 0.06 * math.sin(th), 0.06 * math.cos(th)], theta_deg)
+    share = carried_fraction(fx, pose, ["B1"])
+    assert share == pytest.approx(abs(math.sin(th)), rel=1e-9)
 
 
 def test_carried_share_turns_with_gravity():
@@ -63,8 +74,7 @@ def test_carried_share_turns_with_gravity():
     fx = fixplan.loads(TEXT.replace("gravity = [0.0, -9.81]", "gravity = [-9.81, 0.0]"))
     pose = fx.start
     assert carried_fraction(fx, pose, ["B1", "B2"]) == pytest.approx(1.0, rel=1e-12)
-    # S1 sits at the centre of mass's height: its normal passes through it
-    assert carried_fraction(fx, pose, ["S1"]) == pytest.approx(0.0, abs=1e-9)
+    assert carried_fraction(fx, pose, ["S1"]) == pytest.approx(0.0, abs=1e-12)
 
 
 def test_the_guess_prices_a_carried_move_dearer():

@@ -349,6 +349,7 @@ def search_wrench(
     certify: bool = True,
     confirm: bool = True,
     limit_fraction: float | None = None,
+    lift_below_weight: bool = True,
 ) -> WrenchSearch:
     """The applied wrench that moves the part with acceleration ≥ ``motion``, without jamming.
 
@@ -391,7 +392,11 @@ def search_wrench(
     the hand's limits: every program is first solved with ``‖F‖ ≤ f F_max`` and ``‖T‖ ≤ f T_max``,
     and only when no non-jamming push exists inside them with the whole limits; the reason then
     says so and ``within_fraction`` is false. ``force_fraction`` and ``torque_fraction`` give the
-    push found as fractions of the limits.
+    push found as fractions of the limits. The headroom never costs the kept contacts their hold:
+    with ``lift_below_weight`` (default), where the margin inside the fraction stays below the
+    weight ``m|g|`` (or ``min_margin_N``), the whole limits are tried too and their push is kept
+    when it presses ``settings.search.headroom_margin_gain`` times harder or reaches that margin
+    (the reason says so; ``within_fraction`` is false).
 
     ``confirm=False`` skips the classifier's independent check of the wrench found (its balance
     check and ``check``, both ``None`` then; ``confirmed`` is ``False``): the wrench is still
@@ -431,6 +436,7 @@ def search_wrench(
         certify=certify,
         confirm=confirm,
         limit_fraction=limit_fraction,
+        lift_below_weight=lift_below_weight,
     )
 
 
@@ -465,6 +471,7 @@ def search_wrench_in(
     certify: bool = True,
     confirm: bool = True,
     limit_fraction: float | None = None,
+    lift_below_weight: bool = True,
 ) -> WrenchSearch:
     """:func:`search_wrench` for a contact set already built, with the motion of the centre of mass.
 
@@ -540,7 +547,7 @@ def search_wrench_in(
     weight_N = wp.mass_kg * g if target is None else target
     tau_within = float(-sol.value) if within else 0.0
     lifted = False
-    if within and frac < 1.0 and tau_within < weight_N * (1 - _TARGET_REL):
+    if lift_below_weight and within and frac < 1.0 and tau_within < weight_N * (1 - _TARGET_REL):
         prog_f, meta_f = _build(**build, cert=y, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
         sol_f = ClarabelProgram(prog_f).solve(prog_f.b)
         if sol_f.solved and -sol_f.value > min(tau_within * _SEARCH.headroom_margin_gain, weight_N):

@@ -116,8 +116,8 @@ class ExecutionLog:
     transition_at_end: int = 0
     max_command_force_N: float = 0.0
     max_command_torque_Nm: float = 0.0
-    # wrench solves that found no non-jamming push within the headroom (limit_fraction of the
-    # hand's limits) and used more
+    # wrench solves that used more than the headroom (limit_fraction of the hand's limits): no
+    # non-jamming push inside it, or none inside pressing the kept contacts by the weight
     beyond_fraction_solves: int = 0
 
     def event(self, t: float, kind: str, message: str) -> None:
@@ -1067,11 +1067,16 @@ class Executor:
         self.log.beyond_fraction_solves += 1
         if self._beyond_noted != self.index:
             self._beyond_noted = self.index
+            why = (
+                f"within {self.limit_fraction:.0%} of the hand's limits the kept contacts are pressed by less than the weight"
+                if "less than the weight" in res.reason
+                else f"no non-jamming push within {self.limit_fraction:.0%} of the hand's limits"
+            )
             self.log.event(
                 t,
                 "limits",
-                f"transition {self.index + 1}: no non-jamming push within {self.limit_fraction:.0%} of the hand's "
-                f"limits here; using {res.force_fraction:.0%} of max_force and {res.torque_fraction:.0%} of max_torque",
+                f"transition {self.index + 1}: {why} here; using {res.force_fraction:.0%} of max_force and"
+                f" {res.torque_fraction:.0%} of max_torque",
             )
 
     def _accept(self, w: FloatArray) -> None:

@@ -352,7 +352,7 @@ def gap_closing_step(fixture: Fixture, pose: Pose, state: State, target: str, ki
     if gap > 0 and abs(float(cs.G[-1] @ step) + gap) > 0.5 * gap:
         return None
     length = float(np.sqrt(max(float(step @ cs.mass_matrix @ step), 0.0) / wp.mass_kg))
-    length *= carry_factor(fixture, pose, est)  # priced as the fine plan prices it
+    length *= carry_factor(fixture, pose, est, cs)  # priced as the fine plan prices it
     return length, pose.retract(step, wp.com_body)
 
 

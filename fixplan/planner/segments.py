@@ -26,6 +26,7 @@ from fixplan.settings import DEFAULT
 from fixplan.spatial import Pose, log_so3, shift_twist, shift_wrench
 
 if TYPE_CHECKING:
+    from fixplan.kinematics import ContactSet
     from fixplan.model import Fixture
 
 FloatArray = NDArray[np.float64]
@@ -140,40 +141,47 @@ def free_wrench(fixture: Fixture, pose: Pose, a_com: FloatArray, M: FloatArray) 
     return True, w_o, f"free motion: ‖F‖ = {F:.3g} N, ‖T‖ = {T:.3g} N·m"
 
 
-__all__ = ["free_wrench", "needed_scale", "segment_wrenches"]
+def carried_fraction(
+    fixture: Fixture, pose: Pose, names: tuple[str, ...] | list[str], cs: ContactSet | None = None
+) -> float:
+    """The share of the weight the kept contacts' normals cannot carry at ``pose``: what the hand must.
 
-
-def carried_fraction(fixture: Fixture, pose: Pose, names: tuple[str, ...] | list[str]) -> float:
-    """The share of gravity the hand must carry at ``pose`` when the kept contacts' normals carry what they can.
-
-    0 on a seated base (its normal forces hold the weight), 1 in free space or against walls only
-    (the hand, or friction, carries it all). Measured in the ``M⁻¹``-norm of wrenches about the
-    centre of mass (the acceleration gravity would cause): the least such norm of
-    ``−w_g − Gᵀf`` over normal forces ``f ≥ 0``, over that of ``w_g``. 0 without gravity.
+    The least ``‖−m g − Σ f_i n_i‖`` over normal forces ``f ≥ 0``, over ``m|g|``: 0 when the part
+    rests on something below it (one base contact will do: the hand may balance the moment, its
+    force still goes into the push), 1 in free space or against walls only (the hand, or the
+    friction its pressing raises, carries it all), ``sin θ`` on one contact whose normal is ``θ``
+    off the vertical. 0 without gravity. ``cs``: a contact set at ``pose`` whose first contacts
+    are ``names`` (reused, not rebuilt).
     """
     from fixplan.nnls import nnls
 
-    w_g = fixture.gravity_wrench()
-    if not np.any(w_g):
+    d = fixture.dimension
+    b = -np.asarray(fixture.gravity_wrench()[:d], dtype=float)
+    weight = float(np.linalg.norm(b))
+    if weight == 0.0:
         return 0.0
     if not names:
         return 1.0
-    cs = contact_set(fixture, pose, list(names))
-    L = np.linalg.cholesky(cs.M_inv)  # M⁻¹ = L Lᵀ: ‖w‖_{M⁻¹} = ‖Lᵀ w‖
-    A = L.T @ cs.G.T
-    b = -(L.T @ w_g)
+    if cs is None:
+        cs = contact_set(fixture, pose, list(names))
+    A = cs.G[: len(names), :d].T  # the unit normal forces, one column per kept contact
     f, _ = nnls(A, b)
-    r = float(np.linalg.norm(b - A @ f))
-    return min(1.0, r / float(np.linalg.norm(b)))
+    return min(1.0, float(np.linalg.norm(b - A @ f)) / weight)
 
 
-def carry_factor(fixture: Fixture, pose: Pose, names: tuple[str, ...] | list[str]) -> float:
+def carry_factor(
+    fixture: Fixture, pose: Pose, names: tuple[str, ...] | list[str], cs: ContactSet | None = None
+) -> float:
     """A transition's cost factor: ``1 + carry_cost × carried_fraction`` (settings.planner.carry_cost).
 
     A move with the weight on the locators asks the hand only for the push; a move in the air or
-    along walls asks it to carry the part as well (or leans on friction to). Pricing the carried
+    along walls asks it to carry the part as well (or leans on friction to), leaving less of its
+    force for pressing the kept contacts. Pricing the carried
     share makes the coarse search seat the part on what holds its weight first where the paths
     are otherwise alike (a thin box hung on its end and side locators and slid down them lost
     its walls and fell).
     """
-    return 1.0 + DEFAULT.planner.carry_cost * carried_fraction(fixture, pose, names)
+    return 1.0 + DEFAULT.planner.carry_cost * carried_fraction(fixture, pose, names, cs)
+
+
+__all__ = ["carried_fraction", "carry_factor", "free_wrench", "needed_scale", "segment_wrenches"]
