@@ -24,6 +24,7 @@ to standard error; the document goes to :func:`document_stream`.
 from __future__ import annotations
 
 import codecs
+import contextlib
 import errno
 import hashlib
 import io
@@ -354,89 +355,94 @@ def document_stream() -> TextIO:
 class CommandStreams:
     """Standard output and the inputs' record for one command (``with CommandStreams(document=...)``).
 
-    On the process's own standard output, writes go through a guard: a failure is one
-    :class:`StdoutError` (exit 2) instead of ``OSError`` from deep in a library, and nothing
-    is left for the interpreter's last flush to fail on. With ``document=True`` (``--json``)
-    file descriptor 1 points at standard error for the duration, so that whatever else prints
-    (viser's messages from its thread, numba, Dask's worker processes) cannot break the JSON;
-    the document is written with :func:`document_stream` to the real standard output. When
-    standard output is not the process's (a test's capture), only ``sys.stdout`` is swapped.
-    Call :meth:`flush` at the end of the command to learn whether the output arrived.
+    On the process's own standard output, the command writes through a guard on a duplicate of
+    file descriptor 1: a failure is one :class:`StdoutError` (exit 2) instead of ``OSError`` from
+    deep in a library. With ``document=True`` (``--json``) file descriptor 1 points at standard
+    error for the duration, so that whatever else prints (viser's messages from its thread,
+    numba, Dask's worker processes) cannot break the JSON; the document is written with
+    :func:`document_stream` to the real standard output. When standard output is not the
+    process's (a test's capture), only ``sys.stdout`` is swapped. Call :meth:`flush` at the end
+    of the command to learn whether the output arrived. Once standard output failed, file
+    descriptor 1 points at /dev/null, so that what a library still buffers for it cannot fail
+    again when the interpreter exits.
     """
 
     def __init__(self, *, document: bool):
         self.document = document
-        self._saved_stdout: TextIO | None = None
-        self._saved_document: TextIO | None = None
-        self._saved_inputs: dict[tuple[int, int], str] | None = None
-        self._own: io.TextIOWrapper | None = None  # the guarded stream this command writes its output to
-        self._fd1: int | None = None  # the real standard output while fd 1 points at stderr
+        self._saved: tuple[Any, TextIO | None, dict[tuple[int, int], str] | None] | None = None
+        self._own: io.TextIOWrapper | None = None  # the guarded stream the command's output goes to
+        self._fd1: int | None = None  # a duplicate of the real standard output, the guard's
+        self._redirected = False  # file descriptor 1 points at standard error (--json)
+        self._pending: StdoutError | None = None  # standard output had failed before the command
 
     def __enter__(self) -> CommandStreams:
         global _document, _inputs
-        self._saved_stdout, self._saved_document, self._saved_inputs = sys.stdout, _document, _inputs
-        _inputs = {}
         original = sys.stdout
-        own_fd = original is None or original is sys.__stdout__ and _fileno(original) == 1
-        if not own_fd:  # a capture (pytest, CliRunner): swap the Python objects only
-            if self.document:
+        self._saved = (original, _document, _inputs)
+        _inputs = {}
+        if not (original is None or (original is sys.__stdout__ and _fileno(original) == 1)):
+            if self.document:  # a capture (pytest, CliRunner): swap the Python objects only
                 _document = original
                 sys.stdout = sys.stderr
             return self
+        try:
+            self._fd1 = os.dup(1)
+        except OSError:  # no standard output at all: the guard on 1 reports it on writing
+            self._fd1 = None
         if original is not None:
             try:
                 original.flush()
-            except OSError:
-                pass  # nothing was asked of this command yet
+            except OSError as exc:
+                self._pending = _stdout_error(exc)
+                _silence_fd1()
+        fd, owned = (1, False) if self._fd1 is None else (self._fd1, True)
+        self._own = _text_stream(fd, original, owned=owned)
         if self.document:
-            try:
-                self._fd1 = os.dup(1)
-                os.dup2(2, 1)
-            except OSError:  # no standard output or error at all: the guard reports it on writing
-                self._fd1 = None
-            if self._fd1 is not None:
-                self._own = _text_stream(self._fd1, original, owned=True)
-            else:
-                self._own = _text_stream(1, original, owned=False)
+            if self._fd1 is not None and self._pending is None:
+                with contextlib.suppress(OSError):
+                    os.dup2(2, 1)
+                    self._redirected = True
             _document = self._own
         else:
-            self._own = _text_stream(1, original, owned=False)
             sys.stdout = self._own
         return self
 
     def flush(self) -> None:
         """Send what is buffered; :class:`StdoutError` when standard output did not take it."""
+        if self._pending is not None:
+            pending, self._pending = self._pending, None
+            if not (self._own is not None and self._own.buffer.raw.broken):  # type: ignore[attr-defined]
+                raise pending  # else the command's own write failed and said so
         if self._own is not None:
             self._own.flush()  # the guard turns a failure into StdoutError
-        for stream in (sys.stdout, self._saved_stdout):
+        if self._saved is None:
+            return
+        for stream in (sys.stdout, self._saved[0]):
             if stream is None or stream is self._own or stream is sys.stderr:
                 continue
             try:  # a library's own reference to the interpreter's stream, which the guard does not cover
                 stream.flush()
             except OSError as exc:
-                if self._fd1 is not None:
+                if self._redirected:
                     continue  # file descriptor 1 is standard error now: not the output's failure
                 _silence_fd1()
                 raise _stdout_error(exc) from None
 
     def __exit__(self, *exc: object) -> None:
         global _document, _inputs
-        original = self._saved_stdout
-        try:
-            self.flush()
-        except StdoutError:
-            pass  # reported by the caller's own flush, or lost with the failure it is part of
-        if self._fd1 is not None:
-            os.dup2(self._fd1, 1)
+        with contextlib.suppress(StdoutError):
+            self.flush()  # a failure was reported by the caller's own flush, or is lost with the error it is part of
+        if self._redirected and self._fd1 is not None:
+            with contextlib.suppress(OSError):
+                os.dup2(self._fd1, 1)
         if self._own is not None:
-            try:
+            with contextlib.suppress(OSError, StdoutError):
                 self._own.close()
-            except (OSError, StdoutError):
-                pass
-        sys.stdout, _document, _inputs = original, self._saved_document, self._saved_inputs  # type: ignore[assignment]
+        if self._saved is not None:
+            sys.stdout, _document, _inputs = self._saved
 
 
-def _fileno(stream: TextIO) -> int | None:
+def _fileno(stream: Any) -> int | None:
     try:
         return stream.fileno()
     except (OSError, ValueError, AttributeError):
