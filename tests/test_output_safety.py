@@ -304,3 +304,73 @@ def test_json_stdout_is_one_document_while_libraries_print():
     # without --json the same output stays on stdout
     plain = cli("classify", BOX, "--wrench", "1,0,0,0,0,0", stdout=subprocess.PIPE, wrapper=NOISY)
     assert "(library) hello from a child process" in plain.stdout and plain.stderr == ""
+
+
+# -- one way to write -------------------------------------------------------------------------
+def _writer_calls(tree):  # -> list of (line, what)
+    import ast
+
+    found = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Call):
+            continue
+        func = node.func
+        if isinstance(func, ast.Name) and func.id == "open":
+            mode = (
+                node.args[1] if len(node.args) > 1 else next((k.value for k in node.keywords if k.arg == "mode"), None)
+            )
+            if isinstance(mode, ast.Constant) and isinstance(mode.value, str) and set(mode.value) & set("wax+"):
+                found.append((node, f"open(..., {mode.value!r})"))
+        elif isinstance(func, ast.Attribute) and func.attr in (
+            "savefig",
+            "write_text",
+            "write_bytes",
+            "savetxt",
+            "tofile",
+        ):
+            found.append((node, f".{func.attr}(...)"))
+        elif isinstance(func, ast.Attribute) and func.attr == "File" and len(node.args) > 1:
+            mode = node.args[1]
+            if not (isinstance(mode, ast.Constant) and mode.value == "r"):
+                found.append((node, "h5py.File(..., mode)"))
+    return found
+
+
+def test_every_writer_in_the_package_goes_through_write_output():
+    """A file is written only by a function handed to files.write_output (files.py itself excepted).
+
+    The writers found by the issue wrote to the path they were given (map, trajectory, figure,
+    page); this keeps a new one from doing so: its open/savefig/write_text must sit in a function
+    (or lambda) passed to ``write_output``.
+    """
+    import ast
+
+    package = Path(fixplan.__file__).parent
+    bad = []
+    for path in sorted(package.rglob("*.py")):
+        if path.name == "files.py" and path.parent == package:
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
+        handed: set[str] = set()
+        lambdas: set[ast.AST] = set()
+        for node in ast.walk(tree):
+            if (
+                isinstance(node, ast.Call)
+                and getattr(node.func, "id", getattr(node.func, "attr", None)) == "write_output"
+            ):
+                for arg in node.args[1:]:
+                    if isinstance(arg, ast.Name):
+                        handed.add(arg.id)
+                    elif isinstance(arg, ast.Lambda):
+                        lambdas.add(arg)
+        for call, what in _writer_calls(tree):
+            node, ok = call, False
+            while node in parents:
+                node = parents[node]
+                if node in lambdas or (isinstance(node, ast.FunctionDef) and node.name in handed):
+                    ok = True
+                    break
+            if not ok:
+                bad.append(f"{path.relative_to(package.parent)}:{call.lineno}: {what}")
+    assert bad == [], "writes outside files.write_output:\n" + "\n".join(bad)
