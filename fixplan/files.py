@@ -30,6 +30,7 @@ import hashlib
 import io
 import os
 import secrets
+import select
 import stat
 import sys
 from collections.abc import Callable, Sequence
@@ -323,11 +324,14 @@ class _GuardedFd(io.RawIOBase):
         size = len(memoryview(data).cast("B"))
         if self.broken:
             return size
-        try:
-            return os.write(self._fd, data)
-        except OSError as exc:
-            self.broken = True
-            raise _stdout_error(exc) from None
+        while True:
+            try:
+                return os.write(self._fd, data)
+            except BlockingIOError:  # a descriptor left non-blocking by whoever shares it: wait until it takes more
+                select.select([], [self._fd], [])
+            except OSError as exc:
+                self.broken = True
+                raise _stdout_error(exc) from None
 
     def close(self) -> None:
         if not self.closed and self._owned:
