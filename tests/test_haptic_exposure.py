@@ -1,9 +1,9 @@
-"""``fixplan haptic --host H --token T`` exposes nothing without the token, and ``--json`` stays JSON (issue 22 D13, D12).
+"""``fixplan haptic --host H --token T`` exposes nothing without the token, and ``--json`` stays JSON.
 
-D13: the gate answered 403, but viser itself listened on 127.0.0.1 (its URL printed on stderr)
+The gate answered 403, but viser itself listened on 127.0.0.1 (its URL printed on stderr)
 and served the page and a websocket to any process on the machine without the token. Every
 socket the process listens on is enumerated (psutil) and tried without the token.
-D12: a websocket client of another viser version made viser print "Version mismatch" on stdout,
+A websocket client of another viser version made viser print "Version mismatch" on stdout,
 after which ``--json`` was no longer one document.
 """
 

@@ -1,13 +1,13 @@
-"""Outputs never lose a user's byte, and standard output failing is one line (issue 22 D1, D19, D11, D12).
+"""Outputs never lose a user's byte, and standard output failing is one line.
 
-- D1: an output that is a hard link to an input was written through it (``box.toml`` held the
+- An output that is a hard link to an input was written through it (``box.toml`` held the
   CSV). Every output now goes through :func:`fixplan.files.write_output` (a temporary file renamed
   into place) and is refused when it is the same file (device and inode) as any input the
   command read, whatever option named the input, the bundled fixture included.
-- D19: a full disk left a 0-byte or partial output. The temporary file is flushed to the disk
+- A full disk left a 0-byte or partial output. The temporary file is flushed to the disk
   before the rename and removed on failure; the target keeps what it held.
-- D11: standard output on ``/dev/full`` (or a closed pipe) was an ``OSError`` and exit 3.
-- D12: with ``--json``, whatever a library prints (Python, a thread, file descriptor 1, a child
+- Standard output on ``/dev/full`` (or a closed pipe) was an ``OSError`` and exit 3.
+- With ``--json``, whatever a library prints (Python, a thread, file descriptor 1, a child
   process) goes to stderr; stdout is the one document.
 
 Size-limited places are made with ``RLIMIT_FSIZE`` (the kernel refuses a write past the limit with
@@ -84,7 +84,7 @@ def user(tmp_path: Path) -> Path:
     return tmp_path
 
 
-# -- D1: a hard link to an input ----------------------------------------------------------------
+# -- a hard link to an input -----------------------------------------------------------------------
 # (command line, the input the output is a hard link of, the output's name); "{out}" is the link
 HARD_LINK_CASES = {
     "classify FILE": (["classify", "box.toml", "--wrench", "1,0,0,0,0,0", "--out", "{out}"], "box.toml", "o.csv"),
@@ -158,7 +158,7 @@ def test_a_replaced_output_keeps_its_permissions_and_a_long_name_fits(tmp_path):
     assert long.read_text() == "a\n" and leftovers(tmp_path) == []
 
 
-# -- D19: a full disk -------------------------------------------------------------------------
+# -- a full disk ------------------------------------------------------------------------------
 def test_a_disk_full_at_the_flush_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch):
     """ENOSPC is often reported only when the data reaches the disk: the write is flushed before the rename."""
     target = tmp_path / "plan.json"
@@ -217,7 +217,7 @@ def test_a_full_place_fails_every_writer_with_exit_2_and_keeps_the_old_files(cap
     assert leftovers(user) == []
 
 
-# -- D11: standard output that cannot be written ------------------------------------------------
+# -- standard output that cannot be written -----------------------------------------------------
 def cli(*args: object, stdout: object = None, wrapper: str | None = None) -> subprocess.CompletedProcess:
     """``fixplan ARGS`` (or ``wrapper``'s script with ARGS) in a fresh interpreter, stdout buffered as in a shell."""
     cmd = [*CLI, *map(str, args)] if wrapper is None else [sys.executable, "-c", wrapper, *map(str, args)]
@@ -272,7 +272,7 @@ def test_a_failure_at_the_last_flush_is_one_line_not_exception_ignored():
     assert proc.stderr == "fixplan: cannot write to standard output: no space left on the device\n"
 
 
-# -- D12: --json owns stdout --------------------------------------------------------------------
+# -- --json owns stdout -------------------------------------------------------------------------
 NOISY = """
 import os, subprocess, sys, threading
 import fixplan.jamming

@@ -1,4 +1,4 @@
-"""The UDP bridge's message table in docs/haptic.md is the code's (issue 22 D14).
+"""The UDP bridge's message table in docs/haptic.md is the code's.
 
 The docs gave POSE 120 B and FORCE 240 B while the code sends and expects 116 and 232: a device
 built from the docs got no answer. The table is now generated from the ``struct`` formats.

@@ -1,6 +1,6 @@
 """Outputs that are the users' inputs, outputs where nothing can be written, standard output that takes nothing.
 
-The classes (issue 22 D1, D19, D11): an output that is a hard link to an input (the fixture, the
+The classes: an output that is a hard link to an input (the fixture, the
 wrench list, the plan) or a symbolic link to one; a hard link to a user's file that is no input;
 an output in a full place (a file-size limit, drawn per run: the write fails partway, as on a
 full disk); an output where no file can be made (``/proc``, a device, under a file); standard
