@@ -1,30 +1,43 @@
-"""Users' files: reading input text safely, and checking output paths before anything is written.
+"""Users' files: reading input text safely, writing outputs without losing a byte of theirs, and standard output.
 
 Inputs: only regular files are opened (a named pipe would block forever, a device never ends),
 at most :data:`~fixplan.limits.MAX_FILE_BYTES`, and decoded as UTF-8 with a message that names
-what the file seems to be (HDF5, UTF-16, binary) instead of a ``UnicodeDecodeError``.
+what the file seems to be (HDF5, UTF-16, binary) instead of a ``UnicodeDecodeError``. Within a
+command (:class:`CommandStreams`) every input read is remembered by device and inode.
 
 Outputs: a path is writable when nothing is there, or a regular file is there and the user said
 ``--force``. A path that is a directory, a device (``/dev/full``), a pipe or a dangling symbolic
 link is refused (the link would create a file outside the folder the user named), and several
 outputs of one command must be distinct files (compared by inode, so a hard link to an input is
-refused too). An output is written to a temporary file beside it and renamed onto it, never
-through a link onto another file. Write errors name the path and the reason.
+refused too). Every output goes through :func:`write_output`: written to a temporary file beside
+it, flushed to the disk, and renamed onto it, so it never writes through a link onto another file
+and a full disk leaves nothing half-written under the user's name. A target that is the same file
+as an input of the command is refused, whatever option named it. Write errors name the path and
+the reason.
+
+Standard output: :class:`CommandStreams` turns a failed write (``/dev/full``, a closed pipe) into
+one :class:`StdoutError` line instead of a traceback, and while a ``--json`` document owns
+standard output it sends everything else printed (libraries, their threads and child processes)
+to standard error; the document goes to :func:`document_stream`.
 """
 
 from __future__ import annotations
 
 import codecs
+import contextlib
 import errno
 import hashlib
+import io
 import os
 import secrets
+import select
 import stat
+import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 
-from fixplan.errors import InputError
+from fixplan.errors import FixplanError, InputError
 from fixplan.limits import MAX_FILE_BYTES
 
 if TYPE_CHECKING:
@@ -32,6 +45,36 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
 T = TypeVar("T")
+
+
+# the inputs read by the running command: (device, inode) -> its path as given; None outside a command
+_inputs: dict[tuple[int, int], str] | None = None
+
+
+def note_input(path: Path | str, info: os.stat_result | None = None) -> None:
+    """Remember ``path`` as an input of the running command, so that no output replaces it.
+
+    ``info``: its ``os.fstat`` when the caller holds it open (else the path is stat'ed). Readers of
+    users' files call this (:func:`read_user_text` does); outside a command nothing is kept.
+    """
+    if _inputs is None:
+        return
+    try:
+        info = os.stat(path) if info is None else info
+    except OSError:
+        return
+    _inputs.setdefault((info.st_dev, info.st_ino), str(path))
+
+
+def input_named(path: Path) -> str | None:
+    """The input of the running command that ``path`` is (the same device and inode), else None."""
+    if not _inputs:
+        return None
+    try:
+        info = os.stat(path)
+    except OSError:
+        return None
+    return _inputs.get((info.st_dev, info.st_ino))
 
 
 class UnreadableFile(InputError):
@@ -69,8 +112,10 @@ def read_user_text(path: Path, *, expected: str, max_bytes: int = MAX_FILE_BYTES
         # O_NONBLOCK: should the file have been swapped for a pipe since stat, open does not block
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
         with os.fdopen(fd, "rb") as fh:
-            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+            opened = os.fstat(fh.fileno())
+            if not stat.S_ISREG(opened.st_mode):
                 raise UnreadableFile(path, f"is not a regular file (expected {expected})")
+            note_input(path, opened)
             data = fh.read(max_bytes + 1)
     except OSError as exc:
         raise UnreadableFile(path, exc.strerror or str(exc)) from None
@@ -83,6 +128,7 @@ def file_sha256(path: Path, *, max_bytes: int = MAX_FILE_BYTES) -> str:
     """The SHA-256 (hex) of a user's file bytes, as read (at most ``max_bytes``); :class:`UnreadableFile` if it cannot be read."""
     try:
         with open(path, "rb") as fh:
+            note_input(path, os.fstat(fh.fileno()))
             return hashlib.sha256(fh.read(max_bytes + 1)).hexdigest()
     except OSError as exc:
         raise UnreadableFile(path, exc.strerror or str(exc)) from None
@@ -138,6 +184,10 @@ def check_output(path: Path, force: bool, *, option: str = "--out") -> Path:
             raise InputError(
                 f"{option} {path} is {_file_kind(info.st_mode)}, not a regular file (expected a file path)"
             )
+        if (source := input_named(path)) is not None:
+            raise InputError(
+                f"{option} {path} is the same file as the input {source} (an output must not replace an input)"
+            )
         if not force:
             raise InputError(f"{path} exists (use --force to overwrite it)")
     parent = path.parent
@@ -177,17 +227,33 @@ def check_distinct(outputs: Sequence[tuple[str, Path | None]]) -> None:
 
 
 def write_output(path: Path, write: Callable[[Path], T]) -> T:
-    """Run ``write`` on a temporary file beside ``path``, then rename it onto ``path``.
+    """Run ``write`` on a temporary file beside ``path``, flush it to the disk, then rename it onto ``path``.
 
     The rename replaces the directory entry, so an output that is a link (hard or symbolic) to
-    an input never writes through it onto the input, and a failed write leaves no half file. The
-    temporary name keeps the suffix (writers pick their format by it). A failure (disk full,
-    permission) is one line naming the path.
+    an input never writes through it onto the input, and a failed write (a full disk, reported
+    by the write, the close or the flush to the disk) removes the temporary file and leaves
+    ``path`` as it was: nothing half-written under the user's name. A ``path`` that is the same
+    file as an input of the running command is refused, checked again just before the rename.
+    The temporary name keeps the suffix (writers pick their format by it); a file replaced keeps
+    its permissions. A failure is one line naming the path (:class:`InputError`).
     """
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp{path.suffix}")
+    _refuse_input(path)
+    tmp = temporary_path(path)
+    try:
+        mode = stat.S_IMODE(os.stat(path).st_mode)
+    except OSError:
+        mode = None  # a new file: the writer's mode under the umask
     try:
         result = write(tmp)
+        fd = os.open(tmp, os.O_RDONLY)
+        try:  # a full disk that only shows when the data reaches it fails here, before the rename
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        if mode is not None:
+            os.chmod(tmp, mode)
+        _refuse_input(path)
         os.replace(tmp, path)
         return result
     except OSError as exc:
@@ -196,13 +262,205 @@ def write_output(path: Path, write: Callable[[Path], T]) -> T:
             reason = "no space left on the device"
         raise InputError(f"cannot write {path}: {reason}") from None
     finally:
-        if tmp.exists():
+        if os.path.lexists(tmp):
             tmp.unlink()
+
+
+def temporary_path(path: Path) -> Path:
+    """A fresh hidden name beside ``path`` with its suffix, within the 255-byte limit of a file name."""
+    mark = f".{os.getpid()}-{secrets.token_hex(4)}.tmp{path.suffix}"
+    room = 255 - 1 - len(os.fsencode(mark))
+    stem = os.fsencode(path.name)[: max(room, 0)].decode("utf-8", "ignore")
+    return path.with_name(f".{stem}{mark}")
+
+
+def _refuse_input(path: Path) -> None:
+    if (source := input_named(path)) is not None:
+        raise InputError(f"{path} is the same file as the input {source} (an output must not replace an input)")
 
 
 def write_text(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` as UTF-8 (see :func:`write_output`)."""
     write_output(path, lambda p: p.write_text(text, encoding="utf-8"))
+
+
+# -- standard output ---------------------------------------------------------------------------
+class StdoutError(FixplanError):
+    """Standard output cannot be written (a full device, a closed pipe): what the command printed is lost."""
+
+
+def _stdout_error(exc: OSError) -> StdoutError:
+    reason = {errno.EPIPE: "the reader closed the pipe", errno.ENOSPC: "no space left on the device"}.get(
+        exc.errno or 0, exc.strerror or str(exc)
+    )
+    return StdoutError(f"cannot write to standard output: {reason}")
+
+
+class _GuardedFd(io.RawIOBase):
+    """Writes to a file descriptor; the first failure raises :class:`StdoutError`, later writes are dropped.
+
+    Dropping after the failure is what lets the interpreter's last flush pass quietly: whatever
+    was still buffered can no longer reach the reader, and the failure was reported once.
+    """
+
+    def __init__(self, fd: int, *, owned: bool):
+        super().__init__()
+        self._fd, self._owned = fd, owned
+        self.broken = False
+
+    def writable(self) -> bool:
+        return True
+
+    def fileno(self) -> int:
+        return self._fd
+
+    def isatty(self) -> bool:
+        try:
+            return os.isatty(self._fd)
+        except OSError:
+            return False
+
+    def write(self, data: Any) -> int:
+        size = len(memoryview(data).cast("B"))
+        if self.broken:
+            return size
+        while True:
+            try:
+                return os.write(self._fd, data)
+            except BlockingIOError:  # a descriptor left non-blocking by whoever shares it: wait until it takes more
+                select.select([], [self._fd], [])
+            except OSError as exc:
+                self.broken = True
+                raise _stdout_error(exc) from None
+
+    def close(self) -> None:
+        if not self.closed and self._owned:
+            os.close(self._fd)
+        super().close()
+
+
+def _text_stream(fd: int, like: TextIO | None, *, owned: bool) -> io.TextIOWrapper:
+    encoding = getattr(like, "encoding", None) or "utf-8"
+    errors = getattr(like, "errors", None) or "strict"
+    line_buffering = bool(getattr(like, "line_buffering", False))
+    return io.TextIOWrapper(
+        io.BufferedWriter(_GuardedFd(fd, owned=owned)), encoding=encoding, errors=errors, line_buffering=line_buffering
+    )
+
+
+_document: TextIO | None = None
+
+
+def document_stream() -> TextIO:
+    """Where a command's ``--json`` document goes: standard output, also while library output goes to stderr."""
+    return _document if _document is not None else sys.stdout
+
+
+class CommandStreams:
+    """Standard output and the inputs' record for one command (``with CommandStreams(document=...)``).
+
+    On the process's own standard output, the command writes through a guard on a duplicate of
+    file descriptor 1: a failure is one :class:`StdoutError` (exit 2) instead of ``OSError`` from
+    deep in a library. With ``document=True`` (``--json``) file descriptor 1 points at standard
+    error for the duration, so that whatever else prints (viser's messages from its thread,
+    numba, Dask's worker processes) cannot break the JSON; the document is written with
+    :func:`document_stream` to the real standard output. When standard output is not the
+    process's (a test's capture), only ``sys.stdout`` is swapped. Call :meth:`flush` at the end
+    of the command to learn whether the output arrived. Once standard output failed, file
+    descriptor 1 points at /dev/null, so that what a library still buffers for it cannot fail
+    again when the interpreter exits.
+    """
+
+    def __init__(self, *, document: bool):
+        self.document = document
+        self._saved: tuple[Any, TextIO | None, dict[tuple[int, int], str] | None] | None = None
+        self._own: io.TextIOWrapper | None = None  # the guarded stream the command's output goes to
+        self._fd1: int | None = None  # a duplicate of the real standard output, the guard's
+        self._redirected = False  # file descriptor 1 points at standard error (--json)
+        self._pending: StdoutError | None = None  # standard output had failed before the command
+
+    def __enter__(self) -> CommandStreams:
+        global _document, _inputs
+        original = sys.stdout
+        self._saved = (original, _document, _inputs)
+        _inputs = {}
+        if not (original is None or (original is sys.__stdout__ and _fileno(original) == 1)):
+            if self.document:  # a capture (pytest, CliRunner): swap the Python objects only
+                _document = original
+                sys.stdout = sys.stderr
+            return self
+        try:
+            self._fd1 = os.dup(1)
+        except OSError:  # no standard output at all: the guard on 1 reports it on writing
+            self._fd1 = None
+        if original is not None:
+            try:
+                original.flush()
+            except OSError as exc:
+                self._pending = _stdout_error(exc)
+                _silence_fd1()
+        fd, owned = (1, False) if self._fd1 is None else (self._fd1, True)
+        self._own = _text_stream(fd, original, owned=owned)
+        if self.document:
+            if self._fd1 is not None and self._pending is None:
+                with contextlib.suppress(OSError):
+                    os.dup2(2, 1)
+                    self._redirected = True
+            _document = self._own
+        else:
+            sys.stdout = self._own
+        return self
+
+    def flush(self) -> None:
+        """Send what is buffered; :class:`StdoutError` when standard output did not take it."""
+        if self._pending is not None:
+            pending, self._pending = self._pending, None
+            if not (self._own is not None and self._own.buffer.raw.broken):  # type: ignore[attr-defined]
+                raise pending  # else the command's own write failed and said so
+        if self._own is not None:
+            self._own.flush()  # the guard turns a failure into StdoutError
+        if self._saved is None:
+            return
+        for stream in (sys.stdout, self._saved[0]):
+            if stream is None or stream is self._own or stream is sys.stderr:
+                continue
+            try:  # a library's own reference to the interpreter's stream, which the guard does not cover
+                stream.flush()
+            except OSError as exc:
+                if self._redirected:
+                    continue  # file descriptor 1 is standard error now: not the output's failure
+                _silence_fd1()
+                raise _stdout_error(exc) from None
+
+    def __exit__(self, *exc: object) -> None:
+        global _document, _inputs
+        with contextlib.suppress(StdoutError):
+            self.flush()  # a failure was reported by the caller's own flush, or is lost with the error it is part of
+        if self._redirected and self._fd1 is not None:
+            with contextlib.suppress(OSError):
+                os.dup2(self._fd1, 1)
+        if self._own is not None:
+            with contextlib.suppress(OSError, StdoutError):
+                self._own.close()
+        if self._saved is not None:
+            sys.stdout, _document, _inputs = self._saved
+
+
+def _fileno(stream: Any) -> int | None:
+    try:
+        return stream.fileno()
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def _silence_fd1() -> None:
+    """Point file descriptor 1 at /dev/null: what a library still buffers for it then goes nowhere, quietly."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 1)
+        os.close(devnull)
+    except OSError:
+        pass
 
 
 def read_plan_json(path: Path, *, expected: str) -> object:

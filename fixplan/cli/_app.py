@@ -17,7 +17,7 @@ import typer
 
 from fixplan import limits
 from fixplan.errors import FixplanError, FixtureError, InputError, InputFileError, SolverError, one_line
-from fixplan.files import check_output
+from fixplan.files import CommandStreams, StdoutError, check_output, document_stream
 
 try:  # typer ≥ 0.20 vendors click; older typer depends on it
     from typer._click import exceptions as click_exc
@@ -55,7 +55,10 @@ PoseOpt = Annotated[str, typer.Option("--pose", help="Analyse the part at its 's
 
 
 def _err(message: str) -> None:
-    typer.echo(one_line(f"fixplan: {message}"), err=True)
+    try:
+        typer.echo(one_line(f"fixplan: {message}"), err=True)
+    except OSError:
+        pass  # standard error is gone too: the exit status is all that is left
 
 
 def _console():  # type: ignore[no-untyped-def]
@@ -173,7 +176,7 @@ def _nonfinite_path(obj: Any, path: str) -> str | None:
 
 def _emit_json(obj: dict[str, Any], *, compact: bool = False) -> None:
     """One JSON object on stdout: indented for people, compact for large batches."""
-    sys.stdout.write(_json_text(obj, compact=compact) + "\n")
+    document_stream().write(_json_text(obj, compact=compact) + "\n")
 
 
 def _json_default(x: Any) -> Any:
@@ -223,12 +226,30 @@ def _repeated_option(args: list[str]) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point: run the app and turn every expected failure into one line and exit 2."""
-    import warnings
+    """Entry point: run the app and turn every expected failure into one line and exit 2.
 
+    Standard output is guarded for the command (:class:`fixplan.files.CommandStreams`): one that
+    cannot be written (``/dev/full``, a closed pipe) is exit 2 with one line, also when it shows
+    only at the last flush; with ``--json`` everything but the document goes to stderr.
+    """
     args = sys.argv[1:] if argv is None else list(argv)
     if not args:  # bare `fixplan`: the help, on stdout, as `fixplan --help` prints it
         args = ["--help"]
+    options = args[: args.index("--")] if "--" in args else args
+    with CommandStreams(document="--json" in options) as streams:
+        code = _run(args)
+        try:
+            streams.flush()
+        except StdoutError as exc:
+            _err(str(exc))
+            code = 2
+    return code
+
+
+def _run(args: list[str]) -> int:
+    """The command line ``args`` run, every expected failure turned into one line; the exit status."""
+    import warnings
+
     if (repeated := _repeated_option(args)) is not None:
         _err(repeated)
         return 2

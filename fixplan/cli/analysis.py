@@ -32,7 +32,7 @@ from fixplan.cli._app import (
     app,
 )
 from fixplan.errors import FixtureError, InputError, one_line
-from fixplan.files import check_distinct, write_output
+from fixplan.files import check_distinct, document_stream, write_output
 
 
 @app.command()
@@ -207,7 +207,7 @@ def classify(
         texts = [r for r in results if isinstance(r, str)]
         if len(texts) == len(results):
             head = _json_text({"file": fixture.source, "pose": pose, "contacts": cs.names, "results": []}, compact=True)
-            sys.stdout.write(head[:-2] + ",".join(texts) + "]}\n")  # head ends with "results":[]}
+            document_stream().write(head[:-2] + ",".join(texts) + "]}\n")  # head ends with "results":[]}
             return
         results = [json.loads(r) if isinstance(r, str) else r for r in results]  # a non-finite number: reported below
     if target is not None:
@@ -379,8 +379,8 @@ def map_(
         progress=not json_out,
         axis_names=(ax[0], ax[1]),
     )
-    write_output(png, lambda p: save_map(result, p))
-    write_output(csv_path, lambda p: save_map_csv(result, p))
+    save_map(result, png)  # each through files.write_output
+    save_map_csv(result, csv_path)
     counts = result.counts()
     summary: dict[str, Any] = {
         "png": str(png),
@@ -482,7 +482,7 @@ def simulate(
         if bar is not None:
             bar.stop()
     if target is not None:
-        write_output(target, traj.to_csv)
+        traj.to_csv(target)  # through files.write_output
     outcome = RunOutcome.of(sim, traj)
     if json_out:
         _emit_json(outcome.to_json())

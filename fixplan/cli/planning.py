@@ -23,7 +23,7 @@ from fixplan.cli._app import (
     app,
 )
 from fixplan.errors import InputError, one_line
-from fixplan.files import check_distinct, write_output, write_text
+from fixplan.files import check_distinct, write_text
 from fixplan.settings import DEFAULT
 
 if TYPE_CHECKING:
@@ -227,7 +227,7 @@ def solve(
         figures = []
         if figure is not None and plan.status != "infeasible":
             # the figure first, so the report never links to a missing file
-            write_output(figure, lambda p: save_plan_figure(plan, fixture, p))
+            save_plan_figure(plan, fixture, figure)  # through files.write_output
             figures.append(figure.name)  # beside the report: a relative link
             written.append(figure)
         write_text(report_path, report_markdown(plan, fixture, figures=figures))
@@ -464,7 +464,7 @@ def view(
     target = _writable(out, force)
     replay = rest_replay(fixture) if plan is None else read_plan(plan, fixture)
     fig = scene_figure(fixture, replay, max_frames=frames)
-    size = write_output(target, lambda p: write_scene(fig, p))
+    size = write_scene(fig, target)  # through files.write_output
     info = scene_info(fig)
     if json_out:
         _emit_json(

@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from fixplan import aot
+from fixplan.files import write_output, write_text
 
 RECT_2D = """format = 1
 [scene]
@@ -128,7 +129,7 @@ def steps(tmp: Path) -> list[tuple[str, Callable[[], None]]]:
 
     data = default_fixture_path().parent
     rect = tmp / "rect.toml"
-    rect.write_text(RECT_2D)
+    write_text(rect, RECT_2D)
     w3 = ",".join(["-2.5"] * 3 + ["0"] * 3)
     return [
         ("solve (default fixture)", lambda: _cli("solve", "--out", str(tmp / "plan.json"), "--force")),
@@ -215,11 +216,9 @@ def build_aot(out_dir: Path | None = None) -> str:
         for old in out_dir.glob(f"{aot.EXTENSION}.*"):
             if old.suffix != ".json" and old.name != built.name:
                 old.unlink()  # an extension of another Python version or platform
-        shutil.move(str(built), target.with_name(target.name + ".tmp"))
-        os.replace(target.with_name(target.name + ".tmp"), target)
-        json_tmp = out_dir / (aot.MANIFEST.name + ".tmp")
-        json_tmp.write_text(json.dumps(manifest, indent=1) + "\n")
-        os.replace(json_tmp, out_dir / aot.MANIFEST.name)
+        # each renamed into place (files.write_output): a failed build never leaves half an extension
+        write_output(target, lambda path: shutil.move(str(built), path))
+        write_text(out_dir / aot.MANIFEST.name, json.dumps(manifest, indent=1) + "\n")
     n = sum(len(v) for v in manifest["exports"].values())
     text = f"ahead-of-time kernels: {n} exports in {target.name}"
     return text + (f"; left to the JIT: {'; '.join(skipped)}" if skipped else "")

@@ -165,11 +165,17 @@ class Trajectory:
         per_locator[:, 0::2] = self.gap
         per_locator[:, 1::2] = self.normal_force
         table = np.column_stack([self.time_s, self.position, self.orientation, self.velocity, per_locator])
-        with open(path, "w", newline="") as fh:
-            out = csv.writer(fh)
-            out.writerow(header)
-            for row in table.tolist():
-                out.writerow([f"{x:.12g}" for x in row])
+
+        def write(tmp: Path) -> None:
+            with open(tmp, "w", newline="") as fh:
+                out = csv.writer(fh)
+                out.writerow(header)
+                for row in table.tolist():
+                    out.writerow([f"{x:.12g}" for x in row])
+
+        from fixplan.files import write_output
+
+        write_output(path, write)  # a temporary file renamed into place: never half a file
 
 
 class _Samples:

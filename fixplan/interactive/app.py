@@ -13,12 +13,13 @@ push (``classify``, with margin; a red JAMMED warning), the guidance, loop stati
 A display thread redraws at :data:`DISPLAY_HZ` from the session's latest :class:`Snapshot`; it
 only reads, so it never blocks the loop. viser serves its client from the installed package
 (one self-contained page), so the page fetches nothing from elsewhere. With a token (``--host``
-other than 127.0.0.1), viser listens on 127.0.0.1 only and :mod:`.gate` is what the network sees.
+other than 127.0.0.1), viser listens on a private Unix socket and :mod:`.gate` is the only listener.
 """
 
 from __future__ import annotations
 
 import contextlib
+import io
 import math
 import sys
 import threading
@@ -133,6 +134,7 @@ class HapticApp:
         self.token = token
         self.server: Any = None
         self.gate: Any = None
+        self._socket: Any = None  # the private folder of viser's Unix socket (with a token)
         self.gizmo: Any = None
         self.frames = 0
         self.skipped = 0
@@ -149,20 +151,25 @@ class HapticApp:
             import viser
         except ImportError:  # pragma: no cover - viser is a dependency
             raise InputError("fixplan haptic needs viser: pip install viser") from None
-        inner_host = "127.0.0.1" if self.token is not None else self.host
-        inner_port = 0 if self.token is not None else self.port
-        with contextlib.redirect_stdout(sys.stderr):  # viser's banner: stdout is for --json
-            self.server = viser.ViserServer(host=inner_host, port=inner_port, label="fixplan haptic", verbose=False)
-        bound = int(self.server.get_port())
-        if self.token is None and self.port not in (0, bound):
-            with contextlib.redirect_stdout(sys.stderr):
-                self.server.stop()
-            raise InputError(f"--port {self.port} is in use (choose another, or 0 for any free port)")
-        url_port = bound
-        if self.token is not None:
-            from fixplan.interactive.gate import TokenGate
+        # viser's banner names where viser listens: fixplan prints the page's URL itself (the gate's,
+        # with a token), so the banner is dropped, not moved to stderr
+        if self.token is None:
+            with contextlib.redirect_stdout(io.StringIO()):
+                self.server = viser.ViserServer(host=self.host, port=self.port, label="fixplan haptic", verbose=False)
+            bound = int(self.server.get_port())
+            if self.port not in (0, bound):
+                with contextlib.redirect_stdout(sys.stderr):
+                    self.server.stop()
+                raise InputError(f"--port {self.port} is in use (choose another, or 0 for any free port)")
+            url_port = bound
+        else:
+            from fixplan.interactive.gate import PrivateSocket, TokenGate, viser_on_unix_socket
 
-            self.gate = TokenGate(self.host, self.port, "127.0.0.1", bound, self.token)
+            # viser on a socket only this user can reach, the gate the only listener (no TCP port without the token)
+            self._socket = PrivateSocket()
+            with contextlib.redirect_stdout(io.StringIO()), viser_on_unix_socket(self._socket.path):
+                self.server = viser.ViserServer(host="127.0.0.1", port=0, label="fixplan haptic", verbose=False)
+            self.gate = TokenGate(self.host, self.port, self._socket.path, self.token)
             url_port = self.gate.start()
         self._build_scene()
         self._build_panel()
@@ -420,3 +427,6 @@ class HapticApp:
         if self.server is not None:
             with contextlib.redirect_stdout(sys.stderr):
                 self.server.stop()
+        if self._socket is not None:
+            self._socket.close()
+            self._socket = None

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from fixplan.errors import InputError
+from fixplan.files import document_stream
 
 
 def _echo(text: str) -> None:
@@ -133,7 +134,7 @@ def run_haptic(
         write_text(record, json.dumps(plan_json(result, fixture), allow_nan=False) + "\n")
         payload["record"] = str(record)
     if json_out:
-        sys.stdout.write(json.dumps(payload, indent=2, allow_nan=False) + "\n")
+        document_stream().write(json.dumps(payload, indent=2, allow_nan=False) + "\n")
     else:
         s = result.stats
         _echo(f"status: {result.status} — {result.reason}")
@@ -196,7 +197,7 @@ def run_device_sim(
     if res.peer_gone_s is not None:  # one line, on stderr also with --json
         _echo(f"device-sim: fixplan stopped answering ({res.peer_gone_s:.1f} s without an answer): ending")
     if json_out:
-        sys.stdout.write(json.dumps(res.to_json(), indent=2) + "\n")
+        document_stream().write(json.dumps(res.to_json(), indent=2) + "\n")
     else:
         _echo(
             f"device-sim: {res.sent} poses sent, {res.received} answers, round trip mean {res.rtt_mean_ms:.3f} ms, "
@@ -227,7 +228,7 @@ def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
     if json_out:
         out = v.to_json()
         out.pop("trace", None)
-        sys.stdout.write(json.dumps(out, indent=2, allow_nan=False, default=float) + "\n")
+        document_stream().write(json.dumps(out, indent=2, allow_nan=False, default=float) + "\n")
     else:
         kind = "recorded pushes" if data.get("source") == "haptic session" else "plan"
         seq = " → ".join("{" + ", ".join(s) + "}" for s in v.observed_sequence) or "(none)"

@@ -1,20 +1,27 @@
 """A token gate in front of viser for ``fixplan haptic --host H --token T``.
 
-viser has no authentication, so with ``--host`` other than 127.0.0.1 viser listens on 127.0.0.1
-(an ephemeral port) and this gate is what the network sees. A request is let through when it
-carries the token as ``?token=T`` (the printed URL) or in the ``fixplan_token`` cookie that the
-gate sets on the first page load; anything else gets ``403 Forbidden``, the websocket included.
-Pages are fetched from viser and passed on; a websocket is relayed frame by frame.
+viser has no authentication, so with ``--host`` other than 127.0.0.1 this gate is the only
+listener: viser itself listens on a Unix socket in a folder only this user can enter
+(:class:`PrivateSocket`, :func:`viser_on_unix_socket`), never on a TCP port that another process
+on the machine could reach without the token. A request is let through when it carries the
+token as ``?token=T`` (the printed URL) or in the ``fixplan_token`` cookie that the gate sets on
+the first page load; anything else gets ``403 Forbidden``, the websocket included. Pages are
+fetched from viser over the socket and passed on; a websocket is relayed frame by frame.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hmac
 import http
+import http.client
+import os
+import shutil
+import socket
+import tempfile
 import threading
-import urllib.error
-import urllib.request
+from collections.abc import Iterator
 from http.cookies import SimpleCookie
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
@@ -41,12 +48,70 @@ def token_ok(path: str, cookie_header: str | None, token: str) -> tuple[bool, bo
     return False, False
 
 
-class TokenGate:
-    """Listen on ``host:port``, check the token, and relay to viser at ``inner_host:inner_port``."""
+class PrivateSocket:
+    """A path for a Unix socket in a fresh folder only this user can enter (mode 0700); :meth:`close` removes both."""
 
-    def __init__(self, host: str, port: int, inner_host: str, inner_port: int, token: str):
+    def __init__(self) -> None:
+        self.folder = tempfile.mkdtemp(prefix="fixplan-haptic-")
+        self.path = os.path.join(self.folder, "viser.sock")
+
+    def close(self) -> None:
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def viser_on_unix_socket(path: str) -> Iterator[None]:
+    """While a ``viser.ViserServer`` is built inside, its server listens on the Unix socket ``path``, not TCP.
+
+    viser binds ``host:port`` with ``websockets.asyncio.server.serve`` and has no option for a
+    socket; its constructor returns once the server listens, so the substitution lasts exactly
+    that long. ``get_port()`` of that server means nothing.
+    """
+    import websockets.asyncio.server as ws_server
+
+    original = ws_server.serve
+
+    def on_socket(handler: Any, host: Any = None, port: Any = None, **kwargs: Any) -> Any:  # noqa: ARG001
+        return original(handler, unix=True, path=path, **kwargs)
+
+    ws_server.serve = on_socket  # type: ignore[assignment,misc]
+    try:
+        yield
+    finally:
+        ws_server.serve = original  # type: ignore[misc]
+
+
+class _UnixHTTPConnection(http.client.HTTPConnection):
+    """An HTTP connection to a server on a Unix socket."""
+
+    def __init__(self, path: str, timeout: float):
+        super().__init__("localhost", timeout=timeout)
+        self.socket_path = path
+
+    def connect(self) -> None:
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        sock.settimeout(self.timeout)
+        sock.connect(self.socket_path)
+        self.sock = sock
+
+
+def _fetch(socket_path: str, path: str) -> tuple[bytes, int, str]:
+    """GET ``path`` from the server on ``socket_path``: (body, status, content type)."""
+    conn = _UnixHTTPConnection(socket_path, timeout=10.0)
+    try:
+        conn.request("GET", path)
+        r = conn.getresponse()
+        return r.read(), r.status, r.headers.get("Content-Type", "text/html")
+    finally:
+        conn.close()
+
+
+class TokenGate:
+    """Listen on ``host:port``, check the token, and relay to viser on the Unix socket ``inner``."""
+
+    def __init__(self, host: str, port: int, inner: str, token: str):
         self.host, self.port = host, port
-        self.inner = (inner_host, inner_port)
+        self.inner = inner
         self.token = token
         self.refused = 0
         self.relayed = 0
@@ -80,7 +145,7 @@ class TokenGate:
         from websockets.datastructures import Headers
         from websockets.http11 import Response
 
-        inner_host, inner_port = self.inner
+        inner = self.inner
 
         def process_request(connection: Any, request: Any) -> Any:
             allowed, via_query = token_ok(request.path, request.headers.get("Cookie"), self.token)
@@ -92,23 +157,22 @@ class TokenGate:
                 return None  # the handshake goes on; handler() relays
             path = urlsplit(request.path).path or "/"
             try:
-                with urllib.request.urlopen(f"http://{inner_host}:{inner_port}{path}", timeout=10) as r:  # noqa: S310
-                    body, status, ctype = r.read(), r.status, r.headers.get("Content-Type", "text/html")
-            except urllib.error.HTTPError as exc:
-                body, status, ctype = exc.read(), exc.code, "text/plain"
+                body, status, ctype = _fetch(inner, path)
+            except OSError as exc:
+                body, status, ctype = f"fixplan haptic: {exc}\n".encode(), 502, "text/plain"
             headers = Headers({"Content-Type": ctype, "Content-Length": str(len(body))})
             if via_query:
                 headers["Set-Cookie"] = f"{COOKIE}={self.token}; Path=/; HttpOnly; SameSite=Strict"
             return Response(status, http.HTTPStatus(status).phrase, headers, body)
 
         async def handler(ws: Any) -> None:
-            from websockets.asyncio.client import connect
+            from websockets.asyncio.client import unix_connect
             from websockets.exceptions import ConnectionClosed
 
             protocols = [ws.subprotocol] if ws.subprotocol else None
             self.relayed += 1
-            async with connect(f"ws://{inner_host}:{inner_port}/", subprotocols=protocols, max_size=None,
-                               compression=None) as inner:  # fmt: skip
+            async with unix_connect(inner, "ws://localhost/", subprotocols=protocols, max_size=None,
+                                    compression=None) as viser_ws:  # fmt: skip
 
                 async def pump(a: Any, b: Any) -> None:
                     try:
@@ -117,7 +181,7 @@ class TokenGate:
                     except ConnectionClosed:
                         pass  # either side left: the other is closed below
 
-                tasks = [asyncio.ensure_future(pump(ws, inner)), asyncio.ensure_future(pump(inner, ws))]
+                tasks = [asyncio.ensure_future(pump(ws, viser_ws)), asyncio.ensure_future(pump(viser_ws, ws))]
                 _, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
                 for t in pending:
                     t.cancel()

@@ -16,7 +16,7 @@ world axes, padded the same way.
     stiffness ``K`` and damping ``B`` per coordinate, the handle damping ``device_damping`` and
     mass ``device_mass`` that keep the coupling passive, the start coordinates ``x0``, the hand's
     limits ``F_max_N``/``T_max_Nm``, the locator ``names`` and the ``mode_names`` of verdicts.
-``POSE`` (device → fixplan, :data:`POSE_SIZE` = 120 bytes, up to 1 kHz)
+``POSE`` (device → fixplan, :data:`POSE_SIZE` bytes, up to 1 kHz)
     ``magic``, ``type u8 = 1``, ``ndof u8``, ``flags u16`` (0), ``seq u32`` (increasing),
     ``t_device f64`` [s, the device's clock], ``pose 6×f64``, ``twist 6×f64``.
 ``FORCE`` (fixplan → device, :data:`FORCE_SIZE` bytes, one per haptic tick once a pose came)
@@ -31,6 +31,10 @@ world axes, padded the same way.
 
 Malformed datagrams (wrong size, magic, type or ``ndof``, non-finite numbers) and out-of-order
 poses (``seq`` not above the last accepted one) are counted and dropped; the loop goes on.
+
+:data:`MESSAGES` describes each message's ``struct`` layout for people; :func:`markdown_table`
+renders it, with the sizes the code uses, as the table in docs/haptic.md
+(``python tools/protocol_docs.py --write``).
 """
 
 from __future__ import annotations
@@ -56,6 +60,44 @@ _POSE = struct.Struct("<4sBBHId6d6d")
 _FORCE = struct.Struct("<4sBBHIIdd6d6d6dbBBxf6d")
 POSE_SIZE = _POSE.size
 FORCE_SIZE = _FORCE.size
+
+
+@dataclass(frozen=True)
+class MessageLayout:
+    """One message as a device's programmer needs it: its ``struct`` layout, named field by field, and its size."""
+
+    name: str
+    direction: str
+    layout: struct.Struct
+    fields: tuple[str, ...]  # one per code of the format ("6d" is one field of six numbers, "3x" one of pad bytes)
+    trailer: str = ""  # what follows the fixed part, if anything
+
+    @property
+    def size(self) -> str:
+        """The size in bytes: the fixed part's, ``+`` when a variable trailer follows."""
+        return f"{self.layout.size}" + (" +" if self.trailer else "")
+
+
+MESSAGES: tuple[MessageLayout, ...] = (
+    MessageLayout("HELLO", "device → fixplan", _HEADER, ("magic", "type 3", "3 zero bytes"),
+                  "token (UTF-8, only with `--token`)"),
+    MessageLayout("CONFIG", "fixplan → device", _HEADER, ("magic", "type 4", "3 zero bytes"), "UTF-8 JSON"),
+    MessageLayout("POSE", "device → fixplan", _POSE,
+                  ("magic", "type 1", "ndof", "flags 0", "seq", "t_device [s]", "pose[6]", "twist[6]")),
+    MessageLayout("FORCE", "fixplan → device", _FORCE,
+                  ("magic", "type 2", "ndof", "flags", "seq", "echo_seq", "t_echo [s]", "t_session [s]", "felt[6]",
+                   "part pose[6]", "part twist[6]", "target", "transition", "verdict", "pad", "margin (f32)",
+                   "push[6]")),
+)  # fmt: skip
+
+
+def markdown_table() -> str:
+    """The messages as the Markdown table of docs/haptic.md: layout, fields and size from the code's structs."""
+    rows = ["| message | direction | layout (`struct`) | size [bytes] |", "|---|---|---|---|"]
+    for m in MESSAGES:
+        layout = f"`{m.layout.format}`: " + ", ".join(m.fields) + (f"; then {m.trailer}" if m.trailer else "")
+        rows.append(f"| {m.name} | {m.direction} | {layout} | {m.size} |")
+    return "\n".join(rows) + "\n"
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from fixplan.files import write_output
 from fixplan.jamming.classify import MODES
 from fixplan.mapping import axis_unit
 
@@ -59,16 +60,20 @@ def save_map(result: JammingMap, png: Path, csv_path: Path | None = None) -> Non
         handles=[Patch(color=MODE_COLORS[m], label=m) for m in present], loc="upper right", fontsize=8, framealpha=0.9
     )
     fig.tight_layout()
-    fig.savefig(png)
+    write_output(png, fig.savefig)
     if csv_path is not None:
         save_map_csv(result, csv_path)
 
 
 def save_map_csv(result: JammingMap, csv_path: Path) -> None:
-    """Write the grid as CSV: one row per point (the two axes, the mode, the margin)."""
-    with open(csv_path, "w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow([result.axis_names[0], result.axis_names[1], "mode", "margin"])
-        for j, yv in enumerate(result.y):
-            for i, xv in enumerate(result.x):
-                writer.writerow([f"{xv:.9g}", f"{yv:.9g}", result.modes[j, i], f"{result.margins[j, i]:.6g}"])
+    """Write the grid as CSV: one row per point (the two axes, the mode, the margin); see :func:`fixplan.files.write_output`."""
+
+    def write(path: Path) -> None:
+        with open(path, "w", newline="") as fh:
+            writer = csv.writer(fh)
+            writer.writerow([result.axis_names[0], result.axis_names[1], "mode", "margin"])
+            for j, yv in enumerate(result.y):
+                for i, xv in enumerate(result.x):
+                    writer.writerow([f"{xv:.9g}", f"{yv:.9g}", result.modes[j, i], f"{result.margins[j, i]:.6g}"])
+
+    write_output(csv_path, write)

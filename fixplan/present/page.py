@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from fixplan.errors import FixplanError
+from fixplan.files import write_text
 
 _EXTERNAL = re.compile(r"""<(?:script|link|img|iframe)\b[^>]*\b(?:src|href)\s*=\s*["']?\s*(?:https?:)?//""", re.I)
 
@@ -34,5 +35,5 @@ def write_scene(fig: Any, path: Path) -> int:
     refs = external_references(html)
     if refs:
         raise FixplanError(f"the page would fetch {refs[0]!r}: refusing to write {path}")
-    Path(path).write_text(html, encoding="utf-8")
+    write_text(Path(path), html)
     return len(html.encode("utf-8"))

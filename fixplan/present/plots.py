@@ -327,5 +327,8 @@ def plan_figure(result: Plan | PlanResult, fixture: Fixture, *, dpi: float = 100
 
 def save_plan_figure(result: Plan | PlanResult, fixture: Fixture, png: Path, *, dpi: float = 100.0) -> Path:
     """Draw :func:`plan_figure` and write it as a PNG; returns ``png``."""
-    plan_figure(result, fixture, dpi=dpi).savefig(png, dpi=dpi)
+    from fixplan.files import write_output
+
+    fig = plan_figure(result, fixture, dpi=dpi)
+    write_output(png, lambda path: fig.savefig(path, dpi=dpi))
     return png

@@ -78,8 +78,13 @@ def run_in_process(args: Sequence[str], timeout_s: float = 60.0, cwd: Path | Non
     return Outcome(tuple(args), code, stdout, stderr, time.perf_counter() - t0)
 
 
-def run_subprocess(args: Sequence[str], timeout_s: float = 60.0, cwd: Path | None = None) -> Outcome:
-    """``fixplan ARGS`` in a fresh interpreter; a run past ``timeout_s`` is killed and reported as a hang."""
+def run_subprocess(
+    args: Sequence[str], timeout_s: float = 60.0, cwd: Path | None = None, stdout: object = None
+) -> Outcome:
+    """``fixplan ARGS`` in a fresh interpreter; a run past ``timeout_s`` is killed and reported as a hang.
+
+    ``stdout``: where its standard output goes (a file, a descriptor); by default it is captured.
+    """
     import time
 
     t0 = time.perf_counter()
@@ -88,7 +93,8 @@ def run_subprocess(args: Sequence[str], timeout_s: float = 60.0, cwd: Path | Non
     try:
         proc = subprocess.run(
             [*CLI, *args],
-            capture_output=True,
+            stdout=subprocess.PIPE if stdout is None else stdout,
+            stderr=subprocess.PIPE,
             text=True,
             errors="replace",
             timeout=timeout_s,
@@ -98,7 +104,7 @@ def run_subprocess(args: Sequence[str], timeout_s: float = 60.0, cwd: Path | Non
         )
     except subprocess.TimeoutExpired:
         raise AssertionError(f"fixplan {' '.join(args)} hung: killed after {timeout_s} s") from None
-    return Outcome(tuple(args), proc.returncode, proc.stdout, proc.stderr, time.perf_counter() - t0)
+    return Outcome(tuple(args), proc.returncode, proc.stdout or "", proc.stderr, time.perf_counter() - t0)
 
 
 def _refuse_constant(name: str) -> float:
