@@ -120,11 +120,12 @@ def parse_numbers(
     text: str, what: str, n: int | None = None, ranges: list[Range] | Range | None = None
 ) -> NDArray[np.float64]:
     """Comma-separated finite numbers, ``n`` of them, each inside its range (when given); :class:`InputError` names ``what``."""
-    from fixplan.errors import shorten
+    from fixplan.errors import quote_number, shorten
 
     shown = shorten(text)
+    parts = text.split(",")
     try:
-        values = np.array([float(x) for x in text.split(",")], dtype=float)
+        values = np.array([float(x) for x in parts], dtype=float)
     except ValueError:
         raise InputError(f"{what} must be comma-separated numbers, got {shown}") from None
     if n is not None and values.shape[0] != n:
@@ -135,7 +136,8 @@ def parse_numbers(
         per = ranges if isinstance(ranges, list) else [ranges] * len(values)
         for i, (x, rng) in enumerate(zip(values, per, strict=False)):
             if not rng.contains(float(x)):
-                raise InputError(f"{what}: number {i + 1} is {x:g} (expected {rng.expected()})")
+                # the number as typed: ":g" rounded 1000000.1 to the limit itself (issue 22 D20)
+                raise InputError(f"{what}: number {i + 1} is {quote_number(parts[i])} (expected {rng.expected()})")
     return values
 
 
