@@ -100,7 +100,7 @@ def quote_number(value: object) -> str:
 
     A float is shown with six significant digits when those read back as the same float and are
     no longer (``200``, ``1e+12``), else as ``repr`` — the shortest text that does — so ``mass = 10000.0001`` shows
-    ``10000.0001`` where ``:g`` printed ``10000``, the limit itself (issue 22 D20). An integer
+    ``10000.0001`` where ``:g`` printed ``10000``, the limit itself. An integer
     shows its digits, text (a number as typed on the command line) is quoted as typed; either
     is cut to a readable length.
     """

@@ -148,7 +148,7 @@ class Number(PlainValue):
         value = _as_float(raw)
         if value is None:
             _fail(f"got {_kind(raw)}, too large for a float (expected {what if bounds is None else bounds.expected()})")
-        given = quote_number(raw)  # as written, never rounded to the limit (issue 22 D20)
+        given = quote_number(raw)  # as written, never rounded to the limit
         if not math.isfinite(value):
             _fail(f"got {value} (expected a finite number)")
         if self.exclusive_minimum is not None and value <= self.exclusive_minimum:

@@ -136,7 +136,7 @@ def parse_numbers(
         per = ranges if isinstance(ranges, list) else [ranges] * len(values)
         for i, (x, rng) in enumerate(zip(values, per, strict=False)):
             if not rng.contains(float(x)):
-                # the number as typed: ":g" rounded 1000000.1 to the limit itself (issue 22 D20)
+                # the number as typed: ":g" rounded 1000000.1 to the limit itself
                 raise InputError(f"{what}: number {i + 1} is {quote_number(parts[i])} (expected {rng.expected()})")
     return values
 

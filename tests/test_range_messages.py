@@ -1,4 +1,4 @@
-"""A value outside its range is quoted as given, never rounded to the limit (issue 22 D20).
+"""A value outside its range is quoted as given, never rounded to the limit.
 
 ``mass = 10000.0001`` was reported as ``got 10000`` (``:g`` keeps six digits), which reads as
 "the limit itself is refused"; the same for gravity, friction and the command line's numbers.

@@ -3,8 +3,8 @@
 Each must end in exit 2 with one line naming the address, within the documented bound (README,
 ``fixplan robust``: "a scheduler that cannot be reached within 10 s"): the connection is given
 ``ClusterSettings.connect_timeout_s``, and the rest is starting Python and reading the fixture.
-Issue 22 D8 (``tcp://[::1`` exited 3 after 21 s), D9 (a silent port hung for more than 180 s)
-and D10 (a port that sends garbage exited 3 with a traceback). The elapsed time is a hang check
+Before: ``tcp://[::1`` exited 3 after 21 s, a silent port hung for more than 180 s, and a
+port that sends garbage exited 3 with a traceback. The elapsed time is a hang check
 (a bound), not a speed target.
 """
 
@@ -106,7 +106,7 @@ def test_the_connection_time_fits_the_documented_bound():
 
 @pytest.mark.parametrize("command", [["robust", str(JAMS)], ["solve", "--batch", str(PROBLEMS)]])
 def test_a_silent_port_exits_2_within_the_bound(silent_port, command):
-    """D9: the port accepts and never answers (Dask's handshake read had no timeout)."""
+    """The port accepts and never answers (Dask's handshake read had no timeout)."""
     address = f"tcp://127.0.0.1:{silent_port.port}"
     _assert_refused(command, address, needle="handshake")
     assert silent_port.accepted >= 1  # the connection was made: the hang was in the handshake
@@ -114,7 +114,7 @@ def test_a_silent_port_exits_2_within_the_bound(silent_port, command):
 
 @pytest.mark.parametrize("command", [["robust", str(JAMS)], ["solve", "--batch", str(PROBLEMS)]])
 def test_a_port_sending_garbage_exits_2(garbage_port, command):
-    """D10: garbage where Dask's handshake should be."""
+    """Garbage where Dask's handshake should be."""
     _assert_refused(command, f"tcp://127.0.0.1:{garbage_port.port}", needle="Dask")
 
 
@@ -128,7 +128,7 @@ def test_a_closed_port_exits_2_within_the_bound():
 @pytest.mark.parametrize(
     ("address", "reason"),
     [
-        ("tcp://[::1", "closing ']'"),  # D8: exited 3 after 21 s
+        ("tcp://[::1", "closing ']'"),  # exited 3 after 21 s
         ("tcp://[::1]x", "after the IPv6 address"),
         ("tcp://[nope]:8786", "not an IPv6 address"),
         ("tcp://::1:8786", "in brackets"),

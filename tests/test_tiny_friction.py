@@ -1,4 +1,4 @@
-"""A tiny friction coefficient is as exact as none (issue 22 D15).
+"""A tiny friction coefficient is as exact as none.
 
 box-3-2-1 with μ = 1e-12 classified a 1 N push along +x as ``jammed`` with certificate
 ``static-balance``, E1's normal force −1 N and a cone violation of 7e-14: the cone was written on
@@ -51,7 +51,7 @@ def _assert_in_cones(fixture: fixplan.Fixture, r, contacts=None, pose=None) -> N
 @pytest.mark.parametrize("backend", ["clarabel", "cvxpy"])
 @pytest.mark.parametrize("mu", MUS)
 def test_box_321_push_away_from_e1_separates_at_every_tiny_mu(mu, backend):
-    """The issue's case: separates with margin 1/√m at every μ ≤ 1e-6, forces in the cones."""
+    """The reported case: separates with margin 1/√m at every μ ≤ 1e-6, forces in the cones."""
     f = _box_321(mu)
     r = classify(f, [1.0, 0, 0, 0, 0, 0], backend=backend)[0]
     assert r.mode == "separates", (r.mode, r.certificate, r.reason)

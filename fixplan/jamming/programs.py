@@ -65,7 +65,7 @@ def force_layout(cs: ContactSet, *, scaled: bool = True) -> ForceLayout:
     """The reduced force variables and their exact friction cones for ``cs``.
 
     ``scaled=False``: the tangential variables are the forces themselves and the cones read
-    ``(μ f_n, f_t)`` (the form before issue 22 D15; kept for the wrench search, whose answers
+    ``(μ f_n, f_t)`` (the earlier form; kept for the wrench search, whose answers
     the classifier confirms, so that its plans stay as they were).
     """
     cols: list[FloatArray] = []
@@ -87,7 +87,7 @@ def force_layout(cs: ContactSet, *, scaled: bool = True) -> ForceLayout:
         # tangential (and spin) variables s scaled by μ: λ_t = μ s, λ_spin = μ e_r s_spin, so
         # that every cone reads (f_n, s) with unit coefficients. With the cone written on
         # (μ f_n, λ_t) a tiny μ made the normal force's own sign a 1e-12-weighted constraint:
-        # at μ = 1e-12 the solver returned f_n = -1 N as "balanced" (issue 22 D15)
+        # at μ = 1e-12 the solver returned f_n = -1 N as "balanced"
         for k in range(1, contact.size):
             e = np.zeros(total)
             e[offset + k] = mu * (contact.torsion_m if k == 3 else 1.0) if scaled else 1.0

@@ -1,16 +1,16 @@
-"""Input classes of issue 22's second campaign: nesting, scheduler addresses, range edges, tiny friction.
+"""Input classes of the second hostile-input campaign: nesting, scheduler addresses, range edges, tiny friction.
 
 - Deeply nested TOML in every form (dotted keys, table headers, arrays of tables, arrays,
   inline tables, dotted keys inside inline tables, mixed), from 1 to 40,000 levels: ``validate``
   keeps the contract within a bound, refuses past ``limits.MAX_TOML_NESTING`` with the line,
-  and the pre-parse scan never lets through more levels than the limit (D18).
+  and the pre-parse scan never lets through more levels than the limit.
 - ``--scheduler`` addresses, well formed or not: :func:`fixplan.cluster.check_address` returns
   a host and a port in 1..65535 or refuses with one printable line; a refused address ends the
-  command with exit 2 before any connection (D8).
+  command with exit 2 before any connection.
 - Values just outside each fixture range: refused, quoting a number that reads back as exactly
-  the value written (D20).
+  the value written.
 - Tiny positive friction on seeded fixtures and wrenches: μ = 0's verdict and margin, forces in
-  the cones (D15).
+  the cones.
 
 The short budget (``make test``) runs a few derandomized examples of each; ``make fuzz`` more.
 """
@@ -33,7 +33,7 @@ from fixplan import limits
 
 BOX = (PROBLEMS / "box-3-2-1.toml").read_text()
 
-# -- D18: nesting ------------------------------------------------------------------------------
+# -- nesting -----------------------------------------------------------------------------------
 FORMS = ("dotted", "header", "array-header", "array", "inline", "inline-dotted", "mixed")
 
 
@@ -141,7 +141,7 @@ def _inline(value: object) -> str:
     return repr(value)
 
 
-# -- D8: scheduler addresses -------------------------------------------------------------------
+# -- scheduler addresses -----------------------------------------------------------------------
 ADDRESS_PARTS = st.one_of(
     st.sampled_from(
         ["tcp://", "tls://", "inproc://", "ws://", "", "tcp:/", "TCP://", "[", "]", "::1", ":", "127.0.0.1", "0",
@@ -197,7 +197,7 @@ def test_a_refused_address_ends_the_command_at_once(parts: list[str], command: s
     assert len(outcome.stderr.strip().splitlines()) == 1
 
 
-# -- D20: values just outside their ranges -----------------------------------------------------
+# -- values just outside their ranges ---------------------------------------------------------
 RANGE_KEYS = [
     ("workpiece.mass", "mass = 2.0", "mass = {v}", limits.MASS),
     ("scene.gravity[0]", "gravity = [0.0, 0.0, -9.81]", "gravity = [{v}, 0.0, -9.81]", limits.GRAVITY),
@@ -257,7 +257,7 @@ def test_wrench_components_just_outside_are_quoted_as_typed(i: int, data: st.Dat
     assert outcome.code == 2 and f"number {i + 1} is {v!r} (expected" in outcome.stderr, outcome.stderr
 
 
-# -- D15: tiny positive friction ---------------------------------------------------------------
+# -- tiny positive friction -------------------------------------------------------------------
 TINY_MU = st.one_of(st.sampled_from([1e-14, 1e-12, 1e-10, 1e-9]), st.floats(1e-300, 1e-6))
 
 
