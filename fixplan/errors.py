@@ -93,3 +93,26 @@ def shorten(text: str) -> str:
     """``repr(text)`` (escapes keep a message on one line), cut to a readable length."""
     shown = repr(text)
     return shown if len(shown) <= SHOWN_CHARS else shown[: SHOWN_CHARS - 1] + "…"
+
+
+def quote_number(value: object) -> str:
+    """A number as the user gave it, for "got ..." in a range message: never rounded to the limit.
+
+    A float is shown with six significant digits when those read back as the same float and are
+    no longer (``200``, ``1e+12``), else as ``repr`` — the shortest text that does — so ``mass = 10000.0001`` shows
+    ``10000.0001`` where ``:g`` printed ``10000``, the limit itself. An integer
+    shows its digits, text (a number as typed on the command line) is quoted as typed; either
+    is cut to a readable length.
+    """
+    if isinstance(value, bool):
+        return repr(value)
+    if isinstance(value, int):
+        shown = repr(value)
+    elif isinstance(value, float):
+        x = float(value)  # numpy's float64 too (its repr is np.float64(...))
+        short, exact = f"{x:g}", repr(x)
+        shown = short if float(short) == x and len(short) <= len(exact) else exact
+    else:
+        text = str(value).strip()
+        return text if len(text) <= SHOWN_CHARS and text.isprintable() else shorten(text)
+    return shown if len(shown) <= SHOWN_CHARS else shown[: SHOWN_CHARS - 1] + "…"

@@ -155,7 +155,24 @@ def read_fixture_text(path: Path) -> str:
 
 
 def parse_toml(text: str, source: str) -> dict[str, Any]:
-    """The TOML document, or :class:`FixtureError` keyed ``<toml>`` saying what is wrong."""
+    """The TOML document, or :class:`FixtureError` keyed ``<toml>`` saying what is wrong.
+
+    The nesting is bounded before parsing (:func:`fixplan.limits.toml_nesting`, one linear scan):
+    the parser's cost grows with the square of a dotted key's depth.
+    """
+    deep = limits.toml_nesting(text)
+    if deep is not None:
+        line, depth = deep
+        raise FixtureError(
+            source,
+            [
+                Issue(
+                    "<toml>",
+                    f"line {line}: tables, arrays or dotted keys nested {depth} deep (expected at most "
+                    f"{limits.MAX_TOML_NESTING} levels; a fixture file nests 3)",
+                )
+            ],
+        )
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

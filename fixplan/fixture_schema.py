@@ -39,7 +39,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 from pydantic_core import InitErrorDetails, PydanticCustomError, core_schema
 
 from fixplan import limits
-from fixplan.errors import Issue, shorten
+from fixplan.errors import Issue, quote_number, shorten
 from fixplan.limits import Range
 from fixplan.model import SimulationSettings
 from fixplan.schema import _as_float, _is_number, _kind
@@ -148,18 +148,19 @@ class Number(PlainValue):
         value = _as_float(raw)
         if value is None:
             _fail(f"got {_kind(raw)}, too large for a float (expected {what if bounds is None else bounds.expected()})")
+        given = quote_number(raw)  # as written, never rounded to the limit
         if not math.isfinite(value):
             _fail(f"got {value} (expected a finite number)")
         if self.exclusive_minimum is not None and value <= self.exclusive_minimum:
-            _fail(f"got {value:g} (expected {what} > {self.exclusive_minimum:g})")
+            _fail(f"got {given} (expected {what} > {self.exclusive_minimum:g})")
         if self.minimum is not None and value < self.minimum:
-            _fail(f"got {value:g} (expected {what} ≥ {self.minimum:g})")
+            _fail(f"got {given} (expected {what} ≥ {self.minimum:g})")
         if self.maximum is not None and value > self.maximum:
-            _fail(f"got {value:g} (expected {what} ≤ {self.maximum:g})")
+            _fail(f"got {given} (expected {what} ≤ {self.maximum:g})")
         if bounds is not None and not bounds.contains(value):
             above = value > bounds.high
             hint = f"; {self.too_large}" if self.too_large and above else ""
-            _fail(f"got {value:g} (expected {bounds.expected()}{hint})", above=above)
+            _fail(f"got {given} (expected {bounds.expected()}{hint})", above=above)
         return value
 
     def schema(self) -> dict[str, Any]:
@@ -389,7 +390,7 @@ class Vertices(Value):
             _fail("polygon is not strictly convex (expected a convex polygon, counter-clockwise)")
         extent = float(np.min(V.max(axis=0) - V.min(axis=0)))
         if extent < limits.SIZE.low:
-            _fail(f"the polygon is {extent:.3g} m across (expected a width {limits.SIZE.expected()})")
+            _fail(f"the polygon is {quote_number(extent)} m across (expected a width {limits.SIZE.expected()})")
         return tuple((float(x), float(y)) for x, y in V)
 
     def schema(self) -> dict[str, Any]:

@@ -25,6 +25,7 @@ Why these numbers:
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,6 +81,10 @@ MAX_ENTRIES = 100  # [[locator]] plus [[contact]] entries in one file
 MAX_FILE_BYTES = 1 << 20  # any input file fixplan reads as text (fixture, wrench CSV, plan JSON)
 MAX_SIM_STEPS = 10_000_000  # simulation steps of one `fixplan simulate` run without --force
 MAX_NAME_LENGTH = 64
+# tables, arrays and dotted-key levels nested in a TOML input, counted before parsing: a fixture
+# nests 3 (workpiece.start.position); tomllib's cost grows with the square of a dotted key's
+# depth (40,000 levels in 82 KB took minutes), so the file-size limit alone does not bound it
+MAX_TOML_NESTING = 32
 
 # plausible densities of a solid part [kg/m³]: outside, validate warns (a file in millimetres?)
 DENSITY_WARN_KGPM3 = (5.0, 5e4)
@@ -115,11 +120,12 @@ def parse_numbers(
     text: str, what: str, n: int | None = None, ranges: list[Range] | Range | None = None
 ) -> NDArray[np.float64]:
     """Comma-separated finite numbers, ``n`` of them, each inside its range (when given); :class:`InputError` names ``what``."""
-    from fixplan.errors import shorten
+    from fixplan.errors import quote_number, shorten
 
     shown = shorten(text)
+    parts = text.split(",")
     try:
-        values = np.array([float(x) for x in text.split(",")], dtype=float)
+        values = np.array([float(x) for x in parts], dtype=float)
     except ValueError:
         raise InputError(f"{what} must be comma-separated numbers, got {shown}") from None
     if n is not None and values.shape[0] != n:
@@ -130,5 +136,107 @@ def parse_numbers(
         per = ranges if isinstance(ranges, list) else [ranges] * len(values)
         for i, (x, rng) in enumerate(zip(values, per, strict=False)):
             if not rng.contains(float(x)):
-                raise InputError(f"{what}: number {i + 1} is {x:g} (expected {rng.expected()})")
+                # the number as typed: ":g" rounded 1000000.1 to the limit itself
+                raise InputError(f"{what}: number {i + 1} is {quote_number(parts[i])} (expected {rng.expected()})")
     return values
+
+
+# the characters the nesting scan stops at (everything else — bare-key characters, blanks — is skipped in C)
+_TOML_STOPS = re.compile(r"""[^A-Za-z0-9_\- \t]""")
+_BASIC_END = re.compile(r'(?:[^"\\\n]|\\.)*"')  # the rest of a one-line "..." string
+_BASIC_ML_END = re.compile(r'(?:[^"\\]|\\.|"(?!""))*"""', re.S)  # the rest of a multi-line one
+
+
+def toml_nesting(text: str, limit: int = MAX_TOML_NESTING) -> tuple[int, int] | None:
+    """``(line, depth)`` where TOML ``text`` first nests deeper than ``limit``, else None (one linear scan).
+
+    The depth counts the levels a parser builds,
+    outside strings and comments: each ``[`` or ``{`` of a value, each dot of a dotted key
+    (``a.b.c = 1`` nests 3), and the table header's levels under which its keys nest
+    (``[a.b]``: 2, ``[[a.b]]``: 3). A key's dots count for the value it opens
+    (``a.b = {c.d = [[1]]}`` nests 5: a, b, c, d and the inner array). Not a validator: text
+    the scan cannot follow (an unterminated string) is left to the parser, which reports it.
+    """
+    line, pos, n = 1, 0, len(text)
+    stack: list[tuple[int, int, str]] = []  # per open bracket: (depth, key dots) to restore on close, and "[" or "{"
+    depth = 0  # levels of the table header ([a.b]: 2, [[a.b]]: 3), the open brackets and their keys
+    key_dots = 0  # dots of the current entry's key (set at "=")
+    chain = 0  # dots of the dotted name being read
+    valued = False  # a top-level statement's "=" was read (a "[" is then a value, not a header)
+    in_value = False  # reading a value (a dot there is a number's or a date's, not a key's)
+    header = 0  # brackets of the table header being read (0: not in one)
+    while True:
+        m = _TOML_STOPS.search(text, pos)
+        if m is None:
+            return None
+        i = m.start()
+        c = text[i]
+        pos = i + 1
+        if c == ".":
+            if in_value:
+                continue
+            chain += 1
+            levels = depth + chain + (0 if header else 1)  # a.b.c = 1: 3 levels; [a.b.c]: 3 too
+            if levels > limit:
+                return line, levels
+            continue
+        if c == '"' or c == "'":
+            triple = text.startswith(c * 3, i)
+            if triple and c == "'":
+                close = text.find("'''", i + 3)
+                end = close + 3 if close >= 0 else 0
+            elif c == "'":
+                close, nl = text.find("'", i + 1), text.find("\n", i + 1)
+                end = close + 1 if close >= 0 and not 0 <= nl < close else 0
+            else:
+                em = (_BASIC_ML_END if triple else _BASIC_END).match(text, i + (3 if triple else 1))
+                end = em.end() if em else 0
+            if end <= 0:
+                return None  # unterminated: the parser says so
+            line += text.count("\n", i, end)
+            pos = end
+            continue  # a quoted key segment: the dotted name goes on
+        if c == "#":
+            nl = text.find("\n", i)
+            pos = n if nl < 0 else nl
+            continue
+        if c == "\n":
+            line += 1
+            chain = 0
+            if not stack:
+                key_dots, valued, in_value = 0, False, False
+            continue
+        if c == "=":
+            key_dots, chain = chain, 0
+            valued = valued or not stack
+            in_value = True
+        elif c == "[" and (header or not (stack or valued)):
+            if not header:
+                depth = 0  # a new table: its keys nest under its header only
+            header += 1
+            stack.append((depth, key_dots, "["))
+            depth += 1
+            if depth > limit:
+                return line, depth
+        elif header and c == "]":
+            depth, key_dots, _ = stack.pop() if stack else (0, 0, "[")
+            if not stack:
+                depth = header + chain
+                header = chain = 0
+        elif c in "[{":
+            stack.append((depth, key_dots, c))
+            depth += 1 + key_dots
+            key_dots = chain = 0
+            in_value = c == "["  # an array holds values, an inline table keys
+            if depth > limit:
+                return line, depth
+        elif c in "]}":
+            if stack:
+                depth, key_dots, _ = stack.pop()
+            chain = 0
+            in_value = True  # the bracket closed a value
+        elif c == ",":
+            key_dots = chain = 0
+            in_value = bool(stack) and stack[-1][2] == "["
+        else:
+            chain = 0

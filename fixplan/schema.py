@@ -13,7 +13,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from fixplan.errors import SHOWN_CHARS as _SHOWN_CHARS
-from fixplan.errors import Issue, shorten
+from fixplan.errors import Issue, quote_number, shorten
 from fixplan.limits import Range
 
 
@@ -114,18 +114,19 @@ class Reader:
         if not math.isfinite(value):
             self.error(path, f"got {value} (expected a finite number)")
             return None
+        given = quote_number(raw)  # as written, never rounded to the limit
         if exclusive_minimum is not None and value <= exclusive_minimum:
-            self.error(path, f"got {value:g} (expected {what} > {exclusive_minimum:g})")
+            self.error(path, f"got {given} (expected {what} > {exclusive_minimum:g})")
             return None
         if minimum is not None and value < minimum:
-            self.error(path, f"got {value:g} (expected {what} ≥ {minimum:g})")
+            self.error(path, f"got {given} (expected {what} ≥ {minimum:g})")
             return None
         if maximum is not None and value > maximum:
-            self.error(path, f"got {value:g} (expected {what} ≤ {maximum:g})")
+            self.error(path, f"got {given} (expected {what} ≤ {maximum:g})")
             return None
         if bounds is not None and not bounds.contains(value):
             hint = f"; {too_large}" if too_large and value > bounds.high else ""
-            self.error(path, f"got {value:g} (expected {bounds.expected()}{hint})")
+            self.error(path, f"got {given} (expected {bounds.expected()}{hint})")
             return None
         return value
 
@@ -214,7 +215,7 @@ class Reader:
                 hint = ""
                 if not hinted and v > bounds.high:
                     hint, hinted = f"; {too_large}", True
-                self.error(where, f"got {v:g} (expected {bounds.expected()}{hint})")
+                self.error(where, f"got {quote_number(x)} (expected {bounds.expected()}{hint})")
                 continue
             out.append(v)
         return out if len(out) == length else None

@@ -31,6 +31,8 @@ Groups
     Finding the located pose: Gauss–Newton's stop, when a pose touches, the wider search's starts.
 :class:`Numerics`
     Rank and pseudo-inverse cut-offs of the numerical linear algebra, Clarabel's options.
+:class:`ClusterSettings`
+    How long ``robust`` and ``solve --batch`` wait for a Dask scheduler given with ``--scheduler``.
 
 A :class:`Settings` bundles one of each. The named profiles in :data:`PROFILES`:
 
@@ -700,6 +702,23 @@ class GoalSettings:
 
 
 @dataclass(frozen=True)
+class ClusterSettings:
+    """Reaching a Dask scheduler (:mod:`fixplan.cluster`).
+
+    Attributes
+    ----------
+    connect_timeout_s : float
+        The whole connection — TCP connect (retried while refused), Dask's handshake and the
+        scheduler's answer to an ``identity`` request, then the client's registration — must
+        finish within this [s]; else exit 2. The documentation promises exit 2 within 10 s of
+        the command's start (README, ``fixplan robust``): this plus starting Python and reading
+        the fixture (about 2 s) must stay below that.
+    """
+
+    connect_timeout_s: float = 5.0
+
+
+@dataclass(frozen=True)
 class Settings:
     """One of each group: what a profile selects."""
 
@@ -716,6 +735,7 @@ class Settings:
     robust: RobustSettings = field(default_factory=RobustSettings)
     policy: PolicySettings = field(default_factory=PolicySettings)
     goal: GoalSettings = field(default_factory=GoalSettings)
+    cluster: ClusterSettings = field(default_factory=ClusterSettings)
 
     def with_(self, **changes: Any) -> Settings:
         """A copy with some groups replaced."""

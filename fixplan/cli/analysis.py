@@ -31,7 +31,7 @@ from fixplan.cli._app import (
     _writable,
     app,
 )
-from fixplan.errors import FixtureError, InputError, one_line
+from fixplan.errors import FixtureError, InputError, one_line, quote_number
 from fixplan.files import check_distinct, document_stream, write_output
 
 
@@ -272,7 +272,9 @@ def search(
     if objective not in ("margin", "effort"):
         raise InputError(f"--objective must be margin or effort, got {objective!r}")
     if min_margin is not None and not (0.0 <= min_margin <= limits.FORCE_MAX_N):
-        raise InputError(f"--min-margin is {min_margin:g} (expected a force [N] in [0, {limits.FORCE_MAX_N:g}])")
+        raise InputError(
+            f"--min-margin is {quote_number(min_margin)} (expected a force [N] in [0, {limits.FORCE_MAX_N:g}])"
+        )
     result = search_wrench(
         fixture,
         m,
@@ -431,14 +433,16 @@ def simulate(
 
     fixture = _load(file)
     if not limits.DURATION.contains(duration):
-        raise InputError(f"--duration is {duration:g} (expected {limits.DURATION.expected()})")
+        raise InputError(f"--duration is {quote_number(duration)} (expected {limits.DURATION.expected()})")
     if dt is not None and not limits.TIMESTEP.contains(dt):
-        raise InputError(f"--dt is {dt:g} (expected {limits.TIMESTEP.expected()})")
+        raise InputError(f"--dt is {quote_number(dt)} (expected {limits.TIMESTEP.expected()})")
     if tolerance is not None and not limits.SOLVER_TOLERANCE.contains(tolerance):
-        raise InputError(f"--tolerance is {tolerance:g} (expected {limits.SOLVER_TOLERANCE.expected()})")
+        raise InputError(f"--tolerance is {quote_number(tolerance)} (expected {limits.SOLVER_TOLERANCE.expected()})")
     h = dt if dt is not None else fixture.simulation.timestep_s
     if duration > 0 and h > duration:
-        raise InputError(f"--dt {h:g} s is longer than --duration {duration:g} s (expected a time step ≤ the duration)")
+        raise InputError(
+            f"--dt {quote_number(h)} s is longer than --duration {quote_number(duration)} s (expected a time step ≤ the duration)"
+        )
     n_steps = int(round(duration / h))
     if n_steps > limits.MAX_SIM_STEPS and not force:
         raise InputError(

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal, get_args
 
 import numpy as np
@@ -37,7 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 from fixplan.aot import kernel
 from fixplan.errors import InputError
 from fixplan.jamming.backends import BACKENDS, ClarabelProgram, ConeSolution
-from fixplan.jamming.programs import ProgramBuilder
+from fixplan.jamming.programs import ProgramBuilder, force_cone_violation, into_cones
 from fixplan.jamming.sliding import WitnessSearch
 from fixplan.kinematics import ContactSet
 from fixplan.nnls import nnls
@@ -205,20 +205,29 @@ class Classifier:
         return P
 
     def _solve(self, kind: str, w_hat: FloatArray) -> tuple[ConeSolution, FloatArray]:
-        """Least residual of program ``kind`` for ŵ; returns the solution and the full λ."""
+        """Least residual of program ``kind`` for ŵ; returns the solution and the full λ, in the cones.
+
+        The backend's forces are checked in the mechanics' own terms and moved into the cones
+        (:func:`~fixplan.jamming.programs.into_cones`: a negative normal force is never part of a
+        balance), and the solution's ``cone_violation`` is the violation of the forces the
+        backend returned, in those terms. The caller recomputes the residual from the λ returned.
+        """
         P = self._projector(kind)
         if self.backend == "cvxpy":
             from fixplan.jamming.cvx import least_residual
 
             sol, lam = least_residual(self.cs, w_hat, P, self.builder.C, eps=self.tol.cone_eps)
+        else:
+            prog = self._programs.get(kind)
+            if prog is None:
+                prog = ClarabelProgram(self.builder.residual_program(kind, P), eps=self.tol.cone_eps)
+                self._programs[kind] = prog
+            sol = prog.solve(self.builder.rhs(prog.program, P, w_hat))
+            lam = self.builder.layout.S @ sol.x[: prog.program.nf]
+        if not sol.solved:
             return sol, lam
-        prog = self._programs.get(kind)
-        if prog is None:
-            prog = ClarabelProgram(self.builder.residual_program(kind, P), eps=self.tol.cone_eps)
-            self._programs[kind] = prog
-        sol = prog.solve(self.builder.rhs(prog.program, P, w_hat))
-        f = sol.x[: prog.program.nf]
-        return sol, self.builder.layout.S @ f
+        violation = force_cone_violation(self.cs, lam)
+        return replace(sol, cone_violation=max(violation, sol.cone_violation or 0.0)), into_cones(self.cs, lam)
 
     def _residual_of(self, kind: str, w_hat: FloatArray, lam: FloatArray) -> float:
         """The program's value recomputed from the forces (never trust a solver's own number)."""

@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.jamming.backends import ConeSolution
+from fixplan.jamming.programs import force_cone_violation
 from fixplan.kinematics import ContactSet
 from fixplan.settings import DEFAULT_TOLERANCES
 
@@ -80,13 +81,4 @@ def cone_violation(cs: ContactSet, lam: FloatArray, t: float, residual: FloatArr
     spin scaled by its torsion radius), not from :mod:`.programs`' cone rows.
     """
     worst = float(np.linalg.norm(residual)) - t
-    for offset, contact in zip(cs.offsets, cs.contacts, strict=True):
-        lam_c = lam[offset : offset + contact.size]
-        if contact.dimension == 2:
-            tangential = abs(float(lam_c[1]))
-        elif contact.soft:
-            tangential = float(np.linalg.norm([lam_c[1], lam_c[2], lam_c[3] / contact.torsion_m]))
-        else:
-            tangential = float(np.linalg.norm(lam_c[1:3]))
-        worst = max(worst, -float(lam_c[0]), tangential - contact.friction * float(lam_c[0]))
-    return max(worst, 0.0)
+    return max(worst, force_cone_violation(cs, lam), 0.0)

@@ -8,15 +8,17 @@ with ``K`` a product of non-negative orthants and second-order cones, so it can 
 tested, and solved either by handing the matrices to Clarabel directly (the fast path) or by
 the independent cvxpy model in :mod:`fixplan.jamming.cvx` (the reference path).
 
-Contact forces are the reduced variables ``f``: per contact the normal force, then — only when
-``μ > 0`` — the tangential components and, for a soft finger, the spin moment. ``λ = S f``
-expands them to the full contact vectors of :class:`~fixplan.kinematics.ContactSet`.
+Contact forces are the reduced variables ``f``: per contact the normal force ``f_n``, then —
+only when ``μ > 0`` — the scaled tangential components ``s`` (``f_t = μ s``) and, for a soft
+finger, the scaled spin moment (``f_s = μ e_r s_s``). ``λ = S f`` expands them to the full
+contact vectors of :class:`~fixplan.kinematics.ContactSet` (``S`` holds the μ's).
 
-Friction cones are exact (docs/math.md [9], [10]):
+Friction cones are exact (docs/math.md [9], [10]), written on the scaled variables so that
+every cone has unit coefficients whatever μ (a tiny μ is then as exact as μ = 0):
 
-- 3D point contact: ``(μ f_n, f_t1, f_t2) ∈ SOC³``;
-- 3D soft finger: ``(μ f_n, f_t1, f_t2, f_s / e_r) ∈ SOC⁴``;
-- 2D: ``μ f_n ± f_t ≥ 0`` (the planar cone *is* this pair of half-planes: nothing linearised);
+- 3D point contact: ``(f_n, s_1, s_2) ∈ SOC³``  (``‖f_t‖ ≤ μ f_n``);
+- 3D soft finger: ``(f_n, s_1, s_2, s_s) ∈ SOC⁴``  (``‖(f_t, f_s / e_r)‖ ≤ μ f_n``);
+- 2D: ``f_n ± s ≥ 0`` (the planar cone *is* this pair of half-planes: nothing linearised);
 - ``μ = 0``: only ``f_n ≥ 0``.
 
 The residual programs all minimise ``t`` subject to ``‖P C (ŵ + Jᵀ S f)‖ ≤ t``, where
@@ -39,7 +41,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-from fixplan.kinematics import ContactSet
+from fixplan.kinematics import Contact, ContactSet
 from fixplan.settings import DEFAULT
 
 FloatArray = NDArray[np.float64]
@@ -59,8 +61,13 @@ class ForceLayout:
         return int(self.S.shape[1])
 
 
-def force_layout(cs: ContactSet) -> ForceLayout:
-    """The reduced force variables and their exact friction cones for ``cs``."""
+def force_layout(cs: ContactSet, *, scaled: bool = True) -> ForceLayout:
+    """The reduced force variables and their exact friction cones for ``cs``.
+
+    ``scaled=False``: the tangential variables are the forces themselves and the cones read
+    ``(μ f_n, f_t)`` (the earlier form; kept for the wrench search, whose answers
+    the classifier confirms, so that its plans stay as they were).
+    """
     cols: list[FloatArray] = []
     normal_index: list[int] = []
     cones: list[tuple[str, int]] = []
@@ -77,21 +84,27 @@ def force_layout(cs: ContactSet) -> ForceLayout:
             cones.append(("nonneg", 1))
             rows.append([(base, 1.0)])
             continue
+        # tangential (and spin) variables s scaled by μ: λ_t = μ s, λ_spin = μ e_r s_spin, so
+        # that every cone reads (f_n, s) with unit coefficients. With the cone written on
+        # (μ f_n, λ_t) a tiny μ made the normal force's own sign a 1e-12-weighted constraint:
+        # at μ = 1e-12 the solver returned f_n = -1 N as "balanced"
         for k in range(1, contact.size):
             e = np.zeros(total)
-            e[offset + k] = 1.0
+            e[offset + k] = mu * (contact.torsion_m if k == 3 else 1.0) if scaled else 1.0
             cols.append(e)
+        # the cone rows: (f_n, s) scaled, (μ f_n, f_t[, f_s / e_r]) not
+        n_coef, spin_coef = (1.0, 1.0) if scaled else (mu, 1.0 / contact.torsion_m if contact.soft else 1.0)
         if contact.dimension == 2:
             cones.append(("nonneg", 2))
-            rows.append([(base, mu), (base + 1, -1.0)])
-            rows.append([(base, mu), (base + 1, 1.0)])
+            rows.append([(base, n_coef), (base + 1, -1.0)])
+            rows.append([(base, n_coef), (base + 1, 1.0)])
         else:
             cones.append(("soc", contact.size))
-            rows.append([(base, mu)])
+            rows.append([(base, n_coef)])
             rows.append([(base + 1, 1.0)])
             rows.append([(base + 2, 1.0)])
             if contact.soft:
-                rows.append([(base + 3, 1.0 / contact.torsion_m)])
+                rows.append([(base + 3, spin_coef)])
     nf = len(cols)
     S = np.array(cols).T if cols else np.zeros((total, 0))
     R = np.zeros((len(rows), nf))
@@ -99,6 +112,48 @@ def force_layout(cs: ContactSet) -> ForceLayout:
         for j, v in entries:
             R[i, j] = v
     return ForceLayout(S, np.array(normal_index, dtype=np.int64), tuple(cones), R)
+
+
+def force_cone_violation(cs: ContactSet, lam: FloatArray) -> float:
+    """Largest violation of the friction cones by the full contact vectors ``λ`` (0 inside).
+
+    Written from the mechanics (``λ_n ≥ 0``, ``‖λ_t‖ ≤ μ λ_n``, a soft finger's spin scaled by
+    its torsional radius), not from a program's cone rows: a certificate is checked in the
+    forces it claims, whatever scaling the program used.
+    """
+    worst = 0.0
+    for offset, contact in zip(cs.offsets, cs.contacts, strict=True):
+        lam_c = lam[offset : offset + contact.size]
+        worst = max(worst, -float(lam_c[0]), _tangential(contact, lam_c) - contact.friction * float(lam_c[0]))
+    return max(worst, 0.0)
+
+
+def _tangential(contact: Contact, lam_c: FloatArray) -> float:
+    """``‖λ_t‖`` of one contact (with a soft finger's spin over its torsional radius)."""
+    if contact.dimension == 2:
+        return abs(float(lam_c[1]))
+    if contact.soft:
+        return float(np.sqrt(lam_c[1] ** 2 + lam_c[2] ** 2 + (lam_c[3] / contact.torsion_m) ** 2))
+    return float(np.sqrt(lam_c[1] ** 2 + lam_c[2] ** 2))
+
+
+def into_cones(cs: ContactSet, lam: FloatArray) -> FloatArray:
+    """``λ`` moved into the friction cones: a negative normal force to 0, a tangential part beyond ``μ λ_n`` shrunk onto it.
+
+    Exact for an answer already inside (returned unchanged); a solver's answer a round-off
+    outside moves by that round-off. The caller recomputes the residual with what is returned,
+    so a verdict rests on forces that are in the cones.
+    """
+    out = np.array(lam, dtype=float, copy=True)
+    for offset, contact in zip(cs.offsets, cs.contacts, strict=True):
+        lam_c = out[offset : offset + contact.size]  # a view: edited in place
+        if lam_c[0] < 0.0:
+            lam_c[0] = 0.0
+        t = _tangential(contact, lam_c)
+        limit = contact.friction * lam_c[0]
+        if t > limit:
+            lam_c[1:] *= limit / t
+    return out
 
 
 def null_basis(A: FloatArray, tol: float = DEFAULT.numerics.rcond) -> FloatArray:
