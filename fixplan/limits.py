@@ -80,6 +80,8 @@ MAX_ENTRIES = 100  # [[locator]] plus [[contact]] entries in one file
 MAX_FILE_BYTES = 1 << 20  # any input file fixplan reads as text (fixture, wrench CSV, plan JSON)
 MAX_SIM_STEPS = 10_000_000  # simulation steps of one `fixplan simulate` run without --force
 MAX_NAME_LENGTH = 64
+MAX_JSON_DEPTH = 64  # nesting of a plan file's JSON (a plan nests 6 deep): bounded before parsing
+MAX_NUMBER_DIGITS = 400  # characters of one JSON number (a float has at most 17 significant digits)
 
 # plausible densities of a solid part [kg/m³]: outside, validate warns (a file in millimetres?)
 DENSITY_WARN_KGPM3 = (5.0, 5e4)
