@@ -545,11 +545,20 @@ class Pose(JsonObject):
         n = len(data["position"])
         if dim is None:
             dim = 3 if "quaternion_wxyz" in data else 2
+        if dim == 3 and "angle_deg" in data:
+            return [
+                (("angle_deg",), "a 2D pose (angle_deg) in a plan for a 3D fixture: the plan is for another fixture")
+            ]
+        if dim == 2 and "quaternion_wxyz" in data:
+            return [
+                (
+                    ("quaternion_wxyz",),
+                    "a 3D pose (quaternion_wxyz) in a plan for a 2D fixture: the plan is for another fixture",
+                )
+            ]
         if n != dim:
             return [(("position",), f"got {n} numbers (expected {dim} for a {dim}D pose)")]
         if dim == 3:
-            if "angle_deg" in data:
-                return [(("angle_deg",), "a 2D pose's key in a 3D plan: the plan is for another fixture")]
             if "quaternion_wxyz" not in data:
                 return [(("quaternion_wxyz",), "missing (expected 4 numbers, a unit quaternion w, x, y, z)")]
             q = data["quaternion_wxyz"]
@@ -557,8 +566,6 @@ class Pose(JsonObject):
             if len(q) != 4 or abs(norm - 1.0) > DEFAULT.plan_file.quaternion_norm_tol:
                 return [(("quaternion_wxyz",), f"got {shorten(str(q))} (expected a unit quaternion w, x, y, z)")]
             return []
-        if "quaternion_wxyz" in data:
-            return [(("quaternion_wxyz",), "a 3D pose's key in a 2D plan: the plan is for another fixture")]
         if "angle_deg" not in data:
             return [(("angle_deg",), f"missing (expected {limits.ANGLE.expected()})")]
         return []

@@ -254,21 +254,27 @@ class RecordedPushes:
         return self.pushes[min(max(k, 0), len(self.pushes) - 1)]
 
 
-def recorded_pushes(transitions: Sequence[dict[str, Any]]) -> tuple[FloatArray, FloatArray, int]:
+def recorded_pushes(data: dict[str, Any]) -> tuple[FloatArray, FloatArray, int]:
     """The pushes a recording claims, as one series: session times [s], wrenches (T, ndof), and ndof.
 
     Each transition's ``pushes`` (sampled from its ``t_start_s``) placed at ``t_start_s + time_s``,
-    in time order (a transition's first sample can be the previous one's last).
+    in time order (a transition's first sample can be the previous one's last); then, for a
+    session that ended jammed, the push it jammed under (``where.push`` at ``where.time_s``).
     """
     times: list[float] = []
     rows: list[list[float]] = []
-    for tr in transitions:
+    for tr in data["transitions"]:
         t0 = float(tr["t_start_s"])
         times += [t0 + float(t) for t in tr["pushes"]["time_s"]]
         rows += [[float(x) for x in w] for w in tr["pushes"]["wrench"]]
+    where = data.get("where") or {}
+    if data.get("status") == "jammed" and where.get("push") is not None:
+        t = float(where.get("time_s") or 0.0)
+        times.append(max([t, *times]))
+        rows.append([float(x) for x in where["push"]])
     order = np.argsort(np.asarray(times), kind="stable")
     ndof = len(rows[0]) if rows else 0
-    return np.asarray(times)[order], np.asarray(rows, dtype=float).reshape(-1, ndof)[order], ndof
+    return np.asarray(times)[order], np.asarray(rows, dtype=float).reshape(len(rows), ndof)[order], ndof
 
 
 def push_disagreement(data: dict[str, Any], fixture: Fixture) -> str | None:
@@ -355,7 +361,8 @@ def verify_recording(
     plan_for_fixture(data, fixture, source)  # the format, the fixture's locators and start, pushes within limits
     transitions = data["transitions"]
     contradiction = push_disagreement(data, fixture)  # the trace is the evidence of what was pushed
-    if not transitions:
+    push_times, pushes, _ = recorded_pushes(data)
+    if not len(push_times):
         return Verification(
             passed=False, reason="the recording has no transitions: no recorded pushes to re-run", final_pose=None,
             max_penetration_m=None, deadline_misses=None, tick_mean_us=None, tick_max_us=None, observed_sequence=[],
@@ -371,7 +378,6 @@ def verify_recording(
     threshold = max(settings.press_fraction * weight, 1e-6)
     r_gyr = math.sqrt(float(np.max(np.linalg.eigvalsh(np.atleast_2d(wp.inertia_body)))) / wp.mass_kg)
     # what the file claims was pushed: the transitions' pushes (not the trace, which is only compared)
-    push_times, pushes, _ = recorded_pushes(transitions)
     policy = RecordedPushes(fixture, transitions, push_times, pushes)
     names = frozenset(policy.names)
     d = fixture.dimension
@@ -437,6 +443,9 @@ def verify_recording(
     if contradiction is not None:
         checks.append("evidence")
         reasons.append(contradiction)
+    if not transitions:  # only the push it jammed under: a recording that loads nothing cannot pass
+        checks.append("no transitions")
+        reasons.append("the recording has no transitions (no change of contact state to re-run)")
     if state["outcome"] != "reached":
         checks.append("jammed" if state["outcome"] == "jammed" else "goal")
         reasons.append(

@@ -1043,6 +1043,9 @@ def check_plan_claims(plan: Plan, fixture: Fixture, source: str) -> None:
         if isinstance(pushes, dict):
             for k, w in enumerate(pushes.get("wrench") or []):
                 within_limits(np.asarray(w, dtype=float), f"transitions[{i}].pushes.wrench[{k}]")
+    where = plan.extras.get("where")
+    if isinstance(where, dict) and where.get("push") is not None:
+        within_limits(np.asarray(where["push"], dtype=float), "where.push")
     if plan.policy is not None:
         for i, entry in enumerate(plan.policy.to_json()):
             w = entry.get("wrench")
