@@ -357,3 +357,24 @@ def test_recorded_pushes_are_the_transitions_series(recording):
     assert times[0] == pytest.approx(first["t_start_s"] + first["pushes"]["time_s"][0])
     np.testing.assert_array_equal(pushes[0], first["pushes"]["wrench"][0])
     assert len(times) == sum(len(tr["pushes"]["time_s"]) for tr in recording["transitions"])
+
+
+def test_the_docs_describe_every_key_of_the_format():
+    """docs/plan-format.md names every key the models declare (a key added to the format is documented)."""
+    from conftest import ROOT
+
+    from fixplan import plan_schema
+
+    text = (ROOT / "docs" / "plan-format.md").read_text(encoding="utf-8")
+    models = [
+        plan_schema.PlanFile, plan_schema.RecordingFile, plan_schema.Transition, plan_schema.Pose,
+        plan_schema.Pushes, plan_schema.Tried, plan_schema.PolicyEntry, plan_schema.Verification,
+        plan_schema.Execution, plan_schema.Trace, plan_schema.Where,
+    ]  # fmt: skip
+    missing = [
+        f"{model.__name__}.{field.alias or name}"
+        for model in models
+        for name, field in model.model_fields.items()
+        if f"`{field.alias or name}`" not in text
+    ]
+    assert missing == []
