@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast, get_args
@@ -1055,7 +1055,7 @@ def check_plan_claims(plan: Plan, fixture: Fixture, source: str) -> None:
     names = frozenset(loc.name for loc in fixture.locators)
     start = start_state(fixture)
 
-    def state(s: Sequence[str]) -> str:
+    def state(s: Iterable[str]) -> str:
         return _state(sorted(s))
 
     seq = [frozenset(s) for s in plan.sequence]
