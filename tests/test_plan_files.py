@@ -2,8 +2,8 @@
 
 Every file the package writes validates against :mod:`fixplan.plan_schema`; every hostile one is
 refused with one line per problem (``FILE: key.path: got ... (expected ...)``, exit 2) or fails
-its verification (exit 1) — never "passed" for a claim that is physically false (issue 22: D6,
-D7, D16, D17, D21).
+its verification (exit 1) — never "passed" for a claim that is physically false. Each test's
+docstring says what the code did before.
 """
 
 from __future__ import annotations
@@ -100,7 +100,7 @@ def test_a_2d_recording_validates_and_verifies():
     assert v.passed, v.reason
 
 
-# -- D6 and the JSON parser ---------------------------------------------------------------------------
+# -- the JSON parser ------------------------------------------------------------------------------
 @pytest.mark.parametrize(
     ("text", "match"),
     [
@@ -124,7 +124,7 @@ def test_strict_json_reads_what_json_reads():
 
 
 def test_a_huge_integer_in_a_plan_exits_2_for_verify_and_view(capsys, tmp_path, plan_data, box):
-    """D6: 'Exceeds the limit (4300 digits)' was an internal error (exit 3) in verify and view."""
+    """Before: 'Exceeds the limit (4300 digits)' was an internal error (exit 3) in verify and view."""
     text = json.dumps(plan_data).replace('"proven": null', '"proven": ' + "1" * 4301)
     path = write(tmp_path, "plan.json", text)
     for args in (("verify", path), ("view", box.source, "--plan", path, "--out", tmp_path / "s.html")):
@@ -143,9 +143,9 @@ def test_unreadable_plan_files_exit_2_with_one_line(capsys, tmp_path, data):
     assert code == 2 and len(err) == 1 and err[0].startswith("fixplan: ") and "p.json" in err[0], err
 
 
-# -- D7: the format, with key paths ---------------------------------------------------------------------
+# -- the format, with key paths -------------------------------------------------------------------
 def test_a_recording_without_its_verification_is_refused_with_the_key(capsys, tmp_path, recording):
-    """D7: "verification": null gave TypeError, no verification KeyError (exit 3)."""
+    """Before: "verification": null gave TypeError, no verification KeyError (exit 3)."""
     null = {**recording, "verification": None}
     missing = {k: v for k, v in recording.items() if k != "verification"}
     for name, data, words in (
@@ -185,9 +185,9 @@ def test_every_bad_value_is_one_line_with_its_key_path(recording, plan_data):
     assert [i.key for i in validate_plan_document(typo, 3)] == ["transitons"]
 
 
-# -- D21: a recording names its fixture ----------------------------------------------------------------
+# -- a recording names its fixture ----------------------------------------------------------------
 def test_a_recording_without_its_fixture_is_an_error_not_the_default_box(capsys, tmp_path, recording):
-    """D21: it was verified against the bundled box, with a warning, and passed."""
+    """Before: it was verified against the bundled box, with a warning, and passed."""
     data = {k: v for k, v in recording.items() if k != "fixture"}
     path = write(tmp_path, "rec.json", data)
     code, err, out = cli(capsys, "verify", path)
@@ -198,9 +198,9 @@ def test_a_recording_without_its_fixture_is_an_error_not_the_default_box(capsys,
     assert code == 2 and len(err) == 1 and "nowhere.toml" in err[0] and "not there" in err[0]
 
 
-# -- D16: the pushes the file claims are the ones re-run ------------------------------------------------
+# -- the pushes the file claims are the ones re-run -----------------------------------------------
 def test_zeroed_pushes_fail_and_say_they_contradict_the_trace(recording, box):
-    """D16: zeroing every push still gave "passed: the recorded pushes load the part"."""
+    """Before: zeroing every push still gave "passed: the recorded pushes load the part"."""
     assert push_disagreement(recording, box) is None
     zero = copy.deepcopy(recording)
     for tr in zero["transitions"]:
@@ -227,7 +227,7 @@ def test_the_replay_runs_the_claimed_pushes_not_the_trace(recording, box):
 
 
 def test_a_recording_without_transitions_cannot_pass(capsys, tmp_path, recording, box):
-    """D16: "transitions": [] also passed (the trace's pushes were re-run)."""
+    """Before: "transitions": [] also passed (the trace's pushes were re-run)."""
     data = {**recording, "transitions": []}
     v = verify_recording(box, data)
     assert not v.passed and v.failed_checks == ["no pushes"]
@@ -245,7 +245,7 @@ def test_pushes_beyond_the_hands_limits_are_refused(recording, box):
         plan_for_fixture(data, box, "rec.json")
 
 
-# -- D17: a solved plan's claims, before it is replayed ---------------------------------------------------
+# -- a solved plan's claims, before it is replayed ------------------------------------------------
 def _names(box) -> list[str]:
     return [loc.name for loc in box.locators]
 
@@ -299,7 +299,7 @@ def _names(box) -> list[str]:
     ],  # fmt: skip
 )
 def test_a_plan_the_fixture_rules_out_is_refused_before_a_replay(plan_data, box, edit, match):
-    """D17: a plan with no transitions, or with 1e308 knot poses, passed ("every check passed")."""
+    """Before: a plan with no transitions, or with 1e308 knot poses, passed ("every check passed")."""
     data = copy.deepcopy(plan_data)
     edit(data, box)
     with pytest.raises(InputError, match=match):
@@ -324,7 +324,7 @@ def test_bogus_plans_exit_2_for_verify_with_one_line(capsys, tmp_path, plan_data
 
 
 def test_a_replanned_verification_is_not_a_pass(plan_data, box, monkeypatch):
-    """D17: the executor's re-plans were hidden behind "every check passed"."""
+    """Before: the executor's re-plans were hidden behind "every check passed"."""
     from fixplan.planner import verify as verify_module
 
     real = verify_module.verify
