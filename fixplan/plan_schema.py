@@ -91,10 +91,6 @@ def _number(raw: Any, bounds: Range) -> tuple[float | None, str | None]:
     return value, None
 
 
-def _wrench_ranges(n: int) -> list[Range]:
-    return limits.wrench_ranges(n)
-
-
 # -- values -------------------------------------------------------------------------------------
 class Real(PlainValue):
     """A finite number within ``bounds``; ``nullable``: JSON null reads as None."""
@@ -110,7 +106,7 @@ class Real(PlainValue):
             return None
         x, message = _number(value, self.bounds)
         if message is not None:
-            _fail(message + (" or null" if self.nullable and message.endswith("]") else ""))
+            _fail(message)
         return x
 
     def schema(self) -> dict[str, Any]:
@@ -290,7 +286,7 @@ class Wrench(PlainValue):
             _fail(
                 f"got {_kind(value)} (expected {self.expected(_dimension(info))}{' or null' if self.nullable else ''})"
             )
-        _raise_some("Wrench", _row_errors(value, _wrench_ranges(n), ()))
+        _raise_some("Wrench", _row_errors(value, limits.wrench_ranges(n), ()))
         return tuple(float(x) for x in value)
 
     def schema(self) -> dict[str, Any]:
@@ -314,7 +310,7 @@ class Wrenches(PlainValue):
             _fail(f"got {_kind(value)} (expected {self.expected(_dimension(info))})")
         first = value[0] if value else None
         n = _ndof(info, len(first) if isinstance(first, list) and len(first) in (3, 6) else 6)
-        ranges = _wrench_ranges(n or 6)
+        ranges = limits.wrench_ranges(n or 6)
         errors: list[tuple[tuple, str]] = []
         for i, row in enumerate(value):
             errors += _row_errors(row, ranges, (i,))
