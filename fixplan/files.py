@@ -28,6 +28,7 @@ import contextlib
 import errno
 import hashlib
 import io
+import math
 import os
 import secrets
 import select
@@ -37,7 +38,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 
-from fixplan.errors import FixplanError, InputError
+from fixplan.errors import FixplanError, InputError, shorten
 from fixplan.limits import MAX_FILE_BYTES
 
 if TYPE_CHECKING:
@@ -464,20 +465,88 @@ def _silence_fd1() -> None:
 
 
 def read_plan_json(path: Path, *, expected: str) -> object:
-    """The parsed JSON document of a plan file.
+    """The parsed JSON document of a plan file (strict JSON, see :func:`parse_strict_json`).
 
-    Raises :class:`InputError` with a one-line reason when it is unreadable, not JSON or nested
-    too deeply; ``expected`` says what the file should be.
+    Raises :class:`InputError` with a one-line reason when it is unreadable (not a regular file,
+    over the size limit, not UTF-8) or not strict JSON; ``expected`` says what the file should be.
+    """
+    text = read_user_text(Path(path), expected=expected)
+    return parse_strict_json(text, str(path))
+
+
+class _Refused(ValueError):
+    """A token strict JSON refuses, raised from inside the parser's hooks."""
+
+
+def _json_depth(text: str) -> int:
+    """The deepest nesting of ``[`` and ``{`` in a JSON text, outside strings (linear time)."""
+    import re
+
+    import numpy as np
+
+    # strings (with their escapes) removed first: a bracket inside one does not nest
+    bare = re.sub(r'"(?:[^"\\]|\\.)*"', '""', text)
+    data = np.frombuffer(bare.encode("utf-8", "replace"), dtype=np.uint8)
+    step = np.zeros(len(data), dtype=np.int64)
+    step[(data == ord("[")) | (data == ord("{"))] = 1
+    step[(data == ord("]")) | (data == ord("}"))] = -1
+    return int(np.cumsum(step).max()) if len(step) else 0
+
+
+def _where(text: str, token: str) -> str:
+    at = text.find(token)
+    if at < 0:
+        return ""
+    line = text.count("\n", 0, at) + 1
+    return f"line {line}, column {at - (text.rfind(chr(10), 0, at) + 1) + 1}: "
+
+
+def parse_strict_json(text: str, source: str) -> object:
+    """``text`` parsed as strict JSON, or :class:`InputError` with one line saying why not.
+
+    Refused before or while parsing: nesting deeper than :data:`~fixplan.limits.MAX_JSON_DEPTH`,
+    a number longer than :data:`~fixplan.limits.MAX_NUMBER_DIGITS` characters (Python's integer
+    parser refuses 4,301 digits with an exception of its own), a number too large for a float,
+    ``NaN`` / ``Infinity`` (not JSON; fixplan writes an unknown number as ``null``) and a key
+    given twice in one object (which one would count?).
     """
     import json
 
-    text = read_user_text(Path(path), expected=expected)
+    from fixplan.limits import MAX_JSON_DEPTH, MAX_NUMBER_DIGITS
+
+    depth = _json_depth(text)
+    if depth > MAX_JSON_DEPTH:
+        raise InputError(f"{source}: JSON nested {depth} deep (expected at most {MAX_JSON_DEPTH}: not a fixplan plan)")
+
+    def number(token: str) -> float | int:
+        if len(token) > MAX_NUMBER_DIGITS:
+            raise _Refused(f"a number of {len(token)} characters (expected at most {MAX_NUMBER_DIGITS})")
+        value = float(token) if any(c in token for c in ".eE") else int(token)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise _Refused(
+                f"{_where(text, token)}the number {token} is too large for a float (expected a finite number)"
+            )
+        return value
+
+    def constant(token: str) -> float:
+        raise _Refused(f"{_where(text, token)}{token} is not JSON (expected a finite number; null for an unknown one)")
+
+    def unique(pairs: list[tuple[str, object]]) -> dict[str, object]:
+        out: dict[str, object] = {}
+        for key, value in pairs:
+            if key in out:
+                raise _Refused(f"the key {shorten(key)} appears twice in one object (expected each key once)")
+            out[key] = value
+        return out
+
     try:
-        return json.loads(text)
+        return json.loads(text, parse_int=number, parse_float=number, parse_constant=constant, object_pairs_hook=unique)
+    except _Refused as exc:
+        raise InputError(f"{source}: not strict JSON: {exc}") from None
     except RecursionError:
-        raise InputError(f"{path}: not a fixplan plan (JSON nested too deeply)") from None
+        raise InputError(f"{source}: not a fixplan plan (JSON nested too deeply)") from None
     except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
+        raise InputError(f"{source}: not valid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})") from None
 
 
 def read_wrench_csv(path: Path, n: int) -> NDArray[np.float64]:

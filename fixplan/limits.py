@@ -85,6 +85,8 @@ MAX_NAME_LENGTH = 64
 # nests 3 (workpiece.start.position); tomllib's cost grows with the square of a dotted key's
 # depth (40,000 levels in 82 KB took minutes), so the file-size limit alone does not bound it
 MAX_TOML_NESTING = 32
+MAX_JSON_DEPTH = 64  # nesting of a plan file's JSON (a plan nests 6 deep): bounded before parsing
+MAX_NUMBER_DIGITS = 400  # characters of one JSON number (a float has at most 17 significant digits)
 
 # plausible densities of a solid part [kg/m³]: outside, validate warns (a file in millimetres?)
 DENSITY_WARN_KGPM3 = (5.0, 5e4)

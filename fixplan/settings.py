@@ -269,6 +269,33 @@ class VerificationSettings:
 
 
 @dataclass(frozen=True)
+class PlanFileSettings:
+    """What a plan file or a haptic recording must meet before ``fixplan verify`` replays it.
+
+    The files are written with six significant digits (a recording) or in full (a plan); these
+    tolerances absorb that rounding and nothing more.
+
+    Attributes
+    ----------
+    quaternion_norm_tol : float
+        A pose's quaternion has norm 1 within this.
+    limit_rel : float
+        A push in the file may exceed the hand's limits (``manipulator.max_force``,
+        ``max_torque``) by this fraction: the coupling saturates at them, and the file rounds.
+    push_match_rel : float
+        A recorded push (``transitions[].pushes``) and the trace's coupling wrench at the same
+        sample agree within this fraction of the hand's limit ...
+    push_match_abs : float
+        ... plus this [N or N·m]; beyond, the recording contradicts its own evidence.
+    """
+
+    quaternion_norm_tol: float = 1e-3
+    limit_rel: float = 1e-3
+    push_match_rel: float = 1e-4
+    push_match_abs: float = 1e-3
+
+
+@dataclass(frozen=True)
 class PlannerSettings:
     """The loading planner (:mod:`fixplan.planner`).
 
@@ -736,6 +763,7 @@ class Settings:
     policy: PolicySettings = field(default_factory=PolicySettings)
     goal: GoalSettings = field(default_factory=GoalSettings)
     cluster: ClusterSettings = field(default_factory=ClusterSettings)
+    plan_file: PlanFileSettings = field(default_factory=PlanFileSettings)
 
     def with_(self, **changes: Any) -> Settings:
         """A copy with some groups replaced."""

@@ -158,7 +158,7 @@ def test_a_plan_is_read_for_its_fixture_only(box_unverified, box, plate, tmp_pat
         plan_for_fixture([1, 2], box, "x.json")
     bad = box_unverified.to_json()
     bad["transitions"][1]["wrench"] = [1.0, 2.0]
-    with pytest.raises(InputError, match=r"transitions\[1\]\.wrench: expected 6 numbers, got 2"):
+    with pytest.raises(InputError, match=r"transitions\[1\]\.wrench: got 2 numbers \(expected 6\)"):
         plan_for_fixture(through_file(bad), box, "x.json")
 
 

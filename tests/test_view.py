@@ -57,8 +57,10 @@ def synthetic_plan(fx, T, rng):
         "felt_wrench": np.zeros((T, fx.ndof)).tolist(),
         "pressed": [names[:3]] * T,
     }
+    # "infeasible": a plan that claims no load (a "planned" one with this trace would claim a
+    # load without transitions, which the fixture rules out)
     plan = {
-        "status": "planned",
+        "status": "infeasible",
         "reason": "",
         "sequence": [names[:3]],
         "transitions": [],
@@ -194,7 +196,7 @@ def test_plan_for_another_fixture_is_refused(box, solved_plan, rng):
         replay_from_plan(bad, box)
     bad = copy.deepcopy(plan)
     bad["verification"]["trace"]["forces_world_N"]["B2"] = [[1.0, 2.0]] * 3
-    with pytest.raises(InputError, match=r"forces_world_N\.B2: expected 3 rows of 3"):
+    with pytest.raises(InputError, match=r"forces_world_N\.B2\[0\]: got 2 numbers \(expected 3\)"):
         replay_from_plan(bad, box)
 
 

@@ -38,6 +38,7 @@ _LAYER_LIST: list[tuple[str, list[str]]] = [
         [
             "schema",
             "fixture_schema",
+            "plan_schema",
             "model",
             "fixture",
             "kinematics",

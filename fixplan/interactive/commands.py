@@ -235,7 +235,8 @@ def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
         print(
             f"{plan}: {'passed' if v.passed else 'FAILED'} ({kind} re-run in the loop, {v.duration_s:.2f} s) — {v.reason}"
         )
-        print(f"observed states: {seq}; max penetration {v.max_penetration_m:.2e} m")
+        pen = "n/a (not run)" if v.max_penetration_m is None else f"{v.max_penetration_m:.2e} m"
+        print(f"observed states: {seq}; max penetration {pen}")
     return 0 if v.passed else 1
 
 

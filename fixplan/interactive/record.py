@@ -254,26 +254,70 @@ class RecordedPushes:
         return self.pushes[min(max(k, 0), len(self.pushes) - 1)]
 
 
-def _check_recording(data: Any, fixture: Fixture, source: str) -> list[dict[str, Any]]:
-    from fixplan.planner.plan import plan_for_fixture
+def recorded_pushes(data: dict[str, Any]) -> tuple[FloatArray, FloatArray, int]:
+    """The pushes a recording claims, as one series: session times [s], wrenches (T, ndof), and ndof.
 
-    plan_for_fixture(data, fixture, source)  # the plan belongs to this fixture (names, start pose)
-    transitions = data["transitions"]
-    for i, tr in enumerate(transitions):
-        p = tr.get("pushes") if isinstance(tr, dict) else None
-        where = f"{source}: transitions[{i}].pushes"
-        if not isinstance(p, dict):
-            raise InputError(f"{where}: expected the recorded pushes {{time_s, wrench}}")
-        try:
-            ts = np.asarray(p.get("time_s"), dtype=float)
-            W = np.asarray(p.get("wrench"), dtype=float)
-        except (TypeError, ValueError):
-            raise InputError(f"{where}: expected numbers") from None
-        if ts.ndim != 1 or W.shape != (ts.shape[0], fixture.ndof) or not ts.shape[0]:
-            raise InputError(f"{where}: expected time_s (T,) and wrench (T, {fixture.ndof}), got {ts.shape}, {W.shape}")
-        if not (np.all(np.isfinite(ts)) and np.all(np.isfinite(W))):
-            raise InputError(f"{where}: non-finite numbers")
-    return transitions
+    Each transition's ``pushes`` (sampled from its ``t_start_s``) placed at ``t_start_s + time_s``,
+    in time order (a transition's first sample can be the previous one's last); then, for a
+    session that ended jammed, the push it jammed under (``where.push`` at ``where.time_s``).
+    """
+    times: list[float] = []
+    rows: list[list[float]] = []
+    for tr in data["transitions"]:
+        t0 = float(tr["t_start_s"])
+        times += [t0 + float(t) for t in tr["pushes"]["time_s"]]
+        rows += [[float(x) for x in w] for w in tr["pushes"]["wrench"]]
+    where = data.get("where") or {}
+    if data.get("status") == "jammed" and where.get("push") is not None:
+        t = float(where.get("time_s") or 0.0)
+        times.append(max([t, *times]))
+        rows.append([float(x) for x in where["push"]])
+    order = np.argsort(np.asarray(times), kind="stable")
+    ndof = len(rows[0]) if rows else 0
+    return np.asarray(times)[order], np.asarray(rows, dtype=float).reshape(len(rows), ndof)[order], ndof
+
+
+def push_disagreement(data: dict[str, Any], fixture: Fixture) -> str | None:
+    """Where a recording's claimed pushes contradict its trace (the coupling wrench measured then); None when they agree.
+
+    Every push ``transitions[i].pushes.wrench[k]`` must be the trace's ``coupling_wrench`` at the
+    sample of the same session time (within half a sampling step), component by component within
+    ``push_match_abs + push_match_rel × limit`` (the hand's force or torque limit).
+    """
+    from fixplan.jamming.search import hand_limits
+    from fixplan.settings import DEFAULT
+
+    trace = data["verification"]["trace"]
+    times = np.asarray(trace["time_s"], dtype=float)
+    measured = np.asarray(trace["coupling_wrench"], dtype=float)
+    step = float(trace.get("every_s") or (np.min(np.diff(times)) if len(times) > 1 else 0.0))
+    F_max, T_max, _ = hand_limits(fixture)
+    d = fixture.dimension
+    s = DEFAULT.plan_file
+    tol = np.array([s.push_match_abs + s.push_match_rel * (F_max if j < d else T_max) for j in range(fixture.ndof)])
+    bad = 0
+    first = None
+    for i, tr in enumerate(data["transitions"]):
+        t0 = float(tr["t_start_s"])
+        for k, (t, w) in enumerate(zip(tr["pushes"]["time_s"], tr["pushes"]["wrench"], strict=True)):
+            at = t0 + float(t)
+            j = int(np.clip(np.searchsorted(times, at), 1, len(times) - 1)) if len(times) > 1 else 0
+            if len(times) > 1 and abs(times[j - 1] - at) <= abs(times[j] - at):
+                j -= 1
+            where = f"transitions[{i}].pushes.wrench[{k}]"
+            if abs(times[j] - at) > 0.5 * step + DEFAULT.numerics.same_time_s:
+                bad += 1
+                first = first or f"{where}: no trace sample at t = {at:.6g} s"
+                continue
+            diff = np.abs(np.asarray(w, dtype=float) - measured[j])
+            if np.any(diff > tol):
+                bad += 1
+                shown = ", ".join(f"{x:.4g}" for x in w)
+                there = ", ".join(f"{x:.4g}" for x in measured[j])
+                first = first or f"{where} ({shown}) is not the push measured at t = {times[j]:.6g} s ({there})"
+    if first is None:
+        return None
+    return f"the recorded pushes contradict the session's trace at {bad} samples: {first}"
 
 
 class _PlacedHandle(SimulatedDevice):
@@ -311,10 +355,19 @@ def verify_recording(
     from fixplan.jamming import classify
     from fixplan.jamming.search import hand_limits
     from fixplan.planner.execute import ExecutionSettings
-    from fixplan.planner.plan import Verification
+    from fixplan.planner.plan import Verification, plan_for_fixture
     from fixplan.planner.verify import haptic_rig, loop_measures, pose_coordinates
 
-    transitions = _check_recording(data, fixture, source)
+    plan_for_fixture(data, fixture, source)  # the format, the fixture's locators and start, pushes within limits
+    transitions = data["transitions"]
+    contradiction = push_disagreement(data, fixture)  # the trace is the evidence of what was pushed
+    push_times, pushes, _ = recorded_pushes(data)
+    if not len(push_times):
+        return Verification(
+            passed=False, reason="the recording has no transitions: no recorded pushes to re-run", final_pose=None,
+            max_penetration_m=None, deadline_misses=None, tick_mean_us=None, tick_max_us=None, observed_sequence=[],
+            final_gaps_m={}, duration_s=0.0, felt_force_max_N=None, failed_checks=["no pushes"],
+        )  # fmt: skip
     sim = Simulator(fixture, settings=HAPTIC.engine)
     R0 = fixture.start.R_world_body.copy()
     F_max, T_max, _ = hand_limits(fixture)
@@ -324,10 +377,8 @@ def verify_recording(
     weight = wp.mass_kg * (float(np.linalg.norm(fixture.gravity)) or 9.81)
     threshold = max(settings.press_fraction * weight, 1e-6)
     r_gyr = math.sqrt(float(np.max(np.linalg.eigvalsh(np.atleast_2d(wp.inertia_body)))) / wp.mass_kg)
-    tr_json = data["verification"]["trace"]
-    policy = RecordedPushes(
-        fixture, transitions, np.asarray(tr_json["time_s"], float), np.asarray(tr_json["coupling_wrench"], float)
-    )
+    # what the file claims was pushed: the transitions' pushes (not the trace, which is only compared)
+    policy = RecordedPushes(fixture, transitions, push_times, pushes)
     names = frozenset(policy.names)
     d = fixture.dimension
     rest = settings.stall_speed_mps * 10
@@ -381,13 +432,20 @@ def verify_recording(
     try:
         rec = rig.loop.run(limit, operator, trace_every=every, until=lambda: state["outcome"] is not None)
     except SolverError as exc:
+        why = f"the re-run diverged at t = {sim.time_s:.3f} s: {exc}"
         return Verification(
-            passed=False, reason=f"the re-run diverged at t = {sim.time_s:.3f} s: {exc}", final_pose=sim.pose,
+            passed=False, reason=why if contradiction is None else f"{contradiction}; {why}", final_pose=sim.pose,
             max_penetration_m=sim.max_penetration_m, deadline_misses=None, tick_mean_us=None, tick_max_us=None,
             observed_sequence=list(policy.observed), final_gaps_m={}, duration_s=sim.time_s, felt_force_max_N=None,
-            failed_checks=["diverged"],
+            failed_checks=["diverged"] if contradiction is None else ["evidence", "diverged"],
         )  # fmt: skip
     reasons, checks = [], []
+    if contradiction is not None:
+        checks.append("evidence")
+        reasons.append(contradiction)
+    if not transitions:  # only the push it jammed under: a recording that loads nothing cannot pass
+        checks.append("no transitions")
+        reasons.append("the recording has no transitions (no change of contact state to re-run)")
     if state["outcome"] != "reached":
         checks.append("jammed" if state["outcome"] == "jammed" else "goal")
         reasons.append(
@@ -441,4 +499,15 @@ def verify_plan_file(fixture: Fixture, data: dict[str, Any], *, source: str = "p
     start_state = frozenset(c.name for c in touching.contacts if c.kind == "locator")
     # the plan's policy (solve --json's "policy"), as solve verified it: the executor takes it from
     # a state the plan does not expect before it re-plans
-    return verify(fixture, start_state, steps, replan=Planner(fixture).replan, policy=plan.policy)
+    v = verify(fixture, start_state, steps, replan=Planner(fixture).replan, policy=plan.policy)
+    replans = v.execution.counts.get("replans", 0) if v.execution is not None else 0
+    if replans:
+        # the executor planned anew on the way: what reached the goal is not (only) the file's plan
+        why = (
+            f"the plan as written did not load the part: the executor re-planned {replans} time"
+            f"{'s' if replans > 1 else ''} on the way (a re-planned run does not verify the plan)"
+        )
+        v.passed = False
+        v.failed_checks = [*v.failed_checks, "replanned"]
+        v.reason = why if v.reason in ("", "every check passed") else f"{why}; {v.reason}"
+    return v

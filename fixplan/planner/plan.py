@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast, get_args
@@ -789,12 +789,18 @@ class Plan:
         return {**leading, **out, **{k: v for k, v in self.extras.items() if k not in _LEADING}}
 
     @classmethod
-    def from_json(cls, data: Any, *, source: str = "plan", dimension: int | None = None) -> Plan:
+    def from_json(
+        cls, data: Any, *, source: str = "plan", dimension: int | None = None, validated: bool = False
+    ) -> Plan:
         """Read a plan file's object (``fixplan solve --out`` or ``fixplan haptic --record``).
 
-        ``dimension`` (of the fixture the plan is read for) checks the kind of every pose and the
-        width of every wrench. Raises :class:`InputError` naming the first malformed entry.
+        The object is first checked against the format (:func:`check_plan_document`; skipped when
+        ``validated``): ``dimension`` (of the fixture the plan is read for) checks the kind of
+        every pose and the width of every wrench. Raises :class:`InputError` (every problem with
+        its key path: :class:`~fixplan.errors.InputFileError`).
         """
+        if not validated:
+            check_plan_document(data, source, dimension)
         if not isinstance(data, dict) or not isinstance(data.get("transitions"), list) or "status" not in data:
             raise InputError(f"{source}: {NOT_A_PLAN}")
         sequence = data.get("sequence") or []
@@ -848,6 +854,29 @@ _LEADING = ("source", "fixture", "fixture_sha256")
 
 
 # -- a plan for a fixture --------------------------------------------------------------------------
+MAX_ISSUES_SHOWN = 10  # problems of one plan file listed (then how many more)
+
+
+def check_plan_document(data: Any, source: str, dimension: int | None = None) -> None:
+    """Refuse a plan file's or recording's object that does not follow the format (:mod:`fixplan.plan_schema`).
+
+    Raises :class:`~fixplan.errors.InputFileError` with one line per problem
+    (``plan.json: transitions[2].wrench[0]: got 1e+308 (expected a force component [N] in ...)``).
+    """
+    from fixplan.errors import InputFileError, Issue
+    from fixplan.plan_schema import validate_plan_document
+
+    if not isinstance(data, dict) or "transitions" not in data and "status" not in data:
+        raise InputError(f"{source}: {NOT_A_PLAN}")
+    issues = validate_plan_document(data, dimension)
+    if issues:
+        more = len(issues) - MAX_ISSUES_SHOWN
+        shown = issues[:MAX_ISSUES_SHOWN]
+        if more > 0:
+            shown.append(Issue("...", f"{more} more problems not shown"))
+        raise InputFileError(source, shown)
+
+
 def check_names(data: Any, fixture: Fixture, source: str) -> None:
     """Refuse a plan object that names locators the fixture lacks (before parsing its poses)."""
     if not isinstance(data, dict) or not isinstance(data.get("transitions"), list) or "status" not in data:
@@ -861,8 +890,17 @@ def check_names(data: Any, fixture: Fixture, source: str) -> None:
         if "added" in tr:
             added = tr["added"]
             mentioned += _names(added if isinstance(added, list) else [added], f"{source}: transitions[{i}].added")
+        for key in ("to", "lost"):
+            if isinstance(tr.get(key), list):
+                mentioned += _names(tr[key], f"{source}: transitions[{i}].{key}")
     for i, s in enumerate(data.get("sequence") or []):
         mentioned += _names(s, f"{source}: sequence[{i}]")
+    for key in ("tried", "certificate"):
+        for i, entry in enumerate(data.get(key) or []):
+            if isinstance(entry, dict):
+                mentioned += _names(entry.get("from", []), f"{source}: {key}[{i}].from")
+                add = entry.get("add", [])
+                mentioned += _names(add if isinstance(add, list) else [add], f"{source}: {key}[{i}].add")
     policy = data.get("policy")
     if isinstance(policy, list):
         for i, entry in enumerate(policy):
@@ -870,7 +908,15 @@ def check_names(data: Any, fixture: Fixture, source: str) -> None:
                 mentioned += _names(entry.get("state", []), f"{source}: policy[{i}].state")
                 if isinstance(entry.get("target"), str):
                     mentioned.append(entry["target"])
+                for key in ("next", "together"):
+                    if isinstance(entry.get(key), list):
+                        mentioned += _names(entry[key], f"{source}: policy[{i}].{key}")
     verification = data.get("verification")
+    if isinstance(verification, dict):
+        for i, s in enumerate(verification.get("observed_sequence") or []):
+            mentioned += _names(s, f"{source}: verification.observed_sequence[{i}]")
+        if isinstance(verification.get("final_gaps"), dict):
+            mentioned += list(verification["final_gaps"])
     trace = verification.get("trace") if isinstance(verification, dict) else None
     if trace is not None:
         if not isinstance(trace, dict):
@@ -904,24 +950,162 @@ def check_starts_at(first: Pose, fixture: Fixture, source: str) -> None:
 
 
 def plan_for_fixture(data: Any, fixture: Fixture, source: str = "plan") -> Plan:
-    """A plan file's object read for ``fixture``: the same locators, dimension and start pose.
+    """A plan file's object read for ``fixture``: the same locators, dimension and start pose, and claims it can keep.
 
     Raises
     ------
     InputError
-        Not a fixplan plan, malformed, or for another fixture (other locator names, another
-        dimension, or another start pose).
+        Not a fixplan plan, malformed (every problem with its key path), for another fixture
+        (other locator names, another dimension, or another start pose), or claiming what the
+        fixture rules out (:func:`check_plan_claims`).
     """
+    try:
+        check_plan_document(data, source, fixture.dimension)
+    except InputError:
+        _check_same_fixture(data, fixture, source)  # "for another fixture" says more than its poses' widths
+        raise
     check_names(data, fixture, source)
-    plan = Plan.from_json(data, source=source, dimension=fixture.dimension)
+    plan = Plan.from_json(data, source=source, dimension=fixture.dimension, validated=True)
     trace = plan.verification.trace if plan.verification is not None else None
     if trace is not None:
-        first = trace.poses[0]
-    else:
-        with_knots = [tr for tr in plan.transitions if tr.poses]
-        first = with_knots[0].poses[0] if with_knots and plan.transitions[0].poses else fixture.start
-    check_starts_at(first, fixture, source)
+        check_starts_at(trace.poses[0], fixture, source)
+    # a solved plan's knots start at the start pose (a recording's transitions start where the
+    # person first pressed a locator: its trace is where it started)
+    if plan.transitions and plan.transitions[0].poses and plan.extras.get("source") != "haptic session":
+        check_starts_at(plan.transitions[0].poses[0], fixture, source)
+    check_plan_claims(plan, fixture, source)
     return plan
+
+
+def _check_same_fixture(data: Any, fixture: Fixture, source: str) -> None:
+    """Raise "the plan is for another fixture" when a malformed plan names other locators or is of the other dimension."""
+    try:
+        check_names(data, fixture, source)
+        poses = [p for tr in data["transitions"] for p in tr.get("poses") or []]
+        trace = (data.get("verification") or {}).get("trace")
+        poses += trace["poses"][:1] if isinstance(trace, dict) else []
+        dims = {_dimension_of(p) for p in poses}
+    except InputError as exc:
+        if "another fixture" in str(exc):
+            raise
+        return
+    except (TypeError, KeyError, AttributeError, IndexError):  # a malformed plan: its own messages say why
+        return
+    if dims and dims != {fixture.dimension}:
+        raise InputError(
+            f"{source}: the plan is for another fixture: its poses are {'/'.join(f'{d}D' for d in sorted(dims))}, "
+            f"{fixture.source} is {fixture.dimension}D"
+        )
+
+
+def start_state(fixture: Fixture) -> frozenset[str]:
+    """The locators touching the part at its start pose: where every plan's sequence starts."""
+    from fixplan.locating import contact_set
+
+    touching = contact_set(fixture, "start")
+    return frozenset(c.name for c in touching.contacts if c.kind == "locator")
+
+
+def check_plan_claims(plan: Plan, fixture: Fixture, source: str) -> None:
+    """Refuse a plan whose claims ``fixture`` rules out, before it is replayed.
+
+    - every push it names (a transition's mean wrench, a policy's, a recording's pushes) is within
+      the hand's limits (``manipulator.max_force``, ``max_torque``; :func:`~fixplan.jamming.search.hand_limits`);
+    - a solved plan (not infeasible): its sequence starts in the state the part starts in (the
+      locators touching at the start pose) and ends with every locator; its transitions are that
+      sequence's steps, each closing its ``added`` locators; its knot poses start at the start
+      pose, follow on from one transition to the next and stay in the fixture's neighbourhood
+      (the executor's divergence bound).
+
+    Raises :class:`InputError` naming the key and what was expected.
+    """
+    from fixplan.jamming.search import hand_limits
+    from fixplan.planner.execute import DivergenceGuard
+    from fixplan.settings import DEFAULT
+
+    F_max, T_max, _ = hand_limits(fixture)
+    slack = 1.0 + DEFAULT.plan_file.limit_rel
+    d = fixture.dimension
+
+    def within_limits(w: FloatArray | None, where: str) -> None:
+        if w is None:
+            return
+        force, torque = float(np.linalg.norm(w[:d])), float(np.linalg.norm(w[d:]))
+        if force > F_max * slack or torque > T_max * slack:
+            raise InputError(
+                f"{source}: {where}: a push of {force:.4g} N, {torque:.4g} N·m (expected within the hand's limits "
+                f"{F_max:.4g} N, {T_max:.4g} N·m of {fixture.source})"
+            )
+
+    for i, tr in enumerate(plan.transitions):
+        within_limits(tr.wrench, f"transitions[{i}].wrench")
+        pushes = tr.extras.get("pushes")
+        if isinstance(pushes, dict):
+            for k, w in enumerate(pushes.get("wrench") or []):
+                within_limits(np.asarray(w, dtype=float), f"transitions[{i}].pushes.wrench[{k}]")
+    where = plan.extras.get("where")
+    if isinstance(where, dict) and where.get("push") is not None:
+        within_limits(np.asarray(where["push"], dtype=float), "where.push")
+    if plan.policy is not None:
+        for i, entry in enumerate(plan.policy.to_json()):
+            w = entry.get("wrench")
+            within_limits(None if w is None else np.asarray(w, dtype=float), f"policy[{i}].wrench")
+    if plan.extras.get("source") == "haptic session" or plan.status == "infeasible":
+        return  # a recording claims what a person did: its replay judges it
+    names = frozenset(loc.name for loc in fixture.locators)
+    start = start_state(fixture)
+
+    def state(s: Iterable[str]) -> str:
+        return _state(sorted(s))
+
+    seq = [frozenset(s) for s in plan.sequence]
+    if not seq or seq[0] != start:
+        got = state(seq[0]) if seq else "[]"
+        raise InputError(
+            f"{source}: sequence[0]: got {got} (expected the state the part starts in, {state(start)}, "
+            f"the locators touching at {fixture.source}'s start pose)"
+        )
+    if seq[-1] != names:
+        raise InputError(
+            f"{source}: sequence[{len(seq) - 1}]: got {state(seq[-1])} (expected every locator, {state(names)}: "
+            f"a plan loads the part)"
+        )
+    if len(plan.transitions) != len(seq) - 1:
+        raise InputError(
+            f"{source}: transitions: got {len(plan.transitions)} (expected {len(seq) - 1}, one per step of the sequence)"
+        )
+    for i, tr in enumerate(plan.transitions):
+        where = f"{source}: transitions[{i}]"
+        if tr.added is None:
+            raise InputError(f"{where}.added: missing (expected the locator the transition closes)")
+        if frozenset(tr.from_state) != seq[i]:
+            raise InputError(f"{where}.from: got {state(tr.from_state)} (expected sequence[{i}], {state(seq[i])})")
+        after = frozenset(tr.from_state) | set(tr.added_names)
+        if after != seq[i + 1] or frozenset(tr.to_state) != after or set(tr.added_names) & set(tr.from_state):
+            raise InputError(
+                f"{where}: {state(tr.from_state)} + {tr.added_label} → {state(tr.to_state)} (expected sequence[{i + 1}], "
+                f"{state(seq[i + 1])}, from 'from' plus 'added')"
+            )
+    guard = DivergenceGuard.for_fixture(fixture)
+    previous: Pose | None = None
+    for i, tr in enumerate(plan.transitions):
+        for k, pose in enumerate(tr.poses):
+            away = float(np.linalg.norm(pose.p_world - guard.home_world))
+            if away > guard.far_m:
+                raise InputError(
+                    f"{source}: transitions[{i}].poses[{k}].position: {away:.3g} m from the start "
+                    f"(expected within {guard.far_m:.3g} m, the fixture's neighbourhood)"
+                )
+        if tr.poses and previous is not None:
+            dp, dr = tr.poses[0].distance_to(previous)
+            if dp > START_TOLERANCE_M or dr > START_TOLERANCE_RAD:
+                raise InputError(
+                    f"{source}: transitions[{i}].poses[0]: {dp:.3g} m, {math.degrees(dr):.3g}° from where "
+                    f"transitions[{i - 1}] ends (expected the same pose within {START_TOLERANCE_M:g} m, "
+                    f"{math.degrees(START_TOLERANCE_RAD):.2g}°)"
+                )
+        if tr.poses:
+            previous = tr.poses[-1]
 
 
 def read_plan(path: Path, fixture: Fixture | None = None, *, expected: str | None = None) -> Plan:
