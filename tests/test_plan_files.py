@@ -323,8 +323,11 @@ def test_bogus_plans_exit_2_for_verify_with_one_line(capsys, tmp_path, plan_data
     assert err[-1].endswith("more problems not shown") and len(err) == 11
 
 
-def test_a_replanned_verification_is_not_a_pass(plan_data, box, monkeypatch):
-    """Before: the executor's re-plans were hidden behind "every check passed"."""
+def test_a_replanned_verification_says_so(plan_data, box, monkeypatch):
+    """Before: the executor's re-plans were hidden behind "every check passed". A plan whose claims
+    hold is verified as solve verifies it (re-planning from states its policy does not cover is the
+    executor's last resort), and the reason names the re-plans; bogus claims never reach the run
+    (the tests above)."""
     from fixplan.planner import verify as verify_module
 
     real = verify_module.verify
@@ -336,8 +339,8 @@ def test_a_replanned_verification_is_not_a_pass(plan_data, box, monkeypatch):
 
     monkeypatch.setattr(verify_module, "verify", replanning)
     v = verify_plan_file(box, plan_data, source="plan.json")
-    assert not v.passed and "replanned" in v.failed_checks
-    assert v.reason.startswith("the plan as written did not load the part: the executor re-planned 2 times")
+    assert v.passed and "replanned" not in v.failed_checks
+    assert "the executor re-planned 2 times on the way" in v.reason
 
 
 def test_a_plan_that_is_all_at_the_start_needs_no_transitions():
