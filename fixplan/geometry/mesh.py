@@ -70,15 +70,16 @@ def declared_stl_triangles(head: bytes, size_bytes: int) -> int | None:
     """The triangle count a binary STL's header declares, or None for a file that is not binary STL.
 
     A file is taken as binary when its size is the one its count implies, or when its first bytes
-    are not text (an ASCII STL starts ``solid``, but so may a binary one's free header): so a
-    count of 10⁷ can be refused from 84 bytes, before the rest is read.
+    are not all text (an ASCII STL is text; a binary one's free 80-byte header may be text too, but
+    then its count's 4 bytes are not): so a count of 10⁷ is refused from 84 bytes, before the rest
+    is read.
     """
     if len(head) < STL_HEADER_BYTES:
         return None
     count = int.from_bytes(head[80:84], "little")
     if STL_HEADER_BYTES + STL_TRIANGLE_BYTES * count == size_bytes:
         return count
-    text = head.lstrip()[:5].lower() == b"solid" and all(32 <= b < 127 or b in b"\t\r\n" for b in head[:80])
+    text = all(32 <= b < 127 or b in b"\t\r\n" for b in head)
     return None if text else count
 
 
@@ -133,6 +134,27 @@ def parse_mesh(
     return mesh
 
 
+def stl_bytes(vertices: FloatArray, faces: IntArray, *, ascii: bool = False, name: str = "part") -> bytes:
+    """An STL file of the triangles: binary (float32 coordinates) or ASCII (every float64 digit, ``repr``)."""
+    tri = np.asarray(vertices, dtype=float)[np.asarray(faces)]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    length = np.linalg.norm(n, axis=1)
+    n = n / np.where(length > 0.0, length, 1.0)[:, None]  # a degenerate triangle: normal 0
+    if ascii:
+        lines = [f"solid {name}"]
+        for normal, corners in zip(n, tri, strict=True):
+            lines.append("  facet normal " + " ".join(repr(float(x)) for x in normal))
+            lines.append("    outer loop")
+            lines += ["      vertex " + " ".join(repr(float(x)) for x in c) for c in corners]
+            lines += ["    endloop", "  endfacet"]
+        lines.append(f"endsolid {name}")
+        return ("\n".join(lines) + "\n").encode()
+    record = np.zeros(tri.shape[0], dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+    record["n"], record["v"] = n, tri
+    header = name.encode()[:80].ljust(80, b" ")
+    return header + np.uint32(tri.shape[0]).tobytes() + record.tobytes()
+
+
 # -- reading and cleaning ---------------------------------------------------------------------------
 def _read_triangles(data: bytes, file_type: str) -> tuple[FloatArray, IntArray]:
     import trimesh
@@ -175,7 +197,10 @@ def _compact(vertices: FloatArray, faces: IntArray) -> tuple[FloatArray, IntArra
 def _edges(faces: IntArray) -> tuple[IntArray, IntArray, IntArray]:
     """``(edges (k,2) sorted, inverse (m,3): each face slot's edge, counts (k,))``; slots AB, BC, CA."""
     directed = faces[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2)
-    edges, inverse, counts = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True, return_counts=True)
+    low, high = directed.min(axis=1), directed.max(axis=1)
+    n = int(faces.max()) + 1
+    keys, inverse, counts = np.unique(low * n + high, return_inverse=True, return_counts=True)
+    edges = np.stack(np.divmod(keys, n), axis=1)
     return edges, inverse.reshape(-1, 3), counts
 
 
@@ -346,6 +371,51 @@ def closest_on_triangles(p: FloatArray, a: FloatArray, b: FloatArray, c: FloatAr
     return point, region
 
 
+def _box_pairs(lo: FloatArray, hi: FloatArray, max_entries_per_box: int = 64) -> IntArray:
+    """Pairs ``(i, j)``, i < j, of axis-aligned boxes that overlap: a uniform grid, then the exact box test.
+
+    The cell is the boxes' 90th-percentile extent (doubled until the boxes cover at most
+    ``max_entries_per_box`` cells each on average); each box is entered in every cell it covers,
+    boxes sharing a cell are candidate pairs.
+    """
+    m = lo.shape[0]
+    if m < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    cell = max(float(np.quantile((hi - lo).max(axis=1), 0.9)), float((hi - lo).max()) * 1e-6, 1e-300)
+    origin = lo.min(axis=0)
+    while True:
+        first = np.floor((lo - origin) / cell).astype(np.int64)
+        last = np.floor((hi - origin) / cell).astype(np.int64)
+        span = last - first + 1
+        count = np.prod(span, axis=1)
+        if count.sum() <= max_entries_per_box * m or count.max() == 1:
+            break
+        cell *= 2.0
+    box = np.repeat(np.arange(m), count)
+    k = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)  # index within the box's cells
+    sy, sz = span[box, 1], span[box, 2]
+    ix = first[box, 0] + k // (sy * sz)
+    iy = first[box, 1] + (k // sz) % sy
+    iz = first[box, 2] + k % sz
+    dims = last.max(axis=0) + 1
+    key = (ix * dims[1] + iy) * dims[2] + iz
+    order = np.argsort(key, kind="stable")
+    key, box = key[order], box[order]
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    sizes = np.diff(np.r_[starts, key.size])
+    end = np.repeat(starts + sizes, sizes)  # one past the last of each entry's group
+    partners = end - np.arange(key.size) - 1
+    a = np.repeat(np.arange(key.size), partners)
+    b = a + 1 + (np.arange(partners.sum()) - np.repeat(np.cumsum(partners) - partners, partners))
+    i, j = box[a], box[b]
+    i, j = np.minimum(i, j), np.maximum(i, j)
+    pair_key = np.sort(i * m + j)
+    unique = pair_key[np.r_[True, pair_key[1:] != pair_key[:-1]]]  # (np.unique hashes: slower here)
+    i, j = np.divmod(unique, m)
+    keep = (i != j) & np.all(lo[i] <= hi[j], axis=1) & np.all(lo[j] <= hi[i], axis=1)
+    return np.stack([i[keep], j[keep]], axis=1)
+
+
 def _orient3(a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray) -> FloatArray:
     """``det[b − a, c − a, d − a]`` row by row: > 0 when d is on the side of (a, b, c)'s normal."""
     return np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a)
@@ -360,27 +430,33 @@ def _segments_cross_triangles(p: FloatArray, q: FloatArray, a: FloatArray, b: Fl
     return straddles & inside
 
 
-def _coplanar_overlap(A: FloatArray, B: FloatArray) -> bool:
-    """Two coplanar triangles (3×3 each) overlap or touch: 2D tests in the plane's dominant projection."""
-    n = np.cross(A[1] - A[0], A[2] - A[0])
-    keep = [k for k in range(3) if k != int(np.argmax(np.abs(n)))]
-    a2, b2 = A[:, keep], B[:, keep]
+def _coplanar_overlap(A: FloatArray, B: FloatArray) -> Any:
+    """Coplanar triangle pairs ``A``, ``B`` (each ``(k, 3, 3)``) overlap or touch, row by row.
 
-    def cross2(o: FloatArray, u: FloatArray, v: FloatArray) -> float:
-        return float((u[0] - o[0]) * (v[1] - o[1]) - (u[1] - o[1]) * (v[0] - o[0]))
+    2D tests in each plane's dominant projection: an edge of one properly crosses an edge of the
+    other, or a corner of one lies in the other (closed).
+    """
+    n = np.cross(A[:, 1] - A[:, 0], A[:, 2] - A[:, 0])
+    drop = np.argmax(np.abs(n), axis=1)
+    keep = np.array([[1, 2], [0, 2], [0, 1]])[drop]  # (k, 2)
+    a2 = np.take_along_axis(A, keep[:, None, :], axis=2)  # (k, 3, 2)
+    b2 = np.take_along_axis(B, keep[:, None, :], axis=2)
 
-    def inside(pt: FloatArray, tri: FloatArray) -> bool:
-        s = [cross2(tri[i], tri[(i + 1) % 3], pt) for i in range(3)]
-        return all(x >= 0 for x in s) or all(x <= 0 for x in s)
+    def cross2(o: FloatArray, u: FloatArray, v: FloatArray) -> FloatArray:
+        return (u[:, 0] - o[:, 0]) * (v[:, 1] - o[:, 1]) - (u[:, 1] - o[:, 1]) * (v[:, 0] - o[:, 0])
 
+    def inside(pt: FloatArray, tri: FloatArray) -> Any:
+        s = [cross2(tri[:, i], tri[:, (i + 1) % 3], pt) for i in range(3)]
+        return ((s[0] >= 0) & (s[1] >= 0) & (s[2] >= 0)) | ((s[0] <= 0) & (s[1] <= 0) & (s[2] <= 0))
+
+    hit = np.zeros(A.shape[0], dtype=bool)
     for i in range(3):
+        p, q = a2[:, i], a2[:, (i + 1) % 3]
         for j in range(3):
-            p, q, r, s = a2[i], a2[(i + 1) % 3], b2[j], b2[(j + 1) % 3]
-            d1, d2 = cross2(p, q, r), cross2(p, q, s)
-            d3, d4 = cross2(r, s, p), cross2(r, s, q)
-            if d1 * d2 < 0 and d3 * d4 < 0:
-                return True
-    return any(inside(pt, b2) for pt in a2) or any(inside(pt, a2) for pt in b2)
+            r, t = b2[:, j], b2[:, (j + 1) % 3]
+            hit |= (cross2(p, q, r) * cross2(p, q, t) < 0) & (cross2(r, t, p) * cross2(r, t, q) < 0)
+        hit |= inside(a2[:, i], b2) | inside(b2[:, i], a2)
+    return hit
 
 
 # -- the shape ------------------------------------------------------------------------------------
@@ -405,6 +481,13 @@ class Mesh(Shape):
         f.setflags(write=False)
         object.__setattr__(self, "vertices", v)
         object.__setattr__(self, "faces", f)
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The defining fields only: the cached arrays and coal's BVH are rebuilt where it is unpickled."""
+        return {k: self.__dict__[k] for k in ("vertices", "faces", "settings", "notes")}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
 
     # -- derived arrays (computed once) -----------------------------------------------------------
     @functools.cached_property
@@ -579,22 +662,17 @@ class Mesh(Shape):
 
     # -- checks -----------------------------------------------------------------------------------
     def self_intersection(self) -> tuple[int, int] | None:
-        """A pair of triangles that cross or touch other than along shared edges and vertices, or None."""
-        import coal
+        """A pair of triangles that cross or touch other than along shared edges and vertices, or None.
 
-        request = coal.CollisionRequest()
-        request.num_max_contacts = 64 * self.faces.shape[0]
-        request.enable_contact = False
-        request.security_margin = self.settings.same_point_rel * self._scale_m
-        result = coal.CollisionResult()
-        identity = coal.Transform3s()
-        coal.collide(self.bvh, identity, self.bvh, identity, request, result)
-        pairs = np.array([(ct.b1, ct.b2) for ct in result.getContacts()], dtype=np.int64).reshape(-1, 2)
-        pairs = np.unique(np.sort(pairs, axis=1), axis=0)
-        pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+        The candidate pairs are those whose bounding boxes overlap (within a hair), found on a
+        uniform grid (:func:`_box_pairs`); each is then tested exactly (module docstring).
+        """
+        F, V = self.faces, self.vertices
+        tri = V[F]
+        pad = self.settings.same_point_rel * self._scale_m
+        pairs = _box_pairs(tri.min(axis=1) - pad, tri.max(axis=1) + pad)
         if pairs.size == 0:
             return None
-        F, V = self.faces, self.vertices
         fa, fb = F[pairs[:, 0]], F[pairs[:, 1]]
         shared = (fa[:, :, None] == fb[:, None, :]).sum(axis=(1, 2))
         for count, test in ((0, self._cross_apart), (1, self._cross_at_vertex), (2, self._fold_at_edge)):
@@ -616,9 +694,9 @@ class Mesh(Shape):
         for X, Y in ((A, B), (B, A)):
             for i in range(3):
                 hit |= _segments_cross_triangles(X[:, i], X[:, (i + 1) % 3], Y[:, 0], Y[:, 1], Y[:, 2])
-        flat = self._coplanar(A, B)
-        for k in np.flatnonzero(flat & ~hit):
-            hit[k] = _coplanar_overlap(A[k], B[k])
+        flat = self._coplanar(A, B) & ~hit
+        if flat.any():
+            hit[flat] = _coplanar_overlap(A[flat], B[flat])
         return hit
 
     def _cross_at_vertex(self, pairs: IntArray, V: FloatArray, F: IntArray) -> Any:
@@ -681,4 +759,5 @@ __all__ = [
     "declared_stl_triangles",
     "mass_properties",
     "parse_mesh",
+    "stl_bytes",
 ]
