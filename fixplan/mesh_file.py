@@ -40,6 +40,29 @@ def mesh_path(file: str, base_dir: Path) -> Path:
     return path
 
 
+def declared_elements(data: bytes, kind: str) -> int | None:
+    """The most faces or vertices a text header or the text itself announces, counted before parsing.
+
+    PLY: the ``element vertex N`` and ``element face N`` lines of its header (a parser would
+    allocate for them); OBJ: its ``f`` lines; ASCII STL: its ``facet`` keywords. None for a binary
+    STL (its count was checked from the header).
+    """
+    if kind == "ply":
+        end = data.find(b"end_header")
+        header = data[: end if end >= 0 else 4096]
+        counts = [
+            int(words[2])
+            for line in header.splitlines()
+            if len(words := line.split()) == 3 and words[0] == b"element" and words[2].isdigit()
+        ]
+        return max(counts, default=0)
+    if kind == "obj":
+        return data.count(b"\nf ") + data.startswith(b"f ")
+    if kind == "stl" and data.lstrip()[:5].lower() == b"solid":
+        return data.count(b"facet") // 2  # "facet normal" ... "endfacet"
+    return None
+
+
 def load_mesh_file(file: str, base_dir: Path, *, units: str = "m", settings: MeshSettings = DEFAULT.mesh) -> Mesh:
     """The checked mesh of a fixture's ``workpiece.file`` (module docstring); its ``notes`` say what was repaired.
 
@@ -75,6 +98,11 @@ def load_mesh_file(file: str, base_dir: Path, *, units: str = "m", settings: Mes
         raise MeshError(f"{file!r}: cannot read: {exc.strerror or exc}") from None
     if len(data) > limits.MAX_MESH_BYTES:
         raise MeshError(f"{file!r} is larger than the limit of {limits.MAX_MESH_BYTES} bytes")
+    declared = declared_elements(data, kind)
+    if declared is not None and declared > limits.MAX_MESH_TRIANGLES:
+        raise MeshError(
+            f"{file!r} declares {declared} faces or vertices (expected at most {limits.MAX_MESH_TRIANGLES} triangles)"
+        )
     mesh = parse_mesh(data, kind, units=units, settings=settings, max_triangles=limits.MAX_MESH_TRIANGLES)
     extent = float((mesh.vertices.max(axis=0) - mesh.vertices.min(axis=0)).max())
     farthest = float(abs(mesh.vertices).max())
@@ -87,4 +115,4 @@ def load_mesh_file(file: str, base_dir: Path, *, units: str = "m", settings: Mes
     return mesh
 
 
-__all__ = ["load_mesh_file", "mesh_path"]
+__all__ = ["declared_elements", "load_mesh_file", "mesh_path"]
