@@ -16,13 +16,16 @@ trimesh from memory, so an OBJ never opens a material file) into a :class:`Mesh`
    one connected group;
 6. orientation: inconsistent winding is repaired (trimesh's ``fix_normals``), and a surface
    facing inwards is turned outwards (positive volume); both are reported as notes;
-7. not self-intersecting: the triangle pairs whose bounding volumes are within a hair of each
-   other come from coal's BVH (the mesh collided with itself); each pair is then tested exactly
+7. not self-intersecting: the triangle pairs whose bounding boxes overlap (within a hair) come
+   from a uniform grid (:func:`_box_pairs`, numpy); each pair is then tested exactly
    (floating-point orientation determinants): pairs sharing no vertex by segment–triangle
    crossings of their six edges (coplanar pairs in 2D), pairs sharing one vertex by whether the
    line where their planes meet leaves that vertex inside both triangles (coplanar: whether
    their corners' wedges overlap), pairs sharing an edge by whether they fold onto each other
-   (coplanar, on one side of the edge). Touching counts as intersecting.
+   (coplanar, on one side of the edge). Touching counts as intersecting. Measured here: the whole
+   check takes about 0.6 s for 10⁴ triangles and 2 s for 5·10⁴; coal's BVH of the mesh against
+   itself found the candidate pairs of 2·10⁴ triangles in 0.9 s, but reading its 2.7·10⁵
+   contacts back through Python doubled that, so the grid replaced it.
 
 Queries. :meth:`Mesh.project` is exact on the triangles: coal's BVH gives the nearest triangle
 (an upper bound of the distance) and then every triangle within that distance (a sphere against
@@ -41,6 +44,7 @@ from __future__ import annotations
 
 import functools
 import io
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -416,6 +420,42 @@ def _box_pairs(lo: FloatArray, hi: FloatArray, max_entries_per_box: int = 64) ->
     return np.stack([i[keep], j[keep]], axis=1)
 
 
+def _closest_scalar(p: tuple[float, float, float], tri: Any) -> tuple[tuple[float, float, float], int]:
+    """:func:`closest_on_triangles` for one triangle (3×3 nested lists) in plain floats (fewer calls)."""
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = tri
+    px, py, pz = p
+    abx, aby, abz, acx, acy, acz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
+    apx, apy, apz = px - ax, py - ay, pz - az
+    d1, d2 = abx * apx + aby * apy + abz * apz, acx * apx + acy * apy + acz * apz
+    if d1 <= 0 and d2 <= 0:
+        return (ax, ay, az), VERTEX_A
+    bpx, bpy, bpz = px - bx, py - by, pz - bz
+    d3, d4 = abx * bpx + aby * bpy + abz * bpz, acx * bpx + acy * bpy + acz * bpz
+    if d3 >= 0 and d4 <= d3:
+        return (bx, by, bz), VERTEX_B
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0 and d1 >= 0 and d3 <= 0:
+        v = d1 / (d1 - d3)
+        return (ax + v * abx, ay + v * aby, az + v * abz), EDGE_AB
+    cpx, cpy, cpz = px - cx, py - cy, pz - cz
+    d5, d6 = abx * cpx + aby * cpy + abz * cpz, acx * cpx + acy * cpy + acz * cpz
+    if d6 >= 0 and d5 <= d6:
+        return (cx, cy, cz), VERTEX_C
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0 and d2 >= 0 and d6 <= 0:
+        w = d2 / (d2 - d6)
+        return (ax + w * acx, ay + w * acy, az + w * acz), EDGE_CA
+    va = d3 * d6 - d5 * d4
+    if va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return (bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)), EDGE_BC
+    nx, ny, nz = aby * acz - abz * acy, abz * acx - abx * acz, abx * acy - aby * acx
+    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+    nx, ny, nz = nx / norm, ny / norm, nz / norm
+    h = apx * nx + apy * ny + apz * nz
+    return (px - h * nx, py - h * ny, pz - h * nz), FACE
+
+
 def _orient3(a: FloatArray, b: FloatArray, c: FloatArray, d: FloatArray) -> FloatArray:
     """``det[b − a, c − a, d − a]`` row by row: > 0 when d is on the side of (a, b, c)'s normal."""
     return np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a)
@@ -581,44 +621,62 @@ class Mesh(Shape):
         p = np.asarray(p_body, dtype=float).reshape(3)
         band = self.settings.contact_band_m if band_m is None else band_m
         ids = self._candidates(p, band)
-        a, b, c = (t[ids] for t in self._triangles)
-        points, regions = closest_on_triangles(p, a, b, c)
-        dist = np.linalg.norm(p - points, axis=1)
+        pt = (float(p[0]), float(p[1]), float(p[2]))
+        corners = self._corner_lists
+        closest = [_closest_scalar(pt, corners[i]) for i in ids.tolist()]
+        points = np.array([c[0] for c in closest])
+        regions = [c[1] for c in closest]
+        dist = np.sqrt(((p - points) ** 2).sum(axis=1))
         nearest = float(dist.min())
         same = self.settings.same_point_rel * self._scale_m
         found: list[tuple[float, Projection]] = []
-        for k in np.argsort(dist, kind="stable"):
+        for k in np.argsort(dist, kind="stable").tolist():
             if dist[k] > nearest + band + same:
                 break
             if any(float(np.linalg.norm(points[k] - prj.point_body)) <= same for _, prj in found):
                 continue
-            if regions[k] != FACE and not self._local_minimum(int(ids[k]), int(regions[k]), points[k], ids, points):
+            if regions[k] != FACE and not self._local_minimum(int(ids[k]), regions[k], points[k], ids, points):
                 continue
-            found.append((float(dist[k]), self._signed(p, int(ids[k]), int(regions[k]), points[k], float(dist[k]))))
+            found.append((float(dist[k]), self._signed(p, int(ids[k]), regions[k], points[k], float(dist[k]))))
             if band == 0.0:
                 break
         return [prj for _, prj in found]
 
-    def _candidates(self, p: FloatArray, band_m: float) -> IntArray:
-        """The triangles within (nearest distance + band) of ``p``: coal's BVH, distance then a sphere."""
+    @functools.cached_property
+    def _corner_lists(self) -> list[Any]:
+        """Each triangle's corners as nested lists of floats (for :func:`_closest_scalar`)."""
+        return self.vertices[self.faces].tolist()
+
+    @functools.cached_property
+    def _queries(self) -> tuple[Any, ...]:
+        """coal's objects of a point query, made once: transforms, requests, results, the probe sphere."""
         import coal
 
-        here = coal.Transform3s()
-        here.setTranslation(p)
-        identity = coal.Transform3s()
-        request, result = coal.DistanceRequest(), coal.DistanceResult()
+        request = coal.CollisionRequest()
+        request.num_max_contacts = self.faces.shape[0]
+        request.enable_contact = False
         probe = coal.Sphere(self.settings.same_point_rel * self._scale_m)
-        coal.distance(self.bvh, identity, probe, here, request, result)
+        return coal.Transform3s(), coal.Transform3s(), coal.DistanceRequest(), request, probe
+
+    def _candidates(self, p: FloatArray, band_m: float) -> IntArray:
+        """The triangles within (nearest distance + band) of ``p``: coal's BVH, distance then a sphere.
+
+        coal's nearest triangle gives an upper bound of the distance (the exact distance to that
+        triangle); every triangle that a ball of that radius (plus the band) touches is a candidate.
+        """
+        import coal
+
+        here, identity, distance_request, collision_request, probe = self._queries
+        here.setTranslation(p)
+        result = coal.DistanceResult()
+        coal.distance(self.bvh, identity, probe, here, distance_request, result)
         first = int(result.b1) if 0 <= int(result.b1) < self.faces.shape[0] else 0
-        a, b, c = (t[first : first + 1] for t in self._triangles)
-        upper = float(np.linalg.norm(p - closest_on_triangles(p, a, b, c)[0][0]))
+        point, _ = _closest_scalar((float(p[0]), float(p[1]), float(p[2])), self._corner_lists[first])
+        upper = math.dist(point, p.tolist())
         reach = upper + band_m + 2.0 * self.settings.same_point_rel * self._scale_m
-        creq = coal.CollisionRequest()
-        creq.num_max_contacts = self.faces.shape[0]
-        creq.enable_contact = False
-        cres = coal.CollisionResult()
-        coal.collide(self.bvh, identity, coal.Sphere(reach), here, creq, cres)
-        ids = {int(ct.b1) for ct in cres.getContacts()}
+        found = coal.CollisionResult()
+        coal.collide(self.bvh, identity, coal.Sphere(reach), here, collision_request, found)
+        ids = {int(ct.b1) for ct in found.getContacts()}
         ids.add(first)
         return np.fromiter(sorted(ids), dtype=np.int64)
 
