@@ -649,7 +649,7 @@ class Mesh(Shape):
 
     @functools.cached_property
     def _queries(self) -> tuple[Any, ...]:
-        """coal's objects of a point query, made once: transforms, requests, results, the probe sphere."""
+        """The objects of a coal point query, made once: transforms, requests, the probe sphere."""
         import coal
 
         request = coal.CollisionRequest()
