@@ -709,6 +709,9 @@ class MeshSettings:
     contact_band_m : float
         :meth:`Mesh.contacts` returns every local minimum of the distance within this of the
         nearest [m]: a spherical tip in a concave corner touches two faces.
+    grid_cell_min_rel : float
+        The self-intersection check's grid cell is at least this fraction of the largest
+        triangle's extent (a mesh of slivers does not make a grid of billions of cells).
     """
 
     degenerate_rel: float = 1e-12
@@ -716,6 +719,7 @@ class MeshSettings:
     coplanar_rel: float = 1e-12
     wedge_rel: float = 1e-12
     contact_band_m: float = 1e-6
+    grid_cell_min_rel: float = 1e-6
 
 
 @dataclass(frozen=True)

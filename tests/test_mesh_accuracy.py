@@ -1,4 +1,4 @@
-"""A box as a mesh gives the primitive box's answers (issue 23 §5).
+"""A box as a mesh gives the primitive box's answers.
 
 The same box of ``problems/`` written as a 12-triangle binary STL in millimetres and as a
 10 092-triangle ASCII STL in metres (29 cells a side, every coordinate with all its digits): the

@@ -1,4 +1,4 @@
-"""Build the mesh parts of ``problems/meshes/`` and their fixtures (issue 23): nothing is downloaded.
+"""Build the mesh parts of ``problems/meshes/`` and their fixtures: nothing is downloaded.
 
 Three rectilinear parts from :mod:`fixplan.geometry.cells`, each located 3-2-1 by six spherical
 tips, one of them (E1) inside a concave region, where the part's convex hull would put it inside

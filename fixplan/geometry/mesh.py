@@ -30,7 +30,7 @@ trimesh from memory, so an OBJ never opens a material file) into a :class:`Mesh`
 Queries. :meth:`Mesh.project` is exact on the triangles: coal's BVH gives the nearest triangle
 (an upper bound of the distance) and then every triangle within that distance (a sphere against
 the BVH); closest points on those triangles are Ericson's region tests (Real-Time Collision
-Detection §5.1.5); the sign comes from angle-weighted pseudo-normals (Bærentzen & Aanæs 2005) of
+Detection, section 5.1.5); the sign comes from angle-weighted pseudo-normals (Bærentzen & Aanæs 2005) of
 the closest feature: the face's own normal in a face, the sum of the two faces' normals on an
 edge, the angle-weighted sum at a vertex. coal's own signed distance is not used (it is not
 exact when a sphere and the mesh overlap). :meth:`Mesh.contacts` returns every local minimum of
@@ -335,7 +335,7 @@ def mass_properties(vertices: FloatArray, faces: IntArray) -> tuple[float, Float
 def closest_on_triangles(p: FloatArray, a: FloatArray, b: FloatArray, c: FloatArray) -> tuple[FloatArray, IntArray]:
     """Closest points of triangles ``(a, b, c)`` (each ``(m, 3)``) to the point ``p``, and their regions.
 
-    Ericson, Real-Time Collision Detection §5.1.5: the Voronoi regions of the vertices, then the
+    Ericson, Real-Time Collision Detection, section 5.1.5: the Voronoi regions of the vertices, then the
     edges, then the face; the region codes are :data:`FACE`, :data:`VERTEX_A` ... :data:`EDGE_CA`.
     In the face the point is the orthogonal projection onto the plane (``p − ((p − a)·n) n``), so a
     point over a face gets it to the digits of the face's plane.
@@ -375,17 +375,18 @@ def closest_on_triangles(p: FloatArray, a: FloatArray, b: FloatArray, c: FloatAr
     return point, region
 
 
-def _box_pairs(lo: FloatArray, hi: FloatArray, max_entries_per_box: int = 64) -> IntArray:
+def _box_pairs(lo: FloatArray, hi: FloatArray, max_entries_per_box: int = 64, min_cell_rel: float = 0.0) -> IntArray:
     """Pairs ``(i, j)``, i < j, of axis-aligned boxes that overlap: a uniform grid, then the exact box test.
 
-    The cell is the boxes' 90th-percentile extent (doubled until the boxes cover at most
-    ``max_entries_per_box`` cells each on average); each box is entered in every cell it covers,
+    The cell is the boxes' 90th-percentile extent, at least ``min_cell_rel`` times the largest
+    (doubled until the boxes cover at most ``max_entries_per_box`` cells each on average); each box is entered in every cell it covers,
     boxes sharing a cell are candidate pairs.
     """
     m = lo.shape[0]
     if m < 2:
         return np.zeros((0, 2), dtype=np.int64)
-    cell = max(float(np.quantile((hi - lo).max(axis=1), 0.9)), float((hi - lo).max()) * 1e-6, 1e-300)
+    extent = (hi - lo).max(axis=1)
+    cell = max(float(np.quantile(extent, 0.9)), float(extent.max()) * min_cell_rel, float(np.finfo(float).tiny))
     origin = lo.min(axis=0)
     while True:
         first = np.floor((lo - origin) / cell).astype(np.int64)
@@ -728,7 +729,7 @@ class Mesh(Shape):
         F, V = self.faces, self.vertices
         tri = V[F]
         pad = self.settings.same_point_rel * self._scale_m
-        pairs = _box_pairs(tri.min(axis=1) - pad, tri.max(axis=1) + pad)
+        pairs = _box_pairs(tri.min(axis=1) - pad, tri.max(axis=1) + pad, min_cell_rel=self.settings.grid_cell_min_rel)
         if pairs.size == 0:
             return None
         fa, fb = F[pairs[:, 0]], F[pairs[:, 1]]

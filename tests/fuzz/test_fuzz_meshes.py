@@ -1,6 +1,6 @@
 """Hostile mesh files behind ``shape = "mesh"``: each is refused in one line naming workpiece.file, or loads.
 
-The named cases are the bad meshes of issue 23 §2 and §7 (open, non-manifold, self-intersecting,
+The named cases are the bad meshes of the mesh work (open, non-manifold, self-intersecting,
 degenerate, empty, not a mesh, non-finite, oversized headers; a missing file, a directory, a
 named pipe, a file outside the fixture's folder). Hypothesis then mutates the bytes of a valid
 part's STL (binary and ASCII), OBJ and PLY: flipped, cut, inserted or repeated bytes, and changed
