@@ -355,7 +355,7 @@ def closest_on_triangles(p: FloatArray, a: FloatArray, b: FloatArray, c: FloatAr
     point = np.empty_like(a)
     todo = np.ones(m, dtype=bool)
 
-    def take(mask: FloatArray, code: int, value: FloatArray) -> None:
+    def take(mask: Any, code: int, value: FloatArray) -> None:
         sel = todo & mask
         region[sel] = code
         point[sel] = value[sel]
