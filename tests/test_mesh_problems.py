@@ -67,3 +67,19 @@ def test_hand_derived_verdicts(entry: dict) -> None:
     fixture = load(MESHES / entry["file"])
     (result,) = classify(fixture, np.array([entry["wrench"]]), pose="goal", jobs=1)
     assert result.mode == entry["mode"], entry["why"]
+
+
+def test_validate_says_when_a_tip_in_a_corner_touches_two_faces(tmp_path, capsys) -> None:
+    """E1 moved into the L's concave corner (0.013, 0.02, 0.013) touches the wall and the base: two contacts."""
+    text = (MESHES / "l-bracket.toml").read_text(encoding="utf-8")
+    text = text.replace("position = [0.013, 0.02, 0.035]", "position = [0.013, 0.02, 0.013]")
+    (tmp_path / "l-bracket.stl").write_bytes((MESHES / "l-bracket.stl").read_bytes())
+    (tmp_path / "corner.toml").write_text(text, encoding="utf-8")
+    fixture = load(tmp_path / "corner.toml")
+    mesh = fixture.workpiece.shape
+    assert isinstance(mesh, Mesh)
+    touches = mesh.contacts(fixture.locator("E1").p_world)
+    assert sorted(tuple(np.round(t.normal_body, 12)) for t in touches) == [(0.0, 0.0, 1.0), (1.0, 0.0, 0.0)]
+    assert main(["validate", "--verbose", str(tmp_path / "corner.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "E1 touches the mesh at 2 places at the goal (a concave corner)" in out
