@@ -74,6 +74,11 @@ def load_mesh_file(file: str, base_dir: Path, *, units: str = "m", settings: Mes
     """
     path = mesh_path(file, base_dir)
     suffix = path.suffix.lower()
+    if suffix in (".step", ".stp"):
+        raise MeshError(
+            f"{file!r} is a STEP file: STEP parts are not read yet (expected a mesh file: {', '.join(MESH_SUFFIXES)}; "
+            "export the part as STL from the CAD tool)"
+        )
     if suffix not in MESH_SUFFIXES:
         raise MeshError(
             f"{file!r} has the suffix {suffix or '(none)'!r} (expected a mesh file: {', '.join(MESH_SUFFIXES)})"

@@ -236,7 +236,8 @@ BAD = [
     ("empty.stl", lambda: b"", "no triangles"),
     ("words.stl", lambda: b"this is not a mesh\n" * 10, "no triangles: not a STL mesh"),
     ("nan.obj", lambda: b"v 0 0 0\nv 1 0 0\nv nan 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n", "non-finite"),
-    ("part.step", lambda: b"ISO-10303-21;", "has the suffix '.step' (expected a mesh file: .stl, .obj, .ply)"),
+    ("part.step", lambda: b"ISO-10303-21;", "is a STEP file: STEP parts are not read yet"),
+    ("part.iges", lambda: b"x", "has the suffix '.iges' (expected a mesh file: .stl, .obj, .ply)"),
     ("missing.stl", None, "cannot read: no such file"),
 ]
 
