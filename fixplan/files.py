@@ -36,7 +36,7 @@ import stat
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TextIO, TypeVar
+from typing import TYPE_CHECKING, Any, BinaryIO, TextIO, TypeVar
 
 from fixplan.errors import FixplanError, InputError, shorten
 from fixplan.limits import MAX_FILE_BYTES
@@ -123,6 +123,40 @@ def read_user_text(path: Path, *, expected: str, max_bytes: int = MAX_FILE_BYTES
     if len(data) > max_bytes:
         raise UnreadableFile(path, f"is larger than the limit of {max_bytes} bytes (expected {expected})")
     return decode_text(path, data, expected=expected)
+
+
+def open_user_file(path: Path, *, expected: str, max_bytes: int) -> BinaryIO:
+    """A user's input file opened for binary reading, checked as :func:`read_user_text` checks it.
+
+    Only a regular file of at most ``max_bytes`` bytes (a directory, pipe or device is refused
+    with a one-line :class:`UnreadableFile`), opened without blocking. The caller reads it (a
+    mesh reads its header first) and closes it.
+    """
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise UnreadableFile(path, "no such file") from None
+    except OSError as exc:
+        raise UnreadableFile(path, exc.strerror or str(exc)) from None
+    if stat.S_ISDIR(info.st_mode):
+        raise UnreadableFile(path, f"is a directory (expected {expected})")
+    if not stat.S_ISREG(info.st_mode):
+        raise UnreadableFile(path, f"is not a regular file but {_file_kind(info.st_mode)} (expected {expected})")
+    if info.st_size > max_bytes:
+        raise UnreadableFile(
+            path, f"is {info.st_size} bytes, larger than the limit of {max_bytes} bytes (expected {expected})"
+        )
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        fh = os.fdopen(fd, "rb")
+    except OSError as exc:
+        raise UnreadableFile(path, exc.strerror or str(exc)) from None
+    opened = os.fstat(fh.fileno())
+    if not stat.S_ISREG(opened.st_mode):
+        fh.close()
+        raise UnreadableFile(path, f"is not a regular file (expected {expected})")
+    note_input(path, opened)  # an output of this command never replaces it
+    return fh
 
 
 def file_sha256(path: Path, *, max_bytes: int = MAX_FILE_BYTES) -> str:

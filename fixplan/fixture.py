@@ -230,8 +230,6 @@ class _Builder:
         if dim is None:  # without a valid dimension nothing but the scene can be checked meaningfully
             raise FixtureError(self.source, [i for i in issues if re.split(r"[.\[]", i.key)[0] not in _PER_DIMENSION])
         r.issues.extend(issues)
-        if kind == "mesh":
-            r.error("workpiece.shape", "mesh workpieces are not supported yet (expected box, cylinder or sphere)")
         if doc is not None and not doc.locator and not doc.contact and not r.issues:
             r.error("locator", "no [[locator]] or [[contact]] entries (expected at least one)")
         self.fail_if_issues()
@@ -367,6 +365,14 @@ class _Builder:
             shape = Disk(wp.radius)  # type: ignore[arg-type]
         elif wp.shape == "cylinder":
             shape = Cylinder(wp.radius, wp.length)  # type: ignore[arg-type]
+        elif wp.shape == "mesh":
+            from fixplan.geometry.mesh import MeshError
+            from fixplan.mesh_file import load_mesh_file
+
+            try:
+                shape = load_mesh_file(wp.file or "", self.base_dir, units=wp.units or "m")
+            except MeshError as exc:
+                raise FixtureError(self.source, [Issue("workpiece.file", str(exc))]) from None
         else:
             shape = Polygon(wp.vertices)  # type: ignore[arg-type]
         mass = wp.mass
@@ -403,6 +409,8 @@ class _Builder:
             volume = 4.0 / 3.0 * np.pi * shape.radius**3
         elif isinstance(shape, Cylinder):
             volume = np.pi * shape.radius**2 * shape.length
+        elif dim == 3 and getattr(shape, "volume_m3", 0.0) > 0.0:  # a mesh
+            volume = shape.volume_m3  # type: ignore[attr-defined]
         else:  # 2D: a mass per unit depth has no density to judge
             return
         rho = mass / volume

@@ -56,6 +56,9 @@ SHAPE_KEYS: dict[str, tuple[str, ...]] = {
     "polygon": ("vertices",),
     "mesh": ("file",),
 }
+# the keys a shape may have besides those (each with a default)
+SHAPE_OPTIONAL_KEYS: dict[str, tuple[str, ...]] = {"mesh": ("units",)}
+MESH_UNITS = ("m", "mm", "in")
 FACES = {
     "box": ("+x", "-x", "+y", "-y", "+z", "-z"),
     "rectangle": ("+x", "-x", "+y", "-y"),
@@ -568,7 +571,12 @@ class Workpiece(Table):
         None, description="Polygon: [[x, y], ...] in the body frame, counter-clockwise, convex."
     )
     file: Annotated[str | None, Text(what="a mesh file path")] = Field(
-        None, description="Mesh: the file, relative to the fixture file."
+        None,
+        description="Mesh: the file (STL binary or ASCII, OBJ, PLY), relative to the fixture file's folder and "
+        "inside it; a closed, manifold triangle mesh whose frame is the body frame.",
+    )
+    units: Annotated[str | None, Text(MESH_UNITS)] = Field(
+        None, description="Mesh: the unit of the file's coordinates, m | mm | in (default m)."
     )
     mass: Annotated[float, Number("a mass [kg]", limits.MASS, exclusive_minimum=0.0)] = Field(
         description="The workpiece's mass."
@@ -590,7 +598,7 @@ class Workpiece(Table):
         dim = context.get("dimension") or 3
         if not isinstance(kind, str) or kind not in (SHAPES_3D if dim == 3 else SHAPES_2D):
             return common, []
-        used = common | set(SHAPE_KEYS[kind])
+        used = common | set(SHAPE_KEYS[kind]) | set(SHAPE_OPTIONAL_KEYS.get(kind, ()))
         errors: list[tuple[tuple, str]] = [
             ((key,), f"not used by shape {kind!r} (remove it)")
             for key in data
@@ -851,11 +859,11 @@ def _tidy(node: Any) -> Any:
 
 def _shape_rules() -> list[dict[str, Any]]:
     """if/then per shape: the keys it needs, the keys of other shapes refused, vector lengths."""
-    shape_keys = {k for keys in SHAPE_KEYS.values() for k in keys}
+    shape_keys = {k for keys in (*SHAPE_KEYS.values(), *SHAPE_OPTIONAL_KEYS.values()) for k in keys}
     rules = []
     for kind, keys in SHAPE_KEYS.items():
         then: dict[str, Any] = {"required": list(keys)}
-        others = sorted(shape_keys - set(keys))
+        others = sorted(shape_keys - set(keys) - set(SHAPE_OPTIONAL_KEYS.get(kind, ())))
         if others:
             then["not"] = {"anyOf": [{"required": [k]} for k in others]}
         if kind in ("box", "rectangle"):

@@ -20,6 +20,8 @@ Why these numbers:
   farthest point from the centre of mass), a bound no rigid body can exceed.
 * at most 100 locators and contacts in a file, at most 1 MiB per input file, at most 10⁷
   simulation steps per run without ``--force``.
+* a mesh part: at most 2·10⁵ triangles and 64 MiB (checking it at load takes about 0.8 s for
+  10⁴ triangles and 16 s for 2·10⁵ here).
 """
 
 from __future__ import annotations
@@ -79,6 +81,12 @@ DURATION = Range("a duration", "s", 0.0, 1e6)
 INERTIA_MIN_OF_UNIFORM = 1e-3  # least given moment, as a fraction of the uniform-density moment
 MAX_ENTRIES = 100  # [[locator]] plus [[contact]] entries in one file
 MAX_FILE_BYTES = 1 << 20  # any input file fixplan reads as text (fixture, wrench CSV, plan JSON)
+# a mesh part's file ([workpiece] shape = "mesh"): the checks at load are the cost, and every
+# command loads the fixture (measured here: about 0.8 s for 10⁴ triangles, 5 s for 5·10⁴, 16 s for
+# 2·10⁵, most of it the self-intersection test). A binary STL's header count, and the counts a
+# PLY header or an OBJ/ASCII STL text announces, are checked before trimesh parses the file.
+MAX_MESH_TRIANGLES = 200_000
+MAX_MESH_BYTES = 64 << 20  # 64 MiB: a binary STL of 10⁶ triangles is 50 MB; ASCII ~250 bytes a triangle
 MAX_SIM_STEPS = 10_000_000  # simulation steps of one `fixplan simulate` run without --force
 MAX_NAME_LENGTH = 64
 # tables, arrays and dotted-key levels nested in a TOML input, counted before parsing: a fixture

@@ -746,6 +746,40 @@ class ClusterSettings:
 
 
 @dataclass(frozen=True)
+class MeshSettings:
+    """Triangle-mesh parts (:mod:`fixplan.geometry.mesh`): checks at load and point queries.
+
+    Attributes
+    ----------
+    degenerate_rel : float
+        A triangle is degenerate when twice its area is at most this fraction of its longest
+        edge squared (the sine of its largest angle, near 0 or 180°): removed at load.
+    same_point_rel : float
+        Two closest points within this fraction of the part's bounding radius are one (a tip
+        over an edge is closest to both faces there at one point: one contact).
+    coplanar_rel : float
+        Two triangles are coplanar when the volumes of the tetrahedra their vertices span are at
+        most this fraction of the part's bounding radius cubed (self-intersection test).
+    wedge_rel : float
+        A direction lies on a triangle's wedge (self-intersection test of two triangles with one
+        shared vertex) when its coordinates along the wedge's edges are at least ``-wedge_rel``.
+    contact_band_m : float
+        :meth:`Mesh.contacts` returns every local minimum of the distance within this of the
+        nearest [m]: a spherical tip in a concave corner touches two faces.
+    grid_cell_min_rel : float
+        The self-intersection check's grid cell is at least this fraction of the largest
+        triangle's extent (a mesh of slivers does not make a grid of billions of cells).
+    """
+
+    degenerate_rel: float = 1e-12
+    same_point_rel: float = 1e-9
+    coplanar_rel: float = 1e-12
+    wedge_rel: float = 1e-12
+    contact_band_m: float = 1e-6
+    grid_cell_min_rel: float = 1e-6
+
+
+@dataclass(frozen=True)
 class Settings:
     """One of each group: what a profile selects."""
 
@@ -764,6 +798,7 @@ class Settings:
     goal: GoalSettings = field(default_factory=GoalSettings)
     cluster: ClusterSettings = field(default_factory=ClusterSettings)
     plan_file: PlanFileSettings = field(default_factory=PlanFileSettings)
+    mesh: MeshSettings = field(default_factory=MeshSettings)
 
     def with_(self, **changes: Any) -> Settings:
         """A copy with some groups replaced."""

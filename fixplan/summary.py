@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fixplan.errors import Issue
+from fixplan.geometry import Mesh
 from fixplan.settings import DEFAULT
 
 if TYPE_CHECKING:
@@ -95,6 +96,13 @@ def summarize(fixture: Fixture) -> FixtureSummary:
             return f"position [{pos}] m, rpy [{rpy}] deg"
         return f"position [{pos}] m, angle {np.degrees(pose.angle_rad):.4g} deg"
 
+    shape = fixture.workpiece.shape
+    if isinstance(shape, Mesh):
+        mesh = shape
+        details.append(
+            f"mesh: {mesh.faces.shape[0]} triangles, {mesh.vertices.shape[0]} vertices, volume {mesh.volume_m3:.6g} m³"
+        )
+        details.extend(f"mesh: {note}" for note in mesh.notes)
     details.append(f"start: {pose_text(fixture.start)}")
     gaps: dict[str, float] = {}
     for loc in fixture.locators:
@@ -110,6 +118,15 @@ def summarize(fixture: Fixture) -> FixtureSummary:
         free = len(fixture.free_motions)  # the part's symmetry, left free (a cylinder's spin)
         determined = rank >= fixture.ndof - free
         details.append(f"goal ({goal}): {pose_text(fixture.goal)}")
+        if isinstance(shape, Mesh):
+            for loc in fixture.locators:
+                centre = fixture.goal.point_body_from_world(loc.p_world)
+                touches = shape.contacts(centre)
+                if len(touches) > 1:
+                    details.append(
+                        f"  {loc.name} touches the mesh at {len(touches)} places at the goal (a concave corner); "
+                        "the commands use the nearest one only for now"
+                    )
         if fixture.goal_starts:
             n = fixture.goal_starts
             how = "Gauss–Newton from the start pose" if n == 1 else "the start pose alone did not lead there"

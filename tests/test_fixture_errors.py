@@ -93,10 +93,10 @@ CASES = [
     ),
     ("shape-of-other-dimension", GOOD.replace('shape = "box"', 'shape = "disk"'), "workpiece.shape", "a 2D shape"),
     (
-        "mesh-refused",
+        "mesh-missing-file",
         GOOD.replace('shape = "box"\nsize = [0.2, 0.1, 0.05]', 'shape = "mesh"\nfile = "part.stl"'),
-        "workpiece.shape",
-        "mesh workpieces are not supported yet",
+        "workpiece.file",
+        "'part.stl': cannot read: no such file",
     ),
     (
         "duplicate-name",

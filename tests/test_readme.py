@@ -9,7 +9,7 @@
 - every ``fixplan`` command the README shows parses (options and values), the quickstart's
   table row is what ``classify`` prints, the JSON example's ``solve_time_s`` is within
   :data:`SOLVE_TIME_FACTOR` of a real first call, the default fixture's comment gives its computed
-  gaps, and ``mesh`` is not offered as supported.
+  gaps, and which commands take ``mesh`` parts.
 """
 
 from __future__ import annotations
@@ -214,11 +214,18 @@ def test_the_default_fixture_comment_gives_its_computed_gaps() -> None:
         assert gaps[name] * 1e3 == pytest.approx(mm, abs=0.05), name  # to the digit shown
 
 
-def test_the_fixture_section_does_not_offer_mesh_as_supported(tmp_path) -> None:
+def test_the_fixture_section_says_which_commands_take_mesh_parts(tmp_path) -> None:
     section = README[README.index("## Fixture files") :].split("\n## ")[0]
-    assert "`mesh` with `file` is planned, not yet supported" in section
-    # ... and that is what the loader says
-    text = (ROOT / "problems" / "box-3-2-1.toml").read_text().replace('shape = "box"', 'shape = "mesh"\nfile = "p.stl"')
-    (tmp_path / "m.toml").write_text(text)
-    with pytest.raises(fixplan.FixtureError, match="mesh workpieces are not supported yet"):
-        fixplan.load(tmp_path / "m.toml")
+    assert "the engine's commands (`simulate`, `solve`, `robust`, `view`, `haptic`) refuse it for now" in section
+    # ... and that is what the commands do
+    from fixplan.cli import main
+    from fixplan.geometry.cells import box_cells, cell_surface
+    from fixplan.geometry.mesh import stl_bytes
+
+    V, F = cell_surface(*box_cells((0.2, 0.1, 0.05), 1))
+    (tmp_path / "p.stl").write_bytes(stl_bytes(V, F))
+    text = (ROOT / "problems" / "box-3-2-1.toml").read_text()
+    text = text.replace('shape = "box"\nsize = [0.20, 0.10, 0.05]', 'shape = "mesh"\nfile = "p.stl"')
+    (tmp_path / "m.toml").write_text("\n".join(ln for ln in text.splitlines() if not ln.startswith("face = ")))
+    assert fixplan.load(tmp_path / "m.toml").workpiece.shape.name == "mesh"
+    assert main(["solve", str(tmp_path / "m.toml")]) == 2

@@ -45,6 +45,7 @@ _LAYER_LIST: list[tuple[str, list[str]]] = [
             "locating",
             "limits",
             "files",
+            "mesh_file",
             "summary",
             "twins",
         ],

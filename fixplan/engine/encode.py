@@ -50,6 +50,13 @@ def encode(shape: Shape) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
         E = np.roll(V, -1, axis=0) - V
         N = np.stack([E[:, 1], -E[:, 0]], axis=1) / np.linalg.norm(E, axis=1)[:, None]
         return POLYGON, np.array([shape.bounding_radius]), np.ascontiguousarray(V), np.ascontiguousarray(N)
+    if shape.name == "mesh":
+        from fixplan.errors import InputError
+
+        raise InputError(
+            "the contact engine (simulate, solve, robust, haptic, verify) does not support mesh parts yet "
+            "(expected a box, cylinder, sphere, rectangle, disk or polygon)"
+        )
     raise TypeError(f"no compiled query for {type(shape).__name__}")  # pragma: no cover
 
 

@@ -3,7 +3,8 @@
 A fixed plane or box meets a convex workpiece first at a vertex (box, rectangle, polygon), on a
 rim (cylinder) or at the point of a ball nearest to it (sphere, disk). So the workpiece is seen
 by an obstacle as a few *collision points* in its body frame, each with a radius: the vertices
-(radius 0), ``rim_points`` points on each rim of a cylinder (radius 0; the rims' inscribed
+(radius 0; a mesh part's too: exact against a plane, against a box only where a vertex of the
+part is the deepest point), ``rim_points`` points on each rim of a cylinder (radius 0; the rims' inscribed
 polygons, exact where a vertex of them is the lowest point), the centre of a sphere or disk
 (radius = its radius: exact against a plane). A collision point at ``x`` (world) with radius
 ``ρ`` has the gap ``distance(x) − ρ`` to the obstacle, and the obstacle pushes it along the
@@ -20,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.geometry.mesh import Mesh
 from fixplan.geometry.shapes import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
 
 FloatArray = NDArray[np.float64]
@@ -36,6 +38,9 @@ def collision_points(shape: Shape, rim_points: int) -> tuple[FloatArray, FloatAr
         return signs * half, np.zeros(signs.shape[0])
     if isinstance(shape, Polygon):
         V = shape.array.copy()
+        return V, np.zeros(V.shape[0])
+    if isinstance(shape, Mesh):  # a polyhedron meets a plane first at a vertex
+        V = np.array(shape.vertices)
         return V, np.zeros(V.shape[0])
     if isinstance(shape, Sphere | Disk):
         return np.zeros((1, shape.dimension)), np.array([shape.radius])
