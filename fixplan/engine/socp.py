@@ -192,12 +192,50 @@ MAX_POLISH_SWEEPS = 20_000
 """Ceiling of the growing polish budget (``polish_sweeps · 4ᵏ``) of one round."""
 
 
-def _clarabel_solve(step: SocpStep, cost: np.ndarray, settings: Any, rounds: int, err: float) -> Any:
+@dataclass
+class _ClarabelClock:
+    """What one Clarabel solve costs, measured, so that the next step is not started past the deadline.
+
+    Clarabel checks its own ``time_limit`` only between interior-point iterations, and its setup
+    (scaling, the first KKT factorization) is not interrupted at all. So the setup is timed, and a
+    termination callback stops the iterations when the time left is shorter than the last one took.
+    """
+
+    budget: Budget
+    setup_s: float = 0.0
+    iteration_s: float = 0.0
+    last: float = 0.0
+    stopped: bool = False
+
+    def setup_fits(self) -> bool:
+        """Whether a new solver's setup (as long as the last one) ends before the deadline."""
+        return self.budget.remaining_s() > self.setup_s
+
+    def on_iteration(self, info: Any) -> bool:  # noqa: ARG002 - Clarabel's callback signature
+        """Clarabel's termination callback: ``True`` stops the solve."""
+        now = time.perf_counter()
+        if self.last:
+            self.iteration_s = now - self.last
+        self.last = now
+        self.stopped = self.budget.remaining_s() <= self.iteration_s
+        return self.stopped
+
+
+def _clarabel_solve(
+    step: SocpStep, cost: np.ndarray, settings: Any, rounds: int, err: float, clock: _ClarabelClock
+) -> Any:
     import clarabel
 
     b = np.zeros(step.A.shape[0])
     try:
-        return clarabel.DefaultSolver(step.P, cost, step.A, b, step.cones, settings).solve()
+        t0 = time.perf_counter()
+        solver = clarabel.DefaultSolver(step.P, cost, step.A, b, step.cones, settings)
+        clock.setup_s = time.perf_counter() - t0
+        clock.last = 0.0
+        set_callback = getattr(solver, "set_termination_callback", None)  # Clarabel ≥ 0.10
+        if set_callback is not None:
+            set_callback(clock.on_iteration)
+        return solver.solve()
     except Exception as exc:  # noqa: BLE001 - any backend failure becomes ours
         raise SolverError(
             f"Clarabel failed in SOCP round {rounds}: {exc}",
@@ -270,14 +308,15 @@ def solve_socp(
     rounds = 0
     polish = int(polish_sweeps)
     marks = [err]
+    clock = _ClarabelClock(budget)
     while status != STATUS_CONVERGED and rounds < max_iter:
-        if budget.expired():
+        if budget.expired() or not clock.setup_fits():
             status = STATUS_TIME_LIMIT
             break
         rounds += 1
         limit = budget.limit_s()
         settings.time_limit = math.inf if limit is None else limit
-        result = _clarabel_solve(step, arrays[3] + _offsets_s(u, problem), settings, rounds, err)
+        result = _clarabel_solve(step, arrays[3] + _offsets_s(u, problem), settings, rounds, err, clock)
         ipm_total += int(result.iterations)
         ipm_status.append(str(result.status))
         x = np.asarray(result.x, dtype=float)
