@@ -284,13 +284,16 @@ class _Declared:
     integer: bool
 
 
-def _declared(group: Any, name: str, where: str, *, integer: bool, at_most: int) -> _Declared:
+def _declared(
+    group: Any, name: str, where: str, *, integer: bool, at_most: int, exactly: tuple[int, str] | None = None
+) -> _Declared:
     """Open a dataset and check what it declares, before any of its data is read.
 
     Refused: a non-numeric type; more than ``at_most`` entries (a 9 KB file can declare 10⁹
     unwritten chunks, and reading them would allocate 7.45 GiB); more than
     :data:`~fixplan.limits.FCLIB_MAX_CHUNKS` chunks, or one chunk larger than the dataset may be;
-    data stored in other files (external storage, virtual datasets).
+    data stored in other files (external storage, virtual datasets). ``exactly = (n, what)``: the
+    dataset must declare ``n`` entries ("expected {what}, got ...").
     """
     ds = _dataset(group, name, where)
     path = f"{where}/{name}"
@@ -303,6 +306,8 @@ def _declared(group: Any, name: str, where: str, *, integer: bool, at_most: int)
     if external or virtual:
         raise InputError(f"{path}: its data are stored in other files (refused: an FCLib file holds its own data)")
     count = math.prod(shape) if shape is not None else 0
+    if exactly is not None and count != exactly[0]:
+        raise InputError(f"{path}: expected {exactly[1]}, got {count} {'value' if count == 1 else 'values'}")
     if count > at_most:
         raise InputError(
             f"{path}: declares {count} entries, more than the {at_most} a problem within fixplan's limits can have "
@@ -358,10 +363,7 @@ def _check_entries(values: np.ndarray, path: str, entries: Range, what: str = "e
 
 
 def _scalar_int(group: Any, name: str, where: str) -> int:
-    d = _declared(group, name, where, integer=True, at_most=_MAX_DIM)
-    if d.count != 1:
-        raise InputError(f"{where}/{name}: expected one integer, got {d.count} values")
-    return int(_read(d)[0])
+    return int(_read(_declared(group, name, where, integer=True, at_most=1, exactly=(1, "one integer")))[0])
 
 
 def _check_indices(values: np.ndarray, bound: int, path: str, what: str) -> None:
@@ -456,10 +458,10 @@ def read_matrix(group: Any, where: str, shape: tuple[int, int] | None = None) ->
     if nz not in (-1, -2):
         raise InputError(f"{where}/nz: unknown sparse layout nz={nz} (expected -1 CSC, -2 CSR or ≥ 0 triplets)")
     outer, inner = (n, m) if nz == -1 else (m, n)
-    dp = _declared(group, "p", where, integer=True, at_most=_MAX_ROWS + 1)
-    if dp.count != outer + 1:
-        what = "column" if nz == -1 else "row"
-        raise InputError(f"{where}/p: expected {outer + 1} {what} pointers, got {dp.count}")
+    what = "column" if nz == -1 else "row"
+    dp = _declared(
+        group, "p", where, integer=True, at_most=_MAX_ROWS + 1, exactly=(outer + 1, f"{outer + 1} {what} pointers")
+    )
     di = _declared(group, "i", where, integer=True, at_most=FCLIB_MAX_NNZ)
     dx = _declared(group, "x", where, integer=False, at_most=FCLIB_MAX_NNZ)
     p = _read(dp)
@@ -475,10 +477,8 @@ def _vector(
     group: Any, name: str, size: int | None, where: str, entries: Range = FCLIB_ENTRY, at_most: int = 0
 ) -> np.ndarray:
     """A real vector of ``size`` entries (declared size checked before reading), each inside ``entries``."""
-    d = _declared(group, name, where, integer=False, at_most=at_most or _MAX_ROWS)
-    if size is not None and d.count != size:
-        raise InputError(f"{where}/{name}: expected '{name}' with {size} entries, got {d.count}")
-    return _read(d, entries)
+    exactly = None if size is None else (size, f"'{name}' with {size} entries")
+    return _read(_declared(group, name, where, integer=False, at_most=at_most or _MAX_ROWS, exactly=exactly), entries)
 
 
 def _text(group: Any, name: str, where: str) -> str:
