@@ -293,6 +293,7 @@ def solve_newton(
     max_iter: int = DEFAULT_MAX_STEPS,
     time_limit: float | None = None,
     stall_window: int | None = DEFAULT_STALL_STEPS,
+    step_s: float = 0.0,
 ) -> ContactSolution:
     """Solve ``u = W r + q`` with the contact laws by semismooth Newton on the natural map.
 
@@ -307,25 +308,29 @@ def solve_newton(
     max_iter : int
         Cap on Newton steps.
     time_limit : float, optional
-        Wall-clock limit [s], checked before every factorization.
+        Wall-clock limit [s], checked before every step: a step starts only when the last one
+        (or ``step_s``, before the first) fits in the time left.
     stall_window : int, optional
         Stop when the best residual gained less than 10 % over this many steps.
+    step_s : float
+        Expected duration of one step [s] (``auto`` passes what the Newton stages before took).
 
     Returns
     -------
     ContactSolution
         The best iterate; ``extras`` has ``history``, ``factorizations``,
-        ``line_search_failures``.
+        ``line_search_failures`` and ``step_s`` (the last step's duration).
     """
     _check_settings(tol, max_iter, 1.0)
     budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     arrays = kernel_arrays(problem)
-    run = run_newton(arrays, _initial_scaled(problem, r0), tol, int(max_iter), budget, stall_window)
+    run = run_newton(arrays, _initial_scaled(problem, r0), tol, int(max_iter), budget, stall_window, step_s=step_s)
     extras: dict[str, Any] = {
         "history": np.array(run.history),
         "factorizations": run.factorizations,
         "line_search_failures": run.line_search_failures,
+        "step_s": run.step_s,
         "tol": float(tol),
         "max_iter": int(max_iter),
         "time_limit": time_limit,
@@ -353,11 +358,13 @@ def run_prox(
     budget: Budget,
     stall_window: int | None = DEFAULT_STALL_STEPS,
     sigma: float = 1.0,
+    step_s: float = 0.0,
 ) -> NewtonRun:
     """Proximal point rounds from ``r`` (scaled variables): Newton on ``W + σD``, ``q − σD r_k``.
 
     ``max_iter`` caps the rounds; the inner Newton iterations are capped at
     ``min(PROX_INNER_STEPS, max_iter)`` each. Returns the best iterate of the original problem.
+    ``step_s``: the expected duration of a Newton step [s] before the first one is timed.
     """
     indptr, indices, data, q, mu, offsets, dims = arrays
     m = q.shape[0]
@@ -368,7 +375,7 @@ def run_prox(
     u = np.empty(m)
     r = np.array(r, dtype=float)
     err = error_kernel(*arrays, r, u)  # type: ignore[call-arg]  # numba dispatcher
-    run = NewtonRun(r.copy(), err if math.isfinite(err) else math.inf, 0, STATUS_MAX_ITER)
+    run = NewtonRun(r.copy(), err if math.isfinite(err) else math.inf, 0, STATUS_MAX_ITER, step_s=step_s)
     if err <= tol:
         run.status = STATUS_CONVERGED
         return run
@@ -431,6 +438,7 @@ def solve_prox(
     max_iter: int = DEFAULT_PROX_ROUNDS,
     time_limit: float | None = None,
     stall_window: int | None = DEFAULT_STALL_STEPS,
+    step_s: float = 0.0,
 ) -> ContactSolution:
     """Solve ``u = W r + q`` with the contact laws by the proximal point method (PROX).
 
@@ -445,23 +453,26 @@ def solve_prox(
     max_iter : int
         Cap on proximal rounds (each at most :data:`PROX_INNER_STEPS` Newton steps).
     time_limit : float, optional
-        Wall-clock limit [s].
+        Wall-clock limit [s], checked before every Newton step as in :func:`solve_newton`.
     stall_window : int, optional
         Stop when the best residual gained less than 10 % over this many rounds.
+    step_s : float
+        Expected duration of one Newton step [s], as in :func:`solve_newton`.
 
     Returns
     -------
     ContactSolution
-        The best iterate; ``extras`` has ``history`` and ``factorizations``.
+        The best iterate; ``extras`` has ``history``, ``factorizations`` and ``step_s``.
     """
     _check_settings(tol, max_iter, 1.0)
     budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     arrays = kernel_arrays(problem)
-    run = run_prox(arrays, _initial_scaled(problem, r0), tol, int(max_iter), budget, stall_window)
+    run = run_prox(arrays, _initial_scaled(problem, r0), tol, int(max_iter), budget, stall_window, step_s=step_s)
     extras: dict[str, Any] = {
         "history": np.array(run.history),
         "factorizations": run.factorizations,
+        "step_s": run.step_s,
         "tol": float(tol),
         "max_iter": int(max_iter),
         "time_limit": time_limit,
