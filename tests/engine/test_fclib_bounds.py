@@ -151,7 +151,7 @@ PROMISE = DEFAULT.engine  # fclib_time_factor × limit + fclib_time_slack_s
 def write_rank_deficient(path: Path, contacts: int = 300, rank: int = 60, seed: int = 22) -> Path:
     """300 contacts, ``W = B Bᵀ`` of rank 60 (dense: 810 000 entries), a random ``q``: no solver converges.
 
-    The case of issue 22 (D5): ``nsgs-numpy`` ignored ``--time-limit`` on it (3 s asked, 60–67 s
+    A case found by a hostile-input campaign: ``nsgs-numpy`` ignored ``--time-limit`` on it (3 s asked, 60–67 s
     taken). ``q`` is not in the range of ``W``, so the iterations run until a limit or a stall.
     """
     import h5py

@@ -393,7 +393,7 @@ CORRUPTION_SCRIPT = textwrap.dedent(
 def _real_files(shared_dir: Path) -> list[Path]:
     files = sorted((shared_dir / "data").glob("fclib*/*.hdf5"))
     if not files:
-        pytest.skip("no FCLib problems in ../shared/data/fclib*")
+        pytest.skip(f"no FCLib problems in {shared_dir / 'data'}/fclib*")
     return [p for p in files if p.stat().st_size < 2 * 2**20]
 
 

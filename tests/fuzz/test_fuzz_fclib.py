@@ -73,7 +73,7 @@ def test_malformed_fclib(case: tuple[str, str], tmp_path) -> None:
         assert len(lines) == 1 and str(path) in lines[0], outcome.stderr
 
 
-# -- classes of hostile HDF5 files (issue 22: D2, D3, D4) -----------------------------------------
+# -- classes of hostile HDF5 files: links, corruption, oversized declarations ---------------------
 
 
 def _run_fclib(path: Path) -> None:
@@ -101,7 +101,7 @@ def test_fclib_with_links(link: tuple[str, str, str]) -> None:
 
 
 def _seed_files() -> list[Path]:
-    """Sources to corrupt: a generated problem, and the shared FCLib files when ../shared is there."""
+    """Sources to corrupt: a generated problem, and the shared FCLib files when the shared data folder is there."""
     shared = sorted((SHARED / "data").glob("fclib/*.hdf5")) if (SHARED / "data").is_dir() else []
     return [p for p in shared if p.stat().st_size < 2**20]
 
