@@ -96,6 +96,20 @@ MAX_TOML_NESTING = 32
 MAX_JSON_DEPTH = 64  # nesting of a plan file's JSON (a plan nests 6 deep): bounded before parsing
 MAX_NUMBER_DIGITS = 400  # characters of one JSON number (a float has at most 17 significant digits)
 
+# FCLib problems (`fixplan fclib`): the declared shape of every HDF5 dataset is checked against these
+# before any data is read, so a small file cannot ask for gigabytes (docs/limits.md, docs/fclib.md).
+# The largest problem at hand has 7 002 contacts and a W with 125 806 stored entries.
+FCLIB_MAX_CONTACTS = 100_000  # contacts of one problem (len(mu))
+FCLIB_MAX_NNZ = 10_000_000  # stored entries of one matrix (W, M or H; also of Hᵀ M⁻¹ H when condensing)
+FCLIB_MAX_DOFS = 1_000_000  # rows of M (velocities) of a global problem
+FCLIB_MAX_CHUNKS = 10_000  # chunks of one dataset (each costs an index lookup and a filter call: ~10 µs)
+FCLIB_MAX_LINKS = 1_000  # links in the whole file (an FCLib file has about 30)
+FCLIB_MAX_DEPTH = 8  # nested groups (FCLib uses 3: /fclib_local/W/x)
+FCLIB_MAX_TEXT_BYTES = 1 << 16  # info/title, info/description: longer ones are not read
+# every real entry of W, M, H, q, f, w (μ uses FRICTION): the solvers square norms of q, r and u = W r + q,
+# and ±1e20 keeps those sums far from float64's 1.8e308 at any accepted size (the files at hand stay below 5e4)
+FCLIB_ENTRY = Range("an FCLib matrix or vector entry", "", -1e20, 1e20)
+
 # plausible densities of a solid part [kg/m³]: outside, validate warns (a file in millimetres?)
 DENSITY_WARN_KGPM3 = (5.0, 5e4)
 

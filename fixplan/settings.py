@@ -122,6 +122,12 @@ class EngineSettings:
         ... and rolling (not sticking) above this body angular speed [rad/s].
     fclib_tolerance : float
         Target FCLib residual of ``fixplan fclib`` (natural map, relative).
+    fclib_time_factor, fclib_time_slack_s : float
+        Promise of every FCLib solver: it answers within ``fclib_time_factor × time_limit +
+        fclib_time_slack_s`` [s] of reading and solving. Work that cannot be interrupted (a
+        chunk of sweeps, a factorization, an interior-point iteration) is started only when the
+        last one of its kind fits in the time left; the slack covers the first one and the
+        clock's granularity.
     rim_points : int
         Points on each rim of a cylinder that meet collision-only bodies (``[[obstacle]]``,
         :mod:`fixplan.geometry.collision`): the rims' inscribed polygons.
@@ -134,6 +140,8 @@ class EngineSettings:
     slip_mps: float = 1e-7
     spin_radps: float = 1e-6
     fclib_tolerance: float = 1e-8
+    fclib_time_factor: float = 1.1
+    fclib_time_slack_s: float = 0.05
     rim_points: int = 16
 
 

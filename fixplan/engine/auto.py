@@ -123,7 +123,13 @@ class StageRecord:
 
 
 def _run_stage(
-    plan: StagePlan, problem: ContactProblem, r0: np.ndarray, tol: float, max_iter: int, limit: float | None
+    plan: StagePlan,
+    problem: ContactProblem,
+    r0: np.ndarray,
+    tol: float,
+    max_iter: int,
+    limit: float | None,
+    step_s: float = 0.0,
 ) -> ContactSolution:
     if plan.method == "nsgs":
         from fixplan.engine.nsgs import solve_nsgs
@@ -144,7 +150,9 @@ def _run_stage(
     from fixplan.engine.newton import solve_newton, solve_prox
 
     solve = solve_newton if plan.method == "nsn" else solve_prox
-    return solve(problem, r0=r0, tol=tol, max_iter=max_iter, time_limit=limit, stall_window=plan.stall_window)
+    return solve(
+        problem, r0=r0, tol=tol, max_iter=max_iter, time_limit=limit, stall_window=plan.stall_window, step_s=step_s
+    )
 
 
 def immobile_contact_violation(problem: ContactProblem) -> str | None:
@@ -272,6 +280,7 @@ def solve_auto(
     best: ContactSolution | None = None
     records: list[StageRecord] = []
     impossible = immobile_contact_violation(problem)
+    step_s = 0.0  # a Newton step's duration, once a Newton stage has timed one (PROX starts no step that cannot end)
     for k, plan in enumerate(() if impossible else stages):
         if best_error <= tol and records:
             break
@@ -280,7 +289,10 @@ def solve_auto(
         share = 1.0 if k == len(stages) - 1 else plan.share
         limit = budget.share(share).limit_s()
         t_stage = time.perf_counter()
-        sol = _run_stage(plan, problem, best_r, tol, plan.max_iter if max_iter is None else int(max_iter), limit)
+        sol = _run_stage(
+            plan, problem, best_r, tol, plan.max_iter if max_iter is None else int(max_iter), limit, step_s
+        )
+        step_s = float(sol.extras.get("step_s", step_s)) or step_s
         records.append(
             StageRecord(
                 plan.method,

@@ -151,6 +151,7 @@ class NewtonRun:
     factorizations: int = 0
     line_search_failures: int = 0
     reason: str = ""
+    step_s: float = 0.0  # duration of the last step (Jacobian, factorization, line search) [s]
 
 
 def contact_weights(arrays: tuple[np.ndarray, ...]) -> np.ndarray:
@@ -172,6 +173,7 @@ def run_newton(
     stall_window: int | None = DEFAULT_STALL_STEPS,
     error_arrays: tuple[np.ndarray, ...] | None = None,
     lam: float = LAMBDA_START,
+    step_s: float = 0.0,
 ) -> NewtonRun:
     """Regularized semismooth Newton steps with a line search from ``r`` (scaled variables).
 
@@ -194,6 +196,10 @@ def run_newton(
         original problem while Newton zeroes the regularized one).
     lam : float
         Initial regularization.
+    step_s : float
+        Expected duration of a step [s] (PROX passes the last one of its previous round): no
+        step (Jacobian, factorization, line search) starts when less time than the last one took
+        is left.
 
     Returns
     -------
@@ -218,28 +224,26 @@ def run_newton(
     trial_phi = np.empty(m)
     norm = natural_map_kernel(indptr, indices, data, q, mu, offsets, dims, rho, r, u, phi)
     err = error_kernel(*err_arrays, r, u_err)  # type: ignore[call-arg]  # numba dispatcher
-    run = NewtonRun(r.copy(), err if math.isfinite(err) else math.inf, 0, STATUS_MAX_ITER)
+    run = NewtonRun(r.copy(), err if math.isfinite(err) else math.inf, 0, STATUS_MAX_ITER, step_s=step_s)
     if not (math.isfinite(norm) and math.isfinite(err)):
         run.status, run.reason = STATUS_NAN, "the start overflows"
         return run
     if err <= tol:
         run.status = STATUS_CONVERGED
         return run
-    factor_s = 0.0
     marks: list[float] = [run.best_err]
     while run.iterations < max_iter:
-        if budget.remaining_s() <= factor_s:
+        if budget.remaining_s() <= run.step_s:
             run.status = STATUS_TIME_LIMIT
             break
+        t0 = time.perf_counter()
         jacobian_blocks(mu, offsets, dims, rho, r, u, A, C)
         J = pattern.matrix(A) + pattern.matrix(C) @ W
-        t0 = time.perf_counter()
         try:
             lu = spla.splu(sp.csc_matrix(J + lam * eye), permc_spec="COLAMD")
             d = lu.solve(-phi)
         except RuntimeError:  # exactly singular even with λ: regularize more
             d = np.full(m, np.nan)
-        factor_s = time.perf_counter() - t0
         run.factorizations += 1
         run.iterations += 1
         step = 1.0
@@ -267,6 +271,7 @@ def run_newton(
         else:
             run.line_search_failures += 1
             lam = max(lam * 10.0, 1e-6)
+        run.step_s = time.perf_counter() - t0
         run.history.append(run.best_err)
         marks.append(run.best_err)
         if run.best_err <= tol:
@@ -288,6 +293,7 @@ def solve_newton(
     max_iter: int = DEFAULT_MAX_STEPS,
     time_limit: float | None = None,
     stall_window: int | None = DEFAULT_STALL_STEPS,
+    step_s: float = 0.0,
 ) -> ContactSolution:
     """Solve ``u = W r + q`` with the contact laws by semismooth Newton on the natural map.
 
@@ -302,25 +308,29 @@ def solve_newton(
     max_iter : int
         Cap on Newton steps.
     time_limit : float, optional
-        Wall-clock limit [s], checked before every factorization.
+        Wall-clock limit [s], checked before every step: a step starts only when the last one
+        (or ``step_s``, before the first) fits in the time left.
     stall_window : int, optional
         Stop when the best residual gained less than 10 % over this many steps.
+    step_s : float
+        Expected duration of one step [s] (``auto`` passes what the Newton stages before took).
 
     Returns
     -------
     ContactSolution
         The best iterate; ``extras`` has ``history``, ``factorizations``,
-        ``line_search_failures``.
+        ``line_search_failures`` and ``step_s`` (the last step's duration).
     """
     _check_settings(tol, max_iter, 1.0)
     budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     arrays = kernel_arrays(problem)
-    run = run_newton(arrays, _initial_scaled(problem, r0), tol, int(max_iter), budget, stall_window)
+    run = run_newton(arrays, _initial_scaled(problem, r0), tol, int(max_iter), budget, stall_window, step_s=step_s)
     extras: dict[str, Any] = {
         "history": np.array(run.history),
         "factorizations": run.factorizations,
         "line_search_failures": run.line_search_failures,
+        "step_s": run.step_s,
         "tol": float(tol),
         "max_iter": int(max_iter),
         "time_limit": time_limit,
@@ -348,11 +358,13 @@ def run_prox(
     budget: Budget,
     stall_window: int | None = DEFAULT_STALL_STEPS,
     sigma: float = 1.0,
+    step_s: float = 0.0,
 ) -> NewtonRun:
     """Proximal point rounds from ``r`` (scaled variables): Newton on ``W + σD``, ``q − σD r_k``.
 
     ``max_iter`` caps the rounds; the inner Newton iterations are capped at
     ``min(PROX_INNER_STEPS, max_iter)`` each. Returns the best iterate of the original problem.
+    ``step_s``: the expected duration of a Newton step [s] before the first one is timed.
     """
     indptr, indices, data, q, mu, offsets, dims = arrays
     m = q.shape[0]
@@ -363,13 +375,13 @@ def run_prox(
     u = np.empty(m)
     r = np.array(r, dtype=float)
     err = error_kernel(*arrays, r, u)  # type: ignore[call-arg]  # numba dispatcher
-    run = NewtonRun(r.copy(), err if math.isfinite(err) else math.inf, 0, STATUS_MAX_ITER)
+    run = NewtonRun(r.copy(), err if math.isfinite(err) else math.inf, 0, STATUS_MAX_ITER, step_s=step_s)
     if err <= tol:
         run.status = STATUS_CONVERGED
         return run
     marks = [run.best_err]
     while run.iterations < max_iter:
-        if budget.expired():
+        if budget.remaining_s() <= run.step_s:  # not even one Newton step fits
             run.status = STATUS_TIME_LIMIT
             break
         W_sigma = sp.csr_matrix(W + sp.diags(sigma * D))
@@ -391,9 +403,11 @@ def run_prox(
             min(PROX_INNER_STEPS, max_iter),
             budget,
             stall_window=None,
+            step_s=run.step_s,
         )
         run.iterations += 1
         run.factorizations += inner.factorizations
+        run.step_s = inner.step_s
         # the inner problem's best iterate, judged on the original problem
         r_new = inner.best_r
         err_new = error_kernel(*arrays, r_new, u)  # type: ignore[call-arg]  # numba dispatcher
@@ -424,6 +438,7 @@ def solve_prox(
     max_iter: int = DEFAULT_PROX_ROUNDS,
     time_limit: float | None = None,
     stall_window: int | None = DEFAULT_STALL_STEPS,
+    step_s: float = 0.0,
 ) -> ContactSolution:
     """Solve ``u = W r + q`` with the contact laws by the proximal point method (PROX).
 
@@ -438,23 +453,26 @@ def solve_prox(
     max_iter : int
         Cap on proximal rounds (each at most :data:`PROX_INNER_STEPS` Newton steps).
     time_limit : float, optional
-        Wall-clock limit [s].
+        Wall-clock limit [s], checked before every Newton step as in :func:`solve_newton`.
     stall_window : int, optional
         Stop when the best residual gained less than 10 % over this many rounds.
+    step_s : float
+        Expected duration of one Newton step [s], as in :func:`solve_newton`.
 
     Returns
     -------
     ContactSolution
-        The best iterate; ``extras`` has ``history`` and ``factorizations``.
+        The best iterate; ``extras`` has ``history``, ``factorizations`` and ``step_s``.
     """
     _check_settings(tol, max_iter, 1.0)
     budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     arrays = kernel_arrays(problem)
-    run = run_prox(arrays, _initial_scaled(problem, r0), tol, int(max_iter), budget, stall_window)
+    run = run_prox(arrays, _initial_scaled(problem, r0), tol, int(max_iter), budget, stall_window, step_s=step_s)
     extras: dict[str, Any] = {
         "history": np.array(run.history),
         "factorizations": run.factorizations,
+        "step_s": run.step_s,
         "tol": float(tol),
         "max_iter": int(max_iter),
         "time_limit": time_limit,

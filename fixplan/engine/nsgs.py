@@ -698,11 +698,15 @@ def run_nsgs(
     failures = 0
     chunk = 1
     marks: list[tuple[int, float]] = [(0, float(best[0]))]  # (sweeps, best error) after each chunk
+    per_sweep = 0.0
     while status != STATUS_CONVERGED and done < max_iter:
-        if budget.expired():
+        left = budget.remaining_s()
+        if left <= per_sweep:  # not even one more sweep (as long as the last ones) fits
             status = STATUS_TIME_LIMIT
             break
         n = min(chunk, int(max_iter) - done)
+        if per_sweep > 0 and math.isfinite(left):
+            n = min(n, max(int(left / per_sweep), 1))  # the chunk ends before the deadline
         if stall_window:
             n = min(n, max(stall_window // 2, 1))
         t0 = time.perf_counter()
@@ -799,28 +803,33 @@ def solve_nsgs_reference(
     tol: float = DEFAULT_TOL,
     max_iter: int = DEFAULT_MAX_ITER,
     omega: float = DEFAULT_OMEGA,
+    time_limit: float | None = None,
 ) -> ContactSolution:
     """Plain NumPy NSGS: the same sweep as :func:`solve_nsgs`, written for reading and testing.
 
-    Uses a dense ``W``, NumPy slicing for ``α̂_j`` and :func:`fclib_error` for the residual;
-    only the one-contact solves are the shared compiled ones of :mod:`fixplan.engine.local`.
-    Slow (a Python loop over contacts): meant for small problems and for checking the compiled
-    kernel.
+    Works on the rows of the CSR ``W`` with NumPy (``α̂_j`` and the diagonal block ``W_jj`` of
+    each contact from its rows) and uses :func:`fclib_error` for the residual; only the
+    one-contact solves are the shared compiled ones of :mod:`fixplan.engine.local`. Slow (a
+    Python loop over contacts): meant for small problems and for checking the compiled kernel.
 
     Parameters
     ----------
     problem, r0, tol, max_iter, omega
         As :func:`solve_nsgs`.
+    time_limit : float, optional
+        Wall-clock limit [s], checked before every contact of a sweep (a sweep of a large problem
+        takes seconds here); a sweep cut short is dropped. ``None``: no limit.
 
     Returns
     -------
     ContactSolution
-        With ``solver == "nsgs-numpy"``.
+        With ``solver == "nsgs-numpy"``: the best iterate after a whole sweep (lowest residual).
     """
     _check_settings(tol, max_iter, omega)
+    budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     Wt_sparse, qt = problem.scaled()
-    Wt = Wt_sparse.toarray()
+    Wt = sp.csr_matrix(Wt_sparse)
     s = problem.row_scale
     r = _initial_scaled(problem, r0)
     history: list[float] = []
@@ -829,25 +838,36 @@ def solve_nsgs_reference(
         return fclib_error(problem, s * r_tilde)
 
     err = error_of(r)
+    best_r, best = r.copy(), err if math.isfinite(err) else math.inf
     status = STATUS_CONVERGED if err <= tol else STATUS_MAX_ITER
     it = 0
     while status != STATUS_CONVERGED and it < max_iter:
-        r_prev = r.copy()
         for j in range(problem.n_contacts):
+            if budget.expired():  # inside the sweep: one sweep may take seconds in Python
+                status = STATUS_TIME_LIMIT
+                break
             o, d = int(problem.offsets[j]), int(problem.dims[j])
-            rows = slice(o, o + d)
-            block = np.ascontiguousarray(Wt[rows, rows])
-            alpha = qt[rows] + Wt[rows] @ r - block @ r[rows]
+            lo, hi = int(Wt.indptr[o]), int(Wt.indptr[o + d])
+            cols, vals = Wt.indices[lo:hi], Wt.data[lo:hi]
+            row = np.repeat(np.arange(d), np.diff(Wt.indptr[o : o + d + 1]))  # row of each entry in the contact
+            inside = (cols >= o) & (cols < o + d)
+            block = np.zeros((d, d))
+            np.add.at(block, (row[inside], cols[inside] - o), vals[inside])
+            # α̂_j = q̃_j + Σ_{k≠j} W̃_jk r̃_k
+            alpha = qt[o : o + d] + np.bincount(row[~inside], weights=vals[~inside] * r[cols[~inside]], minlength=d)
             P = np.empty(d)
             local_solve_into(block, alpha, float(problem.mu[j]), d, P)
-            r[rows] = omega * P + (1.0 - omega) * r[rows]
+            r[o : o + d] = omega * P + (1.0 - omega) * r[o : o + d]
+        if status == STATUS_TIME_LIMIT:
+            break
         it += 1
         if not np.all(np.isfinite(r)):
-            r = r_prev
             status = STATUS_NAN
             break
         err = error_of(r)
         history.append(err)
+        if err < best:
+            best_r, best = r.copy(), err
         if err <= tol:
             status = STATUS_CONVERGED
     extras = {
@@ -855,5 +875,6 @@ def solve_nsgs_reference(
         "omega": float(omega),
         "tol": float(tol),
         "max_iter": int(max_iter),
+        "time_limit": time_limit,
     }
-    return _finish(problem, r, err, it, status, t0, "nsgs-numpy", extras)
+    return _finish(problem, best_r, best, it, status, t0, "nsgs-numpy", extras)

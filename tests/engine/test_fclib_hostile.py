@@ -164,7 +164,7 @@ HOSTILE: dict[str, tuple[Callable[[Path], Path], str, str]] = {
     "W = -I": (_w_minus_identity, "/fclib_local/W", "not positive semidefinite"),
     "q too short": (_q_too_short, "/fclib_local/vectors/q", "with 6 entries"),
     "q strings": (_q_strings, "/fclib_local/vectors/q", "expected real numbers"),
-    "mu negative": (_mu_negative, "/fclib_local/vectors/mu", "≥ 0"),
+    "mu negative": (_mu_negative, "/fclib_local/vectors/mu", "is -0.5 (expected a friction coefficient in [0, 10])"),
     "n not matching": (_m_not_matching, "/fclib_local/W/m", "expected shape 3×3"),
     "vectors a dataset": (_vectors_is_dataset, "/fclib_local/vectors", "found a dataset"),
     "triplet out of shape": (_triplet_out_of_shape, "/fclib_local/W/p", "column index 7 outside [0, 3)"),

@@ -312,3 +312,116 @@ def mutate_fclib(path: Path, field: str, how: str, rng: np.random.Generator) -> 
             root[field] = new
             return
         root[field] = repl
+
+
+# -- hostile HDF5 files: links, corruption, oversized declarations ------------------------------
+FCLIB_PATHS = (
+    "fclib_local",
+    "fclib_local/W",
+    "fclib_local/vectors",
+    "fclib_local/spacedim",
+    *(f"fclib_local/{field}" for field in FCLIB_FIELDS),
+)
+
+
+@st.composite
+def fclib_link(draw: st.DrawFn) -> tuple[str, str, str]:
+    """``(where, kind, target)``: a link replacing one node of a valid problem (or added beside it).
+
+    ``kind``: ``soft`` (to a missing node, to itself, to another node, to an ancestor),
+    ``external`` (to ``/etc/passwd``, to a missing file, to a valid FCLib file, to this file), or
+    ``hard-cycle`` (a group linked into itself).
+    """
+    where = draw(st.sampled_from((*FCLIB_PATHS, "solution/r", "guesses")))
+    kind = draw(st.sampled_from(("soft", "external", "hard-cycle")))
+    if kind == "soft":
+        target = draw(st.sampled_from(("/nowhere", "/" + where, "/fclib_local", "/fclib_local/vectors/q", "/")))
+    elif kind == "external":
+        target = draw(st.sampled_from(("/etc/passwd", "missing.hdf5", "valid.hdf5", "self")))
+    else:
+        target = draw(st.sampled_from(("/", "/fclib_local", "/fclib_local/W")))
+    return where, kind, target
+
+
+def link_fclib(path: Path, where: str, kind: str, target: str) -> None:
+    """Apply :func:`fclib_link`'s draw to a valid problem at ``path`` (``valid.hdf5`` is written beside it)."""
+    import h5py
+
+    if target == "valid.hdf5":
+        write_local_problem(path.with_name("valid.hdf5"))
+    with h5py.File(path, "r+") as fh:
+        if kind == "hard-cycle":
+            group = fh.require_group(where if where in fh and isinstance(fh[where], h5py.Group) else "guesses")
+            group["cycle"] = fh[target]
+            return
+        if where in fh:
+            del fh[where]
+        elif "/" in where:
+            fh.require_group(where.rsplit("/", 1)[0])
+        if kind == "soft":
+            fh[where] = h5py.SoftLink(target)
+        else:
+            filename = {"self": str(path), "valid.hdf5": str(path.with_name("valid.hdf5"))}.get(target, target)
+            fh[where] = h5py.ExternalLink(filename, "/" + where if target != "/etc/passwd" else "/x")
+
+
+@st.composite
+def corruption(draw: st.DrawFn) -> list[tuple[str, float, int]]:
+    """Edits of a file's bytes: ``(how, where as a fraction of the length, value)``.
+
+    ``flip`` xors one byte; ``burst`` overwrites 1–64 bytes with a repeated value; ``truncate``
+    cuts the file. Most draws aim at the first 4 KiB, where HDF5 keeps its superblock and the
+    headers of the root group.
+    """
+    edits = st.tuples(
+        st.sampled_from(("flip", "flip", "burst", "truncate")),
+        st.one_of(st.floats(0.0, 0.05), st.floats(0.0, 1.0)),
+        st.integers(1, 255),
+    )
+    return draw(st.lists(edits, min_size=1, max_size=6))
+
+
+def corrupt_bytes(data: bytes, edits: list[tuple[str, float, int]]) -> bytes:
+    """Apply :func:`corruption`'s edits in order."""
+    out = bytearray(data)
+    for how, where, value in edits:
+        if not out:
+            break
+        at = min(int(where * len(out)), len(out) - 1)
+        if how == "flip":
+            out[at] ^= value
+        elif how == "burst":
+            size = 1 + value % 64
+            out[at : at + size] = bytes([value]) * len(out[at : at + size])
+        else:
+            del out[at:]
+    return bytes(out)
+
+
+@st.composite
+def oversized(draw: st.DrawFn) -> tuple[str, int, int | None, bool]:
+    """``(dataset, declared entries, chunk entries or None, gzip)``: a dataset declaring far more than it stores."""
+    field = draw(st.sampled_from(FCLIB_FIELDS))
+    entries = 10 ** draw(st.integers(6, 12))
+    chunk = draw(st.sampled_from((None, 1, 1000, 10**6)))
+    return field, entries, chunk, draw(st.booleans())
+
+
+def oversize_fclib(path: Path, field: str, entries: int, chunk: int | None, gzip: bool) -> None:
+    """Replace ``fclib_local/<field>`` by an unwritten dataset of ``entries`` entries (chunked, or contiguous)."""
+    import h5py
+
+    with h5py.File(path, "r+") as fh:
+        root = fh["fclib_local"]
+        dtype = "f8" if field in ("W/x", "vectors/q", "vectors/mu") else "i4"
+        del root[field]
+        if chunk is None:  # contiguous: the space is declared and never allocated (reading it gives fill values)
+            root.create_dataset(field, shape=(entries,), dtype=dtype)
+        else:
+            root.create_dataset(
+                field,
+                shape=(entries,),
+                dtype=dtype,
+                chunks=(min(chunk, entries),),
+                compression="gzip" if gzip else None,
+            )
