@@ -233,7 +233,7 @@ def verify_sample(
     )  # fmt: skip
     return verify(
         world, start_state, list(steps), settings=settings.execution_settings(), noise=noise, replan=planner.replan,
-        policy=policy,
+        policy=policy, avoid=planner.avoid,
     )  # fmt: skip
 
 

@@ -423,3 +423,28 @@ def test_replanning_a_part_knocked_free_starts_with_the_approach():
     staging = representative_pose(fx, fx.goal_pose, frozenset())
     # the guide passes through the staging pose (the free state's pre-image) before the first contact
     assert min(np.linalg.norm(p.p_world - staging.p_world) for p in first.path) < 1e-9
+
+
+def test_a_transition_that_met_a_wrong_face_is_set_aside_before_the_replan():
+    """The plate met S1 with its bottom face in transition {B1, B2} + S1: the executor hands that
+    transition to ``avoid`` before it lifts the part, so the re-plan from free space cannot lead it
+    the same way again (a generated box re-planned the same sequence six times and met the same
+    face each time until the time ran out). The planner's ``avoid`` sets it aside: its evaluation
+    is then a failure carrying the reason."""
+    from fixplan.planner.solve import Planner
+
+    fx, ex, pose, calls = _rect_on_s1()
+    planner = Planner(fx)
+    seen = []
+
+    def avoid(state, target, why):
+        seen.append((state, target, why))
+        planner.avoid(state, target, why)
+
+    ex.avoid = avoid
+    _feed(ex, fx, [({"S1"}, 20)], pose=pose, twist=np.zeros(3))
+    assert [(s, t) for s, t, _ in seen] == [(frozenset({"B1", "B2"}), "S1")]
+    assert "S1 presses face '-y'" in seen[0][2]
+    assert planner.set_aside[(frozenset({"B1", "B2"}), "S1")] == seen[0][2]
+    plan = planner.plan_from(fx.start, frozenset({"B1", "B2"}))
+    assert not plan.found and "S1 presses face '-y'" in plan.reason

@@ -137,6 +137,8 @@ class ExecutionLog:
 
 
 Replan = Callable[[Pose, State], "list[Step] | str"]
+# sets a transition (established state, target) aside for the re-plans to come, with the reason
+Avoid = Callable[[State, str, str], None]
 
 
 def mass_speed(nu: FloatArray, M: FloatArray, m: float) -> float:
@@ -217,9 +219,11 @@ class Executor:
         noise: ExecutionNoise | None = None,
         tick_s: float = 1e-3,
         policy: Policy | None = None,
+        avoid: Avoid | None = None,
     ):
         self.fixture = fixture
         self.policy = policy
+        self.avoid = avoid
         self.settings = s = settings or ExecutionSettings()
         self.noise = noise or ExecutionNoise()
         self.rng = np.random.default_rng(self.noise.seed)
@@ -566,6 +570,12 @@ class Executor:
         why = f"{where}, not the face it touches at the goal (transition {self.index + 1})"
         self.log.counts["wrong_face"] += 1
         self.log.event(t, "guard", f"{why}: lifting the part off, then approaching again")
+        if self.avoid is not None and self.index < len(self.steps):
+            # the re-plan from free space must not lead the part the same way onto the wrong face
+            # (it chose the same sequence again and the part met the same face until the time ran
+            # out: six lifts in 12 s on a generated box)
+            step = self.steps[self.index]
+            self.avoid(frozenset(step.established), step.target, why)
         self._release = (why, t)
         self._recover_until = None
         return True

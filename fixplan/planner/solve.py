@@ -259,6 +259,10 @@ class Planner:
         self._rows: GoalRows | None = goal_rows(fixture)
         self._groups: dict[tuple[frozenset[str], str], tuple[str, ...]] = {}
 
+    def avoid(self, state: frozenset[str], target: str, why: str) -> None:
+        """Set the transition ``state → target`` aside for the plans to come (the executor saw it fail)."""
+        self.set_aside[(frozenset(state), target)] = why
+
     def group(self, state: frozenset[str], target: str) -> tuple[str, ...]:
         """The locators that touch at the same instant as ``target`` from ``state`` (sorted, with it).
 
@@ -556,8 +560,9 @@ def solve(
         if run_verification:
             t1 = time.perf_counter()
             verification = verify(
-                fixture, start_state, plan_steps(transitions), settings=settings, replan=replan, policy=policy, **vopts
-            )
+                fixture, start_state, plan_steps(transitions), settings=settings, replan=replan, policy=policy,
+                avoid=planner.avoid, **vopts,
+            )  # fmt: skip
             timings["verify_s"] = timings.get("verify_s", 0.0) + time.perf_counter() - t1
         status, reason = _status(verification, "")
         if round_:

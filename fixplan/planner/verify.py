@@ -48,6 +48,7 @@ from fixplan.haptics import DeviceSpecs, HapticLoop, SimulatedDevice, VirtualCou
 from fixplan.kinematics import mass_matrix
 from fixplan.model import Fixture
 from fixplan.planner.execute import (
+    Avoid,
     ExecutionNoise,
     ExecutionSettings,
     Executor,
@@ -177,6 +178,7 @@ def verify(
     max_sweeps: int | None = None,
     profile: Settings = HAPTIC,
     policy: Policy | None = None,
+    avoid: Avoid | None = None,
 ) -> Verification:
     """Execute the plan (``steps`` from ``start_state``) in the haptic loop and check the outcome.
 
@@ -203,7 +205,15 @@ def verify(
     planner_s = [0.0]
     timed_replan = None if replan is None else _timed(replan, planner_s)
     executor = Executor(
-        fixture, start_state, steps, settings, replan=timed_replan, noise=noise, tick_s=sim.dt, policy=policy
+        fixture,
+        start_state,
+        steps,
+        settings,
+        replan=timed_replan,
+        noise=noise,
+        tick_s=sim.dt,
+        policy=policy,
+        avoid=avoid,
     )
     F_max, T_max = executor.F_max, executor.T_max
     rig = haptic_rig(fixture, sim, x0, F_max, T_max, profile.haptic)
