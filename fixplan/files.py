@@ -95,31 +95,11 @@ def read_user_text(path: Path, *, expected: str, max_bytes: int = MAX_FILE_BYTES
     expected : str
         What the file should be, for messages: ``"a .toml fixture file"``.
     """
-    try:
-        info = os.stat(path)
-    except FileNotFoundError:
-        raise UnreadableFile(path, "no such file") from None
-    except OSError as exc:
-        raise UnreadableFile(path, exc.strerror or str(exc)) from None
-    if stat.S_ISDIR(info.st_mode):
-        raise UnreadableFile(path, f"is a directory (expected {expected})")
-    if not stat.S_ISREG(info.st_mode):
-        raise UnreadableFile(path, f"is not a regular file but {_file_kind(info.st_mode)} (expected {expected})")
-    if info.st_size > max_bytes:
-        raise UnreadableFile(
-            path, f"is {info.st_size} bytes, larger than the limit of {max_bytes} bytes (expected {expected})"
-        )
-    try:
-        # O_NONBLOCK: should the file have been swapped for a pipe since stat, open does not block
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-        with os.fdopen(fd, "rb") as fh:
-            opened = os.fstat(fh.fileno())
-            if not stat.S_ISREG(opened.st_mode):
-                raise UnreadableFile(path, f"is not a regular file (expected {expected})")
-            note_input(path, opened)
+    with open_user_file(path, expected=expected, max_bytes=max_bytes) as fh:
+        try:
             data = fh.read(max_bytes + 1)
-    except OSError as exc:
-        raise UnreadableFile(path, exc.strerror or str(exc)) from None
+        except OSError as exc:
+            raise UnreadableFile(path, exc.strerror or str(exc)) from None
     if len(data) > max_bytes:
         raise UnreadableFile(path, f"is larger than the limit of {max_bytes} bytes (expected {expected})")
     return decode_text(path, data, expected=expected)
@@ -147,6 +127,7 @@ def open_user_file(path: Path, *, expected: str, max_bytes: int) -> BinaryIO:
             path, f"is {info.st_size} bytes, larger than the limit of {max_bytes} bytes (expected {expected})"
         )
     try:
+        # O_NONBLOCK: should the file have been swapped for a pipe since stat, open does not block
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
         fh = os.fdopen(fd, "rb")
     except OSError as exc:
