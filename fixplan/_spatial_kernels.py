@@ -104,6 +104,25 @@ def quat_into(R, out):
 
 
 @njit(cache=True)
+def rotate3(R, x):
+    """``R @ x`` for a 3×3 ``R`` written out (numba's ``@`` calls BLAS, which imports SciPy)."""
+    out = np.empty(3)
+    for i in range(3):
+        out[i] = R[i, 0] * x[0] + R[i, 1] * x[1] + R[i, 2] * x[2]
+    return out
+
+
+@njit(cache=True)
+def relative_rotation3(R, R0):
+    """``R @ R0.T`` for 3×3 rotations, written out (see :func:`rotate3`)."""
+    out = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = R[i, 0] * R0[j, 0] + R[i, 1] * R0[j, 1] + R[i, 2] * R0[j, 2]
+    return out
+
+
+@njit(cache=True)
 def log_so3(R):
     """Rotation vector of R (the branches of :func:`fixplan.spatial.log_so3`)."""
     c = min(1.0, max(-1.0, (R[0, 0] + R[1, 1] + R[2, 2] - 1.0) / 2.0))

@@ -17,6 +17,7 @@ The paper's ``G`` [11] is the stack of normal rows, ``H_x``/``H_y`` the tangent 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -42,7 +43,7 @@ class Contact:
 
     def __post_init__(self) -> None:
         n = np.array(self.normal_world, dtype=float)
-        object.__setattr__(self, "normal_world", n / np.linalg.norm(n))
+        object.__setattr__(self, "normal_world", n / math.sqrt(float(n @ n)))
         object.__setattr__(self, "point_world", np.array(self.point_world, dtype=float))
 
     @property

@@ -161,7 +161,7 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
     for jj in range(nc):
         i = idx[jj]
         o = offsets[jj]
-        un_old = np.dot(J[o], nu_old)
+        un_old = J[o, 0] * nu_old[0] + J[o, 1] * nu_old[1] + J[o, 2] * nu_old[2]  # no BLAS (see linalg)
         q[o] = _normal_bias(q[o], un_old, gap[i], h, restitution)
     P = np.zeros(m)
     for jj in range(nc):

@@ -13,6 +13,7 @@ On the surface itself the outward normal is taken from the face the point lies o
 from __future__ import annotations
 
 import functools
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
@@ -65,7 +66,7 @@ def _box_project(p: FloatArray, half: FloatArray) -> Projection:
     q = np.abs(p) - half
     sign = np.where(p >= 0.0, 1.0, -1.0)
     outside = np.maximum(q, 0.0)
-    n_out = float(np.linalg.norm(outside))
+    n_out = math.sqrt(float(outside @ outside))  # lengths of a part: no overflow to guard against
     scale = float(half.max())
     if n_out > 1e-12 * scale:
         # Outside: a face, edge or corner region; the normal is exact in each.

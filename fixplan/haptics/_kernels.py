@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from fixplan._spatial_kernels import log_so3, shifted_velocity3
+from fixplan._spatial_kernels import log_so3, relative_rotation3, rotate3, shifted_velocity3
 
 
 @njit(cache=True)
@@ -15,8 +15,8 @@ def coupling3(R, p, com_b, v, w, R0, x_d, v_d, K, B):
     ``v`` is the velocity of the centre of mass ``c = p + R com_b``; the device couples to the
     body origin ``p``, whose velocity is ``v + ω × (p − c)``.
     """
-    c_world = p + R @ com_b
-    rot = log_so3(R @ R0.T)
+    c_world = p + rotate3(R, com_b)
+    rot = log_so3(relative_rotation3(R, R0))
     r = p - c_world  # lever from the centre of mass to the body origin
     v_origin = np.array(shifted_velocity3(v[0], v[1], v[2], w[0], w[1], w[2], r[0], r[1], r[2]))
     out = np.empty(6)

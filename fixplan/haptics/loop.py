@@ -20,6 +20,7 @@ a tick longer than ``T`` is a deadline miss. The command's share is kept apart
 from __future__ import annotations
 
 import gc
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -152,8 +153,8 @@ class HapticLoop:
     def _saturate(self, w: FloatArray, F_max: float, T_max: float) -> FloatArray:
         """``w`` with its force and moment scaled down to the hand's limits (counted when it was)."""
         d = self.sim.dimension
-        F = float(np.linalg.norm(w[:d]))
-        T = float(np.linalg.norm(w[d:]))
+        F = math.sqrt(float(w[:d] @ w[:d]))
+        T = math.sqrt(float(w[d:] @ w[d:]))
         if F <= F_max and T <= T_max:
             return w
         self.saturated_ticks += 1

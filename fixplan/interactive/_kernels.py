@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from fixplan._spatial_kernels import log_so3, shifted_velocity3
+from fixplan._spatial_kernels import log_so3, relative_rotation3, shifted_velocity3
 
 
 @njit(cache=True)
@@ -14,7 +14,7 @@ def coordinates3(R, p, com_world, twist, R0):
 
     ``twist`` is ``(v, ω)`` of the centre of mass; the origin's velocity is ``v + ω × (p − c)``.
     """
-    rot = log_so3(R @ R0.T)
+    rot = log_so3(relative_rotation3(R, R0))
     r = p - com_world  # lever from the centre of mass to the body origin
     x = np.empty(6)
     v = np.empty(6)
