@@ -14,6 +14,7 @@ Transition durations for the verification are ``T = 0.15 s + 2 √(L / a)`` for 
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -41,6 +42,7 @@ from fixplan.planner.fine import (
 )
 from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.policy import Policy, build_policy
+from fixplan.planner.policy_job import PendingPolicy
 from fixplan.planner.segments import segment_wrenches
 from fixplan.planner.verify import Verification, verify
 from fixplan.settings import DEFAULT
@@ -553,17 +555,25 @@ def solve(
             transitions[0] = with_approach(fixture, transitions[0], approach)
         durations = [_duration(tr, acceleration_mps2) for tr in transitions]
         robustness = [friction_robustness(fixture, tr, acceleration_mps2, margin_N) for tr in transitions]
-        t1 = time.perf_counter()
-        policy = build_policy(fixture, planner, start_state, transitions)
-        timings["policy_s"] = timings.get("policy_s", 0.0) + time.perf_counter() - t1
+        # the policy is built on the second core while the simulated load runs (policy_job's text)
+        pending = PendingPolicy(
+            functools.partial(_policy_and_memo, fixture, planner, start_state, transitions),
+            fork=None if run_verification else False,
+            in_child=functools.partial(setattr, planner, "progress", None),
+        )
         verification = None
         if run_verification:
             t1 = time.perf_counter()
             verification = verify(
-                fixture, start_state, plan_steps(transitions), settings=settings, replan=replan, policy=policy,
+                fixture, start_state, plan_steps(transitions), settings=settings, replan=replan,
+                policy=pending,  # type: ignore[arg-type]
                 avoid=planner.avoid, **vopts,
             )  # fmt: skip
             timings["verify_s"] = timings.get("verify_s", 0.0) + time.perf_counter() - t1
+        policy = pending.result()
+        if pending.started_in_child:
+            planner.policy_memo.update(pending.memo)  # the child's memo, for a rebuild after a set-aside
+        timings["policy_s"] = timings.get("policy_s", 0.0) + policy.build_time_s
         status, reason = _status(verification, "")
         if round_:
             reason = (
@@ -594,6 +604,13 @@ def solve(
     timings["total_s"] = time.perf_counter() - t0
     result.timings = timings
     return result
+
+
+def _policy_and_memo(
+    fixture: Fixture, planner: Planner, start_state: frozenset[str], transitions: Sequence[Transition]
+) -> tuple[Policy, dict[Any, Any]]:
+    """The policy of the plan and the planner's memo after it (what a forked build sends back)."""
+    return build_policy(fixture, planner, start_state, transitions), planner.policy_memo
 
 
 def _hand_limits(fixture: Fixture) -> tuple[float, float]:
