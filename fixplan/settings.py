@@ -493,6 +493,9 @@ class ExecutionSettings:
     wrong_face_cos: float = 0.5
     release_gap_m: float = 2e-3  # a part lifted off a wrong-face contact is free once every gap is this
     release_s: float = 1.5  # the lift may take at most this long
+    # a state no plan leads on from (a re-plan fails there even after pressing back): lift the part
+    # off and approach again, with the transition that led there set aside, at most this often
+    dead_end_releases: int = 1
     carry_torque_fraction: float = 0.5  # a carried part's spin is stopped with up to this fraction of the hand's torque
     reach_factor: float = 3.0  # the part this × (farthest locator + bounding radius) from its start has diverged
 

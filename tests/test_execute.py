@@ -180,7 +180,8 @@ def test_lost_contact_that_comes_back_counts_as_recovered():
 
 
 def test_unplanned_contact_replans_and_a_failed_replan_says_why():
-    fx, ex = _box_executor(replan=lambda pose, state: "no sequence of transitions reaches every locator")
+    no_plan = "no sequence of transitions reaches every locator"
+    fx, ex = _box_executor(replan=lambda pose, state: no_plan, dead_end_releases=0)
     base = {"B1", "B2", "B3"}
     t = _feed(ex, fx, [(base, 20), (base | {"E1"}, 20)])  # E1 before S2: not in the plan
     # no plan from there: the part is pressed back into what it left (and touches) once, for 3 × recover_s
@@ -193,6 +194,47 @@ def test_unplanned_contact_replans_and_a_failed_replan_says_why():
     assert ex.log.counts["replans"] == 2
     assert ex.done and ex.log.outcome == "failed" and ex.log.failure_kind == "replan failed"
     assert "unplanned contact state {B1, B2, B3, E1}" in ex.log.reason and "no sequence" in ex.log.reason
+
+
+def test_a_dead_end_is_left_through_free_space_with_its_transition_set_aside():
+    """S2 was lost while S1 closed, and no plan leads on from {B1, B2, B3, S1} (the monotone
+    planner only adds contacts): after the press back and a second failed re-plan the executor
+    sets aside the transition the contact was lost in, lifts the part off every locator and
+    re-plans from free space (once: ``dead_end_releases``)."""
+    calls, seen = [], []
+
+    def replan(pose, state):
+        calls.append(state)
+        if state:
+            return "no sequence of transitions reaches every locator"
+        return [Step((), "B1", "free", (pose, pose))]
+
+    fx, ex = _box_executor(replan=replan)
+    ex.avoid = lambda state, target, why: seen.append((state, target, why))
+    base = {"B1", "B2", "B3"}
+    t = _feed(ex, fx, [(base, 20), (base | {"S2"}, 20)])
+    assert ex.index == 1  # closing S1 with S2 kept
+    lost = base | {"S1"}
+    t = _feed(ex, fx, [(lost, 20 + int(ex.settings.recover_s / 1e-3))], t0=t)  # pressed back: not restored
+    assert calls == [frozenset(lost)] and not ex.done
+    t = _feed(ex, fx, [(lost, int(round(3 * ex.settings.recover_s / 1e-3)) + 10)], t0=t)
+    assert calls == [frozenset(lost)] * 2 and not ex.done and ex.log.counts["dead_ends"] == 1
+    assert [(s_, t_) for s_, t_, _ in seen] == [(frozenset(base | {"S2"}), "S1")]
+    assert any(k == "guard" and "a dead end; lifting the part off" in m for _, k, m in ex.log.events)
+    # lifted 3 mm clear of every locator: re-planned from free space
+    up = Pose(fx.start.R_world_body, fx.start.p_world + np.array([0.003, 0.003, 0.003]))
+    assert min(fixplan.locating.locator_gaps(fx.workpiece, up, fx.locators)) >= ex.settings.release_gap_m
+    _feed(ex, fx, [((), 20)], t0=t, pose=up)
+    assert calls[-1] == frozenset() and ex.states[0] == frozenset() and not ex.done
+
+
+def test_a_second_dead_end_fails_with_the_reason():
+    fx, ex = _box_executor(replan=lambda pose, state: "no sequence of transitions reaches every locator")
+    base = {"B1", "B2", "B3"}
+    ex._dead_ends = ex.settings.dead_end_releases  # the one lift already spent
+    t = _feed(ex, fx, [(base, 20), (base | {"E1"}, 20)])
+    _feed(ex, fx, [(base | {"E1"}, int(round(3 * ex.settings.recover_s / 1e-3)) + 20)], t0=t)
+    assert ex.done and ex.log.failure_kind == "replan failed" and "no sequence" in ex.log.reason
 
 
 def test_divergence_is_detected_and_named():

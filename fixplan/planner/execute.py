@@ -106,6 +106,7 @@ class ExecutionLog:
             "recovered": 0,
             "policy_switches": 0,
             "wrong_face": 0,
+            "dead_ends": 0,
         }
     )
     observed: list[tuple[str, ...]] = field(default_factory=list)  # debounced pressed sets, in order
@@ -260,6 +261,9 @@ class Executor:
         self._recover_until: float | None = None  # pressing a lost contact back until then
         self._recover_why = ""
         self._pressed_back_for = -1  # the transition in which a failed re-plan last pressed the part back
+        self._left_plan_in: tuple[State, str] | None = None  # (established, target) of the step a contact was lost in
+        self._dead_ends = 0  # dead-end states left by lifting the part off (settings.dead_end_releases)
+        self._avoided: set[tuple[State, str]] = set()  # transitions set aside: the policy's chains skip them
         self._prev_solve: tuple[float, FloatArray] | None = None  # (time, twist) at the last solve
         self._delay_ticks = int(round(self.noise.latency_s / tick_s))
         self._history: deque[tuple[Pose, FloatArray, State]] = deque(maxlen=self._delay_ticks + 1)
@@ -366,6 +370,9 @@ class Executor:
             return
         if lost:
             self.log.counts["lost_contact"] += 1
+            if self.index < len(self.steps):
+                step = self.steps[self.index]
+                self._left_plan_in = (frozenset(step.established), step.target)
             why = f"lost contact with {', '.join(lost)} in transition {self.index + 1}"
             added = set(self.steps[self.index].added) if self.index < len(self.steps) else set()
             if self._recover_until is None and (P - current) <= added:
@@ -397,6 +404,8 @@ class Executor:
         chain = self.policy.chain_from(self.fixture, state, pose, self.goal_state)
         if not chain:
             return False
+        if any((frozenset(st.established), st.target) in self._avoided for st in chain):
+            return False  # the policy was built before a transition was set aside: the re-planner knows
         self.log.counts["policy_switches"] += 1
         self._set_plan(state, chain)
         self._retry, self._use_direct, self._still_since = 0, False, None
@@ -430,12 +439,42 @@ class Executor:
                     f"re-planning from {_fmt(state)} failed: pressing the part back into {_fmt(current | state)} for {press_s:g} s",
                 )
                 return
+            if self._leave_dead_end(t, state, f"{why}; re-planning from {_fmt(state)} failed: {result}"):
+                return
             self._fail(t, f"{why}; re-planning from {_fmt(state)} failed: {result}", "replan failed")
             return
         self._set_plan(state, result)
         self._retry, self._use_direct, self._still_since = 0, False, None
         seq = " → ".join(_fmt(s) for s in self.states)
         self.log.event(t, "replan", f"re-planned from {_fmt(state)}: {seq}")
+
+    def _leave_dead_end(self, t: float, state: State, why: str) -> bool:
+        """Lift the part off a state no plan leads on from, then approach again; True if it does.
+
+        The part lost a contact on its way and settled where every way on jams (a 3-2-1 box that
+        lost S1 while S2 closed: from {B1, B2, B3, E1, S2} the turn about S2 that closes S1 wedges
+        between S2 and E1). Pressing back did not restore the plan, and the monotone planner adds
+        contacts only: the way out is back through free space. The transition the contact was
+        lost in is set aside first, so the new plan does not lead the part the same way again.
+        """
+        s = self.settings
+        if not state or self._dead_ends >= s.dead_end_releases or self.replan is None or self._release is not None:
+            return False
+        self._dead_ends += 1
+        self.log.counts["dead_ends"] += 1
+        culprit = self._left_plan_in
+        if culprit is None and self.index < len(self.steps):
+            step = self.steps[self.index]
+            culprit = (frozenset(step.established), step.target)
+        aside = ""
+        if culprit is not None and self.avoid is not None:
+            self.avoid(culprit[0], culprit[1], why)
+            self._avoided.add(culprit)
+            aside = f", {_fmt(culprit[0])} + {culprit[1]} set aside"
+        self.log.event(t, "guard", f"{why}: a dead end; lifting the part off, then approaching again{aside}")
+        self._release = (why, t)
+        self._recover_until = None
+        return True
 
     # -- the command ---------------------------------------------------------------------------
     def command(self, t: float, pose: Pose, twist: FloatArray, pressed: State) -> FloatArray:
@@ -576,6 +615,7 @@ class Executor:
             # out: six lifts in 12 s on a generated box)
             step = self.steps[self.index]
             self.avoid(frozenset(step.established), step.target, why)
+            self._avoided.add((frozenset(step.established), step.target))
         self._release = (why, t)
         self._recover_until = None
         return True
