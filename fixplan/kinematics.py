@@ -140,6 +140,34 @@ class ContactSet:
             chosen = tuple(self.contacts[i] for i in self.rows_of(owners))
         return ContactSet(chosen, self.com_world, self.mass_matrix, self.body_origin_world)
 
+    def nearest_of(self, owner: str) -> ContactSet:
+        """The set with only the nearest (first) contact of ``owner`` (itself when no locator has several).
+
+        A transition's target is closed along its nearest contact's normal; its kept contacts keep
+        every one of theirs. Built as ``contact_set(..., [*kept, target]).nearest_of(target)``, the
+        target's row is the last and the kept contacts are the ones before it.
+        """
+        if not self.several:
+            return self
+        seen = False
+        chosen = []
+        for c in self.contacts:
+            if c.owner == owner:
+                if seen:
+                    continue
+                seen = True
+            chosen.append(c)
+        return ContactSet(tuple(chosen), self.com_world, self.mass_matrix, self.body_origin_world)
+
+    def nearest_only(self) -> ContactSet:
+        """The set with one contact per owner, its nearest (itself when no locator has several)."""
+        if not self.several:
+            return self
+        kept: dict[str, Contact] = {}
+        for c in self.contacts:
+            kept.setdefault(c.owner, c)
+        return ContactSet(tuple(kept.values()), self.com_world, self.mass_matrix, self.body_origin_world)
+
     def per_locator(self) -> dict[str, list[str]]:
         """Each owner's contact names, in this set's order (JSON: a locator's several contacts)."""
         out: dict[str, list[str]] = {}

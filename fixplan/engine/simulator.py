@@ -26,9 +26,9 @@ from numpy.typing import ArrayLike, NDArray
 from fixplan.aot import kernel
 from fixplan.engine.encode import encode, encode_obstacles
 from fixplan.engine.mesh_slots import MeshSlots, mesh_slots
-from fixplan.geometry.mesh import Mesh
 from fixplan.engine.outcome import STATUS_NONFINITE, STATUS_NOT_CONVERGED, STATUS_OK
 from fixplan.errors import InputError, SolverError
+from fixplan.geometry.mesh import Mesh
 from fixplan.model import Fixture
 from fixplan.settings import DEFAULT, EngineSettings
 from fixplan.spatial import Pose, quaternion_wxyz_from_matrix, rot2, shift_wrench_by, tangent_basis

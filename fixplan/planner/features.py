@@ -145,6 +145,13 @@ def feature_at(fixture: Fixture, locator: Locator, pose: Pose) -> Feature:
         A = np.array([-e, e])
         b = np.array([-float(e @ V[k]), 1.0 + float(e @ V[k])])
         return Feature("plane", f"edge{k}", N[k].copy(), float(N[k] @ V[k]), bounds_A=A, bounds_b=b)
+    if shape.name == "mesh":
+        # the plane of the face the locator is nearest to (unbounded): the part is not convex, so
+        # this gap is not a lower bound of the true one away from the face; every plan is run in
+        # the engine on the real surface (several contacts per locator) before it is accepted
+        n = np.asarray(proj.normal_body, dtype=float)
+        label = "face (" + ", ".join(f"{x:.3g}" for x in n) + ")"
+        return Feature("plane", label, n.copy(), float(n @ proj.point_body))
     raise InputError(
         f"the fine planner has no closed-form gap for a {shape.name!r} workpiece (expected box, cylinder, sphere, rectangle, disk or polygon)"
     )
