@@ -71,6 +71,7 @@ def locator_contacts(workpiece: Workpiece, pose: Pose, locator: Locator) -> list
     if not isinstance(shape, Mesh):
         return [locator_contact(workpiece, pose, locator)]
     found = shape.contacts(pose.point_body_from_world(locator.p_world))
+    found = found[:1] + [c for c in found[1:] if c.distance > 0.0]  # a face seen from behind is no contact
     several = len(found) > 1
     out = []
     for k, proj in enumerate(found):

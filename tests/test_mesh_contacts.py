@@ -170,7 +170,7 @@ def test_the_engine_holds_a_push_into_the_corner_with_both_contacts(tmp_path: Pa
 FREE_START = "start = { position = [0.104, 0.054, 0.033], rpy_deg = [0.5, -0.5, 0.5] }"
 
 
-def test_a_box_as_a_12_triangle_stl_plans_as_the_primitive_box(tmp_path: Path) -> None:
+def test_a_box_as_a_12_triangle_stl_plans_as_the_primitive_box(tmp_path: Path, capsys) -> None:
     text = (PROBLEMS / "box-3-2-1.toml").read_text()
     text = "\n".join(line for line in text.splitlines() if not line.startswith("face = "))
     text = re.sub(r"start = \{[^}]*\}", FREE_START, text, count=1)
@@ -183,7 +183,61 @@ def test_a_box_as_a_12_triangle_stl_plans_as_the_primitive_box(tmp_path: Path) -
     assert mesh_text != text
     (tmp_path / "mesh.toml").write_text(mesh_text)
     box = solve(load(tmp_path / "box.toml"))
-    mesh = solve(load(tmp_path / "mesh.toml"))
-    assert box.status == mesh.status == "planned"
-    assert mesh.sequence == box.sequence
-    assert mesh.verification is not None and mesh.verification.passed  # run in the engine on the mesh
+    plan = tmp_path / "plan.json"
+    assert main(["solve", str(tmp_path / "mesh.toml"), "--json", "--out", str(plan)]) == 0
+    mesh = json.loads(capsys.readouterr().out)
+    assert box.status == mesh["status"] == "planned"
+    assert [tuple(s) for s in mesh["sequence"]] == [tuple(s) for s in box.sequence]
+    assert mesh["verification"]["passed"]  # run in the engine on the mesh's real surface
+    # the plan file verifies again (a part that starts free: the sequence leaves the free state out)
+    assert main(["verify", str(plan), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["passed"]
+
+
+def test_a_haptic_session_loads_a_mesh_part_with_a_locator_in_its_pocket(tmp_path: Path) -> None:
+    """The housing (E1 in its pocket) from a start lifted off its locators: the executor drives the device to the goal."""
+    from fixplan.interactive.app import _mesh
+    from fixplan.interactive.session import HapticSession
+
+    text = (MESHES / "housing.toml").read_text(encoding="utf-8")
+    text = re.sub(
+        r"start = \{[^}]*\}", "start = { position = [-0.004, 0.004, 0.008], rpy_deg = [0.5, -0.5, 0.5] }", text
+    )
+    (tmp_path / "housing.obj").write_bytes((MESHES / "housing.obj").read_bytes())
+    (tmp_path / "housing.toml").write_text(text, encoding="utf-8")
+    fixture = load(tmp_path / "housing.toml")
+    V, F = _mesh(fixture)  # what viser draws: the part's own triangles
+    np.testing.assert_array_equal(F, fixture.workpiece.shape.faces)
+    res = HapticSession(fixture, None, realtime=False, synchronous=True, duration_s=5.0).run()
+    assert res.status == "reached", res.reason
+    assert set(res.states[-1][1]) == {loc.name for loc in fixture.locators}
+    assert max(abs(g) for g in res.final_gaps_m.values()) < 1e-4
+    assert res.max_penetration_m < 1e-5
+
+
+def test_a_locator_in_the_corner_is_planned_and_seated_on_both_faces(tmp_path: Path, capsys) -> None:
+    """The L slid in along its base under E1 (4 mm short of the wall, 4 mm off S1 and S2): E1 ends on both faces.
+
+    The fine planner writes E1 as the least of the base's and the wall's planes (the free space of
+    the corner), so the path keeps it clear of the wall until the wall arrives; the plan is run in
+    the engine, where E1 ends with two loaded contacts.
+    """
+    path = corner_fixture(tmp_path)
+    text = path.read_text(encoding="utf-8")
+    text = re.sub(
+        r"start = \{[^}]*\}",
+        "start = { position = [-0.004, 0.004, 0.0] }\ngoal = { position = [0.0, 0.0, 0.0] }",
+        text,
+    )
+    path.write_text(text, encoding="utf-8")
+    plan = tmp_path / "plan.json"
+    assert main(["solve", str(path), "--json", "--out", str(plan)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["status"] == "planned", out["reason"]
+    assert out["sequence"][0] == ["B1", "B2", "B3", "E1"]  # E1 starts on the base's top only
+    assert out["verification"]["passed"]
+    fixture = load(path)
+    cs = contact_set(fixture, "goal")
+    assert cs.per_locator()["E1"] == ["E1", "E1#2"]
+    assert main(["verify", str(plan), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["passed"]

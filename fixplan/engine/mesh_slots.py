@@ -56,7 +56,9 @@ def mesh_slots(
     obs, slots, owner, rank, gaps = [], [], [], [], []
     for i, loc in enumerate(locators):
         p_body = R_world_body.T @ (np.asarray(loc.p_world, dtype=float) - p_world)
-        for k, proj in enumerate(mesh.contacts(p_body, band_m=band_m)):
+        found = mesh.contacts(p_body, band_m=band_m)
+        found = found[:1] + [c for c in found[1:] if c.distance > 0.0]  # a face seen from behind is no contact
+        for k, proj in enumerate(found):
             n_world = -(R_world_body @ proj.normal_body)  # from the locator into the part
             x_world = p_world + R_world_body @ proj.point_body
             gap = float(proj.distance - loc.radius_m)
