@@ -53,7 +53,11 @@ def mesh_slots(
     mesh: Mesh, locators: tuple[Locator, ...], R_world_body: FloatArray, p_world: FloatArray, band_m: float
 ) -> MeshSlots:
     """The contacts of ``locators`` on ``mesh`` at the pose ``(R, p)``, within ``band_m`` of each one's nearest."""
-    obs, slots, owner, rank, gaps = [], [], [], [], []
+    obs: list[list[float]] = []
+    slots: list[list[float]] = []
+    owner: list[int] = []
+    rank: list[int] = []
+    gaps: list[float] = []
     for i, loc in enumerate(locators):
         p_body = R_world_body.T @ (np.asarray(loc.p_world, dtype=float) - p_world)
         found = mesh.contacts(p_body, band_m=band_m)
