@@ -21,10 +21,11 @@ from conftest import PROBLEMS
 
 from fixplan.cli import main
 from fixplan.engine.simulator import Simulator
+from fixplan.errors import InputError
 from fixplan.fixture import load
 from fixplan.geometry.cells import box_cells, cell_surface
 from fixplan.geometry.mesh import stl_bytes
-from fixplan.jamming import Classifier, classify
+from fixplan.jamming import Classifier, classify, search_wrench
 from fixplan.locating import contact_set
 from fixplan.planner.solve import solve
 
@@ -107,6 +108,11 @@ def test_classify_json_lists_a_locator_s_contacts_and_primitives_keep_their_keys
     assert result["locators"]["E1"] == ["E1", "E1#2"]  # every locator's contacts, where one has several
     assert result["locators"]["B1"] == ["B1"]
     assert set(result["contact_forces"]) == {"B1", "B2", "B3", "S1", "S2", "E1", "E1#2"}
+    corner = load(path)
+    with pytest.raises(InputError, match="into contact E1#2"):  # a lift drives the base's top into E1's tip
+        search_wrench(corner, np.array([0.0, 0.0, 0.1, 0.0, 0.0, 0.0]), pose="goal")
+    push = search_wrench(corner, np.array([-0.1, 0.0, 0.0, 0.0, 0.0, 0.0]), pose="goal").to_json()
+    assert push["locators"]["E1"] == ["E1", "E1#2"]  # backing off the wall: E1 opens, E1#2 slides
     assert main(["classify", str(PROBLEMS / "box-3-2-1.toml"), "--wrench", "0,0,0,0,0,0", "--json"]) == 0
     box = json.loads(capsys.readouterr().out)
     assert "locators" not in json.dumps(box)
@@ -241,3 +247,25 @@ def test_a_locator_in_the_corner_is_planned_and_seated_on_both_faces(tmp_path: P
     assert cs.per_locator()["E1"] == ["E1", "E1#2"]
     assert main(["verify", str(plan), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["passed"]
+
+
+def test_a_mesh_box_on_a_floor_and_one_tip_keeps_the_floor_s_slots_after_the_tips(tmp_path: Path) -> None:
+    """The fixture's own collision-only bodies follow a mesh part's contact slots: a box on a floor, one tip beside it.
+
+    The floor carries the whole weight (its four corner points share it), the tip nothing; at rest.
+    """
+    path = resting_box(tmp_path)
+    text = path.read_text()
+    text = text[: text.index("[[locator]]")]
+    text += '[[locator]]\nname = "S1"\nposition = [0.0, -0.0531, 0.0]\nradius = 0.003\nfriction = 0.3\n'
+    text += '[[obstacle]]\nname = "floor"\nshape = "plane"\npoint = [0.0, 0.0, -0.025]\nnormal = [0.0, 0.0, 1.0]\n'
+    path.write_text(text)
+    fixture = load(path)
+    sim = Simulator(fixture)
+    sim.run(0.1)
+    weight = fixture.workpiece.mass_kg * 9.81
+    (floor,) = sim.obstacles()
+    np.testing.assert_allclose(floor.force_world, [0.0, 0.0, weight], rtol=0, atol=1e-6 * weight)
+    (tip,) = sim.contacts()
+    assert tip.normal_force_N == 0.0 and tip.gap_m == pytest.approx(0.0001, abs=1e-9)
+    assert np.abs(sim.twist).max() <= 1e-9
