@@ -18,6 +18,7 @@ The paper's ``G`` [11] is the stack of normal rows, ``H_x``/``H_y`` the tangent 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -40,6 +41,15 @@ class Contact:
     torsion_m: float = 0.0  # soft-finger torsional radius e_r [m]; 0 = no spin row
     gap_m: float = 0.0  # signed distance at this configuration [m]
     kind: str = "locator"  # "locator" or "explicit"
+    # the locator this contact belongs to, when it is one of several of that locator (a tip in a
+    # mesh part's concave corner touches two faces: ``"E1"`` and ``"E1#2"``, both of ``"E1"``);
+    # None: the contact is its locator's only one, and ``owner`` is its name
+    locator: str | None = None
+
+    @property
+    def owner(self) -> str:
+        """The locator (or explicit contact) this contact belongs to."""
+        return self.name if self.locator is None else self.locator
 
     def __post_init__(self) -> None:
         n = np.array(self.normal_world, dtype=float)
@@ -106,6 +116,65 @@ class ContactSet:
 
     def __len__(self) -> int:
         return len(self.contacts)
+
+    @property
+    def owners(self) -> list[str]:
+        """The locator (or explicit contact) of each contact: a name repeats for a locator with several contacts."""
+        return [c.owner for c in self.contacts]
+
+    @cached_property
+    def several(self) -> bool:
+        """Some locator has more than one contact here (a mesh part's concave corner)."""
+        return any(c.locator is not None for c in self.contacts)
+
+    def rows_of(self, owners: Sequence[str]) -> NDArray[np.int64]:
+        """Indices of the contacts that belong to ``owners``, in this set's order."""
+        keep = set(owners)
+        return np.array([i for i, c in enumerate(self.contacts) if c.owner in keep], dtype=np.int64)
+
+    def subset(self, owners: Sequence[str]) -> ContactSet:
+        """The contacts of ``owners`` (every contact of each), same configuration and mass matrix."""
+        if not self.several:
+            keep = set(owners)
+            chosen = tuple(c for c in self.contacts if c.name in keep)
+        else:
+            chosen = tuple(self.contacts[i] for i in self.rows_of(owners))
+        return ContactSet(chosen, self.com_world, self.mass_matrix, self.body_origin_world)
+
+    def nearest_of(self, owner: str) -> ContactSet:
+        """The set with only the nearest (first) contact of ``owner`` (itself when no locator has several).
+
+        A transition's target is closed along its nearest contact's normal; its kept contacts keep
+        every one of theirs. Built as ``contact_set(..., [*kept, target]).nearest_of(target)``, the
+        target's row is the last and the kept contacts are the ones before it.
+        """
+        if not self.several:
+            return self
+        seen = False
+        chosen = []
+        for c in self.contacts:
+            if c.owner == owner:
+                if seen:
+                    continue
+                seen = True
+            chosen.append(c)
+        return ContactSet(tuple(chosen), self.com_world, self.mass_matrix, self.body_origin_world)
+
+    def nearest_only(self) -> ContactSet:
+        """The set with one contact per owner, its nearest (itself when no locator has several)."""
+        if not self.several:
+            return self
+        kept: dict[str, Contact] = {}
+        for c in self.contacts:
+            kept.setdefault(c.owner, c)
+        return ContactSet(tuple(kept.values()), self.com_world, self.mass_matrix, self.body_origin_world)
+
+    def per_locator(self) -> dict[str, list[str]]:
+        """Each owner's contact names, in this set's order (JSON: a locator's several contacts)."""
+        out: dict[str, list[str]] = {}
+        for c in self.contacts:
+            out.setdefault(c.owner, []).append(c.name)
+        return out
 
     @cached_property
     def max_lever_m(self) -> float:

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import FixplanError, InfeasibleError, InputError
-from fixplan.geometry import Box, Cylinder, Polygon, Rectangle, Shape
+from fixplan.geometry import Box, Cylinder, Mesh, Polygon, Rectangle, Shape
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
 from fixplan.model import (
     ExplicitContact,
@@ -57,6 +57,37 @@ def locator_contact(workpiece: Workpiece, pose: Pose, locator: Locator) -> Conta
         gap_m=proj.distance - locator.radius_m,
         kind="locator",
     )
+
+
+def locator_contacts(workpiece: Workpiece, pose: Pose, locator: Locator) -> list[Contact]:
+    """Every contact a locator would make with the workpiece at ``pose``, nearest first.
+
+    A convex shape gives one (:func:`locator_contact`). A mesh part gives one per local minimum of
+    the distance within ``MeshSettings.contact_band_m`` of the nearest (:meth:`Mesh.contacts`): a
+    tip in a concave corner touches two faces. The first keeps the locator's name, the others are
+    named ``"<locator>#2"``, ``"<locator>#3"`` ... and carry the locator in ``Contact.locator``.
+    """
+    shape = workpiece.shape
+    if not isinstance(shape, Mesh):
+        return [locator_contact(workpiece, pose, locator)]
+    found = shape.contacts(pose.point_body_from_world(locator.p_world))
+    found = found[:1] + [c for c in found[1:] if c.distance > 0.0]  # a face seen from behind is no contact
+    several = len(found) > 1
+    out = []
+    for k, proj in enumerate(found):
+        out.append(
+            Contact(
+                name=locator.name if k == 0 else f"{locator.name}#{k + 1}",
+                point_world=pose.point_world_from_body(proj.point_body),
+                normal_world=-(pose.R_world_body @ proj.normal_body),
+                friction=locator.friction,
+                torsion_m=locator.torsion_m,
+                gap_m=proj.distance - locator.radius_m,
+                kind="locator",
+                locator=locator.name if several else None,
+            )
+        )
+    return out
 
 
 def locator_gaps(workpiece: Workpiece, pose: Pose, locators: Sequence[Locator]) -> FloatArray:
@@ -94,7 +125,10 @@ def contact_set(
 
     if names is None:
         tol = fixture.tolerances.touch_m
-        all_contacts = [locator_contact(wp, pose, loc) for loc in fixture.locators]
+        if isinstance(wp.shape, Mesh):  # every contact of each locator; those touching are kept
+            all_contacts = [c for loc in fixture.locators for c in locator_contacts(wp, pose, loc)]
+        else:
+            all_contacts = [locator_contact(wp, pose, loc) for loc in fixture.locators]
         all_contacts += [explicit(c) for c in fixture.contacts]
         chosen = [c for c in all_contacts if c.kind == "explicit" or c.gap_m <= tol]
     else:
@@ -107,7 +141,16 @@ def contact_set(
             raise InputError(f"unknown contact {unknown[0]!r} (known: {', '.join(known)})")
         if len(set(names)) != len(names):
             raise InputError(f"contact names repeat: {', '.join(names)}")
-        chosen = [explicit(explicits[n]) if n in explicits else locator_contact(wp, pose, locators[n]) for n in names]
+        if isinstance(wp.shape, Mesh):  # a named locator brings every one of its contacts
+            chosen = [
+                c
+                for n in names
+                for c in ([explicit(explicits[n])] if n in explicits else locator_contacts(wp, pose, locators[n]))
+            ]
+        else:
+            chosen = [
+                explicit(explicits[n]) if n in explicits else locator_contact(wp, pose, locators[n]) for n in names
+            ]
     c = com_world(pose, wp.com_body)
     M = mass_matrix(wp.mass_kg, wp.inertia_body, pose.R_world_body)
     return ContactSet(tuple(chosen), c, M, pose.p_world.copy())
@@ -841,6 +884,7 @@ __all__ = [
     "find_goal",
     "free_motions_at",
     "locator_contact",
+    "locator_contacts",
     "locator_gaps",
     "named_faces",
     "no_pose_proof",

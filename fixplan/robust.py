@@ -131,7 +131,7 @@ def draw_world(fixture: Fixture, sample: int, settings: RobustSettings) -> tuple
         dataclasses.replace(loc, friction=max(loc.friction * (1.0 + float(ui)), 0.0), p_world=loc.p_world + off)
         for loc, ui, off in zip(fixture.locators, u, offsets, strict=True)
     )
-    touching = [c.name for c in contact_set(fixture, "start").contacts if c.kind == "locator"]
+    touching = list(dict.fromkeys(c.owner for c in contact_set(fixture, "start").contacts if c.kind == "locator"))
     wp = fixture.workpiece
     g = np.asarray(fixture.gravity, dtype=float)
     g_hat = g / np.linalg.norm(g) if np.linalg.norm(g) > 0 else np.eye(d)[-1]
@@ -251,7 +251,7 @@ def verify_on_world(
     info = {**what.to_json(), "settings": settings.to_json()}
     if result.status == "infeasible":
         return result, info
-    start_state = frozenset(c.name for c in contact_set(fixture, "start").contacts if c.kind == "locator")
+    start_state = frozenset(c.owner for c in contact_set(fixture, "start").contacts if c.kind == "locator")
     t0 = time.perf_counter()
     v = verify_sample(fixture, start_state, plan_steps(result.transitions), sample, settings, result.policy)
     timings = {**result.timings, "verify_s": time.perf_counter() - t0}
@@ -347,7 +347,7 @@ def nominal_plan(fixture: Fixture, settings: RobustSettings) -> tuple[PlanResult
         fixture, run_verification=False, acceleration_mps2=settings.acceleration_mps2,
         margin_N=settings.margin_N, friction_margin=settings.friction_margin, knots=settings.knots,
     )  # fmt: skip
-    start_state = frozenset(c.name for c in contact_set(fixture, "start").contacts if c.kind == "locator")
+    start_state = frozenset(c.owner for c in contact_set(fixture, "start").contacts if c.kind == "locator")
     return result, start_state, plan_steps(result.transitions)
 
 

@@ -316,6 +316,11 @@ class PlannerSettings:
         Friction margins δ tried per transition (pushes robust to μ(1 ± δ)).
     smooth_max_m : float
         Length scale of the smooth maximum of two face planes' gaps [m].
+    mesh_planes_band_m : float
+        A mesh part's locator is written, in the fine planner, as the least of the planes of every
+        face (or tangent plane at an edge or vertex) that is a local minimum of its distance within
+        this of the nearest [m]: in a concave region those planes bound the free space the tip
+        moves in (a tip 4 mm from the L's wall, on its base, keeps clear of the wall).
     ipopt_tol : float
         IPOPT's ``tol`` for a transition's NLP.
     ipopt_max_iter : int
@@ -363,6 +368,7 @@ class PlannerSettings:
     clearances_m: tuple[float, ...] = (1e-3, 1e-4)
     robust_grid: tuple[float, ...] = (0.05, 0.1, 0.2, 0.3, 0.5)
     smooth_max_m: float = 1e-4
+    mesh_planes_band_m: float = 0.01
     ipopt_tol: float = 1e-9
     ipopt_max_iter: int = 500
     ipopt_constr_viol_tol: float = 1e-10

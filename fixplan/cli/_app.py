@@ -97,28 +97,11 @@ def _root(
     """Plan how a workpiece is loaded into a fixture without jamming."""
 
 
-MESH_COMMANDS = ("validate", "classify", "search", "map")  # the commands that take mesh parts so far
-
-
 def _load(path: Path | None):
-    """The fixture at ``path`` (default: the bundled box); a mesh part only for :data:`MESH_COMMANDS`."""
+    """The fixture at ``path`` (default: the bundled box); every command takes mesh parts."""
     from fixplan.fixture import default_fixture_path, load
-    from fixplan.geometry import Mesh
 
-    try:
-        from typer._click.globals import get_current_context
-    except ImportError:  # pragma: no cover - depends on the installed typer
-        from click import get_current_context  # type: ignore[no-redef]
-
-    fixture = load(path if path is not None else default_fixture_path())
-    context = get_current_context(silent=True)
-    command = context.info_name if context is not None else None
-    if isinstance(fixture.workpiece.shape, Mesh) and command not in (None, *MESH_COMMANDS):
-        raise InputError(
-            f"{path}: workpiece.shape: 'fixplan {command}' does not support mesh parts yet "
-            f"(expected a box, cylinder or sphere; mesh parts work with {', '.join(MESH_COMMANDS)})"
-        )
-    return fixture
+    return load(path if path is not None else default_fixture_path())
 
 
 def _numbers(

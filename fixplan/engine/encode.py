@@ -10,7 +10,9 @@ Codes and parameters (``params``; ``verts``/``edge_normals`` only for polygons):
 - ``BOX`` (box or rectangle): half extents (3 or 2 numbers);
 - ``BALL`` (sphere or disk): radius;
 - ``CYLINDER``: radius, half length (axis = body z);
-- ``POLYGON``: vertices (n × 2, counter-clockwise) and outward edge normals (n × 2).
+- ``POLYGON``: vertices (n × 2, counter-clockwise) and outward edge normals (n × 2);
+- ``MESH``: no parameters. A mesh part is never queried by the kernels: the simulator detects its
+  locators' contacts in Python each step and passes them as slots (:mod:`.mesh_slots`).
 
 Collision-only bodies (:func:`encode_obstacles`): one row per obstacle, ``[kind, origin (d),
 R_world_obstacle row-major (d²), half extents (d)]`` (kind 0: plane or line, 1: box or
@@ -33,7 +35,7 @@ from fixplan.geometry.collision import collision_points
 if TYPE_CHECKING:
     from fixplan.model import Fixture
 
-BOX, BALL, CYLINDER, POLYGON = 0, 1, 2, 3
+BOX, BALL, CYLINDER, POLYGON, MESH = 0, 1, 2, 3, 4
 
 
 def encode(shape: Shape) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
@@ -50,13 +52,8 @@ def encode(shape: Shape) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
         E = np.roll(V, -1, axis=0) - V
         N = np.stack([E[:, 1], -E[:, 0]], axis=1) / np.linalg.norm(E, axis=1)[:, None]
         return POLYGON, np.array([shape.bounding_radius]), np.ascontiguousarray(V), np.ascontiguousarray(N)
-    if shape.name == "mesh":
-        from fixplan.errors import InputError
-
-        raise InputError(
-            "the contact engine (simulate, solve, robust, haptic, verify) does not support mesh parts yet "
-            "(expected a box, cylinder, sphere, rectangle, disk or polygon)"
-        )
+    if shape.name == "mesh":  # never queried by the kernels: its contacts come as slots (.mesh_slots)
+        return MESH, np.zeros(3), empty, empty
     raise TypeError(f"no compiled query for {type(shape).__name__}")  # pragma: no cover
 
 

@@ -25,8 +25,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from fixplan.aot import kernel
 from fixplan.engine.encode import encode, encode_obstacles
+from fixplan.engine.mesh_slots import MeshSlots, mesh_slots
 from fixplan.engine.outcome import STATUS_NONFINITE, STATUS_NOT_CONVERGED, STATUS_OK
 from fixplan.errors import InputError, SolverError
+from fixplan.geometry.mesh import Mesh
 from fixplan.model import Fixture
 from fixplan.settings import DEFAULT, EngineSettings
 from fixplan.spatial import Pose, quaternion_wxyz_from_matrix, rot2, shift_wrench_by, tangent_basis
@@ -76,9 +78,33 @@ class ContactReport:
     force_world: FloatArray  # average contact force over the step, on the workpiece [N]
     spin_moment_Nm: float  # soft fingers only
     mode: ContactMode
+    # a locator touching a mesh part at several places (a concave corner): each contact (the
+    # fields above are their sum, the least gap); empty for a locator with one contact
+    contacts: tuple[ContactTouch, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
-        return {"name": self.name, "gap": self.gap_m, "normal_force": self.normal_force_N, "mode": self.mode}
+        out = {"name": self.name, "gap": self.gap_m, "normal_force": self.normal_force_N, "mode": self.mode}
+        if self.contacts:
+            out["contacts"] = [c.to_json() for c in self.contacts]
+        return out
+
+
+@dataclass(frozen=True)
+class ContactTouch:
+    """One of a locator's several contacts with a mesh part, after the last step."""
+
+    gap_m: float  # at the start of the step [m]
+    normal_force_N: float
+    force_world: FloatArray  # on the workpiece [N]
+    normal_world: FloatArray  # from the locator into the workpiece
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "gap": self.gap_m,
+            "normal_force": self.normal_force_N,
+            "normal": [float(x) for x in self.normal_world],
+            "force": [float(x) for x in self.force_world],
+        }
 
 
 @dataclass(frozen=True)
@@ -309,6 +335,11 @@ class Simulator:
         wp = fixture.workpiece
         self.dimension = fixture.dimension
         self._kind, self._params, self._verts, self._enorm = encode(wp.shape)
+        # a mesh part: the locators' contacts are detected in Python before each step (several per
+        # locator in a concave corner) and handed to the compiled step as slots (module mesh_slots)
+        self._mesh = wp.shape if isinstance(wp.shape, Mesh) else None
+        self._mesh_last: MeshSlots | None = None  # the last step's slots
+        self._mesh_state: dict[tuple[int, int], FloatArray] = {}  # (locator, rank) -> its warm start
         locs = fixture.locators
         self.names = [loc.name for loc in locs]
         self._names_t = tuple(self.names)
@@ -356,6 +387,8 @@ class Simulator:
         self._active = np.zeros(self._k, dtype=np.bool_)
         self._P_prev = np.zeros((self._k, 4))  # the step before (3D: extrapolated warm start)
         self._active_prev = np.zeros(self._k, dtype=np.bool_)
+        self._mesh_state = {}
+        self._mesh_last = None
         if pose is not None:
             # gaps at the new pose (until a step measures them): a report before any step is true
             from fixplan.locating import locator_contact
@@ -417,7 +450,9 @@ class Simulator:
         w_norm = float(np.sqrt(np.dot(self._w, self._w))) if self.dimension == 3 else abs(float(self._w))
         speed = math.sqrt(float(v @ v)) + w_norm * self._bound
         margin = self.margin_m + 2.0 * h * speed
-        if self.dimension == 3:
+        if self._mesh is not None:
+            err, iters, status, failures, pen = self._step_mesh(f, tau, margin)
+        elif self.dimension == 3:
             err, iters, status, failures, pen = _step3_into(
                 self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
                 self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu, self._tors, self._obs,
@@ -459,6 +494,83 @@ class Simulator:
             self._active[: self._k_loc].copy(),
         )
         return self.last
+
+    def _step_mesh(self, f: FloatArray, tau: FloatArray, margin: float) -> tuple[float, int, int, int, float]:
+        """One 3D step of a mesh part: its locators' contacts as slots (:mod:`.mesh_slots`), then the compiled step.
+
+        The slots of the locators come first, then the fixture's own collision-only bodies'
+        (as for a convex part). Each slot's warm start is carried by its ``(locator, rank)``.
+        Afterwards the locator rows of the simulator's arrays hold each locator's contacts
+        together: the least gap, any active, the summed normal impulse, the nearest's normal.
+        """
+        assert self._mesh is not None
+        ms = mesh_slots(self._mesh, self.fixture.locators, self._R, self._p, margin)
+        n, kl = len(ms), self._k_loc
+        fix_mu = self._mu[kl:]
+        shifted = self._slots.copy()
+        shifted[:, 4] += n  # the fixture's obstacles follow the mesh's planes
+        obs = np.ascontiguousarray(np.vstack([ms.obs, self._obs]).reshape(-1, 16))
+        slots = np.ascontiguousarray(np.vstack([ms.slots, shifted]).reshape(-1, 5))
+        mu = np.concatenate([[self.fixture.locators[i].friction for i in ms.locator], fix_mu])
+        k = mu.shape[0]
+        tors = np.zeros(k)
+        # warm start: per slot (P, active, P_prev, active_prev, u) from the slot of the same key
+        P, P_prev, u = np.zeros((k, 4)), np.zeros((k, 4)), np.zeros((k, 4))
+        act, act_prev = np.zeros(k, dtype=np.bool_), np.zeros(k, dtype=np.bool_)
+        for j, key in enumerate(ms.keys):
+            old = self._mesh_state.get(key)
+            if old is not None:
+                P[j], P_prev[j], u[j] = old[0:4], old[4:8], old[8:12]
+                act[j], act_prev[j] = bool(old[12]), bool(old[13])
+        P[n:], P_prev[n:], u[n:] = self._P[kl:], self._P_prev[kl:], self._u[kl:]
+        act[n:], act_prev[n:] = self._active[kl:], self._active_prev[kl:]
+        gap, n_w = np.zeros(k), np.zeros((k, 3))
+        err, iters, status, failures, pen = _step3_into(
+            self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
+            self._params, self._verts, self._enorm, np.zeros((0, 3)), np.zeros(0), mu, tors, obs,
+            slots, self.dt, f, tau,
+            self.restitution, margin, self.tolerance, self.max_iterations, self.polish_steps, P, act, P_prev,
+            act_prev, gap, u, n_w, self._bound,
+        )  # fmt: skip
+        self._mesh_last = ms
+        self._mesh_slot_P, self._mesh_slot_active, self._mesh_slot_u = P[:n].copy(), act[:n].copy(), u[:n].copy()
+        self._mesh_slot_n, self._mesh_slot_gap = n_w[:n].copy(), gap[:n].copy()
+        self._mesh_state = {
+            key: np.concatenate([P[j], P_prev[j], u[j], [float(act[j]), float(act_prev[j])]])
+            for j, key in enumerate(ms.keys)
+        }
+        # the locator rows: each locator's contacts together
+        self._P[kl:], self._P_prev[kl:], self._u[kl:] = P[n:], P_prev[n:], u[n:]
+        self._active[kl:], self._active_prev[kl:] = act[n:], act_prev[n:]
+        self._gap[kl:], self._nw[kl:] = gap[n:], n_w[n:]
+        for i in range(kl):
+            rows = np.flatnonzero(ms.locator == i)
+            if rows.size == 0:  # pragma: no cover - every locator has a nearest contact
+                continue
+            on = rows[act[rows]]
+            self._active[i] = on.size > 0
+            self._gap[i] = float(gap[rows].min())
+            self._P[i] = 0.0
+            self._P[i, 0] = float(P[on, 0].sum()) if on.size else 0.0
+            self._nw[i] = n_w[rows[0]]
+            self._u[i] = u[rows[0]]
+        return err, iters, status, failures, pen
+
+    def _mesh_contacts(self, i: int) -> list[tuple[FloatArray, float, FloatArray, float, float]]:
+        """Locator ``i``'s contacts in the last step: ``(force_world, normal force, normal, slip, gap)`` each."""
+        ms = self._mesh_last
+        if ms is None:
+            return []
+        out = []
+        for j in np.flatnonzero(ms.locator == i):
+            n = self._mesh_slot_n[j]
+            P = self._mesh_slot_P[j]
+            on = bool(self._mesh_slot_active[j]) and P[0] > 0.0
+            t1, t2 = tangent_basis(n)
+            force = (P[0] * n + P[1] * t1 + P[2] * t2) / self.dt if on else np.zeros(3)
+            slip = float(np.hypot(self._mesh_slot_u[j, 1], self._mesh_slot_u[j, 2]))
+            out.append((force, float(P[0]) / self.dt if on else 0.0, n.copy(), slip, float(self._mesh_slot_gap[j])))
+        return out
 
     def pressed(self, min_force_N: float = 1e-9) -> tuple[str, ...]:
         """Names of the locators that pushed on the workpiece in the last step (normal force > min)."""
@@ -505,6 +617,9 @@ class Simulator:
             Pn = float(self._P[i, 0])
             n = self._nw[i]
             d = self.dimension
+            if self._mesh is not None:
+                reports.append(self._mesh_report(i, name, float(gaps[i]), omega))
+                continue
             if not self._active[i] or Pn <= 0.0:
                 reports.append(ContactReport(name, float(gaps[i]), 0.0, np.zeros(d), 0.0, "open"))
                 continue
@@ -522,6 +637,19 @@ class Simulator:
             mode: ContactMode = "sliding" if slip > slip_tol else ("rolling" if omega > spin_tol else "sticking")
             reports.append(ContactReport(name, float(gaps[i]), Pn / h, force, spin, mode))
         return reports
+
+    def _mesh_report(self, i: int, name: str, gap_m: float, omega: float) -> ContactReport:
+        """A mesh part's locator: its contacts' forces summed, one :class:`ContactTouch` per contact."""
+        touches = self._mesh_contacts(i)
+        force = sum((t[0] for t in touches), np.zeros(3))
+        fn = sum(t[1] for t in touches)
+        each = tuple(ContactTouch(g, f_n, fw, nn) for fw, f_n, nn, _s, g in touches) if len(touches) > 1 else ()
+        if fn <= 0.0:
+            return ContactReport(name, gap_m, 0.0, np.zeros(3), 0.0, "open", each)
+        slip = max(t[3] for t in touches if t[1] > 0.0)
+        slip_tol, spin_tol = self.settings.slip_mps, self.settings.spin_radps
+        mode: ContactMode = "sliding" if slip > slip_tol else ("rolling" if omega > spin_tol else "sticking")
+        return ContactReport(name, gap_m, fn, force, 0.0, mode, each)
 
     # -- collision-only bodies ---------------------------------------------------------------------
     def _obstacle_gaps(self) -> FloatArray:
@@ -580,6 +708,10 @@ class Simulator:
         every = max(1, int(record_every))
         if callable(wrench) and not isinstance(wrench, WrenchSchedule):
             return self._run_python(n_steps, wrench, every, progress)
+        if self._mesh is not None:  # detection in Python every step: the Python loop
+            times, table = self._schedule(wrench)
+            schedule = WrenchSchedule(times, table)
+            return self._run_python(n_steps, lambda t, _sim: schedule(t), every, progress)
         return self._run_compiled(n_steps, self._schedule(wrench), every, progress)
 
     def _schedule(self, wrench: ArrayLike | WrenchSchedule | None) -> tuple[FloatArray, FloatArray]:

@@ -496,7 +496,7 @@ def verify_plan_file(fixture: Fixture, data: dict[str, Any], *, source: str = "p
             )
         steps.append(Step(tr.from_state, tr.added, cast(TransitionKind, tr.motion), tr.poses, tr.together))
     touching = contact_set(fixture, "start")
-    start_state = frozenset(c.name for c in touching.contacts if c.kind == "locator")
+    start_state = frozenset(c.owner for c in touching.contacts if c.kind == "locator")
     # the plan's policy (solve --json's "policy"), as solve verified it: the executor takes it from
     # a state the plan does not expect before it re-plans
     v = verify(fixture, start_state, steps, replan=Planner(fixture).replan, policy=plan.policy)

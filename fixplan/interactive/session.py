@@ -503,7 +503,7 @@ class HapticSession:
         self.synchronous = synchronous
         self.trace_every = max(int(trace_every), 1)
         touching = contact_set(fixture, "start")
-        self.start_state = frozenset(x.name for x in touching.contacts if x.kind == "locator")
+        self.start_state = frozenset(x.owner for x in touching.contacts if x.kind == "locator")
         self._guidance_on = guidance
         self.guide: Guide | RemoteGuide | None = None
         if guidance and synchronous:

@@ -81,6 +81,9 @@ class Classification:
     acceleration: FloatArray | None = None  # centre-of-mass twist rate, world axes (moving modes)
     residuals: dict[str, float | None] = field(default_factory=dict)  # None: not measured
     contact_frames: dict[str, FloatArray] = field(default_factory=dict)  # rows n, t1[, t2] (world)
+    # a locator with several contacts (a tip in a mesh part's concave corner): its contacts' names
+    # in ``contact_forces``; empty when every locator has one contact (the JSON key is then absent)
+    locators: dict[str, list[str]] = field(default_factory=dict)
 
     @property
     def margin(self) -> float:
@@ -122,7 +125,12 @@ class Classification:
             "acceleration": None if self.acceleration is None else self.acceleration.tolist(),
             "residuals": {k: _finite_or_none(v) for k, v in self.residuals.items()},
             "solve_time_s": float(self.solve_time_s),
-        }
+        } | ({"locators": {k: list(v) for k, v in self.locators.items()}} if self.locators else {})
+
+    def locator_force_world(self, locator: str) -> FloatArray:
+        """The total force of a locator on the workpiece, every one of its contacts together, world axes [N]."""
+        names = self.locators.get(locator, [locator])
+        return np.sum([self.force_world(n) for n in names], axis=0)
 
 
 class Classifier:
@@ -157,6 +165,7 @@ class Classifier:
         )
         self.frames = {c.name: np.vstack([c.normal_world, c.tangents_world]) for c in cs.contacts}
         self._names = cs.names
+        self._locators = cs.per_locator() if cs.several else {}
         self._sizes = [int(k) for k in cs.sizes]
         self._offsets = [int(o) for o in cs.offsets]
         self._loaded: dict[tuple[int, ...], Classifier] = {}  # the loaded contacts' classifiers (see _wedging)
@@ -269,6 +278,7 @@ class Classifier:
                 accel,
                 dict(res),
                 self.frames,
+                self._locators,
             )
 
         if not np.all(np.isfinite(w_e)):

@@ -190,7 +190,14 @@ class WrenchSearch:
             "within_fraction": self.within_fraction,
             "force_fraction": _finite_or_none(self.force_fraction),
             "torque_fraction": _finite_or_none(self.torque_fraction),
-        }
+        } | self._locators_json()
+
+    def _locators_json(self) -> dict[str, Any]:
+        """``{"locators": {locator: [contact names]}}`` where a locator has several contacts (else nothing)."""
+        for c in (self.balance_check, self.check):
+            if c is not None and c.locators:
+                return {"locators": {k: list(v) for k, v in c.locators.items()}}
+        return {}
 
 
 def _finite_twist(fixture: Fixture, x: ArrayLike, what: str) -> FloatArray:

@@ -844,9 +844,9 @@ class Executor:
         fx = self.fixture
         wp = fx.workpiece
         names = [*step.established, step.target]
-        cs = contact_set(fx, pose, names)
+        cs = contact_set(fx, pose, names).nearest_of(step.target)  # kept contacts, then the target's nearest
         M, M_inv = cs.mass_matrix, cs.M_inv
-        n_est = len(step.established)
+        n_est = len(cs) - 1 if step.established else 0
         if n_est:
             est_cs_rows = cs.J[: int(sum(c.size for c in cs.contacts[:n_est]))] if step.kind == "roll" else cs.G[:n_est]
         else:

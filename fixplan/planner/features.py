@@ -45,6 +45,15 @@ class Feature:
     bounds_b: FloatArray | None = None
     disc_radius: float | None = None
     half: FloatArray | None = None
+    # ``"planes"`` (a mesh part): the least of the planes ``N_i·x = h_i`` (outward normals ``N``
+    # (k, 3), offsets ``h`` (k,)), the free space of a concave region (:func:`feature_at`)
+    normals: FloatArray | None = None
+    offsets: FloatArray | None = None
+
+    def _plane_gaps(self, ca: Any, q: Any) -> list[Any]:
+        """``planes``: each plane's signed distance ``N_i·q − h_i``."""
+        assert self.normals is not None and self.offsets is not None
+        return [ca.dot(ca.DM(n), q) - float(h) for n, h in zip(self.normals, self.offsets, strict=True)]
 
     def _outside(self, ca: Any, q: Any) -> Any:
         """``box``: the vector from the closest point of the box to ``q`` (zero inside)."""
@@ -59,6 +68,9 @@ class Feature:
         """
         if self.kind == "plane":
             return ca.dot(ca.DM(self.normal), q) - self.offset
+        if self.kind == "planes":
+            gaps = self._plane_gaps(ca, q)
+            return gaps[0] if len(gaps) == 1 else ca.mmin(ca.vertcat(*gaps))
         if self.kind == "box":
             # outside: ‖v‖; inside (v = 0): the largest face-plane gap, ≤ 0 (no NaN derivative at v = 0)
             v = self._outside(ca, q)
@@ -74,6 +86,14 @@ class Feature:
         """Outward unit normal at the projection of ``q``."""
         if self.kind == "plane":
             return ca.DM(self.normal)
+        if self.kind == "planes":  # the nearest plane's normal
+            assert self.normals is not None
+            gaps = self._plane_gaps(ca, q)
+            best, normal = gaps[0], ca.DM(self.normals[0])
+            for g, n in zip(gaps[1:], self.normals[1:], strict=True):
+                normal = ca.if_else(g < best, ca.DM(n), normal)
+                best = ca.fmin(best, g)
+            return normal
         if self.kind == "box":
             v = self._outside(ca, q)
             vv = ca.dot(v, v)
@@ -117,7 +137,7 @@ def _box_face(half: FloatArray, face: str, label: str) -> Feature:
 
 def feature_at(fixture: Fixture, locator: Locator, pose: Pose) -> Feature:
     """The feature of the workpiece nearest to ``locator`` at ``pose``."""
-    from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Sphere
+    from fixplan.geometry import Box, Cylinder, Disk, Mesh, Polygon, Rectangle, Sphere
 
     shape = fixture.workpiece.shape
     q = pose.point_body_from_world(locator.p_world)
@@ -145,6 +165,18 @@ def feature_at(fixture: Fixture, locator: Locator, pose: Pose) -> Feature:
         A = np.array([-e, e])
         b = np.array([-float(e @ V[k]), 1.0 + float(e @ V[k])])
         return Feature("plane", f"edge{k}", N[k].copy(), float(N[k] @ V[k]), bounds_A=A, bounds_b=b)
+    if isinstance(shape, Mesh):
+        # the least of the planes of the faces (tangent planes at an edge or a vertex) that are
+        # local minima of the tip's distance within a band of the nearest: in a concave region the
+        # free space is their intersection, so their least gap is the true one there (a tip in a
+        # corner: both faces). Unbounded: far from them it is not a lower bound of the true gap on a
+        # non-convex part; every plan is run in the engine on the real surface before it is accepted
+        found = shape.contacts(q, band_m=DEFAULT.planner.mesh_planes_band_m)
+        found = found[:1] + [c for c in found[1:] if c.distance > 0.0]  # not a face seen from behind
+        N = np.array([np.asarray(c.normal_body, dtype=float) for c in found]).reshape(-1, 3)
+        h = np.array([float(n @ c.point_body) for n, c in zip(N, found, strict=True)])
+        label = "face (" + ", ".join(f"{x:.3g}" for x in N[0]) + ")" + (f" + {len(N) - 1}" if len(N) > 1 else "")
+        return Feature("planes", label, N[0].copy(), float(h[0]), normals=N, offsets=h)
     raise InputError(
         f"the fine planner has no closed-form gap for a {shape.name!r} workpiece (expected box, cylinder, sphere, rectangle, disk or polygon)"
     )

@@ -1186,7 +1186,7 @@ def goal_rows(fixture: Fixture, pose: Pose | None = None) -> GoalRows | None:
         except Exception:  # noqa: BLE001 - no goal, nothing to compare
             return None
     names = tuple(loc.name for loc in fixture.locators)
-    G = np.asarray(contact_set(fixture, pose, list(names)).G, dtype=float)
+    G = np.asarray(contact_set(fixture, pose, list(names)).nearest_only().G, dtype=float)  # a row per locator
     tol = DEFAULT.planner.span_rel
     rank = int(np.linalg.matrix_rank(G, tol=tol * max(float(np.abs(G).max()), 1.0)))
     return GoalRows(names, G, rank)
@@ -1287,12 +1287,12 @@ def closing_group(
 
 def _step_rows(fixture: Fixture, pose: Pose, est: tuple[str, ...], target: str, kind: str) -> tuple[Any, FloatArray]:
     """(contact set, rows A) of the linearised step: the kept contacts' rows, then the target's normal."""
-    cs = contact_set(fixture, pose, [*est, target])
+    cs = contact_set(fixture, pose, [*est, target]).nearest_of(target)  # kept contacts, then the target's nearest
     if kind == "roll":
         n_rows = sum(c.size for c in cs.contacts[:-1])
         A = np.vstack([cs.J[:n_rows], cs.G[-1:]])
     else:
-        A = cs.G[: len(est) + 1]
+        A = cs.G[: len(cs)]
     return cs, A
 
 
@@ -1469,9 +1469,9 @@ def _initial_guess(
             end = hi * xi_goal
             return np.outer(end, np.linspace(0.0, 1.0, K + 1)), "straight line toward the goal"
     # Linearised: the least-M-norm step that closes the target's gap and keeps the contacts.
-    cs = contact_set(fixture, start, [*est, target])
+    cs = contact_set(fixture, start, [*est, target]).nearest_of(target)  # kept contacts, then the target's nearest
     rows = cs.J if kind == "roll" else cs.G
-    n_rows_est = sum(c.size for c in cs.contacts[:-1]) if kind == "roll" else len(est)
+    n_rows_est = sum(c.size for c in cs.contacts[:-1]) if kind == "roll" else len(cs) - 1
     A = rows[: n_rows_est + 1] if kind != "roll" else np.vstack([rows[:n_rows_est], cs.G[-1:]])
     b = np.zeros(A.shape[0])
     b[-1] = -cs.contacts[-1].gap_m

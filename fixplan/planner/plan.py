@@ -1003,7 +1003,7 @@ def start_state(fixture: Fixture) -> frozenset[str]:
     from fixplan.locating import contact_set
 
     touching = contact_set(fixture, "start")
-    return frozenset(c.name for c in touching.contacts if c.kind == "locator")
+    return frozenset(c.owner for c in touching.contacts if c.kind == "locator")
 
 
 def check_plan_claims(plan: Plan, fixture: Fixture, source: str) -> None:
@@ -1059,6 +1059,8 @@ def check_plan_claims(plan: Plan, fixture: Fixture, source: str) -> None:
         return _state(sorted(s))
 
     seq = [frozenset(s) for s in plan.sequence]
+    if not start and seq and seq[0] and plan.transitions and not plan.transitions[0].from_state:
+        seq = [frozenset(), *seq]  # a part that starts free: solve's sequence leaves out the free state
     if not seq or seq[0] != start:
         got = state(seq[0]) if seq else "[]"
         raise InputError(

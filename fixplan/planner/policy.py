@@ -302,7 +302,7 @@ def representative_pose(
     if frozenset(state) == frozenset(names):
         return goal
     cs = contact_set(fixture, goal, names)
-    b = np.array([0.0 if n in state else settings.backoff_m for n in names])
+    b = np.array([0.0 if c.owner in state else settings.backoff_m for c in cs.contacts])  # every contact of each
     G = cs.G
     Minv = cs.M_inv
     step = Minv @ G.T @ np.linalg.pinv(G @ Minv @ G.T, rcond=DEFAULT.numerics.rcond) @ b
@@ -333,14 +333,14 @@ def gap_closing_step(fixture: Fixture, pose: Pose, state: State, target: str, ki
     """
     wp = fixture.workpiece
     est = sorted(state)
-    cs = contact_set(fixture, pose, [*est, target])
+    cs = contact_set(fixture, pose, [*est, target]).nearest_of(target)  # kept contacts, then the target's nearest
     gap = max(float(cs.contacts[-1].gap_m), 0.0)
     if not est or kind == "free":
         kept = np.zeros((0, fixture.ndof))
     elif kind == "roll":
         kept = cs.J[: int(sum(c.size for c in cs.contacts[:-1]))]
     else:
-        kept = cs.G[: len(est)]
+        kept = cs.G[: len(cs) - 1]
     A = np.vstack([kept, cs.G[-1:]])
     b = np.zeros(A.shape[0])
     b[-1] = -gap

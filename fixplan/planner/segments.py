@@ -164,7 +164,8 @@ def carried_fraction(
         return 1.0
     if cs is None:
         cs = contact_set(fixture, pose, list(names))
-    A = cs.G[: len(names), :d].T  # the unit normal forces, one column per kept contact
+    rows = cs.rows_of(names) if cs.several else np.arange(len(names))  # every contact of the kept locators
+    A = cs.G[rows, :d].T  # the unit normal forces, one column per kept contact
     f, _ = nnls(A, b)
     return min(1.0, float(np.linalg.norm(b - A @ f)) / weight)
 

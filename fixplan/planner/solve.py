@@ -523,7 +523,7 @@ def solve(
     t0 = time.perf_counter()
     names = [loc.name for loc in fixture.locators]
     touching = contact_set(fixture, "start")
-    start_state = frozenset(c.name for c in touching.contacts if c.kind == "locator")
+    start_state = frozenset(c.owner for c in touching.contacts if c.kind == "locator")
     settings = vopts.pop("settings", None) or ExecutionSettings(
         accel_mps2=acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N
     )

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import InputError
+from fixplan.geometry.mesh import Mesh
 from fixplan.geometry.shapes import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
 
 if TYPE_CHECKING:
@@ -84,7 +85,9 @@ def shape_mesh(shape: Shape) -> tuple[FloatArray, IntArray]:
         return cylinder_mesh(shape.radius, shape.length)
     if isinstance(shape, Sphere):
         return sphere_mesh(shape.radius)
-    raise InputError(f"no mesh for a {shape.name} workpiece (expected box, cylinder or sphere)")
+    if isinstance(shape, Mesh):  # the part's own triangles, as loaded (metres, outward winding)
+        return np.array(shape.vertices, dtype=float), np.array(shape.faces, dtype=np.int64)
+    raise InputError(f"no mesh for a {shape.name} workpiece (expected box, cylinder, sphere or mesh)")
 
 
 def shape_outline(shape: Shape, segments: int = 64) -> FloatArray:
