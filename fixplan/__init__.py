@@ -7,13 +7,7 @@ pull in cvxpy, CasADi or numba until they are needed.
 from __future__ import annotations
 
 from importlib import import_module
-from importlib.metadata import PackageNotFoundError, version
 from typing import Any
-
-try:  # the version is written once, in pyproject.toml
-    __version__ = version("fixplan")
-except PackageNotFoundError:  # pragma: no cover - a source tree that was never installed
-    __version__ = "0+unknown"
 
 _LAZY = {
     "load": ("fixplan.fixture", "load"),
@@ -38,7 +32,25 @@ _LAZY = {
 __all__ = sorted([*_LAZY, "__version__"])
 
 
+def _version() -> str:
+    """The installed version, written once in pyproject.toml.
+
+    Read on first use: importing ``importlib.metadata`` costs 20 ms that a command which never
+    prints the version should not pay.
+    """
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("fixplan")
+    except PackageNotFoundError:  # pragma: no cover - a source tree that was never installed
+        return "0+unknown"
+
+
 def __getattr__(name: str) -> Any:
+    if name == "__version__":
+        value = _version()
+        globals()[name] = value
+        return value
     try:
         module_name, attr = _LAZY[name]
     except KeyError:

@@ -15,7 +15,6 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from fixplan.errors import InputError
-from fixplan.jamming.batch import classify_batch
 from fixplan.jamming.classify import MODES, Classification, Classifier, wrench_array
 from fixplan.jamming.search import WrenchSearch, search_wrench, search_wrench_in
 from fixplan.jamming.wedge import can_wedge, wedge_force
@@ -81,6 +80,8 @@ def classify(
     list of Classification
         One per wrench, in input order.
     """
+    from fixplan.jamming.batch import classify_batch  # its process pool (and logging) only when classifying
+
     W = wrench_array(wrenches, fixture.ndof)
     cs = contact_set(fixture, pose, contacts)
     if at is not None:
