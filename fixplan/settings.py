@@ -777,6 +777,9 @@ class MeshSettings:
     grid_cell_min_rel : float
         The self-intersection check's grid cell is at least this fraction of the largest
         triangle's extent (a mesh of slivers does not make a grid of billions of cells).
+    tree_leaf_triangles : int
+        At most this many triangles in a leaf of the point queries' AABB tree (measured on a
+        5·10⁴-triangle part: 8 about as fast as 4, 2 and 16 slower).
     """
 
     degenerate_rel: float = 1e-12
@@ -785,6 +788,7 @@ class MeshSettings:
     wedge_rel: float = 1e-12
     contact_band_m: float = 1e-6
     grid_cell_min_rel: float = 1e-6
+    tree_leaf_triangles: int = 8
 
 
 @dataclass(frozen=True)
