@@ -193,20 +193,32 @@ def contacts(
     reach = np.inf
     slack2 = np.inf  # (reach + same)²: the box test with slack; the exact test follows
     stack = np.empty(STACK, dtype=np.int64)
-    stack[0] = 0
+    below = np.empty(STACK)  # each stacked node's box distance² (the test again when it is popped)
+    stack[0], below[0] = 0, 0.0
     depth = 1
     while depth > 0:
         depth -= 1
         node = stack[depth]
-        if _box_distance2(px, py, pz, boxes[node]) > slack2:
+        if below[depth] > slack2:
             continue
         if nodes[node, 3] == 0:
             left, right = nodes[node, 0], nodes[node, 1]
-            if _box_distance2(px, py, pz, boxes[left]) <= _box_distance2(px, py, pz, boxes[right]):
-                stack[depth], stack[depth + 1] = right, left  # the nearer child on top
+            dl = _box_distance2(px, py, pz, boxes[left])
+            dr = _box_distance2(px, py, pz, boxes[right])
+            if dl <= dr:  # the nearer child on top
+                if dr <= slack2:
+                    stack[depth], below[depth] = right, dr
+                    depth += 1
+                if dl <= slack2:
+                    stack[depth], below[depth] = left, dl
+                    depth += 1
             else:
-                stack[depth], stack[depth + 1] = left, right
-            depth += 2
+                if dl <= slack2:
+                    stack[depth], below[depth] = left, dl
+                    depth += 1
+                if dr <= slack2:
+                    stack[depth], below[depth] = right, dr
+                    depth += 1
             continue
         start = nodes[node, 2]
         for k in range(start, start + nodes[node, 3]):
