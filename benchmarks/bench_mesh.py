@@ -1,6 +1,6 @@
 """Mesh parts: the closest-point query of a locator tip against a 5·10⁴-triangle part, time against error.
 
-Issue 23 §6: a query, sphere (tip centre) to a 5·10⁴-triangle part, in ≤ 20 µs. Two parts, each
+The target: a query, sphere (tip centre) to a 5·10⁴-triangle part, in ≤ 20 µs. Two parts, each
 read through the loader (:func:`fixplan.geometry.mesh.parse_mesh`, binary STL bytes, every check):
 a torus (curved, not convex: 250 × 100 sections, 50 000 triangles) and a box split into 65 × 65
 squares a face (flat faces whose closest points fall on shared edges and vertices: 50 700
@@ -106,7 +106,7 @@ def run(quick: bool) -> Section:
     rows: list[dict] = []
     lines = [
         "Closest-point query, sphere (locator tip centre) to a part of about 5·10⁴ triangles, from Python; "
-        f"target ≤ {TARGET_US:.0f} µs (issue 23 §6). Error: largest difference from the Python reference "
+        f"target ≤ {TARGET_US:.0f} µs. Error: largest difference from the Python reference "
         "(coal's BVH, Ericson's regions in Python) over distance, point and normal.",
         "",
         "| part | queries | call | mean [µs] | p50 [µs] | p95 [µs] | target | max error vs reference | reference mean [µs] |",

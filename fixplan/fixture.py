@@ -413,10 +413,22 @@ class _Builder:
             shape = Cylinder(wp.radius, wp.length)  # type: ignore[arg-type]
         elif wp.shape == "mesh":
             from fixplan.geometry.mesh import MeshError
+            from fixplan.geometry.step import STEP_SUFFIXES
             from fixplan.mesh_file import load_mesh_file
 
+            step = Path(wp.file or "").suffix.lower() in STEP_SUFFIXES
+            if step and wp.units is not None:
+                raise FixtureError(
+                    self.source,
+                    [Issue("workpiece.units", "not used for a STEP file, which states its own unit (remove it)")],
+                )
+            if not step and wp.tolerance is not None:
+                raise FixtureError(
+                    self.source,
+                    [Issue("workpiece.tolerance", "only used for a STEP file's tessellation (remove it)")],
+                )
             try:
-                shape = load_mesh_file(wp.file or "", self.base_dir, units=wp.units or "m")
+                shape = load_mesh_file(wp.file or "", self.base_dir, units=wp.units or "m", tolerance_m=wp.tolerance)
             except MeshError as exc:
                 raise FixtureError(self.source, [Issue("workpiece.file", str(exc))]) from None
         else:

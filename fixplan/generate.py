@@ -984,6 +984,7 @@ def _mesh_part(
         return "the part is too small for its walls"
     t = int(rng.integers(MESH_WALL_MM[0], thickest + 1))
     m = 1.0  # [mm] a tip's clearance from the edges of a concave face
+    dims: dict[str, Any]
     if kind == "l-bracket":
         cells = l_bracket_cells(float(a), float(b), float(c), float(t))
         dims = {"length_mm": a, "width_mm": b, "height_mm": c, "thickness_mm": t}

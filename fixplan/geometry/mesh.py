@@ -113,6 +113,31 @@ def parse_mesh(
         raise MeshError(
             f"no triangles: not a {file_type.upper()} mesh, or an empty one (expected a closed triangle mesh)"
         )
+    return mesh_from_triangles(vertices, faces, units=units, settings=settings, max_triangles=max_triangles)
+
+
+def mesh_from_triangles(
+    vertices: FloatArray,
+    faces: IntArray,
+    *,
+    units: str = "m",
+    settings: MeshSettings = DEFAULT.mesh,
+    max_triangles: int | None = None,
+    read_notes: tuple[str, ...] = (),
+) -> Mesh:
+    """A checked :class:`Mesh` from triangles (a parsed file's, or a tessellated STEP part's): checks 2–7 of the module docstring.
+
+    ``read_notes`` come first in the mesh's ``notes`` (what reading did, e.g. the tessellation).
+
+    Raises
+    ------
+    MeshError
+        The triangles are not a closed, manifold surface free of self-intersections, or none is usable.
+    """
+    vertices = np.asarray(vertices, dtype=float).reshape(-1, 3)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if faces.shape[0] == 0:
+        raise MeshError("no triangles (expected a closed triangle mesh)")
     if max_triangles is not None and faces.shape[0] > max_triangles:
         raise MeshError(f"{faces.shape[0]} triangles (expected at most {max_triangles})")
     if not np.all(np.isfinite(vertices)):
@@ -121,7 +146,7 @@ def parse_mesh(
     if used.size and (used.min() < 0 or used.max() >= vertices.shape[0]):
         raise MeshError("a triangle refers to a vertex that does not exist")
     vertices = vertices * UNITS_M[units]
-    notes: list[str] = []
+    notes = list(read_notes)
     vertices, faces = _merge_vertices(vertices, faces)
     faces, dropped = _drop_degenerate(vertices, faces, settings)
     if faces.shape[0] == 0:
@@ -876,6 +901,7 @@ __all__ = [
     "closest_on_triangles",
     "declared_stl_triangles",
     "mass_properties",
+    "mesh_from_triangles",
     "parse_mesh",
     "stl_bytes",
 ]
