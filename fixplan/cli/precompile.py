@@ -7,7 +7,8 @@ first command a user runs after installing starts warm.
 
 It runs the commands themselves, in this process and on small inputs: ``solve`` and
 ``classify`` on the bundled default fixture, ``simulate`` in 3D (compiled loop and per-step
-stepping) and 2D, ``map`` and the FCLib solvers (``auto`` and each method) on small problems.
+stepping) and 2D, ``map`` and the FCLib solvers (``auto`` and each method) on small problems,
+and a mesh part's AABB tree and point queries.
 Running the real code paths compiles exactly the signatures (argument types and layouts) that
 later runs look up; a hand-written list of signatures would drift from the code.
 
