@@ -124,3 +124,14 @@ def test_the_tree_holds_every_triangle_once_and_boxes_hold_their_children() -> N
         else:
             for child in (left, right):
                 assert np.all(boxes[child, :3] >= lo) and np.all(boxes[child, 3:] <= hi)
+
+
+def test_a_point_that_is_not_finite_is_refused() -> None:
+    from fixplan.geometry.mesh import MeshError
+
+    mesh = torus(8, 6)
+    for bad in ([np.nan, 0.0, 0.0], [0.0, np.inf, 0.0]):
+        with pytest.raises(MeshError, match="finite point"):
+            mesh.contacts(np.array(bad))
+    with pytest.raises(MeshError, match="band"):
+        mesh.contacts(np.zeros(3), band_m=-1.0)

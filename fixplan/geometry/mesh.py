@@ -661,6 +661,8 @@ class Mesh(Shape):
         """
         x, y, z = np.asarray(p_body, dtype=float).reshape(3).tolist()
         band = float(self.settings.contact_band_m if band_m is None else band_m)
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and math.isfinite(band) and band >= 0.0):
+            raise MeshError(f"a point query needs a finite point and band ≥ 0, got {[x, y, z]} and {band}")
         arrays = self._kernel_arrays
         out = np.empty((4, 7))
         found = _contacts_kernel()(x, y, z, band, self._same_m, *arrays, out)
