@@ -76,6 +76,7 @@ import numpy as np
 
 from fixplan import twins
 from fixplan.errors import FixtureError, InfeasibleError, InputError
+from fixplan.files import write_output
 from fixplan.fixture import loads, parse_toml
 from fixplan.geometry import Box, Polygon, Rectangle
 from fixplan.geometry.cells import (
@@ -270,8 +271,12 @@ def _first_valid(
         files = tuple((f"{name}{suffix}", data) for suffix, data in draft.files)
         if files:
             draft.shape["file"] = files[0][0]
-        for file_name, data in files:
-            (folder / file_name).write_bytes(data)
+        for file_name, data in files:  # beside the text, for the loader's checks
+
+            def write_file(path: Path, data: bytes = data) -> None:
+                path.write_bytes(data)
+
+            write_output(folder / file_name, write_file)
         body = _render(name, draft)
         try:
             fixture = loads(body, source=name, base_dir=folder)

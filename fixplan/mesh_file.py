@@ -17,10 +17,11 @@ The bytes then go to :func:`fixplan.geometry.mesh.parse_mesh`, which checks the 
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 from fixplan import limits
-from fixplan.files import UnreadableFile, open_user_file
+from fixplan.files import UnreadableFile, open_user_file, write_output
 from fixplan.geometry.mesh import MESH_SUFFIXES, STL_HEADER_BYTES, Mesh, MeshError, declared_stl_triangles, parse_mesh
 from fixplan.settings import DEFAULT, MeshSettings
 
@@ -145,7 +146,10 @@ def _step_mesh(file: str, data: bytes, settings: MeshSettings, tolerance_m: floa
     from fixplan.geometry.step import step_triangles, tessellation_note
 
     try:
-        vertices, faces = step_triangles(data, tolerance_m, settings.step_angular_rad)
+        with tempfile.TemporaryDirectory(prefix="fixplan-step-") as folder:
+            copy = Path(folder) / "part.step"  # the bytes read under the limits, not the user's path
+            write_output(copy, lambda path: path.write_bytes(data))
+            vertices, faces = step_triangles(copy, tolerance_m, settings.step_angular_rad)
     except MeshError as exc:
         raise MeshError(f"{file!r} {exc}") from None
     if faces.shape[0] > limits.MAX_MESH_TRIANGLES:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -146,7 +145,11 @@ def generate(
     fixtures = run(family, count, seed, rotate_world=rotate_world, floor=floor)
     for target, fx in zip(targets, fixtures, strict=True):
         for file_name, data in fx.files:  # the mesh first: a fixture is never written without its file
-            write_output(out / file_name, _bytes_writer(data))
+
+            def write_file(path: Path, data: bytes = data) -> None:
+                path.write_bytes(data)
+
+            write_output(out / file_name, write_file)
         write_text(target, fx.toml_text)
     if json_out:
         files = [
@@ -166,11 +169,6 @@ def generate(
             f"wrote {count} {family} fixtures{with_meshes} (seed {seed}){where} to {out}: "
             f"{targets[0].name} .. {targets[-1].name}"
         )
-
-
-def _bytes_writer(data: bytes) -> Callable[[Path], int]:
-    """A :func:`~fixplan.files.write_output` writer of ``data``."""
-    return lambda path: path.write_bytes(data)
 
 
 @app.command()

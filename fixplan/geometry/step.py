@@ -22,7 +22,6 @@ import contextlib
 import math
 import os
 import sys
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -76,12 +75,13 @@ def _quiet() -> Iterator[None]:
     sys.stdout.flush()
     sys.stderr.flush()
     saved = [os.dup(1), os.dup(2)]
+    sink = os.open(os.devnull, os.O_WRONLY)
     try:
-        with open(os.devnull, "wb") as sink:
-            os.dup2(sink.fileno(), 1)
-            os.dup2(sink.fileno(), 2)
-            yield
+        os.dup2(sink, 1)
+        os.dup2(sink, 2)
+        yield
     finally:
+        os.close(sink)
         os.dup2(saved[0], 1)
         os.dup2(saved[1], 2)
         for fd in saved:
@@ -97,8 +97,11 @@ def step_available() -> bool:
     return True
 
 
-def step_triangles(data: bytes, tolerance_m: float, angular_rad: float) -> tuple[FloatArray, IntArray]:
-    """``(vertices (n, 3) [m], faces (m, 3))`` of the STEP file's bytes, tessellated to ``tolerance_m``.
+def step_triangles(path: Path, tolerance_m: float, angular_rad: float) -> tuple[FloatArray, IntArray]:
+    """``(vertices (n, 3) [m], faces (m, 3))`` of the STEP file at ``path``, tessellated to ``tolerance_m``.
+
+    OpenCASCADE's reader takes a path: :func:`fixplan.mesh_file.load_mesh_file` reads the user's
+    file under the size limits and hands over a private copy of those bytes.
 
     ``angular_rad`` bounds the angle between neighbouring triangles' normals on a curved face
     (OpenCASCADE's angular deflection) as well.
@@ -110,9 +113,7 @@ def step_triangles(data: bytes, tolerance_m: float, angular_rad: float) -> tuple
         not a STEP file with a shape, or a face could not be triangulated.
     """
     occ = _occ()
-    with tempfile.TemporaryDirectory(prefix="fixplan-step-") as folder, _quiet():
-        path = Path(folder) / "part.step"  # the reader takes a path; the bytes were read under the limits
-        path.write_bytes(data)
+    with _quiet():
         reader = occ["STEPControl_Reader"]()
         readable = reader.ReadFile(str(path)) == occ["IFSelect_RetDone"]
         transferred = readable and reader.TransferRoots() > 0
