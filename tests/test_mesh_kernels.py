@@ -94,6 +94,21 @@ def test_a_tip_in_the_l_corner_gets_both_faces_and_matches_the_reference(rng: np
         assert_same_contacts(mesh.contacts(p), mesh.contacts_reference(p))
 
 
+def test_a_compiled_caller_gets_the_same_contacts_from_the_query_arrays(rng: np.random.Generator) -> None:
+    """The engine's way in: the kernel on :attr:`Mesh.query_arrays` (as a numba step would call it)."""
+    from fixplan.geometry import _mesh_kernels
+
+    mesh = Mesh(*cell_surface(*l_bracket_cells(0.1, 0.04, 0.06, 0.01)))
+    for p in rng.uniform(-0.01, 0.11, size=(50, 3)):
+        out = np.zeros((8, 7))
+        n = _mesh_kernels.contacts(*p.tolist(), 1e-6, mesh.same_point_m, *mesh.query_arrays, out)
+        want = mesh.contacts(p)
+        assert n == len(want)
+        for row, w in zip(out[:n], want, strict=True):
+            assert row[0] == w.distance and np.array_equal(row[1:4], w.point_body)
+            assert np.array_equal(row[4:7], w.normal_body)
+
+
 def test_more_contacts_than_the_first_buffer_holds() -> None:
     """The centre of a 12-triangle cube with a band of 1 m: one contact per face (6 > the 4 rows first tried)."""
     mesh = Mesh(*cell_surface(*box_cells((0.1, 0.1, 0.1), 1)))

@@ -677,6 +677,23 @@ class Mesh(Shape):
         """Two points this close are one [m] (``MeshSettings.same_point_rel`` of the part's size)."""
         return float(self.settings.same_point_rel * self._scale_m)
 
+    @property
+    def query_arrays(self) -> tuple[Any, ...]:
+        """The arrays a numba kernel passes to :func:`fixplan.geometry._mesh_kernels.contacts` after ``(px, py, pz, band, same)``.
+
+        In order (read-only, C-contiguous, built once per mesh): ``tri (m, 9)`` corners,
+        ``face_normals (m, 3)``, ``edge_normals (m, 9)`` (slots AB, BC, CA), ``vertex_normals (n, 3)``,
+        ``faces (m, 3)``, ``around`` (vertex → triangles, CSR offsets then indices), and the tree's
+        ``boxes (k, 6)``, ``nodes (k, 4)``, ``order (m,)``. ``same`` is :attr:`same_point_m`. A
+        compiled caller (the engine's step) queries the part without coming back to Python.
+        """
+        return self._kernel_arrays
+
+    @property
+    def same_point_m(self) -> float:
+        """Two closest points this close are one contact [m] (the kernel's ``same`` argument)."""
+        return self._same_m
+
     @functools.cached_property
     def _kernel_arrays(self) -> tuple[Any, ...]:
         """The compiled query's arrays (read-only, C-contiguous): triangles, pseudo-normals, the tree."""
