@@ -271,15 +271,17 @@ def _first_valid(
         files = tuple((f"{name}{suffix}", data) for suffix, data in draft.files)
         if files:
             draft.shape["file"] = files[0][0]
+        here = folder / f"draw-{draw}"  # each draw's own: a file the loader read is an input, never rewritten
+        here.mkdir(exist_ok=True)
         for file_name, data in files:  # beside the text, for the loader's checks
 
             def write_file(path: Path, data: bytes = data) -> None:
                 path.write_bytes(data)
 
-            write_output(folder / file_name, write_file)
+            write_output(here / file_name, write_file)
         body = _render(name, draft)
         try:
-            fixture = loads(body, source=name, base_dir=folder)
+            fixture = loads(body, source=name, base_dir=here)
         except FixtureError as exc:
             reason = f"the loader refused it: {exc.issues[0].key}: {exc.issues[0].message}"
             continue
@@ -297,7 +299,7 @@ def _first_valid(
             return GeneratedFixture(name, family, seed, index, params, text, draw, goal, files)
         R = twins.random_rotation(np.random.default_rng([seed, index, WORLD_STREAM]), draft.dimension)
         doc = twins.rotate_world(parse_toml(body, name), R)
-        problem = _check_twin(fixture, doc, name, folder)
+        problem = _check_twin(fixture, doc, name, here)
         if problem is not None:
             reason = problem
             continue
