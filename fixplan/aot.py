@@ -47,8 +47,9 @@ ENV = "FIXPLAN_KERNELS"  # "jit" forces numba's dispatchers
 
 # The kernels the solve paths call from Python (planning: the jamming classifier's NNLS and
 # the witness system, its Newton and fixed-point starts; verification: the engine's planar step
-# and its compiled loop, the spatial step and the haptic loop's spatial coupling). A 3D solve
-# that reached any of the last four through numba paid its start (about 0.8 s) in every process.
+# and its compiled loop, the spatial step and the haptic loop's spatial coupling; a mesh part's
+# AABB tree and point queries). A 3D solve that reached any of the spatial kernels through numba
+# paid its start (about 0.8 s) in every process.
 EXPORTS: tuple[tuple[str, str], ...] = (
     ("fixplan.engine.step", "step2"),
     ("fixplan.engine.step", "run2"),
@@ -58,6 +59,8 @@ EXPORTS: tuple[tuple[str, str], ...] = (
     ("fixplan.jamming._witness_kernels", "fixed_point"),
     ("fixplan.engine.step", "step3_into"),
     ("fixplan.haptics._kernels", "coupling3"),
+    ("fixplan.geometry._mesh_kernels", "build_tree"),
+    ("fixplan.geometry._mesh_kernels", "contacts"),
 )
 
 fallbacks: dict[str, int] = {}  # "module.name" -> calls that matched no compiled variant

@@ -80,13 +80,59 @@ def fixture_stamp(path: str | Path) -> dict[str, str]:
     """The keys by which a plan file names its fixture: ``fixture`` and ``fixture_sha256``.
 
     ``fixture`` is the path resolved to an absolute one (so that the plan can be verified from
-    any folder); ``fixture_sha256`` the SHA-256 of the file's bytes, so that an edited file is
-    noticed (:func:`fixture_of_plan`).
+    any folder); ``fixture_sha256`` the SHA-256 of the file's bytes, followed by its mesh file's
+    bytes for a mesh part (:func:`fixture_sha256`), so that an edited file is noticed
+    (:func:`fixture_of_plan`).
     """
-    from fixplan.files import file_sha256
-
     path = Path(path)
-    return {"fixture": str(path.resolve()), "fixture_sha256": file_sha256(path)}
+    return {"fixture": str(path.resolve()), "fixture_sha256": fixture_sha256(path)[0]}
+
+
+def fixture_sha256(path: Path) -> tuple[str, str | None]:
+    """``(SHA-256 hex, the mesh file's name or None)`` of a fixture: what a plan's ``fixture_sha256`` holds.
+
+    The SHA-256 of the fixture file's bytes; for a mesh part (``[workpiece] shape = "mesh"``),
+    of the fixture's bytes followed by its mesh file's bytes (``cat fixture.toml part.stl |
+    sha256sum``), so that a plan made on one mesh is not replayed on an edited one. A mesh file
+    that cannot be read (gone, outside the folder) adds a marker instead of its bytes: the
+    digest then differs from any made on a readable file. A fixture that is not valid TOML is
+    digested alone (loading it reports what is wrong).
+
+    Raises
+    ------
+    UnreadableFile
+        The fixture file itself cannot be read.
+    """
+    import hashlib
+    import tomllib
+
+    from fixplan.files import UnreadableFile, open_user_file
+    from fixplan.limits import MAX_FILE_BYTES
+
+    with open_user_file(path, expected="a fixture file", max_bytes=MAX_FILE_BYTES) as fh:
+        data = fh.read(MAX_FILE_BYTES + 1)
+    digest = hashlib.sha256(data)
+    try:
+        table = tomllib.loads(data.decode("utf-8-sig"))
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return digest.hexdigest(), None
+    workpiece = table.get("workpiece")
+    file = workpiece.get("file") if isinstance(workpiece, dict) and workpiece.get("shape") == "mesh" else None
+    if not isinstance(file, str):
+        return digest.hexdigest(), None
+    from fixplan import limits
+    from fixplan.geometry.mesh import MeshError
+    from fixplan.mesh_file import mesh_path
+
+    try:
+        with open_user_file(
+            mesh_path(file, path.parent), expected="a mesh file", max_bytes=limits.MAX_MESH_BYTES
+        ) as fh:
+            while chunk := fh.read(1 << 20):
+                digest.update(chunk)
+    except (MeshError, UnreadableFile, OSError):
+        digest.update(b"\0fixplan: the mesh file could not be read\0")
+    return digest.hexdigest(), file
 
 
 def fixture_of_plan(data: Any, plan: Path, given: Path | None) -> tuple[Path, str | None]:
@@ -106,7 +152,6 @@ def fixture_of_plan(data: Any, plan: Path, given: Path | None) -> tuple[Path, st
     from shlex import quote
 
     from fixplan.errors import InputError
-    from fixplan.files import file_sha256
 
     obj = data if isinstance(data, dict) else {}
     named, digest = obj.get("fixture"), obj.get("fixture_sha256")
@@ -116,7 +161,7 @@ def fixture_of_plan(data: Any, plan: Path, given: Path | None) -> tuple[Path, st
         raise InputError(f"{plan}: fixture_sha256: expected 64 lowercase hex digits, got {shorten(repr(digest))}")
     if given is not None:
         note = None
-        if digest is not None and given.is_file() and file_sha256(given) != digest:
+        if digest is not None and given.is_file() and fixture_sha256(given)[0] != digest:
             same = named is not None and Path(named).resolve() == given.resolve()
             was = "changed since the plan was made" if same else f"is not the fixture the plan was made for ({named})"
             note = f"warning: {given} {was}: verifying {plan} against it as it is now"
@@ -135,10 +180,11 @@ def fixture_of_plan(data: Any, plan: Path, given: Path | None) -> tuple[Path, st
             f"{plan}: the plan names the fixture {named}, which is not there (moved or deleted?): "
             "pass the fixture with --fixture FILE"
         )
-    if digest is not None and (now := file_sha256(found)) != digest:
+    if digest is not None and (now := fixture_sha256(found))[0] != digest:
+        what = f"the fixture {found}" if now[1] is None else f"the fixture {found} or its mesh file {now[1]!r}"
         raise InputError(
-            f"{plan}: the fixture {found} changed since the plan was made (SHA-256 {digest[:12]}… then, "
-            f"{now[:12]}… now): solve it again ('fixplan solve {quote(str(found))} --out {quote(str(plan))} --force'), "
+            f"{plan}: {what} changed since the plan was made (SHA-256 {digest[:12]}… then, {now[0][:12]}… now): "
+            f"solve it again ('fixplan solve {quote(str(found))} --out {quote(str(plan))} --force'), "
             f"or verify the plan against the file as it is now with --fixture {quote(str(found))}"
         )
     return found, None
@@ -367,10 +413,22 @@ class _Builder:
             shape = Cylinder(wp.radius, wp.length)  # type: ignore[arg-type]
         elif wp.shape == "mesh":
             from fixplan.geometry.mesh import MeshError
+            from fixplan.geometry.step import STEP_SUFFIXES
             from fixplan.mesh_file import load_mesh_file
 
+            step = Path(wp.file or "").suffix.lower() in STEP_SUFFIXES
+            if step and wp.units is not None:
+                raise FixtureError(
+                    self.source,
+                    [Issue("workpiece.units", "not used for a STEP file, which states its own unit (remove it)")],
+                )
+            if not step and wp.tolerance is not None:
+                raise FixtureError(
+                    self.source,
+                    [Issue("workpiece.tolerance", "only used for a STEP file's tessellation (remove it)")],
+                )
             try:
-                shape = load_mesh_file(wp.file or "", self.base_dir, units=wp.units or "m")
+                shape = load_mesh_file(wp.file or "", self.base_dir, units=wp.units or "m", tolerance_m=wp.tolerance)
             except MeshError as exc:
                 raise FixtureError(self.source, [Issue("workpiece.file", str(exc))]) from None
         else:

@@ -57,7 +57,7 @@ SHAPE_KEYS: dict[str, tuple[str, ...]] = {
     "mesh": ("file",),
 }
 # the keys a shape may have besides those (each with a default)
-SHAPE_OPTIONAL_KEYS: dict[str, tuple[str, ...]] = {"mesh": ("units",)}
+SHAPE_OPTIONAL_KEYS: dict[str, tuple[str, ...]] = {"mesh": ("units", "tolerance")}
 MESH_UNITS = ("m", "mm", "in")
 FACES = {
     "box": ("+x", "-x", "+y", "-y", "+z", "-z"),
@@ -572,11 +572,19 @@ class Workpiece(Table):
     )
     file: Annotated[str | None, Text(what="a mesh file path")] = Field(
         None,
-        description="Mesh: the file (STL binary or ASCII, OBJ, PLY), relative to the fixture file's folder and "
-        "inside it; a closed, manifold triangle mesh whose frame is the body frame.",
+        description="Mesh: the file (STL binary or ASCII, OBJ, PLY; STEP with the CAD extra), relative to the "
+        "fixture file's folder and inside it; a closed, manifold triangle mesh whose frame is the body frame.",
     )
     units: Annotated[str | None, Text(MESH_UNITS)] = Field(
-        None, description="Mesh: the unit of the file's coordinates, m | mm | in (default m)."
+        None,
+        description="Mesh: the unit of the file's coordinates, m | mm | in (default m; not for STEP, whose "
+        "file states its unit).",
+    )
+    tolerance: Annotated[float | None, Number("a chordal tolerance [m]", limits.STEP_TOLERANCE)] = Field(
+        None,
+        description="Mesh from a STEP file (.step, .stp; the CAD extra, pip install fixplan[cad]): the chordal "
+        "tolerance it is tessellated to, the largest distance between a triangle and the surface "
+        "(default 1e-4 m).",
     )
     mass: Annotated[float, Number("a mass [kg]", limits.MASS, exclusive_minimum=0.0)] = Field(
         description="The workpiece's mass."

@@ -45,6 +45,19 @@ plate-2d-free
     must hold the part there: ``max_torque`` ≥ ``HOLD_MARGIN`` × the weight's moment about the
     body origin (a polygon's origin is a corner; draws that cannot are redrawn).
 
+mesh-321
+    A CAD-like mesh part (``MESH_PARTS``: an L-bracket, a slotted block or a housing with a pocket,
+    a third each), whole-millimetre dimensions log-uniform in ``MESH_EXTENT_MM``, walls in
+    ``MESH_WALL_MM``, built by :mod:`fixplan.geometry.cells` and written as a binary STL in mm
+    beside the fixture (:attr:`GeneratedFixture.files`). B1, B2, B3 under the flat bottom, S1, S2
+    on the -y face, E1 on the face inside the concave region (the L's inner wall, a slot wall, the
+    pocket's inner wall; its outward normal +x): its centre is inside the convex hull, so the hull
+    would be wrong there. Goal: the file's frame, written in half the files (the loader finds it
+    on the real surface in the others). Start: slid off S (+y) and E1 (-x, within the slot or
+    pocket) and turned ±``MESH_TILT_DEG`` about z through the centre of mass, resting on B1, B2,
+    B3. Checked as box-321 (the goal found again from the start), and each locator touches one
+    face at the goal.
+
 The free families are checked on their goal known by construction (every gap 0 within
 ``EXACT_M``, rank-full ``G``), never by searching for it. ``rotate_world=True`` (``fixplan generate
 --rotate-world``) turns any family's fixture rigidly by :func:`fixplan.twins.random_rotation`.
@@ -53,17 +66,28 @@ The free families are checked on their goal known by construction (every gap 0 w
 from __future__ import annotations
 
 import math
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from fixplan import twins
 from fixplan.errors import FixtureError, InfeasibleError, InputError
+from fixplan.files import write_output
 from fixplan.fixture import loads, parse_toml
 from fixplan.geometry import Box, Polygon, Rectangle
+from fixplan.geometry.cells import (
+    cell_mass_properties,
+    cell_surface,
+    housing_cells,
+    l_bracket_cells,
+    slotted_block_cells,
+)
 from fixplan.geometry.collision import collision_points
+from fixplan.geometry.mesh import stl_bytes
 from fixplan.locating import contact_set, locator_gaps, solve_goal
 from fixplan.model import Fixture, Locator, Workpiece
 from fixplan.settings import DEFAULT
@@ -89,6 +113,19 @@ FAMILIES: dict[str, str] = {
         "locator and tilted up to 15 deg; goal written in half the rectangles and every polygon"
     ),
 }
+
+# Families whose fixtures come with a mesh file (GeneratedFixture.files): listed apart, since a
+# fixture of theirs loads only beside its mesh file.
+MESH_FAMILIES: dict[str, str] = {
+    "mesh-321": (
+        "3D CAD-like mesh parts (binary STL in mm, whole-mm dimensions): L-brackets, slotted blocks and "
+        "housings with a pocket, 30-200 mm, on 3 base, 2 side and 1 end locator, the end locator inside the "
+        "concave region (the L's inner wall, a slot wall, the pocket's inner wall); start slid 2-30 mm off the "
+        "side and end locators and turned up to 5 deg about z around the centre of mass, resting on the base; "
+        "goal written in half the files (the loader computes it on the real surface in the others)"
+    ),
+}
+ALL_FAMILIES: dict[str, str] = {**FAMILIES, **MESH_FAMILIES}
 
 # What the families draw from (the README lists them; tests/test_generate.py checks them).
 EDGE_M = (0.04, 0.40)  # box edges, plate width and height [m], log-uniform
@@ -117,6 +154,12 @@ AWAY_MIN_COSINE = 0.2  # the start displacement's direction cosine away from eac
 GOAL_WRITTEN_SHARE = 0.5  # share of free fixtures whose file states the goal (the others: the loader finds it)
 HOLD_MARGIN = 1.5  # free starts: max_torque ≥ this × the torque that holds the part still there (about the body origin)
 WORLD_STREAM = 1  # --rotate-world draws the rotation from default_rng([seed, index, WORLD_STREAM])
+MESH_PARTS = ("l-bracket", "slotted-block", "housing")  # mesh-321: one drawn per fixture, uniformly
+MESH_EXTENT_MM = (30, 200)  # mesh-321: outer dimensions, whole millimetres, log-uniform
+MESH_WALL_MM = (5, 20)  # mesh-321: the L's thickness, the housing's wall, whole millimetres
+MESH_TILT_DEG = (0.0, 5.0)  # mesh-321: start yaw magnitude about z through the centre of mass
+MESH_EDGE_MARGIN = 0.08  # mesh-321: locators this fraction of a face's extent in from its edges
+MESH_KIND_ATTEMPTS = 50  # mesh-321: draws of one part kind before the kind is drawn again
 FLOOR_BELOW_M = 0.01  # --floor: a collision-only floor this far below the part's lowest point at start and goal
 
 # Checks every generated file passes.
@@ -144,6 +187,9 @@ class GeneratedFixture:
     goal : dict
         The goal pose as the file would state it (``position`` and ``rpy_deg`` or ``angle_deg``),
         known by construction, also when the file leaves it out (free families).
+    files : tuple of (str, bytes)
+        Files the fixture names, to be written beside it: ``(name, bytes)`` (a mesh family's
+        mesh file, ``FAMILY-sSEED-NNN.stl``); empty for the other families.
     """
 
     name: str
@@ -154,6 +200,7 @@ class GeneratedFixture:
     toml_text: str
     draws: int
     goal: dict[str, Any] | None = None  # the located pose, known by construction, in the file's form
+    files: tuple[tuple[str, bytes], ...] = ()  # files the fixture names, written beside it
 
 
 def fixture_name(family: str, seed: int, index: int, *, rotate_world: bool = False) -> str:
@@ -163,8 +210,8 @@ def fixture_name(family: str, seed: int, index: int, *, rotate_world: bool = Fal
 
 def check_family(family: str) -> None:
     """Raise :class:`InputError` naming the known families when ``family`` is not one."""
-    if family not in FAMILIES:
-        raise InputError(f"unknown fixture family {family!r} (known: {', '.join(FAMILIES)})")
+    if family not in ALL_FAMILIES:
+        raise InputError(f"unknown fixture family {family!r} (known: {', '.join(ALL_FAMILIES)})")
 
 
 def generate(
@@ -199,15 +246,42 @@ def generate_one(
     _check_int(index, "index")
     name = fixture_name(family, seed, index, rotate_world=rotate_world)
     rng = np.random.default_rng([seed, index])
+    with tempfile.TemporaryDirectory(prefix="fixplan-generate-") as folder:
+        return _first_valid(family, seed, index, name, rng, Path(folder), rotate_world=rotate_world, floor=floor)
+
+
+def _first_valid(
+    family: str,
+    seed: int,
+    index: int,
+    name: str,
+    rng: np.random.Generator,
+    folder: Path,
+    *,
+    rotate_world: bool,
+    floor: bool,
+) -> GeneratedFixture:
+    """The first draw that passes every check (:func:`generate_one`); a draft's files are loaded from ``folder``."""
     reason = ""
     for draw in range(1, MAX_DRAWS + 1):
         draft = _DRAWS[family](rng)
         if isinstance(draft, str):
             reason = draft
             continue
+        files = tuple((f"{name}{suffix}", data) for suffix, data in draft.files)
+        if files:
+            draft.shape["file"] = files[0][0]
+        here = folder / f"draw-{draw}"  # each draw's own: a file the loader read is an input, never rewritten
+        here.mkdir(exist_ok=True)
+        for file_name, data in files:  # beside the text, for the loader's checks
+
+            def write_file(path: Path, data: bytes = data) -> None:
+                path.write_bytes(data)
+
+            write_output(here / file_name, write_file)
         body = _render(name, draft)
         try:
-            fixture = loads(body, source=name)
+            fixture = loads(body, source=name, base_dir=here)
         except FixtureError as exc:
             reason = f"the loader refused it: {exc.issues[0].key}: {exc.issues[0].message}"
             continue
@@ -222,10 +296,10 @@ def generate_one(
         body += extra
         if not rotate_world:
             text = head + (body if draft.goal_written else _render(name, draft, goal=False) + extra)
-            return GeneratedFixture(name, family, seed, index, params, text, draw, goal)
+            return GeneratedFixture(name, family, seed, index, params, text, draw, goal, files)
         R = twins.random_rotation(np.random.default_rng([seed, index, WORLD_STREAM]), draft.dimension)
         doc = twins.rotate_world(parse_toml(body, name), R)
-        problem = _check_twin(fixture, doc, name)
+        problem = _check_twin(fixture, doc, name, here)
         if problem is not None:
             reason = problem
             continue
@@ -239,7 +313,7 @@ def generate_one(
             "the goal, start and layout above are in the unrotated world; this file is that fixture turned by R."
         )
         text = twins.twin_text(head, doc, note)
-        return GeneratedFixture(name, family, seed, index, params, text, draw, goal)
+        return GeneratedFixture(name, family, seed, index, params, text, draw, goal, files)
     raise InfeasibleError(f"{name}: no draw passed the checks in {MAX_DRAWS} draws (last: {reason})")
 
 
@@ -267,6 +341,7 @@ class _Draft:
     check: Callable[[Fixture], str | None]  # the family's own geometric check of the loaded file
     free: bool = False  # the start is in free space (START_GAP_M) rather than resting
     goal_written: bool = True  # the file states the goal (free families: GOAL_WRITTEN_SHARE of them)
+    files: tuple[tuple[str, bytes], ...] = ()  # (suffix, bytes) of files the fixture names (a mesh)
 
 
 def _uniform(rng: np.random.Generator, lo: float, hi: float, decimals: int) -> float:
@@ -892,11 +967,233 @@ def _check_plate_free(fixture: Fixture) -> str | None:
     return None
 
 
+# -- mesh-321 ---------------------------------------------------------------------------------------
+
+
+def _mm(rng: np.random.Generator, lo: float, hi: float) -> int:
+    """A whole number of millimetres, log-uniform in [lo, hi]."""
+    return int(round(math.exp(float(rng.uniform(math.log(lo), math.log(hi))))))
+
+
+def _mesh_part(
+    rng: np.random.Generator, kind: str, rho_mm: float
+) -> tuple[tuple[Any, ...], dict[str, Any], dict[str, Any]] | str:
+    """``(cells in mm, the part's dimensions, its faces)`` of one drawn part, or why not.
+
+    The faces, in mm: ``footprint`` (x0, x1, y0, y1) of the bottom z = 0; ``side`` the y of the
+    -y face and the (x, z) ranges S1 and S2 are drawn in; ``concave`` the x of the face E1
+    touches (outward normal +x, inside the concave region), its y and z ranges, and ``room`` how
+    far a tip there can move along +x before it meets the part again.
+    """
+    a, b, c = (_mm(rng, *MESH_EXTENT_MM) for _ in range(3))
+    thickest = min(MESH_WALL_MM[1], min(a, b, c) // 4)  # walls at most a quarter of the part
+    if thickest < MESH_WALL_MM[0]:
+        return "the part is too small for its walls"
+    t = int(rng.integers(MESH_WALL_MM[0], thickest + 1))
+    m = 1.0  # [mm] a tip's clearance from the edges of a concave face
+    dims: dict[str, Any]
+    if kind == "l-bracket":
+        cells = l_bracket_cells(float(a), float(b), float(c), float(t))
+        dims = {"length_mm": a, "width_mm": b, "height_mm": c, "thickness_mm": t}
+        faces = {
+            "footprint": (0.0, a, 0.0, b),
+            "side": (
+                0.0,
+                [
+                    ((t + 0.1 * (a - t), a - 0.1 * (a - t)), (0.3 * t, 0.7 * t)),
+                    ((0.3 * t, 0.7 * t), (t + 0.2 * (c - t), c - 0.1 * (c - t))),
+                ],
+            ),
+            "concave": (
+                float(t),
+                (0.15 * b, 0.85 * b),
+                (t + rho_mm + m + 0.1 * (c - t), c - m - 0.1 * (c - t)),
+                math.inf,
+            ),
+        }
+    elif kind == "slotted-block":
+        narrowest = max(8, math.ceil(2 * rho_mm) + 6)
+        if a // 3 < narrowest:
+            return "the block is too short for a slot the tip fits in"
+        w = int(rng.integers(narrowest, a // 3 + 1))
+        d = int(rng.integers(max(4, c // 4), max(5, c // 2) + 1))
+        if d < rho_mm + 2 * m + 2:
+            return "the slot is too shallow for the tip"
+        cells = slotted_block_cells((float(a), float(b), float(c)), float(w), float(d))
+        dims = {"size_mm": [a, b, c], "slot_width_mm": w, "slot_depth_mm": d}
+        faces = {
+            "footprint": (-a / 2, a / 2, -b / 2, b / 2),
+            "side": (
+                -b / 2,
+                [
+                    ((-0.45 * a, -w / 2 - 0.1 * a), (0.2 * c, 0.8 * c)),
+                    ((w / 2 + 0.1 * a, 0.45 * a), (0.2 * c, 0.8 * c)),
+                ],
+            ),
+            "concave": (-w / 2, (-0.35 * b, 0.35 * b), (c - d + rho_mm + m, c - m), w - 2 * rho_mm),
+        }
+    else:  # housing
+        d = int(rng.integers(max(4, c // 3), max(5, 2 * c // 3) + 1))
+        if 2 * t + 2 * rho_mm + 10 > min(a, b) or d < rho_mm + 2 * m + 2 or c - d < 3:
+            return "the pocket is too small for the tip, or the floor too thin"
+        cells = housing_cells((float(a), float(b), float(c)), float(t), float(d))
+        dims = {"size_mm": [a, b, c], "wall_mm": t, "pocket_depth_mm": d}
+        inner = b / 2 - t - rho_mm - m
+        faces = {
+            "footprint": (-a / 2, a / 2, -b / 2, b / 2),
+            "side": (-b / 2, [((-0.4 * a, -0.1 * a), (0.2 * c, 0.8 * c)), ((0.1 * a, 0.4 * a), (0.2 * c, 0.8 * c))]),
+            "concave": (-a / 2 + t, (-0.7 * inner, 0.7 * inner), (c - d + rho_mm + m, c - m), a - 2 * t - 2 * rho_mm),
+        }
+    return cells, dims, faces
+
+
+def _draw_mesh(rng: np.random.Generator) -> _Draft | str:
+    """A part kind, then up to :data:`MESH_KIND_ATTEMPTS` draws of that kind (the kinds stay about equally likely)."""
+    kind = MESH_PARTS[int(rng.integers(len(MESH_PARTS)))]
+    reason = ""
+    for _ in range(MESH_KIND_ATTEMPTS):
+        draft = _draw_mesh_kind(rng, kind)
+        if not isinstance(draft, str):
+            return draft
+        reason = draft
+    return reason
+
+
+def _draw_mesh_kind(rng: np.random.Generator, kind: str) -> _Draft | str:
+    rho = _uniform(rng, *TIP_RADIUS_M, 4)
+    drawn = _mesh_part(rng, kind, 1e3 * rho)
+    if isinstance(drawn, str):
+        return drawn
+    cells, dims, faces = drawn
+    volume_mm3, com_mm, _ = cell_mass_properties(*cells)
+    density = round(_log_uniform(rng, *DENSITY_KG_M3, 0))
+    mass = _sig(density * volume_mm3 * 1e-9, 4)
+    mu, varied, mus = _frictions(rng, 6)
+    soft = bool(rng.random() < 0.5)
+    torsion = _uniform(rng, *TORSION_M, 4) if soft else 0.0
+    x0, x1, y0, y1 = (1e-3 * v for v in faces["footprint"])
+    face_x, e_y, e_z, room = faces["concave"]
+    # the start: slid off S (+y) and off E1 (its face's normal is +x: -x), turned about the centre of mass
+    cap_x = _offset_cap(x1 - x0)
+    if math.isfinite(room):  # a slot or a pocket: the tip must not reach the opposite wall
+        cap_x = min(cap_x, math.floor((1e-3 * room - 0.001) * 1e4) / 1e4)
+    if cap_x < OFFSET_M[0]:
+        return "no room to slide the part off E1 inside the concave region"
+    dx = -_uniform(rng, OFFSET_M[0], cap_x, 4)
+    dy = _uniform(rng, OFFSET_M[0], _offset_cap(y1 - y0), 4)
+    tilt = _uniform(rng, *MESH_TILT_DEG, 2)
+    yaw = tilt if rng.random() < 0.5 else -tilt
+    # base locators under the bottom at both poses (the footprints' overlap, 8 % in from its edges)
+    lo_x, hi_x = x0 + MESH_EDGE_MARGIN * (x1 - x0), x1 + dx - MESH_EDGE_MARGIN * (x1 - x0)
+    lo_y, hi_y = y0 + dy + MESH_EDGE_MARGIN * (y1 - y0), y1 - MESH_EDGE_MARGIN * (y1 - y0)
+
+    def base(u: tuple[float, float], v: tuple[float, float]) -> tuple[float, float]:
+        x = _uniform(rng, lo_x + u[0] * (hi_x - lo_x), lo_x + u[1] * (hi_x - lo_x), 4)
+        y = _uniform(rng, lo_y + v[0] * (hi_y - lo_y), lo_y + v[1] * (hi_y - lo_y), 4)
+        return x, y
+
+    com = 1e-3 * np.asarray(com_mm, dtype=float)
+    middle = float(np.clip((com[0] + 0.5 * dx - lo_x) / (hi_x - lo_x), 0.2, 0.8))  # B3 about under the mass
+    b1, b2 = base((0.0, 0.15), (0.0, 0.2)), base((0.85, 1.0), (0.0, 0.2))
+    b3 = base((middle - 0.1, middle + 0.1), (0.8, 1.0))
+    tri = np.array([b1, b2, b3])
+    need = 0.05 * min(x1 - x0, y1 - y0)
+    for centre in (com[:2], com[:2] + np.array([dx, dy])):
+        if _triangle_margin(centre, tri) < need:
+            return "the base triangle does not hold the centre of mass with a margin"
+    side_y, side_boxes = faces["side"]
+    (s1x, s1z), (s2x, s2z) = side_boxes
+    s1 = (_uniform(rng, 1e-3 * s1x[0], 1e-3 * s1x[1], 4), _uniform(rng, 1e-3 * s1z[0], 1e-3 * s1z[1], 4))
+    s2 = (_uniform(rng, 1e-3 * s2x[0], 1e-3 * s2x[1], 4), _uniform(rng, 1e-3 * s2z[0], 1e-3 * s2z[1], 4))
+    if e_z[1] <= e_z[0] or e_y[1] <= e_y[0]:
+        return "the concave face has no room for the tip"
+    e1 = (_uniform(rng, 1e-3 * e_y[0], 1e-3 * e_y[1], 4), _uniform(rng, 1e-3 * e_z[0], 1e-3 * e_z[1], 4))
+    spots = {
+        "B1": [b1[0], b1[1], -rho],
+        "B2": [b2[0], b2[1], -rho],
+        "B3": [b3[0], b3[1], -rho],
+        "S1": [s1[0], 1e-3 * side_y - rho, s1[1]],
+        "S2": [s2[0], 1e-3 * side_y - rho, s2[1]],
+        "E1": [1e-3 * face_x + rho, e1[0], e1[1]],
+    }
+    locators = []
+    for (name, position), mu_i in zip(spots.items(), mus, strict=True):
+        entry: dict[str, Any] = {"name": name, "position": position, "radius": rho, "friction": mu_i}
+        if soft:
+            entry["torsion"] = torsion
+        locators.append(entry)
+    R = matrix_from_rpy(np.radians([0.0, 0.0, yaw]))
+    start_p = com + np.array([dx, dy, 0.0]) - R @ com
+    weight = mass * GRAVITY_M_S2
+    half_diagonal = 0.5e-3 * math.sqrt(sum(float(np.ptp(np.asarray(g))) ** 2 for g in cells[:3]))
+    kf, kt, max_force, max_torque = _hand(rng, weight, half_diagonal)
+    written = bool(rng.random() < GOAL_WRITTEN_SHARE)
+    params = {
+        "part": kind,
+        **dims,
+        "density_kg_m3": density,
+        "mass_kg": mass,
+        "tip_radius_m": rho,
+        "friction": mu,
+        "friction_per_locator": varied,
+        "soft_fingers": soft,
+        "torsion_m": torsion,
+        "offset_m": [dx, dy],
+        "yaw_deg": yaw,
+        "force_per_weight": kf,
+        "torque_per_weight_lever": kt,
+        "goal_in_file": written,
+    }
+    concave = {"l-bracket": "the L's inner wall", "slotted-block": "a slot wall", "housing": "the pocket's inner wall"}
+    story = [
+        f"Part: a {kind.replace('-', ' ')} ({', '.join(f'{k} {v}' for k, v in dims.items())}), binary STL in mm; "
+        "goal: the file's frame (the identity pose).",
+        f"E1 touches {concave[kind]} (x = {1e-3 * face_x:g} m, normal +x), inside the part's concave region.",
+        f"Start: slid by ({dx * 1e3:g}, {dy * 1e3:g}) mm off E1, S1 and S2 and turned {yaw:g} deg about z through "
+        "the centre of mass, resting flat on B1, B2, B3 (gap 0).",
+        *(["The file leaves the goal out: the loader computes it on the real surface."] if not written else []),
+    ]
+    V_mm, F = cell_surface(*cells)
+    return _Draft(
+        dimension=3,
+        shape={"shape": "mesh", "file": "", "units": "mm"},
+        mass_kg=mass,
+        start={"position": [float(v) for v in start_p], "rpy_deg": [0.0, 0.0, yaw]},
+        goal={"position": [0.0, 0.0, 0.0], "rpy_deg": [0.0, 0.0, 0.0]},
+        locators=locators,
+        max_force_N=max_force,
+        max_torque_Nm=max_torque,
+        params=params,
+        resting=("B1", "B2", "B3"),
+        story=story,
+        check=_check_mesh,
+        goal_written=written,
+        files=((".stl", stl_bytes(V_mm, F)),),
+    )
+
+
+def _check_mesh(fixture: Fixture) -> str | None:
+    """Each locator touches one face at the goal; E1's centre is inside the part's convex hull (a concave region)."""
+    from scipy.spatial import ConvexHull
+
+    shape = fixture.workpiece.shape
+    for loc in fixture.locators:
+        found = shape.contacts(fixture.goal.point_body_from_world(loc.p_world))  # type: ignore[attr-defined]
+        if len(found) != 1:
+            return f"{loc.name} touches {len(found)} faces at the goal (expected one)"
+    hull = ConvexHull(np.asarray(shape.vertices))  # type: ignore[attr-defined]
+    e1 = fixture.goal.point_body_from_world(fixture.locator("E1").p_world)
+    if float(np.max(hull.equations[:, :3] @ e1 + hull.equations[:, 3])) >= 0.0:
+        return "E1 is not inside the part's concave region (its centre is outside the convex hull)"
+    return None
+
+
 _DRAWS: dict[str, Callable[[np.random.Generator], _Draft | str]] = {
     "box-321": _draw_box,
     "plate-2d": _draw_plate,
     "box-321-free": _draw_box_free,
     "plate-2d-free": _draw_plate_free,
+    "mesh-321": _draw_mesh,
 }
 
 
@@ -949,10 +1246,10 @@ def _check_free(fixture: Fixture, draft: _Draft) -> str | None:
     return draft.check(fixture)
 
 
-def _check_twin(fixture: Fixture, doc: dict[str, Any], name: str) -> str | None:
+def _check_twin(fixture: Fixture, doc: dict[str, Any], name: str, folder: Path) -> str | None:
     """Why the rotated document is not the same fixture (gaps at the start and the goal), or None."""
     try:
-        twin = loads(twins.fixture_toml(doc), source=name)
+        twin = loads(twins.fixture_toml(doc), source=name, base_dir=folder)
     except FixtureError as exc:
         return f"the loader refused the rotated fixture: {exc.issues[0].key}: {exc.issues[0].message}"
     for a, b in ((fixture.start, twin.start), (fixture.goal, twin.goal)):
@@ -1020,7 +1317,7 @@ def _header(
     lines = [
         f"{name}: generated by `fixplan generate {family} --seed {seed}{' --rotate-world' if rotated else ''}` "
         f"(fixture index {index}).",
-        f"Family {family}: {FAMILIES[family]}.",
+        f"Family {family}: {ALL_FAMILIES[family]}.",
         f"Drawn from numpy.random.default_rng([{seed}, {index}]), draw {draw} "
         f"({draw - 1} earlier draws failed a check and were replaced).",
         *draft.story,

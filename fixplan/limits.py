@@ -67,6 +67,7 @@ ANGLE = Range("an angle", "deg", -360.0, 360.0)
 TIP_RADIUS = Range("a tip radius", "m", 0.0, 1.0)
 TORSION = Range("a torsional radius", "m", 0.0, 1.0)
 FRICTION = Range("a friction coefficient", "", 0.0, 10.0)
+STEP_TOLERANCE = Range("a chordal tolerance", "m", 1e-6, 1e-2)  # a STEP part's tessellation (workpiece.tolerance)
 NORMAL = Range("a normal component", "", -1e300, 1e300)  # any finite direction; normalised on load
 MAX_FORCE = Range("a force", "N", 1e-6, FORCE_MAX_N)
 MAX_TORQUE = Range("a torque", "N·m", 1e-9, TORQUE_MAX_NM)
@@ -122,6 +123,7 @@ ALL: dict[str, Range] = {
     "locator.radius": TIP_RADIUS,
     "torsion": TORSION,
     "friction": FRICTION,
+    "workpiece.tolerance (a STEP part's tessellation)": STEP_TOLERANCE,
     "manipulator.max_force": MAX_FORCE,
     "manipulator.max_torque": MAX_TORQUE,
     "simulation.timestep, --dt": TIMESTEP,

@@ -17,10 +17,11 @@ The bytes then go to :func:`fixplan.geometry.mesh.parse_mesh`, which checks the 
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 from fixplan import limits
-from fixplan.files import UnreadableFile, open_user_file
+from fixplan.files import UnreadableFile, open_user_file, write_output
 from fixplan.geometry.mesh import MESH_SUFFIXES, STL_HEADER_BYTES, Mesh, MeshError, declared_stl_triangles, parse_mesh
 from fixplan.settings import DEFAULT, MeshSettings
 
@@ -63,28 +64,38 @@ def declared_elements(data: bytes, kind: str) -> int | None:
     return None
 
 
-def load_mesh_file(file: str, base_dir: Path, *, units: str = "m", settings: MeshSettings = DEFAULT.mesh) -> Mesh:
+def load_mesh_file(
+    file: str,
+    base_dir: Path,
+    *,
+    units: str = "m",
+    settings: MeshSettings = DEFAULT.mesh,
+    tolerance_m: float | None = None,
+) -> Mesh:
     """The checked mesh of a fixture's ``workpiece.file`` (module docstring); its ``notes`` say what was repaired.
+
+    A STEP file (``.step``, ``.stp``) is tessellated to ``tolerance_m`` (default
+    ``settings.step_tolerance_m``) by the optional CAD extra (:mod:`fixplan.geometry.step`); its
+    coordinates come in the unit the file states, so ``units`` is not used for it.
 
     Raises
     ------
     MeshError
         One line saying why the file cannot be the part: where it is, what it is, how large, or
-        what is wrong with the mesh.
+        what is wrong with the mesh (a STEP file without the extra: how to install it).
     """
+    from fixplan.geometry.step import STEP_SUFFIXES
+
     path = mesh_path(file, base_dir)
     suffix = path.suffix.lower()
-    if suffix in (".step", ".stp"):
+    step = suffix in STEP_SUFFIXES
+    if not step and suffix not in MESH_SUFFIXES:
         raise MeshError(
-            f"{file!r} is a STEP file: STEP parts are not read yet (expected a mesh file: {', '.join(MESH_SUFFIXES)}; "
-            "export the part as STL from the CAD tool)"
+            f"{file!r} has the suffix {suffix or '(none)'!r} (expected a mesh file: "
+            f"{', '.join(MESH_SUFFIXES)}; or {', '.join(STEP_SUFFIXES)} with {_step_hint()})"
         )
-    if suffix not in MESH_SUFFIXES:
-        raise MeshError(
-            f"{file!r} has the suffix {suffix or '(none)'!r} (expected a mesh file: {', '.join(MESH_SUFFIXES)})"
-        )
-    kind = MESH_SUFFIXES[suffix]
-    expected = f"a {kind.upper()} mesh file"
+    kind = "step" if step else MESH_SUFFIXES[suffix]
+    expected = "a STEP file" if step else f"a {kind.upper()} mesh file"
     try:
         with open_user_file(path, expected=expected, max_bytes=limits.MAX_MESH_BYTES) as fh:
             size = os.fstat(fh.fileno()).st_size
@@ -108,7 +119,10 @@ def load_mesh_file(file: str, base_dir: Path, *, units: str = "m", settings: Mes
         raise MeshError(
             f"{file!r} declares {declared} faces or vertices (expected at most {limits.MAX_MESH_TRIANGLES} triangles)"
         )
-    mesh = parse_mesh(data, kind, units=units, settings=settings, max_triangles=limits.MAX_MESH_TRIANGLES)
+    if step:
+        mesh = _step_mesh(file, data, settings, settings.step_tolerance_m if tolerance_m is None else tolerance_m)
+    else:
+        mesh = parse_mesh(data, kind, units=units, settings=settings, max_triangles=limits.MAX_MESH_TRIANGLES)
     extent = float((mesh.vertices.max(axis=0) - mesh.vertices.min(axis=0)).max())
     farthest = float(abs(mesh.vertices).max())
     if not limits.SIZE.contains(extent) or farthest > limits.LENGTH_MAX_M:
@@ -118,6 +132,33 @@ def load_mesh_file(file: str, base_dir: Path, *, units: str = "m", settings: Mes
             f"{limits.SIZE.expected()} across, within {limits.LENGTH_MAX_M:g} m of the origin){hint}"
         )
     return mesh
+
+
+def _step_hint() -> str:
+    from fixplan.geometry.step import INSTALL_HINT
+
+    return f"the CAD extra: {INSTALL_HINT}"
+
+
+def _step_mesh(file: str, data: bytes, settings: MeshSettings, tolerance_m: float) -> Mesh:
+    """The checked mesh of a STEP file's bytes, tessellated to ``tolerance_m`` (:mod:`fixplan.geometry.step`)."""
+    from fixplan.geometry.mesh import mesh_from_triangles
+    from fixplan.geometry.step import step_triangles, tessellation_note
+
+    try:
+        with tempfile.TemporaryDirectory(prefix="fixplan-step-") as folder:
+            copy = Path(folder) / "part.step"  # the bytes read under the limits, not the user's path
+            write_output(copy, lambda path: path.write_bytes(data))
+            vertices, faces = step_triangles(copy, tolerance_m, settings.step_angular_rad)
+    except MeshError as exc:
+        raise MeshError(f"{file!r} {exc}") from None
+    if faces.shape[0] > limits.MAX_MESH_TRIANGLES:
+        raise MeshError(
+            f"{file!r} tessellates to {faces.shape[0]} triangles at a tolerance of {tolerance_m:g} m "
+            f"(expected at most {limits.MAX_MESH_TRIANGLES}: a coarser workpiece.tolerance)"
+        )
+    note = tessellation_note(tolerance_m, settings.step_angular_rad, int(faces.shape[0]))
+    return mesh_from_triangles(vertices, faces, settings=settings, read_notes=(note,))
 
 
 __all__ = ["declared_elements", "load_mesh_file", "mesh_path"]

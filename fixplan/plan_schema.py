@@ -754,7 +754,9 @@ class PlanFile(JsonObject):
 
     what: ClassVar[str] = "the JSON object written by 'fixplan solve --out'"
     fixture: Annotated[str | None, Str(what="the fixture file's path")] = Field(None, description="Its fixture.")
-    fixture_sha256: Annotated[str | None, Sha256()] = Field(None, description="SHA-256 of the fixture's bytes.")
+    fixture_sha256: Annotated[str | None, Sha256()] = Field(
+        None, description="SHA-256 of the fixture's bytes (a mesh part: followed by its mesh file's bytes)."
+    )
     status: Annotated[str, Str(PLAN_STATUSES)] = Field(description="planned, unverified or infeasible.")
     reason: Annotated[str, Str()] = Field("", description="Why not planned, or a note.")
     sequence: tuple[Annotated[tuple[str, ...], Locators()], ...] = Field((), description="The contact states.")
@@ -789,7 +791,9 @@ class RecordingFile(JsonObject):
     fixture: Annotated[str, Str(what="the path of the fixture the session ran on")] = Field(
         description="The fixture file the session ran on."
     )
-    fixture_sha256: Annotated[str | None, Sha256()] = Field(None, description="SHA-256 of the fixture's bytes.")
+    fixture_sha256: Annotated[str | None, Sha256()] = Field(
+        None, description="SHA-256 of the fixture's bytes (a mesh part: followed by its mesh file's bytes)."
+    )
     status: Annotated[str, Str(SESSION_STATUSES)] = Field(description="How the session ended.")
     reason: Annotated[str, Str()] = Field("", description="Why.")
     where: Annotated[Any, AnyObject(nullable=True)] = Field(None, description="Where it ended.")

@@ -786,6 +786,15 @@ class MeshSettings:
     grid_cell_min_rel : float
         The self-intersection check's grid cell is at least this fraction of the largest
         triangle's extent (a mesh of slivers does not make a grid of billions of cells).
+    step_tolerance_m : float
+        A STEP part is tessellated to this chordal tolerance [m] (the largest distance between a
+        triangle and the surface) unless ``workpiece.tolerance`` says otherwise.
+    step_angular_rad : float
+        ...and to at most this angle between neighbouring triangles on a curved face
+        (OpenCASCADE's angular deflection; its default).
+    tree_leaf_triangles : int
+        At most this many triangles in a leaf of the point queries' AABB tree (measured on a
+        5·10⁴-triangle part: 8 about as fast as 4, 2 and 16 slower).
     """
 
     degenerate_rel: float = 1e-12
@@ -794,6 +803,9 @@ class MeshSettings:
     wedge_rel: float = 1e-12
     contact_band_m: float = 1e-6
     grid_cell_min_rel: float = 1e-6
+    tree_leaf_triangles: int = 8
+    step_tolerance_m: float = 1e-4
+    step_angular_rad: float = 0.5
 
 
 @dataclass(frozen=True)

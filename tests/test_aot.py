@@ -137,6 +137,36 @@ def test_nnls_equals_the_jit_bit_for_bit(rng: np.random.Generator) -> None:
 
 
 @needs_build
+def test_the_mesh_tree_and_queries_equal_the_jit_bit_for_bit(rng: np.random.Generator) -> None:
+    from fixplan.geometry import Mesh
+    from fixplan.geometry.cells import cell_surface, l_bracket_cells
+
+    mesh = Mesh(*cell_surface(*l_bracket_cells(0.1, 0.04, 0.06, 0.01)))
+    arrays = mesh._kernel_arrays  # built by the compiled build_tree
+    tri = arrays[0]
+    m = tri.shape[0]
+    trees = []
+    for build in (
+        aot.kernel("fixplan.geometry._mesh_kernels", "build_tree"),
+        _jit("fixplan.geometry._mesh_kernels", "build_tree"),
+    ):
+        boxes, nodes, order = np.empty((2 * m, 6)), np.empty((2 * m, 4), dtype=np.int64), np.empty(m, dtype=np.int64)
+        count = build(np.array(tri), mesh.settings.tree_leaf_triangles, boxes, nodes, order)
+        trees.append((boxes[:count], nodes[:count], order))
+    assert all(np.array_equal(a, b) for a, b in zip(*trees, strict=True))
+    aot_query = aot.kernel("fixplan.geometry._mesh_kernels", "contacts")
+    jit_query = _jit("fixplan.geometry._mesh_kernels", "contacts")
+    for p in rng.uniform(-0.01, 0.11, size=(200, 3)):
+        outs = [np.zeros((8, 7)), np.zeros((8, 7))]
+        counts = [
+            q(*map(float, p), 1e-6, mesh._same_m, *arrays, out)
+            for q, out in zip((aot_query, jit_query), outs, strict=True)
+        ]
+        assert counts[0] == counts[1] and np.array_equal(outs[0], outs[1])
+    assert not any(key.startswith("fixplan.geometry._mesh_kernels") for key in aot.fallbacks)
+
+
+@needs_build
 def test_the_witness_system_equals_the_jit_bit_for_bit(rng: np.random.Generator) -> None:
     from fixplan.jamming.sliding import Rows
     from fixplan.locating import contact_set

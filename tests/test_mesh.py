@@ -20,6 +20,7 @@ from fixplan.fixture import load
 from fixplan.geometry import Box, Mesh
 from fixplan.geometry.cells import box_cells, cell_surface, l_bracket_cells
 from fixplan.geometry.mesh import MeshError, closest_on_triangles, mass_properties, parse_mesh, stl_bytes
+from fixplan.geometry.step import step_available
 from fixplan.limits import MAX_MESH_BYTES, MAX_MESH_TRIANGLES
 
 SIZE = (0.2, 0.1, 0.05)
@@ -156,7 +157,10 @@ def write_fixture(folder: Path, file: str, data: bytes | None, units: str = "m")
     if data is not None:
         (folder / file).write_bytes(data)
     path = folder / "f.toml"
-    path.write_text(FIXTURE.format(file=file, units=units))
+    text = FIXTURE.format(file=file, units=units)
+    if file.endswith(".step"):  # a STEP file states its own unit
+        text = text.replace(f'units = "{units}"\n', "")
+    path.write_text(text)
     return path
 
 
@@ -237,8 +241,14 @@ BAD = [
     ("empty.stl", lambda: b"", "no triangles"),
     ("words.stl", lambda: b"this is not a mesh\n" * 10, "no triangles: not a STL mesh"),
     ("nan.obj", lambda: b"v 0 0 0\nv 1 0 0\nv nan 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n", "non-finite"),
-    ("part.step", lambda: b"ISO-10303-21;", "is a STEP file: STEP parts are not read yet"),
-    ("part.iges", lambda: b"x", "has the suffix '.iges' (expected a mesh file: .stl, .obj, .ply)"),
+    (
+        "part.step",
+        lambda: b"ISO-10303-21;",
+        "is not a readable STEP file"
+        if step_available()
+        else "is a STEP file: reading STEP needs the optional CAD extra",
+    ),
+    ("part.iges", lambda: b"x", "has the suffix '.iges' (expected a mesh file: .stl, .obj, .ply; or .step, .stp with"),
     ("missing.stl", None, "cannot read: no such file"),
 ]
 

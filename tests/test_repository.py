@@ -60,3 +60,10 @@ def test_no_file_points_outside_the_repository():
             if TRACKER.search(line) or OLD_SPEC.search(line) or (SHARED.search(line) and rel not in READS_SHARED_DATA):
                 found.append(f"{rel}:{n}: {line.strip()[:100]}")
     assert not found, "references outside the repository:\n" + "\n".join(found)
+
+
+def test_no_file_carries_merge_conflict_markers():
+    """A merge left ``<<<<<<< HEAD`` … ``>>>>>>>`` in docs/architecture.md once, committed and unseen."""
+    marker = re.compile(r"^(?:<{7} |>{7} |={7}$)", re.MULTILINE)
+    found = [name for name, text in _texts() if marker.search(text)]
+    assert found == []

@@ -7,7 +7,8 @@ first command a user runs after installing starts warm.
 
 It runs the commands themselves, in this process and on small inputs: ``solve`` and
 ``classify`` on the bundled default fixture, ``simulate`` in 3D (compiled loop and per-step
-stepping) and 2D, ``map`` and the FCLib solvers (``auto`` and each method) on small problems.
+stepping) and 2D, ``map`` and the FCLib solvers (``auto`` and each method) on small problems,
+and a mesh part's AABB tree and point queries.
 Running the real code paths compiles exactly the signatures (argument types and layouts) that
 later runs look up; a hand-written list of signatures would drift from the code.
 
@@ -123,6 +124,18 @@ def _simulator_paths() -> None:
         sim.run(0.003, WrenchSchedule(np.array([0.0, 0.001]), np.zeros((2, n))), record_every=2)
 
 
+def _mesh_queries() -> None:
+    """A mesh part's AABB tree and point queries (one contact, and two in the L's concave corner)."""
+    import numpy as np
+
+    from fixplan.geometry.cells import cell_surface, l_bracket_cells
+    from fixplan.geometry.mesh import Mesh
+
+    mesh = Mesh(*cell_surface(*l_bracket_cells(0.1, 0.04, 0.06, 0.01)))
+    mesh.project(np.array([0.05, 0.02, 0.03]))
+    mesh.contacts(np.array([0.013, 0.02, 0.013]))
+
+
 def steps(tmp: Path) -> list[tuple[str, Callable[[], None]]]:
     """The workloads, in order: (label, function)."""
     from fixplan import default_fixture_path
@@ -145,6 +158,7 @@ def steps(tmp: Path) -> list[tuple[str, Callable[[], None]]]:
             ),
         ),
         ("FCLib solvers", _fclib_problems),
+        ("mesh queries", _mesh_queries),
     ]
 
 

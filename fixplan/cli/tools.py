@@ -15,7 +15,7 @@ from fixplan.cli._app import (
     app,
 )
 from fixplan.errors import InputError
-from fixplan.files import write_text
+from fixplan.files import write_output, write_text
 from fixplan.settings import DEFAULT
 
 
@@ -116,40 +116,58 @@ def generate(
 
     Families: box-321 and plate-2d start resting on the base locators; box-321-free and
     plate-2d-free start in free space (the nearest locator 5-80 mm away, tilted up to 15 deg about
-    every axis, mirrored layouts, the goal written in half the files). --list describes them.
+    every axis, mirrored layouts, the goal written in half the files); mesh-321 writes CAD-like mesh
+    parts (L-brackets, slotted blocks, housings), each fixture beside its STL file, with a locator
+    inside the part's concave region. --list describes them.
     """
-    from fixplan.generate import FAMILIES, check_family, fixture_name
+    from fixplan.generate import ALL_FAMILIES, MESH_FAMILIES, check_family, fixture_name
     from fixplan.generate import generate as run
 
     if list_:
         if json_out:
-            _emit_json({"families": FAMILIES})
+            _emit_json({"families": ALL_FAMILIES})
         else:
-            for name, description in FAMILIES.items():
+            for name, description in ALL_FAMILIES.items():
                 typer.echo(f"{name}: {description}")
         return
     if family is None:
-        raise InputError("give a FAMILY (one of: " + ", ".join(FAMILIES) + ") or --list")
+        raise InputError("give a FAMILY (one of: " + ", ".join(ALL_FAMILIES) + ") or --list")
     check_family(family)
     if out is None:
         raise InputError("--out DIR is required (the directory to write the fixtures into)")
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out} is a file (expected a directory)")
-    targets = [out / f"{fixture_name(family, seed, i, rotate_world=rotate_world)}.toml" for i in range(count)]
-    for target in targets:
+    names = [fixture_name(family, seed, i, rotate_world=rotate_world) for i in range(count)]
+    targets = [out / f"{name}.toml" for name in names]
+    meshes = [out / f"{name}.stl" for name in names] if family in MESH_FAMILIES else []
+    for target in targets + meshes:
         _writable(target, force)
     fixtures = run(family, count, seed, rotate_world=rotate_world, floor=floor)
     for target, fx in zip(targets, fixtures, strict=True):
+        for file_name, data in fx.files:  # the mesh first: a fixture is never written without its file
+
+            def write_file(path: Path, data: bytes = data) -> None:
+                path.write_bytes(data)
+
+            write_output(out / file_name, write_file)
         write_text(target, fx.toml_text)
     if json_out:
         files = [
-            {"name": fx.name, "path": str(t), "params": fx.params} for t, fx in zip(targets, fixtures, strict=True)
+            {
+                "name": fx.name,
+                "path": str(t),
+                "params": fx.params,
+                **({"files": [str(out / n) for n, _ in fx.files]} if fx.files else {}),
+            }
+            for t, fx in zip(targets, fixtures, strict=True)
         ]
         _emit_json({"family": family, "seed": seed, "count": count, "out": str(out), "files": files})
     else:
         where = " in rotated worlds" if rotate_world else ""
+        with_meshes = " with their STL meshes" if meshes else ""
         typer.echo(
-            f"wrote {count} {family} fixtures (seed {seed}){where} to {out}: {targets[0].name} .. {targets[-1].name}"
+            f"wrote {count} {family} fixtures{with_meshes} (seed {seed}){where} to {out}: "
+            f"{targets[0].name} .. {targets[-1].name}"
         )
 
 

@@ -27,14 +27,19 @@ trimesh from memory, so an OBJ never opens a material file) into a :class:`Mesh`
    itself found the candidate pairs of 2·10⁴ triangles in 0.9 s, but reading its 2.7·10⁵
    contacts back through Python doubled that, so the grid replaced it.
 
-Queries. :meth:`Mesh.project` is exact on the triangles: coal's BVH gives the nearest triangle
-(an upper bound of the distance) and then every triangle within that distance (a sphere against
-the BVH); closest points on those triangles are Ericson's region tests (Real-Time Collision
-Detection, section 5.1.5); the sign comes from angle-weighted pseudo-normals (Bærentzen & Aanæs 2005) of
-the closest feature: the face's own normal in a face, the sum of the two faces' normals on an
-edge, the angle-weighted sum at a vertex. coal's own signed distance is not used (it is not
-exact when a sphere and the mesh overlap). :meth:`Mesh.contacts` returns every local minimum of
-the distance within a band: a tip in a concave corner touches two faces.
+Queries. :meth:`Mesh.project` and :meth:`Mesh.contacts` are exact on the triangles and compiled
+(:mod:`fixplan.geometry._mesh_kernels`, numba, ahead of time with the other kernels): the mesh's
+own AABB tree (flat arrays, median splits, built once per mesh) gives every triangle within the
+nearest distance plus the band; closest points on those triangles are Ericson's region tests
+(Real-Time Collision Detection, section 5.1.5); the sign comes from angle-weighted pseudo-normals
+(Bærentzen & Aanæs 2005) of the closest feature: the face's own normal in a face, the sum of the
+two faces' normals on an edge, the angle-weighted sum at a vertex. :meth:`Mesh.contacts` returns
+every local minimum of the distance within a band: a tip in a concave corner touches two faces.
+A query near the surface of a 5·10⁴-triangle part takes about 12 µs from Python
+(``benchmarks/run.py --only mesh``). :meth:`Mesh.contacts_reference` is the same query in Python
+(coal's BVH gives the nearest triangle, an upper bound of the distance, then every triangle within
+that distance, a sphere against the BVH): the tests' reference. coal's own signed distance is
+not used (it is not exact when a sphere and the mesh overlap).
 
 Mass properties (:func:`mass_properties`) come from the closed surface by the divergence theorem:
 the signed tetrahedra each triangle spans with a reference point.
@@ -108,6 +113,31 @@ def parse_mesh(
         raise MeshError(
             f"no triangles: not a {file_type.upper()} mesh, or an empty one (expected a closed triangle mesh)"
         )
+    return mesh_from_triangles(vertices, faces, units=units, settings=settings, max_triangles=max_triangles)
+
+
+def mesh_from_triangles(
+    vertices: FloatArray,
+    faces: IntArray,
+    *,
+    units: str = "m",
+    settings: MeshSettings = DEFAULT.mesh,
+    max_triangles: int | None = None,
+    read_notes: tuple[str, ...] = (),
+) -> Mesh:
+    """A checked :class:`Mesh` from triangles (a parsed file's, or a tessellated STEP part's): checks 2–7 of the module docstring.
+
+    ``read_notes`` come first in the mesh's ``notes`` (what reading did, e.g. the tessellation).
+
+    Raises
+    ------
+    MeshError
+        The triangles are not a closed, manifold surface free of self-intersections, or none is usable.
+    """
+    vertices = np.asarray(vertices, dtype=float).reshape(-1, 3)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if faces.shape[0] == 0:
+        raise MeshError("no triangles (expected a closed triangle mesh)")
     if max_triangles is not None and faces.shape[0] > max_triangles:
         raise MeshError(f"{faces.shape[0]} triangles (expected at most {max_triangles})")
     if not np.all(np.isfinite(vertices)):
@@ -116,7 +146,7 @@ def parse_mesh(
     if used.size and (used.min() < 0 or used.max() >= vertices.shape[0]):
         raise MeshError("a triangle refers to a vertex that does not exist")
     vertices = vertices * UNITS_M[units]
-    notes: list[str] = []
+    notes = list(read_notes)
     vertices, faces = _merge_vertices(vertices, faces)
     faces, dropped = _drop_degenerate(vertices, faces, settings)
     if faces.shape[0] == 0:
@@ -500,6 +530,14 @@ def _coplanar_overlap(A: FloatArray, B: FloatArray) -> Any:
     return hit
 
 
+@functools.cache
+def _contacts_kernel() -> Any:
+    """The compiled query (ahead of time when built, else numba's JIT; :mod:`fixplan.aot`)."""
+    from fixplan import aot
+
+    return aot.kernel("fixplan.geometry._mesh_kernels", "contacts")
+
+
 # -- the shape ------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class Mesh(Shape):
@@ -617,8 +655,73 @@ class Mesh(Shape):
 
         Nearest first. One per face, edge or vertex region (a tip over a convex edge: one; a tip
         in a concave corner between two faces: two). ``band_m`` defaults to
-        ``MeshSettings.contact_band_m``.
+        ``MeshSettings.contact_band_m``. Computed by the compiled kernel
+        (:func:`fixplan.geometry._mesh_kernels.contacts`) on the mesh's own AABB tree;
+        :meth:`contacts_reference` is the same query in Python (coal's BVH for the candidates).
         """
+        x, y, z = np.asarray(p_body, dtype=float).reshape(3).tolist()
+        band = float(self.settings.contact_band_m if band_m is None else band_m)
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z) and math.isfinite(band) and band >= 0.0):
+            raise MeshError(f"a point query needs a finite point and band ≥ 0, got {[x, y, z]} and {band}")
+        arrays = self._kernel_arrays
+        out = np.empty((4, 7))
+        found = _contacts_kernel()(x, y, z, band, self._same_m, *arrays, out)
+        while found < 0:  # too few rows: again with room for all
+            out = np.empty((2 * out.shape[0] - found, 7))
+            found = _contacts_kernel()(x, y, z, band, self._same_m, *arrays, out)
+        rows = out[:found]  # this call's own array: the projections' views of it are theirs alone
+        return [Projection(float(row[0]), row[1:4], row[4:7]) for row in rows]
+
+    @functools.cached_property
+    def _same_m(self) -> float:
+        """Two points this close are one [m] (``MeshSettings.same_point_rel`` of the part's size)."""
+        return float(self.settings.same_point_rel * self._scale_m)
+
+    @property
+    def query_arrays(self) -> tuple[Any, ...]:
+        """The arrays a numba kernel passes to :func:`fixplan.geometry._mesh_kernels.contacts` after ``(px, py, pz, band, same)``.
+
+        In order (read-only, C-contiguous, built once per mesh): ``tri (m, 9)`` corners,
+        ``face_normals (m, 3)``, ``edge_normals (m, 9)`` (slots AB, BC, CA), ``vertex_normals (n, 3)``,
+        ``faces (m, 3)``, ``around`` (vertex → triangles, CSR offsets then indices), and the tree's
+        ``boxes (k, 6)``, ``nodes (k, 4)``, ``order (m,)``. ``same`` is :attr:`same_point_m`. A
+        compiled caller (the engine's step) queries the part without coming back to Python.
+        """
+        return self._kernel_arrays
+
+    @property
+    def same_point_m(self) -> float:
+        """Two closest points this close are one contact [m] (the kernel's ``same`` argument)."""
+        return self._same_m
+
+    @functools.cached_property
+    def _kernel_arrays(self) -> tuple[Any, ...]:
+        """The compiled query's arrays (read-only, C-contiguous): triangles, pseudo-normals, the tree."""
+        from fixplan import aot
+
+        m = self.faces.shape[0]
+        tri = np.ascontiguousarray(self.vertices[self.faces].reshape(m, 9))
+        offsets, around = self._vertex_faces
+        boxes, nodes, order = np.empty((2 * m, 6)), np.empty((2 * m, 4), dtype=np.int64), np.empty(m, dtype=np.int64)
+        build = aot.kernel("fixplan.geometry._mesh_kernels", "build_tree")
+        count = int(build(tri, self.settings.tree_leaf_triangles, boxes, nodes, order))
+        arrays = (
+            tri,
+            np.ascontiguousarray(self.face_normals),
+            np.ascontiguousarray(self._edge_normals.reshape(m, 9)),
+            np.ascontiguousarray(self._vertex_normals),
+            np.ascontiguousarray(self.faces),
+            np.concatenate([offsets, around]).astype(np.int64),
+            boxes[:count].copy(),
+            nodes[:count].copy(),
+            order,
+        )
+        for a in arrays:
+            a.setflags(write=False)
+        return arrays
+
+    def contacts_reference(self, p_body: FloatArray, band_m: float | None = None) -> list[Projection]:
+        """:meth:`contacts` in Python and numpy, coal's BVH for the candidates (the tests' reference)."""
         p = np.asarray(p_body, dtype=float).reshape(3)
         band = self.settings.contact_band_m if band_m is None else band_m
         ids = self._candidates(p, band)
@@ -817,6 +920,7 @@ __all__ = [
     "closest_on_triangles",
     "declared_stl_triangles",
     "mass_properties",
+    "mesh_from_triangles",
     "parse_mesh",
     "stl_bytes",
 ]
