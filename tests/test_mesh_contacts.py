@@ -269,3 +269,35 @@ def test_a_mesh_box_on_a_floor_and_one_tip_keeps_the_floor_s_slots_after_the_tip
     (tip,) = sim.contacts()
     assert tip.normal_force_N == 0.0 and tip.gap_m == pytest.approx(0.0001, abs=1e-9)
     assert np.abs(sim.twist).max() <= 1e-9
+
+
+def test_a_finely_split_mesh_box_on_a_floor_hands_the_step_only_its_bottom_vertices(tmp_path: Path) -> None:
+    """A box split into 30 × 30 squares a face (5402 vertices) on a floor plane.
+
+    Every vertex is a collision point against the floor; handing all of them to the step made its
+    arrays grow with their square (a 5·10⁴-triangle part failed to allocate). Only the points that
+    can be within the margin go: at rest on the floor, exactly the bottom face's 31² vertices. The
+    floor carries the weight, with the box at rest, as the 12-triangle box does.
+    """
+    n = 30
+    V, F = cell_surface(*box_cells(tuple(1000.0 * s for s in BOX_M), n))  # type: ignore[arg-type]
+    (tmp_path / "box.stl").write_bytes(stl_bytes(V, F))
+    text = (
+        'format = 1\n[scene]\nname = "split box on a floor"\ndimension = 3\n'
+        '[workpiece]\nshape = "mesh"\nfile = "box.stl"\nunits = "mm"\nmass = 2.0\n'
+        "start = { position = [0.0, 0.0, 0.0] }\n"
+        '[[locator]]\nname = "S1"\nposition = [0.0, -0.0531, 0.0]\nradius = 0.003\nfriction = 0.3\n'
+        '[[obstacle]]\nname = "floor"\nshape = "plane"\npoint = [0.0, 0.0, -0.025]\nnormal = [0.0, 0.0, 1.0]\n'
+    )
+    (tmp_path / "floor.toml").write_text(text)
+    fixture = load(tmp_path / "floor.toml")
+    sim = Simulator(fixture)
+    assert sim._slots.shape[0] == 6 * n * n + 2
+    near = sim._obstacle_points_near(sim.margin_m)
+    bottom = np.flatnonzero(np.isclose(sim._slots[:, 2], -BOX_M[2] / 2, rtol=0, atol=1e-12))
+    assert bottom.size == (n + 1) ** 2 and np.array_equal(near, bottom)
+    sim.run(0.05)
+    weight = fixture.workpiece.mass_kg * 9.81
+    (floor,) = sim.obstacles()
+    np.testing.assert_allclose(floor.force_world, [0.0, 0.0, weight], rtol=0, atol=1e-6 * weight)
+    assert np.abs(sim.twist).max() <= 1e-9

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from fixplan.aot import kernel
-from fixplan.engine.encode import encode, encode_obstacles
+from fixplan.engine.encode import OBSTACLE_PLANE, encode, encode_obstacles
 from fixplan.engine.mesh_slots import MeshSlots, mesh_slots
 from fixplan.engine.outcome import STATUS_NONFINITE, STATUS_NOT_CONVERGED, STATUS_OK
 from fixplan.errors import InputError, SolverError
@@ -506,8 +506,13 @@ class Simulator:
         assert self._mesh is not None
         ms = mesh_slots(self._mesh, self.fixture.locators, self._R, self._p, margin)
         n, kl = len(ms), self._k_loc
-        fix_mu = self._mu[kl:]
-        shifted = self._slots.copy()
+        # a mesh part's collision points are its vertices (5·10⁴ triangles: 2.5·10⁴ of them against
+        # each obstacle, and the step's arrays grow with the square of the slots it is handed). Only
+        # the points whose gap can be within the margin are handed over: the step treats the others
+        # as open anyway, so the answer is the same (a lower bound of each gap decides)
+        near = self._obstacle_points_near(margin)
+        fix_mu = self._mu[kl:][near]
+        shifted = self._slots[near].copy()
         shifted[:, 4] += n  # the fixture's obstacles follow the mesh's planes
         obs = np.ascontiguousarray(np.vstack([ms.obs, self._obs]).reshape(-1, 16))
         slots = np.ascontiguousarray(np.vstack([ms.slots, shifted]).reshape(-1, 5))
@@ -522,8 +527,8 @@ class Simulator:
             if old is not None:
                 P[j], P_prev[j], u[j] = old[0:4], old[4:8], old[8:12]
                 act[j], act_prev[j] = bool(old[12]), bool(old[13])
-        P[n:], P_prev[n:], u[n:] = self._P[kl:], self._P_prev[kl:], self._u[kl:]
-        act[n:], act_prev[n:] = self._active[kl:], self._active_prev[kl:]
+        P[n:], P_prev[n:], u[n:] = self._P[kl:][near], self._P_prev[kl:][near], self._u[kl:][near]
+        act[n:], act_prev[n:] = self._active[kl:][near], self._active_prev[kl:][near]
         gap, n_w = np.zeros(k), np.zeros((k, 3))
         err, iters, status, failures, pen = _step3_into(
             self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
@@ -539,10 +544,16 @@ class Simulator:
             key: np.concatenate([P[j], P_prev[j], u[j], [float(act[j]), float(act_prev[j])]])
             for j, key in enumerate(ms.keys)
         }
+        # the obstacles' rows: the points handed over, the others open (their gap: beyond the margin)
+        rows = kl + near
+        for arr in (self._P, self._P_prev, self._u):
+            arr[kl:] = 0.0
+        self._active[kl:], self._active_prev[kl:] = False, False
+        self._gap[kl:] = np.inf
+        self._P[rows], self._P_prev[rows], self._u[rows] = P[n:], P_prev[n:], u[n:]
+        self._active[rows], self._active_prev[rows] = act[n:], act_prev[n:]
+        self._gap[rows], self._nw[rows] = gap[n:], n_w[n:]
         # the locator rows: each locator's contacts together
-        self._P[kl:], self._P_prev[kl:], self._u[kl:] = P[n:], P_prev[n:], u[n:]
-        self._active[kl:], self._active_prev[kl:] = act[n:], act_prev[n:]
-        self._gap[kl:], self._nw[kl:] = gap[n:], n_w[n:]
         for i in range(kl):
             rows = np.flatnonzero(ms.locator == i)
             if rows.size == 0:  # pragma: no cover - every locator has a nearest contact
@@ -555,6 +566,29 @@ class Simulator:
             self._nw[i] = n_w[rows[0]]
             self._u[i] = u[rows[0]]
         return err, iters, status, failures, pen
+
+    def _obstacle_points_near(self, margin: float) -> NDArray[np.intp]:
+        """Indices of the obstacle slots whose gap may be within ``margin`` at the current pose.
+
+        A lower bound of each gap, vectorized: a plane's is exact (the point's height over it, less
+        its radius), a box's the distance to its centre less its half-diagonal and the radius.
+        """
+        slots = self._slots
+        if slots.shape[0] == 0:
+            return np.zeros(0, dtype=np.intp)
+        lower = np.empty(slots.shape[0])
+        which = slots[:, 4]
+        for j, ob in enumerate(self._obs):
+            rows = which == j
+            R_ob = ob[4:13].reshape(3, 3)
+            # Rᵀ (R_part p_body + p − o), as one small matrix product per obstacle
+            local = slots[rows, :3] @ (R_ob.T @ self._R).T + R_ob.T @ (self._p - ob[1:4])
+            if ob[0] == OBSTACLE_PLANE:
+                lower[rows] = local[:, 2]
+            else:
+                lower[rows] = np.sqrt(np.einsum("ki,ki->k", local, local)) - float(np.sqrt(ob[13:16] @ ob[13:16]))
+        lower -= slots[:, 3]
+        return np.flatnonzero(lower <= margin)
 
     def _mesh_contacts(self, i: int) -> list[tuple[FloatArray, float, FloatArray, float, float]]:
         """Locator ``i``'s contacts in the last step: ``(force_world, normal force, normal, slip, gap)`` each."""
