@@ -301,3 +301,19 @@ def test_a_finely_split_mesh_box_on_a_floor_hands_the_step_only_its_bottom_verti
     (floor,) = sim.obstacles()
     np.testing.assert_allclose(floor.force_world, [0.0, 0.0, weight], rtol=0, atol=1e-6 * weight)
     assert np.abs(sim.twist).max() <= 1e-9
+
+
+def test_the_path_program_keeps_a_split_box_clear_of_a_floor_with_its_eight_corners() -> None:
+    """The lowest point of a part over a plane is a vertex of its hull: a box split into 30 × 30
+    squares a face (5402 vertices) needs its 8 corners as clearance rows, not every vertex (with
+    2.5·10⁴ vertices the path program took minutes to build); equal radii only, few points whole."""
+    from fixplan.planner.fine import HULL_MIN_POINTS, _hull_points
+
+    V, _ = cell_surface(*box_cells(BOX_M, 30))
+    corners = _hull_points(V, np.zeros(len(V)))
+    assert len(V) == 5402 and len(corners) == 8
+    assert np.allclose(np.abs(V[corners]), np.array(BOX_M) / 2, rtol=0, atol=1e-15)
+    few = V[:HULL_MIN_POINTS]
+    assert np.array_equal(_hull_points(few, np.zeros(len(few))), np.arange(len(few)))
+    radii = np.linspace(0.0, 1e-3, len(V))
+    assert np.array_equal(_hull_points(V, radii), np.arange(len(V)))
