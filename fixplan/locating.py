@@ -25,8 +25,8 @@ from numpy.typing import NDArray
 
 from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.geometry import Box, Cylinder, Mesh, Polygon, Rectangle, Shape
-from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
 from fixplan.geometry.pins import HoleBody, PinBody, pin_hole_contacts
+from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
 from fixplan.model import (
     Bore,
     ExplicitContact,
