@@ -19,7 +19,7 @@ from fixplan.geometry.pins import HoleBody, PinBody, pin_hole_contacts, radial_p
 from fixplan.jamming import can_wedge
 from fixplan.kinematics import Contact, ContactSet
 from fixplan.locating import contact_set
-from fixplan.spatial import exp_so3
+from fixplan.spatial import Pose, exp_so3
 
 HOUSING = PROBLEMS / "housing-2-pins.toml"
 R_HOLE, R_PIN = 0.005, 0.0049  # D = 10 mm, d = 9.8 mm
@@ -184,9 +184,13 @@ def test_cli_refuses_pins_outside_validate_classify_search(tmp_path: Path) -> No
     for command in ("solve", "simulate"):
         proc = run_cli(command, HOUSING)
         assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
-        assert proc.stderr.strip().splitlines()[-1].endswith(
-            f"pin.P1: pins and bores are not supported by '{command}' yet (expected a fixture of locators; "
-            "'validate', 'classify' and 'search' take pins)"
+        assert (
+            proc.stderr.strip()
+            .splitlines()[-1]
+            .endswith(
+                f"pin.P1: pins and bores are not supported by '{command}' yet (expected a fixture of locators; "
+                "'validate', 'classify' and 'search' take pins)"
+            )
         ), proc.stderr
 
 
@@ -202,3 +206,120 @@ def test_housing_contacts_at_the_located_pose() -> None:
     named = contact_set(fixplan.load(HOUSING), "goal", names=["P2"])
     assert [c.owner for c in named.contacts] == ["P2", "P2"]
     assert all(abs(c.gap_m - 1e-4) <= 1e-12 for c in named.contacts)  # the lands' play, both sides
+
+
+# -- the explicit-contact peg-hole problem and its geometric twin ---------------------------------------
+SHAFT = PROBLEMS / "shaft-in-bore.toml"
+
+
+def _to_3d(w: list[float]) -> np.ndarray:
+    """peg-hole-mid's plane (x, y) is the shaft's (x, z): (Fx, Fy, M) -> (Fx, 0, Fy, 0, -M, 0)."""
+    return np.array([w[0], 0.0, w[1], 0.0, -w[2], 0.0])
+
+
+def test_peg_hole_mid_and_its_bore_twin_agree() -> None:
+    """The same wrenches on peg-hole-mid's explicit contacts and on the bore's computed ones: the same verdict.
+
+    The one difference is the tilt: the mouth edge's normal leans by θ = 2e-3 in the bore, so a
+    wrench that normals alone balance in 2D (held) needs a friction of θ N there (jammed).
+    """
+    flat, twin = fixplan.load(PROBLEMS / "peg-hole-mid.toml"), fixplan.load(SHAFT)
+    assert [c.owner for c in contact_set(twin).contacts] == ["B1", "B1"]
+    grid = [[fx, fy, m] for fx in (-0.1, 0.0, 0.1) for fy in (-1.0, -0.4, 0.0, 0.3) for m in (-0.01, 0.0, 0.01, 0.02)]
+    a = fixplan.classify(flat, np.array(grid))
+    b = fixplan.classify(twin, np.array([_to_3d(w) for w in grid]))
+    for w, ra, rb in zip(grid, a, b, strict=True):
+        if ra.mode == "held":
+            assert rb.mode in ("held", "jammed"), (w, ra.mode, rb.mode)
+            if rb.mode == "jammed":  # the friction needed is the tilt's share of the normal force
+                f = rb.contact_forces
+                ratio = max(float(np.linalg.norm(v[1:]) / max(v[0], 1e-300)) for v in f.values() if v[0] > 0.0)
+                assert ratio <= 0.3, (w, f)
+        elif all(float(np.max(np.abs(v))) == 0.0 for v in ra.contact_forces.values()):
+            # a pure lift: in 2D the walls are tangent to it and carry nothing (the peg slides up);
+            # the bore's tilted edge opens under it (its normal leans up by θ): the tie broken
+            assert rb.mode in (ra.mode, "separates"), (w, ra.mode, rb.mode)
+        else:
+            assert rb.mode == ra.mode, (w, ra.mode, rb.mode)
+
+
+# -- Whitney's jamming diagram for the two-point contact, with the real geometry ------------------------
+def _balanced_closed_form(fx: float, fy: float, m: float, l_m: float, yc: float, h: float, mu: float) -> bool:
+    """Two-point contact A (-h/2, 0) normal +x, B (h/2, -l) normal -x, centre (0, yc); a 2D wrench about it.
+
+    x: Fx + N_A - N_B = 0; y: Fy + T_A + T_B = 0; moment: M + yc N_A - (l + yc) N_B + (h/2)(T_B - T_A) = 0.
+    So N_B = N_A + Fx, T_B - T_A = D = (2/h)(l N_A + (l + yc) Fx - M), T_A = -(Fy + D)/2,
+    T_B = (D - Fy)/2; balanced iff some N_A >= 0 (N_B >= 0) keeps |T_A| <= mu N_A and
+    |T_B| <= mu N_B: four linear inequalities p + q N_A <= 0, an interval of N_A.
+    """
+    k = 2.0 / h
+    d0, d1 = k * ((l_m + yc) * fx - m), k * l_m  # D = d0 + d1 N_A
+    rows = [  # p + q N <= 0
+        (fy + d0, d1 - 2 * mu),
+        (-fy - d0, -d1 - 2 * mu),
+        (d0 - fy - 2 * mu * fx, d1 - 2 * mu),
+        (fy - d0 - 2 * mu * fx, -d1 - 2 * mu),
+        (-fx, -1.0),  # N_B >= 0
+        (0.0, -1.0),  # N_A >= 0
+    ]
+    lo, hi = -math.inf, math.inf
+    for p, q in rows:
+        if q > 0:
+            hi = min(hi, -p / q)
+        elif q < 0:
+            lo = max(lo, -p / q)
+        elif p > 0:
+            return False
+    return lo <= hi
+
+
+def _shaft_at(l_m: float, mu: float) -> tuple[fixplan.Fixture, Pose, float]:
+    """The shaft of shaft-in-bore.toml cocked to two-point contact at depth ``l_m`` (the tilt from the formula)."""
+    from scipy.optimize import brentq
+
+    R, r, L = 0.01001, 0.01, 0.10
+    theta = brentq(lambda t: ((2 * R - r * math.cos(t)) * math.cos(t) - r) / math.sin(t) - l_m, 1e-7, 0.5)
+    u = np.array([math.sin(theta), 0.0, -math.cos(theta)])
+    centre = np.array([R - r * math.cos(theta), 0.0, -l_m]) - 0.5 * L * u
+    fx = fixplan.loads(SHAFT.read_text().replace("friction = 0.3", f"friction = {mu}"), source="shaft.toml")
+    pose = Pose.from_rpy_deg(list(centre), [0.0, -math.degrees(theta), 0.0])
+    return fx, pose, float(centre[2])
+
+
+@pytest.mark.parametrize("mu", [0.2, 0.5])
+@pytest.mark.parametrize("l_m", [0.003, 0.012, 0.03])
+def test_whitney_jamming_diagram_with_the_bore(l_m: float, mu: float) -> None:
+    """classify on the bore's contacts is balanced exactly where the closed form is, over (direction, M/F).
+
+    Points whose closed-form verdict flips within 5 % of the moment or of the force's direction are
+    left out (the real contacts differ from the idealised ones by the tilt, under 1 %).
+    """
+    fx, pose, yc = _shaft_at(l_m, mu)
+    cs = contact_set(fx, pose)
+    assert len(cs) == 2 and all(abs(c.gap_m) <= 1e-9 for c in cs.contacts)
+    h, r = 0.02002, 0.01
+    grid, expect = [], []
+    for angle in (-0.3, -0.1, 0.0, 0.1, 0.3):  # the force's direction from straight down [rad]
+        for ratio in (-1.0, -0.3, 0.0, 0.3, 0.7, 1.5, 3.0, 6.0):  # M / (F r)
+            f = (math.sin(angle), -math.cos(angle))
+            m = ratio * r
+            verdicts = {
+                _balanced_closed_form(f[0] * s, f[1], m * t, l_m, yc, h, mu)
+                for s in (0.95, 1.0, 1.05)
+                for t in (0.95, 1.0, 1.05)
+            } | {
+                _balanced_closed_form(math.sin(angle + da), -math.cos(angle + da), m, l_m, yc, h, mu)
+                for da in (-0.05, 0.05)
+            }
+            if len(verdicts) == 1:
+                grid.append(_to_3d([f[0], f[1], m]))
+                expect.append(verdicts.pop())
+    assert len(grid) >= 20
+    results = fixplan.classify(fx, np.array(grid), pose=pose)
+    got = [res.mode in ("held", "jammed") for res in results]
+    assert got == expect, [(list(np.round(g, 4)), e) for g, e, x in zip(grid, expect, got, strict=True) if e != x]
+    if l_m < mu * h:  # Whitney's wedging: the two contacts hold any push
+        assert all(expect)
+        assert bool(can_wedge(cs))
+    else:
+        assert not bool(can_wedge(cs))
