@@ -807,6 +807,9 @@ class PinSettings:
         (the distance along a circle of an ellipse's projection has at most 4 extremes).
     newton_steps : int
         Newton steps on the extreme's angle; quadratic convergence reaches machine precision in 4-5.
+    golden_steps : int
+        Golden-section steps on a tip contact's angle (between the samples around the least):
+        0.618⁶⁰ of 2·2π/rim_samples is below 1e-13 rad.
     coaxial_rel : float
         A rim whose tilt from the other axis, or an offset, is below this fraction of its radius
         is coaxial (a face lying flat: its contact is put at the face's centre).
@@ -816,6 +819,7 @@ class PinSettings:
 
     rim_samples: int = 64
     newton_steps: int = 8
+    golden_steps: int = 60
     coaxial_rel: float = 1e-9
     axis_angle_rad: float = 0.01
 

@@ -323,3 +323,51 @@ def test_whitney_jamming_diagram_with_the_bore(l_m: float, mu: float) -> None:
         assert bool(can_wedge(cs))
     else:
         assert not bool(can_wedge(cs))
+
+
+# -- the tip entering the mouth: 45° chamfers ------------------------------------------------------------
+CP, CH, L_PIN = 0.001, 0.0005, 0.012  # the pin's tip chamfer, the hole's mouth chamfer, the pin's length
+DOWN_AT_45 = np.array([1.0, 0.0, -1.0]) / math.sqrt(2.0)
+
+
+@pytest.mark.parametrize("offset", [0.0008, 0.0012])
+@pytest.mark.parametrize("gap", [-1e-5, 0.0, 2e-5, 1e-4])
+def test_mouth_edge_on_the_tip_chamfer(offset: float, gap: float) -> None:
+    """A pin e to +x, coming down: the hole's mouth edges meet its tip chamfer on the +x side.
+
+    In the pin's half-plane (t down its axis, ρ from it) the chamfer is the line t + ρ = L - c_p + r
+    (free normal (1, 1)/√2); the hole's top edge is at t = z_b (the base's height over the mouth),
+    ρ = R + c_h - e; its wall edge at (z_b + c_h, R - e). Both: gap (z_b + R + c_h - e - L + c_p - r)/√2
+    (the two 45° faces are parallel), normal (1, 0, -1)/√2.
+    """
+    z_b = L_PIN - CP + R_PIN - R_HOLE - CH + offset + math.sqrt(2.0) * gap
+    pin = PinBody(np.array([offset, 0.0, z_b]), np.array([0.0, 0.0, -1.0]), R_PIN, L_PIN, CP)
+    hole = HoleBody(np.zeros(3), np.array([0.0, 0.0, 1.0]), R_HOLE, 0.03, CH, True)
+    tips = sorted((c for c in pin_hole_contacts(pin, hole) if c.kind == "tip"), key=lambda c: c.gap_m)
+    assert len(tips) >= 2  # the two edges (and the pin's circles on the chamfer's far side, farther)
+    for c in tips[:2]:
+        assert abs(c.gap_m - gap) <= 1e-12, (c.gap_m, gap)
+        # the angle of a least found by golden section is good to √ε (the gap to ε): 1e-7 on the normal
+        assert np.allclose(c.normal_world, DOWN_AT_45, atol=1e-7)
+        assert c.point_hole_world[0] > R_HOLE - 1e-12 and abs(c.point_hole_world[1]) <= 1e-9  # the +x side
+        assert np.allclose(c.point_pin_world + c.gap_m * c.normal_world, c.point_hole_world, atol=1e-15)
+
+
+@pytest.mark.parametrize("offset", [0.0002, 0.0004])
+@pytest.mark.parametrize("gap", [-1e-5, 0.0, 3e-5])
+def test_pin_rim_on_the_mouth_chamfer(offset: float, gap: float) -> None:
+    """A pin e to +x over a chamfered mouth: its rim's +x point (depth d, ρ = e + r) on the chamfer
+    depth + ρ = R + c_h: gap (R + c_h - d - e - r)/√2, normal (from the pin into the part) (1, 0, -1)/√2."""
+    depth_rim = R_HOLE + CH - offset - R_PIN - math.sqrt(2.0) * gap
+    z_b = L_PIN - CP - depth_rim  # the rim is L - c_p below the base
+    pin = PinBody(np.array([offset, 0.0, z_b]), np.array([0.0, 0.0, -1.0]), R_PIN, L_PIN, CP)
+    hole = HoleBody(np.zeros(3), np.array([0.0, 0.0, 1.0]), R_HOLE, 0.03, CH, True)
+    # the rim's contact (the pin's chamfer, parallel to the hole's, touches the wall edge at the same gap)
+    tips = [
+        c for c in pin_hole_contacts(pin, hole) if c.kind == "tip" and abs(c.point_pin_world[2] + depth_rim) <= 1e-9
+    ]
+    assert len(tips) == 1
+    best = tips[0]
+    assert abs(best.gap_m - gap) <= 1e-12, (best.gap_m, gap)
+    assert np.allclose(best.point_pin_world, [offset + R_PIN, 0.0, -depth_rim], atol=1e-9)
+    assert np.allclose(best.normal_world, DOWN_AT_45, atol=1e-7)

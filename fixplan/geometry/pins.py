@@ -20,6 +20,11 @@ Contacts (each an edge on a surface, exact):
 - ``"exit"``: a through hole's far edge on the pin's side, once the rim has passed it.
 - ``"bottom"``: the pin's tip face on a blind hole's bottom: the face's deepest point; gap
   ``depth − z``; normal ``−a``.
+- ``"tip"``: the tip entering the mouth: the hole's mouth edges (the chamfer's top and bottom
+  circles) on the pin's tip chamfer or face, and the pin's rim and tip circles on the hole's
+  chamfer. A point's distance to a surface of revolution is its distance in the half-plane
+  ``(t, ρ)`` of that axis to the surface's profile (a segment, or a corner); the least over the
+  edge circle is sampled and refined by golden section.
 
 Why these suffice for the side: along a generator line of one cylinder the distance from the other's
 axis is convex, so the overlap of two straight cylinders over the engaged length is extreme at its
@@ -29,12 +34,13 @@ ends, the rim and the mouth (or exit): a tilted pin's line contact resolves to t
 Each extreme is found on its circle ``x(φ) = c + ρ (cos φ e1 + sin φ e2)``: the squared distance
 ``|w + A cos φ + B sin φ|²`` from the other axis is a trigonometric quadratic; it is sampled
 (``PinSettings.rim_samples``) and its stationary point refined by Newton to machine precision.
-Not computed here (yet): the pin's tip chamfer on the hole's mouth chamfer (a pin not yet entered).
+Not computed here: the pin's tip on the part's face around the hole (a pin that misses its hole).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -240,7 +246,9 @@ def _angle_of(
     return math.atan2(float(v @ e2), float(v @ e1))
 
 
-def _dist2(P: FloatArray, centre: FloatArray, h1: FloatArray, h2: FloatArray, R: float, t: float, pin: PinBody) -> float:
+def _dist2(
+    P: FloatArray, centre: FloatArray, h1: FloatArray, h2: FloatArray, R: float, t: float, pin: PinBody
+) -> float:
     v = P @ (centre + R * (math.cos(t) * h1 + math.sin(t) * h2) - pin.base_world)
     return float(v @ v)
 
@@ -260,11 +268,190 @@ def _bottom(pin: PinBody, hole: HoleBody, settings: PinSettings) -> PinContact |
     return PinContact("bottom", x, x - gap * a, -a, gap)
 
 
+# -- the tip entering the mouth: edges on the chamfers, in the plane (t, ρ) of each body's axis -------------
+# A point's distance to a surface of revolution is its distance, in the half-plane (t along the axis,
+# ρ from it), to the surface's profile: exact for the circles of the other body, point by point.
+_SQRT_HALF = math.sqrt(0.5)
+
+
+def _nearest_on_segment(q: FloatArray, a: FloatArray, b: FloatArray) -> tuple[FloatArray, float]:
+    """The point of segment ``ab`` nearest ``q`` and its parameter in [0, 1]."""
+    d = b - a
+    dd = float(d @ d)
+    t = 0.0 if dd == 0.0 else min(max(float((q - a) @ d) / dd, 0.0), 1.0)
+    return a + t * d, t
+
+
+def _in_cone(v: FloatArray, n1: FloatArray, n2: FloatArray) -> bool:
+    """``v`` between the unit normals ``n1`` and ``n2`` (less than π apart), boundaries included."""
+    cross = lambda x, y: float(x[0] * y[1] - x[1] * y[0])  # noqa: E731
+    return cross(n1, v) * cross(n1, n2) >= 0.0 and cross(v, n2) * cross(n1, n2) >= 0.0
+
+
+def _pin_tip_gap(pin: PinBody, q: FloatArray) -> tuple[float, FloatArray] | None:
+    """Signed distance of a point ``q = (t, ρ)`` (pin frame) from the pin's tip: its chamfer and face.
+
+    The free-side normal ``(n_t, n_ρ)`` with it; None where the nearest point is on the side (the rim
+    and mouth contacts' business) or the tip's nearest feature does not face ``q``.
+    """
+    L, r, c = pin.length_m, pin.radius_m, pin.chamfer_m
+    a, b, e = np.array([L - c, r]), np.array([L, r - c]), np.array([L, 0.0])
+    side, cham, face = np.array([0.0, 1.0]), np.array([_SQRT_HALF, _SQRT_HALF]), np.array([1.0, 0.0])
+    p1, t1 = _nearest_on_segment(q, a, b)
+    p2, t2 = _nearest_on_segment(q, b, e)
+    d1, d2 = float(np.linalg.norm(q - p1)), float(np.linalg.norm(q - p2))
+    if c > 0.0 and d1 <= d2:
+        p, n = p1, cham
+        if t1 == 0.0:  # the rim's corner: facing q between the side and the chamfer
+            v = q - p
+            if not _in_cone(v, side, cham):
+                return None
+            n = v / np.linalg.norm(v) if np.linalg.norm(v) > 0.0 else cham
+        elif t1 == 1.0 and not _in_cone(q - p, cham, face):
+            return None
+    else:
+        p, n = p2, face
+        if t2 == 0.0:  # the tip's corner (no chamfer: the rim's)
+            v = q - p
+            if not _in_cone(v, side if c == 0.0 else cham, face):
+                return None
+            n = v / np.linalg.norm(v) if np.linalg.norm(v) > 0.0 else face
+        elif t2 == 1.0:
+            return None  # the axis
+    gap = float((q - p) @ n)
+    if gap < 0.0 and r - float(q[1]) < -gap:
+        return None  # inside the pin, nearer its side: the rim and mouth contacts' business
+    return gap, n
+
+
+def _hole_chamfer_gap(hole: HoleBody, q: FloatArray) -> tuple[float, FloatArray] | None:
+    """Signed distance of ``q = (depth, ρ)`` (hole frame) from the mouth chamfer's face, its free normal; None off the face."""
+    c = hole.chamfer_m
+    if c <= 0.0:
+        return None
+    a, b = np.array([0.0, hole.radius_m + c]), np.array([c, hole.radius_m])
+    p, t = _nearest_on_segment(q, a, b)
+    if t <= 0.0 or t >= 1.0:
+        return None
+    n = np.array([-_SQRT_HALF, -_SQRT_HALF])
+    gap = float((q - p) @ n)
+    if gap < 0.0 and min(float(q[1]) - hole.radius_m, float(q[0])) < -gap:
+        return None  # inside the body, nearer its wall or its face
+    return gap, n
+
+
+def _least_on_circle(gap_of: Callable[[float], float | None], settings: PinSettings) -> float | None:
+    """The angle where ``gap_of`` is least on a circle: sampled, then golden-section between the neighbours."""
+    phis = np.linspace(0.0, 2.0 * math.pi, settings.rim_samples, endpoint=False)
+    vals = [gap_of(float(p)) for p in phis]
+    ok = [(v, float(p)) for v, p in zip(vals, phis, strict=True) if v is not None]
+    if not ok:
+        return None
+    best, phi = min(ok)
+    step = 2.0 * math.pi / settings.rim_samples
+    lo, hi = phi - step, phi + step
+    g = 0.5 * (math.sqrt(5.0) - 1.0)
+
+    def value(x: float) -> float:
+        v = gap_of(x)
+        return math.inf if v is None else v
+
+    x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
+    f1, f2 = value(x1), value(x2)
+    for _ in range(settings.golden_steps):
+        if f1 <= f2:
+            hi, x2, f2 = x2, x1, f1
+            x1 = hi - g * (hi - lo)
+            f1 = value(x1)
+        else:
+            lo, x1, f1 = x1, x2, f2
+            x2 = lo + g * (hi - lo)
+            f2 = value(x2)
+    x = 0.5 * (lo + hi)
+    return x if value(x) <= best else phi
+
+
+def _hole_edges_on_tip(pin: PinBody, hole: HoleBody, settings: PinSettings) -> list[PinContact]:
+    """The hole's mouth edges (the chamfer's top and bottom circles) on the pin's tip chamfer or face."""
+    u, a = pin.axis_world, hole.axis_world
+    h1, h2 = _perp_basis(a)
+    P = np.eye(3) - np.outer(u, u)
+    edges = [(0.0, hole.radius_m + hole.chamfer_m)] + ([(hole.chamfer_m, hole.radius_m)] if hole.chamfer_m > 0 else [])
+    out = []
+    for depth, radius in edges:
+        centre = hole.mouth_world - depth * a
+
+        def at(phi: float, centre: FloatArray = centre, radius: float = radius) -> tuple[FloatArray, FloatArray]:
+            y = centre + radius * (math.cos(phi) * h1 + math.sin(phi) * h2)
+            v = P @ (y - pin.base_world)
+            return y, np.array([float((y - pin.base_world) @ u), float(np.linalg.norm(v))])
+
+        def gap_of(phi: float, at: Callable[[float], tuple[FloatArray, FloatArray]] = at) -> float | None:
+            found = _pin_tip_gap(pin, at(phi)[1])
+            return None if found is None else found[0]
+
+        phi = _least_on_circle(gap_of, settings)
+        if phi is None:
+            continue
+        y, q = at(phi)
+        found = _pin_tip_gap(pin, q)
+        if found is None:
+            continue
+        gap, n2 = found
+        v = P @ (y - pin.base_world)
+        radial = v / np.linalg.norm(v) if np.linalg.norm(v) > 0.0 else _perp_basis(u)[0]
+        n = n2[0] * u + n2[1] * radial
+        out.append(PinContact("tip", y - gap * n, y, n, gap))
+    return out
+
+
+def _tip_edges_on_chamfer(pin: PinBody, hole: HoleBody, settings: PinSettings) -> list[PinContact]:
+    """The pin's rim and tip circles on the hole's mouth chamfer."""
+    if hole.chamfer_m <= 0.0:
+        return []
+    u, a, m = pin.axis_world, hole.axis_world, hole.mouth_world
+    e1, e2 = _perp_basis(u, pin.land_direction_world)
+    P = np.eye(3) - np.outer(a, a)
+    arcs = _land_arcs(pin)
+    circles = [(pin.side_end_m, pin.radius_m)] + (
+        [(pin.length_m, pin.radius_m - pin.chamfer_m)] if pin.chamfer_m > 0 else []
+    )
+    out = []
+    for s, radius in circles:
+        centre = pin.base_world + s * u
+
+        def at(phi: float, centre: FloatArray = centre, radius: float = radius) -> tuple[FloatArray, FloatArray]:
+            x = centre + radius * (math.cos(phi) * e1 + math.sin(phi) * e2)
+            return x, np.array([float((m - x) @ a), float(np.linalg.norm(P @ (x - m)))])
+
+        def gap_of(phi: float, at: Callable[[float], tuple[FloatArray, FloatArray]] = at) -> float | None:
+            if not _in_arcs(phi, arcs):
+                return None
+            found = _hole_chamfer_gap(hole, at(phi)[1])
+            return None if found is None else found[0]
+
+        phi = _least_on_circle(gap_of, settings)
+        if phi is None:
+            continue
+        x, q = at(phi)
+        found = _hole_chamfer_gap(hole, q)
+        if found is None:
+            continue
+        gap, f2 = found
+        rho = P @ (x - m)
+        radial = rho / np.linalg.norm(rho) if np.linalg.norm(rho) > 0.0 else e1
+        free = f2[0] * (-a) + f2[1] * radial  # away from the hole's body
+        out.append(PinContact("tip", x, x - gap * free, -free, gap))
+    return out
+
+
 def pin_hole_contacts(pin: PinBody, hole: HoleBody, settings: PinSettings = _DEFAULT.pins) -> list[PinContact]:
     """Every contact of ``pin`` with ``hole`` that their relative pose makes possible, with its gap.
 
     The rim and the mouth (a through hole's exit once the rim has passed it) for the side, the
-    bottom for a blind hole; an empty list when the pin's side is not in the hole.
+    bottom for a blind hole, and the tip entering the mouth: the hole's mouth edges on the pin's tip
+    chamfer or face, the pin's rim and tip circles on the hole's mouth chamfer (``"tip"``), each
+    where its nearest feature faces the other body.
     """
     out: list[PinContact] = []
     for found in (
@@ -275,7 +462,7 @@ def pin_hole_contacts(pin: PinBody, hole: HoleBody, settings: PinSettings = _DEF
     ):
         if found is not None:
             out.append(found)
-    return out
+    return out + _hole_edges_on_tip(pin, hole, settings) + _tip_edges_on_chamfer(pin, hole, settings)
 
 
 __all__ = ["HoleBody", "PinBody", "PinContact", "pin_hole_contacts", "radial_play_m"]
