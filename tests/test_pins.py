@@ -204,8 +204,12 @@ def test_housing_contacts_at_the_located_pose() -> None:
     for c in p1.values():
         assert np.allclose(c.normal_world, [-1.0, 0.0, 0.0], atol=1e-12) and abs(c.gap_m) <= 1e-12
     named = contact_set(fixplan.load(HOUSING), "goal", names=["P2"])
-    assert [c.owner for c in named.contacts] == ["P2", "P2"]
-    assert all(abs(c.gap_m - 1e-4) <= 1e-12 for c in named.contacts)  # the lands' play, both sides
+    # each land on its own: rim and mouth on the +y land, then on the -y land, 0.1 mm of play each
+    assert named.names == ["P2", "P2#2", "P2#3", "P2#4"] and {c.owner for c in named.contacts} == {"P2"}
+    assert all(abs(c.gap_m - 1e-4) <= 1e-12 for c in named.contacts)
+    alpha = math.asin(0.0015 / R_PIN)  # a land's half angle: the normals stay within it of ±y
+    ys = [float(c.normal_world[1]) for c in named.contacts]
+    assert all(y >= math.cos(alpha) - 1e-9 for y in ys[:2]) and all(y <= -math.cos(alpha) + 1e-9 for y in ys[2:])
 
 
 # -- the explicit-contact peg-hole problem and its geometric twin ---------------------------------------
@@ -371,3 +375,20 @@ def test_pin_rim_on_the_mouth_chamfer(offset: float, gap: float) -> None:
     assert abs(best.gap_m - gap) <= 1e-12, (best.gap_m, gap)
     assert np.allclose(best.point_pin_world, [offset + R_PIN, 0.0, -depth_rim], atol=1e-9)
     assert np.allclose(best.normal_world, DOWN_AT_45, atol=1e-7)
+
+
+@pytest.mark.parametrize("offset", [0.0001, 0.0002, 0.0003, 0.00035])
+def test_diamond_pin_touches_on_its_lands_only(offset: float) -> None:
+    """A diamond pin (lands ±y, width w) e across them (+x), upright: its rim's farthest land point is a
+    land's end, (e + w/2, r cos α): gap R - √(r² + e w + e²). A round pin there: R - r - e."""
+    w = 0.003
+    pin = PinBody(
+        np.array([offset, 0.0, 0.01]), np.array([0.0, 0.0, -1.0]), R_PIN, 0.02, 0.0, np.array([0.0, 1.0, 0.0]), w
+    )
+    rims = [c for c in pin_hole_contacts(pin, _hole()) if c.kind == "rim"]
+    assert len(rims) == 2  # one per land
+    expected = R_HOLE - math.sqrt(R_PIN**2 + offset * w + offset**2)
+    for c in rims:
+        assert abs(c.gap_m - expected) <= 1e-12, (c.gap_m, expected)
+        assert abs(abs(c.point_pin_world[0] - offset) - w / 2) <= 1e-12  # at a land's end
+    assert expected > R_HOLE - R_PIN - offset  # the relief: more room than a round pin has

@@ -174,14 +174,14 @@ def _in_arcs(angle: float, arcs: list[tuple[float, float]]) -> bool:
     return False
 
 
-def _rim(pin: PinBody, hole: HoleBody, settings: PinSettings) -> PinContact | None:
-    """The pin's rim (where its side ends) on the hole's wall, when the rim is between the wall's ends."""
+def _rim(pin: PinBody, hole: HoleBody, arcs: list[tuple[float, float]], settings: PinSettings) -> PinContact | None:
+    """The pin's rim (where its side ends, within ``arcs``) on the hole's wall, when the rim is between the wall's ends."""
     u, a, m = pin.axis_world, hole.axis_world, hole.mouth_world
     centre = pin.base_world + pin.side_end_m * u
     e1, e2 = _perp_basis(u, pin.land_direction_world)
     P = np.eye(3) - np.outer(a, a)
     w, A, B = P @ (centre - m), pin.radius_m * (P @ e1), pin.radius_m * (P @ e2)
-    phi = _circle_extreme(w, A, B, True, _land_arcs(pin), settings)
+    phi = _circle_extreme(w, A, B, True, arcs, settings)
     x = centre + pin.radius_m * (math.cos(phi) * e1 + math.sin(phi) * e2)
     depth = float((m - x) @ a)
     if depth < hole.chamfer_m or depth > hole.depth_m:
@@ -193,15 +193,40 @@ def _rim(pin: PinBody, hole: HoleBody, settings: PinSettings) -> PinContact | No
     return PinContact("rim", x, x + gap * n, n, gap)
 
 
-def _edge(pin: PinBody, hole: HoleBody, depth_m: float, kind: str, settings: PinSettings) -> PinContact | None:
-    """The hole's edge circle at ``depth_m`` on the pin's side, when the pin's side spans that level."""
+def _edge(
+    pin: PinBody, hole: HoleBody, depth_m: float, kind: str, arcs: list[tuple[float, float]], settings: PinSettings
+) -> PinContact | None:
+    """The hole's edge circle at ``depth_m`` on the pin's side within ``arcs``, when the side spans that level.
+
+    A round pin's whole side: the circle's point nearest the pin's axis (Newton). A diamond's land:
+    the nearest point whose direction from the axis the land faces (sampled, then golden section:
+    at the land's end when the nearest point overall faces the relief).
+    """
     u, a = pin.axis_world, hole.axis_world
     centre = hole.mouth_world - depth_m * a
     h1, h2 = _perp_basis(a)
     P = np.eye(3) - np.outer(u, u)
-    w, A, B = P @ (centre - pin.base_world), hole.radius_m * (P @ h1), hole.radius_m * (P @ h2)
-    phi = _circle_extreme(w, A, B, False, [(0.0, 2.0 * math.pi)], settings)
-    y = centre + hole.radius_m * (math.cos(phi) * h1 + math.sin(phi) * h2)
+    R = hole.radius_m
+
+    def point(phi: float) -> FloatArray:
+        return centre + R * (math.cos(phi) * h1 + math.sin(phi) * h2)
+
+    if pin.land_direction_world is None:
+        w, A, B = P @ (centre - pin.base_world), R * (P @ h1), R * (P @ h2)
+        phi: float | None = _circle_extreme(w, A, B, False, [(0.0, 2.0 * math.pi)], settings)
+    else:
+        e1, e2 = _perp_basis(u, pin.land_direction_world)
+
+        def gap_of(t: float) -> float | None:
+            v = P @ (point(t) - pin.base_world)
+            if not _in_arcs(math.atan2(float(v @ e2), float(v @ e1)), arcs):
+                return None
+            return float(np.linalg.norm(v)) - pin.radius_m
+
+        phi = _least_on_circle(gap_of, settings)
+    if phi is None:
+        return None
+    y = point(phi)
     s = float((y - pin.base_world) @ u)
     if s < 0.0 or s > pin.side_end_m:
         return None
@@ -210,47 +235,8 @@ def _edge(pin: PinBody, hole: HoleBody, depth_m: float, kind: str, settings: Pin
     if d == 0.0:
         return None
     n = v / d
-    if pin.land_direction_world is not None:
-        e1, e2 = _perp_basis(u, pin.land_direction_world)
-        arcs = _land_arcs(pin)
-        if not _in_arcs(math.atan2(float(n @ e2), float(n @ e1)), arcs):
-            # the nearest point faces the relief: the nearest one the lands face
-            ok = [
-                float(t)
-                for t in np.linspace(0.0, 2.0 * math.pi, 4 * settings.rim_samples, endpoint=False)
-                if _in_arcs(_angle_of(P, centre, h1, h2, hole.radius_m, float(t), pin, e1, e2), arcs)
-            ]
-            if not ok:
-                return None
-            phi = min(ok, key=lambda t: _dist2(P, centre, h1, h2, hole.radius_m, t, pin))
-            y = centre + hole.radius_m * (math.cos(phi) * h1 + math.sin(phi) * h2)
-            v = P @ (y - pin.base_world)
-            d = float(np.linalg.norm(v))
-            n = v / d
-    x = pin.base_world + float((y - pin.base_world) @ u) * u + pin.radius_m * n
+    x = pin.base_world + s * u + pin.radius_m * n
     return PinContact(kind, x, y, n, d - pin.radius_m)
-
-
-def _angle_of(
-    P: FloatArray,
-    centre: FloatArray,
-    h1: FloatArray,
-    h2: FloatArray,
-    R: float,
-    t: float,
-    pin: PinBody,
-    e1: FloatArray,
-    e2: FloatArray,
-) -> float:
-    v = P @ (centre + R * (math.cos(t) * h1 + math.sin(t) * h2) - pin.base_world)
-    return math.atan2(float(v @ e2), float(v @ e1))
-
-
-def _dist2(
-    P: FloatArray, centre: FloatArray, h1: FloatArray, h2: FloatArray, R: float, t: float, pin: PinBody
-) -> float:
-    v = P @ (centre + R * (math.cos(t) * h1 + math.sin(t) * h2) - pin.base_world)
-    return float(v @ v)
 
 
 def _bottom(pin: PinBody, hole: HoleBody, settings: PinSettings) -> PinContact | None:
@@ -448,20 +434,25 @@ def _tip_edges_on_chamfer(pin: PinBody, hole: HoleBody, settings: PinSettings) -
 def pin_hole_contacts(pin: PinBody, hole: HoleBody, settings: PinSettings = _DEFAULT.pins) -> list[PinContact]:
     """Every contact of ``pin`` with ``hole`` that their relative pose makes possible, with its gap.
 
-    The rim and the mouth (a through hole's exit once the rim has passed it) for the side, the
+    The rim and the mouth (a through hole's exit once the rim has passed it) for the side (a
+    diamond pin: for each land, the one along ``+land_direction`` first), the
     bottom for a blind hole, and the tip entering the mouth: the hole's mouth edges on the pin's tip
     chamfer or face, the pin's rim and tip circles on the hole's mouth chamfer (``"tip"``), each
     where its nearest feature faces the other body.
     """
     out: list[PinContact] = []
-    for found in (
-        _rim(pin, hole, settings),
-        _edge(pin, hole, hole.chamfer_m, "mouth", settings),
-        None if hole.blind else _edge(pin, hole, hole.depth_m, "exit", settings),
-        _bottom(pin, hole, settings) if hole.blind else None,
-    ):
-        if found is not None:
-            out.append(found)
+    arcs = _land_arcs(pin)
+    for land in [arcs] if len(arcs) == 1 else [[arc] for arc in arcs]:  # a diamond: each land on its own
+        for found in (
+            _rim(pin, hole, land, settings),
+            _edge(pin, hole, hole.chamfer_m, "mouth", land, settings),
+            None if hole.blind else _edge(pin, hole, hole.depth_m, "exit", land, settings),
+        ):
+            if found is not None:
+                out.append(found)
+    bottom = _bottom(pin, hole, settings) if hole.blind else None
+    if bottom is not None:
+        out.append(bottom)
     return out + _hole_edges_on_tip(pin, hole, settings) + _tip_edges_on_chamfer(pin, hole, settings)
 
 
