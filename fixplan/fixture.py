@@ -72,23 +72,6 @@ def _scaled(shape: Shape, k: float) -> Shape | None:
     return None
 
 
-def refuse_pins(fixture: Fixture, command: str) -> Fixture:
-    """``fixture``, or :class:`~fixplan.errors.InputError` (one line, exit 2) when it has pins or bores.
-
-    Pins, holes and bores are read, checked, classified and searched; the other commands (planning,
-    simulation, the haptic loop, views) do not model them yet and say so instead of ignoring them.
-    """
-    from fixplan.errors import InputError
-
-    if not fixture.has_pins:
-        return fixture
-    key = f"pin.{fixture.pins[0].name}" if fixture.pins else f"bore.{fixture.bores[0].name}"
-    raise InputError(
-        f"{fixture.source}: {key}: pins and bores are not supported by '{command}' yet "
-        "(expected a fixture of locators; 'validate', 'classify' and 'search' take pins)"
-    )
-
-
 def default_fixture_path() -> Path:
     """The bundled default fixture (a 3-2-1 box), used when a command is given no file."""
     return _DATA / "default.toml"
@@ -388,7 +371,10 @@ class _Builder:
         for bore in fixture.bores:
             key = f"bore.{bore.name}"
             if not isinstance(wp.shape, Cylinder):
-                r.error(key, f"a bore takes a cylindrical part (expected workpiece.shape = 'cylinder', got {wp.shape.name!r})")
+                r.error(
+                    key,
+                    f"a bore takes a cylindrical part (expected workpiece.shape = 'cylinder', got {wp.shape.name!r})",
+                )
             elif 2.0 * wp.shape.radius >= bore.diameter_m:
                 r.error(
                     f"{key}.diameter",
@@ -438,8 +424,10 @@ class _Builder:
             q = pin.p_world + s * pin.axis_world
             off = q - m - float((q - m) @ a) * a
             play = 0.5 * (hole.diameter_m - pin.diameter_m)
-            along = abs(float(off @ pin.land_direction_world)) if pin.land_direction_world is not None else float(
-                np.linalg.norm(off)
+            along = (
+                abs(float(off @ pin.land_direction_world))
+                if pin.land_direction_world is not None
+                else float(np.linalg.norm(off))
             )
             if along > play + tol.goal_gap_m:
                 r.error(

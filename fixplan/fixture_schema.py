@@ -554,6 +554,27 @@ class Pose(Table):
 _LENGTH = Number("a length", limits.SIZE, exclusive_minimum=0.0, too_large=UNITS_HINT)
 
 
+_DIAMETER = Number("a diameter [m]", limits.SIZE, exclusive_minimum=0.0, too_large=UNITS_HINT)
+_CHAMFER = Number("a 45° chamfer's leg [m]", limits.TIP_RADIUS, minimum=0.0)
+_POINT3 = Vector(length=3, bounds=limits.COORDINATE)
+PIN_KINDS = ("round", "diamond")
+
+
+class Hole(Table):
+    """``[[workpiece.hole]]``: a cylindrical hole in the part, body frame (exact geometry, also in a mesh part)."""
+
+    name: Annotated[str, Name()] = Field(description="Unique among the part's holes; a pin names it in `hole`.")
+    position: Annotated[tuple[float, ...], _POINT3] = Field(description="Centre of the hole's mouth, body frame.")
+    axis: Annotated[tuple[float, ...], Direction(length=3)] = Field(
+        description="Pointing out of the part through the mouth, body frame (normalised on load)."
+    )
+    diameter: Annotated[float, _DIAMETER] = Field(description="The hole's diameter D.")
+    depth: Annotated[float, _DIAMETER] = Field(
+        description="From the mouth to the bottom; a hole as deep as the part is a through hole."
+    )
+    chamfer: Annotated[float, _CHAMFER] = Field(0.0, description="The mouth's 45° chamfer (its leg length).")
+
+
 class Workpiece(Table):
     """``[workpiece]``: the part to load; the keys of its shape, its mass, inertia and poses."""
 
@@ -612,27 +633,6 @@ class Workpiece(Table):
             if key not in data and value is not None:
                 errors.append(((key,), f"missing (expected {value.expected(dim)})"))
         return used, errors
-
-
-_DIAMETER = Number("a diameter [m]", limits.SIZE, exclusive_minimum=0.0, too_large=UNITS_HINT)
-_CHAMFER = Number("a 45° chamfer's leg [m]", limits.TIP_RADIUS, minimum=0.0)
-_POINT3 = Vector(length=3, bounds=limits.COORDINATE)
-PIN_KINDS = ("round", "diamond")
-
-
-class Hole(Table):
-    """``[[workpiece.hole]]``: a cylindrical hole in the part, body frame (exact geometry, also in a mesh part)."""
-
-    name: Annotated[str, Name()] = Field(description="Unique among the part's holes; a pin names it in `hole`.")
-    position: Annotated[tuple[float, ...], _POINT3] = Field(description="Centre of the hole's mouth, body frame.")
-    axis: Annotated[tuple[float, ...], Direction(length=3)] = Field(
-        description="Pointing out of the part through the mouth, body frame (normalised on load)."
-    )
-    diameter: Annotated[float, _DIAMETER] = Field(description="The hole's diameter D.")
-    depth: Annotated[float, _DIAMETER] = Field(
-        description="From the mouth to the bottom; a hole as deep as the part is a through hole."
-    )
-    chamfer: Annotated[float, _CHAMFER] = Field(0.0, description="The mouth's 45° chamfer (its leg length).")
 
 
 class Locator(Table):
@@ -793,7 +793,9 @@ class Pin(Table):
     def rules(cls, data: Mapping[str, Any], context: Mapping[str, Any]) -> tuple[set[str], list[tuple[tuple, str]]]:
         errors: list[tuple[tuple, str]] = []
         if data.get("kind") == "diamond":
-            errors += [((k,), "missing (a diamond pin needs it)") for k in ("land_direction", "land_width") if k not in data]
+            errors += [
+                ((k,), "missing (a diamond pin needs it)") for k in ("land_direction", "land_width") if k not in data
+            ]
         elif data.get("kind") == "round":
             errors += [
                 ((k,), "a diamond pin's key (remove it for a round pin)")

@@ -1,4 +1,4 @@
-"""Pins in holes and pegs in bores (issue 24): closed-form contacts, the format's checks, verdicts.
+"""Pins in holes and pegs in bores: closed-form contacts, the format's checks, verdicts.
 
 Every expected number is derived here by hand (radial play, the two-point contact of a tilted
 peg, Whitney's wedging condition), never by running fixplan.

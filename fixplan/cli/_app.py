@@ -102,7 +102,8 @@ def _load(path: Path | None, command: str, pins: bool = False):
 
     A fixture with pins or bores is refused in one line unless the command takes them (``pins``).
     """
-    from fixplan.fixture import default_fixture_path, load, refuse_pins
+    from fixplan.fixture import default_fixture_path, load
+    from fixplan.model import refuse_pins
 
     fixture = load(path if path is not None else default_fixture_path())
     return fixture if pins else refuse_pins(fixture, command)

@@ -64,8 +64,9 @@ def run_haptic(
 ) -> int:
     """Run a session; 0 when the goal was reached, 1 otherwise."""
     from fixplan.files import check_distinct, check_output
-    from fixplan.fixture import default_fixture_path, load, refuse_pins
+    from fixplan.fixture import default_fixture_path, load
     from fixplan.interactive.handles import GizmoHandle, Handle, SpaceMouseHandle, UdpHandle, parse_device
+    from fixplan.model import refuse_pins
 
     kind, udp_port = parse_device(device)
     until_goal, seconds = parse_until(until)
@@ -209,8 +210,9 @@ def run_device_sim(
 def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
     """Re-run a plan file in the haptic loop; 0 when it passes."""
     from fixplan.files import read_plan_json
-    from fixplan.fixture import fixture_of_plan, load, refuse_pins
+    from fixplan.fixture import fixture_of_plan, load
     from fixplan.interactive.record import verify_plan_file
+    from fixplan.model import refuse_pins
 
     data = read_plan_json(plan, expected="a plan JSON ('fixplan solve --out' or 'fixplan haptic --record')")  # ≤ 1 MiB
     if not isinstance(data, dict):
