@@ -33,7 +33,18 @@ from fixplan.geometry.collision import BOX as OBSTACLE_BOX
 from fixplan.geometry.collision import PLANE as OBSTACLE_PLANE
 from fixplan.geometry.collision import collision_points, obstacle_gap, plane_frame, polytope_overlap_m
 from fixplan.locating import find_goal, locator_contact, settle_free_motions, with_free_motions
-from fixplan.model import ExplicitContact, Fixture, Locator, Manipulator, Obstacle, SimulationSettings, Workpiece
+from fixplan.model import (
+    Bore,
+    ExplicitContact,
+    Fixture,
+    Hole,
+    Locator,
+    Manipulator,
+    Obstacle,
+    Pin,
+    SimulationSettings,
+    Workpiece,
+)
 from fixplan.schema import Reader, shorten
 from fixplan.settings import DEFAULT as DEFAULT_SETTINGS
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
@@ -276,7 +287,7 @@ class _Builder:
         if dim is None:  # without a valid dimension nothing but the scene can be checked meaningfully
             raise FixtureError(self.source, [i for i in issues if re.split(r"[.\[]", i.key)[0] not in _PER_DIMENSION])
         r.issues.extend(issues)
-        if doc is not None and not doc.locator and not doc.contact and not r.issues:
+        if doc is not None and not doc.locator and not doc.contact and not doc.pin and not doc.bore and not r.issues:
             r.error("locator", "no [[locator]] or [[contact]] entries (expected at least one)")
         self.fail_if_issues()
         if doc is None:  # no issue and no document: a reader fault, still one line and exit 2
@@ -309,8 +320,14 @@ class _Builder:
             goal_given=_pose(wp.goal, dim) if wp.goal is not None else None,
             tolerances=self.tol,
             obstacles=tuple(self.obstacle(e, dim) for e in doc.obstacle),
+            pins=tuple(self.pin(e) for e in doc.pin),
+            bores=tuple(self.bore(e) for e in doc.bore),
         )
-        fixture = with_free_motions(fixture)  # fewer locators that leave only the part's symmetry free
+        if fixture.has_pins or workpiece.holes:
+            self.check_pins(fixture, dim)
+            self.fail_if_issues()
+        else:
+            fixture = with_free_motions(fixture)  # fewer locators that leave only the part's symmetry free
         goal = self.check_geometry(fixture)
         self.check_obstacles(fixture, goal)
         self.fail_if_issues()
@@ -336,6 +353,153 @@ class _Builder:
                         "a fixture needs 6 in 3D, 3 in 2D)",
                     )
                 ],
+            )
+
+    # -- pins, holes and bores ------------------------------------------------------------------
+    def pin(self, e: fixture_schema.Pin) -> Pin:
+        axis = _unit(e.axis)
+        land = None
+        if e.land_direction is not None:
+            d = _unit(e.land_direction)
+            if abs(float(d @ axis)) > np.sin(DEFAULT_SETTINGS.pins.axis_angle_rad):
+                self.r.error(
+                    f"pin.{e.name}.land_direction",
+                    f"not normal to the pin's axis (cosine {float(d @ axis):.3g}; expected a direction across the pin)",
+                )
+            d = d - float(d @ axis) * axis
+            land = d / np.linalg.norm(d) if np.linalg.norm(d) > 0.0 else None
+        return Pin(
+            e.name,
+            e.kind,
+            e.hole,
+            np.array(e.position),
+            axis,
+            e.diameter,
+            e.length,
+            e.friction,
+            e.chamfer,
+            land,
+            e.land_width or 0.0,
+        )
+
+    def bore(self, e: fixture_schema.Bore) -> Bore:
+        return Bore(e.name, np.array(e.position), _unit(e.axis), e.diameter, e.depth, e.friction, e.chamfer)
+
+    def check_pins(self, fixture: Fixture, dim: int) -> None:
+        """Each pin against its hole and each bore against the part: sizes, names (the located pose: :meth:`check_pin_goal`)."""
+        r, wp = self.r, fixture.workpiece
+        if dim != 3:
+            for key in ("pin", "bore", "workpiece.hole"):
+                r.error(key, "pins, holes and bores are 3D only (expected scene.dimension = 3)")
+            return
+        holes = {h.name: h for h in wp.holes}
+        for pin in fixture.pins:
+            key = f"pin.{pin.name}"
+            hole = holes.get(pin.hole)
+            if hole is None:
+                known = ", ".join(holes) if holes else "none: add a [[workpiece.hole]]"
+                r.error(f"{key}.hole", f"no hole {pin.hole!r} in the part (expected one of: {known})")
+                continue
+            if pin.diameter_m >= hole.diameter_m:
+                r.error(
+                    f"{key}.diameter",
+                    f"{pin.diameter_m:g} m does not fit hole {hole.name} of {hole.diameter_m:g} m "
+                    "(expected a pin smaller than its hole)",
+                )
+            if pin.kind == "diamond" and pin.land_width_m > pin.diameter_m:
+                r.error(
+                    f"{key}.land_width",
+                    f"{pin.land_width_m:g} m is wider than the pin ({pin.diameter_m:g} m; expected lands narrower "
+                    "than the pin's diameter)",
+                )
+            if pin.chamfer_m >= 0.5 * pin.diameter_m or pin.chamfer_m >= pin.length_m:
+                r.error(f"{key}.chamfer", f"{pin.chamfer_m:g} m (expected less than the pin's radius and length)")
+        for bore in fixture.bores:
+            key = f"bore.{bore.name}"
+            if not isinstance(wp.shape, Cylinder):
+                r.error(
+                    key,
+                    f"a bore takes a cylindrical part (expected workpiece.shape = 'cylinder', got {wp.shape.name!r})",
+                )
+            elif 2.0 * wp.shape.radius >= bore.diameter_m:
+                r.error(
+                    f"{key}.diameter",
+                    f"{bore.diameter_m:g} m does not take the part of {2.0 * wp.shape.radius:g} m "
+                    "(expected a bore larger than the part)",
+                )
+        for hole in wp.holes:
+            if hole.chamfer_m >= hole.depth_m:
+                r.error(f"workpiece.hole.{hole.name}.chamfer", f"{hole.chamfer_m:g} m (expected less than the depth)")
+
+    def check_pin_goal(self, fixture: Fixture, goal: Pose) -> None:
+        """Every pin in its hole at the located pose, and rests with pins leaving 6 constraints (rank of the normals)."""
+        r, wp, tol = self.r, fixture.workpiece, self.tol
+        angle = DEFAULT_SETTINGS.pins.axis_angle_rad
+        rows = [locator_contact(wp, goal, loc) for loc in fixture.locators]
+        normals = [(c.point_world, c.normal_world) for c in rows]
+        for pin in fixture.pins:
+            hole = wp.hole(pin.hole)
+            key = f"pin.{pin.name}"
+            a = goal.R_world_body @ hole.axis_body
+            m = goal.point_world_from_body(hole.p_body)
+            if float(a @ pin.axis_world) > -np.cos(angle):
+                r.error(
+                    f"{key}.axis",
+                    f"hole {hole.name} does not face the pin at the located pose (its axis is "
+                    f"{np.degrees(np.arccos(np.clip(-float(a @ pin.axis_world), -1, 1))):.3g}° off; expected the hole's axis "
+                    "against the pin's)",
+                )
+                continue
+            tip = pin.p_world + pin.length_m * pin.axis_world
+            tip_depth = float((m - tip) @ a)
+            if tip_depth <= hole.chamfer_m:
+                r.error(
+                    f"{key}.position",
+                    f"the pin does not reach into hole {hole.name} at the located pose (its tip is {-tip_depth:.3g} m "
+                    "out of the hole's mouth; expected the pin's side inside the hole)",
+                )
+                continue
+            if not hole.through and tip_depth > hole.depth_m + tol.goal_gap_m:
+                r.error(
+                    f"{key}.length",
+                    f"the pin is {tip_depth - hole.depth_m:.3g} m longer than hole {hole.name} is deep at the located "
+                    "pose (expected it clear of the hole's bottom while the rests touch)",
+                )
+            # the pin's axis where it crosses the mouth, against the hole's axis
+            s = float((m - pin.p_world) @ pin.axis_world)
+            q = pin.p_world + s * pin.axis_world
+            off = q - m - float((q - m) @ a) * a
+            play = 0.5 * (hole.diameter_m - pin.diameter_m)
+            along = (
+                abs(float(off @ pin.land_direction_world))
+                if pin.land_direction_world is not None
+                else float(np.linalg.norm(off))
+            )
+            if along > play + tol.goal_gap_m:
+                r.error(
+                    f"{key}.position",
+                    f"hole {hole.name} cannot reach the pin at the located pose: the axes are {along:.3g} m apart "
+                    f"(expected at most the radial play (D - d)/2 = {play:.3g} m)",
+                )
+            e1 = pin.land_direction_world
+            if e1 is None:
+                k = int(np.argmin(np.abs(pin.axis_world)))
+                e1 = np.eye(3)[k] - pin.axis_world[k] * pin.axis_world
+                e1 = e1 / np.linalg.norm(e1)
+                normals.append((q, np.cross(pin.axis_world, e1)))
+            normals.append((q, e1))
+        if r.issues:
+            return
+        c = goal.point_world_from_body(wp.com_body)
+        scale = wp.shape.bounding_radius
+        G = np.array([[*n, *(np.cross(p - c, n) / scale)] for p, n in normals]).reshape(len(normals), 6)
+        rank = int(np.linalg.matrix_rank(G)) if len(G) else 0
+        if rank < 6:
+            r.error(
+                "pin",
+                f"the rests and pins leave {6 - rank} motion(s) free at the located pose (rank of their constraint "
+                f"normals {rank} < 6; expected 3 rests, a round pin and a diamond pin whose lands do not point at the "
+                "round pin)",
             )
 
     # -- obstacles ---------------------------------------------------------------------------
@@ -440,7 +604,15 @@ class _Builder:
             inertia = np.array([[wp.inertia]]) if dim == 2 else np.diag(wp.inertia)
             self.check_inertia(inertia, shape, mass)
         self.check_density(shape, mass, dim)
-        return Workpiece(shape, mass, inertia, shape.com_body)
+        holes = tuple(self.hole(h, shape) for h in wp.hole)
+        return Workpiece(shape, mass, inertia, shape.com_body, holes)
+
+    def hole(self, e: fixture_schema.Hole, shape: Shape) -> Hole:
+        """A ``[[workpiece.hole]]``: through when its bottom lies on or outside the part's surface."""
+        axis = _unit(e.axis)
+        bottom = np.array(e.position) - e.depth * axis
+        through = shape.dimension == 3 and shape.project(bottom).distance >= -self.tol.penetration_m
+        return Hole(e.name, np.array(e.position), axis, e.diameter, e.depth, e.chamfer, through)
 
     def check_inertia(self, inertia: FloatArray, shape: Shape, mass: float) -> bool:
         """A given inertia within what a rigid body of this shape and mass can have (see :mod:`fixplan.limits`)."""
@@ -537,6 +709,24 @@ class _Builder:
                     f"locator.{loc.name}.position",
                     f"tip is inside the workpiece by {-gap:.3g} m at the start pose (expected gap ≥ -{tol.penetration_m:g} m)",
                 )
+        if fixture.has_pins and not r.issues and fixture.is_full:
+            if fixture.goal_given is None:
+                r.error(
+                    "workpiece.goal",
+                    "missing (a fixture with pins needs its located pose given: finding it with pins is not "
+                    "supported yet)",
+                )
+                return None
+            goal = fixture.goal_given
+            for loc in locs:
+                gap = locator_contact(wp, goal, loc).gap_m
+                if abs(gap) > tol.goal_gap_m:
+                    r.error(
+                        "workpiece.goal",
+                        f"locator {loc.name} does not touch at the given goal (gap {gap:.3g} m; expected |gap| ≤ {tol.goal_gap_m:g} m)",
+                    )
+            self.check_pin_goal(fixture, goal)
+            return goal
         if r.issues or not fixture.is_full:
             if fixture.goal_given is not None and not fixture.is_full and not r.issues:
                 r.error(
@@ -573,7 +763,7 @@ class _Builder:
         return None
 
 
-_PER_DIMENSION = ("workpiece", "locator", "contact")  # tables whose keys need the scene's dimension
+_PER_DIMENSION = ("workpiece", "locator", "contact", "pin", "bore")  # tables whose keys need the scene's dimension
 
 
 def _dimension_of(data: dict[str, Any]) -> int | None:

@@ -554,6 +554,27 @@ class Pose(Table):
 _LENGTH = Number("a length", limits.SIZE, exclusive_minimum=0.0, too_large=UNITS_HINT)
 
 
+_DIAMETER = Number("a diameter [m]", limits.SIZE, exclusive_minimum=0.0, too_large=UNITS_HINT)
+_CHAMFER = Number("a 45° chamfer's leg [m]", limits.TIP_RADIUS, minimum=0.0)
+_POINT3 = Vector(length=3, bounds=limits.COORDINATE)
+PIN_KINDS = ("round", "diamond")
+
+
+class Hole(Table):
+    """``[[workpiece.hole]]``: a cylindrical hole in the part, body frame (exact geometry, also in a mesh part)."""
+
+    name: Annotated[str, Name()] = Field(description="Unique among the part's holes; a pin names it in `hole`.")
+    position: Annotated[tuple[float, ...], _POINT3] = Field(description="Centre of the hole's mouth, body frame.")
+    axis: Annotated[tuple[float, ...], Direction(length=3)] = Field(
+        description="Pointing out of the part through the mouth, body frame (normalised on load)."
+    )
+    diameter: Annotated[float, _DIAMETER] = Field(description="The hole's diameter D.")
+    depth: Annotated[float, _DIAMETER] = Field(
+        description="From the mouth to the bottom; a hole as deep as the part is a through hole."
+    )
+    chamfer: Annotated[float, _CHAMFER] = Field(0.0, description="The mouth's 45° chamfer (its leg length).")
+
+
 class Workpiece(Table):
     """``[workpiece]``: the part to load; the keys of its shape, its mass, inertia and poses."""
 
@@ -598,10 +619,13 @@ class Workpiece(Table):
     goal: Pose | None = Field(
         None, description="The located pose (every locator touching); computed when absent, checked when given."
     )
+    hole: Annotated[tuple[Hole, ...], TablesOf("workpiece.hole")] = Field(
+        (), description="A cylindrical hole in the part (body frame) that a [[pin]] enters."
+    )
 
     @classmethod
     def rules(cls, data: Mapping[str, Any], context: Mapping[str, Any]) -> tuple[set[str], list[tuple[tuple, str]]]:
-        common = {"shape", "mass", "inertia", "start", "goal"}
+        common = {"shape", "mass", "inertia", "start", "goal", "hole"}
         kind = data.get("shape")
         dim = context.get("dimension") or 3
         if not isinstance(kind, str) or kind not in (SHAPES_3D if dim == 3 else SHAPES_2D):
@@ -748,6 +772,63 @@ class Obstacle(Table):
         return common | set(own), errors
 
 
+class Pin(Table):
+    """``[[pin]]``: a locating pin fixed in the fixture, world frame; it enters a hole of the part."""
+
+    name: Annotated[str, Name()] = Field(description="Unique among locators, contacts, obstacles, pins and bores.")
+    kind: Annotated[str, Text(PIN_KINDS)] = Field(
+        description="round (locates 2 directions) or diamond (relieved: locates along land_direction only)."
+    )
+    hole: Annotated[str, Name()] = Field(description="The name of the [[workpiece.hole]] it enters.")
+    position: Annotated[tuple[float, ...], _POINT3] = Field(
+        description="Centre of the pin's base, where it leaves the fixture, world frame."
+    )
+    axis: Annotated[tuple[float, ...], Direction(length=3)] = Field(
+        description="From base to tip, world frame (normalised on load)."
+    )
+    diameter: Annotated[float, _DIAMETER] = Field(description="The pin's diameter d.")
+    length: Annotated[float, _DIAMETER] = Field(description="From the base to the tip.")
+    friction: Annotated[float, Number("a friction coefficient", limits.FRICTION, minimum=0.0)] = Field(
+        description="Coulomb coefficient μ."
+    )
+    chamfer: Annotated[float, _CHAMFER] = Field(0.0, description="The tip's 45° chamfer (its leg length).")
+    land_direction: Annotated[tuple[float, ...] | None, Direction(length=3)] = Field(
+        None, description="Diamond only: the direction the lands locate along (normal to the axis), world frame."
+    )
+    land_width: Annotated[float | None, _DIAMETER] = Field(None, description="Diamond only: the width of each land.")
+
+    @classmethod
+    def rules(cls, data: Mapping[str, Any], context: Mapping[str, Any]) -> tuple[set[str], list[tuple[tuple, str]]]:
+        errors: list[tuple[tuple, str]] = []
+        if data.get("kind") == "diamond":
+            errors += [
+                ((k,), "missing (a diamond pin needs it)") for k in ("land_direction", "land_width") if k not in data
+            ]
+        elif data.get("kind") == "round":
+            errors += [
+                ((k,), "a diamond pin's key (remove it for a round pin)")
+                for k in ("land_direction", "land_width")
+                if k in data
+            ]
+        return set(cls.model_fields), errors
+
+
+class Bore(Table):
+    """``[[bore]]``: a cylindrical hole in the fixture, world frame, for a cylindrical workpiece (a peg)."""
+
+    name: Annotated[str, Name()] = Field(description="Unique among locators, contacts, obstacles, pins and bores.")
+    position: Annotated[tuple[float, ...], _POINT3] = Field(description="Centre of the bore's mouth, world frame.")
+    axis: Annotated[tuple[float, ...], Direction(length=3)] = Field(
+        description="Pointing out of the fixture through the mouth, world frame (normalised on load)."
+    )
+    diameter: Annotated[float, _DIAMETER] = Field(description="The bore's diameter D.")
+    depth: Annotated[float, _DIAMETER] = Field(description="From the mouth to the bore's bottom.")
+    friction: Annotated[float, Number("a friction coefficient", limits.FRICTION, minimum=0.0)] = Field(
+        description="Coulomb coefficient μ."
+    )
+    chamfer: Annotated[float, _CHAMFER] = Field(0.0, description="The mouth's 45° chamfer (its leg length).")
+
+
 class FixtureFile(Table):
     """A fixture file: ``docs/fixture-format.md``."""
 
@@ -755,6 +836,8 @@ class FixtureFile(Table):
         "locator",
         "contact",
         "obstacle",
+        "pin",
+        "bore",
     )  # arrays of tables whose names are unique across all
 
     format: Annotated[int, Integer((1,))] = Field(description="The file format's version.")
@@ -768,6 +851,12 @@ class FixtureFile(Table):
     )
     obstacle: Annotated[tuple[Obstacle, ...], TablesOf("obstacle")] = Field(
         (), description="A collision-only body: a floor, a base plate, the fixture's body (never locates)."
+    )
+    pin: Annotated[tuple[Pin, ...], TablesOf("pin")] = Field(
+        (), description="A locating pin (round or diamond) fixed in the fixture; it enters a hole of the part."
+    )
+    bore: Annotated[tuple[Bore, ...], TablesOf("bore")] = Field(
+        (), description="A cylindrical hole in the fixture for a cylindrical part (a peg)."
     )
     manipulator: Manipulator | None = Field(None, description="What the hand/robot can exert on the workpiece.")
     simulation: Simulation | None = Field(None, description="Simulation defaults, overridable on the command line.")

@@ -40,7 +40,8 @@ class Contact:
     friction: float  # Coulomb μ
     torsion_m: float = 0.0  # soft-finger torsional radius e_r [m]; 0 = no spin row
     gap_m: float = 0.0  # signed distance at this configuration [m]
-    kind: str = "locator"  # "locator" or "explicit"
+    # "locator", "explicit", "pin" (a [[pin]] in the part's hole) or "bore" (the part in a [[bore]])
+    kind: str = "locator"
     # the locator this contact belongs to, when it is one of several of that locator (a tip in a
     # mesh part's concave corner touches two faces: ``"E1"`` and ``"E1#2"``, both of ``"E1"``);
     # None: the contact is its locator's only one, and ``owner`` is its name

@@ -25,11 +25,15 @@ from numpy.typing import NDArray
 
 from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.geometry import Box, Cylinder, Mesh, Polygon, Rectangle, Shape
+from fixplan.geometry.pins import HoleBody, PinBody, pin_hole_contacts
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
 from fixplan.model import (
+    Bore,
     ExplicitContact,
     Fixture,
+    Hole,
     Locator,
+    Pin,
     Workpiece,
     nearest_symmetric_pose,
     require_full,
@@ -90,6 +94,82 @@ def locator_contacts(workpiece: Workpiece, pose: Pose, locator: Locator) -> list
     return out
 
 
+def _hole_body(workpiece: Workpiece, pose: Pose, hole: Hole) -> HoleBody:
+    return HoleBody(
+        pose.point_world_from_body(hole.p_body),
+        pose.R_world_body @ hole.axis_body,
+        0.5 * hole.diameter_m,
+        hole.depth_m,
+        hole.chamfer_m,
+        blind=not hole.through,
+    )
+
+
+def _named(raw: Sequence[Contact], owner: str) -> list[Contact]:
+    """Contacts of one pin or bore named ``owner``, ``owner#2`` ... (each carries its owner when there are several)."""
+    several = len(raw) > 1
+    return [
+        replace(c, name=owner if k == 0 else f"{owner}#{k + 1}", locator=owner if several else None)
+        for k, c in enumerate(raw)
+    ]
+
+
+def pin_contacts(workpiece: Workpiece, pose: Pose, pin: Pin) -> list[Contact]:
+    """The contacts of a ``[[pin]]`` with its hole in the part at ``pose`` (:func:`~fixplan.geometry.pins.pin_hole_contacts`).
+
+    The workpiece's material point is the hole's; the normal pushes the part away from the pin.
+    Named ``"<pin>"``, ``"<pin>#2"`` ... (rim, mouth, exit, bottom, those the pose makes possible).
+    """
+    body = PinBody(
+        pin.p_world,
+        pin.axis_world,
+        0.5 * pin.diameter_m,
+        pin.length_m,
+        pin.chamfer_m,
+        pin.land_direction_world,
+        pin.land_width_m,
+    )
+    raw = pin_hole_contacts(body, _hole_body(workpiece, pose, workpiece.hole(pin.hole)))
+    return _named(
+        [Contact(pin.name, c.point_hole_world, c.normal_world, pin.friction, 0.0, c.gap_m, "pin") for c in raw],
+        pin.name,
+    )
+
+
+def peg_body(workpiece: Workpiece, pose: Pose, bore: Bore) -> PinBody:
+    """The cylindrical part as a pin entering ``bore``: from its end farther out of the bore to the deeper one."""
+    shape = workpiece.shape
+    if not isinstance(shape, Cylinder):
+        raise InputError(f"bore {bore.name}: a bore takes a cylindrical part (workpiece.shape = 'cylinder')")
+    z = pose.R_world_body[:, 2]
+    ends = [pose.p_world + 0.5 * shape.length * z, pose.p_world - 0.5 * shape.length * z]
+    deep = [float((bore.p_world - e) @ bore.axis_world) for e in ends]
+    lead = int(np.argmax(deep))
+    base = ends[1 - lead]
+    return PinBody(base, (ends[lead] - base) / shape.length, shape.radius, shape.length)
+
+
+def bore_contacts(workpiece: Workpiece, pose: Pose, bore: Bore) -> list[Contact]:
+    """The contacts of a cylindrical part (a peg) at ``pose`` with a ``[[bore]]`` of the fixture.
+
+    The workpiece's material point is the peg's; the normal pushes the peg away from the bore's
+    wall, edge or bottom. Named ``"<bore>"``, ``"<bore>#2"`` ...
+    """
+    hole = HoleBody(bore.p_world, bore.axis_world, 0.5 * bore.diameter_m, bore.depth_m, bore.chamfer_m, blind=True)
+    raw = pin_hole_contacts(peg_body(workpiece, pose, bore), hole)
+    return _named(
+        [Contact(bore.name, c.point_pin_world, -c.normal_world, bore.friction, 0.0, c.gap_m, "bore") for c in raw],
+        bore.name,
+    )
+
+
+def cylinder_contacts(fixture: Fixture, pose: Pose) -> list[Contact]:
+    """Every contact of the fixture's pins and bores at ``pose`` (touching or not), pin by pin."""
+    wp = fixture.workpiece
+    out = [c for pin in fixture.pins for c in pin_contacts(wp, pose, pin)]
+    return out + [c for bore in fixture.bores for c in bore_contacts(wp, pose, bore)]
+
+
 def locator_gaps(workpiece: Workpiece, pose: Pose, locators: Sequence[Locator]) -> FloatArray:
     """Signed gaps [m] of the locators at ``pose`` (negative: penetration)."""
     return np.array([locator_contact(workpiece, pose, loc).gap_m for loc in locators])
@@ -130,18 +210,32 @@ def contact_set(
         else:
             all_contacts = [locator_contact(wp, pose, loc) for loc in fixture.locators]
         all_contacts += [explicit(c) for c in fixture.contacts]
+        all_contacts += cylinder_contacts(fixture, pose) if fixture.has_pins else []
         chosen = [c for c in all_contacts if c.kind == "explicit" or c.gap_m <= tol]
     else:
         # only the named contacts are computed (an explicit contact wins over a locator of its name)
         locators = {loc.name: loc for loc in fixture.locators}
         explicits = {c.name: c for c in fixture.contacts}
-        known = dict.fromkeys([*locators, *explicits])
+        pins = {p.name: p for p in fixture.pins}
+        bores = {b.name: b for b in fixture.bores}
+        known = dict.fromkeys([*locators, *explicits, *pins, *bores])
         unknown = [n for n in names if n not in known]
         if unknown:
             raise InputError(f"unknown contact {unknown[0]!r} (known: {', '.join(known)})")
         if len(set(names)) != len(names):
             raise InputError(f"contact names repeat: {', '.join(names)}")
-        if isinstance(wp.shape, Mesh):  # a named locator brings every one of its contacts
+        if fixture.has_pins:  # a named pin or bore brings every contact it can make at this pose
+            chosen = []
+            for n in names:
+                if n in explicits:
+                    chosen.append(explicit(explicits[n]))
+                elif n in pins:
+                    chosen += pin_contacts(wp, pose, pins[n])
+                elif n in bores:
+                    chosen += bore_contacts(wp, pose, bores[n])
+                else:
+                    chosen += locator_contacts(wp, pose, locators[n])
+        elif isinstance(wp.shape, Mesh):  # a named locator brings every one of its contacts
             chosen = [
                 c
                 for n in names
@@ -886,6 +980,10 @@ __all__ = [
     "locator_contact",
     "locator_contacts",
     "locator_gaps",
+    "peg_body",
+    "pin_contacts",
+    "bore_contacts",
+    "cylinder_contacts",
     "named_faces",
     "no_pose_proof",
     "require_full",

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from fixplan.errors import InfeasibleError, Issue
+from fixplan.errors import InfeasibleError, InputError, Issue
 from fixplan.geometry import Cylinder, Disk, Shape, Sphere
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
 from fixplan.settings import Tolerances
@@ -42,6 +42,62 @@ class ExplicitContact:
     normal_world: FloatArray  # unit, the direction in which the fixture pushes the workpiece
     friction: float
     torsion_m: float = 0.0
+
+
+@dataclass(frozen=True)
+class Hole:
+    """A cylindrical hole in the workpiece (``[[workpiece.hole]]``), body frame.
+
+    ``axis_body`` is unit and points out of the part through the mouth ``p_body``; ``through``:
+    the hole's bottom lies on or outside the part's surface (set at load).
+    """
+
+    name: str
+    p_body: FloatArray
+    axis_body: FloatArray
+    diameter_m: float
+    depth_m: float
+    chamfer_m: float = 0.0
+    through: bool = False
+
+
+@dataclass(frozen=True)
+class Pin:
+    """A locating pin fixed in the fixture (``[[pin]]``), world frame; it enters the part's hole ``hole``.
+
+    A round pin locates the hole's axis in both directions normal to it (2 constraints), a diamond
+    pin only along ``land_direction_world`` (1 constraint): its side is relieved but for two lands.
+    """
+
+    name: str
+    kind: str  # "round" or "diamond"
+    hole: str
+    p_world: FloatArray  # centre of the base
+    axis_world: FloatArray  # unit, base to tip
+    diameter_m: float
+    length_m: float
+    friction: float
+    chamfer_m: float = 0.0
+    land_direction_world: FloatArray | None = None  # unit, normal to the axis (diamond)
+    land_width_m: float = 0.0
+
+    @property
+    def constraints(self) -> int:
+        """The directions it locates the part in: 2 (round), 1 (diamond)."""
+        return 2 if self.kind == "round" else 1
+
+
+@dataclass(frozen=True)
+class Bore:
+    """A cylindrical hole in the fixture (``[[bore]]``), world frame, for a cylindrical part (a peg)."""
+
+    name: str
+    p_world: FloatArray  # centre of the mouth
+    axis_world: FloatArray  # unit, out of the fixture through the mouth
+    diameter_m: float
+    depth_m: float
+    friction: float
+    chamfer_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -93,6 +149,13 @@ class Workpiece:
     mass_kg: float
     inertia_body: FloatArray  # (3,3) in 3D, (1,1) in 2D
     com_body: FloatArray
+    holes: tuple[Hole, ...] = ()  # [[workpiece.hole]]: the holes the fixture's pins enter
+
+    def hole(self, name: str) -> Hole:
+        for h in self.holes:
+            if h.name == name:
+                return h
+        raise KeyError(name)
 
 
 @dataclass(frozen=True)
@@ -121,6 +184,13 @@ class Fixture:
     # these free: such a fixture is located up to them, and planning leaves them free. None: none.
     free_motions_body: FloatArray | None = None
     unlocated: str = ""  # a fixture that is not full: the motions its locators leave free, for people
+    pins: tuple[Pin, ...] = ()  # [[pin]]: locating pins in the part's holes
+    bores: tuple[Bore, ...] = ()  # [[bore]]: holes in the fixture for a cylindrical part
+
+    @property
+    def has_pins(self) -> bool:
+        """Pins or bores: contacts of cylinders in holes (``validate``, ``classify`` and ``search`` only, so far)."""
+        return bool(self.pins or self.bores)
 
     @property
     def ndof(self) -> int:
@@ -129,7 +199,8 @@ class Fixture:
     @property
     def is_full(self) -> bool:
         """The locators locate the part: six in 3D, three in 2D, or fewer that leave only the part's symmetry free."""
-        return len(self.locators) >= (6 if self.dimension == 3 else 3) or self.free_motions_body is not None
+        located = len(self.locators) + sum(p.constraints for p in self.pins)
+        return located >= (6 if self.dimension == 3 else 3) or self.free_motions_body is not None
 
     @property
     def free_motions(self) -> FloatArray:
@@ -159,7 +230,12 @@ class Fixture:
 
     @property
     def names(self) -> list[str]:
-        return [loc.name for loc in self.locators] + [c.name for c in self.contacts]
+        return (
+            [loc.name for loc in self.locators]
+            + [c.name for c in self.contacts]
+            + [p.name for p in self.pins]
+            + [b.name for b in self.bores]
+        )
 
     @property
     def goal(self) -> Pose:
@@ -233,6 +309,21 @@ def nearest_symmetric_pose(shape: Shape, pose: Pose, near: Pose) -> Pose:
     return Pose(pose.R_world_body @ exp_so3(theta * axes[0]), pose.p_world)
 
 
+def refuse_pins(fixture: Fixture, command: str) -> Fixture:
+    """``fixture``, or :class:`~fixplan.errors.InputError` (one line, exit 2) when it has pins or bores.
+
+    Pins, holes and bores are read, checked, classified and searched; the other commands (planning,
+    simulation, the haptic loop, views) do not model them yet and say so instead of ignoring them.
+    """
+    if not fixture.has_pins:
+        return fixture
+    key = f"pin.{fixture.pins[0].name}" if fixture.pins else f"bore.{fixture.bores[0].name}"
+    raise InputError(
+        f"{fixture.source}: {key}: pins and bores are not supported by '{command}' yet "
+        "(expected a fixture of locators; 'validate', 'classify' and 'search' take pins)"
+    )
+
+
 def require_full(fixture: Fixture, what: str) -> None:
     """Raise a clear error when ``what`` needs a full fixture (6 locators in 3D, 3 in 2D, or fewer on a symmetric part).
 
@@ -251,14 +342,18 @@ def require_full(fixture: Fixture, what: str) -> None:
 
 
 __all__ = [
+    "Bore",
     "ExplicitContact",
     "Fixture",
+    "Hole",
     "Locator",
     "Manipulator",
     "Obstacle",
+    "Pin",
     "SimulationSettings",
     "Workpiece",
     "nearest_symmetric_pose",
+    "refuse_pins",
     "require_full",
     "symmetry_axes_body",
     "symmetry_motions_body",

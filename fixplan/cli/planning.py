@@ -170,7 +170,7 @@ def solve(
             force_noise=force_noise, latency_ms=latency_ms, accel=accel, margin=margin,
             friction_margin=friction_margin,
         )  # fmt: skip
-    fixture = _load(file)
+    fixture = _load(file, "solve")
     # the plan names its fixture (path and hash of the bytes read) so that 'fixplan verify PLAN' finds it
     stamp = fixture_stamp(file if file is not None else default_fixture_path())
     figure = None if report is None else figure_path(report)
@@ -394,7 +394,7 @@ def robust(
         samples=samples, seed=seed, mu_spread=mu_spread, pose_sigma=pose_sigma, locator_sigma=locator_sigma,
         force_noise=force_noise, latency_ms=latency_ms,
     )  # fmt: skip
-    fixture = _load(file)
+    fixture = _load(file, "robust")
     with progress_bar("perturbed worlds", samples, enabled=not json_out) as progress:
         result = run(fixture, settings, scheduler=scheduler, progress=progress)
     if json_out:
@@ -459,7 +459,7 @@ def view(
     from fixplan.present.replay import read_plan, rest_replay
     from fixplan.present.scene import scene_figure, scene_info
 
-    fixture = _load(file)
+    fixture = _load(file, "view")
     check_distinct([("FILE", file), ("--plan", plan), ("--out", out)])
     target = _writable(out, force)
     replay = rest_replay(fixture) if plan is None else read_plan(plan, fixture)

@@ -66,13 +66,14 @@ def run_haptic(
     from fixplan.files import check_distinct, check_output
     from fixplan.fixture import default_fixture_path, load
     from fixplan.interactive.handles import GizmoHandle, Handle, SpaceMouseHandle, UdpHandle, parse_device
+    from fixplan.model import refuse_pins
 
     kind, udp_port = parse_device(device)
     until_goal, seconds = parse_until(until)
     if not (0 <= port <= 65535):
         raise InputError(f"--port must be 0..65535, got {port}")
     token = check_host(host, token)
-    fixture = load(file if file is not None else default_fixture_path())
+    fixture = refuse_pins(load(file if file is not None else default_fixture_path()), "haptic")
     if record is not None:
         check_distinct([("FILE", file), ("--record", record)])
         check_output(record, force, option="--record")
@@ -211,12 +212,13 @@ def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
     from fixplan.files import read_plan_json
     from fixplan.fixture import fixture_of_plan, load
     from fixplan.interactive.record import verify_plan_file
+    from fixplan.model import refuse_pins
 
     data = read_plan_json(plan, expected="a plan JSON ('fixplan solve --out' or 'fixplan haptic --record')")  # ≤ 1 MiB
     if not isinstance(data, dict):
         raise InputError(f"{plan}: not a fixplan plan (expected a JSON object)")
     path, note = fixture_of_plan(data, plan, fixture_path)  # the fixture the plan names (path, hash)
-    fixture = load(path)
+    fixture = refuse_pins(load(path), "verify")
     try:
         v = verify_plan_file(fixture, data, source=str(plan))
     except InputError as exc:

@@ -25,7 +25,7 @@ import numpy as np
 
 from fixplan.errors import InputError
 from fixplan.locating import contact_set, solve_goal
-from fixplan.model import Fixture, require_full
+from fixplan.model import Fixture, refuse_pins, require_full
 from fixplan.planner.approach import Approach, plan_approach
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
 from fixplan.planner.execute import ExecutionSettings, Step, TransitionKind
@@ -517,6 +517,7 @@ def solve(
     ``noise``).
     """
     vopts = dict(verify_options or {})
+    refuse_pins(fixture, "solve")  # the planner does not model pins yet: one line, not a plan that ignores them
     require_full(fixture, "planning")
     if order is not None:
         _check_order(fixture, order)

@@ -1,0 +1,459 @@
+"""A cylindrical pin in a cylindrical hole: the contacts in closed form (world frame, metres).
+
+A *pin* is a cylinder of radius ``r`` from its base ``b`` along its unit axis ``u`` (base to tip)
+for ``length_m``, its tip chamfered at 45° by ``chamfer_m`` (its side ends at ``s = L − c_p``); a
+diamond pin keeps only two lands of its side, the arcs of width ``land_width_m`` centred on
+``±land_direction``. A *hole* is a cylinder of radius ``R`` from its mouth ``m`` into the material
+along ``−a`` (``a`` points out of the body through the mouth) for ``depth_m``, its mouth
+chamfered at 45° by ``chamfer_m`` (its wall begins at depth ``c_h``), blind or through.
+
+The same pair serves a fixture pin in a workpiece hole (``[[pin]]`` in ``[[workpiece.hole]]``) and a
+workpiece peg in a fixture bore (``[[bore]]``): every contact carries the point on each body and the
+normal from the pin into the hole's body, and the caller takes the workpiece's side.
+
+Contacts (each an edge on a surface, exact):
+
+- ``"rim"``: the circle where the pin's side ends on the hole's wall: the rim's point farthest from
+  the hole's axis; gap ``R − ρ_max``; normal the wall's, radially outward.
+- ``"mouth"``: the circle where the hole's wall begins on the pin's side: the circle's point nearest
+  the pin's axis; gap ``d_min − r``; normal the pin side's, radially outward from the pin's axis.
+- ``"exit"``: a through hole's far edge on the pin's side, once the rim has passed it.
+- ``"bottom"``: the pin's tip face on a blind hole's bottom: the face's deepest point; gap
+  ``depth − z``; normal ``−a``.
+- ``"tip"``: the tip entering the mouth: the hole's mouth edges (the chamfer's top and bottom
+  circles) on the pin's tip chamfer or face, and the pin's rim and tip circles on the hole's
+  chamfer. A point's distance to a surface of revolution is its distance in the half-plane
+  ``(t, ρ)`` of that axis to the surface's profile (a segment, or a corner); the least over the
+  edge circle is sampled and refined by golden section.
+
+Why these suffice for the side: along a generator line of one cylinder the distance from the other's
+axis is convex, so the overlap of two straight cylinders over the engaged length is extreme at its
+ends, the rim and the mouth (or exit): a tilted pin's line contact resolves to these two points
+(Whitney's one- and two-point contact), and a coaxial one's to either (both at ``(D − d)/2``).
+
+Each extreme is found on its circle ``x(φ) = c + ρ (cos φ e1 + sin φ e2)``: the squared distance
+``|w + A cos φ + B sin φ|²`` from the other axis is a trigonometric quadratic; it is sampled
+(``PinSettings.rim_samples``) and its stationary point refined by Newton to machine precision.
+Not computed here: the pin's tip on the part's face around the hole (a pin that misses its hole).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fixplan.settings import DEFAULT as _DEFAULT
+from fixplan.settings import PinSettings
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class PinBody:
+    """A pin (or a workpiece peg) in world coordinates: base ``base_world``, unit axis base → tip."""
+
+    base_world: FloatArray
+    axis_world: FloatArray
+    radius_m: float
+    length_m: float
+    chamfer_m: float = 0.0
+    land_direction_world: FloatArray | None = None  # a diamond pin: the direction its lands locate along
+    land_width_m: float = 0.0
+
+    @property
+    def side_end_m(self) -> float:
+        """Where the cylindrical side ends along the axis (the tip chamfer begins)."""
+        return self.length_m - self.chamfer_m
+
+    @property
+    def land_half_angle_rad(self) -> float:
+        """Half the angle each land spans about the axis (π/2: a round pin, all of its side)."""
+        if self.land_direction_world is None:
+            return math.pi / 2
+        return math.asin(min(1.0, self.land_width_m / (2.0 * self.radius_m)))
+
+
+@dataclass(frozen=True)
+class HoleBody:
+    """A hole (or a bore) in world coordinates: mouth centre, unit axis out of its body through the mouth."""
+
+    mouth_world: FloatArray
+    axis_world: FloatArray
+    radius_m: float
+    depth_m: float
+    chamfer_m: float = 0.0
+    blind: bool = True
+
+
+@dataclass(frozen=True)
+class PinContact:
+    """One contact of a pin and its hole: the point on each, the normal from the pin into the hole's body, the gap."""
+
+    kind: str  # "rim", "mouth", "exit" or "bottom"
+    point_pin_world: FloatArray
+    point_hole_world: FloatArray
+    normal_world: FloatArray  # unit, from the pin into the hole's body
+    gap_m: float  # signed: > 0 clearance, < 0 overlap
+
+
+def radial_play_m(hole_diameter_m: float, pin_diameter_m: float) -> float:
+    """The radial play of a pin of diameter d in a hole of D: ``(D − d) / 2``."""
+    return 0.5 * (hole_diameter_m - pin_diameter_m)
+
+
+def _perp_basis(u: FloatArray, prefer: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+    """``e1, e2`` with ``(e1, e2, u)`` right-handed; ``e1`` along ``prefer``'s part normal to ``u`` when given."""
+    if prefer is not None:
+        e1 = prefer - (prefer @ u) * u
+    else:
+        k = int(np.argmin(np.abs(u)))
+        e1 = np.zeros(3)
+        e1[k] = 1.0
+        e1 = e1 - (e1 @ u) * u
+    e1 = e1 / np.linalg.norm(e1)
+    return e1, np.cross(u, e1)
+
+
+def _circle_extreme(
+    w: FloatArray,
+    A: FloatArray,
+    B: FloatArray,
+    largest: bool,
+    arcs: list[tuple[float, float]],
+    settings: PinSettings,
+) -> float:
+    """The angle φ within ``arcs`` at which ``|w + A cos φ + B sin φ|²`` is largest (or least)."""
+    sign = 1.0 if largest else -1.0
+
+    def f(phi: float) -> float:
+        v = w + A * math.cos(phi) + B * math.sin(phi)
+        return sign * float(v @ v)
+
+    best_phi, best = arcs[0][0], -math.inf
+    n = max(settings.rim_samples // len(arcs), 2)
+    for lo, hi in arcs:
+        for phi in np.linspace(lo, hi, n + 1):
+            val = f(float(phi))
+            if val > best:
+                best_phi, best = float(phi), val
+    lo, hi = next((a for a in arcs if a[0] <= best_phi <= a[1]), arcs[0])
+    if hi - lo >= 2.0 * math.pi:  # the whole circle: nothing to clip to
+        lo, hi = -math.inf, math.inf
+    phi = best_phi
+    for _ in range(settings.newton_steps):
+        c, s = math.cos(phi), math.sin(phi)
+        v = w + A * c + B * s
+        dv = -A * s + B * c
+        d1 = 2.0 * float(v @ dv)
+        d2 = 2.0 * float(dv @ dv - v @ (A * c + B * s))
+        if d2 * sign >= 0.0 or d2 == 0.0:  # not concave towards the extreme: keep the sample
+            break
+        step = min(max(phi - d1 / d2, lo), hi)
+        if f(step) < f(phi):
+            break
+        phi = step
+    return phi
+
+
+def _land_arcs(pin: PinBody) -> list[tuple[float, float]]:
+    """The angles (about the pin's axis, from ``e1`` = the land direction) its side spans."""
+    if pin.land_direction_world is None:
+        return [(0.0, 2.0 * math.pi)]
+    alpha = pin.land_half_angle_rad
+    return [(-alpha, alpha), (math.pi - alpha, math.pi + alpha)]
+
+
+def _in_arcs(angle: float, arcs: list[tuple[float, float]]) -> bool:
+    for lo, hi in arcs:
+        if lo <= angle <= hi or lo <= angle + 2 * math.pi <= hi or lo <= angle - 2 * math.pi <= hi:
+            return True
+    return False
+
+
+def _rim(pin: PinBody, hole: HoleBody, arcs: list[tuple[float, float]], settings: PinSettings) -> PinContact | None:
+    """The pin's rim (where its side ends, within ``arcs``) on the hole's wall, when the rim is between the wall's ends."""
+    u, a, m = pin.axis_world, hole.axis_world, hole.mouth_world
+    centre = pin.base_world + pin.side_end_m * u
+    e1, e2 = _perp_basis(u, pin.land_direction_world)
+    P = np.eye(3) - np.outer(a, a)
+    w, A, B = P @ (centre - m), pin.radius_m * (P @ e1), pin.radius_m * (P @ e2)
+    phi = _circle_extreme(w, A, B, True, arcs, settings)
+    x = centre + pin.radius_m * (math.cos(phi) * e1 + math.sin(phi) * e2)
+    depth = float((m - x) @ a)
+    if depth < hole.chamfer_m or depth > hole.depth_m:
+        return None
+    rho = P @ (x - m)
+    rho_m = float(np.linalg.norm(rho))
+    n = rho / rho_m if rho_m > 0.0 else e1
+    gap = hole.radius_m - rho_m
+    return PinContact("rim", x, x + gap * n, n, gap)
+
+
+def _edge(
+    pin: PinBody, hole: HoleBody, depth_m: float, kind: str, arcs: list[tuple[float, float]], settings: PinSettings
+) -> PinContact | None:
+    """The hole's edge circle at ``depth_m`` on the pin's side within ``arcs``, when the side spans that level.
+
+    A round pin's whole side: the circle's point nearest the pin's axis (Newton). A diamond's land:
+    the nearest point whose direction from the axis the land faces (sampled, then golden section:
+    at the land's end when the nearest point overall faces the relief).
+    """
+    u, a = pin.axis_world, hole.axis_world
+    centre = hole.mouth_world - depth_m * a
+    h1, h2 = _perp_basis(a)
+    P = np.eye(3) - np.outer(u, u)
+    R = hole.radius_m
+
+    def point(phi: float) -> FloatArray:
+        return centre + R * (math.cos(phi) * h1 + math.sin(phi) * h2)
+
+    if pin.land_direction_world is None:
+        w, A, B = P @ (centre - pin.base_world), R * (P @ h1), R * (P @ h2)
+        phi: float | None = _circle_extreme(w, A, B, False, [(0.0, 2.0 * math.pi)], settings)
+    else:
+        e1, e2 = _perp_basis(u, pin.land_direction_world)
+
+        def gap_of(t: float) -> float | None:
+            v = P @ (point(t) - pin.base_world)
+            if not _in_arcs(math.atan2(float(v @ e2), float(v @ e1)), arcs):
+                return None
+            return float(np.linalg.norm(v)) - pin.radius_m
+
+        phi = _least_on_circle(gap_of, settings)
+    if phi is None:
+        return None
+    y = point(phi)
+    s = float((y - pin.base_world) @ u)
+    if s < 0.0 or s > pin.side_end_m:
+        return None
+    v = P @ (y - pin.base_world)
+    d = float(np.linalg.norm(v))
+    if d == 0.0:
+        return None
+    n = v / d
+    x = pin.base_world + s * u + pin.radius_m * n
+    return PinContact(kind, x, y, n, d - pin.radius_m)
+
+
+def _bottom(pin: PinBody, hole: HoleBody, settings: PinSettings) -> PinContact | None:
+    """The pin's tip face on a blind hole's bottom, when the tip is in the hole."""
+    u, a, m = pin.axis_world, hole.axis_world, hole.mouth_world
+    tip = pin.base_world + pin.length_m * u
+    down = -a - float(-a @ u) * u  # the way down the hole, within the tip face
+    rho = pin.radius_m - pin.chamfer_m
+    norm = float(np.linalg.norm(down))
+    x = tip + rho * down / norm if norm > settings.coaxial_rel else tip
+    depth = float((m - x) @ a)
+    if depth < hole.chamfer_m:
+        return None
+    gap = hole.depth_m - depth
+    return PinContact("bottom", x, x - gap * a, -a, gap)
+
+
+# -- the tip entering the mouth: edges on the chamfers, in the plane (t, ρ) of each body's axis -------------
+# A point's distance to a surface of revolution is its distance, in the half-plane (t along the axis,
+# ρ from it), to the surface's profile: exact for the circles of the other body, point by point.
+_SQRT_HALF = math.sqrt(0.5)
+
+
+def _nearest_on_segment(q: FloatArray, a: FloatArray, b: FloatArray) -> tuple[FloatArray, float]:
+    """The point of segment ``ab`` nearest ``q`` and its parameter in [0, 1]."""
+    d = b - a
+    dd = float(d @ d)
+    t = 0.0 if dd == 0.0 else min(max(float((q - a) @ d) / dd, 0.0), 1.0)
+    return a + t * d, t
+
+
+def _in_cone(v: FloatArray, n1: FloatArray, n2: FloatArray) -> bool:
+    """``v`` between the unit normals ``n1`` and ``n2`` (less than π apart), boundaries included."""
+    cross = lambda x, y: float(x[0] * y[1] - x[1] * y[0])  # noqa: E731
+    return cross(n1, v) * cross(n1, n2) >= 0.0 and cross(v, n2) * cross(n1, n2) >= 0.0
+
+
+def _pin_tip_gap(pin: PinBody, q: FloatArray) -> tuple[float, FloatArray] | None:
+    """Signed distance of a point ``q = (t, ρ)`` (pin frame) from the pin's tip: its chamfer and face.
+
+    The free-side normal ``(n_t, n_ρ)`` with it; None where the nearest point is on the side (the rim
+    and mouth contacts' business) or the tip's nearest feature does not face ``q``.
+    """
+    L, r, c = pin.length_m, pin.radius_m, pin.chamfer_m
+    a, b, e = np.array([L - c, r]), np.array([L, r - c]), np.array([L, 0.0])
+    side, cham, face = np.array([0.0, 1.0]), np.array([_SQRT_HALF, _SQRT_HALF]), np.array([1.0, 0.0])
+    p1, t1 = _nearest_on_segment(q, a, b)
+    p2, t2 = _nearest_on_segment(q, b, e)
+    d1, d2 = float(np.linalg.norm(q - p1)), float(np.linalg.norm(q - p2))
+    if c > 0.0 and d1 <= d2:
+        p, n = p1, cham
+        if t1 == 0.0:  # the rim's corner: facing q between the side and the chamfer
+            v = q - p
+            if not _in_cone(v, side, cham):
+                return None
+            n = v / np.linalg.norm(v) if np.linalg.norm(v) > 0.0 else cham
+        elif t1 == 1.0 and not _in_cone(q - p, cham, face):
+            return None
+    else:
+        p, n = p2, face
+        if t2 == 0.0:  # the tip's corner (no chamfer: the rim's)
+            v = q - p
+            if not _in_cone(v, side if c == 0.0 else cham, face):
+                return None
+            n = v / np.linalg.norm(v) if np.linalg.norm(v) > 0.0 else face
+        elif t2 == 1.0:
+            return None  # the axis
+    gap = float((q - p) @ n)
+    if gap < 0.0 and r - float(q[1]) < -gap:
+        return None  # inside the pin, nearer its side: the rim and mouth contacts' business
+    return gap, n
+
+
+def _hole_chamfer_gap(hole: HoleBody, q: FloatArray) -> tuple[float, FloatArray] | None:
+    """Signed distance of ``q = (depth, ρ)`` (hole frame) from the mouth chamfer's face, its free normal; None off the face."""
+    c = hole.chamfer_m
+    if c <= 0.0:
+        return None
+    a, b = np.array([0.0, hole.radius_m + c]), np.array([c, hole.radius_m])
+    p, t = _nearest_on_segment(q, a, b)
+    if t <= 0.0 or t >= 1.0:
+        return None
+    n = np.array([-_SQRT_HALF, -_SQRT_HALF])
+    gap = float((q - p) @ n)
+    if gap < 0.0 and min(float(q[1]) - hole.radius_m, float(q[0])) < -gap:
+        return None  # inside the body, nearer its wall or its face
+    return gap, n
+
+
+def _least_on_circle(gap_of: Callable[[float], float | None], settings: PinSettings) -> float | None:
+    """The angle where ``gap_of`` is least on a circle: sampled, then golden-section between the neighbours."""
+    phis = np.linspace(0.0, 2.0 * math.pi, settings.rim_samples, endpoint=False)
+    vals = [gap_of(float(p)) for p in phis]
+    ok = [(v, float(p)) for v, p in zip(vals, phis, strict=True) if v is not None]
+    if not ok:
+        return None
+    best, phi = min(ok)
+    step = 2.0 * math.pi / settings.rim_samples
+    lo, hi = phi - step, phi + step
+    g = 0.5 * (math.sqrt(5.0) - 1.0)
+
+    def value(x: float) -> float:
+        v = gap_of(x)
+        return math.inf if v is None else v
+
+    x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
+    f1, f2 = value(x1), value(x2)
+    for _ in range(settings.golden_steps):
+        if f1 <= f2:
+            hi, x2, f2 = x2, x1, f1
+            x1 = hi - g * (hi - lo)
+            f1 = value(x1)
+        else:
+            lo, x1, f1 = x1, x2, f2
+            x2 = lo + g * (hi - lo)
+            f2 = value(x2)
+    x = 0.5 * (lo + hi)
+    return x if value(x) <= best else phi
+
+
+def _hole_edges_on_tip(pin: PinBody, hole: HoleBody, settings: PinSettings) -> list[PinContact]:
+    """The hole's mouth edges (the chamfer's top and bottom circles) on the pin's tip chamfer or face."""
+    u, a = pin.axis_world, hole.axis_world
+    h1, h2 = _perp_basis(a)
+    P = np.eye(3) - np.outer(u, u)
+    edges = [(0.0, hole.radius_m + hole.chamfer_m)] + ([(hole.chamfer_m, hole.radius_m)] if hole.chamfer_m > 0 else [])
+    out = []
+    for depth, radius in edges:
+        centre = hole.mouth_world - depth * a
+
+        def at(phi: float, centre: FloatArray = centre, radius: float = radius) -> tuple[FloatArray, FloatArray]:
+            y = centre + radius * (math.cos(phi) * h1 + math.sin(phi) * h2)
+            v = P @ (y - pin.base_world)
+            return y, np.array([float((y - pin.base_world) @ u), float(np.linalg.norm(v))])
+
+        def gap_of(phi: float, at: Callable[[float], tuple[FloatArray, FloatArray]] = at) -> float | None:
+            found = _pin_tip_gap(pin, at(phi)[1])
+            return None if found is None else found[0]
+
+        phi = _least_on_circle(gap_of, settings)
+        if phi is None:
+            continue
+        y, q = at(phi)
+        found = _pin_tip_gap(pin, q)
+        if found is None:
+            continue
+        gap, n2 = found
+        v = P @ (y - pin.base_world)
+        radial = v / np.linalg.norm(v) if np.linalg.norm(v) > 0.0 else _perp_basis(u)[0]
+        n = n2[0] * u + n2[1] * radial
+        out.append(PinContact("tip", y - gap * n, y, n, gap))
+    return out
+
+
+def _tip_edges_on_chamfer(pin: PinBody, hole: HoleBody, settings: PinSettings) -> list[PinContact]:
+    """The pin's rim and tip circles on the hole's mouth chamfer."""
+    if hole.chamfer_m <= 0.0:
+        return []
+    u, a, m = pin.axis_world, hole.axis_world, hole.mouth_world
+    e1, e2 = _perp_basis(u, pin.land_direction_world)
+    P = np.eye(3) - np.outer(a, a)
+    arcs = _land_arcs(pin)
+    circles = [(pin.side_end_m, pin.radius_m)] + (
+        [(pin.length_m, pin.radius_m - pin.chamfer_m)] if pin.chamfer_m > 0 else []
+    )
+    out = []
+    for s, radius in circles:
+        centre = pin.base_world + s * u
+
+        def at(phi: float, centre: FloatArray = centre, radius: float = radius) -> tuple[FloatArray, FloatArray]:
+            x = centre + radius * (math.cos(phi) * e1 + math.sin(phi) * e2)
+            return x, np.array([float((m - x) @ a), float(np.linalg.norm(P @ (x - m)))])
+
+        def gap_of(phi: float, at: Callable[[float], tuple[FloatArray, FloatArray]] = at) -> float | None:
+            if not _in_arcs(phi, arcs):
+                return None
+            found = _hole_chamfer_gap(hole, at(phi)[1])
+            return None if found is None else found[0]
+
+        phi = _least_on_circle(gap_of, settings)
+        if phi is None:
+            continue
+        x, q = at(phi)
+        found = _hole_chamfer_gap(hole, q)
+        if found is None:
+            continue
+        gap, f2 = found
+        rho = P @ (x - m)
+        radial = rho / np.linalg.norm(rho) if np.linalg.norm(rho) > 0.0 else e1
+        free = f2[0] * (-a) + f2[1] * radial  # away from the hole's body
+        out.append(PinContact("tip", x, x - gap * free, -free, gap))
+    return out
+
+
+def pin_hole_contacts(pin: PinBody, hole: HoleBody, settings: PinSettings = _DEFAULT.pins) -> list[PinContact]:
+    """Every contact of ``pin`` with ``hole`` that their relative pose makes possible, with its gap.
+
+    The rim and the mouth (a through hole's exit once the rim has passed it) for the side (a
+    diamond pin: for each land, the one along ``+land_direction`` first), the
+    bottom for a blind hole, and the tip entering the mouth: the hole's mouth edges on the pin's tip
+    chamfer or face, the pin's rim and tip circles on the hole's mouth chamfer (``"tip"``), each
+    where its nearest feature faces the other body.
+    """
+    out: list[PinContact] = []
+    arcs = _land_arcs(pin)
+    for land in [arcs] if len(arcs) == 1 else [[arc] for arc in arcs]:  # a diamond: each land on its own
+        for found in (
+            _rim(pin, hole, land, settings),
+            _edge(pin, hole, hole.chamfer_m, "mouth", land, settings),
+            None if hole.blind else _edge(pin, hole, hole.depth_m, "exit", land, settings),
+        ):
+            if found is not None:
+                out.append(found)
+    bottom = _bottom(pin, hole, settings) if hole.blind else None
+    if bottom is not None:
+        out.append(bottom)
+    return out + _hole_edges_on_tip(pin, hole, settings) + _tip_edges_on_chamfer(pin, hole, settings)
+
+
+__all__ = ["HoleBody", "PinBody", "PinContact", "pin_hole_contacts", "radial_play_m"]
