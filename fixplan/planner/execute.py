@@ -263,7 +263,6 @@ class Executor:
         self._pressed_back_for = -1  # the transition in which a failed re-plan last pressed the part back
         self._left_plan_in: tuple[State, str] | None = None  # (established, target) of the step a contact was lost in
         self._dead_ends = 0  # dead-end states left by lifting the part off (settings.dead_end_releases)
-        self._avoided: set[tuple[State, str]] = set()  # transitions set aside: the policy's chains skip them
         self._prev_solve: tuple[float, FloatArray] | None = None  # (time, twist) at the last solve
         self._delay_ticks = int(round(self.noise.latency_s / tick_s))
         self._history: deque[tuple[Pose, FloatArray, State]] = deque(maxlen=self._delay_ticks + 1)
@@ -404,8 +403,6 @@ class Executor:
         chain = self.policy.chain_from(self.fixture, state, pose, self.goal_state)
         if not chain:
             return False
-        if any((frozenset(st.established), st.target) in self._avoided for st in chain):
-            return False  # the policy was built before a transition was set aside: the re-planner knows
         self.log.counts["policy_switches"] += 1
         self._set_plan(state, chain)
         self._retry, self._use_direct, self._still_since = 0, False, None
@@ -469,7 +466,6 @@ class Executor:
         aside = ""
         if culprit is not None and self.avoid is not None:
             self.avoid(culprit[0], culprit[1], why)
-            self._avoided.add(culprit)
             aside = f", {_fmt(culprit[0])} + {culprit[1]} set aside"
         self.log.event(t, "guard", f"{why}: a dead end; lifting the part off, then approaching again{aside}")
         self._release = (why, t)
@@ -615,7 +611,6 @@ class Executor:
             # out: six lifts in 12 s on a generated box)
             step = self.steps[self.index]
             self.avoid(frozenset(step.established), step.target, why)
-            self._avoided.add((frozenset(step.established), step.target))
         self._release = (why, t)
         self._recover_until = None
         return True
