@@ -431,6 +431,17 @@ class _Builder:
             if hole.chamfer_m >= hole.depth_m:
                 r.error(f"workpiece.hole.{hole.name}.chamfer", f"{hole.chamfer_m:g} m (expected less than the depth)")
 
+    def check_goal_gaps(self, fixture: Fixture, goal: Pose) -> None:
+        """Every locator touches at the given goal (``|gap| ≤ goal_gap_m``), else one error each."""
+        tol = self.tol
+        for loc in fixture.locators:
+            gap = locator_contact(fixture.workpiece, goal, loc).gap_m
+            if abs(gap) > tol.goal_gap_m:
+                self.r.error(
+                    "workpiece.goal",
+                    f"locator {loc.name} does not touch at the given goal (gap {gap:.3g} m; expected |gap| ≤ {tol.goal_gap_m:g} m)",
+                )
+
     def check_pin_goal(self, fixture: Fixture, goal: Pose) -> None:
         """Every pin in its hole at the located pose, and rests with pins leaving 6 constraints (rank of the normals)."""
         r, wp, tol = self.r, fixture.workpiece, self.tol
@@ -718,13 +729,7 @@ class _Builder:
                 )
                 return None
             goal = fixture.goal_given
-            for loc in locs:
-                gap = locator_contact(wp, goal, loc).gap_m
-                if abs(gap) > tol.goal_gap_m:
-                    r.error(
-                        "workpiece.goal",
-                        f"locator {loc.name} does not touch at the given goal (gap {gap:.3g} m; expected |gap| ≤ {tol.goal_gap_m:g} m)",
-                    )
+            self.check_goal_gaps(fixture, goal)
             self.check_pin_goal(fixture, goal)
             return goal
         if r.issues or not fixture.is_full:
@@ -736,13 +741,7 @@ class _Builder:
             return None
         if fixture.goal_given is not None:
             goal = fixture.goal_given
-            for loc in locs:
-                gap = locator_contact(wp, goal, loc).gap_m
-                if abs(gap) > tol.goal_gap_m:
-                    r.error(
-                        "workpiece.goal",
-                        f"locator {loc.name} does not touch at the given goal (gap {gap:.3g} m; expected |gap| ≤ {tol.goal_gap_m:g} m)",
-                    )
+            self.check_goal_gaps(fixture, goal)
             for loc in locs:
                 if loc.face is None:
                     continue

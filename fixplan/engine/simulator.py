@@ -503,7 +503,8 @@ class Simulator:
         Afterwards the locator rows of the simulator's arrays hold each locator's contacts
         together: the least gap, any active, the summed normal impulse, the nearest's normal.
         """
-        assert self._mesh is not None
+        if self._mesh is None:  # pragma: no cover - step() calls it only for a mesh part
+            raise SolverError("a mesh step was asked of a part that is not a mesh")
         ms = mesh_slots(self._mesh, self.fixture.locators, self._R, self._p, margin)
         n, kl = len(ms), self._k_loc
         # a mesh part's collision points are its vertices (5·10⁴ triangles: 2.5·10⁴ of them against
