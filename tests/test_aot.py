@@ -256,7 +256,9 @@ def _solve_json(path: Path, env: dict[str, str]) -> tuple[dict, list[str]]:
     code = (
         "import json, sys; from fixplan.cli import main; from fixplan import aot\n"
         "try:\n    main(['solve', sys.argv[1], '--json'])\nexcept SystemExit:\n    pass\n"
-        "print(json.dumps({'numba': 'numba' in sys.modules, 'fallbacks': aot.fallbacks}), file=sys.stderr)\n"
+        "print(json.dumps({'numba': 'numba' in sys.modules, 'fallbacks': aot.fallbacks,\n"
+        "  'scipy.linalg': 'scipy.linalg' in sys.modules,\n"
+        "  'lapack': 'scipy.linalg.cython_lapack' in sys.modules}), file=sys.stderr)\n"
     )
     proc = subprocess.run(
         [sys.executable, "-c", code, str(path)], capture_output=True, text=True, cwd=ROOT, env=env, timeout=600
@@ -285,7 +287,29 @@ def test_a_solve_runs_without_numba_and_answers_as_the_jit_does(name: str) -> No
     env = {k: v for k, v in os.environ.items() if k != aot.ENV}
     out_aot, err_aot = _solve_json(path, env)
     out_jit, err_jit = _solve_json(path, {**env, aot.ENV: "jit"})
-    assert json.loads(err_aot[-1]) == {"numba": False, "fallbacks": {}}
+    # LAPACK reached without scipy.linalg's package init (0.18 s), the answers the JIT's (which imports it)
+    seen = json.loads(err_aot[-1])
+    assert seen == {"numba": False, "fallbacks": {}, "scipy.linalg": False, "lapack": seen["lapack"]}
+    if "box" in name:
+        assert seen["lapack"] is True  # the 3D witness kernels called LAPACK
     assert json.loads(err_jit[-1])["numba"] is True
     assert out_aot["status"] == "planned"
     assert _without_wall_clock(out_aot) == _without_wall_clock(out_jit)
+
+
+def test_lapack_preloaded_without_the_package_init_leaves_scipy_linalg_whole() -> None:
+    """The preloaded Cython LAPACK is the one a later ``import scipy.linalg`` uses, and that import works."""
+    code = (
+        "import json, sys; from fixplan import aot; aot._preload_lapack()\n"
+        "before = ['scipy.linalg' in sys.modules, 'scipy.linalg.cython_lapack' in sys.modules]\n"
+        "lap = sys.modules.get('scipy.linalg.cython_lapack')\n"
+        "import numpy as np, scipy.linalg, scipy.linalg.cython_lapack as again\n"
+        "a = np.array([[4.0, 1.0], [2.0, 3.0]]); x = scipy.linalg.solve(a, np.array([1.0, 2.0]))\n"
+        "print(json.dumps([before, again is lap, float(abs(a @ x - [1.0, 2.0]).max())]))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    before, same, residual = json.loads(proc.stdout)
+    assert before == [False, True]
+    assert same is True
+    assert residual < 1e-14
