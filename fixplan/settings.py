@@ -336,6 +336,10 @@ class PlannerSettings:
     lazy_slack : float
         The lazy search accepts a sequence whose fine-planned cost is within this factor of the
         best estimate of any other (1: the cheapest, as far as the learned estimates tell).
+    spare_core_idle_cpus : float
+        The planner runs likely next fine plans ahead on a second core (a forked child) only when
+        at least this many CPUs are idle (CPU count minus the one-minute load average): on a busy
+        machine the child would only compete with the parent.
     precheck_penalty : float
         A transition that fails its cheap cone check before the fine plan is made this many times
         dearer (tried after the others, never dropped).
@@ -376,6 +380,7 @@ class PlannerSettings:
     same_pose_m: float = 1e-9
     cost_slack: float = 1.5
     lazy_slack: float = 1.0
+    spare_core_idle_cpus: float = 0.75
     precheck_penalty: float = 100.0
     carry_cost: float = 1.0
     precheck_floor: float = 1e-6

@@ -55,6 +55,8 @@ Precheck = Callable[[Pose, State, str], "str | None"]
 # completes a priced transition whose fine plan stopped at the path (its wrenches searched only now,
 # once its sequence is the chosen one): (pose, state, target, result) -> the completed result
 Confirm = Callable[[Pose, State, str, Any], TransitionResult]
+# the transitions a search is about to confirm, in order: (start pose, state, target, priced result)
+Upcoming = Callable[[Sequence[tuple[Pose, State, str, Any]]], None]
 # the locators a transition adds with ``target`` (sorted, ``target`` among them): ``(target,)`` unless
 # geometry closes others at the same instant
 Group = Callable[[State, str], "tuple[str, ...]"]
@@ -126,6 +128,7 @@ def search(
     precheck: Precheck | None = None,
     group: Group | None = None,
     confirm: Confirm | None = None,
+    upcoming: Upcoming | None = None,
 ) -> CoarsePlan:
     """Cheapest monotone sequence of contact states from ``start_state`` to all locators.
 
@@ -145,12 +148,14 @@ def search(
     result with ``wrenches_checked`` False); once a sequence made of priced transitions is the
     best one, ``confirm`` completes each of them in order (the pushes along the path), and a
     failure sends the search on as any failed transition does. The pushes of transitions priced
-    and then left are never searched.
+    and then left are never searched. ``upcoming`` is told, before each such round of
+    confirmations, which transitions it will confirm (a caller may start on the later ones on
+    another core).
     """
     grp = group or _single
     if estimate is not None and order is None:
         return _lazy_search(
-            start_state, all_locators, start_pose, evaluate, estimate, progress, precheck, grp, confirm
+            start_state, all_locators, start_pose, evaluate, estimate, progress, precheck, grp, confirm, upcoming
         )  # fmt: skip
     goal: State = frozenset(all_locators)
     unknown = start_state - goal
@@ -328,6 +333,7 @@ def _lazy_search(
     precheck: Precheck | None = None,
     group: Group = _single,
     confirm: Confirm | None = None,
+    upcoming: Upcoming | None = None,
 ) -> CoarsePlan:
     """LazySP over the lattice: fine-plan only the transitions on the current best sequence."""
     goal: State = frozenset(all_locators)
@@ -421,6 +427,13 @@ def _lazy_search(
             pose = done[key].end_pose
         if complete and confirm is not None:
             # the best sequence is priced: complete its transitions (the pushes along each path)
+            if upcoming is not None:
+                todo, pose = [], start_pose
+                for state, target, _ in path:
+                    if not getattr(done[(state, target)], "wrenches_checked", True):
+                        todo.append((pose, state, target, done[(state, target)]))
+                    pose = done[(state, target)].end_pose
+                upcoming(todo)
             pose = start_pose
             for state, target, _ in path:
                 key = (state, target)

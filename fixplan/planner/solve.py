@@ -44,6 +44,7 @@ from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.policy import Policy, build_policy
 from fixplan.planner.policy_job import PendingPolicy
 from fixplan.planner.segments import segment_wrenches
+from fixplan.planner.spare import SpareCore
 from fixplan.planner.verify import Verification, verify
 from fixplan.settings import DEFAULT
 from fixplan.spatial import Pose
@@ -279,8 +280,14 @@ class Planner:
         return self._groups[key]
 
     def plan_from(self, pose: Pose, state: frozenset[str], order: Sequence[str] | None = None) -> CoarsePlan:
-        """The cheapest monotone sequence from ``state`` at ``pose`` to every locator."""
+        """The cheapest monotone sequence from ``state`` at ``pose`` to every locator.
+
+        The fine plans and the confirmations the search will likely ask for next run ahead on the
+        second core (:class:`~fixplan.planner.spare.SpareCore`): the same answers, sooner.
+        """
         cache = self._cache
+        spare = SpareCore(self._spare_job)
+        upcoming: list[tuple[Pose, frozenset[str], str, Any]] = []
 
         def evaluate(pose_: Pose, state_: frozenset[str], target: str) -> Transition:
             key = (tuple(sorted(state_)), target, _pose_key(pose_), self.full_ladder)
@@ -292,26 +299,10 @@ class Planner:
                 return _set_aside(self.fixture, pose_, state_, target, why)
             if key not in cache:
                 t = time.perf_counter()
-                # the kind of motion whose first-order step closes the target (rolling on two
-                # contacts in 3D leaves one rotation, which often cannot)
-                g = self.guess(pose_, state_, target) if state_ else None
-                kind = None if g is None else g[2]
-                if self.full_ladder and kind == default_kind(self.fixture.dimension, len(state_)):
-                    kind = None  # the ladder may then try the other kind too
-                for clearance in CLEARANCES_M:
-                    # the ladder of formulations and the diagnosis at the last clearance, and only
-                    # in the second pass (a failing transition costs 2-9 s with them)
-                    full = self.full_ladder and clearance == CLEARANCES_M[-1]
-                    tr = plan_transition(
-                        self.fixture, pose_, sorted(state_), target, knots=self.knots,
-                        acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
-                        margin_N=self.margin_N, clearance_m=clearance, kind=kind,
-                        ladder=LADDER if full else LADDER[:1], diagnose=full,
-                        together=[n for n in self.group(state_, target) if n != target],
-                        wrenches=False,
-                    )  # fmt: skip
-                    if tr.ipopt_status in IPOPT_PATH_FOUND:
-                        break  # a path: its wrenches decide, not the clearance
+                found, tr = spare.take(("fine", key))
+                if not found:
+                    self._offer_sibling(spare, pose_, state_, target)
+                    tr = self._fine(pose_, state_, target, self.full_ladder)
                 cache[key] = tr
                 self.fine_time_s += time.perf_counter() - t
             return cache[key]
@@ -320,36 +311,117 @@ class Planner:
             """The pushes along a priced path (only for the transitions of a chosen sequence)."""
             key = (tuple(sorted(state_)), target, _pose_key(pose_), self.full_ladder)
             t = time.perf_counter()
-            done = with_wrenches(
-                self.fixture, tr, acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
-                margin_N=self.margin_N, plain=LADDER[0].name,
-            )  # fmt: skip
+            found, done = spare.take(("confirm", key))
+            if not found:
+                # the next transition of the sequence on the second core meanwhile
+                later = [u for u in upcoming if u[3] is not tr and not getattr(u[3], "wrenches_checked", True)]
+                if later:
+                    p_, s_, t_, tr_ = later[0]
+                    k_ = (tuple(sorted(s_)), t_, _pose_key(p_), self.full_ladder)
+                    spare.offer(("confirm", k_), ("confirm", p_, s_, t_, tr_))
+                done = self._confirm(tr)
+            if upcoming and upcoming[0][3] is tr:
+                upcoming.pop(0)
             self.fine_time_s += time.perf_counter() - t
             for k in (key, (*key[:3], not self.full_ladder)):
                 if cache.get(k) is tr:
                     cache[k] = done
             return done
 
+        def upcoming_set(todo: Sequence[tuple[Pose, frozenset[str], str, Any]]) -> None:
+            upcoming[:] = list(todo)
+
         # first the plain program for every transition; only when no sequence is found that way,
         # the whole ladder (other guesses, the other kind, a waypoint, ...) and the diagnosis of
         # what blocks each transition that still fails
         self.full_ladder = False
-        first = search(
-            state, self.names, pose, evaluate, order=order, progress=self.progress,
-            estimate=self.estimate, precheck=self.precheck, group=self.group, confirm=confirm,
-        )  # fmt: skip
-        if first.found:
-            return first
-        self.full_ladder = True
         try:
-            second = search(
+            first = search(
                 state, self.names, pose, evaluate, order=order, progress=self.progress,
                 estimate=self.estimate, precheck=self.precheck, group=self.group, confirm=confirm,
+                upcoming=upcoming_set,
             )  # fmt: skip
+            if first.found:
+                return first
+            self.full_ladder = True
+            try:
+                second = search(
+                    state, self.names, pose, evaluate, order=order, progress=self.progress,
+                    estimate=self.estimate, precheck=self.precheck, group=self.group, confirm=confirm,
+                    upcoming=upcoming_set,
+                )  # fmt: skip
+            finally:
+                self.full_ladder = False
         finally:
-            self.full_ladder = False
+            spare.close()
         second.attempts = [*first.attempts, *(a for a in second.attempts if a not in first.attempts)]
         return second
+
+    def _fine(self, pose: Pose, state: frozenset[str], target: str, full_ladder: bool) -> Transition:
+        """The fine plan of ``state → target`` from ``pose``, priced by its path (no pushes yet)."""
+        # the kind of motion whose first-order step closes the target (rolling on two contacts
+        # in 3D leaves one rotation, which often cannot)
+        g = self.guess(pose, state, target) if state else None
+        kind = None if g is None else g[2]
+        if full_ladder and kind == default_kind(self.fixture.dimension, len(state)):
+            kind = None  # the ladder may then try the other kind too
+        tr: Transition | None = None
+        for clearance in CLEARANCES_M:
+            # the ladder of formulations and the diagnosis at the last clearance, and only in the
+            # second pass (a failing transition costs 2-9 s with them)
+            full = full_ladder and clearance == CLEARANCES_M[-1]
+            tr = plan_transition(
+                self.fixture, pose, sorted(state), target, knots=self.knots,
+                acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
+                margin_N=self.margin_N, clearance_m=clearance, kind=kind,
+                ladder=LADDER if full else LADDER[:1], diagnose=full,
+                together=[n for n in self.group(state, target) if n != target],
+                wrenches=False,
+            )  # fmt: skip
+            if tr.ipopt_status in IPOPT_PATH_FOUND:
+                break  # a path: its wrenches decide, not the clearance
+        assert tr is not None  # CLEARANCES_M is never empty
+        return tr
+
+    def _confirm(self, tr: Transition) -> Transition:
+        """A priced transition with the pushes along its path searched."""
+        return with_wrenches(
+            self.fixture, tr, acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
+            margin_N=self.margin_N, plain=LADDER[0].name,
+        )  # fmt: skip
+
+    def _spare_job(self, job: tuple[Any, ...]) -> Transition:
+        """A job of :meth:`plan_from`'s second core (run in its child)."""
+        if job[0] == "fine":
+            return self._fine(*job[1:])
+        return self._confirm(job[4])
+
+    def _offer_sibling(self, spare: SpareCore, pose: Pose, state: frozenset[str], target: str) -> None:
+        """Start the second core on the likeliest next fine plan: another target from ``state`` at ``pose``.
+
+        The lazy search asks for a sibling next when this transition turns out dearer than its
+        estimate; the cheapest estimate among the targets it may ask for (one per closing group)
+        comes first. Nothing when the core is busy or absent.
+        """
+        if not spare.active:
+            return
+        est, pk = tuple(sorted(state)), _pose_key(pose)
+        options = []
+        for other in self.names:
+            if other in state or other == target or min(self.group(state, other)) != other:
+                continue
+            key = (est, other, pk, self.full_ladder)
+            plain = self._cache.get((*key[:3], False))
+            if key in self._cache or (plain is not None and plain.success):
+                continue
+            if (frozenset(state), other) in self.set_aside or spare.pending(("fine", key)):
+                continue
+            guess = self.estimate(pose, state, other)
+            if guess is not None:
+                options.append((guess[0], other, key))
+        if options:
+            _, other, key = min(options)
+            spare.offer(("fine", key), ("fine", pose, state, other, self.full_ladder))
 
     def guess(self, pose: Pose, state: frozenset[str], target: str) -> tuple[float, Pose, str] | None:
         """A cheap guess of a transition: (mass-weighted length [m], end pose, kind of motion).
