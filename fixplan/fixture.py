@@ -42,6 +42,7 @@ from fixplan.model import (
     Manipulator,
     Obstacle,
     Pin,
+    RobotSpec,
     SimulationSettings,
     Workpiece,
 )
@@ -322,7 +323,9 @@ class _Builder:
             obstacles=tuple(self.obstacle(e, dim) for e in doc.obstacle),
             pins=tuple(self.pin(e) for e in doc.pin),
             bores=tuple(self.bore(e) for e in doc.bore),
+            robot=self.robot(doc.robot) if doc.robot is not None else None,
         )
+        self.fail_if_issues()
         if fixture.has_pins or workpiece.holes:
             self.check_pins(fixture, dim)
             self.fail_if_issues()
@@ -514,6 +517,23 @@ class _Builder:
             )
 
     # -- obstacles ---------------------------------------------------------------------------
+    def robot(self, e: fixture_schema.Robot) -> RobotSpec | None:
+        """``[robot]``: its URDF found and loaded now (a missing file or frame is an issue at load)."""
+        from fixplan.robot_file import RobotError, load_robot, urdf_path
+
+        try:
+            path = urdf_path(e.urdf, self.base_dir)
+        except RobotError as exc:
+            self.r.error("robot.urdf", str(exc))
+            return None
+        spec = RobotSpec(e.urdf, path, _pose(e.base, 3), _pose(e.grasp, 3), e.tool_frame, e.repeatability)
+        try:
+            load_robot(spec)
+        except RobotError as exc:
+            self.r.error("robot.tool_frame" if str(exc).startswith("tool_frame") else "robot.urdf", str(exc))
+            return None
+        return spec
+
     def obstacle(self, e: fixture_schema.Obstacle, dim: int) -> Obstacle:
         """``[[obstacle]]`` of a valid table: a plane (line) or a box (rectangle) in the world."""
         plane = e.shape == fixture_schema.OBSTACLE_SHAPES[dim][0]

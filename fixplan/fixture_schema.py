@@ -829,6 +829,29 @@ class Bore(Table):
     chamfer: Annotated[float, _CHAMFER] = Field(0.0, description="The mouth's 45° chamfer (its leg length).")
 
 
+class Robot(Table):
+    """``[robot]``: the arm that carries the part (3D): a URDF, its base, the grasp and the tool frame."""
+
+    urdf: Annotated[str, Text(what="a URDF path or a robot name")] = Field(
+        description="A URDF file relative to the fixture file's folder (and inside it), or the name of a robot of "
+        "example-robot-data (panda, ur5, ...; the optional extra fixplan[robots])."
+    )
+    base: Pose = Field(description="World pose of the robot's base (its URDF root frame).")
+    grasp: Pose = Field(description="The tool frame's pose in the workpiece body frame (where the hand holds it).")
+    tool_frame: Annotated[str | None, Text(what="a frame name of the URDF")] = Field(
+        None, description="The URDF frame that holds the part; default: the URDF's last frame."
+    )
+    repeatability: Annotated[float | None, Number("a repeatability [m]", limits.REPEATABILITY, minimum=0.0)] = Field(
+        None, description="The arm's pose repeatability; `robust` samples it as the part's pose noise."
+    )
+
+    @classmethod
+    def rules(cls, data: Mapping[str, Any], context: Mapping[str, Any]) -> tuple[set[str], list[tuple[tuple, str]]]:
+        if context.get("dimension") == 2:
+            return set(cls.model_fields), [(("urdf",), "a robot arm is 3D only (remove [robot] in a 2D scene)")]
+        return set(cls.model_fields), []
+
+
 class FixtureFile(Table):
     """A fixture file: ``docs/fixture-format.md``."""
 
@@ -859,6 +882,7 @@ class FixtureFile(Table):
         (), description="A cylindrical hole in the fixture for a cylindrical part (a peg)."
     )
     manipulator: Manipulator | None = Field(None, description="What the hand/robot can exert on the workpiece.")
+    robot: Robot | None = Field(None, description="The arm that carries the part (3D; checked along the plan).")
     simulation: Simulation | None = Field(None, description="Simulation defaults, overridable on the command line.")
 
     @classmethod

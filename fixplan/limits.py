@@ -78,6 +78,7 @@ WRENCH_FORCE = Range("a force component", "N", -FORCE_MAX_N, FORCE_MAX_N)
 WRENCH_TORQUE = Range("a moment component", "N·m", -TORQUE_MAX_NM, TORQUE_MAX_NM)
 ACCELERATION = Range("an acceleration component", "m/s² or rad/s²", -1e3, 1e3)
 DURATION = Range("a duration", "s", 0.0, 1e6)
+REPEATABILITY = Range("a repeatability", "m", 0.0, 0.1)  # a robot's pose noise ([robot] repeatability)
 
 INERTIA_MIN_OF_UNIFORM = 1e-3  # least given moment, as a fraction of the uniform-density moment
 MAX_ENTRIES = 100  # [[locator]] plus [[contact]] entries in one file

@@ -8,6 +8,7 @@ workpiece's mass properties are about its centre of mass in body axes.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -133,6 +134,24 @@ class Manipulator:
 
 
 @dataclass(frozen=True)
+class RobotSpec:
+    """The ``[robot]`` table: the arm that carries the part (its model is loaded by :mod:`fixplan.robot_file`).
+
+    ``urdf`` is what the file says; ``urdf_path`` the file it names (None for a robot of
+    example-robot-data, named by ``urdf``). ``base`` is the world pose of the URDF's root frame,
+    ``grasp`` the tool frame's pose in the workpiece body frame: the part's world pose ``X`` puts
+    the tool at ``X · grasp``. ``tool_frame`` None: the URDF's last frame.
+    """
+
+    urdf: str
+    urdf_path: Path | None
+    base: Pose
+    grasp: Pose
+    tool_frame: str | None = None
+    repeatability_m: float | None = None
+
+
+@dataclass(frozen=True)
 class SimulationSettings:
     """Defaults for the simulator, overridable on the command line."""
 
@@ -186,6 +205,7 @@ class Fixture:
     unlocated: str = ""  # a fixture that is not full: the motions its locators leave free, for people
     pins: tuple[Pin, ...] = ()  # [[pin]]: locating pins in the part's holes
     bores: tuple[Bore, ...] = ()  # [[bore]]: holes in the fixture for a cylindrical part
+    robot: RobotSpec | None = None  # [robot]: the arm that carries the part (checked along a plan)
 
     @property
     def has_pins(self) -> bool:
@@ -350,6 +370,7 @@ __all__ = [
     "Manipulator",
     "Obstacle",
     "Pin",
+    "RobotSpec",
     "SimulationSettings",
     "Workpiece",
     "nearest_symmetric_pose",

@@ -842,6 +842,43 @@ class PinSettings:
 
 
 @dataclass(frozen=True)
+class RobotSettings:
+    """The arm that carries the part (:mod:`fixplan.robot`).
+
+    Attributes
+    ----------
+    ik_tol : float
+        Inverse kinematics stops when the tool's pose error (‖log(X⁻¹ X_target)‖: metres and
+        radians together) is below this.
+    ik_max_iter : int
+        Damped least-squares steps per knot at most.
+    ik_damping : float
+        The damping λ² of the least-squares step ``Δq = Jᵀ (J Jᵀ + λ² I)⁻¹ e``.
+    ik_starts : int
+        Configurations tried for the first knot (the neutral one, then seeded random ones within
+        the joint limits); the one with the largest joint-limit margin is kept.
+    ik_seed : int
+        The seed of those random starts (the answer is the same on every run).
+    max_step_rad : float
+        The largest joint motion between consecutive knots of a continuous path; beyond it the
+        arm flipped to another branch (an elbow or wrist flip the plan's motion does not ask for).
+    reach_tol_m : float
+        A knot whose best pose error stays above this is out of reach.
+    point_radius_m : float
+        A point locator tip is measured as a sphere of this radius in the clearance check.
+    """
+
+    ik_tol: float = 1e-10
+    ik_max_iter: int = 200
+    ik_damping: float = 1e-6
+    ik_starts: int = 24
+    ik_seed: int = 0
+    max_step_rad: float = 0.5
+    reach_tol_m: float = 1e-6
+    point_radius_m: float = 1e-6
+
+
+@dataclass(frozen=True)
 class Settings:
     """One of each group: what a profile selects."""
 
@@ -862,6 +899,7 @@ class Settings:
     plan_file: PlanFileSettings = field(default_factory=PlanFileSettings)
     mesh: MeshSettings = field(default_factory=MeshSettings)
     pins: PinSettings = field(default_factory=PinSettings)
+    robot: RobotSettings = field(default_factory=RobotSettings)
 
     def with_(self, **changes: Any) -> Settings:
         """A copy with some groups replaced."""

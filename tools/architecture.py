@@ -46,12 +46,13 @@ _LAYER_LIST: list[tuple[str, list[str]]] = [
             "limits",
             "files",
             "mesh_file",
+            "robot_file",
             "summary",
             "twins",
         ],
     ),
     # the contact dynamics engine and the jamming cone programs: physics, no planning
-    ("mechanics", ["engine", "simulator", "jamming"]),
+    ("mechanics", ["engine", "simulator", "jamming", "robot"]),
     # the planner (coarse, fine, executor, verification) and the simulated haptic rig it runs in
     ("planning", ["haptics", "planner"]),
     # what is built on plans: batches and Monte Carlo on Dask, generated fixtures, pictures, the app

@@ -78,6 +78,7 @@ class PlanResult:
     # the hand's force [N] and torque [N·m] limits the pushes were planned within (the search's,
     # with its defaults when the file has none); None: not known
     hand_limits: tuple[float, float] | None = None
+    robot: Any = None  # fixplan.robot.RobotReport: the fixture's [robot] along the plan (None: no robot)
 
     @property
     def ok(self) -> bool:
@@ -155,6 +156,7 @@ class PlanResult:
             verification=self.verification,
             timings=dict(self.timings),
             policy=self.policy,
+            extras={} if self.robot is None else {"robot": self.robot.to_json()},
         )
 
     def to_json(self) -> dict[str, Any]:
@@ -673,10 +675,25 @@ def solve(
         result.reason += "; the next-best sequences failed too"
     result.attempts = attempts
     result.hand_limits = _hand_limits(fixture)
+    if fixture.robot is not None and result.transitions:
+        _check_robot(fixture, result, timings)
     timings["fine_s"] = planner.fine_time_s
     timings["total_s"] = time.perf_counter() - t0
     result.timings = timings
     return result
+
+
+def _check_robot(fixture: Fixture, result: PlanResult, timings: dict[str, float]) -> None:
+    """The fixture's arm along the plan (:func:`fixplan.robot.check_plan`): infeasible when it cannot carry it out."""
+    from fixplan.robot import check_plan
+
+    t = time.perf_counter()
+    report = check_plan(fixture, result.plan)
+    timings["robot_s"] = time.perf_counter() - t
+    result.robot = report
+    if not report.feasible and result.status != "infeasible":
+        result.status = "infeasible"
+        result.reason = f"the robot cannot carry the plan out: {report.reason}"
 
 
 def _policy_and_memo(
