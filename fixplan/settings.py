@@ -852,6 +852,8 @@ class RobotSettings:
         radians together) is below this.
     ik_max_iter : int
         Damped least-squares steps per knot at most.
+    ik_halvings : int
+        A step that does not lower the pose error is halved at most this many times.
     ik_damping : float
         The damping λ² of the least-squares step ``Δq = Jᵀ (J Jᵀ + λ² I)⁻¹ e``.
     ik_starts : int
@@ -870,6 +872,7 @@ class RobotSettings:
 
     ik_tol: float = 1e-10
     ik_max_iter: int = 200
+    ik_halvings: int = 30
     ik_damping: float = 1e-6
     ik_starts: int = 24
     ik_seed: int = 0

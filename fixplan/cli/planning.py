@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -34,8 +34,12 @@ if TYPE_CHECKING:
 SeedOpt = Annotated[int, typer.Option("--seed", help="Base seed of the perturbed worlds (sample k: rng([seed, k])).")]
 MuSpreadOpt = Annotated[float, typer.Option("--mu-spread", help="Friction per locator μ(1 + u), u uniform in ±SPREAD.")]
 PoseSigmaOpt = Annotated[
-    str,
-    typer.Option("--pose-sigma", help="Start-pose noise M,DEG: translation [m] in the resting plane, turn [deg]."),
+    str | None,
+    typer.Option(
+        "--pose-sigma",
+        help="Start-pose noise M,DEG: translation [m] in the resting plane, turn [deg] "
+        "(default 1e-3,1; with [robot] repeatability R: R,1).",
+    ),
 ]
 LocatorSigmaOpt = Annotated[float, typer.Option("--locator-sigma", help="Locator position noise per axis [m].")]
 ForceNoiseOpt = Annotated[
@@ -130,7 +134,7 @@ def solve(
     ] = None,
     seed: SeedOpt = 0,
     mu_spread: MuSpreadOpt = 0.2,
-    pose_sigma: PoseSigmaOpt = "1e-3,1",
+    pose_sigma: PoseSigmaOpt = None,
     locator_sigma: LocatorSigmaOpt = DEFAULT.robust.locator_sigma_m,
     force_noise: ForceNoiseOpt = 0.05,
     latency_ms: LatencyOpt = 2.0,
@@ -165,12 +169,13 @@ def solve(
     if perturb_seed is not None:
         if no_verify:
             raise InputError("--perturb-seed verifies the plan on a perturbed world: it cannot go with --no-verify")
+    fixture = _load(file, "solve")
+    if perturb_seed is not None:
         perturb = _robust_settings(
-            seed=seed, mu_spread=mu_spread, pose_sigma=pose_sigma, locator_sigma=locator_sigma,
+            seed=seed, mu_spread=mu_spread, pose_sigma=_pose_sigma(pose_sigma, fixture), locator_sigma=locator_sigma,
             force_noise=force_noise, latency_ms=latency_ms, accel=accel, margin=margin,
             friction_margin=friction_margin,
         )  # fmt: skip
-    fixture = _load(file, "solve")
     # the plan names its fixture (path and hash of the bytes read) so that 'fixplan verify PLAN' finds it
     stamp = fixture_stamp(file if file is not None else default_fixture_path())
     figure = None if report is None else figure_path(report)
@@ -365,6 +370,16 @@ def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | No
         raise typer.Exit(1)
 
 
+def _pose_sigma(given: str | None, fixture: Any) -> str:
+    """``--pose-sigma`` as given, else the robot's repeatability with 1 degree, else 1 mm and 1 degree."""
+    if given is not None:
+        return given
+    robot = fixture.robot
+    if robot is not None and robot.repeatability_m is not None:
+        return f"{robot.repeatability_m!r},1"
+    return "1e-3,1"
+
+
 @app.command()
 def robust(
     file: FileArg = None,
@@ -373,7 +388,7 @@ def robust(
     ] = 20,
     seed: SeedOpt = 0,
     mu_spread: MuSpreadOpt = 0.2,
-    pose_sigma: PoseSigmaOpt = "1e-3,1",
+    pose_sigma: PoseSigmaOpt = None,
     locator_sigma: LocatorSigmaOpt = DEFAULT.robust.locator_sigma_m,
     force_noise: ForceNoiseOpt = 0.05,
     latency_ms: LatencyOpt = 2.0,
@@ -390,11 +405,11 @@ def robust(
     from fixplan.cluster import progress_bar
     from fixplan.robust import robust as run
 
-    settings = _robust_settings(
-        samples=samples, seed=seed, mu_spread=mu_spread, pose_sigma=pose_sigma, locator_sigma=locator_sigma,
-        force_noise=force_noise, latency_ms=latency_ms,
-    )  # fmt: skip
     fixture = _load(file, "robust")
+    settings = _robust_settings(
+        samples=samples, seed=seed, mu_spread=mu_spread, pose_sigma=_pose_sigma(pose_sigma, fixture),
+        locator_sigma=locator_sigma, force_noise=force_noise, latency_ms=latency_ms,
+    )  # fmt: skip
     with progress_bar("perturbed worlds", samples, enabled=not json_out) as progress:
         result = run(fixture, settings, scheduler=scheduler, progress=progress)
     if json_out:

@@ -6,7 +6,8 @@ the root's axes. The part's world pose ``X`` puts the tool frame at ``X · grasp
 
 Inverse kinematics is damped least squares on the tool's pose error ``e = log(X_tool⁻¹ X_target)``
 (local axes, metres and radians; pinocchio's ``Jlog6`` makes the step exact to first order),
-``Δq = −Jₑᵀ (Jₑ Jₑᵀ + λ² I)⁻¹ e``, each step clipped to the joint limits. Torques use the
+``Δq = −Jₑᵀ (Jₑ Jₑᵀ + λ² ‖e‖ I)⁻¹ e`` (the damping fades near the target), each step halved
+until the error drops and clipped to the joint limits. Torques use the
 recursive Newton-Euler algorithm and the tool's Jacobian at its origin in world axes.
 """
 
@@ -104,22 +105,34 @@ class Arm:
         pin, s = self._pin, self.settings
         target = self._root_target(R_world, p_world)
         q = np.clip(np.asarray(q0, dtype=float).copy(), self.lower, self.upper)
-        err = np.inf
+        e, err = self._pose_error(q, target)
         for _ in range(s.ik_max_iter):
-            pin.framesForwardKinematics(self.model, self.data, q)
-            iMd = self.data.oMf[self.tool_id].actInv(target)
-            e = pin.log6(iMd).vector
-            err = float(np.linalg.norm(e))
             if err <= s.ik_tol:
                 break
+            iMd = self.data.oMf[self.tool_id].actInv(target)
             J = pin.computeFrameJacobian(self.model, self.data, q, self.tool_id, pin.ReferenceFrame.LOCAL)
             J = -pin.Jlog6(iMd.inverse()) @ J
-            dq = -J.T @ np.linalg.solve(J @ J.T + s.ik_damping * np.eye(6), e)
-            q_new = np.clip(pin.integrate(self.model, q, dq), self.lower, self.upper)
-            if np.array_equal(q_new, q):
-                break  # held at the limits
-            q = q_new
+            # damping that fades with the error (Levenberg-Marquardt): robust far away, Newton near the target
+            dq = -J.T @ np.linalg.solve(J @ J.T + s.ik_damping * min(err, 1.0) * np.eye(6), e)
+            # the step, halved until the error drops (a full step overshoots far from the target)
+            for _half in range(s.ik_halvings):
+                q_new = np.clip(pin.integrate(self.model, q, dq), self.lower, self.upper)
+                e_new, err_new = self._pose_error(q_new, target)
+                if err_new < err:
+                    break
+                dq = 0.5 * dq
+            else:
+                self._pose_error(q, target)  # leave the data at q
+                break  # no step lowers the error: a local minimum (or held at the limits)
+            q, e, err = q_new, e_new, err_new
         return q, err
+
+    def _pose_error(self, q: FloatArray, target: Any) -> tuple[FloatArray, float]:
+        """``(e, ‖e‖)``, ``e = log(X_tool(q)⁻¹ X_target)`` in the tool's axes (updates the kinematics to ``q``)."""
+        pin = self._pin
+        pin.framesForwardKinematics(self.model, self.data, q)
+        e = np.asarray(pin.log6(self.data.oMf[self.tool_id].actInv(target)).vector, dtype=float)
+        return e, float(np.linalg.norm(e))
 
     def ik_starts(self, R_world: FloatArray, p_world: FloatArray) -> list[tuple[FloatArray, float]]:
         """``(q, error)`` from the neutral start and seeded random ones: the reaching ones first, by joint-limit margin.

@@ -1,0 +1,299 @@
+"""The arm that carries the part: kinematics, torques against closed forms and finite differences, the plan check.
+
+The URDFs are the repository's own: ``problems/robots/arm6.urdf`` (a UR5's kinematics, masses and
+limits) and ``tests/data/robots/planar2.urdf`` (two massless links of 0.4 m and 0.3 m turning in
+a vertical plane, efforts 20 and 8 N·m), whose torques have a closed form.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import PROBLEMS, ROOT, run_cli
+
+import fixplan
+from fixplan.model import RobotSpec
+from fixplan.robot import Arm, check_plan
+from fixplan.robot.check import plan_knots
+from fixplan.spatial import Pose, log_so3
+
+ARM6 = PROBLEMS / "robots" / "arm6.urdf"
+PLANAR2 = ROOT / "tests" / "data" / "robots" / "planar2.urdf"
+FIXTURE = PROBLEMS / "box-3-2-1-arm6.toml"
+G = np.array([0.0, 0.0, -9.81])
+
+
+def _arm(path: Path, base: Pose | None = None, tool: str | None = None) -> Arm:
+    spec = RobotSpec(path.name, path, base or Pose.identity(3), Pose.identity(3), tool)
+    return Arm(spec, G)
+
+
+@cache
+def _solved():
+    fx = fixplan.load(FIXTURE)
+    return fx, fixplan.solve(fx)
+
+
+# -- kinematics --------------------------------------------------------------------------------------
+def test_ik_reaches_a_pose_forward_kinematics_made(rng: np.random.Generator) -> None:
+    """Targets from random joint values, then IK from another start: FK of its answer is the target to 1e-9."""
+    base = Pose.from_rpy_deg([0.3, -0.2, 0.1], [5.0, -10.0, 30.0])
+    arm = _arm(ARM6, base, "tool0")
+    for _ in range(10):
+        q_true = rng.uniform(-2.0, 2.0, arm.nq)
+        R, p = arm.tool_pose(q_true)
+        q, err = arm.ik(R, p, q_true + rng.normal(scale=0.2, size=arm.nq))
+        R2, p2 = arm.tool_pose(q)
+        assert err <= 1e-9
+        assert np.linalg.norm(p2 - p) <= 1e-9
+        assert np.linalg.norm(log_so3(R2.T @ R)) <= 1e-9
+
+
+def test_the_world_jacobian_is_the_derivative_of_the_tool_pose(rng: np.random.Generator) -> None:
+    base = Pose.from_rpy_deg([0.1, 0.2, 0.0], [0.0, 20.0, -45.0])
+    arm = _arm(ARM6, base, "tool0")
+    q = rng.uniform(-2.0, 2.0, arm.nq)
+    J = arm.jacobian_world(q)
+    eps = 1e-6
+    R0, _ = arm.tool_pose(q)
+    for i in range(arm.nq):
+        dq = np.zeros(arm.nq)
+        dq[i] = eps
+        Rp, pp = arm.tool_pose(q + dq)
+        Rm, pm = arm.tool_pose(q - dq)
+        v = (pp - pm) / (2 * eps)
+        w = (log_so3(Rp @ R0.T) - log_so3(Rm @ R0.T)) / (2 * eps)
+        np.testing.assert_allclose(J[:3, i], v, atol=1e-7)
+        np.testing.assert_allclose(J[3:, i], w, atol=1e-7)
+
+
+# -- torques -----------------------------------------------------------------------------------------
+def test_gravity_torques_are_the_gradient_of_the_potential_energy(rng: np.random.Generator) -> None:
+    base = Pose.from_rpy_deg([0.0, 0.0, 0.0], [10.0, 0.0, 0.0])  # a tilted base: gravity in other axes
+    arm = _arm(ARM6, base, "tool0")
+    q = rng.uniform(-2.0, 2.0, arm.nq)
+    tau = arm.torques(q, np.zeros(arm.nq), np.zeros(arm.nq), np.zeros(6))
+    eps = 1e-6
+    fd = np.array(
+        [(arm.potential_energy(q + eps * e) - arm.potential_energy(q - eps * e)) / (2 * eps) for e in np.eye(arm.nq)]
+    )
+    np.testing.assert_allclose(tau, fd, atol=1e-6)
+    np.testing.assert_allclose(tau, arm.gravity_torques(q), atol=1e-12)
+
+
+def test_the_push_torques_do_the_push_s_virtual_work(rng: np.random.Generator) -> None:
+    """τ_push·δq = w·δx: the joints that push the part with w do its work along any small motion."""
+    arm = _arm(ARM6, Pose.identity(3), "tool0")
+    q = rng.uniform(-2.0, 2.0, arm.nq)
+    w = rng.normal(size=6) * np.array([30.0, 30.0, 30.0, 2.0, 2.0, 2.0])
+    zero = np.zeros(arm.nq)
+    tau_push = arm.torques(q, zero, zero, w) - arm.torques(q, zero, zero, np.zeros(6))
+    R0, p0 = arm.tool_pose(q)
+    eps = 1e-6
+    for i in range(arm.nq):
+        dq = np.zeros(arm.nq)
+        dq[i] = eps
+        Rp, pp = arm.tool_pose(q + dq)
+        Rm, pm = arm.tool_pose(q - dq)
+        dx = np.concatenate([(pp - pm) / (2 * eps), (log_so3(Rp @ R0.T) - log_so3(Rm @ R0.T)) / (2 * eps)])
+        assert tau_push[i] == pytest.approx(w @ dx, abs=1e-6)
+
+
+def test_inertial_torques_are_the_mass_matrix_times_the_acceleration(rng: np.random.Generator) -> None:
+    import pinocchio as pin
+
+    arm = _arm(ARM6, Pose.identity(3), "tool0")
+    q = rng.uniform(-2.0, 2.0, arm.nq)
+    a = rng.normal(size=arm.nq)
+    zero = np.zeros(arm.nq)
+    M = pin.crba(arm.model, arm.model.createData(), q)
+    M = np.triu(M) + np.triu(M, 1).T
+    tau = arm.torques(q, zero, a, np.zeros(6)) - arm.torques(q, zero, zero, np.zeros(6))
+    np.testing.assert_allclose(tau, M @ a, atol=1e-10)
+
+
+def _planar_closed_form(q1: float, q2: float, F: float) -> tuple[float, float]:
+    """|τ| of the shoulder and elbow holding a downward push F at the tip (massless links 0.4, 0.3 m)."""
+    return abs(F * (0.4 * math.cos(q1) + 0.3 * math.cos(q1 + q2))), abs(F * 0.3 * math.cos(q1 + q2))
+
+
+def test_a_planar_arm_s_torques_equal_the_closed_form(rng: np.random.Generator) -> None:
+    arm = _arm(PLANAR2, Pose.identity(3), "tool")
+    zero = np.zeros(2)
+    for _ in range(20):
+        q = rng.uniform(-1.5, 1.5, 2)
+        F = float(rng.uniform(1.0, 50.0))
+        tau = arm.torques(q, zero, zero, np.array([0.0, 0.0, -F, 0.0, 0.0, 0.0]))
+        t1, t2 = _planar_closed_form(float(q[0]), float(q[1]), F)
+        assert abs(tau[0]) == pytest.approx(t1, abs=1e-7)
+        assert abs(tau[1]) == pytest.approx(t2, abs=1e-7)
+
+
+def test_the_shoulder_saturates_where_the_closed_form_says() -> None:
+    """40 N down at the tip, elbow straight: the shoulder's 20 N·m binds at 0.7 cos q1 = 0.5, q1 = acos(5/7)."""
+    arm = _arm(PLANAR2, Pose.identity(3), "tool")
+    w = np.array([0.0, 0.0, -40.0, 0.0, 0.0, 0.0])
+    zero = np.zeros(2)
+
+    def ratio(q1: float) -> float:
+        return float(abs(arm.torques(np.array([q1, 0.0]), zero, zero, w)[0]) / arm.effort_Nm[0])
+
+    lo, hi = 0.0, 1.5  # saturated when horizontal, not when raised
+    assert ratio(lo) > 1.0 > ratio(hi)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if ratio(mid) > 1.0 else (lo, mid)
+    assert lo == pytest.approx(math.acos(5.0 / 7.0), abs=1e-9)
+
+
+# -- the plan check ----------------------------------------------------------------------------------
+@pytest.mark.slow
+def test_every_knot_s_joints_put_the_part_at_its_pose() -> None:
+    fx, result = _solved()
+    assert result.status == "planned", result.reason
+    report = result.robot
+    assert report is not None and report.feasible and report.reachable
+    knots = plan_knots(fx, result.plan)
+    assert len(report.knots) == len(knots) >= 2
+    arm = Arm(fx.robot, fx.gravity)
+    for k, (_, pose, _, _) in zip(report.knots, knots, strict=True):
+        got = arm.part_pose_of(k.q)
+        assert np.linalg.norm(got.p_world - pose.p_world) <= 1e-9
+        assert np.linalg.norm(log_so3(got.R_world_body.T @ pose.R_world_body)) <= 1e-9
+        assert np.all(k.q >= arm.lower) and np.all(k.q <= arm.upper)
+    # one continuous joint path, and the times increase
+    Q = np.array([k.q for k in report.knots])
+    assert np.max(np.abs(np.diff(Q, axis=0))) <= 0.5
+    assert all(b.time_s >= a.time_s for a, b in zip(report.knots, report.knots[1:], strict=False))
+    assert 0.0 < report.max_torque_ratio < 1.0
+    assert report.min_clearance_m is not None and report.min_clearance_m > 0.0
+    data = result.plan.to_json()["robot"]
+    assert data["reachable"] is True and len(data["knots"]) == len(knots)
+    assert set(data) >= {
+        "reachable",
+        "knots",
+        "max_torque_ratio",
+        "joint_limit_margin_rad",
+        "min_clearance_m",
+        "reason",
+    }
+
+
+def _copy_with(tmp_path: Path, base: str | None = None, urdf_edit: tuple[str, str] | None = None) -> Path:
+    (tmp_path / "robots").mkdir()
+    text = ARM6.read_text()
+    if urdf_edit is not None:
+        assert urdf_edit[0] in text
+        text = text.replace(*urdf_edit)
+    (tmp_path / "robots" / "arm6.urdf").write_text(text)
+    fixture = FIXTURE.read_text()
+    if base is not None:
+        old = "base = { position = [0.1, 0.55, -0.01], rpy_deg = [0.0, 0.0, -90.0] }"
+        assert old in fixture
+        fixture = fixture.replace(old, base)
+    path = tmp_path / "fixture.toml"
+    path.write_text(fixture)
+    return path
+
+
+@pytest.mark.slow
+def test_a_base_out_of_reach_is_infeasible_naming_the_knot(tmp_path: Path) -> None:
+    fx0, result = _solved()
+    path = _copy_with(tmp_path, base="base = { position = [2.5, 0.0, 0.0], rpy_deg = [0.0, 0.0, 180.0] }")
+    fx = fixplan.load(path)
+    report = check_plan(fx, result.plan)
+    assert not report.reachable and not report.feasible
+    assert report.worst_knot == 0
+    assert report.reason.startswith("knot 0 (") and "out of reach" in report.reason
+
+
+@pytest.mark.slow
+def test_a_weak_shoulder_saturates_naming_the_joint(tmp_path: Path) -> None:
+    """The shoulder lift holds the arm's own weight: 150 N·m is ample, 5 N·m is not."""
+    _, result = _solved()
+    weak = '<limit lower="-6.2832" upper="6.2832" effort="5.0" velocity="3.15"/>\n  </joint>\n  <link name="upper_arm_link">'
+    strong = '<limit lower="-6.2832" upper="6.2832" effort="150.0" velocity="3.15"/>\n  </joint>\n  <link name="upper_arm_link">'
+    path = _copy_with(tmp_path, urdf_edit=(strong, weak))
+    fx = fixplan.load(path)
+    report = check_plan(fx, result.plan)
+    assert report.reachable and not report.feasible
+    assert report.worst_joint == "shoulder_lift_joint" and report.max_torque_ratio > 1.0
+    assert "shoulder_lift_joint needs" in report.reason and "effort limit 5 N·m" in report.reason
+
+
+# -- bad input ---------------------------------------------------------------------------------------
+def _fixture_with_robot(tmp_path: Path, robot: str, *, dimension: int = 3) -> Path:
+    src = (PROBLEMS / "box-3-2-1.toml").read_text() if dimension == 3 else (PROBLEMS / "disk-2d.toml").read_text()
+    path = tmp_path / "f.toml"
+    path.write_text(src + "\n" + robot)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("robot", "expected"),
+    [
+        ('[robot]\nurdf = "missing.urdf"\nbase = { position = [0, 0, 0] }\ngrasp = { position = [0, 0, 0] }',
+         "robot.urdf: "),
+        ('[robot]\nurdf = "../outside.urdf"\nbase = { position = [0, 0, 0] }\ngrasp = { position = [0, 0, 0] }',
+         "outside the fixture file's folder"),
+        ('[robot]\nurdf = "arm6.urdf"\nbase = { position = [0, 0, 0] }\ngrasp = { position = [0, 0, 0] }\ntool_frame = "nope"',
+         "robot.tool_frame: tool_frame 'nope' is not a frame"),
+        ('[robot]\nurdf = "arm6.urdf"\ngrasp = { position = [0, 0, 0] }', "robot.base: missing"),
+        ('[robot]\nurdf = "arm6.urdf"\nbase = { position = [0, 0, 0] }\ngrasp = { position = [0, 0, 0] }\nrepeatability = -1',
+         "robot.repeatability"),
+    ],
+)  # fmt: skip
+def test_a_bad_robot_is_one_line_and_exit_2(tmp_path: Path, robot: str, expected: str) -> None:
+    shutil.copy(ARM6, tmp_path / "arm6.urdf")
+    (tmp_path / "not-a-urdf.urdf").write_text("<robot")
+    path = _fixture_with_robot(tmp_path, robot)
+    proc = run_cli("validate", str(path))
+    code, err = proc.returncode, proc.stderr
+    assert code == 2
+    assert expected in err, err
+    assert "Traceback" not in err
+
+
+def test_a_robot_in_2d_is_refused(tmp_path: Path) -> None:
+    path = _fixture_with_robot(
+        tmp_path,
+        '[robot]\nurdf = "arm6.urdf"\nbase = { position = [0, 0] }\ngrasp = { position = [0, 0] }',
+        dimension=2,
+    )
+    proc = run_cli("validate", str(path))
+    code, err = proc.returncode, proc.stderr
+    assert code == 2 and "3D only" in err
+
+
+def test_a_named_robot_needs_the_extra_or_loads(tmp_path: Path) -> None:
+    path = _fixture_with_robot(
+        tmp_path, '[robot]\nurdf = "panda"\nbase = { position = [0.6, 0, 0] }\ngrasp = { position = [0, 0, 0] }'
+    )
+    proc = run_cli("validate", str(path))
+    code, err = proc.returncode, proc.stderr
+    try:
+        import example_robot_data  # noqa: F401
+    except ImportError:
+        assert code == 2 and "pip install fixplan[robots]" in err
+    else:
+        assert code == 0, err
+
+
+def test_robust_samples_the_robot_s_repeatability(tmp_path: Path) -> None:
+    """Without --pose-sigma, `robust` takes the arm's repeatability as the part's pose noise."""
+    from fixplan.cli.planning import _pose_sigma
+
+    shutil.copytree(PROBLEMS / "robots", tmp_path / "robots")
+    text = FIXTURE.read_text().replace('tool_frame = "tool0"', 'tool_frame = "tool0"\nrepeatability = 2e-4')
+    path = tmp_path / "f.toml"
+    path.write_text(text)
+    fx = fixplan.load(path)
+    assert fx.robot is not None and fx.robot.repeatability_m == 2e-4
+    assert _pose_sigma(None, fx) == "0.0002,1"
+    assert _pose_sigma("3e-3,2", fx) == "3e-3,2"  # given on the command line: as given
+    assert _pose_sigma(None, fixplan.load(FIXTURE)) == "1e-3,1"  # no repeatability: the default
