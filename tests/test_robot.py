@@ -297,3 +297,32 @@ def test_robust_samples_the_robot_s_repeatability(tmp_path: Path) -> None:
     assert _pose_sigma(None, fx) == "0.0002,1"
     assert _pose_sigma("3e-3,2", fx) == "3e-3,2"  # given on the command line: as given
     assert _pose_sigma(None, fixplan.load(FIXTURE)) == "1e-3,1"  # no repeatability: the default
+
+
+def test_the_hand_limits_cut_to_the_arm_are_never_beyond_its_joints(tmp_path: Path, rng: np.random.Generator) -> None:
+    """A 60 N·m shoulder cannot push 40 N anywhere: the limits shrink, and no push within them overloads a joint."""
+    from fixplan.planner.solve import _with_arm_limits
+    from fixplan.robot.check import first_configuration
+
+    weak = '<limit lower="-6.2832" upper="6.2832" effort="60.0" velocity="3.15"/>\n  </joint>\n  <link name="upper_arm_link">'
+    strong = '<limit lower="-6.2832" upper="6.2832" effort="150.0" velocity="3.15"/>\n  </joint>\n  <link name="upper_arm_link">'
+    fx = fixplan.load(_copy_with(tmp_path, urdf_edit=(strong, weak)))
+    cut, limits = _with_arm_limits(fx)
+    assert limits is not None and 0.0 < limits.scale < 1.0 and limits.joint == "shoulder_lift_joint"
+    F, T = cut.manipulator.max_force_N, cut.manipulator.max_torque_Nm
+    assert F == pytest.approx(40.0 * limits.scale) and T == pytest.approx(2.0 * limits.scale)
+    arm = Arm(fx.robot, fx.gravity)
+    for pose in (fx.start, fx.goal_pose):
+        q = first_configuration(arm, fx, pose)[0] if pose is fx.start else arm.ik(*arm.tool_target(pose), q)[0]
+        R, p = arm.tool_target(pose)
+        zero = np.zeros(arm.nq)
+        for _ in range(500):
+            f = rng.normal(size=3)
+            m = rng.normal(size=3)
+            f *= F / np.linalg.norm(f)
+            m *= T / np.linalg.norm(m)  # on the limits' spheres, about the body origin
+            w_tool = np.concatenate([f, m + np.cross(f, p - pose.p_world)])
+            assert np.all(np.abs(arm.torques(q, zero, zero, w_tool)) <= arm.effort_Nm + 1e-9)
+    # the arm of the library is strong enough: the fixture's own limits stay
+    same, full = _with_arm_limits(fixplan.load(FIXTURE))
+    assert full is not None and full.scale == 1.0 and same.manipulator.max_force_N == 40.0

@@ -593,6 +593,9 @@ def solve(
     vopts = dict(verify_options or {})
     refuse_pins(fixture, "solve")  # the planner does not model pins yet: one line, not a plan that ignores them
     require_full(fixture, "planning")
+    arm_limits = None
+    if fixture.robot is not None:
+        fixture, arm_limits = _with_arm_limits(fixture)
     if order is not None:
         _check_order(fixture, order)
     t0 = time.perf_counter()
@@ -676,19 +679,35 @@ def solve(
     result.attempts = attempts
     result.hand_limits = _hand_limits(fixture)
     if fixture.robot is not None and result.transitions:
-        _check_robot(fixture, result, timings)
+        _check_robot(fixture, result, timings, arm_limits)
     timings["fine_s"] = planner.fine_time_s
     timings["total_s"] = time.perf_counter() - t0
     result.timings = timings
     return result
 
 
-def _check_robot(fixture: Fixture, result: PlanResult, timings: dict[str, float]) -> None:
+def _with_arm_limits(fixture: Fixture) -> tuple[Fixture, Any]:
+    """The fixture with its hand limits cut to what its arm exerts at the start and goal (:func:`fixplan.robot.check.arm_hand_limits`)."""
+    from dataclasses import replace
+
+    from fixplan.jamming.search import hand_limits
+    from fixplan.model import Manipulator
+    from fixplan.robot.check import arm_hand_limits
+
+    F_max, T_max, _ = hand_limits(fixture)
+    limits = arm_hand_limits(fixture, F_max, T_max)
+    if limits is None or limits.scale >= 1.0:
+        return fixture, limits
+    return replace(fixture, manipulator=Manipulator(limits.max_force_N, limits.max_torque_Nm)), limits
+
+
+def _check_robot(fixture: Fixture, result: PlanResult, timings: dict[str, float], arm_limits: Any = None) -> None:
     """The fixture's arm along the plan (:func:`fixplan.robot.check_plan`): infeasible when it cannot carry it out."""
     from fixplan.robot import check_plan
 
     t = time.perf_counter()
     report = check_plan(fixture, result.plan)
+    report.hand_limits = arm_limits
     timings["robot_s"] = time.perf_counter() - t
     result.robot = report
     if not report.feasible and result.status != "infeasible":

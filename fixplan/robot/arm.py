@@ -166,6 +166,30 @@ class Arm:
         J = self.jacobian_world(q)
         return tau + J.T @ np.asarray(wrench_tool_world, dtype=float)
 
+    def exertable_scale(self, q: FloatArray, lever_m: float, force_N: float, torque_Nm: float) -> tuple[float, int]:
+        """``(s, joint)``: the largest ``s ≤ 1`` with every push ``‖f‖ ≤ s F``, ``‖m‖ ≤ s T`` within the effort limits.
+
+        ``m`` is the push's moment about the part's body origin, ``lever_m`` that origin's distance
+        from the tool frame's origin (there the moment is at most ``‖m‖ + lever ‖f‖``). Joint
+        ``i`` carries ``|J_iᵀ w + g_i|`` ≤ ``(‖J_v,i‖ + lever ‖J_ω,i‖) ‖f‖ + ‖J_ω,i‖ ‖m‖ + |g_i|``
+        (``g``: the arm's own weight), which must stay within its effort limit: the ball of pushes
+        inscribed in the arm's zonotope of wrenches at ``q``. ``joint`` binds (-1: none does). ``s``
+        is 0 where the arm cannot hold itself.
+        """
+        J = self.jacobian_world(q)
+        g = np.abs(self.gravity_torques(q))
+        a = np.linalg.norm(J[:3], axis=0) + lever_m * np.linalg.norm(J[3:], axis=0)
+        b = np.linalg.norm(J[3:], axis=0)
+        need = a * force_N + b * torque_Nm
+        room = self.effort_Nm - g
+        best, joint = 1.0, -1
+        for i in range(self.nq):
+            if room[i] <= 0.0:
+                return 0.0, i
+            if need[i] > 0.0 and room[i] / need[i] < best:
+                best, joint = float(room[i] / need[i]), i
+        return best, joint
+
     def gravity_torques(self, q: FloatArray) -> FloatArray:
         """The joint torques that hold the arm still against gravity."""
         return np.asarray(self._pin.computeGeneralizedGravity(self.model, self.data, q), dtype=float).copy()

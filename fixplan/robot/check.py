@@ -72,6 +72,7 @@ class RobotReport:
     worst_joint: str | None = None
     worst_knot: int | None = None
     notes: list[str] = field(default_factory=list)
+    hand_limits: ArmLimits | None = None  # the hand limits the planner used, cut to the arm's (solve sets it)
 
     @property
     def feasible(self) -> bool:
@@ -93,6 +94,7 @@ class RobotReport:
             "worst_knot": self.worst_knot,
             "reason": self.reason,
             "notes": list(self.notes),
+            "hand_limits": None if self.hand_limits is None else self.hand_limits.to_json(),
         }
 
 
@@ -149,15 +151,7 @@ def check_plan(fixture: Fixture, plan: Plan, settings: RobotSettings = DEFAULT.r
         R, p = arm.tool_target(pose)
         if j == 0:
             # the first knot's branch: the first reaching one clear of the fixture and the part
-            candidates = arm.ik_starts(R, p)
-            q, err = candidates[0]
-            for q_c, err_c in candidates:
-                if err_c > settings.reach_tol_m:
-                    break
-                c = least_clearance(arm, fixture, [(pose, q_c)])
-                if c is None or c.distance_m >= 0.0:
-                    q, err = q_c, err_c
-                    break
+            q, err = first_configuration(arm, fixture, pose)
         else:
             q, err = arm.ik(R, p, qs[-1])
         qs.append(q)
@@ -230,6 +224,72 @@ def check_plan(fixture: Fixture, plan: Plan, settings: RobotSettings = DEFAULT.r
     return report
 
 
+@dataclass(frozen=True)
+class ArmLimits:
+    """The hand's limits the arm can honour at the part's start and goal: ``s ×`` the fixture's."""
+
+    max_force_N: float
+    max_torque_Nm: float
+    scale: float  # ≤ 1: the factor applied to the fixture's hand limits
+    joint: str | None  # the joint that binds (None: none does)
+    where: str  # "start" or "goal"
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "max_force_N": self.max_force_N,
+            "max_torque_Nm": self.max_torque_Nm,
+            "scale": self.scale,
+            "joint": self.joint,
+            "where": self.where,
+        }
+
+
+def first_configuration(arm: Arm, fixture: Fixture, pose: Pose) -> tuple[FloatArray, float]:
+    """``(q, error)``: the first reaching branch at ``pose`` whose links clear the fixture and the part."""
+    from fixplan.robot.clearance import least_clearance
+
+    R, p = arm.tool_target(pose)
+    candidates = arm.ik_starts(R, p)
+    for q_c, err_c in candidates:
+        if err_c > arm.settings.reach_tol_m:
+            break
+        c = least_clearance(arm, fixture, [(pose, q_c)])
+        if c is None or c.distance_m >= 0.0:
+            return q_c, err_c
+    return candidates[0]
+
+
+def arm_hand_limits(fixture: Fixture, force_N: float, torque_Nm: float) -> ArmLimits | None:
+    """The hand limits ``(F, T)`` scaled to what the arm exerts at the start and goal poses (None: no robot).
+
+    The planner's wrench searches then keep every push inside the ball of pushes the arm can
+    exert there (:meth:`Arm.exertable_scale`); between those poses the plan check measures the
+    torques themselves. A pose the arm cannot reach leaves the limits as they are (the plan
+    check then refuses the plan, naming the knot).
+    """
+    if fixture.robot is None:
+        return None
+    arm = Arm(fixture.robot, fixture.gravity)
+    best = ArmLimits(force_N, torque_Nm, 1.0, None, "start")
+    poses = [("start", fixture.start)] + ([("goal", fixture.goal_pose)] if fixture.goal_pose is not None else [])
+    q_prev: FloatArray | None = None
+    for where, pose in poses:
+        if q_prev is None:
+            q, err = first_configuration(arm, fixture, pose)
+        else:
+            R, p = arm.tool_target(pose)
+            q, err = arm.ik(R, p, q_prev)
+        if err > arm.settings.reach_tol_m:
+            continue
+        q_prev = q
+        R, p = arm.tool_target(pose)
+        s, joint = arm.exertable_scale(q, float(np.linalg.norm(p - pose.p_world)), force_N, torque_Nm)
+        if s < best.scale:
+            name = arm.joint_names[joint] if joint >= 0 else None
+            best = ArmLimits(s * force_N, s * torque_Nm, s, name, where)
+    return best
+
+
 def _derivatives(times: FloatArray, Q: FloatArray) -> tuple[FloatArray, FloatArray]:
     """``q̇`` and ``q̈`` at the knots: finite differences over the knot times (zero where time stands still)."""
     n = len(times)
@@ -254,4 +314,12 @@ def _xyz(p: FloatArray) -> str:
     return "(" + ", ".join(f"{float(x):.3g}" for x in p) + ") m"
 
 
-__all__ = ["RobotKnot", "RobotReport", "check_plan", "plan_knots"]
+__all__ = [
+    "ArmLimits",
+    "RobotKnot",
+    "RobotReport",
+    "arm_hand_limits",
+    "check_plan",
+    "first_configuration",
+    "plan_knots",
+]
