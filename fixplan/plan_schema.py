@@ -771,6 +771,9 @@ class PlanFile(JsonObject):
     )
     timings: Annotated[dict[str, Any], Numbers(QUANTITY)] = Field(default_factory=dict, description="[s]")
     perturbation: Annotated[Any, AnyObject(nullable=True)] = Field(None, description="--perturb-seed's world.")
+    robot: Annotated[Any, AnyObject(nullable=True)] = Field(
+        None, description="The fixture's [robot] along the plan (kept as written; `solve` recomputes it)."
+    )
 
 
 class Where(JsonObject):

@@ -326,3 +326,29 @@ def test_the_hand_limits_cut_to_the_arm_are_never_beyond_its_joints(tmp_path: Pa
     # the arm of the library is strong enough: the fixture's own limits stay
     same, full = _with_arm_limits(fixplan.load(FIXTURE))
     assert full is not None and full.scale == 1.0 and same.manipulator.max_force_N == 40.0
+
+
+def test_the_stick_figure_ends_at_the_tool(rng: np.random.Generator) -> None:
+    arm = _arm(ARM6, Pose.from_rpy_deg([0.2, 0.1, 0.0], [0.0, 0.0, 60.0]), "tool0")
+    for _ in range(5):
+        q = rng.uniform(-2.0, 2.0, arm.nq)
+        P = arm.skeleton_world(q)
+        assert P.shape == (arm.nq + 2, 3)
+        np.testing.assert_allclose(P[0], arm.p_world_root, atol=1e-15)
+        np.testing.assert_allclose(P[-1], arm.tool_pose(q)[1], atol=1e-12)
+
+
+@pytest.mark.slow
+def test_view_draws_the_arm_holding_the_part(tmp_path: Path) -> None:
+    """`view --plan` draws the arm (a stick figure through its joints) in the replay's frames."""
+    import json
+    import re
+
+    plan = tmp_path / "plan.json"
+    page = tmp_path / "scene.html"
+    run_cli("solve", str(FIXTURE), "--out", str(plan), check_rc=0)
+    run_cli("view", str(FIXTURE), "--plan", str(plan), "--out", str(page), check_rc=0)
+    html = page.read_text()
+    assert html.count('"name":"robot (joints)"') >= 10  # the first frame's trace and every frame's
+    data = json.loads(plan.read_text())
+    assert data["robot"]["feasible"] is True and re.search(r"reachable through \d+ knots", data["robot"]["reason"])

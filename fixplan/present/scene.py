@@ -51,6 +51,7 @@ PRESSED = "#d62728"
 NORMAL = "#333333"
 FORCE = "#ff7f0e"
 PUSH = "#2ca02c"
+ARM = "#6b4c9a"  # the robot arm's stick figure
 PATH = "#17becf"
 
 
@@ -213,6 +214,7 @@ def scene_figure(fixture: Fixture, replay: Replay, *, max_frames: int = MAX_FRAM
 
     if d == 3:
         loc_mesh, loc_owner = _locator_mesh(fixture, go)
+    arm_points = _arm_skeletons(fixture, replay, idx) if d == 3 and fixture.robot is not None else None
 
     def dynamic(k: int, *, full: bool = False) -> dict[str, Any]:
         """The traces that change from sample to sample, by name (``full``: complete traces, for fig.data)."""
@@ -251,6 +253,12 @@ def scene_figure(fixture: Fixture, replay: Replay, *, max_frames: int = MAX_FRAM
             out["forces"] = arrows(np.vstack(starts), np.vstack(vecs), "contact forces", FORCE)
         if replay.push_wrench is not None:
             out["push"] = arrows(pose.p_world[None, :], replay.push_wrench[k, :d][None, :], "hand push (force)", PUSH)
+        if arm_points is not None and k in arm_points:
+            P = arm_points[k]
+            out["arm"] = go.Scatter3d(
+                x=_rounded(P[:, 0]), y=_rounded(P[:, 1]), z=_rounded(P[:, 2]), mode="lines+markers",
+                line={"color": ARM, "width": 8}, marker={"size": 3, "color": ARM}, name="robot (joints)",
+            )  # fmt: skip
         return out
 
     static: dict[str, Any] = {}
@@ -445,6 +453,37 @@ def _locator_bodies(fixture: Fixture, go: Any) -> Any:
         name="locator tips",
         hoverinfo="skip",
     )
+
+
+def _arm_skeletons(fixture: Fixture, replay: Replay, idx: IntArray) -> dict[int, FloatArray] | None:
+    """The arm's stick figure at each frame's part pose (inverse kinematics, each frame from the one before).
+
+    None when the arm cannot be loaded or does not reach the first frame; a frame it does not
+    reach keeps the last reached figure (the plan check names such a knot).
+    """
+    from fixplan.robot import Arm
+    from fixplan.robot.check import first_configuration
+    from fixplan.robot_file import RobotError
+
+    assert fixture.robot is not None
+    try:
+        arm = Arm(fixture.robot, fixture.gravity)
+    except RobotError:
+        return None
+    out: dict[int, FloatArray] = {}
+    q = None
+    for k in idx:
+        pose = replay.poses[int(k)]
+        if q is None:
+            q, err = first_configuration(arm, fixture, pose)
+            if err > arm.settings.reach_tol_m:
+                return None
+        else:
+            q_new, err = arm.ik(*arm.tool_target(pose), q)
+            if err <= arm.settings.reach_tol_m:
+                q = q_new
+        out[int(k)] = arm.skeleton_world(q)
+    return out
 
 
 def _bounds(fixture: Fixture, replay: Replay, idx: IntArray, fig: Any) -> tuple[FloatArray, FloatArray]:

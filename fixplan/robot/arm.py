@@ -85,6 +85,14 @@ class Arm:
         M = self.data.oMf[self.tool_id]
         return self.R_world_root @ M.rotation, self.p_world_root + self.R_world_root @ M.translation
 
+    def skeleton_world(self, q: FloatArray) -> FloatArray:
+        """(nq + 2, 3): the root, every joint's origin and the tool frame's origin, world frame (a stick figure)."""
+        pin = self._pin
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        pts = [np.zeros(3)] + [np.asarray(M.translation, dtype=float) for M in self.data.oMi[1:]]
+        pts.append(np.asarray(self.data.oMf[self.tool_id].translation, dtype=float))
+        return self.p_world_root + np.array(pts) @ self.R_world_root.T
+
     def jacobian_world(self, q: FloatArray) -> FloatArray:
         """(6, nq): ``q̇`` ↦ the tool origin's velocity and the angular velocity, world axes."""
         pin = self._pin
