@@ -312,8 +312,9 @@ def test_the_hand_limits_cut_to_the_arm_are_never_beyond_its_joints(tmp_path: Pa
     F, T = cut.manipulator.max_force_N, cut.manipulator.max_torque_Nm
     assert F == pytest.approx(40.0 * limits.scale) and T == pytest.approx(2.0 * limits.scale)
     arm = Arm(fx.robot, fx.gravity)
+    q = first_configuration(arm, fx, fx.start)[0]
     for pose in (fx.start, fx.goal_pose):
-        q = first_configuration(arm, fx, pose)[0] if pose is fx.start else arm.ik(*arm.tool_target(pose), q)[0]
+        q = arm.ik(*arm.tool_target(pose), q)[0]
         R, p = arm.tool_target(pose)
         zero = np.zeros(arm.nq)
         for _ in range(500):
