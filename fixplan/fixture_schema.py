@@ -1047,6 +1047,10 @@ def _dimension_rules() -> list[dict[str, Any]]:
                 },
             }
         }
+        if dim == 3:
+            then["properties"]["robot"] = {"properties": {"base": pose, "grasp": pose}}
+        else:
+            then["not"] = {"required": ["robot"]}  # a robot arm is 3D only
         # dimension defaults to 3: a file without it is a 3D one
         cond: dict[str, Any] = {"properties": {"scene": {"properties": {"dimension": {"const": dim}}}}}
         if dim == 2:
