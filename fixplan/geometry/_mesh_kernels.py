@@ -251,14 +251,14 @@ def contacts(
     for k in range(n):
         if dist[k] > limit:
             continue
-        d, i, x, y, z, region = dist[k], ids[k], pts[k, 0], pts[k, 1], pts[k, 2], pts[k, 3]
+        d, i, x, y, z, code = dist[k], ids[k], pts[k, 0], pts[k, 1], pts[k, 2], pts[k, 3]
         r = kept
         while r > 0 and (dist[r - 1] > d or (dist[r - 1] == d and ids[r - 1] > i)):
             dist[r], ids[r] = dist[r - 1], ids[r - 1]
             pts[r, 0], pts[r, 1], pts[r, 2], pts[r, 3] = pts[r - 1, 0], pts[r - 1, 1], pts[r - 1, 2], pts[r - 1, 3]
             r -= 1
         dist[r], ids[r] = d, i
-        pts[r, 0], pts[r, 1], pts[r, 2], pts[r, 3] = x, y, z, region
+        pts[r, 0], pts[r, 1], pts[r, 2], pts[r, 3] = x, y, z, code
         kept += 1
     found = 0
     needed = 0
