@@ -131,8 +131,8 @@ def _corner_fixture(folder: Path) -> Path:
     return path
 
 
-def _box_on_floor(folder: Path) -> Path:
-    """A split box (4 × 4 squares a face) on a floor, three tips beside it: the floor's points near, the tips' far."""
+def _box_on_floor(folder: Path, torsion_m: float = 0.0) -> Path:
+    """A split box (4 × 4 squares a face) on a floor, three tips beside it (soft fingers when ``torsion_m > 0``)."""
     V, F = cell_surface(*box_cells((200.0, 100.0, 50.0), 4))
     (folder / "box.stl").write_bytes(stl_bytes(V, F))
     tips = [("S1", (-0.05, -0.0531, 0.0)), ("S2", (0.05, -0.0531, 0.0)), ("E1", (-0.1031, 0.0, 0.0))]
@@ -142,6 +142,7 @@ def _box_on_floor(folder: Path) -> Path:
         "start = { position = [0.0, 0.0, 0.0] }\n"
         + "".join(
             f'[[locator]]\nname = "{name}"\nposition = [{x}, {y}, {z}]\nradius = 0.003\nfriction = 0.3\n'
+            + (f"torsion = {torsion_m}\n" if torsion_m > 0.0 else "")
             for name, (x, y, z) in tips
         )
         + '[[obstacle]]\nname = "floor"\nshape = "plane"\npoint = [0.0, 0.0, -0.025]\nnormal = [0.0, 0.0, 1.0]\n'
@@ -204,7 +205,7 @@ def sync(a: Simulator, b: Simulator) -> None:
         stepper.loc_slots[i, 1] += 1
 
 
-@pytest.mark.parametrize("case", ["corner", "floor"])
+@pytest.mark.parametrize("case", ["corner", "floor", "floor with soft fingers"])
 def test_the_compiled_step_follows_the_python_step(tmp_path: Path, case: str) -> None:
     """Step for step from the same state (:func:`sync`): the L pressed into E1's corner (two loaded contacts), a split box slid along a floor."""
     if case == "corner":
@@ -213,7 +214,7 @@ def test_the_compiled_step_follows_the_python_step(tmp_path: Path, case: str) ->
         wrench = np.concatenate([F, np.cross(fixture.start.p_world + np.array([0.05, 0.02, 0.01]), F)])
         steps = 150
     else:
-        fixture = load(_box_on_floor(tmp_path))
+        fixture = load(_box_on_floor(tmp_path, 0.01 if "soft" in case else 0.0))
         wrench = np.array([8.0, -1.0, 0.0, 0.0, 0.0, 0.05])  # slides along S1 and S2 on the floor
         steps = 200
     compiled, reference = Simulator(fixture), Simulator(fixture)
@@ -254,3 +255,38 @@ def test_more_slots_than_the_state_holds_grows_it(tmp_path: Path) -> None:
         reference.step(np.zeros(6))
     assert stepper.state.shape[0] >= len(fixture.locators) + 1
     assert_same_state(compiled, reference)
+
+
+# -- soft fingers -------------------------------------------------------------------------------------
+def test_a_yaw_moment_on_a_mesh_box_is_resisted_by_its_soft_fingers_as_on_the_primitive_box(tmp_path: Path) -> None:
+    """box-3-2-1-soft on its three base locators alone (μ = 0.25, e_r = 0.035 m), a pure yaw moment of 0.24 N·m.
+
+    The file's closed forms: point contacts hold at most 0.2081 N·m; with the spin rows at least
+    0.2688 N·m. So the primitive box and its 12-triangle mesh twin hold, with the same spin
+    moments at each locator; the mesh twin without torsion arms turns.
+    """
+    text = (PROBLEMS / "box-3-2-1-soft.toml").read_text(encoding="utf-8")
+    text = text[: text.index('[[locator]]\nname = "S1"')]  # B1, B2, B3 only
+    (tmp_path / "box.toml").write_text(text)
+    (tmp_path / "box12.stl").write_bytes(stl_bytes(*cell_surface(*box_cells((200.0, 100.0, 50.0), 1))))
+    mesh_text = "\n".join(line for line in text.splitlines() if not line.startswith("face = "))
+    mesh_text = mesh_text.replace(
+        'shape = "box"\nsize = [0.20, 0.10, 0.05]', 'shape = "mesh"\nfile = "box12.stl"\nunits = "mm"'
+    )
+    assert mesh_text.count("torsion = 0.035") == 3
+    (tmp_path / "mesh.toml").write_text(mesh_text)
+    (tmp_path / "point.toml").write_text(mesh_text.replace("torsion = 0.035\n", ""))
+    yaw = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.24])
+    sims = {}
+    for name in ("box", "mesh", "point"):
+        sims[name] = Simulator(load(tmp_path / f"{name}.toml"))
+        sims[name].run(0.2, yaw)
+    box, mesh = sims["box"].contacts(), sims["mesh"].contacts()
+    for sim in (sims["box"], sims["mesh"]):
+        assert np.abs(sim.twist).max() <= 1e-9  # held
+    spins = np.array([r.spin_moment_Nm for r in mesh])
+    np.testing.assert_allclose(spins, [r.spin_moment_Nm for r in box], rtol=0, atol=1e-9)
+    np.testing.assert_allclose([r.normal_force_N for r in mesh], [r.normal_force_N for r in box], rtol=0, atol=1e-9)
+    assert np.abs(spins).min() > 0.01  # every base locator takes a share of the yaw
+    assert sims["point"].twist[5] > 0.1  # without the spin rows 0.24 N·m is beyond what friction holds
+    assert all(r.spin_moment_Nm == 0.0 for r in sims["point"].contacts())

@@ -7,7 +7,8 @@ together, 1e-12, on a box and an L-bracket):
 1. every locator's contacts on the mesh (:func:`fixplan.geometry._mesh_kernels.contacts`, band =
    the step's margin; after the nearest, a face seen from behind is no contact), each made a
    plane slot as :func:`fixplan.engine.mesh_slots.mesh_slots` makes it (plane through the tip's
-   point nearest the part, frame of :func:`fixplan.geometry.collision.plane_frame`);
+   point nearest the part, frame of :func:`fixplan.geometry.collision.plane_frame`), with the
+   locator's μ and, for a soft finger, its torsion arm (a spin row);
 2. the fixture's collision points that may be within the margin of their obstacle
    (:meth:`Simulator._obstacle_points_near`'s lower bound, point by point), found through an
    AABB tree of the points (:func:`fixplan.geometry._mesh_kernels.build_tree` on degenerate
@@ -231,13 +232,14 @@ def locator_slots(R, p, tri, face_normals, edge_normals, vertex_normals, faces, 
 def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
                tri, face_normals, edge_normals, vertex_normals, faces, around, boxes, nodes, order, same,
                loc, obs_fix, pts_fix, pt_boxes, pt_nodes, pt_order, rho_max,
-               h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_steps, bound, spin,
+               h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_steps, bound,
                P_full, active_full, P_prev_full, active_prev_full, gap_full, u_full, n_full,
                slot_state, loc_slots, near):  # fmt: skip
     """One 3D step of a mesh part (the module docstring's five parts); the state arrays updated in place.
 
-    ``loc (k_loc, 6)``: each locator's ``[p_world (3), radius, μ, torsion arm]``; ``spin``: whether
-    a locator's torsion arm gives its slots a soft finger's spin row. ``obs_fix``, ``pts_fix``: the
+    ``loc (k_loc, 6)``: each locator's ``[p_world (3), radius, μ, torsion arm]`` (a soft finger's
+    torsion arm gives each of its slots a spin row, as it gives a primitive part's contact one).
+    ``obs_fix``, ``pts_fix``: the
     fixture's collision-only bodies and collision points (``[x_body (3), radius, obstacle row, μ]``,
     with the AABB tree of :func:`points_near` and their largest radius ``rho_max``),
     whose rows follow the locators' in ``P_full`` … ``n_full`` (the simulator's arrays).
@@ -273,8 +275,7 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
         obs[j] = s_obs[j]
         slots[j, 0], slots[j, 1], slots[j, 2], slots[j, 3], slots[j, 4] = s_x[j, 0], s_x[j, 1], s_x[j, 2], 0.0, j
         mu[j] = loc[i, 4]
-        if spin and loc[i, 5] > 0.0:
-            tors[j] = loc[i, 5]
+        tors[j] = loc[i, 5]
         if s_rank[j] < loc_slots[i, 1]:  # the same (locator, rank) in the last step
             o = loc_slots[i, 0] + s_rank[j]
             for a in range(4):

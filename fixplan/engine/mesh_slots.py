@@ -10,8 +10,9 @@ contact (body frame, radius 0) against the fixed plane through the tip's point n
 ``o = x − g n``, with normal ``n`` (from the locator into the part). At the step's start this
 slot has the locator's gap ``g``, normal ``n``, contact point ``x`` and therefore its Jacobian
 rows exactly; within the step the plane stands for the tip (the difference is second order in
-the step's motion, and the next step detects afresh). A soft finger's spin row is not applied to
-mesh parts (the slots carry none).
+the step's motion, and the next step detects afresh). A soft finger (a locator with a torsion
+arm) gives each of its slots a spin row about the slot's normal, as it gives a primitive part's
+contact one.
 
 Slots are ordered locator by locator, nearest contact first; a slot's identity from one step to
 the next (for the warm start) is ``(locator, rank)``.
@@ -108,11 +109,8 @@ class MeshStepper:
         obs: FloatArray,
         slots: FloatArray,
         slot_mu: FloatArray,
-        *,
-        spin: bool = False,
     ) -> None:
         self.mesh = mesh
-        self.spin = bool(spin)
         self.loc = np.ascontiguousarray(
             [[*loc.p_world, loc.radius_m, loc.friction, loc.torsion_m] for loc in locators], dtype=float
         ).reshape(-1, 6)
@@ -151,7 +149,7 @@ class MeshStepper:
             out = _mesh_step3(
                 sim._R, sim._p, sim._v, sim._w, sim._mass, sim._Ib, sim._Ib_inv, sim._com_b, *self._part, sim.dt,
                 f_ext, tau_ext, sim.restitution, margin, sim.tolerance, sim.max_iterations, sim.polish_steps,
-                sim._bound, self.spin, sim._P, sim._active, sim._P_prev, sim._active_prev, sim._gap, sim._u, sim._nw,
+                sim._bound, sim._P, sim._active, sim._P_prev, sim._active_prev, sim._gap, sim._u, sim._nw,
                 self.state, self.loc_slots, self.near,
             )  # fmt: skip
             err, iters, status, failures, pen, n = out
