@@ -145,7 +145,8 @@ def _mesh_simulation(tmp: Path) -> None:
     from fixplan.geometry.cells import box_cells, cell_surface
     from fixplan.geometry.mesh import stl_bytes
 
-    (tmp / "box.stl").write_bytes(stl_bytes(*cell_surface(*box_cells((0.2, 0.1, 0.05), 2))))
+    stl = stl_bytes(*cell_surface(*box_cells((0.2, 0.1, 0.05), 2)))
+    write_output(tmp / "box.stl", lambda path: path.write_bytes(stl))
     text = (
         'format = 1\n[scene]\nname = "precompile-mesh"\ndimension = 3\n'
         '[workpiece]\nshape = "mesh"\nfile = "box.stl"\nmass = 2.0\nstart = { position = [0.0, 0.0, 0.0] }\n'
