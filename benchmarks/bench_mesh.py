@@ -17,7 +17,11 @@ its box written as the split box above (50 700 triangles, the same size, mass an
 the primitive box: engine steps per second pushing the part on its locators (5 N along (−1, −1, −1)
 / √3 through the centre of mass, 2000 steps of 1 ms from the start pose), and ``solve`` with its
 verification in the haptic loop from the start pose (in-process, after a warm-up solve of each):
-the haptic loop's mean tick and the solve's time.
+the haptic loop's mean tick and the solve's time. The verification's tick includes the plan's
+executor (its command, and any cone program it solves from inside a tick); the loop a person
+holds is the engine step and the coupling alone (:func:`held_loop_tick_us`: the haptic rig of a
+verification, the hand pushing the handle with the same 5 N, 2000 ticks, the executor's share
+left out).
 """
 
 from __future__ import annotations
@@ -196,6 +200,19 @@ def _mesh_twin_of_default(folder: Path) -> Path:
     return path
 
 
+def held_loop_tick_us(fixture, push: np.ndarray, ticks: int) -> float:
+    """Mean tick of the haptic loop a person holds [µs]: coupling, engine step and display (no executor)."""
+    from fixplan.engine.simulator import Simulator
+    from fixplan.planner.verify import haptic_rig, pose_coordinates
+    from fixplan.settings import HAPTIC
+
+    sim = Simulator(fixture, settings=HAPTIC.engine)
+    x0 = pose_coordinates(fixture.start, fixture.start.R_world_body)
+    rig = haptic_rig(fixture, sim, x0, 50.0, 5.0, HAPTIC.haptic)
+    rec = rig.loop.run(ticks * sim.dt, lambda _t, _device: push)
+    return 1e6 * float(np.mean(np.subtract(rec.compute_s, rec.command_s)))
+
+
 def engine_and_solve(rows: list[dict], quick: bool) -> list[str]:
     """Engine steps/s, the haptic tick and the solve time with the mesh part against the primitive box."""
     import fixplan
@@ -214,7 +231,7 @@ def engine_and_solve(rows: list[dict], quick: bool) -> list[str]:
             "box": fixplan.load(fixplan.default_fixture_path()),
             "mesh": fixplan.load(_mesh_twin_of_default(Path(tmp))),
         }
-        rate, tick, total, status = {}, {}, {}, {}
+        rate, tick, held, total, status = {}, {}, {}, {}, {}
         push = np.concatenate([5.0 * -np.ones(3) / np.sqrt(3.0), np.zeros(3)])
         for name, fx in fixtures.items():
             sim = Simulator(fx)
@@ -224,6 +241,7 @@ def engine_and_solve(rows: list[dict], quick: bool) -> list[str]:
             for _ in range(steps):
                 sim.step(push)
             rate[name] = steps / (time.perf_counter() - t0)
+            held[name] = held_loop_tick_us(fx, push, steps)
             solve(fx)  # warm-up (kernels, imports)
             res = solve(fx)
             status[name] = res.status
@@ -240,6 +258,14 @@ def engine_and_solve(rows: list[dict], quick: bool) -> list[str]:
             rate["mesh"] >= 0.5 * rate["box"],
         ),
         ("haptic tick, mean [µs]", tick, "{:.0f}", tick["mesh"] / tick["box"], "mean ≤ 200 µs", tick["mesh"] <= 200.0),
+        (
+            "haptic tick without the executor (coupling and engine step), mean [µs]",
+            held,
+            "{:.0f}",
+            held["mesh"] / held["box"],
+            "mean ≤ 200 µs",
+            held["mesh"] <= 200.0,
+        ),
         (
             "`solve` with its verification [s]",
             total,
@@ -267,6 +293,7 @@ def engine_and_solve(rows: list[dict], quick: bool) -> list[str]:
         "",
         f"- Status of each solve: primitive box `{status['box']}`, mesh part `{status['mesh']}`; {steps} engine steps each "
         "after 20 warm-up steps; the haptic tick is the verification's mean tick: the executor's command, the engine "
-        "step and the coupling (the target, 200 µs, is for the loop a person holds: engine step and coupling).",
+        "step and the coupling (the target, 200 µs, is for the loop a person holds: engine step and coupling, the "
+        f"next row: the verification's rig, the hand pushing the handle with the same 5 N, {steps} ticks).",
     ]
     return out

@@ -252,6 +252,30 @@ def test_a_2d_simulation_steps_and_runs_identically(monkeypatch, name: str) -> N
     assert not any(key.startswith("fixplan.engine.step") for key in aot.fallbacks)
 
 
+@needs_build
+def test_a_mesh_part_steps_identically(monkeypatch) -> None:
+    """Simulator.step of a mesh part (detection, slots and step in one kernel), AOT vs JIT."""
+    from fixplan.engine import mesh_slots as mesh_slots_module
+
+    fx = fixplan.load(PROBLEMS / "meshes" / "l-bracket.toml")
+    push = np.array([-1.0, 0.5, -2.0, 0.01, 0.0, 0.02])
+
+    def simulate() -> list[np.ndarray]:
+        sim = Simulator(fx)
+        out = []
+        for _ in range(100):
+            info = sim.step(push)
+            out.append(np.concatenate([sim.pose.p_world, sim.pose.R_world_body.ravel(), sim.twist, [info.error]]))
+        return out
+
+    states_aot = simulate()
+    assert isinstance(mesh_slots_module._mesh_step3, aot._AotKernel)
+    monkeypatch.setattr(mesh_slots_module, "_mesh_step3", _jit("fixplan.engine._mesh_slot_kernels", "mesh_step3"))
+    states_jit = simulate()
+    assert all(np.array_equal(a, b) for a, b in zip(states_aot, states_jit, strict=True))
+    assert not any(key.startswith("fixplan.engine._mesh_slot_kernels") for key in aot.fallbacks)
+
+
 def _solve_json(path: Path, env: dict[str, str]) -> tuple[dict, list[str]]:
     code = (
         "import json, sys; from fixplan.cli import main; from fixplan import aot\n"

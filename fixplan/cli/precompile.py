@@ -8,7 +8,7 @@ first command a user runs after installing starts warm.
 It runs the commands themselves, in this process and on small inputs: ``solve`` and
 ``classify`` on the bundled default fixture, ``simulate`` in 3D (compiled loop and per-step
 stepping) and 2D, ``map`` and the FCLib solvers (``auto`` and each method) on small problems,
-and a mesh part's AABB tree and point queries.
+a mesh part's AABB tree and point queries, and a mesh part's engine step.
 Running the real code paths compiles exactly the signatures (argument types and layouts) that
 later runs look up; a hand-written list of signatures would drift from the code.
 
@@ -136,6 +136,29 @@ def _mesh_queries() -> None:
     mesh.contacts(np.array([0.013, 0.02, 0.013]))
 
 
+def _mesh_simulation(tmp: Path) -> None:
+    """Simulator.step of a mesh part (one compiled call a step: its detection too), with a floor."""
+    import numpy as np
+
+    import fixplan
+    from fixplan.engine.simulator import Simulator
+    from fixplan.geometry.cells import box_cells, cell_surface
+    from fixplan.geometry.mesh import stl_bytes
+
+    stl = stl_bytes(*cell_surface(*box_cells((0.2, 0.1, 0.05), 2)))
+    write_output(tmp / "box.stl", lambda path: path.write_bytes(stl))
+    text = (
+        'format = 1\n[scene]\nname = "precompile-mesh"\ndimension = 3\n'
+        '[workpiece]\nshape = "mesh"\nfile = "box.stl"\nmass = 2.0\nstart = { position = [0.0, 0.0, 0.0] }\n'
+        '[[locator]]\nname = "B1"\nposition = [0.0, 0.0, -0.028]\nradius = 0.003\nfriction = 0.3\n'
+        '[[obstacle]]\nname = "floor"\nshape = "plane"\npoint = [0.0, 0.0, -0.025]\nnormal = [0.0, 0.0, 1.0]\n'
+    )
+    write_text(tmp / "mesh.toml", text)
+    sim = Simulator(fixplan.load(tmp / "mesh.toml"))
+    for _ in range(3):
+        sim.step(np.zeros(6))
+
+
 def steps(tmp: Path) -> list[tuple[str, Callable[[], None]]]:
     """The workloads, in order: (label, function)."""
     from fixplan import default_fixture_path
@@ -159,6 +182,7 @@ def steps(tmp: Path) -> list[tuple[str, Callable[[], None]]]:
         ),
         ("FCLib solvers", _fclib_problems),
         ("mesh queries", _mesh_queries),
+        ("mesh part in the engine", lambda: _mesh_simulation(tmp)),
     ]
 
 

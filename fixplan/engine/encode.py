@@ -11,8 +11,9 @@ Codes and parameters (``params``; ``verts``/``edge_normals`` only for polygons):
 - ``BALL`` (sphere or disk): radius;
 - ``CYLINDER``: radius, half length (axis = body z);
 - ``POLYGON``: vertices (n × 2, counter-clockwise) and outward edge normals (n × 2);
-- ``MESH``: no parameters. A mesh part is never queried by the kernels: the simulator detects its
-  locators' contacts in Python each step and passes them as slots (:mod:`.mesh_slots`).
+- ``MESH``: no parameters. The step's shape queries never see a mesh part: its locators' contacts
+  are detected each step by the compiled mesh step, which hands them to the step as slots
+  (:mod:`.mesh_slots`, :mod:`._mesh_slot_kernels`).
 
 Collision-only bodies (:func:`encode_obstacles`): one row per obstacle, ``[kind, origin (d),
 R_world_obstacle row-major (d²), half extents (d)]`` (kind 0: plane or line, 1: box or

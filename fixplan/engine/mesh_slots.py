@@ -10,25 +10,38 @@ contact (body frame, radius 0) against the fixed plane through the tip's point n
 ``o = x − g n``, with normal ``n`` (from the locator into the part). At the step's start this
 slot has the locator's gap ``g``, normal ``n``, contact point ``x`` and therefore its Jacobian
 rows exactly; within the step the plane stands for the tip (the difference is second order in
-the step's motion, and the next step detects afresh). A soft finger's spin row is not applied to
-mesh parts (the slots carry none).
+the step's motion, and the next step detects afresh). A soft finger (a locator with a torsion
+arm) gives each of its slots a spin row about the slot's normal, as it gives a primitive part's
+contact one.
 
 Slots are ordered locator by locator, nearest contact first; a slot's identity from one step to
 the next (for the warm start) is ``(locator, rank)``.
+
+:func:`mesh_slots` is the reference, in Python (with
+:meth:`fixplan.engine.simulator.Simulator._step_mesh_reference`). The engine steps a mesh part
+through :class:`MeshStepper`: the arrays are set up here once per simulator, and each step is one
+compiled call (:func:`fixplan.engine._mesh_slot_kernels.mesh_step3`: detection, slots, the
+fixture's collision points near their obstacles, warm starts, the step and its write-back), with
+no Python object made per step.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.aot import kernel
 from fixplan.geometry.collision import PLANE, plane_frame
 from fixplan.geometry.mesh import Mesh
 from fixplan.model import Locator
 
 FloatArray = NDArray[np.float64]
+_KERNELS = "fixplan.engine._mesh_slot_kernels"
+_mesh_step3 = kernel(_KERNELS, "mesh_step3")
+_STATE_COLUMNS = 18  # fixplan.engine._mesh_slot_kernels.STATE
 
 
 @dataclass(frozen=True)
@@ -81,4 +94,73 @@ def mesh_slots(
     )
 
 
-__all__ = ["MeshSlots", "mesh_slots"]
+class MeshStepper:
+    """A simulator's mesh part as the compiled step reads it: arrays set up once, one call a step.
+
+    Holds the part's query arrays, the locators as ``[p_world (3), radius, μ, torsion arm]`` rows,
+    the fixture's collision points with their μ and an AABB tree of them, and the state carried
+    from step to step (:mod:`fixplan.engine._mesh_slot_kernels` says what each array holds).
+    """
+
+    def __init__(
+        self,
+        mesh: Mesh,
+        locators: tuple[Locator, ...],
+        obs: FloatArray,
+        slots: FloatArray,
+        slot_mu: FloatArray,
+    ) -> None:
+        self.mesh = mesh
+        self.loc = np.ascontiguousarray(
+            [[*loc.p_world, loc.radius_m, loc.friction, loc.torsion_m] for loc in locators], dtype=float
+        ).reshape(-1, 6)
+        self.obs = np.ascontiguousarray(obs, dtype=float).reshape(-1, 16)
+        self.points = np.ascontiguousarray(np.column_stack([slots, slot_mu]), dtype=float).reshape(-1, 6)
+        m = self.points.shape[0]
+        boxes, nodes, order = np.zeros((max(2 * m, 1), 6)), np.zeros((max(2 * m, 1), 4), dtype=np.int64), np.arange(m)
+        if m:  # the points as degenerate triangles: the mesh's own tree builder
+            build = kernel("fixplan.geometry._mesh_kernels", "build_tree")
+            tri = np.ascontiguousarray(np.tile(self.points[:, :3], (1, 3)))
+            count = int(build(tri, mesh.settings.tree_leaf_triangles, boxes, nodes, order))
+            boxes, nodes = boxes[:count].copy(), nodes[:count].copy()
+        rho_max = float(self.points[:, 3].max(initial=0.0))
+        self.tree = (boxes, nodes, np.ascontiguousarray(order, dtype=np.int64), rho_max)
+        k = self.loc.shape[0]
+        self.state = np.zeros((4 * k + 8, _STATE_COLUMNS))
+        self.loc_slots = np.zeros((k, 2), dtype=np.int64)
+        self.near = np.zeros(2 * m + 1, dtype=np.int64)
+        # the arguments that never change, in the kernel's order
+        self._part = (*mesh.query_arrays, mesh.same_point_m, self.loc, self.obs, self.points, *self.tree)
+        self.reset()
+
+    def reset(self) -> None:
+        """A new state: no warm start for the next step, every collision point's row reset by it."""
+        self.loc_slots[:] = 0
+        self.near[0] = -1
+
+    def step(
+        self, sim: Any, f_ext: FloatArray, tau_ext: FloatArray, margin: float
+    ) -> tuple[float, int, int, int, float]:
+        """One step of ``sim`` (a :class:`~fixplan.engine.simulator.Simulator`): its arrays updated in place.
+
+        Returns ``(error, iterations, status, failed local solves, penetration)``.
+        """
+        while True:
+            out = _mesh_step3(
+                sim._R, sim._p, sim._v, sim._w, sim._mass, sim._Ib, sim._Ib_inv, sim._com_b, *self._part, sim.dt,
+                f_ext, tau_ext, sim.restitution, margin, sim.tolerance, sim.max_iterations, sim.polish_steps,
+                sim._bound, sim._P, sim._active, sim._P_prev, sim._active_prev, sim._gap, sim._u, sim._nw,
+                self.state, self.loc_slots, self.near,
+            )  # fmt: skip
+            err, iters, status, failures, pen, n = out
+            if n >= 0:
+                return float(err), int(iters), int(status), int(failures), float(pen)
+            self.state = np.zeros((2 * self.state.shape[0] - int(n), _STATE_COLUMNS))  # room for every slot
+
+    def slots_of(self, i: int) -> FloatArray:
+        """Locator ``i``'s slots in the last step: rows of ``[P (4), P_prev (4), u (4), n_world (3), gap, active, active_prev]``."""
+        start, count = (int(x) for x in self.loc_slots[i])
+        return self.state[start : start + count]
+
+
+__all__ = ["MeshSlots", "MeshStepper", "mesh_slots"]

@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fixplan.aot import kernel
 from fixplan.engine.encode import OBSTACLE_PLANE, encode, encode_obstacles
-from fixplan.engine.mesh_slots import MeshSlots, mesh_slots
+from fixplan.engine.mesh_slots import MeshSlots, MeshStepper, mesh_slots
 from fixplan.engine.outcome import STATUS_NONFINITE, STATUS_NOT_CONVERGED, STATUS_OK
 from fixplan.errors import InputError, SolverError
 from fixplan.geometry.mesh import Mesh
@@ -335,10 +335,11 @@ class Simulator:
         wp = fixture.workpiece
         self.dimension = fixture.dimension
         self._kind, self._params, self._verts, self._enorm = encode(wp.shape)
-        # a mesh part: the locators' contacts are detected in Python before each step (several per
-        # locator in a concave corner) and handed to the compiled step as slots (module mesh_slots)
+        # a mesh part: the locators' contacts are detected before each step (several per locator in
+        # a concave corner) and handed to the step as slots, in one compiled call (module mesh_slots)
         self._mesh = wp.shape if isinstance(wp.shape, Mesh) else None
-        self._mesh_last: MeshSlots | None = None  # the last step's slots
+        self._mesh_last: MeshSlots | None = None  # the last step's slots (the Python reference's)
+        self._mesh_reference = False  # True: the Python reference of the mesh step (tests)
         self._mesh_state: dict[tuple[int, int], FloatArray] = {}  # (locator, rank) -> its warm start
         locs = fixture.locators
         self.names = [loc.name for loc in locs]
@@ -351,6 +352,9 @@ class Simulator:
         self._k_loc = len(locs)
         self._mu = np.concatenate([[loc.friction for loc in locs], slot_mu])
         self._tors = np.concatenate([[loc.torsion_m for loc in locs], np.zeros(len(slot_mu))])
+        self._mesh_stepper = (
+            MeshStepper(self._mesh, locs, self._obs, self._slots, slot_mu) if self._mesh is not None else None
+        )
         self._mass = wp.mass_kg
         self._Ib = np.ascontiguousarray(wp.inertia_body, dtype=float)
         self._Ib_inv = np.linalg.inv(self._Ib)
@@ -389,6 +393,8 @@ class Simulator:
         self._active_prev = np.zeros(self._k, dtype=np.bool_)
         self._mesh_state = {}
         self._mesh_last = None
+        if self._mesh_stepper is not None:
+            self._mesh_stepper.reset()
         if pose is not None:
             # gaps at the new pose (until a step measures them): a report before any step is true
             from fixplan.locating import locator_contact
@@ -496,7 +502,13 @@ class Simulator:
         return self.last
 
     def _step_mesh(self, f: FloatArray, tau: FloatArray, margin: float) -> tuple[float, int, int, int, float]:
-        """One 3D step of a mesh part: its locators' contacts as slots (:mod:`.mesh_slots`), then the compiled step.
+        """One 3D step of a mesh part: one compiled call (:class:`.mesh_slots.MeshStepper`), detection included."""
+        if self._mesh_reference or self._mesh_stepper is None:
+            return self._step_mesh_reference(f, tau, margin)
+        return self._mesh_stepper.step(self, f, tau, margin)
+
+    def _step_mesh_reference(self, f: FloatArray, tau: FloatArray, margin: float) -> tuple[float, int, int, int, float]:
+        """:meth:`_step_mesh` in Python: contacts as slots (:func:`.mesh_slots.mesh_slots`), then the compiled step.
 
         The slots of the locators come first, then the fixture's own collision-only bodies'
         (as for a convex part). Each slot's warm start is carried by its ``(locator, rank)``.
@@ -519,7 +531,8 @@ class Simulator:
         slots = np.ascontiguousarray(np.vstack([ms.slots, shifted]).reshape(-1, 5))
         mu = np.concatenate([[self.fixture.locators[i].friction for i in ms.locator], fix_mu])
         k = mu.shape[0]
-        tors = np.zeros(k)
+        tors = np.zeros(k)  # a soft finger's torsion arm on each of its slots
+        tors[:n] = [self.fixture.locators[i].torsion_m for i in ms.locator]
         # warm start: per slot (P, active, P_prev, active_prev, u) from the slot of the same key
         P, P_prev, u = np.zeros((k, 4)), np.zeros((k, 4)), np.zeros((k, 4))
         act, act_prev = np.zeros(k, dtype=np.bool_), np.zeros(k, dtype=np.bool_)
@@ -591,8 +604,20 @@ class Simulator:
         lower -= slots[:, 3]
         return np.flatnonzero(lower <= margin)
 
-    def _mesh_contacts(self, i: int) -> list[tuple[FloatArray, float, FloatArray, float, float]]:
-        """Locator ``i``'s contacts in the last step: ``(force_world, normal force, normal, slip, gap)`` each."""
+    def _mesh_contacts(self, i: int) -> list[tuple[FloatArray, float, FloatArray, float, float, float]]:
+        """Locator ``i``'s contacts in the last step: ``(force_world, normal force, normal, slip, gap, spin moment)`` each."""
+        tors = float(self._tors[i])
+        if not self._mesh_reference and self._mesh_stepper is not None:
+            out = []
+            for row in self._mesh_stepper.slots_of(i):
+                P, n = row[0:4], row[12:15].copy()
+                on = bool(row[16]) and P[0] > 0.0
+                t1, t2 = tangent_basis(n)
+                force = (P[0] * n + P[1] * t1 + P[2] * t2) / self.dt if on else np.zeros(3)
+                slip = float(np.hypot(row[9], row[10]))
+                spin = float(P[3] * tors / self.dt) if on and tors > 0.0 else 0.0
+                out.append((force, float(P[0]) / self.dt if on else 0.0, n, slip, float(row[15]), spin))
+            return out
         ms = self._mesh_last
         if ms is None:
             return []
@@ -604,7 +629,10 @@ class Simulator:
             t1, t2 = tangent_basis(n)
             force = (P[0] * n + P[1] * t1 + P[2] * t2) / self.dt if on else np.zeros(3)
             slip = float(np.hypot(self._mesh_slot_u[j, 1], self._mesh_slot_u[j, 2]))
-            out.append((force, float(P[0]) / self.dt if on else 0.0, n.copy(), slip, float(self._mesh_slot_gap[j])))
+            spin = float(P[3] * tors / self.dt) if on and tors > 0.0 else 0.0
+            out.append(
+                (force, float(P[0]) / self.dt if on else 0.0, n.copy(), slip, float(self._mesh_slot_gap[j]), spin)
+            )
         return out
 
     def pressed(self, min_force_N: float = 1e-9) -> tuple[str, ...]:
@@ -678,13 +706,14 @@ class Simulator:
         touches = self._mesh_contacts(i)
         force = sum((t[0] for t in touches), np.zeros(3))
         fn = sum(t[1] for t in touches)
-        each = tuple(ContactTouch(g, f_n, fw, nn) for fw, f_n, nn, _s, g in touches) if len(touches) > 1 else ()
+        each = tuple(ContactTouch(g, f_n, fw, nn) for fw, f_n, nn, _s, g, _m in touches) if len(touches) > 1 else ()
         if fn <= 0.0:
             return ContactReport(name, gap_m, 0.0, np.zeros(3), 0.0, "open", each)
         slip = max(t[3] for t in touches if t[1] > 0.0)
         slip_tol, spin_tol = self.settings.slip_mps, self.settings.spin_radps
         mode: ContactMode = "sliding" if slip > slip_tol else ("rolling" if omega > spin_tol else "sticking")
-        return ContactReport(name, gap_m, fn, force, 0.0, mode, each)
+        spin = sum(t[5] for t in touches)  # a soft finger's spin moments about its contacts' normals
+        return ContactReport(name, gap_m, fn, force, spin, mode, each)
 
     # -- collision-only bodies ---------------------------------------------------------------------
     def _obstacle_gaps(self) -> FloatArray:
@@ -743,7 +772,7 @@ class Simulator:
         every = max(1, int(record_every))
         if callable(wrench) and not isinstance(wrench, WrenchSchedule):
             return self._run_python(n_steps, wrench, every, progress)
-        if self._mesh is not None:  # detection in Python every step: the Python loop
+        if self._mesh is not None:  # one compiled call per step (detection and step), from Python's loop
             times, table = self._schedule(wrench)
             schedule = WrenchSchedule(times, table)
             return self._run_python(n_steps, lambda t, _sim: schedule(t), every, progress)

@@ -159,6 +159,8 @@ def _feature_is_shared(px, py, pz, x, y, z, tri_id, region, same, tri, faces, ar
         v0, v1 = faces[tri_id, u], faces[tri_id, (u + 1) % 3]
     for k in range(around_start[v0], around_start[v0 + 1]):
         f = around[k]
+        if f == tri_id:  # (x, y, z) is its own closest point
+            continue
         if v1 >= 0 and faces[f, 0] != v1 and faces[f, 1] != v1 and faces[f, 2] != v1:
             continue
         qx, qy, qz, _ = closest_point(px, py, pz, tri[f])
@@ -244,15 +246,23 @@ def contacts(
     for k in range(n):
         nearest = min(nearest, dist[k])
     limit = nearest + band + same
-    # by (distance, triangle index): triangle indices ascending, then a stable sort by distance
-    by_id = np.argsort(ids[:n])
-    by_dist = np.argsort(dist[:n][by_id], kind="mergesort")
+    # by (distance, triangle index), those within the limit: an insertion sort of a few rows, in place
+    kept = 0
+    for k in range(n):
+        if dist[k] > limit:
+            continue
+        d, i, x, y, z, code = dist[k], ids[k], pts[k, 0], pts[k, 1], pts[k, 2], pts[k, 3]
+        r = kept
+        while r > 0 and (dist[r - 1] > d or (dist[r - 1] == d and ids[r - 1] > i)):
+            dist[r], ids[r] = dist[r - 1], ids[r - 1]
+            pts[r, 0], pts[r, 1], pts[r, 2], pts[r, 3] = pts[r - 1, 0], pts[r - 1, 1], pts[r - 1, 2], pts[r - 1, 3]
+            r -= 1
+        dist[r], ids[r] = d, i
+        pts[r, 0], pts[r, 1], pts[r, 2], pts[r, 3] = x, y, z, code
+        kept += 1
     found = 0
     needed = 0
-    for r in range(n):
-        k = by_id[by_dist[r]]
-        if dist[k] > limit:
-            break
+    for k in range(kept):
         x, y, z, d = pts[k, 0], pts[k, 1], pts[k, 2], dist[k]
         region = int(pts[k, 3])
         repeat = False
