@@ -431,7 +431,7 @@ def simulate(
     from fixplan.engine.outcome import RunOutcome
     from fixplan.engine.simulator import Simulator
 
-    fixture = _load(file, "simulate")
+    fixture = _load(file, "simulate", pins=True)
     if not limits.DURATION.contains(duration):
         raise InputError(f"--duration is {quote_number(duration)} (expected {limits.DURATION.expected()})")
     if dt is not None and not limits.TIMESTEP.contains(dt):
