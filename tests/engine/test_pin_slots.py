@@ -253,6 +253,29 @@ def test_diamond_pin_resists_along_its_lands_only() -> None:
     assert {r.name: r for r in sim.contacts()}["P2"].normal_force_N == 0.0
 
 
+def test_housing_engages_both_pins_on_their_chamfers() -> None:
+    """From 0.5 mm above the pins' tips, 0.36 mm off (3.6 times the play), pushed down 20 N: the chamfers capture it.
+
+    It ends on its rests (the located height), each hole around its pin within the play: P1's and
+    P2's gaps in [0, 2 (D − d)/2] (P1 stands 0.1 mm off its hole's axis), at rest; the fast
+    engagement (20 N on 2 kg) penetrates less than 50 µm in a step.
+    """
+    fixture = fixplan.load(HOUSING)
+    goal = fixture.goal
+    sim = Simulator(fixture)
+    sim.set_state(Pose(goal.R_world_body, goal.p_world + np.array([0.0003, 0.0002, 0.0125])))
+    sim.run(0.2, np.array([0.0, 0.0, -20.0, 0.0, 0.0, 0.0]))
+    assert sim.pose.p_world[2] == pytest.approx(goal.p_world[2], abs=1e-9)  # on the rests
+    gaps = dict(zip(sim.names, sim.gaps_m(), strict=True))
+    assert all(abs(gaps[n]) < 1e-9 for n in ("B1", "B2", "B3"))
+    play = 0.5 * (0.010 - 0.0098)
+    # both pins in their holes: the holes' axes within the play (plus P1's 0.1 mm offset) of the located pose
+    assert np.hypot(*(sim.pose.p_world - goal.p_world)[:2]) <= 2 * play + 1e-9
+    assert 0.0 <= gaps["P1"] <= 2 * play and 0.0 <= gaps["P2"] <= 2 * play
+    assert sim.max_penetration_m < 5e-5
+    assert np.linalg.norm(sim.twist) < 1e-8
+
+
 def test_simulate_takes_pins_from_the_command_line() -> None:
     """``simulate`` on the housing at its located pose: at rest, P1 touching, P2 open by its 0.1 mm of play."""
     from conftest import run_cli
