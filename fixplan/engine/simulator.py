@@ -420,6 +420,11 @@ class Simulator:
         return Pose(self._R, self._p)
 
     @property
+    def n_tips(self) -> int:
+        """How many of :attr:`names` are locator tips (the rest: pins, then bores)."""
+        return self._n_tips
+
+    @property
     def twist(self) -> FloatArray:
         """``(v, ω)`` of the centre of mass, world axes."""
         w = np.atleast_1d(np.asarray(self._w, dtype=float))
