@@ -289,3 +289,46 @@ def test_simulate_takes_pins_from_the_command_line() -> None:
     assert contacts["P2"]["gap"] == pytest.approx(1e-4, abs=1e-9) and contacts["P2"]["mode"] == "open"
     # the weight (2 kg) on the rests: the pin's friction carries a little, the rests the rest
     assert sum(contacts[n]["normal_force"] for n in ("B1", "B2", "B3")) == pytest.approx(2.0 * 9.81, rel=0.02)
+
+
+def test_pins_and_collision_only_bodies_together() -> None:
+    """The shaft in its bore over a floor plane at the bore's bottom: the floor's rows follow the pins' in the step.
+
+    A bore 30 mm deep whose bottom is also a collision plane: the peg pushed down 2 N rests on both;
+    the two together carry the push and gravity (the split is indeterminate, the sum is not), and
+    the floor's report is its own.
+    """
+    text = PEG_DROP.replace("start = { position = [0.0006, 0.0002, 0.033]", "start = { position = [0.0, 0.0, 0.0005]")
+    text += textwrap.dedent(
+        """
+        [[obstacle]]
+        name = "floor"
+        shape = "plane"
+        point = [0.0, 0.0, -0.03]
+        normal = [0.0, 0.0, 1.0]
+        friction = 0.3
+        """
+    )
+    fixture = fixplan.loads(text)
+    sim = Simulator(fixture)
+    sim.run(0.3, np.array([0.0, 0.0, -2.0, 0.0, 0.0, 0.0]))
+    assert sim.pose.p_world[2] == pytest.approx(0.0, abs=1e-6)  # the lower end on the bottom
+    (bore,) = sim.contacts()
+    (floor,) = sim.obstacles()
+    assert floor.name == "floor" and floor.gap_m == pytest.approx(0.0, abs=1e-6)
+    total = bore.force_world + floor.force_world
+    np.testing.assert_allclose(total, [0.0, 0.0, 2.0 + 0.1 * 9.81], atol=1e-6)
+    assert floor.force_world[2] > 0.0  # the floor carries its share
+
+
+def test_pins_on_a_mesh_part_are_refused_in_one_line() -> None:
+    from fixplan.errors import InputError
+    from fixplan.geometry.cells import box_cells, cell_surface
+    from fixplan.geometry.mesh import Mesh
+
+    fixture = fixplan.load(HOUSING)
+    V, F = cell_surface(*box_cells((0.12, 0.08, 0.03), 2))
+    mesh = Mesh(V, F)
+    part = dataclasses.replace(fixture, workpiece=dataclasses.replace(fixture.workpiece, shape=mesh))
+    with pytest.raises(InputError, match="pins on a mesh part are not simulated yet"):
+        Simulator(part)
