@@ -125,7 +125,18 @@ MESH_FAMILIES: dict[str, str] = {
         "goal written in half the files (the loader computes it on the real surface in the others)"
     ),
 }
-ALL_FAMILIES: dict[str, str] = {**FAMILIES, **MESH_FAMILIES}
+# Families with pins and holes (a plane and two pins): listed apart, since only the commands that take
+# pins take them (the planner does not model pins yet).
+PIN_FAMILIES: dict[str, str] = {
+    "plane-2-pins": (
+        "3D boxes (edges 6-30 cm by 4-20 cm, 2-6 cm thick) on 3 rests under -z and two bored through holes "
+        "(D 6-16 mm, mouth chamfers 0-2 mm) on a round pin and a diamond pin (radial play 0.02-0.2 mm, tip "
+        "chamfers 0-2 mm, lands across the line between the pins); goal written (seated toward the round pin's "
+        "contact); start above the pins, tilted up to 0.5 deg about each axis, each hole within 80 % of the capture "
+        "(play + chamfers) of its pin"
+    ),
+}
+ALL_FAMILIES: dict[str, str] = {**FAMILIES, **MESH_FAMILIES, **PIN_FAMILIES}
 
 # What the families draw from (the README lists them; tests/test_generate.py checks them).
 EDGE_M = (0.04, 0.40)  # box edges, plate width and height [m], log-uniform
@@ -161,6 +172,18 @@ MESH_TILT_DEG = (0.0, 5.0)  # mesh-321: start yaw magnitude about z through the 
 MESH_EDGE_MARGIN = 0.08  # mesh-321: locators this fraction of a face's extent in from its edges
 MESH_KIND_ATTEMPTS = 50  # mesh-321: draws of one part kind before the kind is drawn again
 FLOOR_BELOW_M = 0.01  # --floor: a collision-only floor this far below the part's lowest point at start and goal
+
+PIN_PART_EDGE_M = ((0.06, 0.30), (0.04, 0.20), (0.02, 0.06))  # plane-2-pins: box a, b, c [m], log-uniform
+PIN_HOLE_D_M = (0.006, 0.016)  # plane-2-pins: hole diameter D [m]
+PIN_PLAY_M = (2e-5, 2e-4)  # plane-2-pins: radial play (D - d) / 2 [m], log-uniform
+PIN_CHAMFER_M = (0.0, 0.002)  # plane-2-pins: hole mouth and pin tip chamfers [m] (a pin's at most 40 % of its radius)
+PIN_LENGTH_FRACTION = (0.4, 0.9)  # plane-2-pins: pin length / part thickness c
+PIN_LAND_FRACTION = (0.2, 0.5)  # plane-2-pins: diamond land width / pin diameter
+PIN_SPAN_FRACTION = 0.4  # plane-2-pins: the holes at least this fraction of a apart along x
+PIN_START_RISE_M = (0.002, 0.020)  # plane-2-pins: the holes' mouths this far above the pins' tips at the start
+PIN_START_TILT_DEG = 0.5  # plane-2-pins: start roll, pitch, yaw each uniform in ±this
+PIN_CAPTURE_SHARE = 0.5  # plane-2-pins: start offset at most this share of the capture (play + both chamfers)
+PIN_CAPTURE_CHECK = 0.8  # plane-2-pins: each hole's axis within this share of the capture of its pin's at the start
 
 # Checks every generated file passes.
 EXACT_M = 1e-9  # resting locators touch within this at the start; nothing penetrates more
@@ -224,7 +247,14 @@ def generate(
     """
     check_family(family)
     _check_int(count, "count")
+    _check_pin_options(family, rotate_world)
     return [generate_one(family, seed, index, rotate_world=rotate_world, floor=floor) for index in range(count)]
+
+
+def _check_pin_options(family: str, rotate_world: bool) -> None:
+    """The pin families are not turned (the world rotation of pins and holes is not written yet)."""
+    if rotate_world and family in PIN_FAMILIES:
+        raise InputError(f"--rotate-world does not take the {family} family yet (expected a family without pins)")
 
 
 def generate_one(
@@ -242,6 +272,7 @@ def generate_one(
     verdicts and plans are those without it unless a push drives the part onto it).
     """
     check_family(family)
+    _check_pin_options(family, rotate_world)
     _check_int(seed, "seed")
     _check_int(index, "index")
     name = fixture_name(family, seed, index, rotate_world=rotate_world)
@@ -285,7 +316,10 @@ def _first_valid(
         except FixtureError as exc:
             reason = f"the loader refused it: {exc.issues[0].key}: {exc.issues[0].message}"
             continue
-        problem = _check_free(fixture, draft) if draft.free else _check(fixture, draft)
+        if draft.pins:
+            problem = _check_pins(fixture, draft)
+        else:
+            problem = _check_free(fixture, draft) if draft.free else _check(fixture, draft)
         if problem is not None:
             reason = problem
             continue
@@ -342,6 +376,8 @@ class _Draft:
     free: bool = False  # the start is in free space (START_GAP_M) rather than resting
     goal_written: bool = True  # the file states the goal (free families: GOAL_WRITTEN_SHARE of them)
     files: tuple[tuple[str, bytes], ...] = ()  # (suffix, bytes) of files the fixture names (a mesh)
+    holes: tuple[dict[str, Any], ...] = ()  # [[workpiece.hole]] entries (plane-2-pins)
+    pins: tuple[dict[str, Any], ...] = ()  # [[pin]] entries (plane-2-pins)
 
 
 def _uniform(rng: np.random.Generator, lo: float, hi: float, decimals: int) -> float:
@@ -1188,16 +1224,163 @@ def _check_mesh(fixture: Fixture) -> str | None:
     return None
 
 
+# -- plane-2-pins ----------------------------------------------------------------------------------
+
+
+def _draw_plane_2_pins(rng: np.random.Generator) -> _Draft | str:
+    """A box on 3 rests and a round and a diamond pin in two through holes of its bottom (module text)."""
+    a, b, c = (_log_uniform(rng, lo, hi, 4) for lo, hi in PIN_PART_EDGE_M)
+    density = round(_log_uniform(rng, *DENSITY_KG_M3, 0))
+    mass = _sig(density * a * b * c, 4)
+    D = _uniform(rng, *PIN_HOLE_D_M, 4)
+    play = _sig(_log_uniform(rng, *PIN_PLAY_M, 7), 3)
+    d = round(D - 2.0 * play, 7)
+    hole_chamfer = _uniform(rng, *PIN_CHAMFER_M, 4)
+    pin_chamfer = round(min(_uniform(rng, *PIN_CHAMFER_M, 4), 0.4 * d / 2), 4)
+    length = round(_uniform(rng, *PIN_LENGTH_FRACTION, 3) * c, 4)
+    land = round(_uniform(rng, *PIN_LAND_FRACTION, 3) * d, 5)
+    mu, varied, mus = _frictions(rng, 5)
+    # the holes along x, at least PIN_SPAN_FRACTION of a apart, their mouths (with the chamfer) 2 D in
+    # from the edges; the round pin's at H1, the diamond's at H2
+    edge = 2.0 * D + hole_chamfer
+    if a - 2 * edge < PIN_SPAN_FRACTION * a or b < 2 * edge:
+        return "the part is too small for two holes of this diameter"
+    x1 = _uniform(rng, edge, a / 2 - PIN_SPAN_FRACTION * a / 2, 4)
+    x2 = _uniform(rng, max(x1 + PIN_SPAN_FRACTION * a, a / 2), a - edge, 4)
+    y1, y2 = (_uniform(rng, edge, b - edge, 4) for _ in range(2))
+    # seated toward the round pin's contact: P1 stands `play` off H1's axis against the seating
+    # direction s (a heading drawn in the plane), so the part seated along s touches it; P2 centred
+    heading = _uniform(rng, 0.0, 360.0, 1)
+    s = np.array([math.cos(math.radians(heading)), math.sin(math.radians(heading))])
+    p1 = (round(x1 - play * float(s[0]), 10), round(y1 - play * float(s[1]), 10))
+    between = np.array([x2 - x1, y2 - y1])
+    across = np.array([-between[1], between[0]]) / float(np.linalg.norm(between))  # the diamond's lands
+    # rests: B1, B2 near x = 0, B3 near x = a, clear of the holes by 2 D; their triangle holds the centre
+    b1 = (_uniform(rng, 0.08 * a, 0.3 * a, 4), _uniform(rng, 0.08 * b, 0.3 * b, 4))
+    b2 = (_uniform(rng, 0.08 * a, 0.3 * a, 4), _uniform(rng, 0.7 * b, 0.92 * b, 4))
+    b3 = (_uniform(rng, 0.7 * a, 0.92 * a, 4), _uniform(rng, 0.35 * b, 0.65 * b, 4))
+    for rest in (b1, b2, b3):
+        for hx, hy in ((x1, y1), (x2, y2)):
+            if math.hypot(rest[0] - hx, rest[1] - hy) < 2.0 * D + hole_chamfer:
+                return "a rest under a hole"
+    if _triangle_margin(np.array([a / 2, b / 2]), np.array([b1, b2, b3])) < 0.05 * min(a, b):
+        return "the rests' triangle does not hold the centre of mass with a margin"
+    # the start: the holes' mouths PIN_START_RISE_M above the pins' tips, off within the capture, tilted
+    rise = _uniform(rng, *PIN_START_RISE_M, 4)
+    capture = PIN_CAPTURE_SHARE * (play + hole_chamfer + pin_chamfer)
+    off = rng.uniform(-1.0, 1.0, 2)
+    off = off / max(1.0, float(np.linalg.norm(off))) * capture
+    tilt = [_uniform(rng, -PIN_START_TILT_DEG, PIN_START_TILT_DEG, 3) for _ in range(3)]
+    weight = mass * GRAVITY_M_S2
+    kf, kt, max_force, max_torque = _hand(rng, weight, 0.5 * math.sqrt(a * a + b * b + c * c))
+    locators = [
+        {"name": n, "position": [x, y, 0.0], "friction": m}
+        for n, (x, y), m in zip(("B1", "B2", "B3"), (b1, b2, b3), mus[:3], strict=True)
+    ]
+    holes = tuple(
+        {"name": n, "position": [x - a / 2, y - b / 2, -c / 2], "axis": [0.0, 0.0, -1.0], "diameter": D,
+         "depth": c, "chamfer": hole_chamfer}
+        for n, (x, y) in (("H1", (x1, y1)), ("H2", (x2, y2)))
+    )  # fmt: skip
+    common = {"axis": [0.0, 0.0, 1.0], "diameter": d, "length": length, "chamfer": pin_chamfer}
+    pins = (
+        {"name": "P1", "kind": "round", "hole": "H1", "position": [p1[0], p1[1], 0.0], **common, "friction": mus[3]},
+        {"name": "P2", "kind": "diamond", "hole": "H2", "position": [x2, y2, 0.0], **common, "friction": mus[4],
+         "land_direction": [round(float(across[0]), 9), round(float(across[1]), 9), 0.0], "land_width": land},
+    )  # fmt: skip
+    start_c = [a / 2 + float(off[0]), b / 2 + float(off[1]), c / 2 + length + rise]
+    params = {
+        "size_m": [a, b, c],
+        "density_kg_m3": density,
+        "mass_kg": mass,
+        "hole_diameter_m": D,
+        "pin_diameter_m": d,
+        "radial_play_m": play,
+        "hole_chamfer_m": hole_chamfer,
+        "pin_chamfer_m": pin_chamfer,
+        "pin_length_m": length,
+        "land_width_m": land,
+        "holes_xy_m": [[x1, y1], [x2, y2]],
+        "seating_heading_deg": heading,
+        "friction": mu,
+        "friction_per_locator": varied,
+        "start_rise_m": rise,
+        "start_offset_m": [float(off[0]), float(off[1])],
+        "start_tilt_deg": tilt,
+        "force_per_weight": kf,
+        "torque_per_weight_lever": kt,
+    }
+    story = [
+        f"Goal: the box fills [0, {a:g}] x [0, {b:g}] x [0, {c:g}] m on the rests B1, B2, B3; its through holes H1, H2",
+        f"(D = {D * 1e3:g} mm) on the round pin P1 and the diamond pin P2 (d = {d * 1e3:g} mm, play {play * 1e6:g} um),",
+        f"seated toward heading {heading:g} deg: P1 touches H1's wall, P2 is centred in H2.",
+        f"Start: the holes {rise * 1e3:g} mm above the pins' tips, off by ({off[0] * 1e3:.3f}, {off[1] * 1e3:.3f}) mm",
+        f"(play + chamfers = {2 * capture * 1e3:.3f} mm), tilted (roll, pitch, yaw) = {tilt} deg; each hole within 80 %",
+        "of that of its pin's axis (the chamfers capture it).",
+    ]
+    return _Draft(
+        dimension=3,
+        shape={"shape": "box", "size": [a, b, c]},
+        mass_kg=mass,
+        start={"position": start_c, "rpy_deg": tilt},
+        goal={"position": [a / 2, b / 2, c / 2], "rpy_deg": [0.0, 0.0, 0.0]},
+        locators=locators,
+        max_force_N=max_force,
+        max_torque_Nm=max_torque,
+        params=params,
+        resting=(),
+        story=story,
+        check=lambda _fixture: None,
+        holes=holes,
+        pins=pins,
+    )
+
+
 _DRAWS: dict[str, Callable[[np.random.Generator], _Draft | str]] = {
     "box-321": _draw_box,
     "plate-2d": _draw_plate,
     "box-321-free": _draw_box_free,
     "plate-2d-free": _draw_plate_free,
     "mesh-321": _draw_mesh,
+    "plane-2-pins": _draw_plane_2_pins,
 }
 
 
 # -- checks and output ------------------------------------------------------------------------------
+
+
+def _check_pins(fixture: Fixture, draft: _Draft) -> str | None:
+    """Why a plane-2-pins draft is not valid, or None: the located pose as built, the start clear above the pins."""
+    from fixplan.locating import cylinder_contacts
+
+    if not fixture.is_full:
+        return "the rests and pins do not make 6 constraints"
+    wp = fixture.workpiece
+    goal_gaps = locator_gaps(wp, fixture.goal, fixture.locators)
+    if np.max(np.abs(goal_gaps)) > EXACT_M:
+        return f"a rest does not touch at the goal (gaps {goal_gaps})"
+    play = float(draft.params["radial_play_m"])
+    seated: dict[str, float] = {}
+    for c in cylinder_contacts(fixture, fixture.goal):
+        seated[c.owner] = min(seated.get(c.owner, math.inf), c.gap_m)
+    if abs(seated.get("P1", math.inf)) > EXACT_M:
+        return f"the round pin does not touch its hole at the goal (gap {seated.get('P1')})"
+    if abs(seated.get("P2", math.inf) - play) > EXACT_M:
+        return f"the diamond pin is not centred in its hole at the goal (gap {seated.get('P2')}, play {play})"
+    start_gaps = locator_gaps(wp, fixture.start, fixture.locators)
+    if np.min(start_gaps) < CLEARANCE_M:
+        return f"a rest is within {np.min(start_gaps):.3g} m of the part at the start"
+    for c in cylinder_contacts(fixture, fixture.start):
+        if c.gap_m < CLEARANCE_M:
+            return f"{c.name} touches at the start (gap {c.gap_m:.3g} m)"
+    capture = play + float(draft.params["hole_chamfer_m"]) + float(draft.params["pin_chamfer_m"])
+    for pin in fixture.pins:  # the chamfers capture the start: each hole over its pin, the tilt included
+        mouth = fixture.start.point_world_from_body(wp.hole(pin.hole).p_body)
+        off = mouth - pin.p_world
+        lateral = float(np.linalg.norm(off - float(off @ pin.axis_world) * pin.axis_world))
+        if lateral > PIN_CAPTURE_CHECK * capture:
+            return f"{pin.hole} is {lateral:.3g} m off {pin.name} at the start (capture {capture:.3g} m)"
+    return None  # the rank of the rests' and pins' constraints: the loader's own check
 
 
 def _check(fixture: Fixture, draft: _Draft) -> str | None:
@@ -1297,8 +1480,12 @@ def _render(name: str, draft: _Draft, goal: bool = True) -> str:
         f"start = {_value(draft.start)}",
         *([f"goal = {_value(draft.goal)}"] if goal else []),
     ]
+    for hole in draft.holes:
+        lines += ["", "[[workpiece.hole]]", *(f"{k} = {_value(v)}" for k, v in hole.items())]
     for loc in draft.locators:
         lines += ["", "[[locator]]", *(f"{k} = {_value(v)}" for k, v in loc.items())]
+    for pin in draft.pins:
+        lines += ["", "[[pin]]", *(f"{k} = {_value(v)}" for k, v in pin.items())]
     lines += [
         "",
         "[manipulator]",

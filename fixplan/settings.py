@@ -832,6 +832,11 @@ class PinSettings:
         is coaxial (a face lying flat: its contact is put at the face's centre).
     axis_angle_rad : float
         A pin enters its hole at the located pose when their axes are antiparallel within this.
+    face_points : int
+        The engine's points of a tip face on a blind hole's bottom (the face's rim at that many
+        angles from its deepest point, :mod:`fixplan.engine.pin_slots`): a face resting flat is
+        held by its disk, not by the deepest point alone (one point lets it wobble like a coin).
+        The closed forms (:mod:`fixplan.geometry.pins`, the cone programs) keep the deepest point.
     """
 
     rim_samples: int = 64
@@ -839,6 +844,7 @@ class PinSettings:
     golden_steps: int = 60
     coaxial_rel: float = 1e-9
     axis_angle_rad: float = 0.01
+    face_points: int = 4
 
 
 @dataclass(frozen=True)

@@ -199,9 +199,9 @@ def test_cli_list_and_bad_input():
     listed = fixplan("generate", "--list")
     assert listed.returncode == 0
     names = [line.split(":")[0] for line in listed.stdout.splitlines()]
-    assert names == ["box-321", "plate-2d", "box-321-free", "plate-2d-free", "mesh-321"]
+    assert names == ["box-321", "plate-2d", "box-321-free", "plate-2d-free", "mesh-321", "plane-2-pins"]
     as_json = json.loads(fixplan("generate", "--list", "--json").stdout)
-    assert as_json["families"] == gen.ALL_FAMILIES == {**gen.FAMILIES, **gen.MESH_FAMILIES}
+    assert as_json["families"] == gen.ALL_FAMILIES == {**gen.FAMILIES, **gen.MESH_FAMILIES, **gen.PIN_FAMILIES}
     unknown = fixplan("generate", "cube", "--out", "unused")
     assert unknown.returncode == 2 and "unknown fixture family 'cube'" in unknown.stderr
     missing = fixplan("generate", "box-321")

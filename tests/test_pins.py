@@ -181,7 +181,7 @@ def test_cli_refuses_pins_outside_validate_classify_search(tmp_path: Path) -> No
     proc = run_cli("validate", bad)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert f"{bad}: pin.P2.hole: no hole 'H9'" in proc.stderr
-    for command in ("solve", "simulate"):
+    for command in ("solve", "map"):
         proc = run_cli(command, HOUSING)
         assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
         assert (
@@ -189,7 +189,7 @@ def test_cli_refuses_pins_outside_validate_classify_search(tmp_path: Path) -> No
             .splitlines()[-1]
             .endswith(
                 f"pin.P1: pins and bores are not supported by '{command}' yet (expected a fixture of locators; "
-                "'validate', 'classify' and 'search' take pins)"
+                "'validate', 'classify', 'search', 'simulate', 'view' and 'haptic' take pins)"
             )
         ), proc.stderr
 
@@ -392,3 +392,31 @@ def test_diamond_pin_touches_on_its_lands_only(offset: float) -> None:
         assert abs(c.gap_m - expected) <= 1e-12, (c.gap_m, expected)
         assert abs(abs(c.point_pin_world[0] - offset) - w / 2) <= 1e-12  # at a land's end
     assert expected > R_HOLE - R_PIN - offset  # the relief: more room than a round pin has
+
+
+# -- wedging named by classify, with the bore's real geometry ------------------------------------------------
+@pytest.mark.parametrize("scale", [0.95, 1.05])
+def test_classify_names_the_bore_wedged_past_whitneys_friction(tmp_path: Path, scale: float) -> None:
+    """Two-point contact in the bore: the rim at the +x wall l = 9.98 mm down, the mouth's edge at −x.
+
+    The contacts wedge iff the line joining them lies in both friction cones: its angle from the
+    wall's normal is atan(l / 2R) (2R = 20.02 mm), from the mouth edge's normal (tilted by θ = 2e-3
+    toward it) that plus θ; so μ* = tan(atan(l / 2R) + θ). Below it classify names no wedging,
+    above it it says the part is wedged (JSON ``wedging.wedges``).
+    """
+    import json
+
+    cs = contact_set(fixplan.load(SHAFT))
+    (a, b) = (c.point_world for c in cs.contacts)
+    l_m, span_m = abs(a[2] - b[2]), abs(a[0] - b[0])
+    mu_star = math.tan(math.atan(l_m / span_m) + 2.0e-3)
+    mu = scale * mu_star
+    path = tmp_path / "wedge.toml"
+    path.write_text(SHAFT.read_text().replace("friction = 0.3", f"friction = {mu!r}"))
+    proc = run_cli("classify", path, "--wrench", "0,0,-1,0,0,0", "--json")
+    assert proc.returncode == 0, proc.stderr
+    wedging = json.loads(proc.stdout)["wedging"]
+    assert wedging["contacts"] == ["B1", "B1#2"]
+    assert wedging["wedges"] is (scale > 1.0)
+    text = run_cli("classify", path, "--wrench", "0,0,-1,0,0,0").stdout
+    assert ("wedged: B1, B1#2" in text) is (scale > 1.0)

@@ -213,18 +213,45 @@ def classify(
     if target is not None:
         rows: list[dict[str, Any]] = [r if isinstance(r, dict) else r.to_json() for r in results]
         _write_classify_csv(target, rows, n)
+    wedging = _pin_wedging(cs) if fixture.has_pins else None
     if json_out:
-        _emit_json(
-            {"file": fixture.source, "pose": pose, "contacts": cs.names, "results": results},
-            compact=len(results) > 100,
-        )
+        doc = {"file": fixture.source, "pose": pose, "contacts": cs.names, "results": results}
+        if wedging is not None:
+            doc["wedging"] = wedging
+        _emit_json(doc, compact=len(results) > 100)
     else:
         if len(results) > CLASSIFY_TABLE_ROWS:
             _classify_summary(fixture, results, cs.names, target)
         else:
             _classify_table(fixture, results, cs.names)
+        if wedging is not None and wedging["wedges"]:
+            typer.echo(
+                f"wedged: {', '.join(wedging['contacts'])} can hold forces that balance each other with no push "
+                "(the friction cones overlap along the line joining them, Whitney 1982): pressed in, the part "
+                "stays stuck whatever the push"
+            )
         if target is not None:
             typer.echo(f"wrote {target}")
+
+
+def _pin_wedging(cs: Any) -> dict[str, Any] | None:
+    """Whether a pin's or bore's contacts can wedge (:func:`fixplan.jamming.wedge.wedge_force`): two or more of one owner.
+
+    None when no pin or bore touches at two places (one contact cannot wedge on its own).
+    """
+    from collections import Counter
+
+    from fixplan.jamming.wedge import wedge_force
+    from fixplan.settings import DEFAULT_TOLERANCES
+
+    owners = Counter(c.owner for c in cs.contacts if c.kind in ("pin", "bore"))
+    several = sorted(o for o, k in owners.items() if k >= 2)
+    if not several:
+        return None
+    force = wedge_force(cs)
+    wedges = force is not None and force > DEFAULT_TOLERANCES.wedge_force
+    touching = [c.name for c in cs.contacts if c.owner in several]
+    return {"wedges": wedges, "force": force, "contacts": touching}
 
 
 AXES_3D = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
@@ -431,7 +458,7 @@ def simulate(
     from fixplan.engine.outcome import RunOutcome
     from fixplan.engine.simulator import Simulator
 
-    fixture = _load(file, "simulate")
+    fixture = _load(file, "simulate", pins=True)
     if not limits.DURATION.contains(duration):
         raise InputError(f"--duration is {quote_number(duration)} (expected {limits.DURATION.expected()})")
     if dt is not None and not limits.TIMESTEP.contains(dt):

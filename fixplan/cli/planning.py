@@ -474,7 +474,7 @@ def view(
     from fixplan.present.replay import read_plan, rest_replay
     from fixplan.present.scene import scene_figure, scene_info
 
-    fixture = _load(file, "view")
+    fixture = _load(file, "view", pins=True)
     check_distinct([("FILE", file), ("--plan", plan), ("--out", out)])
     target = _writable(out, force)
     replay = rest_replay(fixture) if plan is None else read_plan(plan, fixture)

@@ -27,6 +27,7 @@ from fixplan.aot import kernel
 from fixplan.engine.encode import OBSTACLE_PLANE, encode, encode_obstacles
 from fixplan.engine.mesh_slots import MeshSlots, MeshStepper, mesh_slots
 from fixplan.engine.outcome import STATUS_NONFINITE, STATUS_NOT_CONVERGED, STATUS_OK
+from fixplan.engine.pin_slots import PinGeometry, PinSlots
 from fixplan.errors import InputError, SolverError
 from fixplan.geometry.mesh import Mesh
 from fixplan.model import Fixture
@@ -312,7 +313,7 @@ class Simulator:
         strict: bool = False,
         settings: EngineSettings = DEFAULT.engine,
     ):
-        if not fixture.locators:
+        if not fixture.locators and not fixture.has_pins:
             raise InputError(
                 f"{fixture.source} has only explicit [[contact]] entries: there is no geometry to simulate "
                 "(add [[locator]] entries)"
@@ -342,16 +343,29 @@ class Simulator:
         self._mesh_reference = False  # True: the Python reference of the mesh step (tests)
         self._mesh_state: dict[tuple[int, int], FloatArray] = {}  # (locator, rank) -> its warm start
         locs = fixture.locators
-        self.names = [loc.name for loc in locs]
+        # pins and bores: their contacts are detected before each step by the compiled closed forms and
+        # handed to the step as slots (module pin_slots); one named row each after the locators'
+        self._pins = PinGeometry(fixture) if fixture.has_pins else None
+        if self._pins is not None and self._mesh is not None:
+            raise InputError(
+                f"{fixture.source}: pins on a mesh part are not simulated yet (expected a primitive shape with pins)"
+            )
+        self._pin_last: PinSlots | None = None
+        self._pin_state: dict[tuple[int, int, int], FloatArray] = {}  # (owner, kind, ordinal) -> its warm start
+        pin_names = self._pins.names if self._pins is not None else []
+        pin_mu = self._pins.friction if self._pins is not None else np.zeros(0)
+        self._n_tips = len(locs)  # the locator tips the compiled step detects itself
+        self.names = [loc.name for loc in locs] + pin_names
         self._names_t = tuple(self.names)
-        self._loc_p = np.ascontiguousarray([loc.p_world for loc in locs], dtype=float)
-        self._loc_r = np.array([loc.radius_m for loc in locs])
+        self._loc_p = np.ascontiguousarray(np.reshape([loc.p_world for loc in locs], (-1, self.dimension)), dtype=float)
+        self._loc_r = np.array([loc.radius_m for loc in locs], dtype=float)
         # collision-only bodies: the part's collision points against each, contacts after the
         # locators in the kernels' arrays (mu, tors, P, gaps ...), never in names or reports
         self._obs, self._slots, slot_mu = encode_obstacles(fixture, settings.rim_points)
-        self._k_loc = len(locs)
-        self._mu = np.concatenate([[loc.friction for loc in locs], slot_mu])
-        self._tors = np.concatenate([[loc.torsion_m for loc in locs], np.zeros(len(slot_mu))])
+        self._k_loc = len(self.names)  # the named rows: locators, then pins and bores
+        self._mu = np.concatenate([[loc.friction for loc in locs], pin_mu, slot_mu])
+        self._tors = np.concatenate([[loc.torsion_m for loc in locs], np.zeros(len(pin_mu) + len(slot_mu))])
+        # (a mesh part has no pins: the simulator refuses them, so its named rows are its locators)
         self._mesh_stepper = (
             MeshStepper(self._mesh, locs, self._obs, self._slots, slot_mu) if self._mesh is not None else None
         )
@@ -395,19 +409,27 @@ class Simulator:
         self._mesh_last = None
         if self._mesh_stepper is not None:
             self._mesh_stepper.reset()
+        self._pin_state = {}
+        self._pin_last = None
         if pose is not None:
             # gaps at the new pose (until a step measures them): a report before any step is true
             from fixplan.locating import locator_contact
 
             wp = self.fixture.workpiece
             self._gap = np.concatenate(
-                [[locator_contact(wp, self.pose, loc).gap_m for loc in self.fixture.locators], self._obstacle_gaps()]
-            )
+                [[locator_contact(wp, self.pose, loc).gap_m for loc in self.fixture.locators], self._pin_gaps(),
+                 self._obstacle_gaps()]
+            )  # fmt: skip
         self._gaps_now: tuple[int, FloatArray] | None = None  # (steps, gaps at the current pose)
 
     @property
     def pose(self) -> Pose:
         return Pose(self._R, self._p)
+
+    @property
+    def n_tips(self) -> int:
+        """How many of :attr:`names` are locator tips (the rest: pins, then bores)."""
+        return self._n_tips
 
     @property
     def twist(self) -> FloatArray:
@@ -458,6 +480,8 @@ class Simulator:
         margin = self.margin_m + 2.0 * h * speed
         if self._mesh is not None:
             err, iters, status, failures, pen = self._step_mesh(f, tau, margin)
+        elif self._pins is not None:
+            err, iters, status, failures, pen = self._step_pins(f, tau, margin)
         elif self.dimension == 3:
             err, iters, status, failures, pen = _step3_into(
                 self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
@@ -581,6 +605,96 @@ class Simulator:
             self._u[i] = u[rows[0]]
         return err, iters, status, failures, pen
 
+    def _pin_gaps(self) -> FloatArray:
+        """Each pin's and bore's least gap at the current pose [m] (inf: none possible; empty without pins)."""
+        if self._pins is None:
+            return np.zeros(0)
+        return self._pins.least_gaps_m(self._R, self._p)
+
+    def _step_pins(self, f: FloatArray, tau: FloatArray, margin: float) -> tuple[float, int, int, int, float]:
+        """One 3D step with pins or bores: their contacts as slots (:mod:`.pin_slots`), then the compiled step.
+
+        The compiled step's rows: the locator tips (detected by the step itself), the pins' and
+        bores' slots, the fixture's collision-only bodies. Each pin slot's warm start is carried by
+        its ``(owner, kind, ordinal)``. Afterwards each pin's named row holds its contacts together:
+        the least gap, any active, the summed normal impulse, the nearest's normal.
+        """
+        pins = self._pins
+        if pins is None:  # pragma: no cover - step() calls it only with pins
+            raise SolverError("a pin step was asked of a fixture without pins")
+        ps = pins.slots(self._R, self._p, margin)
+        nt, kl, n = self._n_tips, self._k_loc, len(ps)
+        shifted = self._slots.copy()
+        shifted[:, 4] += n  # the fixture's obstacles follow the pins' planes
+        obs = np.ascontiguousarray(np.vstack([ps.obs, self._obs]).reshape(-1, 16))
+        slots = np.ascontiguousarray(np.vstack([ps.slots, shifted]).reshape(-1, 5))
+        mu = np.concatenate([self._mu[:nt], pins.friction[ps.owner], self._mu[kl:]])
+        k = mu.shape[0]
+        tors = np.concatenate([self._tors[:nt], np.zeros(k - nt)])
+        # the locator tips' and the obstacles' rows are carried as they are (slices: no index arrays)
+        tip, ob, own_ob = slice(0, nt), slice(nt + n, k), slice(kl, self._k)
+        P, P_prev, u = np.zeros((k, 4)), np.zeros((k, 4)), np.zeros((k, 4))
+        act, act_prev = np.zeros(k, dtype=np.bool_), np.zeros(k, dtype=np.bool_)
+        gap, n_w = np.zeros(k), np.zeros((k, 3))
+        for mine, theirs in ((tip, tip), (ob, own_ob)):
+            P[mine], P_prev[mine], u[mine] = self._P[theirs], self._P_prev[theirs], self._u[theirs]
+            act[mine], act_prev[mine] = self._active[theirs], self._active_prev[theirs]
+            gap[mine], n_w[mine] = self._gap[theirs], self._nw[theirs]
+        for j, key in enumerate(ps.keys):
+            old = self._pin_state.get(key)
+            if old is not None:
+                P[nt + j], P_prev[nt + j], u[nt + j] = old[0:4], old[4:8], old[8:12]
+                act[nt + j], act_prev[nt + j] = bool(old[12]), bool(old[13])
+        err, iters, status, failures, pen = _step3_into(
+            self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
+            self._params, self._verts, self._enorm, self._loc_p, self._loc_r, mu, tors, obs,
+            slots, self.dt, f, tau,
+            self.restitution, margin, self.tolerance, self.max_iterations, self.polish_steps, P, act, P_prev,
+            act_prev, gap, u, n_w, self._bound,
+        )  # fmt: skip
+        rows = slice(nt, nt + n)
+        self._pin_last = ps
+        self._pin_slot_P, self._pin_slot_active, self._pin_slot_u = P[rows].copy(), act[rows].copy(), u[rows].copy()
+        self._pin_slot_n, self._pin_slot_gap = n_w[rows].copy(), gap[rows].copy()
+        self._pin_state = {
+            key: np.concatenate([P[nt + j], P_prev[nt + j], u[nt + j], [float(act[nt + j]), float(act_prev[nt + j])]])
+            for j, key in enumerate(ps.keys)
+        }
+        for mine, theirs in ((tip, tip), (ob, own_ob)):
+            self._P[theirs], self._P_prev[theirs], self._u[theirs] = P[mine], P_prev[mine], u[mine]
+            self._active[theirs], self._active_prev[theirs] = act[mine], act_prev[mine]
+            self._gap[theirs], self._nw[theirs] = gap[mine], n_w[mine]
+        # each pin's named row: its contacts together
+        named = slice(nt, kl)
+        self._active[named], self._gap[named] = False, ps.least_gap_m
+        self._P[named], self._P_prev[named], self._u[named] = 0.0, 0.0, 0.0
+        slot_gap, slot_P, slot_act = gap[rows], P[rows, 0], act[rows]
+        for j, i in enumerate(ps.owner.tolist()):  # few contacts: a loop is cheaper than grouping
+            r = nt + i
+            if slot_act[j]:
+                self._active[r] = True
+                self._P[r, 0] += slot_P[j]
+            if slot_gap[j] <= self._gap[r]:
+                self._gap[r] = slot_gap[j]
+                self._nw[r], self._u[r] = n_w[nt + j], u[nt + j]
+        return err, iters, status, failures, pen
+
+    def _pin_contacts(self, i: int) -> list[tuple[FloatArray, float, FloatArray, float, float]]:
+        """Pin or bore ``i``'s contacts in the last step: ``(force_world, normal force, normal, slip, gap)`` each."""
+        ps = self._pin_last
+        if ps is None:
+            return []
+        out = []
+        for j in np.flatnonzero(ps.owner == i):
+            n = self._pin_slot_n[j]
+            P = self._pin_slot_P[j]
+            on = bool(self._pin_slot_active[j]) and P[0] > 0.0
+            t1, t2 = tangent_basis(n)
+            force = (P[0] * n + P[1] * t1 + P[2] * t2) / self.dt if on else np.zeros(3)
+            slip = float(np.hypot(self._pin_slot_u[j, 1], self._pin_slot_u[j, 2]))
+            out.append((force, float(P[0]) / self.dt if on else 0.0, n.copy(), slip, float(self._pin_slot_gap[j])))
+        return out
+
     def _obstacle_points_near(self, margin: float) -> NDArray[np.intp]:
         """Indices of the obstacle slots whose gap may be within ``margin`` at the current pose.
 
@@ -666,7 +780,8 @@ class Simulator:
         if cached is None or cached[0] != self.steps:
             from fixplan.locating import locator_gaps
 
-            cached = (self.steps, locator_gaps(self.fixture.workpiece, self.pose, self.fixture.locators))
+            gaps = locator_gaps(self.fixture.workpiece, self.pose, self.fixture.locators)
+            cached = (self.steps, np.concatenate([gaps, self._pin_gaps()]))
             self._gaps_now = cached
         return cached[1].copy()
 
@@ -682,6 +797,9 @@ class Simulator:
             d = self.dimension
             if self._mesh is not None:
                 reports.append(self._mesh_report(i, name, float(gaps[i]), omega))
+                continue
+            if i >= self._n_tips:  # a pin or a bore
+                reports.append(self._mesh_report(i, name, float(gaps[i]), omega, self._pin_contacts(i - self._n_tips)))
                 continue
             if not self._active[i] or Pn <= 0.0:
                 reports.append(ContactReport(name, float(gaps[i]), 0.0, np.zeros(d), 0.0, "open"))
@@ -701,9 +819,12 @@ class Simulator:
             reports.append(ContactReport(name, float(gaps[i]), Pn / h, force, spin, mode))
         return reports
 
-    def _mesh_report(self, i: int, name: str, gap_m: float, omega: float) -> ContactReport:
-        """A mesh part's locator: its contacts' forces summed, one :class:`ContactTouch` per contact."""
-        touches = self._mesh_contacts(i)
+    def _mesh_report(
+        self, i: int, name: str, gap_m: float, omega: float,
+        touches: list[tuple[FloatArray, float, FloatArray, float, float]] | None = None,
+    ) -> ContactReport:  # fmt: skip
+        """A mesh part's locator (or a pin, ``touches`` given): its contacts' forces summed, one :class:`ContactTouch` per contact."""
+        touches = self._mesh_contacts(i) if touches is None else touches
         force = sum((t[0] for t in touches), np.zeros(3))
         fn = sum(t[1] for t in touches)
         each = tuple(ContactTouch(g, f_n, fw, nn) for fw, f_n, nn, _s, g, _m in touches) if len(touches) > 1 else ()
@@ -772,7 +893,7 @@ class Simulator:
         every = max(1, int(record_every))
         if callable(wrench) and not isinstance(wrench, WrenchSchedule):
             return self._run_python(n_steps, wrench, every, progress)
-        if self._mesh is not None:  # one compiled call per step (detection and step), from Python's loop
+        if self._mesh is not None or self._pins is not None:  # per-step detection outside run_compiled: Python's loop
             times, table = self._schedule(wrench)
             schedule = WrenchSchedule(times, table)
             return self._run_python(n_steps, lambda t, _sim: schedule(t), every, progress)

@@ -51,11 +51,11 @@ PUSH = (44, 160, 44)
 
 def _mesh(fixture: Any) -> tuple[FloatArray, NDArray[np.int64]]:
     """Body-frame mesh of the workpiece (2D shapes extruded to a thin slab)."""
-    from fixplan.present.meshes import shape_mesh, shape_outline
+    from fixplan.present.meshes import part_mesh, shape_outline
 
     shape = fixture.workpiece.shape
     if fixture.dimension == 3:
-        V, F = shape_mesh(shape)
+        V, F = part_mesh(fixture)  # the shape with its holes' walls
         return np.asarray(V, dtype=float), np.asarray(F, dtype=np.int64)
     P = shape_outline(shape)
     n = len(P)
@@ -212,6 +212,12 @@ class HapticApp:
             sc.add_label(
                 f"/labels/{loc.name}", loc.name, position=_xyz(loc.p_world) + np.array([0, 0, 2.5 * loc.radius_m])
             )
+        from fixplan.present.meshes import fixture_meshes
+
+        # pins and bores (world frame), coloured like the locators: red while pressing, green as the target
+        for name, (V_pin, F_pin) in fixture_meshes(fx).items():
+            self.locators[name] = sc.add_mesh_simple(f"/pins/{name}", V_pin, F_pin, color=LOCATOR, opacity=0.9)
+            sc.add_label(f"/labels/{name}", name, position=V_pin.max(axis=0))
         self._colors = dict.fromkeys(self.locators, LOCATOR)
         z = np.zeros((1, 2, 3))
         t = 0.004 * self.bound
@@ -230,7 +236,8 @@ class HapticApp:
                 self._gizmo_to_handle()
 
         # the camera looks at the fixture from the front, above
-        c = np.mean([_xyz(loc.p_world) for loc in fx.locators], axis=0)
+        anchors = [loc.p_world for loc in fx.locators] + [p.p_world for p in fx.pins] + [b.p_world for b in fx.bores]
+        c = np.mean([_xyz(a) for a in anchors], axis=0)
         self.server.initial_camera.look_at = c
         if fx.dimension == 3:
             self.server.initial_camera.position = c + np.array([1.3, -2.0, 1.4]) * self.bound * 1.05
@@ -336,7 +343,7 @@ class HapticApp:
             return
         self._last = snap
         fx = s.fixture
-        from fixplan.present.meshes import locator_tips
+        from fixplan.present.meshes import contact_anchors
 
         pose = snap.pose
         with self.server.atomic():
@@ -344,7 +351,7 @@ class HapticApp:
             self.part.wxyz = _wxyz(pose)
             self.proxy.position = _xyz(snap.device_pose.p_world)
             self.proxy.wxyz = _wxyz(snap.device_pose)
-            tips, normals = locator_tips(fx, pose)
+            tips, normals = contact_anchors(fx, pose)  # per name: locators, then pins and bores
             tips3 = np.array([_xyz(t) for t in tips])
             n3 = np.array([_xyz(n) for n in normals])
             self.normals.points = np.stack([tips3, tips3 + 0.25 * self.bound * n3], axis=1)

@@ -66,14 +66,13 @@ def run_haptic(
     from fixplan.files import check_distinct, check_output
     from fixplan.fixture import default_fixture_path, load
     from fixplan.interactive.handles import GizmoHandle, Handle, SpaceMouseHandle, UdpHandle, parse_device
-    from fixplan.model import refuse_pins
 
     kind, udp_port = parse_device(device)
     until_goal, seconds = parse_until(until)
     if not (0 <= port <= 65535):
         raise InputError(f"--port must be 0..65535, got {port}")
     token = check_host(host, token)
-    fixture = refuse_pins(load(file if file is not None else default_fixture_path()), "haptic")
+    fixture = load(file if file is not None else default_fixture_path())  # pins and bores too
     if record is not None:
         check_distinct([("FILE", file), ("--record", record)])
         check_output(record, force, option="--record")

@@ -464,9 +464,9 @@ class HapticSession:
             raise InputError(f"session duration must be a positive number of seconds, got {duration_s}")
         self.fixture = fixture
         self.handle = handle
-        self.names = tuple(loc.name for loc in fixture.locators)
         self.rig_settings = profile.haptic
         self.sim = Simulator(fixture, max_iterations=max_sweeps, settings=profile.engine)
+        self.names = tuple(self.sim.names)  # the locators, then the pins and bores
         self.period_s = self.sim.dt
         self.dimension = fixture.dimension
         self.ndof = fixture.ndof
@@ -503,7 +503,14 @@ class HapticSession:
         self.synchronous = synchronous
         self.trace_every = max(int(trace_every), 1)
         touching = contact_set(fixture, "start")
-        self.start_state = frozenset(x.owner for x in touching.contacts if x.kind == "locator")
+        self.start_state = frozenset(x.owner for x in touching.contacts if x.kind in ("locator", "pin", "bore"))
+        # the goal: every locator pressed; a pin or bore pressed when it touches at the located pose
+        # (its clearance leaves the others free: a diamond pin centred in its hole touches nothing)
+        self.goal_names = frozenset(self.names)
+        if fixture.has_pins and fixture.is_full:
+            seated = {x.owner for x in contact_set(fixture, "goal").contacts}
+            tips = self.names[: self.sim.n_tips]
+            self.goal_names = frozenset(tips) | frozenset(n for n in self.names[self.sim.n_tips :] if n in seated)
         self._guidance_on = guidance
         self.guide: Guide | RemoteGuide | None = None
         if guidance and synchronous:
@@ -752,20 +759,20 @@ class HapticSession:
         else:
             self._candidate = None
         at_rest = self._speed() < self.rest_speed_mps
-        if self._observed == frozenset(self.names) and at_rest:
+        if self._observed == self.goal_names and at_rest:
             if self._settled_since is None:
                 self._settled_since = t
             elif t - self._settled_since >= self.settle_s and self.goal_reached_at is None:
                 self.goal_reached_at = t
         else:
             self._settled_since = None
-            if self._observed != frozenset(self.names):
+            if self._observed != self.goal_names:
                 self.goal_reached_at = None
         g = self.guidance
         if (
             g.verdict == "jammed"
             and at_rest
-            and self._observed != frozenset(self.names)
+            and self._observed != self.goal_names
             and self._push_norm(self._push_recent) > 1e-3 * self.weight_N
         ):
             if self._jammed_since is None:
@@ -954,7 +961,7 @@ class HapticSession:
                 f"({', '.join(f'{x:.3g}' for x in j['push'])}) is held by friction (margin {j['margin']})"
             )
         else:
-            missing = sorted(set(self.names) - set(self._observed or ()))
+            missing = sorted(self.goal_names - set(self._observed or ()))
             self.status = "short"
             self.reason = (
                 f"ended at t = {t:.3f} s short of the goal in {{{', '.join(sorted(self._observed or ()))}}}"

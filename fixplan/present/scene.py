@@ -27,7 +27,14 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fixplan.present.meshes import locator_tips, points_world, shape_mesh, shape_outline, sphere_mesh
+from fixplan.present.meshes import (
+    fixture_meshes,
+    locator_tips,
+    part_mesh,
+    points_world,
+    shape_outline,
+    sphere_mesh,
+)
 
 if TYPE_CHECKING:
     from fixplan.model import Fixture
@@ -145,7 +152,7 @@ def scene_figure(fixture: Fixture, replay: Replay, *, max_frames: int = MAX_FRAM
     centres = np.array([loc.p_world for loc in fixture.locators]).reshape(-1, d)
 
     if d == 3:
-        V_body, F = shape_mesh(shape)
+        V_body, F = part_mesh(fixture)  # the shape with its holes' walls
     else:
         outline = shape_outline(shape)
 
@@ -267,6 +274,10 @@ def scene_figure(fixture: Fixture, replay: Replay, *, max_frames: int = MAX_FRAM
     if d == 2:
         static["locator tips"] = _locator_bodies(fixture, go)
     static["locator names"] = _locator_labels(fixture, go)
+    for name, (V_pin, F_pin) in fixture_meshes(fixture).items():  # pins and bores (world frame)
+        static[f"pin {name}"] = _mesh3d(
+            go, V_pin, F_pin, color=LOCATOR, opacity=0.9, flatshading=True, name=name, showlegend=True, hoverinfo="name"
+        )
     if fixture.contacts:
         pts = np.array([c.point_world for c in fixture.contacts]).reshape(-1, d)
         nrm = np.array([c.normal_world for c in fixture.contacts]).reshape(-1, d)

@@ -1,0 +1,524 @@
+"""The closed-form pin/hole contacts of :mod:`fixplan.geometry.pins`, compiled (numba): what the engine calls each step.
+
+The same arithmetic as :func:`fixplan.geometry.pins.pin_hole_contacts` (the reference; the
+module's text derives the contacts), on flat arrays instead of dataclasses and without closures:
+the Python reference takes about 10 ms for the two pins of a housing, a 1 kHz loop has 1 ms for
+everything. ``tests/engine/test_pin_slots.py`` pins the two together on random poses.
+
+Arrays (world frame, metres):
+
+- ``pin`` (14,): base (3), unit axis base → tip (3), radius, length, tip chamfer, land direction
+  (3), land width, 1.0 for a diamond pin (else 0.0);
+- ``hole`` (10,): mouth centre (3), unit axis out of its body (3), radius, depth, mouth chamfer,
+  1.0 for a blind hole;
+- ``out`` (:data:`MAX_CONTACTS`, 11): one row per contact, ``[kind, point on the pin (3), point on
+  the hole's body (3), unit normal from the pin into the hole's body (3), gap]``, kinds coded as
+  :data:`KINDS`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+KINDS = ("rim", "mouth", "exit", "bottom", "tip")  # the kind codes of ``out[:, 0]``
+RIM, MOUTH, EXIT, BOTTOM, TIP = 0, 1, 2, 3, 4
+MAX_CONTACTS = 24  # 2 lands x (rim, mouth, exit) + bottom + 2 mouth edges + 2 pin circles = 11, + the face's rim
+_TWO_PI = 2.0 * math.pi
+_SQRT_HALF = math.sqrt(0.5)
+_GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
+
+
+@njit(cache=True)
+def _perp_basis(u, prefer, use_prefer):
+    """``e1, e2`` with ``(e1, e2, u)`` right-handed; ``e1`` along ``prefer``'s part normal to ``u`` when asked."""
+    if use_prefer:
+        e1 = prefer - (prefer @ u) * u
+    else:
+        k = int(np.argmin(np.abs(u)))
+        e1 = np.zeros(3)
+        e1[k] = 1.0
+        e1 = e1 - (e1 @ u) * u
+    e1 = e1 / np.linalg.norm(e1)
+    return e1, np.cross(u, e1)
+
+
+@njit(cache=True)
+def _proj(a):
+    """``I − a aᵀ``: the projection normal to the unit ``a``."""
+    return np.eye(3) - np.outer(a, a)
+
+
+@njit(cache=True)
+def _land_arcs(pin):
+    """The angles (about the pin's axis, from ``e1`` = the land direction) its side spans, ``(k, 2)``."""
+    if pin[13] == 0.0:
+        out = np.empty((1, 2))
+        out[0, 0], out[0, 1] = 0.0, _TWO_PI
+        return out
+    alpha = math.asin(min(1.0, pin[12] / (2.0 * pin[6])))
+    out = np.empty((2, 2))
+    out[0, 0], out[0, 1] = -alpha, alpha
+    out[1, 0], out[1, 1] = math.pi - alpha, math.pi + alpha
+    return out
+
+
+@njit(cache=True)
+def _in_arcs(angle, arcs):
+    for i in range(arcs.shape[0]):
+        lo, hi = arcs[i, 0], arcs[i, 1]
+        if lo <= angle <= hi or lo <= angle + _TWO_PI <= hi or lo <= angle - _TWO_PI <= hi:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _sq(w, A, B, phi, sign):
+    """``sign · |w + A cos φ + B sin φ|²`` (scalars: no temporary arrays in the hot loop)."""
+    c, s = math.cos(phi), math.sin(phi)
+    v0 = w[0] + A[0] * c + B[0] * s
+    v1 = w[1] + A[1] * c + B[1] * s
+    v2 = w[2] + A[2] * c + B[2] * s
+    return sign * (v0 * v0 + v1 * v1 + v2 * v2)
+
+
+@njit(cache=True)
+def _circle_extreme(w, A, B, largest, arcs, rim_samples, newton_steps):
+    """The angle φ within ``arcs`` at which ``|w + A cos φ + B sin φ|²`` is largest (or least)."""
+    sign = 1.0 if largest else -1.0
+    best_phi, best = arcs[0, 0], -math.inf
+    n = max(rim_samples // arcs.shape[0], 2)
+    for i in range(arcs.shape[0]):
+        lo, hi = arcs[i, 0], arcs[i, 1]
+        step = (hi - lo) / n
+        for j in range(n + 1):
+            phi = j * step + lo if j < n else hi  # np.linspace(lo, hi, n + 1), as the reference
+            val = _sq(w, A, B, phi, sign)
+            if val > best:
+                best_phi, best = phi, val
+    lo, hi = arcs[0, 0], arcs[0, 1]
+    for i in range(arcs.shape[0]):
+        if arcs[i, 0] <= best_phi <= arcs[i, 1]:
+            lo, hi = arcs[i, 0], arcs[i, 1]
+            break
+    if hi - lo >= _TWO_PI:
+        lo, hi = -math.inf, math.inf
+    phi = best_phi
+    for _ in range(newton_steps):
+        c, s = math.cos(phi), math.sin(phi)
+        d1 = 0.0
+        vv2 = 0.0
+        for k in range(3):
+            v = w[k] + A[k] * c + B[k] * s
+            dv = -A[k] * s + B[k] * c
+            d1 += v * dv
+            vv2 += dv * dv - v * (A[k] * c + B[k] * s)
+        d1 *= 2.0
+        d2 = 2.0 * vv2
+        if d2 * sign >= 0.0 or d2 == 0.0:
+            break
+        step = min(max(phi - d1 / d2, lo), hi)
+        if _sq(w, A, B, step, sign) < _sq(w, A, B, phi, sign):
+            break
+        phi = step
+    return phi
+
+
+@njit(cache=True)
+def _put(out, n, kind, x, y, normal, gap):
+    out[n, 0] = kind
+    out[n, 1:4] = x
+    out[n, 4:7] = y
+    out[n, 7:10] = normal
+    out[n, 10] = gap
+    return n + 1
+
+
+@njit(cache=True)
+def _rim(pin, hole, arcs, rim_samples, newton_steps, out, n):
+    u, a, m = pin[3:6], hole[3:6], hole[0:3]
+    r = pin[6]
+    centre = pin[0:3] + (pin[7] - pin[8]) * u
+    e1, e2 = _perp_basis(u, pin[9:12], pin[13] != 0.0)
+    P = _proj(a)
+    w, A, B = P @ (centre - m), r * (P @ e1), r * (P @ e2)
+    phi = _circle_extreme(w, A, B, True, arcs, rim_samples, newton_steps)
+    x = centre + r * (math.cos(phi) * e1 + math.sin(phi) * e2)
+    depth = (m - x) @ a
+    if depth < hole[8] or depth > hole[7]:
+        return n
+    rho = P @ (x - m)
+    rho_m = np.linalg.norm(rho)
+    nn = rho / rho_m if rho_m > 0.0 else e1
+    gap = hole[6] - rho_m
+    return _put(out, n, RIM, x, x + gap * nn, nn, gap)
+
+
+# -- the distance of a point (t, ρ) to the pin's tip and to the hole's mouth chamfer ------------------------
+@njit(cache=True)
+def _seg(q0, q1, a0, a1, b0, b1):
+    """The point of segment ``ab`` nearest ``q`` and its parameter in [0, 1] (2D, scalars)."""
+    d0, d1 = b0 - a0, b1 - a1
+    dd = d0 * d0 + d1 * d1
+    t = 0.0 if dd == 0.0 else min(max(((q0 - a0) * d0 + (q1 - a1) * d1) / dd, 0.0), 1.0)
+    return a0 + t * d0, a1 + t * d1, t
+
+
+@njit(cache=True)
+def _in_cone(v0, v1, n10, n11, n20, n21):
+    c12 = n10 * n21 - n11 * n20
+    return (n10 * v1 - n11 * v0) * c12 >= 0.0 and (v0 * n21 - v1 * n20) * c12 >= 0.0
+
+
+@njit(cache=True)
+def _pin_tip_gap(pin, q0, q1):
+    """``(found, gap, n_t, n_ρ)``: :func:`fixplan.geometry.pins._pin_tip_gap`."""
+    L, r, c = pin[7], pin[6], pin[8]
+    s = _SQRT_HALF
+    p10, p11, t1 = _seg(q0, q1, L - c, r, L, r - c)
+    p20, p21, t2 = _seg(q0, q1, L, r - c, L, 0.0)
+    d1 = math.hypot(q0 - p10, q1 - p11)
+    d2 = math.hypot(q0 - p20, q1 - p21)
+    if c > 0.0 and d1 <= d2:
+        p0, p1, n0, n1 = p10, p11, s, s
+        if t1 == 0.0:
+            v0, v1 = q0 - p0, q1 - p1
+            if not _in_cone(v0, v1, 0.0, 1.0, s, s):
+                return False, 0.0, 0.0, 0.0
+            nv = math.hypot(v0, v1)
+            if nv > 0.0:
+                n0, n1 = v0 / nv, v1 / nv
+        elif t1 == 1.0 and not _in_cone(q0 - p0, q1 - p1, s, s, 1.0, 0.0):
+            return False, 0.0, 0.0, 0.0
+    else:
+        p0, p1, n0, n1 = p20, p21, 1.0, 0.0
+        if t2 == 0.0:
+            v0, v1 = q0 - p0, q1 - p1
+            m0, m1 = (0.0, 1.0) if c == 0.0 else (s, s)
+            if not _in_cone(v0, v1, m0, m1, 1.0, 0.0):
+                return False, 0.0, 0.0, 0.0
+            nv = math.hypot(v0, v1)
+            if nv > 0.0:
+                n0, n1 = v0 / nv, v1 / nv
+        elif t2 == 1.0:
+            return False, 0.0, 0.0, 0.0
+    gap = (q0 - p0) * n0 + (q1 - p1) * n1
+    if gap < 0.0 and r - q1 < -gap:
+        return False, 0.0, 0.0, 0.0
+    return True, gap, n0, n1
+
+
+@njit(cache=True)
+def _hole_chamfer_gap(hole, q0, q1):
+    """``(found, gap, n_depth, n_ρ)``: :func:`fixplan.geometry.pins._hole_chamfer_gap`."""
+    c, R = hole[8], hole[6]
+    if c <= 0.0:
+        return False, 0.0, 0.0, 0.0
+    p0, p1, t = _seg(q0, q1, 0.0, R + c, c, R)
+    if t <= 0.0 or t >= 1.0:
+        return False, 0.0, 0.0, 0.0
+    n0, n1 = -_SQRT_HALF, -_SQRT_HALF
+    gap = (q0 - p0) * n0 + (q1 - p1) * n1
+    if gap < 0.0 and min(q1 - R, q0) < -gap:
+        return False, 0.0, 0.0, 0.0
+    return True, gap, n0, n1
+
+
+# -- a gap along a circle, by mode (numba has no closures to hand around) -----------------------------------
+# mode 0: the hole's edge circle on a diamond pin's land; 1: a hole edge circle on the pin's tip;
+# 2: a pin circle on the hole's mouth chamfer. The circle is ``x(φ) = c + rad (cos φ b1 + sin φ b2)``;
+# the other body's axial coordinate of ``x`` is ``t0 + t1 cos φ + t2 sin φ`` and its radial vector
+# ``w + A cos φ + B sin φ`` (coefficients computed once per circle, then only scalars per angle).
+@njit(cache=True)
+def _circle_coef(mode, pin, hole, c, rad, b1, b2):
+    """``[w (3), A (3), B (3), t (3), radial·e1 (3), radial·e2 (3)]`` of the circle in the other body's frame."""
+    out = np.zeros(18)
+    if mode == 2:
+        a, m = hole[3:6], hole[0:3]
+        P = _proj(a)
+        out[0:3], out[3:6], out[6:9] = P @ (c - m), rad * (P @ b1), rad * (P @ b2)
+        out[9], out[10], out[11] = (m - c) @ a, -rad * (b1 @ a), -rad * (b2 @ a)
+        return out
+    u, base = pin[3:6], pin[0:3]
+    P = _proj(u)
+    out[0:3], out[3:6], out[6:9] = P @ (c - base), rad * (P @ b1), rad * (P @ b2)
+    out[9], out[10], out[11] = (c - base) @ u, rad * (b1 @ u), rad * (b2 @ u)
+    if mode == 0:
+        e1, e2 = _perp_basis(u, pin[9:12], True)
+        for k in range(3):
+            out[12 + k] = out[3 * k : 3 * k + 3] @ e1
+            out[15 + k] = out[3 * k : 3 * k + 3] @ e2
+    return out
+
+
+@njit(cache=True)
+def _circle_gap(mode, phi, pin, hole, arcs, coef):
+    cs, sn = math.cos(phi), math.sin(phi)
+    if mode == 2 and not _in_arcs(phi, arcs):
+        return False, 0.0
+    v0 = coef[0] + coef[3] * cs + coef[6] * sn
+    v1 = coef[1] + coef[4] * cs + coef[7] * sn
+    v2 = coef[2] + coef[5] * cs + coef[8] * sn
+    rho = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    t = coef[9] + coef[10] * cs + coef[11] * sn
+    if mode == 2:
+        found, gap, _n0, _n1 = _hole_chamfer_gap(hole, t, rho)
+        return found, gap
+    if mode == 0:
+        along = coef[12] + coef[13] * cs + coef[14] * sn
+        across = coef[15] + coef[16] * cs + coef[17] * sn
+        if not _in_arcs(math.atan2(across, along), arcs):
+            return False, 0.0
+        return True, rho - pin[6]
+    found, gap, _n0, _n1 = _pin_tip_gap(pin, t, rho)
+    return found, gap
+
+
+@njit(cache=True)
+def _value(mode, phi, pin, hole, arcs, coef):
+    found, gap = _circle_gap(mode, phi, pin, hole, arcs, coef)
+    return gap if found else math.inf
+
+
+@njit(cache=True)
+def _least_on_circle(mode, pin, hole, arcs, c, rad, b1, b2, rim_samples, golden_steps):
+    """``(found, φ)``: the angle where the mode's gap is least on the circle (sampled, then golden section)."""
+    coef = _circle_coef(mode, pin, hole, c, rad, b1, b2)
+    step = _TWO_PI / rim_samples
+    best, phi, any_found = math.inf, 0.0, False
+    for i in range(rim_samples):
+        t = i * step
+        found, gap = _circle_gap(mode, t, pin, hole, arcs, coef)
+        if found and (not any_found or gap < best):
+            best, phi, any_found = gap, t, True
+    if not any_found:
+        return False, 0.0
+    lo, hi = phi - step, phi + step
+    g = _GOLDEN
+    x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
+    f1 = _value(mode, x1, pin, hole, arcs, coef)
+    f2 = _value(mode, x2, pin, hole, arcs, coef)
+    for _ in range(golden_steps):
+        if f1 <= f2:
+            hi, x2, f2 = x2, x1, f1
+            x1 = hi - g * (hi - lo)
+            f1 = _value(mode, x1, pin, hole, arcs, coef)
+        else:
+            lo, x1, f1 = x1, x2, f2
+            x2 = lo + g * (hi - lo)
+            f2 = _value(mode, x2, pin, hole, arcs, coef)
+    x = 0.5 * (lo + hi)
+    return True, (x if _value(mode, x, pin, hole, arcs, coef) <= best else phi)
+
+
+@njit(cache=True)
+def _edge(pin, hole, depth_m, kind, arcs, rim_samples, newton_steps, golden_steps, out, n):
+    u, a, base = pin[3:6], hole[3:6], pin[0:3]
+    centre = hole[0:3] - depth_m * a
+    h1, h2 = _perp_basis(a, a, False)
+    P = _proj(u)
+    R = hole[6]
+    if pin[13] == 0.0:
+        w, A, B = P @ (centre - base), R * (P @ h1), R * (P @ h2)
+        full = np.empty((1, 2))
+        full[0, 0], full[0, 1] = 0.0, _TWO_PI
+        phi = _circle_extreme(w, A, B, False, full, rim_samples, newton_steps)
+    else:
+        found, phi = _least_on_circle(0, pin, hole, arcs, centre, R, h1, h2, rim_samples, golden_steps)
+        if not found:
+            return n
+    y = centre + R * (math.cos(phi) * h1 + math.sin(phi) * h2)
+    s = (y - base) @ u
+    if s < 0.0 or s > pin[7] - pin[8]:
+        return n
+    v = P @ (y - base)
+    d = np.linalg.norm(v)
+    if d == 0.0:
+        return n
+    nn = v / d
+    x = base + s * u + pin[6] * nn
+    return _put(out, n, kind, x, y, nn, d - pin[6])
+
+
+@njit(cache=True)
+def _bottom(pin, hole, coaxial_rel, out, n):
+    u, a, m = pin[3:6], hole[3:6], hole[0:3]
+    tip = pin[0:3] + pin[7] * u
+    down = -a - ((-a) @ u) * u
+    rho = pin[6] - pin[8]
+    norm = np.linalg.norm(down)
+    x = tip + rho * down / norm if norm > coaxial_rel else tip
+    depth = (m - x) @ a
+    if depth < hole[8]:
+        return n
+    gap = hole[7] - depth
+    return _put(out, n, BOTTOM, x, x - gap * a, -a, gap)
+
+
+@njit(cache=True)
+def _hole_edges_on_tip(pin, hole, arcs, rim_samples, golden_steps, out, n):
+    u, a, base = pin[3:6], hole[3:6], pin[0:3]
+    h1, h2 = _perp_basis(a, a, False)
+    P = _proj(u)
+    ch = hole[8]
+    n_edges = 2 if ch > 0.0 else 1
+    for k in range(n_edges):
+        depth, radius = (0.0, hole[6] + ch) if k == 0 else (ch, hole[6])
+        centre = hole[0:3] - depth * a
+        found, phi = _least_on_circle(1, pin, hole, arcs, centre, radius, h1, h2, rim_samples, golden_steps)
+        if not found:
+            continue
+        y = centre + radius * (math.cos(phi) * h1 + math.sin(phi) * h2)
+        v = P @ (y - base)
+        nv = np.linalg.norm(v)
+        ok, gap, n0, n1 = _pin_tip_gap(pin, (y - base) @ u, nv)
+        if not ok:
+            continue
+        if nv > 0.0:
+            radial = v / nv
+        else:
+            radial, _e2 = _perp_basis(u, u, False)
+        nn = n0 * u + n1 * radial
+        n = _put(out, n, TIP, y - gap * nn, y, nn, gap)
+    return n
+
+
+@njit(cache=True)
+def _tip_edges_on_chamfer(pin, hole, arcs, rim_samples, golden_steps, out, n):
+    if hole[8] <= 0.0:
+        return n
+    u, a, m = pin[3:6], hole[3:6], hole[0:3]
+    e1, e2 = _perp_basis(u, pin[9:12], pin[13] != 0.0)
+    P = _proj(a)
+    n_circles = 2 if pin[8] > 0.0 else 1
+    for k in range(n_circles):
+        s, radius = (pin[7] - pin[8], pin[6]) if k == 0 else (pin[7], pin[6] - pin[8])
+        centre = pin[0:3] + s * u
+        found, phi = _least_on_circle(2, pin, hole, arcs, centre, radius, e1, e2, rim_samples, golden_steps)
+        if not found:
+            continue
+        x = centre + radius * (math.cos(phi) * e1 + math.sin(phi) * e2)
+        rho = P @ (x - m)
+        nr = np.linalg.norm(rho)
+        ok, gap, f0, f1 = _hole_chamfer_gap(hole, (m - x) @ a, nr)
+        if not ok:
+            continue
+        radial = rho / nr if nr > 0.0 else e1
+        free = f0 * (-a) + f1 * radial
+        n = _put(out, n, TIP, x, x - gap * free, -free, gap)
+    return n
+
+
+@njit(cache=True)
+def contacts(pin, hole, rim_samples, newton_steps, golden_steps, coaxial_rel, out):
+    """Every contact of ``pin`` with ``hole`` into ``out`` (module text); returns how many.
+
+    The same contacts, in the same order, as :func:`fixplan.geometry.pins.pin_hole_contacts`.
+    """
+    n = 0
+    arcs = _land_arcs(pin)
+    blind = hole[9] != 0.0
+    for i in range(arcs.shape[0]):
+        land = arcs if arcs.shape[0] == 1 else arcs[i : i + 1]
+        n = _rim(pin, hole, land, rim_samples, newton_steps, out, n)
+        n = _edge(pin, hole, hole[8], MOUTH, land, rim_samples, newton_steps, golden_steps, out, n)
+        if not blind:
+            n = _edge(pin, hole, hole[7], EXIT, land, rim_samples, newton_steps, golden_steps, out, n)
+    if blind:
+        n = _bottom(pin, hole, coaxial_rel, out, n)
+    n = _hole_edges_on_tip(pin, hole, arcs, rim_samples, golden_steps, out, n)
+    return _tip_edges_on_chamfer(pin, hole, arcs, rim_samples, golden_steps, out, n)
+
+
+@njit(cache=True)
+def _face_points(pin, hole, face_points, coaxial_rel, rows, k):
+    """A tip face on a blind hole's bottom as ``face_points`` points of the face's rim (and its centre when flat).
+
+    :func:`contacts` gives the face's deepest point only (exact for the gap); a face resting on the
+    bottom is held by its whole disk, so the engine also hands over the rim at ``face_points``
+    angles from the deepest point (each with its own gap to the bottom, normal ``−a``). Appended to
+    ``rows`` after row ``k − 1``; returns the new count.
+    """
+    if face_points <= 1:
+        return k
+    u, a, m = pin[3:6], hole[3:6], hole[0:3]
+    rho = pin[6] - pin[8]
+    if rho <= 0.0:
+        return k
+    tip = pin[0:3] + pin[7] * u
+    down = -a - ((-a) @ u) * u
+    norm = np.linalg.norm(down)
+    if norm > coaxial_rel:
+        d1 = down / norm
+        first = 1  # the deepest point (angle 0) is contacts()' own
+    else:
+        d1, _d2 = _perp_basis(u, u, False)
+        first = 0  # flat: contacts() gave the centre; the whole rim is added
+    d2 = np.cross(u, d1)
+    for j in range(first, face_points):
+        phi = _TWO_PI * j / face_points
+        x = tip + rho * (math.cos(phi) * d1 + math.sin(phi) * d2)
+        depth = (m - x) @ a
+        if depth < hole[8]:
+            continue
+        gap = hole[7] - depth
+        k = _put(rows, k, BOTTOM, x, x - gap * a, -a, gap)
+    return k
+
+
+@njit(cache=True)
+def pose_contacts(
+    pins, holes_body, bores, peg, R, p, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points, out
+):
+    """Every contact of every pin (in its hole of the part at the pose ``(R, p)``) and bore (with the part as its peg).
+
+    ``pins`` (k, 14) and ``holes_body`` (k, 10): each pin and its hole in body coordinates;
+    ``bores`` (j, 10) in world coordinates, ``peg`` = (radius, length) of the cylindrical part (its
+    end deeper in the bore leads). ``out`` ((k + j)·:data:`MAX_CONTACTS`, 13): one row per contact,
+    ``[owner (pins then bores), is a bore, kind, point on the pin or peg (3), point on the hole's or
+    bore's body (3), normal from the pin into the hole's body (3), gap]``. Returns the number of rows.
+    A tip face on a blind hole's bottom adds its rim's points (:func:`_face_points`, ``face_points``
+    of them; 0 or 1: the deepest point only, as :func:`contacts`).
+    """
+    rows = np.zeros((MAX_CONTACTS, 11))
+    hole = np.zeros(10)
+    n = 0
+    for i in range(pins.shape[0]):
+        hole[:] = holes_body[i]
+        hole[0:3] = p + R @ holes_body[i, 0:3]
+        hole[3:6] = R @ holes_body[i, 3:6]
+        k = contacts(pins[i], hole, rim_samples, newton_steps, golden_steps, coaxial_rel, rows)
+        for r in range(k):
+            if rows[r, 0] == BOTTOM:
+                k = _face_points(pins[i], hole, face_points, coaxial_rel, rows, k)
+                break
+        for r in range(k):
+            out[n, 0], out[n, 1] = i, 0.0
+            out[n, 2:13] = rows[r]
+            n += 1
+    if bores.shape[0] == 0:
+        return n
+    radius, length = peg[0], peg[1]
+    z = R[:, 2].copy()
+    e0 = p + 0.5 * length * z
+    e1 = p - 0.5 * length * z
+    pg = np.zeros(14)
+    for j in range(bores.shape[0]):
+        a, mouth = bores[j, 3:6], bores[j, 0:3]
+        if (mouth - e0) @ a >= (mouth - e1) @ a:
+            pg[0:3], pg[3:6] = e1, z
+        else:
+            pg[0:3], pg[3:6] = e0, -z
+        pg[6], pg[7] = radius, length
+        k = contacts(pg, bores[j], rim_samples, newton_steps, golden_steps, coaxial_rel, rows)
+        for r in range(k):
+            if rows[r, 0] == BOTTOM:
+                k = _face_points(pg, bores[j], face_points, coaxial_rel, rows, k)
+                break
+        for r in range(k):
+            out[n, 0], out[n, 1] = pins.shape[0] + j, 1.0
+            out[n, 2:13] = rows[r]
+            n += 1
+    return n

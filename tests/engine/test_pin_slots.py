@@ -1,0 +1,334 @@
+"""Pins and bores in the engine: the compiled closed forms against their reference, and physics against closed forms.
+
+The compiled contacts (:mod:`fixplan.geometry._pin_kernels`) must give the reference's
+(:func:`fixplan.geometry.pins.pin_hole_contacts`) on random seeded pairs; the slots handed to the
+step (:mod:`fixplan.engine.pin_slots`) their NumPy reference. Then the engine with pins:
+
+- a peg dropped into a chamfered bore with clearance settles on the bottom with its axis within
+  the radial play ``(D − d)/2`` of the bore's, upright, the bottom carrying its weight;
+- a part on three frictionless rests and one round pin, pushed sideways into the pin: the pin's
+  reaction equals the push, and the part stays (the push is held);
+- a diamond pin resists along its land direction (reaction = the push) and not across it: pushed
+  across, the part moves as a free mass, ``x_n = a h² n (n + 1) / 2`` for Moreau–Jean's step.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import textwrap
+
+import numpy as np
+import pytest
+from conftest import PROBLEMS
+
+import fixplan
+from fixplan.aot import kernel
+from fixplan.engine.pin_slots import MAX_CONTACTS, PinGeometry
+from fixplan.engine.simulator import Simulator
+from fixplan.geometry._pin_kernels import KINDS
+from fixplan.geometry.pins import HoleBody, PinBody, pin_hole_contacts
+from fixplan.settings import DEFAULT
+from fixplan.spatial import Pose, exp_so3
+
+HOUSING = PROBLEMS / "housing-2-pins.toml"
+SHAFT = PROBLEMS / "shaft-in-bore.toml"
+_contacts = kernel("fixplan.geometry._pin_kernels", "contacts")
+
+
+def _random_pair(rng: np.random.Generator) -> tuple[PinBody, HoleBody]:
+    """A pin near a hole's mouth (within its length of it), tilted, offset, with random chamfers and lands."""
+    R_hole = rng.uniform(0.003, 0.01)
+    r_pin = R_hole * rng.uniform(0.9, 0.999)
+    hole_axis = exp_so3(rng.normal(size=3) * 0.3) @ np.array([0.0, 0.0, 1.0])
+    mouth = rng.normal(size=3) * 0.01
+    depth = rng.uniform(0.01, 0.03)
+    length = rng.uniform(0.01, 0.03)
+    tilt = exp_so3(rng.normal(size=3) * 0.02)
+    u = tilt @ -hole_axis  # into the hole
+    offset = (np.eye(3) - np.outer(hole_axis, hole_axis)) @ rng.normal(size=3) * (R_hole - r_pin) * 2.0
+    tip = mouth + offset - rng.uniform(-0.3, 0.8) * length * hole_axis
+    diamond = rng.random() < 0.4
+    land = None
+    if diamond:
+        land = np.cross(u, rng.normal(size=3))
+        land /= np.linalg.norm(land)
+    pin = PinBody(
+        tip - length * u, u, r_pin, length, rng.uniform(0.0, 0.3) * r_pin, land, rng.uniform(0.2, 1.2) * r_pin
+    )
+    hole = HoleBody(mouth, hole_axis, R_hole, depth, rng.uniform(0.0, 0.2) * R_hole, bool(rng.random() < 0.5))
+    return pin, hole
+
+
+def _arrays(pin: PinBody, hole: HoleBody) -> tuple[np.ndarray, np.ndarray]:
+    land = pin.land_direction_world if pin.land_direction_world is not None else np.zeros(3)
+    p = np.array([*pin.base_world, *pin.axis_world, pin.radius_m, pin.length_m, pin.chamfer_m, *land,
+                  pin.land_width_m, 0.0 if pin.land_direction_world is None else 1.0])  # fmt: skip
+    h = np.array([*hole.mouth_world, *hole.axis_world, hole.radius_m, hole.depth_m, hole.chamfer_m, float(hole.blind)])
+    return p, h
+
+
+def test_compiled_contacts_are_the_reference() -> None:
+    """400 seeded pairs: the same contacts, kinds and order; gaps to 1e-12 m, points and normals to 1e-7.
+
+    One exception, bounded: a tip contact's gap along its circle (the distance to the tip's profile,
+    by its nearest feature) jumps where the nearest feature changes, and a golden section whose
+    bracket holds such a jump ends on either side by rounding alone. That happens far from contact
+    (more than 0.2 mm here, beyond the step's detection margin) in a few pairs; the rest agree.
+    """
+    rng = np.random.default_rng(0)
+    s = DEFAULT.pins
+    out = np.zeros((MAX_CONTACTS, 11))
+    seen, far_tips = set(), 0
+    for _ in range(400):
+        pin, hole = _random_pair(rng)
+        ref = pin_hole_contacts(pin, hole)
+        k = _contacts(*_arrays(pin, hole), s.rim_samples, s.newton_steps, s.golden_steps, s.coaxial_rel, out)
+        kinds = [KINDS[int(c)] for c in out[:k, 0]]
+        side = [c for c in ref if c.kind != "tip"]
+        assert kinds[: len(side)] == [c.kind for c in side]
+        tips_agree = kinds == [c.kind for c in ref] and all(
+            abs(row[10] - c.gap_m) <= 1e-12 for row, c in zip(out[:k], ref, strict=True)
+        )
+        if not tips_agree:
+            far_tips += 1
+            a = [c.gap_m for c in ref if c.kind == "tip"]
+            b = out[len(side) : k, 10].tolist()
+            differing = [g for g in a if min((abs(g - x) for x in b), default=1.0) > 1e-12]
+            differing += [g for g in b if min((abs(g - x) for x in a), default=1.0) > 1e-12]
+            assert min(differing) > 2e-4, differing
+        for row, c in zip(out[:k], ref if tips_agree else side, strict=False):
+            seen.add(c.kind)
+            assert row[10] == pytest.approx(c.gap_m, abs=1e-12)
+            # a least along a circle is flat: its angle (so its point) is known to about √eps
+            np.testing.assert_allclose(row[1:4], c.point_pin_world, atol=1e-7)
+            np.testing.assert_allclose(row[4:7], c.point_hole_world, atol=1e-7)
+            np.testing.assert_allclose(row[7:10], c.normal_world, atol=1e-4)
+    assert seen == set(KINDS)  # every kind of contact was compared
+    assert far_tips <= 8
+
+
+@pytest.mark.parametrize("path", [HOUSING, SHAFT])
+def test_compiled_slots_are_the_reference(path) -> None:
+    """The slots at seeded poses around the start or goal: planes, body points, keys and gaps as the NumPy assembly."""
+    fixture = fixplan.load(path)
+    geometry = PinGeometry(fixture)
+    rng = np.random.default_rng(1)
+    base = fixture.goal if fixture.goal_pose is not None else fixture.start
+    for _ in range(20):
+        pose = Pose(base.R_world_body @ exp_so3(rng.normal(size=3) * 1e-3), base.p_world + rng.normal(size=3) * 1e-4)
+        a = geometry.slots(pose.R_world_body, pose.p_world, 2e-4)
+        b = geometry.slots_reference(pose.R_world_body, pose.p_world, 2e-4)
+        assert a.keys == b.keys and len(a) > 0
+        np.testing.assert_allclose(a.obs, b.obs, atol=1e-12)
+        np.testing.assert_allclose(a.slots, b.slots, atol=1e-12)
+        np.testing.assert_array_equal(a.gap_m, b.gap_m)
+        np.testing.assert_array_equal(a.least_gap_m, b.least_gap_m)
+        # each slot's gap is its plane's signed distance of the part's point, at the pose
+        x = pose.p_world + a.slots[:, :3] @ pose.R_world_body.T
+        n = a.obs[:, 4:13].reshape(-1, 3, 3)[:, :, 2]
+        np.testing.assert_allclose(np.einsum("ki,ki->k", x - a.obs[:, 1:4], n), a.gap_m, atol=1e-15)
+
+
+def test_a_tilted_face_on_the_bottom_brings_its_rim() -> None:
+    """A face of radius ρ tilted by θ on a blind hole's bottom: its rim at angle φ from the deepest point is ρ sin θ (1 − cos φ) higher."""
+    rho, theta, depth = 0.004, 0.01, 0.02
+    u = exp_so3(np.array([0.0, theta, 0.0])) @ np.array([0.0, 0.0, -1.0])
+    tip_depth = 0.015
+    pin = PinBody(np.array([0.0, 0.0, -tip_depth]) - 0.03 * u, u, rho, 0.03)  # the tip's centre 15 mm down the hole
+    hole = HoleBody(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.005, depth, 0.0, True)
+    p, h = _arrays(pin, hole)
+    geometry_out = np.zeros((MAX_CONTACTS, 13))
+    pose_contacts = kernel("fixplan.geometry._pin_kernels", "pose_contacts")
+    s = DEFAULT.pins
+    # a pin in a hole of a part at the identity pose (body = world)
+    k = pose_contacts(
+        p[None, :], h[None, :], np.zeros((0, 10)), np.zeros(2), np.eye(3), np.zeros(3),
+        s.rim_samples, s.newton_steps, s.golden_steps, s.coaxial_rel, 4, geometry_out,
+    )  # fmt: skip
+    bottom = geometry_out[:k][geometry_out[:k, 2] == KINDS.index("bottom")]
+    assert bottom.shape[0] == 4
+    deepest = depth - (tip_depth + rho * math.sin(theta))
+    for j, row in enumerate(bottom):
+        assert row[12] == pytest.approx(
+            deepest + rho * math.sin(theta) * (1.0 - math.cos(0.5 * math.pi * j)), abs=1e-15
+        )
+        np.testing.assert_allclose(row[9:12], [0.0, 0.0, -1.0])
+
+
+# -- physics -----------------------------------------------------------------------------------------------
+PEG_DROP = textwrap.dedent(
+    """
+    format = 1
+    [scene]
+    name = "peg-drop"
+    [workpiece]
+    shape = "cylinder"
+    radius = 0.01
+    length = 0.06
+    mass = 0.1
+    start = { position = [0.0006, 0.0002, 0.033], rpy_deg = [0.0, 0.0, 0.0] }
+    [[bore]]
+    name = "B1"
+    position = [0.0, 0.0, 0.0]
+    axis = [0.0, 0.0, 1.0]
+    diameter = 0.0202
+    depth = 0.03
+    chamfer = 0.001
+    friction = 0.2
+    """
+)
+
+
+def test_peg_dropped_into_a_bore_settles_within_the_radial_play() -> None:
+    """Dropped 0.6 mm off axis onto the 1 mm chamfer: it enters, and rests on the bottom within (D − d)/2 = 0.1 mm."""
+    fixture = fixplan.loads(PEG_DROP)
+    sim = Simulator(fixture)
+    sim.run(1.5)
+    pose = sim.pose
+    z = pose.R_world_body[:, 2]
+    play = 0.5 * (0.0202 - 0.02)
+    for end in (pose.p_world + 0.03 * z, pose.p_world - 0.03 * z):
+        assert math.hypot(end[0], end[1]) <= play + 1e-9  # the axis within the play at both ends
+    assert pose.p_world[2] == pytest.approx(-0.03 + 0.03, abs=1e-6)  # the lower end on the bottom, 30 mm deep
+    assert np.linalg.norm(sim.twist) < 1e-6  # at rest
+    (report,) = sim.contacts()
+    np.testing.assert_allclose(report.force_world, [0.0, 0.0, 0.1 * 9.81], atol=1e-6)  # the bottom carries the weight
+    assert sim.max_penetration_m < 1e-4
+
+
+def _housing(pins: str, friction: float = 0.0) -> tuple[fixplan.Fixture, Pose]:
+    """The housing on frictionless rests with only the named pins (a model built by hand: the engine's input), its located pose."""
+    f = fixplan.load(HOUSING)
+    located = dataclasses.replace(
+        f,
+        locators=tuple(dataclasses.replace(loc, friction=friction) for loc in f.locators),
+        pins=tuple(p for p in f.pins if p.name in pins),
+    )
+    return located, f.goal
+
+
+def test_part_on_a_round_pin_holds_a_lateral_push() -> None:
+    """Seated against P1 (its hole's −x wall), pushed +x by 10 N: P1's reaction is −10 N along x, and the part stays."""
+    fixture, goal = _housing("P1")
+    sim = Simulator(fixture)
+    sim.set_state(goal)
+    F = 10.0
+    sim.run(0.2, np.array([F, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    reports = {r.name: r for r in sim.contacts()}
+    assert reports["P1"].force_world[0] == pytest.approx(-F, rel=1e-6)
+    assert abs(reports["P1"].force_world[1]) < 1e-6 * F
+    assert np.abs(sim.pose.p_world - goal.p_world).max() < 1e-9
+    assert np.linalg.norm(sim.twist) < 1e-8
+    # the rests are frictionless: they carry the weight and the pin's moment, nothing along x
+    rests = sum(reports[n].force_world for n in ("B1", "B2", "B3"))
+    assert abs(rests[0]) < 1e-9
+
+
+def test_diamond_pin_resists_along_its_lands_only() -> None:
+    """P2 alone (lands along ±y): a push along y at its axis is held (reaction −F); one along x moves the part freely."""
+    fixture, goal = _housing("P2")
+    arm = np.array([0.04, 0.0, 0.0]) - goal.p_world  # from the body origin to P2's base: no moment about P2
+
+    def push(f: np.ndarray) -> np.ndarray:
+        return np.concatenate([f, np.cross(arm, f)])
+
+    sim = Simulator(fixture)
+    sim.set_state(goal)
+    F = 10.0
+    sim.run(0.2, push(np.array([0.0, F, 0.0])))
+    p2 = {r.name: r for r in sim.contacts()}["P2"]
+    # rel 1e-3: P2 and frictionless rests leave the turn about P2 free, and the contact's first
+    # impact leaves a slow turn (6e-4 rad/s) whose inertia the lands also carry
+    assert p2.force_world[1] == pytest.approx(-F, rel=1e-3)
+    assert abs(p2.force_world[0]) < 1e-3 * F
+    assert 0.0 < sim.pose.p_world[1] - goal.p_world[1] <= 1e-4  # it took up at most the play, then held
+
+    sim = Simulator(fixture)
+    sim.set_state(goal)
+    Fx, n, h = 2.0, 15, sim.dt  # 15 ms: 0.12 mm, short of the relief's 0.3 mm
+    sim.run(n * h, push(np.array([Fx, 0.0, 0.0])))
+    a = Fx / fixture.workpiece.mass_kg
+    assert sim.pose.p_world[0] - goal.p_world[0] == pytest.approx(a * h * h * n * (n + 1) / 2, rel=1e-9)
+    assert {r.name: r for r in sim.contacts()}["P2"].normal_force_N == 0.0
+
+
+def test_housing_engages_both_pins_on_their_chamfers() -> None:
+    """From 0.5 mm above the pins' tips, 0.36 mm off (3.6 times the play), pushed down 20 N: the chamfers capture it.
+
+    It ends on its rests (the located height), each hole around its pin within the play: P1's and
+    P2's gaps in [0, 2 (D − d)/2] (P1 stands 0.1 mm off its hole's axis), at rest; the fast
+    engagement (20 N on 2 kg) penetrates less than 50 µm in a step.
+    """
+    fixture = fixplan.load(HOUSING)
+    goal = fixture.goal
+    sim = Simulator(fixture)
+    sim.set_state(Pose(goal.R_world_body, goal.p_world + np.array([0.0003, 0.0002, 0.0125])))
+    sim.run(0.2, np.array([0.0, 0.0, -20.0, 0.0, 0.0, 0.0]))
+    assert sim.pose.p_world[2] == pytest.approx(goal.p_world[2], abs=1e-9)  # on the rests
+    gaps = dict(zip(sim.names, sim.gaps_m(), strict=True))
+    assert all(abs(gaps[n]) < 1e-9 for n in ("B1", "B2", "B3"))
+    play = 0.5 * (0.010 - 0.0098)
+    # both pins in their holes: the holes' axes within the play (plus P1's 0.1 mm offset) of the located pose
+    assert np.hypot(*(sim.pose.p_world - goal.p_world)[:2]) <= 2 * play + 1e-9
+    assert 0.0 <= gaps["P1"] <= 2 * play and 0.0 <= gaps["P2"] <= 2 * play
+    assert sim.max_penetration_m < 5e-5
+    assert np.linalg.norm(sim.twist) < 1e-8
+
+
+def test_simulate_takes_pins_from_the_command_line() -> None:
+    """``simulate`` on the housing at its located pose: at rest, P1 touching, P2 open by its 0.1 mm of play."""
+    from conftest import run_cli
+
+    proc = run_cli("simulate", HOUSING, "--duration", "0.05", "--pose", "goal", "--json", check_rc=0)
+    import json
+
+    out = json.loads(proc.stdout)
+    contacts = {c["name"]: c for c in out["contacts"]}
+    assert set(contacts) == {"B1", "B2", "B3", "P1", "P2"}
+    assert contacts["P2"]["gap"] == pytest.approx(1e-4, abs=1e-9) and contacts["P2"]["mode"] == "open"
+    # the weight (2 kg) on the rests: the pin's friction carries a little, the rests the rest
+    assert sum(contacts[n]["normal_force"] for n in ("B1", "B2", "B3")) == pytest.approx(2.0 * 9.81, rel=0.02)
+
+
+def test_pins_and_collision_only_bodies_together() -> None:
+    """The shaft in its bore over a floor plane at the bore's bottom: the floor's rows follow the pins' in the step.
+
+    A bore 30 mm deep whose bottom is also a collision plane: the peg pushed down 2 N rests on both;
+    the two together carry the push and gravity (the split is indeterminate, the sum is not), and
+    the floor's report is its own.
+    """
+    text = PEG_DROP.replace("start = { position = [0.0006, 0.0002, 0.033]", "start = { position = [0.0, 0.0, 0.0005]")
+    text += textwrap.dedent(
+        """
+        [[obstacle]]
+        name = "floor"
+        shape = "plane"
+        point = [0.0, 0.0, -0.03]
+        normal = [0.0, 0.0, 1.0]
+        friction = 0.3
+        """
+    )
+    fixture = fixplan.loads(text)
+    sim = Simulator(fixture)
+    sim.run(0.3, np.array([0.0, 0.0, -2.0, 0.0, 0.0, 0.0]))
+    assert sim.pose.p_world[2] == pytest.approx(0.0, abs=1e-6)  # the lower end on the bottom
+    (bore,) = sim.contacts()
+    (floor,) = sim.obstacles()
+    assert floor.name == "floor" and floor.gap_m == pytest.approx(0.0, abs=1e-6)
+    total = bore.force_world + floor.force_world
+    np.testing.assert_allclose(total, [0.0, 0.0, 2.0 + 0.1 * 9.81], atol=1e-6)
+    assert floor.force_world[2] > 0.0  # the floor carries its share
+
+
+def test_pins_on_a_mesh_part_are_refused_in_one_line() -> None:
+    from fixplan.errors import InputError
+    from fixplan.geometry.cells import box_cells, cell_surface
+    from fixplan.geometry.mesh import Mesh
+
+    fixture = fixplan.load(HOUSING)
+    V, F = cell_surface(*box_cells((0.12, 0.08, 0.03), 2))
+    mesh = Mesh(V, F)
+    part = dataclasses.replace(fixture, workpiece=dataclasses.replace(fixture.workpiece, shape=mesh))
+    with pytest.raises(InputError, match="pins on a mesh part are not simulated yet"):
+        Simulator(part)

@@ -1,0 +1,88 @@
+"""The plane-2-pins family: seeded boxes on 3 rests, a round and a diamond pin in two bored holes.
+
+Measured in the loaded files (never taken from the generator's own numbers): the drawn ranges,
+the located pose as built (every rest touching, the round pin touching its hole's wall, the diamond
+pin centred with the radial play (D − d)/2 on each side), the start clear above the pins with each
+hole within the chamfers' capture of its pin, and the family's determinism.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import run_cli
+
+import fixplan
+import fixplan.generate as gen
+from fixplan.locating import cylinder_contacts, locator_gaps
+
+FAMILY = "plane-2-pins"
+
+
+@pytest.fixture(scope="module")
+def drawn() -> list[tuple[gen.GeneratedFixture, fixplan.Fixture]]:
+    return [(g, fixplan.loads(g.toml_text)) for g in gen.generate(FAMILY, 12, 2026)]
+
+
+def test_ranges_in_the_loaded_files(drawn) -> None:
+    chamfers = []
+    for _g, fx in drawn:
+        (h1, h2), (p1, p2) = fx.workpiece.holes, fx.pins
+        D, d = h1.diameter_m, p1.diameter_m
+        assert gen.PIN_HOLE_D_M[0] <= D <= gen.PIN_HOLE_D_M[1] and h2.diameter_m == D
+        play = 0.5 * (D - d)
+        assert gen.PIN_PLAY_M[0] * (1 - 1e-2) <= play <= gen.PIN_PLAY_M[1] * (1 + 1e-2)
+        for c in (h1.chamfer_m, p1.chamfer_m):
+            assert gen.PIN_CHAMFER_M[0] <= c <= gen.PIN_CHAMFER_M[1]
+        chamfers += [h1.chamfer_m, p1.chamfer_m]
+        assert h1.through and h2.through  # bored through the part
+        assert p1.kind == "round" and p2.kind == "diamond"
+        # the diamond's lands locate across the line between the holes (the turn about the round pin);
+        # the round pin stands the play off its hole's axis
+        between = p2.p_world - p1.p_world
+        assert abs(float(np.dot(p2.land_direction_world, between))) <= play + 1e-9
+        assert float(np.linalg.norm(between[:2])) >= gen.PIN_SPAN_FRACTION * fx.workpiece.shape.half[0] * 2 - play
+    assert min(chamfers) < 0.5e-3 and max(chamfers) > 1.5e-3  # the range is used
+
+
+def test_located_pose_as_built_and_start_above_the_pins(drawn) -> None:
+    """At the goal: rests at gap 0, P1 at 0 (seated against it), P2 at (D − d)/2; at the start nothing touches."""
+    for _g, fx in drawn:
+        wp = fx.workpiece
+        assert np.abs(locator_gaps(wp, fx.goal, fx.locators)).max() <= gen.EXACT_M
+        least: dict[str, float] = {}
+        for c in cylinder_contacts(fx, fx.goal):
+            least[c.owner] = min(least.get(c.owner, np.inf), c.gap_m)
+        play = 0.5 * (wp.holes[0].diameter_m - fx.pins[0].diameter_m)
+        assert abs(least["P1"]) <= gen.EXACT_M
+        assert least["P2"] == pytest.approx(play, abs=gen.EXACT_M)
+        assert locator_gaps(wp, fx.start, fx.locators).min() > gen.CLEARANCE_M
+        assert all(c.gap_m > gen.CLEARANCE_M for c in cylinder_contacts(fx, fx.start))
+        capture = play + wp.holes[0].chamfer_m + fx.pins[0].chamfer_m
+        for pin in fx.pins:
+            mouth = fx.start.point_world_from_body(wp.hole(pin.hole).p_body)
+            off = mouth - pin.p_world
+            lateral = np.linalg.norm(off - np.dot(off, pin.axis_world) * pin.axis_world)
+            assert lateral <= gen.PIN_CAPTURE_CHECK * capture + 1e-12
+            assert np.dot(off, pin.axis_world) > pin.length_m  # the mouth above the pin's tip
+
+
+def test_deterministic_per_seed_and_index() -> None:
+    a = gen.generate(FAMILY, 3, 11)
+    assert [x.toml_text for x in a] == [x.toml_text for x in gen.generate(FAMILY, 3, 11)]
+    assert gen.generate_one(FAMILY, 11, 2).toml_text == a[2].toml_text
+    assert all(x.toml_text != y.toml_text for x, y in zip(a, gen.generate(FAMILY, 3, 12), strict=True))
+
+
+def test_cli_writes_files_that_validate(tmp_path) -> None:
+    proc = run_cli("generate", FAMILY, "--count", "2", "--seed", "5", "--out", tmp_path, "--json", check_rc=0)
+    files = [f["path"] for f in json.loads(proc.stdout)["files"]]
+    valid = run_cli("validate", *files)
+    assert valid.returncode == 0 and "warning" not in valid.stdout + valid.stderr, valid.stderr
+
+
+def test_rotate_world_is_refused_for_pins() -> None:
+    with pytest.raises(fixplan.InputError, match="plane-2-pins"):
+        gen.generate(FAMILY, 1, 0, rotate_world=True)
