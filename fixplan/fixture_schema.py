@@ -893,7 +893,7 @@ class Clamp(Table):
         errors: list[tuple[tuple, str]] = []
         force, top = data.get("force"), data.get("max_force")
         if _is_number(force) and _is_number(top):
-            f, m = _as_float(force), _as_float(top)
+            f, m = _as_float(force), _as_float(top)  # type: ignore[arg-type]  # numbers, checked just above
             if f is not None and m is not None and math.isfinite(f) and math.isfinite(m) and f > m:
                 errors.append(
                     (
