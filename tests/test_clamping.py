@@ -349,3 +349,26 @@ def test_clamping_matches_the_hand_derived_verdict(entry: dict) -> None:
         refused = analyse_clamping(fx, entry["refused_order"], verify=False)
         assert not refused.holds
         assert entry["because"] in refused.reason, refused.reason
+
+
+# -- the scene view --------------------------------------------------------------------------------
+def test_view_draws_each_clamp_pushing_onto_the_part_with_its_force() -> None:
+    from fixplan.present.replay import rest_replay
+    from fixplan.present.scene import CLAMP_ARROW_MAX_NORMALS, NORMAL_FRACTION, scene_figure, scene_info
+
+    fx = load(TALL_2D)
+    forces = analyse_clamping(fx, verify=False).forces_N
+    fig = scene_figure(fx, rest_replay(fx), clamp_forces_N=forces)
+    info = scene_info(fig)
+    tips = fig.data[info.traces["clamps"]]
+    assert list(tips.text) == [f"K1 {forces['K1']:.3g} N", f"K2 {forces['K2']:.3g} N"]
+    shafts = fig.data[info.traces["clamp forces"]]
+    x, y = np.array(shafts.x, dtype=float), np.array(shafts.y, dtype=float)  # (start, end, None) per clamp
+    normal = NORMAL_FRACTION * fx.workpiece.shape.bounding_radius
+    for i, k in enumerate(fx.clamps):
+        start, end = np.array([x[3 * i], y[3 * i]]), np.array([x[3 * i + 1], y[3 * i + 1]])
+        assert np.allclose(end, k.p_world + k.radius_m * k.direction_world, atol=1e-6)  # it ends on the part
+        along = end - start
+        assert np.allclose(along / np.linalg.norm(along), k.direction_world, atol=1e-6)  # along its direction
+        expected = min(max(forces[k.name] * info.force_scale_m_per_N, 0.25 * normal), CLAMP_ARROW_MAX_NORMALS * normal)
+        assert np.linalg.norm(along) == pytest.approx(expected, rel=1e-5)

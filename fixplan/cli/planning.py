@@ -463,7 +463,16 @@ def view(
     check_distinct([("FILE", file), ("--plan", plan), ("--out", out)])
     target = _writable(out, force)
     replay = rest_replay(fixture) if plan is None else read_plan(plan, fixture)
-    fig = scene_figure(fixture, replay, max_frames=frames)
+    clamp_forces = None
+    if fixture.clamps:  # the clamps at their least forces (fixplan clamp's program), drawn at the located pose
+        from fixplan.clamping import analyse_clamping
+        from fixplan.errors import FixplanError
+
+        try:
+            clamp_forces = analyse_clamping(fixture, verify=False).forces_N or None
+        except FixplanError:  # too many clamps for the order search: drawn without their forces
+            clamp_forces = None
+    fig = scene_figure(fixture, replay, max_frames=frames, clamp_forces_N=clamp_forces)
     size = write_scene(fig, target)  # through files.write_output
     info = scene_info(fig)
     if json_out:
