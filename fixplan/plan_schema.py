@@ -771,6 +771,9 @@ class PlanFile(JsonObject):
     )
     timings: Annotated[dict[str, Any], Numbers(QUANTITY)] = Field(default_factory=dict, description="[s]")
     perturbation: Annotated[Any, AnyObject(nullable=True)] = Field(None, description="--perturb-seed's world.")
+    clamping: Annotated[Any, AnyObject(nullable=True)] = Field(
+        None, description="--clamp: the clamping stage after loading (fixplan clamp's JSON)."
+    )
 
 
 class Where(JsonObject):

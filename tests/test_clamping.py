@@ -372,3 +372,21 @@ def test_view_draws_each_clamp_pushing_onto_the_part_with_its_force() -> None:
         assert np.allclose(along / np.linalg.norm(along), k.direction_world, atol=1e-6)  # along its direction
         expected = min(max(forces[k.name] * info.force_scale_m_per_N, 0.25 * normal), CLAMP_ARROW_MAX_NORMALS * normal)
         assert np.linalg.norm(along) == pytest.approx(expected, rel=1e-5)
+
+
+# -- solve --clamp ---------------------------------------------------------------------------------
+def test_solve_clamp_continues_the_loading_plan_with_the_clamping_stage(tmp_path) -> None:
+    from fixplan.plan_schema import validate_plan_document
+
+    plan = tmp_path / "plan.json"
+    proc = run_cli("solve", TALL_2D, "--clamp", "--json", "--out", plan, check_rc=0)
+    out = json.loads(proc.stdout)
+    assert out["status"] == "planned"
+    clamping = out["clamping"]
+    assert clamping["holds"] is True and clamping["order"] == ["K2", "K1"]
+    assert clamping["verification"]["passed"] is True
+    assert json.loads(plan.read_text())["clamping"] == clamping
+    assert validate_plan_document(json.loads(plan.read_text()), 2) == []  # the plan file's schema takes it
+    run_cli("verify", plan, check_rc=0)  # and verify replays the loading as before
+    proc = run_cli("solve", PROBLEMS / "box-3-2-1.toml", "--clamp", check_rc=2)
+    assert "--clamp: no [[clamp]] entries" in proc.stderr

@@ -139,6 +139,13 @@ def solve(
         typer.Option("--batch", help='Solve every *.toml in DIR as Dask tasks: one table (or {"fixtures": [...]}).'),
     ] = None,
     scheduler: SchedulerOpt = None,
+    clamp: Annotated[
+        bool,
+        typer.Option(
+            "--clamp",
+            help="Continue with the clamping stage (the fixture's [[clamp]] and [[load]]: fixplan clamp) once loaded.",
+        ),
+    ] = False,
     json_out: JsonOpt = False,
 ) -> None:
     """Plan the loading of a full fixture and verify it in the simulated haptic loop.
@@ -147,7 +154,8 @@ def solve(
     (exit 0). unverified: a sequence was found but the loop did not confirm it, or --no-verify
     (exit 1). infeasible: no sequence, with the reason (exit 1). Bad input: exit 2.
     With --perturb-seed K the loop runs on perturbed world K of 'fixplan robust' instead of the
-    nominal one. With --batch DIR: exit 0 only if every file is planned.
+    nominal one. With --batch DIR: exit 0 only if every file is planned. With --clamp the plan
+    goes on with the clamping stage (its least forces, order and engine check; exit 1 unless it holds).
     """
     from fixplan.fixture import default_fixture_path, fixture_stamp
     from fixplan.planner.solve import solve as run_solve
@@ -155,8 +163,15 @@ def solve(
     from fixplan.present.report import report_markdown
 
     if batch is not None:
-        if file is not None or out is not None or report is not None or order is not None or perturb_seed is not None:
-            raise InputError("--batch DIR takes no FILE, --out, --report, --order or --perturb-seed")
+        if (
+            file is not None
+            or out is not None
+            or report is not None
+            or order is not None
+            or perturb_seed is not None
+            or clamp
+        ):
+            raise InputError("--batch DIR takes no FILE, --out, --report, --order, --perturb-seed or --clamp")
         _solve_batch(batch, not no_verify, accel, margin, friction_margin, scheduler, json_out)
         return
     if scheduler is not None:
@@ -171,6 +186,10 @@ def solve(
             friction_margin=friction_margin,
         )  # fmt: skip
     fixture = _load(file, "solve")
+    if clamp and not fixture.clamps:
+        raise InputError(
+            f"{fixture.source}: --clamp: no [[clamp]] entries (expected the clamps to apply after loading)"
+        )
     # the plan names its fixture (path and hash of the bytes read) so that 'fixplan verify PLAN' finds it
     stamp = fixture_stamp(file if file is not None else default_fixture_path())
     figure = None if report is None else figure_path(report)
@@ -219,6 +238,15 @@ def solve(
     plan = result.plan.with_extras(**stamp)
     if perturbation is not None:
         plan = plan.with_extras(perturbation=perturbation)
+    clamped = None
+    if clamp:
+        from fixplan.clamping import analyse_clamping
+
+        if plan.status == "infeasible":  # nothing loaded: no clamping stage
+            plan = plan.with_extras(clamping=None)
+        else:  # the part at its located pose, where the plan ends
+            clamped = analyse_clamping(fixture, verify=not no_verify)
+            plan = plan.with_extras(clamping=clamped.to_json())
     payload = plan.to_json()
     if target is not None:
         write_text(target, _json_text(payload) + "\n")
@@ -241,9 +269,11 @@ def solve(
                 f"perturbed world {perturb_seed} (seed {seed}): friction {mu}; start {json.dumps(perturbation['start'])}"
             )
         _print_plan(plan, fixture, {"accel": accel, "friction_margin": friction_margin})
+        if clamped is not None:
+            typer.echo(one_line(f"clamping: {clamped.reason}"))
         if written:
             typer.echo("wrote " + ", ".join(str(p) for p in written))
-    if not plan.ok:
+    if not plan.ok or (clamp and (clamped is None or not clamped.holds)):
         raise typer.Exit(1)
 
 
