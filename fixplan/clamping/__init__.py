@@ -198,7 +198,7 @@ def _held(order: tuple[str, ...], total: float, preload: float, loads: int, v: V
 
 def _least_force(scene: ClampScene, case: Case, forces_N: dict[str, float], settings: Settings) -> LoadResult:
     """The best least locator force of ``case`` at these clamp forces (``max t: every locator ≥ t``)."""
-    fp = build_force_program(scene, (case,), 0.0, given=forces_N, maxmin=True, seat=case.name == "clamped")
+    fp = build_force_program(scene, (case,), 0.0, given=forces_N, maxmin=True)
     a = solve_force_program(scene, fp, settings)
     if not a.found:
         return LoadResult(case.name, False, None, None)
@@ -207,9 +207,9 @@ def _least_force(scene: ClampScene, case: Case, forces_N: dict[str, float], sett
 
 def _case_alone(scene: ClampScene, case: Case, preload: float, settings: Settings) -> tuple[LoadResult, str]:
     """Whether ``case`` alone is held with the clamps free within max_force, and why not."""
-    seat = case.name == "clamped"
-    a = solve_force_program(scene, build_force_program(scene, (case,), preload, seat=seat), settings)
-    fp = build_force_program(scene, (case,), 0.0, maxmin=True, seat=seat)
+    seat = case.seated
+    a = solve_force_program(scene, build_force_program(scene, (case,), preload), settings)
+    fp = build_force_program(scene, (case,), 0.0, maxmin=True)
     best = solve_force_program(scene, fp, settings)
     least = best.min_locator_force_N[case.name] if best.found else None
     weakest = best.weakest_locator[case.name] if best.found else None

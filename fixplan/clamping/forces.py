@@ -138,12 +138,16 @@ class Case:
 
     name: str
     wrench_com: FloatArray  # the load's wrench about the centre of mass (0 for "clamped")
+    seated: bool = False  # the clamped part without load: balanced by normal forces alone (see build_force_program)
 
 
 def cases_of(scene: ClampScene) -> tuple[Case, ...]:
     """``clamped`` (gravity alone), then each ``[[load]]`` in file order."""
     zero = np.zeros(scene.cs.ndof)
-    return (Case("clamped", zero), *(Case(ld.name, scene.load_com(ld.wrench)) for ld in scene.fixture.loads))
+    return (
+        Case("clamped", zero, seated=True),
+        *(Case(ld.name, scene.load_com(ld.wrench)) for ld in scene.fixture.loads),
+    )
 
 
 @dataclass(frozen=True)
@@ -181,7 +185,7 @@ def build_force_program(
     variable is ``t`` and each locator's normal force is ``≥ t`` instead of ``≥ preload``; the
     objective is ``max t`` (the best least locator force those clamps allow).
 
-    ``seat``: the first case (``clamped``, no load) is balanced by the locators' normal forces
+    ``seat``: a ``seated`` case (``clamped``, no load) is balanced by the locators' normal forces
     alone (the clamps seat the part on every locator; the classifier's ``held``). With friction
     allowed there, a rigid body's indeterminacy would let the base's friction "press" the part
     onto a side locator that no clamp pushes it towards (a wedging force nothing drives, which
@@ -209,7 +213,7 @@ def build_force_program(
         for kind, dim in scene.layout.cones:
             blocks.append((A[row : row + dim], np.zeros(dim), (kind, dim)))
             row += dim
-        if j == 0 and seat:  # the clamped part is seated by normal forces alone: no tangential force
+        if case.seated and seat:  # the clamped part is seated by normal forces alone: no tangential force
             tangential = np.setdiff1d(np.arange(nf), scene.layout.normal_index)
             if len(tangential):
                 A = np.zeros((len(tangential), nx))
