@@ -5,7 +5,9 @@ A table holds ``[[case]]`` entries (``file``, ``pose``, ``contacts``, ``wrench``
 (``file``, ``names``), and ``[[plan]]`` entries (``file``, ``status`` planned | infeasible,
 ``verified``, ``first``/``last`` states, ``sequence``, ``binding`` limit named in the reason,
 ``why``, and ``xfail_reason`` where the planner disagrees with the derived outcome: the tests
-mark it as an expected failure) for ``fixplan solve``. ``fixplan validate`` recognises such a
+mark it as an expected failure) for ``fixplan solve``, and ``[[clamp]]`` entries (``file``,
+``holds``, the clamping ``order`` found, a ``refused_order`` and words its reason holds,
+``because``, ``why``) for ``fixplan clamp``. ``fixplan validate`` recognises such a
 file (it has ``case`` entries and no ``format`` key) and checks that every referenced fixture
 exists and loads, that wrenches have the fixture's length, that modes and poses are known and
 that contact names exist.
@@ -24,6 +26,7 @@ KINDS = {
     "wedge": ("file", "wedges", "why"),
     "touching": ("file", "names"),
     "plan": ("file", "status", "verified", "first", "last", "sequence", "binding", "why", "xfail_reason"),
+    "clamp": ("file", "holds", "order", "refused_order", "because", "why"),
 }
 
 
@@ -73,6 +76,16 @@ def check_expectations(path: Path, data: dict[str, Any]) -> tuple[list[Issue], d
             elif kind == "wedge":
                 if not isinstance(entry.get("wedges"), bool):
                     r.error(f"{where}.wedges", "expected true or false")
+                r.string(entry, "why", f"{where}.why", required=True)
+            elif kind == "clamp":
+                clamps = [k.name for k in fixture.clamps]
+                if not clamps:
+                    r.error(f"{where}.file", f"{name} has no [[clamp]] entries (expected a clamped fixture)")
+                if not isinstance(entry.get("holds"), bool):
+                    r.error(f"{where}.holds", "expected true or false")
+                for key in ("order", "refused_order"):
+                    _names(r, entry, key, f"{where}.{key}", clamps)
+                r.string(entry, "because", f"{where}.because")
                 r.string(entry, "why", f"{where}.why", required=True)
             elif kind == "touching":
                 _names(r, entry, "names", f"{where}.names", [loc.name for loc in fixture.locators], required=True)

@@ -35,6 +35,7 @@ from fixplan.geometry.collision import collision_points, obstacle_gap, plane_fra
 from fixplan.locating import find_goal, locator_contact, settle_free_motions, with_free_motions
 from fixplan.model import (
     Bore,
+    Clamp,
     ExplicitContact,
     Fixture,
     Hole,
@@ -42,6 +43,7 @@ from fixplan.model import (
     Manipulator,
     Obstacle,
     Pin,
+    ProcessLoad,
     RobotSpec,
     SimulationSettings,
     Workpiece,
@@ -324,6 +326,11 @@ class _Builder:
             pins=tuple(self.pin(e) for e in doc.pin),
             bores=tuple(self.bore(e) for e in doc.bore),
             robot=self.robot(doc.robot) if doc.robot is not None else None,
+            clamps=tuple(
+                Clamp(e.name, np.array(e.position), _unit(e.direction), e.radius, e.friction, e.max_force, e.force)
+                for e in doc.clamp
+            ),
+            loads=tuple(ProcessLoad(e.name, np.array(e.wrench)) for e in doc.load),
         )
         self.fail_if_issues()
         if fixture.has_pins or workpiece.holes:
@@ -333,6 +340,7 @@ class _Builder:
             fixture = with_free_motions(fixture)  # fewer locators that leave only the part's symmetry free
         goal = self.check_geometry(fixture)
         self.check_obstacles(fixture, goal)
+        self.check_clamps(fixture, goal)
         self.fail_if_issues()
         fixture = replace(fixture, goal_pose=goal, goal_starts=self.goal_starts, warnings=tuple(self.warnings))
         return settle_free_motions(fixture)
@@ -515,6 +523,44 @@ class _Builder:
                 f"normals {rank} < 6; expected 3 rests, a round pin and a diamond pin whose lands do not point at the "
                 "round pin)",
             )
+
+    # -- clamps ---------------------------------------------------------------------------------
+    def check_clamps(self, fixture: Fixture, goal: Pose | None) -> None:
+        """Each clamp's tip on the located part's surface (``|gap| ≤ goal_gap_m``): clamping comes after locating.
+
+        A direction pointing out of the surface is not refused here: ``fixplan clamp`` refuses it
+        with the reason (a tip can only push).
+        """
+        if not fixture.clamps or self.r.issues:
+            return
+        if goal is None:
+            self.r.error(
+                "clamp",
+                f"clamps act at the located pose, which needs a full fixture ({6 if fixture.dimension == 3 else 3} "
+                f"locators); this one has {len(fixture.locators)}",
+            )
+            return
+        tol = self.tol
+        for clamp in fixture.clamps:
+            tip = Locator(clamp.name, clamp.p_world, clamp.radius_m, clamp.friction)
+            gap = locator_contact(fixture.workpiece, goal, tip).gap_m
+            if abs(gap) > tol.goal_gap_m:
+                where = "inside the part" if gap < 0.0 else "away from the part"
+                self.r.error(
+                    f"clamp.{clamp.name}.position",
+                    f"the tip is {abs(gap):.3g} m {where} at the located pose (expected it on the part's surface: "
+                    f"|gap| ≤ {tol.goal_gap_m:g} m)",
+                )
+            for loc in fixture.locators:
+                dist = float(np.linalg.norm(loc.p_world - clamp.p_world))
+                if dist < loc.radius_m + clamp.radius_m or (
+                    loc.radius_m + clamp.radius_m == 0.0 and dist < tol.touch_m
+                ):
+                    self.r.error(
+                        f"clamp.{clamp.name}.position",
+                        f"the tip overlaps locator {loc.name}'s (centres {dist:.3g} m apart; expected ≥ "
+                        f"{loc.radius_m + clamp.radius_m:g} m)",
+                    )
 
     # -- obstacles ---------------------------------------------------------------------------
     def robot(self, e: fixture_schema.Robot) -> RobotSpec | None:
@@ -782,7 +828,15 @@ class _Builder:
         return None
 
 
-_PER_DIMENSION = ("workpiece", "locator", "contact", "pin", "bore")  # tables whose keys need the scene's dimension
+_PER_DIMENSION = (
+    "workpiece",
+    "locator",
+    "contact",
+    "pin",
+    "bore",
+    "clamp",
+    "load",
+)  # tables whose keys need the scene's dimension
 
 
 def _dimension_of(data: dict[str, Any]) -> int | None:

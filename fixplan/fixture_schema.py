@@ -852,6 +852,93 @@ class Robot(Table):
         return set(cls.model_fields), []
 
 
+class WrenchValue(Vector):
+    """A wrench about the workpiece's body origin, world axes: 6 numbers in 3D, ``Fx, Fy, Mz`` in 2D."""
+
+    def size(self, dim: int | None) -> int | None:
+        return None if dim is None else (6 if dim == 3 else 3)
+
+    def expected(self, dim: int | None) -> str:
+        n = self.size(dim)
+        return f"{n} numbers" if n is not None else "6 numbers (3D) or 3 (2D)"
+
+    def check_list(self, value: Any, handler: Callable[[Any], list[float]], info: ValidationInfo) -> Any:
+        n = self.size(_dimension(info))
+        if isinstance(value, list) and n is not None and len(value) != n:
+            what = "Fx, Fy, Fz, Tx, Ty, Tz" if n == 6 else "Fx, Fy, Mz"
+            _fail(f"got {len(value)} numbers (expected {n} for a {3 if n == 6 else 2}D scene: {what})")
+        return super().check_list(value, handler, info)
+
+    def after(self, values: list[float], info: ValidationInfo) -> Any:
+        for i, (x, bounds) in enumerate(zip(values, limits.wrench_ranges(len(values)), strict=True)):
+            if not bounds.contains(x):
+                _fail(f"component {i} is {quote_number(x)} (expected {bounds.expected()})")
+        return tuple(values)
+
+    def schema(self) -> dict[str, Any]:
+        return super().schema() | {"minItems": 3, "maxItems": 6}
+
+
+_WRENCH = Range(
+    "a force [N] or moment [N·m] component",
+    "N, N·m",
+    -max(limits.FORCE_MAX_N, limits.TORQUE_MAX_NM),
+    max(limits.FORCE_MAX_N, limits.TORQUE_MAX_NM),
+)
+_CLAMP_FORCE = Number("a force [N]", limits.MAX_FORCE, exclusive_minimum=0.0)
+
+
+class Clamp(Table):
+    """``[[clamp]]``: a clamp applied after loading, its spherical tip touching the located part."""
+
+    name: Annotated[str, Name()] = Field(
+        description="Unique among locators, contacts, obstacles, pins, bores, clamps and loads."
+    )
+    position: Annotated[tuple[float, ...], Vector(bounds=limits.COORDINATE)] = Field(
+        description="Centre of the clamp's spherical tip when it touches the located part, world frame."
+    )
+    direction: Annotated[tuple[float, ...], Direction()] = Field(
+        description="The direction in which it pushes the part, world frame (normalised on load)."
+    )
+    radius: Annotated[float, Number("a tip radius [m]", limits.TIP_RADIUS, minimum=0.0)] = Field(
+        0.0, description="Tip radius; 0 is a point."
+    )
+    friction: Annotated[float, Number("a friction coefficient", limits.FRICTION, minimum=0.0)] = Field(
+        description="Coulomb coefficient μ of the tip on the part: the direction must lie within its friction cone."
+    )
+    max_force: Annotated[float, _CLAMP_FORCE] = Field(description="The largest force the clamp exerts.")
+    force: Annotated[float | None, _CLAMP_FORCE] = Field(
+        None, description="A clamp of fixed force (a toggle clamp): checked, not computed; at most max_force."
+    )
+
+    @classmethod
+    def rules(cls, data: Mapping[str, Any], context: Mapping[str, Any]) -> tuple[set[str], list[tuple[tuple, str]]]:
+        errors: list[tuple[tuple, str]] = []
+        force, top = data.get("force"), data.get("max_force")
+        if _is_number(force) and _is_number(top):
+            f, m = _as_float(force), _as_float(top)  # type: ignore[arg-type]  # numbers, checked just above
+            if f is not None and m is not None and math.isfinite(f) and math.isfinite(m) and f > m:
+                errors.append(
+                    (
+                        ("force",),
+                        f"got {quote_number(force)} N, above max_force = {quote_number(top)} N (expected a fixed force ≤ max_force)",
+                    )
+                )
+        return set(cls.model_fields), errors
+
+
+class Load(Table):
+    """``[[load]]``: a process load (a cutting force) the clamped part must hold."""
+
+    name: Annotated[str, Name()] = Field(
+        description="Unique among locators, contacts, obstacles, pins, bores, clamps and loads."
+    )
+    wrench: Annotated[tuple[float, ...], WrenchValue(bounds=_WRENCH)] = Field(
+        description="Fx, Fy, Fz, Tx, Ty, Tz about the workpiece's body-frame origin, world axes (2D: Fx, Fy, Mz), "
+        "in addition to gravity."
+    )
+
+
 class FixtureFile(Table):
     """A fixture file: ``docs/fixture-format.md``."""
 
@@ -861,6 +948,8 @@ class FixtureFile(Table):
         "obstacle",
         "pin",
         "bore",
+        "clamp",
+        "load",
     )  # arrays of tables whose names are unique across all
 
     format: Annotated[int, Integer((1,))] = Field(description="The file format's version.")
@@ -880,6 +969,12 @@ class FixtureFile(Table):
     )
     bore: Annotated[tuple[Bore, ...], TablesOf("bore")] = Field(
         (), description="A cylindrical hole in the fixture for a cylindrical part (a peg)."
+    )
+    clamp: Annotated[tuple[Clamp, ...], TablesOf("clamp")] = Field(
+        (), description="A clamp applied after loading, at the located pose (`fixplan clamp`)."
+    )
+    load: Annotated[tuple[Load, ...], TablesOf("load")] = Field(
+        (), description="A process load the clamped part must hold (`fixplan clamp`)."
     )
     manipulator: Manipulator | None = Field(None, description="What the hand/robot can exert on the workpiece.")
     robot: Robot | None = Field(None, description="The arm that carries the part (3D; checked along the plan).")
@@ -1011,7 +1106,7 @@ def _dimension_rules() -> list[dict[str, Any]]:
         }
         if dim == 2:
             entry["not"] = {"required": ["torsion"]}
-        then = {
+        then: dict[str, Any] = {
             "properties": {
                 "scene": {"properties": {"gravity": vectors(dim)}},
                 "workpiece": {
@@ -1023,6 +1118,8 @@ def _dimension_rules() -> list[dict[str, Any]]:
                     }
                 },
                 "locator": {"items": entry},
+                "clamp": {"items": {"properties": {"position": vectors(dim), "direction": vectors(dim)}}},
+                "load": {"items": {"properties": {"wrench": vectors(6 if dim == 3 else 3)}}},
                 "contact": {"items": entry},
                 "obstacle": {
                     "items": {

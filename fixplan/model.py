@@ -126,6 +126,33 @@ class Obstacle:
 
 
 @dataclass(frozen=True)
+class Clamp:
+    """A clamp applied after loading (``[[clamp]]``): its tip touches the located part and pushes along a direction.
+
+    ``p_world`` is the centre of the spherical tip (radius ``radius_m``) when it touches the part
+    at the located pose; ``direction_world`` (unit) the direction it pushes the part;
+    ``force_N`` a fixed force (a toggle clamp), else None: the force is computed within
+    ``max_force_N``.
+    """
+
+    name: str
+    p_world: FloatArray
+    direction_world: FloatArray
+    radius_m: float
+    friction: float
+    max_force_N: float
+    force_N: float | None = None
+
+
+@dataclass(frozen=True)
+class ProcessLoad:
+    """A process load the clamped part must hold (``[[load]]``): a wrench about the body origin, world axes."""
+
+    name: str
+    wrench: FloatArray  # (6,) in 3D, (Fx, Fy, Mz) in 2D
+
+
+@dataclass(frozen=True)
 class Manipulator:
     """What the hand or robot can exert on the workpiece."""
 
@@ -206,6 +233,8 @@ class Fixture:
     pins: tuple[Pin, ...] = ()  # [[pin]]: locating pins in the part's holes
     bores: tuple[Bore, ...] = ()  # [[bore]]: holes in the fixture for a cylindrical part
     robot: RobotSpec | None = None  # [robot]: the arm that carries the part (checked along a plan)
+    clamps: tuple[Clamp, ...] = ()  # [[clamp]]: applied after loading, at the located pose
+    loads: tuple[ProcessLoad, ...] = ()  # [[load]]: process loads the clamped part must hold
 
     @property
     def has_pins(self) -> bool:
@@ -363,6 +392,7 @@ def require_full(fixture: Fixture, what: str) -> None:
 
 __all__ = [
     "Bore",
+    "Clamp",
     "ExplicitContact",
     "Fixture",
     "Hole",
@@ -371,6 +401,7 @@ __all__ = [
     "Obstacle",
     "Pin",
     "RobotSpec",
+    "ProcessLoad",
     "SimulationSettings",
     "Workpiece",
     "nearest_symmetric_pose",

@@ -774,6 +774,9 @@ class PlanFile(JsonObject):
     robot: Annotated[Any, AnyObject(nullable=True)] = Field(
         None, description="The fixture's [robot] along the plan (kept as written; `solve` recomputes it)."
     )
+    clamping: Annotated[Any, AnyObject(nullable=True)] = Field(
+        None, description="--clamp: the clamping stage after loading (fixplan clamp's JSON)."
+    )
 
 
 class Where(JsonObject):

@@ -888,6 +888,59 @@ class RobotSettings:
 
 
 @dataclass(frozen=True)
+class ClampSettings:
+    """Clamping after loading (:mod:`fixplan.clamping`): the least clamp forces, the order, the check in the engine.
+
+    Attributes
+    ----------
+    preload_N : float
+        Least normal force every locator keeps once clamped, under every load (``--preload``).
+    balance_rel : float
+        A clamping prefix holds when the least ``M⁻¹``-weighted balance residual of gravity and
+        its clamps, over the wrench's own norm, is at most this (as the classifier's ``balance_rel``).
+    residual_N : float
+        Largest equilibrium or cone residual [N, N·m] accepted in an answer of the force program.
+    lift_rel : float
+        In a failure's explanation, a locator lifts when its normal acceleration exceeds this
+        fraction of the largest (it is kept below).
+    spin_rel : float
+        ... and the part tips (not slides) when its angular acceleration times its size exceeds
+        this fraction of the linear one.
+    ramp_s, settle_s, hold_s : float
+        In the engine: each clamp ramps to its force over ``ramp_s`` (the hand holding the part),
+        the part settles ``settle_s`` after the hand lets go, each load ramps over ``ramp_s`` and
+        is held ``hold_s``.
+    displacement_m : float
+        The part has not moved when no point of it is farther than this from its located pose
+        (1e-9 m: rigid contacts, in principle).
+    contact_N : float
+        In the engine, a locator touching with less normal force than this is reported as unloaded.
+    max_order_clamps : int
+        The order search tries subsets of at most this many clamps (2ⁿ cone programs).
+    direction_rel : float
+        A clamp's direction is within its tip's friction cone when its tangential part is at most
+        ``μ`` times its normal part plus this (round-off of a direction given along the normal).
+    axis_rel : float
+        In a tipping explanation, a locator lies on the tipping axis when it is within this
+        fraction of the part's size of it.
+    """
+
+    preload_N: float = 1.0
+    balance_rel: float = 1e-6
+    residual_N: float = 1e-6
+    lift_rel: float = 1e-3
+    spin_rel: float = 0.1
+    ramp_s: float = 0.05
+    settle_s: float = 0.05
+    hold_s: float = 0.1
+    displacement_m: float = 1e-9
+    contact_N: float = 1e-6
+    max_order_clamps: int = 12
+    direction_rel: float = 1e-9
+    axis_rel: float = 0.05
+
+
+@dataclass(frozen=True)
 class Settings:
     """One of each group: what a profile selects."""
 
@@ -909,6 +962,7 @@ class Settings:
     mesh: MeshSettings = field(default_factory=MeshSettings)
     pins: PinSettings = field(default_factory=PinSettings)
     robot: RobotSettings = field(default_factory=RobotSettings)
+    clamp: ClampSettings = field(default_factory=ClampSettings)
 
     def with_(self, **changes: Any) -> Settings:
         """A copy with some groups replaced."""

@@ -163,6 +163,14 @@ def _map_world(doc: Mapping[str, Any], dim: int, A: FloatArray, t: FloatArray, f
     for entry in out.get("contact") or []:
         entry["point"] = point(entry["point"])
         entry["normal"] = direction(entry["normal"])
+    for entry in out.get("clamp") or []:
+        entry["position"] = point(entry["position"])
+        entry["direction"] = direction(entry["direction"])
+    sign = float(np.sign(np.linalg.det(A)))  # a moment is a pseudo-vector: a mirror turns it over
+    for entry in out.get("load") or []:  # about the body origin, which moves with the part
+        w = np.asarray(entry["wrench"], dtype=float)
+        moment = sign * (A @ w[3:]) if dim == 3 else sign * w[2:]
+        entry["wrench"] = [*direction(w[:dim]), *(float(v) for v in moment)]
     for entry in out.get("obstacle") or []:  # planes map as a point and a normal, boxes as a pose
         if "point" in entry:
             entry["point"] = point(entry["point"])

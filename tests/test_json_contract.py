@@ -48,9 +48,24 @@ def run_json(capsys, *args: str) -> tuple[int, dict | None]:
 def test_every_json_command_is_covered():
     commands = typer.main.get_command(app).commands
     with_json = {n for n, c in commands.items() if any("--json" in getattr(p, "opts", ()) for p in c.params)}
-    covered = {"classify", "search", "map", "simulate", "solve", "view", "fclib", "generate", "robust"}
+    covered = {"classify", "search", "map", "simulate", "solve", "view", "fclib", "generate", "robust", "clamp"}
     covered |= {"haptic", "device-sim", "verify"}  # strict-JSON checks in tests/test_interactive_cli.py
     assert with_json <= covered, f"--json commands without a contract test: {sorted(with_json - covered)}"
+
+
+# ---------------------------------------------------------------------------------- clamp
+@pytest.mark.parametrize("path", [p for p in FIXTURES if _fixture(p).clamps], ids=lambda p: p.stem)
+def test_clamp(capsys, path):
+    for extra in ((), ("--order", ",".join(reversed([k.name for k in _fixture(path).clamps])))):
+        rc, data = run_json(capsys, "clamp", str(path), "--no-verify", *extra)
+        assert data is not None and rc == (0 if data["holds"] else 1)
+        assert {"holds", "order", "forces_N", "loads", "verification", "reason"} <= set(data)
+        assert all({"name", "holds", "min_locator_force_N"} <= set(x) for x in data["loads"])
+
+
+def test_clamp_without_clamps_is_bad_input(capsys):
+    rc, data = run_json(capsys, "clamp", str(PROBLEMS / "box-3-2-1.toml"))
+    assert rc == 2 and data is None
 
 
 # ---------------------------------------------------------------------------------- classify

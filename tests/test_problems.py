@@ -125,7 +125,7 @@ def test_validate_rejects_a_broken_verdict_table(tmp_path: Path) -> None:
 def test_expected_names_existing_files_and_is_well_formed() -> None:
     data = _expected()
     assert data, f"{EXPECTED} is missing or empty"
-    assert set(data) <= {"case", "wedge", "touching", "plan"}, sorted(data)
+    assert set(data) <= {"case", "wedge", "touching", "plan", "clamp"}, sorted(data)
     cases = data.get("case", [])
     assert len(cases) >= 40
     existing = {p.name for p in _problem_files()}

@@ -16,6 +16,6 @@ from __future__ import annotations
 from fixplan.cli._app import app, main
 
 # the command modules register their commands on app, in the order --help lists them
-from fixplan.cli import analysis, planning, tools, haptic  # noqa: E402, F401, I001  isort: skip
+from fixplan.cli import analysis, planning, tools, haptic, clamp  # noqa: E402, F401, I001  isort: skip
 
 __all__ = ["app", "main"]

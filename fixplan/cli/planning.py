@@ -143,6 +143,13 @@ def solve(
         typer.Option("--batch", help='Solve every *.toml in DIR as Dask tasks: one table (or {"fixtures": [...]}).'),
     ] = None,
     scheduler: SchedulerOpt = None,
+    clamp: Annotated[
+        bool,
+        typer.Option(
+            "--clamp",
+            help="Continue with the clamping stage (the fixture's [[clamp]] and [[load]]: fixplan clamp) once loaded.",
+        ),
+    ] = False,
     json_out: JsonOpt = False,
 ) -> None:
     """Plan the loading of a full fixture and verify it in the simulated haptic loop.
@@ -151,7 +158,8 @@ def solve(
     (exit 0). unverified: a sequence was found but the loop did not confirm it, or --no-verify
     (exit 1). infeasible: no sequence, with the reason (exit 1). Bad input: exit 2.
     With --perturb-seed K the loop runs on perturbed world K of 'fixplan robust' instead of the
-    nominal one. With --batch DIR: exit 0 only if every file is planned.
+    nominal one. With --batch DIR: exit 0 only if every file is planned. With --clamp the plan
+    goes on with the clamping stage (its least forces, order and engine check; exit 1 unless it holds).
     """
     from fixplan.fixture import default_fixture_path, fixture_stamp
     from fixplan.planner.solve import solve as run_solve
@@ -159,8 +167,15 @@ def solve(
     from fixplan.present.report import report_markdown
 
     if batch is not None:
-        if file is not None or out is not None or report is not None or order is not None or perturb_seed is not None:
-            raise InputError("--batch DIR takes no FILE, --out, --report, --order or --perturb-seed")
+        if (
+            file is not None
+            or out is not None
+            or report is not None
+            or order is not None
+            or perturb_seed is not None
+            or clamp
+        ):
+            raise InputError("--batch DIR takes no FILE, --out, --report, --order, --perturb-seed or --clamp")
         _solve_batch(batch, not no_verify, accel, margin, friction_margin, scheduler, json_out)
         return
     if scheduler is not None:
@@ -176,6 +191,10 @@ def solve(
             force_noise=force_noise, latency_ms=latency_ms, accel=accel, margin=margin,
             friction_margin=friction_margin,
         )  # fmt: skip
+    if clamp and not fixture.clamps:
+        raise InputError(
+            f"{fixture.source}: --clamp: no [[clamp]] entries (expected the clamps to apply after loading)"
+        )
     # the plan names its fixture (path and hash of the bytes read) so that 'fixplan verify PLAN' finds it
     stamp = fixture_stamp(file if file is not None else default_fixture_path())
     figure = None if report is None else figure_path(report)
@@ -224,6 +243,15 @@ def solve(
     plan = result.plan.with_extras(**stamp)
     if perturbation is not None:
         plan = plan.with_extras(perturbation=perturbation)
+    clamped = None
+    if clamp:
+        from fixplan.clamping import analyse_clamping
+
+        if plan.status == "infeasible":  # nothing loaded: no clamping stage
+            plan = plan.with_extras(clamping=None)
+        else:  # the part at its located pose, where the plan ends
+            clamped = analyse_clamping(fixture, verify=not no_verify)
+            plan = plan.with_extras(clamping=clamped.to_json())
     payload = plan.to_json()
     if target is not None:
         write_text(target, _json_text(payload) + "\n")
@@ -246,9 +274,11 @@ def solve(
                 f"perturbed world {perturb_seed} (seed {seed}): friction {mu}; start {json.dumps(perturbation['start'])}"
             )
         _print_plan(plan, fixture, {"accel": accel, "friction_margin": friction_margin})
+        if clamped is not None:
+            typer.echo(one_line(f"clamping: {clamped.reason}"))
         if written:
             typer.echo("wrote " + ", ".join(str(p) for p in written))
-    if not plan.ok:
+    if not plan.ok or (clamp and (clamped is None or not clamped.holds)):
         raise typer.Exit(1)
 
 
@@ -478,7 +508,16 @@ def view(
     check_distinct([("FILE", file), ("--plan", plan), ("--out", out)])
     target = _writable(out, force)
     replay = rest_replay(fixture) if plan is None else read_plan(plan, fixture)
-    fig = scene_figure(fixture, replay, max_frames=frames)
+    clamp_forces = None
+    if fixture.clamps:  # the clamps at their least forces (fixplan clamp's program), drawn at the located pose
+        from fixplan.clamping import analyse_clamping
+        from fixplan.errors import FixplanError
+
+        try:
+            clamp_forces = analyse_clamping(fixture, verify=False).forces_N or None
+        except FixplanError:  # too many clamps for the order search: drawn without their forces
+            clamp_forces = None
+    fig = scene_figure(fixture, replay, max_frames=frames, clamp_forces_N=clamp_forces)
     size = write_scene(fig, target)  # through files.write_output
     info = scene_info(fig)
     if json_out:

@@ -679,7 +679,7 @@ class Simulator:
                 self._nw[r], self._u[r] = n_w[nt + j], u[nt + j]
         return err, iters, status, failures, pen
 
-    def _pin_contacts(self, i: int) -> list[tuple[FloatArray, float, FloatArray, float, float]]:
+    def _pin_contacts(self, i: int) -> list[tuple[FloatArray, float, FloatArray, float, float, float]]:
         """Pin or bore ``i``'s contacts in the last step: ``(force_world, normal force, normal, slip, gap)`` each."""
         ps = self._pin_last
         if ps is None:
@@ -692,7 +692,8 @@ class Simulator:
             t1, t2 = tangent_basis(n)
             force = (P[0] * n + P[1] * t1 + P[2] * t2) / self.dt if on else np.zeros(3)
             slip = float(np.hypot(self._pin_slot_u[j, 1], self._pin_slot_u[j, 2]))
-            out.append((force, float(P[0]) / self.dt if on else 0.0, n.copy(), slip, float(self._pin_slot_gap[j])))
+            # (a pin's contacts have no spin row: their spin moment is 0, the last entry as a mesh contact's)
+            out.append((force, float(P[0]) / self.dt if on else 0.0, n.copy(), slip, float(self._pin_slot_gap[j]), 0.0))
         return out
 
     def _obstacle_points_near(self, margin: float) -> NDArray[np.intp]:
@@ -821,7 +822,7 @@ class Simulator:
 
     def _mesh_report(
         self, i: int, name: str, gap_m: float, omega: float,
-        touches: list[tuple[FloatArray, float, FloatArray, float, float]] | None = None,
+        touches: list[tuple[FloatArray, float, FloatArray, float, float, float]] | None = None,
     ) -> ContactReport:  # fmt: skip
         """A mesh part's locator (or a pin, ``touches`` given): its contacts' forces summed, one :class:`ContactTouch` per contact."""
         touches = self._mesh_contacts(i) if touches is None else touches

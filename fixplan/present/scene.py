@@ -60,6 +60,10 @@ FORCE = "#ff7f0e"
 PUSH = "#2ca02c"
 ARM = "#6b4c9a"  # the robot arm's stick figure
 PATH = "#17becf"
+CLAMP = "#9467bd"
+CLAMP_ARROW_MAX_NORMALS = (
+    6.0  # the longest clamp arrow, in contact-normal lengths (a big clamp force stays on the page)
+)
 
 
 def frame_indices(n_samples: int, max_frames: int = MAX_FRAMES) -> IntArray:
@@ -132,8 +136,19 @@ class SceneInfo:
     traces: dict[str, int]  # trace name → index in fig.data
 
 
-def scene_figure(fixture: Fixture, replay: Replay, *, max_frames: int = MAX_FRAMES) -> Any:
+def scene_figure(
+    fixture: Fixture,
+    replay: Replay,
+    *,
+    max_frames: int = MAX_FRAMES,
+    clamp_forces_N: dict[str, float] | None = None,
+) -> Any:
     """The plotly figure of ``replay``: a still scene for one sample, else an animation.
+
+    A fixture's ``[[clamp]]`` entries are drawn at the located pose (they act after loading):
+    each tip and an arrow along its direction ending on the part, as long as its force at the
+    contact forces' scale when ``clamp_forces_N`` gives it (``fixplan clamp``'s least forces),
+    else of the normals' length; the labels name the clamps and their forces.
 
     Frames update only the traces that move (workpiece, pressed highlight, normals, forces,
     push); the axes are fixed over the whole replay. ``fig.layout.meta`` holds the
@@ -278,6 +293,8 @@ def scene_figure(fixture: Fixture, replay: Replay, *, max_frames: int = MAX_FRAM
         static[f"pin {name}"] = _mesh3d(
             go, V_pin, F_pin, color=LOCATOR, opacity=0.9, flatshading=True, name=name, showlegend=True, hoverinfo="name"
         )
+    if fixture.clamps:
+        static.update(_clamp_traces(fixture, go, arrows, clamp_forces_N, scale, normal_len))
     if fixture.contacts:
         pts = np.array([c.point_world for c in fixture.contacts]).reshape(-1, d)
         nrm = np.array([c.normal_world for c in fixture.contacts]).reshape(-1, d)
@@ -425,6 +442,42 @@ def _locator_mesh(fixture: Fixture, go: Any) -> tuple[Any, list[int]]:
         hoverinfo="skip",
     )
     return mesh, owner
+
+
+def _clamp_traces(
+    fixture: Fixture,
+    go: Any,
+    arrows: Any,
+    forces_N: dict[str, float] | None,
+    scale_m_per_N: float,
+    normal_len_m: float,
+) -> dict[str, Any]:
+    """The clamps: their tips (labelled with name and force) and arrows along their directions, ending on the part."""
+    d = fixture.dimension
+    tips = np.array([k.p_world for k in fixture.clamps]).reshape(-1, d)
+    dirs = np.array([k.direction_world for k in fixture.clamps]).reshape(-1, d)
+    ends = tips + np.array([k.radius_m for k in fixture.clamps])[:, None] * dirs  # where the tip meets the part
+    if forces_N is not None and scale_m_per_N > 0.0:
+        lengths = np.array([forces_N.get(k.name, 0.0) * scale_m_per_N for k in fixture.clamps])
+    else:
+        lengths = np.full(len(fixture.clamps), normal_len_m)
+    lengths = np.clip(lengths, 0.25 * normal_len_m, CLAMP_ARROW_MAX_NORMALS * normal_len_m)  # 0 N still shows
+    vectors = dirs * lengths[:, None]
+    labels = [
+        f"{k.name} {forces_N[k.name]:.3g} N" if forces_N is not None and k.name in forces_N else k.name
+        for k in fixture.clamps
+    ]
+    text = {"text": labels, "mode": "markers+text", "textposition": "top center", "name": "clamps", "hoverinfo": "text"}
+    marker = {"size": 6, "color": CLAMP, "symbol": "square"}
+    if d == 3:
+        tip_trace = go.Scatter3d(
+            x=_rounded(tips[:, 0]), y=_rounded(tips[:, 1]), z=_rounded(tips[:, 2]), marker=marker, **text
+        )
+    else:
+        tip_trace = go.Scatter(x=_rounded(tips[:, 0]), y=_rounded(tips[:, 1]), marker=marker | {"size": 9}, **text)
+    # arrows() scales by the contact forces' scale; hand it vectors already in metres
+    unit = scale_m_per_N if scale_m_per_N > 0.0 else 1.0
+    return {"clamps": tip_trace, "clamp forces": arrows(ends - vectors, vectors / unit, "clamp pushes", CLAMP)}
 
 
 def _locator_labels(fixture: Fixture, go: Any) -> Any:
