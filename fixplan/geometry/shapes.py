@@ -96,18 +96,23 @@ class Box(Shape):
 
     @property
     def half(self) -> FloatArray:
+        return self._half.copy()
+
+    @functools.cached_property
+    def _half(self) -> FloatArray:
+        """The half extents, computed once (``project`` runs for every locator at every tick)."""
         return np.asarray(self.size, dtype=float) / 2.0
 
     def project(self, p_body: FloatArray) -> Projection:
-        return _box_project(np.asarray(p_body, dtype=float), self.half)
+        return _box_project(np.asarray(p_body, dtype=float), self._half)
 
     def inertia_body(self, mass_kg: float) -> FloatArray:
         a, b, c = self.size
         return mass_kg / 12.0 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
 
-    @property
+    @functools.cached_property
     def bounding_radius(self) -> float:
-        return float(np.linalg.norm(self.half))
+        return float(np.linalg.norm(self._half))
 
     def face_of(self, p_body: FloatArray) -> str | None:
         q = np.abs(p_body) - self.half
@@ -125,18 +130,23 @@ class Rectangle(Shape):
 
     @property
     def half(self) -> FloatArray:
+        return self._half.copy()
+
+    @functools.cached_property
+    def _half(self) -> FloatArray:
+        """The half extents, computed once (``project`` runs for every locator at every tick)."""
         return np.asarray(self.size, dtype=float) / 2.0
 
     def project(self, p_body: FloatArray) -> Projection:
-        return _box_project(np.asarray(p_body, dtype=float), self.half)
+        return _box_project(np.asarray(p_body, dtype=float), self._half)
 
     def inertia_body(self, mass_kg: float) -> FloatArray:
         w, h = self.size
         return np.array([[mass_kg * (w * w + h * h) / 12.0]])
 
-    @property
+    @functools.cached_property
     def bounding_radius(self) -> float:
-        return float(np.linalg.norm(self.half))
+        return float(np.linalg.norm(self._half))
 
     def face_of(self, p_body: FloatArray) -> str | None:
         q = np.abs(p_body) - self.half
@@ -280,6 +290,11 @@ class Polygon(Shape):
         return Projection(float(d[k]), C[k], normal)
 
     def _area_terms(self) -> tuple[float, FloatArray, float]:
+        area, c, j = self._area_terms_once
+        return area, c.copy(), j
+
+    @functools.cached_property
+    def _area_terms_once(self) -> tuple[float, FloatArray, float]:
         V = self.array
         x, y = V[:, 0], V[:, 1]
         xn, yn = np.roll(x, -1), np.roll(y, -1)
@@ -304,6 +319,6 @@ class Polygon(Shape):
         j_centroid = j_origin / area - float(c @ c)  # per unit mass
         return np.array([[mass_kg * j_centroid]])
 
-    @property
+    @functools.cached_property
     def bounding_radius(self) -> float:
         return float(np.linalg.norm(self.array, axis=1).max())
