@@ -50,7 +50,8 @@ ENV = "FIXPLAN_KERNELS"  # "jit" forces numba's dispatchers
 # and its compiled loop, the spatial step and the haptic loop's spatial coupling; a mesh part's
 # AABB tree and point queries). A 3D solve that reached any of the spatial kernels through numba
 # paid its start (about 0.8 s) in every process. A mesh part's engine step, detection included,
-# is one kernel too.
+# is one kernel too, and so are the pins' contacts and slots (a first simulation of a part on
+# pins compiled them for 40-50 s).
 EXPORTS: tuple[tuple[str, str], ...] = (
     ("fixplan.engine.step", "step2"),
     ("fixplan.engine.step", "run2"),
@@ -63,6 +64,8 @@ EXPORTS: tuple[tuple[str, str], ...] = (
     ("fixplan.geometry._mesh_kernels", "build_tree"),
     ("fixplan.geometry._mesh_kernels", "contacts"),
     ("fixplan.engine._mesh_slot_kernels", "mesh_step3"),
+    ("fixplan.geometry._pin_kernels", "pose_contacts"),
+    ("fixplan.engine._pin_slot_kernels", "pin_slots"),
 )
 
 fallbacks: dict[str, int] = {}  # "module.name" -> calls that matched no compiled variant

@@ -276,6 +276,32 @@ def test_a_mesh_part_steps_identically(monkeypatch) -> None:
     assert not any(key.startswith("fixplan.engine._mesh_slot_kernels") for key in aot.fallbacks)
 
 
+@needs_build
+def test_a_part_on_pins_steps_identically(monkeypatch) -> None:
+    """Simulator.step of the housing on two pins (the pins' contacts and slots), AOT vs JIT."""
+    from fixplan.engine import pin_slots as pin_slots_module
+
+    fx = fixplan.load(PROBLEMS / "housing-2-pins.toml")
+    push = np.array([0.5, -0.3, -5.0, 0.01, -0.02, 0.0])
+
+    def simulate() -> list[np.ndarray]:
+        sim = Simulator(fx)
+        out = []
+        for _ in range(100):
+            info = sim.step(push)
+            out.append(np.concatenate([sim.pose.p_world, sim.pose.R_world_body.ravel(), sim.twist, [info.error]]))
+        return out
+
+    states_aot = simulate()
+    assert isinstance(pin_slots_module._pose_contacts, aot._AotKernel)
+    assert isinstance(pin_slots_module._pin_slots, aot._AotKernel)
+    monkeypatch.setattr(pin_slots_module, "_pose_contacts", _jit("fixplan.geometry._pin_kernels", "pose_contacts"))
+    monkeypatch.setattr(pin_slots_module, "_pin_slots", _jit("fixplan.engine._pin_slot_kernels", "pin_slots"))
+    states_jit = simulate()
+    assert all(np.array_equal(a, b) for a, b in zip(states_aot, states_jit, strict=True))
+    assert not any("_pin" in key for key in aot.fallbacks)
+
+
 def _solve_json(path: Path, env: dict[str, str]) -> tuple[dict, list[str]]:
     code = (
         "import json, sys; from fixplan.cli import main; from fixplan import aot\n"

@@ -159,6 +159,25 @@ def _mesh_simulation(tmp: Path) -> None:
         sim.step(np.zeros(6))
 
 
+def _pin_simulation() -> None:
+    """Simulator.step of the library's housing on two pins (the pin kernels: contacts and slots).
+
+    Skipped outside a checkout (an installed wheel has no ``problems/``): the kernels then compile
+    on their first use.
+    """
+    import numpy as np
+
+    import fixplan
+    from fixplan.engine.simulator import Simulator
+
+    path = Path(fixplan.__file__).resolve().parents[1] / "problems" / "housing-2-pins.toml"
+    if not path.is_file():
+        return
+    sim = Simulator(fixplan.load(path))
+    for _ in range(3):
+        sim.step(np.zeros(6))
+
+
 def steps(tmp: Path) -> list[tuple[str, Callable[[], None]]]:
     """The workloads, in order: (label, function)."""
     from fixplan import default_fixture_path
@@ -183,6 +202,7 @@ def steps(tmp: Path) -> list[tuple[str, Callable[[], None]]]:
         ("FCLib solvers", _fclib_problems),
         ("mesh queries", _mesh_queries),
         ("mesh part in the engine", lambda: _mesh_simulation(tmp)),
+        ("pins in the engine", _pin_simulation),
     ]
 
 
