@@ -252,6 +252,16 @@ def test_a_2d_simulation_steps_and_runs_identically(monkeypatch, name: str) -> N
     assert not any(key.startswith("fixplan.engine.step") for key in aot.fallbacks)
 
 
+def _states(fx: fixplan.Fixture, push: np.ndarray) -> list[np.ndarray]:
+    """100 Simulator steps under ``push``: pose, rotation, twist and residual after each."""
+    sim = Simulator(fx)
+    out = []
+    for _ in range(100):
+        info = sim.step(push)
+        out.append(np.concatenate([sim.pose.p_world, sim.pose.R_world_body.ravel(), sim.twist, [info.error]]))
+    return out
+
+
 @needs_build
 def test_a_mesh_part_steps_identically(monkeypatch) -> None:
     """Simulator.step of a mesh part (detection, slots and step in one kernel), AOT vs JIT."""
@@ -259,19 +269,10 @@ def test_a_mesh_part_steps_identically(monkeypatch) -> None:
 
     fx = fixplan.load(PROBLEMS / "meshes" / "l-bracket.toml")
     push = np.array([-1.0, 0.5, -2.0, 0.01, 0.0, 0.02])
-
-    def simulate() -> list[np.ndarray]:
-        sim = Simulator(fx)
-        out = []
-        for _ in range(100):
-            info = sim.step(push)
-            out.append(np.concatenate([sim.pose.p_world, sim.pose.R_world_body.ravel(), sim.twist, [info.error]]))
-        return out
-
-    states_aot = simulate()
+    states_aot = _states(fx, push)
     assert isinstance(mesh_slots_module._mesh_step3, aot._AotKernel)
     monkeypatch.setattr(mesh_slots_module, "_mesh_step3", _jit("fixplan.engine._mesh_slot_kernels", "mesh_step3"))
-    states_jit = simulate()
+    states_jit = _states(fx, push)
     assert all(np.array_equal(a, b) for a, b in zip(states_aot, states_jit, strict=True))
     assert not any(key.startswith("fixplan.engine._mesh_slot_kernels") for key in aot.fallbacks)
 
@@ -283,21 +284,12 @@ def test_a_part_on_pins_steps_identically(monkeypatch) -> None:
 
     fx = fixplan.load(PROBLEMS / "housing-2-pins.toml")
     push = np.array([0.5, -0.3, -5.0, 0.01, -0.02, 0.0])
-
-    def simulate() -> list[np.ndarray]:
-        sim = Simulator(fx)
-        out = []
-        for _ in range(100):
-            info = sim.step(push)
-            out.append(np.concatenate([sim.pose.p_world, sim.pose.R_world_body.ravel(), sim.twist, [info.error]]))
-        return out
-
-    states_aot = simulate()
+    states_aot = _states(fx, push)
     assert isinstance(pin_slots_module._pose_contacts, aot._AotKernel)
     assert isinstance(pin_slots_module._pin_slots, aot._AotKernel)
     monkeypatch.setattr(pin_slots_module, "_pose_contacts", _jit("fixplan.geometry._pin_kernels", "pose_contacts"))
     monkeypatch.setattr(pin_slots_module, "_pin_slots", _jit("fixplan.engine._pin_slot_kernels", "pin_slots"))
-    states_jit = simulate()
+    states_jit = _states(fx, push)
     assert all(np.array_equal(a, b) for a, b in zip(states_aot, states_jit, strict=True))
     assert not any("_pin" in key for key in aot.fallbacks)
 

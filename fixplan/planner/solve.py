@@ -23,7 +23,7 @@ from typing import Any, Literal, cast
 
 import numpy as np
 
-from fixplan.errors import InputError
+from fixplan.errors import InputError, SolverError
 from fixplan.locating import contact_set, solve_goal
 from fixplan.model import Fixture, refuse_pins, require_full
 from fixplan.planner.approach import Approach, plan_approach
@@ -367,11 +367,11 @@ class Planner:
         kind = None if g is None else g[2]
         if full_ladder and kind == default_kind(self.fixture.dimension, len(state)):
             kind = None  # the ladder may then try the other kind too
-        tr: Transition | None = None
-        for clearance in CLEARANCES_M:
+        for i, clearance in enumerate(CLEARANCES_M):
             # the ladder of formulations and the diagnosis at the last clearance, and only in the
             # second pass (a failing transition costs 2-9 s with them)
-            full = full_ladder and clearance == CLEARANCES_M[-1]
+            last = i == len(CLEARANCES_M) - 1
+            full = full_ladder and last
             tr = plan_transition(
                 self.fixture, pose, sorted(state), target, knots=self.knots,
                 acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
@@ -380,10 +380,9 @@ class Planner:
                 together=[n for n in self.group(state, target) if n != target],
                 wrenches=False,
             )  # fmt: skip
-            if tr.ipopt_status in IPOPT_PATH_FOUND:
-                break  # a path: its wrenches decide, not the clearance
-        assert tr is not None  # CLEARANCES_M is never empty
-        return tr
+            if last or tr.ipopt_status in IPOPT_PATH_FOUND:
+                return tr  # a path: its wrenches decide, not the clearance
+        raise SolverError("no clearance to plan a transition at (settings planner.clearances_m is empty)")
 
     def _confirm(self, tr: Transition) -> Transition:
         """A priced transition with the pushes along its path searched."""

@@ -145,8 +145,11 @@ class SpareCore:
 
     def _receive(self) -> None:
         """Store the child's answer to the pending job (blocks until it comes)."""
-        assert self._from_child is not None
-        message = _read(self._from_child)
+        fd = self._from_child
+        if fd is None:  # closed meanwhile: nothing pending any more
+            self._pending, self._busy = None, False
+            return
+        message = _read(fd)
         key, self._pending, self._busy = self._pending, None, False
         if message is None:  # the child died: no more jobs
             self.close()
@@ -167,9 +170,8 @@ class SpareCore:
         if self._pid is None:
             return False
         self._poll()
-        if self._busy or key in self._done:
+        if self._busy or key in self._done or self._to_child is None:
             return False
-        assert self._to_child is not None
         try:
             _write(self._to_child, (key, job))
         except (OSError, pickle.PicklingError, TypeError, AttributeError):

@@ -37,7 +37,7 @@ from fixplan.present.meshes import (
 )
 
 if TYPE_CHECKING:
-    from fixplan.model import Fixture
+    from fixplan.model import Fixture, RobotSpec
     from fixplan.present.replay import Replay
     from fixplan.spatial import Pose
 
@@ -236,7 +236,7 @@ def scene_figure(
 
     if d == 3:
         loc_mesh, loc_owner = _locator_mesh(fixture, go)
-    arm_points = _arm_skeletons(fixture, replay, idx) if d == 3 and fixture.robot is not None else None
+    arm_points = _arm_skeletons(fixture, fixture.robot, replay, idx) if d == 3 and fixture.robot is not None else None
 
     def dynamic(k: int, *, full: bool = False) -> dict[str, Any]:
         """The traces that change from sample to sample, by name (``full``: complete traces, for fig.data)."""
@@ -519,7 +519,7 @@ def _locator_bodies(fixture: Fixture, go: Any) -> Any:
     )
 
 
-def _arm_skeletons(fixture: Fixture, replay: Replay, idx: IntArray) -> dict[int, FloatArray] | None:
+def _arm_skeletons(fixture: Fixture, robot: RobotSpec, replay: Replay, idx: IntArray) -> dict[int, FloatArray] | None:
     """The arm's stick figure at each frame's part pose (inverse kinematics, each frame from the one before).
 
     None when the arm cannot be loaded or does not reach the first frame; a frame it does not
@@ -529,9 +529,8 @@ def _arm_skeletons(fixture: Fixture, replay: Replay, idx: IntArray) -> dict[int,
     from fixplan.robot.check import first_configuration
     from fixplan.robot_file import RobotError
 
-    assert fixture.robot is not None
     try:
-        arm = Arm(fixture.robot, fixture.gravity)
+        arm = Arm(robot, fixture.gravity)
     except RobotError:
         return None
     out: dict[int, FloatArray] = {}
