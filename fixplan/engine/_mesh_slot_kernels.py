@@ -232,7 +232,7 @@ def locator_slots(R, p, tri, face_normals, edge_normals, vertex_normals, faces, 
 def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
                tri, face_normals, edge_normals, vertex_normals, faces, around, boxes, nodes, order, same,
                loc, obs_fix, pts_fix, pt_boxes, pt_nodes, pt_order, rho_max,
-               h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_steps, bound,
+               h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_after, polish_steps, bound,
                P_full, active_full, P_prev_full, active_prev_full, gap_full, u_full, n_full,
                slot_state, loc_slots, near):  # fmt: skip
     """One 3D step of a mesh part (the module docstring's five parts); the state arrays updated in place.
@@ -306,7 +306,7 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
     err, iters, status, failures, pen = step3_ws(
         R, p, v, w, mass, Ib, Ib_inv, com_b, MESH, np.zeros(3), np.zeros((0, 2)), np.zeros((0, 2)),
         np.zeros((0, 3)), np.zeros(0), mu, tors, obs, slots, h, f_ext, tau_ext, restitution, margin, tol, max_iter,
-        polish_steps, P, act, P_prev, act_prev, gap, u, n_w, bound, workspace3(k),
+        polish_after, polish_steps, P, act, P_prev, act_prev, gap, u, n_w, bound, workspace3(k),
     )  # fmt: skip
     # 5. written back: the slots' state, the collision points' rows, the locators' rows
     for j in range(n):

@@ -148,7 +148,7 @@ class MeshStepper:
         while True:
             out = _mesh_step3(
                 sim._R, sim._p, sim._v, sim._w, sim._mass, sim._Ib, sim._Ib_inv, sim._com_b, *self._part, sim.dt,
-                f_ext, tau_ext, sim.restitution, margin, sim.tolerance, sim.max_iterations, sim.polish_steps,
+                f_ext, tau_ext, sim.restitution, margin, sim.tolerance, sim.max_iterations, sim.polish_after, sim.polish_steps,
                 sim._bound, sim._P, sim._active, sim._P_prev, sim._active_prev, sim._gap, sim._u, sim._nw,
                 self.state, self.loc_slots, self.near,
             )  # fmt: skip

@@ -290,9 +290,12 @@ class Simulator:
         Newton restitution coefficient; default ``[simulation] restitution``.
     max_iterations : int, optional
         Cap on NSGS sweeps per step (the stop is the residual); default ``settings.max_iterations``.
+    polish_after : int, optional
+        NSGS sweeps before the Newton polish takes over (0: only after ``max_iterations``);
+        default ``settings.polish_after``.
     polish_steps : int, optional
-        Cap on the Newton steps of the polish of a step whose sweeps reached their cap
-        (:mod:`fixplan.engine.polish`; 0: none); default ``settings.polish_steps``.
+        Cap on the Newton steps of each polish (:mod:`fixplan.engine.polish`; 0: none); default
+        ``settings.polish_steps``.
     margin_m : float, optional
         Contact detection margin [m]; default ``settings.margin_m``.
     settings : EngineSettings
@@ -308,6 +311,7 @@ class Simulator:
         *,
         restitution: float | None = None,
         max_iterations: int | None = None,
+        polish_after: int | None = None,
         polish_steps: int | None = None,
         margin_m: float | None = None,
         strict: bool = False,
@@ -330,6 +334,7 @@ class Simulator:
             raise InputError(f"tolerance must be positive, got {tolerance}")
         self.settings = settings
         self.max_iterations = int(max_iterations if max_iterations is not None else settings.max_iterations)
+        self.polish_after = int(settings.polish_after if polish_after is None else polish_after)
         self.polish_steps = int(settings.polish_steps if polish_steps is None else polish_steps)
         self.margin_m = float(margin_m if margin_m is not None else settings.margin_m)
         self.strict = strict
@@ -487,7 +492,7 @@ class Simulator:
                 self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
                 self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu, self._tors, self._obs,
                 self._slots, h, f, tau,
-                self.restitution, margin, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active, self._P_prev,
+                self.restitution, margin, self.tolerance, self.max_iterations, self.polish_after, self.polish_steps, self._P, self._active, self._P_prev,
                 self._active_prev, self._gap, self._u, self._nw, self._bound,
             )  # fmt: skip
         else:
@@ -495,7 +500,7 @@ class Simulator:
             out = _step2(
                 theta, self._p, self._v, self._w, self._mass, float(self._Ib[0, 0]), self._com_b,
                 self._kind, self._params, self._verts, self._enorm, self._loc_p, self._loc_r, self._mu, self._obs,
-                self._slots, h, f, tau, self.restitution, margin, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active,
+                self._slots, h, f, tau, self.restitution, margin, self.tolerance, self.max_iterations, self.polish_after, self.polish_steps, self._P, self._active,
                 self._bound,
             )  # fmt: skip
             rot, p, v2, w2, P, active, gap, u, n_w, _pt, err, iters, status, failures, pen = out
@@ -572,7 +577,7 @@ class Simulator:
             self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
             self._params, self._verts, self._enorm, np.zeros((0, 3)), np.zeros(0), mu, tors, obs,
             slots, self.dt, f, tau,
-            self.restitution, margin, self.tolerance, self.max_iterations, self.polish_steps, P, act, P_prev,
+            self.restitution, margin, self.tolerance, self.max_iterations, self.polish_after, self.polish_steps, P, act, P_prev,
             act_prev, gap, u, n_w, self._bound,
         )  # fmt: skip
         self._mesh_last = ms
@@ -649,7 +654,7 @@ class Simulator:
             self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
             self._params, self._verts, self._enorm, self._loc_p, self._loc_r, mu, tors, obs,
             slots, self.dt, f, tau,
-            self.restitution, margin, self.tolerance, self.max_iterations, self.polish_steps, P, act, P_prev,
+            self.restitution, margin, self.tolerance, self.max_iterations, self.polish_after, self.polish_steps, P, act, P_prev,
             act_prev, gap, u, n_w, self._bound,
         )  # fmt: skip
         rows = slice(nt, nt + n)
@@ -1000,7 +1005,7 @@ class Simulator:
                 n, every, first, self.time_s, self._R, self._p, self._v, self._w, self._mass, self._Ib,
                 self._Ib_inv, self._com_b, self._kind, self._params, self._verts, self._enorm, self._loc_p,
                 self._loc_r, self._mu, self._tors, self._obs, self._slots, self.dt, gravity_f, times, table, self.restitution,
-                self.margin_m, self._bound, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active,
+                self.margin_m, self._bound, self.tolerance, self.max_iterations, self.polish_after, self.polish_steps, self._P, self._active,
                 self._P_prev, self._active_prev, self._gap, self._u, self._nw,
             )  # fmt: skip
         theta = math.atan2(self._R[1, 0], self._R[0, 0])
@@ -1008,7 +1013,7 @@ class Simulator:
             n, every, first, self.time_s, theta, self._p, self._v, float(self._w), self._mass,
             float(self._Ib[0, 0]), self._com_b, self._kind, self._params, self._verts, self._enorm,
             self._loc_p, self._loc_r, self._mu, self._obs, self._slots, self.dt, gravity_f, times, table, self.restitution,
-            self.margin_m, self._bound, self.tolerance, self.max_iterations, self.polish_steps, self._P, self._active, self._gap,
+            self.margin_m, self._bound, self.tolerance, self.max_iterations, self.polish_after, self.polish_steps, self._P, self._active, self._gap,
         )  # fmt: skip
         (rt, rp, rori, rnu, rfn, rgap, rerr, rit, th, p2, v2, w2, P2, act2, gap2, u2, nw2,
          t_end, k_done, status_k, pen, worst_k, l_err, l_it) = out  # fmt: skip

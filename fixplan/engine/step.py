@@ -97,8 +97,45 @@ def _pgs_lcp(A, b, x, n, iterations):
 
 
 @njit(cache=True)
+def solve_staged(W, q, mus, offsets, sizes, nc, m, P, tol, max_iter, polish_after, polish_steps, diag, inv, has_inv, u,
+                 scratch):  # fmt: skip
+    """The step's contact problem: sweeps, then Newton where they stall, then the rest of the sweeps.
+
+    :func:`~fixplan.engine.nsgs.nsgs_dense` from the warm start ``P`` for at most
+    ``polish_after`` sweeps (``≤ 0``: ``max_iter``); if that has not reached ``tol``, the
+    nonsmooth Newton polish of :mod:`fixplan.engine.polish` from the sweeps' iterate (kept only
+    where it lowers the residual). If the polish does not converge either, the sweeps go on
+    from the best iterate up to ``max_iter`` in all, and a last polish follows. Gauss–Seidel
+    converges linearly, slowly on a statically indeterminate seat (a box on six point
+    locators: 80 sweeps on average, 1500 at worst, for 10⁻⁶); Newton converges quadratically
+    near the solution, so a stalled sweep hands over early. Returns
+    ``(error, sweeps + Newton steps, converged, failed local solves in the last sweep)``.
+    """
+    first = max_iter if polish_after <= 0 else min(max_iter, polish_after)
+    err, iters, converged, failures = nsgs_dense(
+        W, q, mus, offsets, sizes, nc, m, P, tol, first, diag, inv, has_inv, u, scratch
+    )
+    if converged or not math.isfinite(err):
+        return err, iters, converged, failures
+    # Gauss–Seidel stalled (two contacts sliding on their cone boundaries in a corner, a
+    # hyperstatic seat): nonsmooth Newton from its iterate, kept only where it lowers the residual
+    err, extra, converged = newton_polish(W, q, mus, offsets, sizes, nc, m, P, tol, polish_steps)
+    iters += extra
+    if converged or first >= max_iter or not math.isfinite(err):
+        return err, iters, converged, failures
+    err, more, converged, failures = nsgs_dense(
+        W, q, mus, offsets, sizes, nc, m, P, tol, max_iter - first, diag, inv, has_inv, u, scratch
+    )
+    iters += more
+    if not converged and math.isfinite(err):
+        err, extra, converged = newton_polish(W, q, mus, offsets, sizes, nc, m, P, tol, polish_steps)
+        iters += extra
+    return err, iters, converged, failures
+
+
+@njit(cache=True)
 def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, obs, slots,
-          h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_steps, P_warm, warm_active, bound_m):  # fmt: skip
+          h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_after, polish_steps, P_warm, warm_active, bound_m):  # fmt: skip
     """One planar step, ``ν = (vx, vy, ω)``: :func:`step3_ws` with 2-row contacts (allocating its arrays).
 
     Contacts: the locators, then the collision points ``slots`` against ``obs`` (``mu`` covers both).
@@ -173,14 +210,10 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
     inv = np.zeros((nc, 4, 4))
     has_inv = np.zeros(nc, dtype=np.bool_)
     scratch = np.empty(WORKSPACE_SIZE + 16)
-    err, iters, converged, failures = nsgs_dense(
-        W, q, mus, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has_inv, np.empty(m), scratch
-    )
-    if not converged and math.isfinite(err):
-        # Gauss–Seidel stalled (two contacts sliding on their cone boundaries in a corner):
-        # nonsmooth Newton from its iterate, kept only where it lowers the residual
-        err, extra, converged = newton_polish(W, q, mus, offsets, sizes, nc, m, P, tol, polish_steps)
-        iters += extra
+    err, iters, converged, failures = solve_staged(
+        W, q, mus, offsets, sizes, nc, m, P, tol, max_iter, polish_after, polish_steps, diag, inv, has_inv, np.empty(m),
+        scratch,
+    )  # fmt: skip
     dnu = mv(MinvJt, P)
     nu = nu_free + dnu
     u = mv(W, P) + q
@@ -315,7 +348,7 @@ def workspace3(k):
 
 @njit(cache=True)
 def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, obs, slots,
-             h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_steps, P_full, active_full, P_prev, active_prev,
+             h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_after, polish_steps, P_full, active_full, P_prev, active_prev,
              gap_full, u_full, n_full, bound_m, ws):  # fmt: skip
     """One 3D step on caller-owned buffers (the algorithm of the module docstring, no allocation).
 
@@ -483,14 +516,9 @@ def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, lo
         elif active_full[i]:
             for a in range(d):
                 P[o + a] = P_full[i, a]
-    err, iters, converged, failures = nsgs_dense(
-        W, q, mus, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has_inv, u, scratch
+    err, iters, converged, failures = solve_staged(
+        W, q, mus, offsets, sizes, nc, m, P, tol, max_iter, polish_after, polish_steps, diag, inv, has_inv, u, scratch
     )
-    if not converged and math.isfinite(err):
-        # Gauss–Seidel stalled: nonsmooth Newton from its iterate (module polish), kept only
-        # where it lowers the residual
-        err, extra, converged = newton_polish(W, q, mus, offsets, sizes, nc, m, P, tol, polish_steps)
-        iters += extra
     finite = math.isfinite(err)
     for a in range(6):
         acc = 0.0
@@ -616,7 +644,7 @@ def _schedule_index(times, t, k):
 
 @njit(cache=True)
 def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p,
-         loc_r, mu, tors, obs, slots, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, polish_steps,
+         loc_r, mu, tors, obs, slots, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, polish_after, polish_steps,
          P, active, P_prev, active_prev, gap, u, n_w):  # fmt: skip
     """``n_steps`` of :func:`step3_ws` under a wrench schedule, compiled end to end.
 
@@ -683,7 +711,7 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
         margin = margin_m + 2.0 * h * speed
         err, iters, st, failures, pen = step3_ws(
             R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, obs, slots,
-            h, f_ext, tau, restitution, margin, tol, max_iter, polish_steps, P, active, P_prev, active_prev, gap, u, n_w, bound, ws)  # fmt: skip
+            h, f_ext, tau, restitution, margin, tol, max_iter, polish_after, polish_steps, P, active, P_prev, active_prev, gap, u, n_w, bound, ws)  # fmt: skip
         if st == STATUS_NONFINITE:
             status = st
             break
@@ -714,19 +742,19 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
 
 @njit(cache=True)
 def step3_into(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, obs, slots, h, f_ext,
-               tau_ext, restitution, margin, tol, max_iter, polish_steps, P, active, P_prev, active_prev, gap, u, n_w, bound):  # fmt: skip
+               tau_ext, restitution, margin, tol, max_iter, polish_after, polish_steps, P, active, P_prev, active_prev, gap, u, n_w, bound):  # fmt: skip
     """One :func:`step3_ws` for Python callers (:meth:`Simulator.step`), with its own workspace.
 
     Same in-place contract and returns as :func:`step3_ws`.
     """
     ws = workspace3(mu.shape[0])
     return step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, tors, obs, slots, h,
-                    f_ext, tau_ext, restitution, margin, tol, max_iter, polish_steps, P, active, P_prev, active_prev, gap, u, n_w, bound, ws)  # fmt: skip
+                    f_ext, tau_ext, restitution, margin, tol, max_iter, polish_after, polish_steps, P, active, P_prev, active_prev, gap, u, n_w, bound, ws)  # fmt: skip
 
 
 @njit(cache=True)
 def run2(n_steps, record_every, first, t_start, theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r,
-         mu, obs, slots, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, polish_steps, P, active, gap_in):  # fmt: skip
+         mu, obs, slots, h, gravity_f, times, wrenches, restitution, margin_m, bound, tol, max_iter, polish_after, polish_steps, P, active, gap_in):  # fmt: skip
     """``n_steps`` of :func:`step2` under a wrench schedule ``(Fx, Fy, Mz)`` about the body origin.
 
     The planar counterpart of :func:`run3` (same schedule, margin and recording rules). Returns
@@ -778,7 +806,7 @@ def run2(n_steps, record_every, first, t_start, theta, p, v, w, mass, Izz, com_b
         speed = math.sqrt(v[0] * v[0] + v[1] * v[1]) + abs(w) * bound
         margin = margin_m + 2.0 * h * speed
         out = step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, loc_r, mu, obs, slots,
-                    h, f_ext, tau, restitution, margin, tol, max_iter, polish_steps, P, active, bound)  # fmt: skip
+                    h, f_ext, tau, restitution, margin, tol, max_iter, polish_after, polish_steps, P, active, bound)  # fmt: skip
         th2, p2, v2, w2, P2, act2, gap, u2, nw2, _pt, err, iters, st, failures, pen = out
         if st == STATUS_NONFINITE:
             status = st
