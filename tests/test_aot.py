@@ -28,6 +28,12 @@ needs_build = pytest.mark.skipif(not BUILT, reason=f"no usable extension: {aot.s
 PLATES_2D = ["gen-plate-2d-s2026-000.toml", "gen-plate-2d-s2026-002.toml", "polygon-2d.toml", "naive-order-jams.toml"]
 
 
+@pytest.fixture(autouse=True)
+def _fresh_fallbacks(monkeypatch) -> None:
+    """Each test counts its own fallbacks (a test elsewhere may call a kernel with other types on purpose)."""
+    monkeypatch.setattr(aot, "fallbacks", {})
+
+
 def _jit(module: str, name: str):  # numba's dispatcher itself
     import importlib
 
@@ -39,28 +45,42 @@ def _spec(**kw):
     return aot._spec(kw)
 
 
-def test_the_guard_accepts_exact_types_only() -> None:
+def _generated(args, specs) -> bool:  # the per-variant checker the kernels call
+    return aot._checker(specs)(args)
+
+
+@pytest.mark.parametrize("accepts", [aot._accepts, _generated], ids=["loop", "generated"])
+def test_the_guard_accepts_exact_types_only(accepts) -> None:
     specs = (
         _spec(kind="scalar", dtype="float64"),
         _spec(kind="scalar", dtype="int64"),
         _spec(kind="array", dtype="float64", ndim=2, contiguous=True, mutable=True),
     )
     A = np.zeros((3, 2))
-    assert aot._accepts((1.5, 3, A), specs)
-    assert aot._accepts((np.float64(1.5), np.int64(3), A), specs)
-    assert not aot._accepts((1, 3, A), specs)  # an int where a float64 is compiled: numba would type it int64
-    assert not aot._accepts((1.5, True, A), specs)  # a bool is not an int64
-    assert not aot._accepts((1.5, 3.0, A), specs)
-    assert not aot._accepts((1.5, 3, A.astype(np.float32)), specs)  # would be reinterpreted
-    assert not aot._accepts((1.5, 3, A.astype(np.int64)), specs)
-    assert not aot._accepts((1.5, 3, np.zeros(3)), specs)  # rank
-    assert not aot._accepts((1.5, 3, np.asfortranarray(np.zeros((3, 2)))), specs)  # not C-contiguous
-    assert not aot._accepts((1.5, 3, np.zeros((3, 4))[:, ::2]), specs)
-    assert not aot._accepts((1.5, 3, A.tolist()), specs)  # a list would crash the process
+    assert accepts((1.5, 3, A), specs)
+    assert accepts((np.float64(1.5), np.int64(3), A), specs)
+    assert not accepts((1, 3, A), specs)  # an int where a float64 is compiled: numba would type it int64
+    assert not accepts((1.5, True, A), specs)  # a bool is not an int64
+    assert not accepts((1.5, 3.0, A), specs)
+    assert not accepts((1.5, 3, A.astype(np.float32)), specs)  # would be reinterpreted
+    assert not accepts((1.5, 3, A.astype(np.int64)), specs)
+    assert not accepts((1.5, 3, np.zeros(3)), specs)  # rank
+    assert not accepts((1.5, 3, np.asfortranarray(np.zeros((3, 2)))), specs)  # not C-contiguous
+    assert not accepts((1.5, 3, np.zeros((3, 4))[:, ::2]), specs)
+    assert not accepts((1.5, 3, A.tolist()), specs)  # a list would crash the process
     readonly = A.copy()
     readonly.flags.writeable = False
-    assert not aot._accepts((1.5, 3, readonly), specs)
-    assert not aot._accepts((1.5, 3), specs)
+    assert not accepts((1.5, 3, readonly), specs)
+    assert not accepts((1.5, 3), specs)
+    assert not accepts((1.5, 3, A, A), specs)
+    # arrays checked only for what they were built for (rank and dtype always)
+    loose = (_spec(kind="array", dtype="float64", ndim=1, contiguous=False, mutable=False),)
+    strided = np.zeros(6)[::2]
+    strided.flags.writeable = False
+    assert accepts((strided,), loose)
+    assert not accepts((strided.astype(np.float32),), loose)
+    assert accepts((), ())
+    assert not accepts((1.5,), ())
 
 
 def test_a_call_no_variant_accepts_goes_to_the_jit_and_is_counted(monkeypatch) -> None:
