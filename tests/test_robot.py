@@ -353,3 +353,115 @@ def test_view_draws_the_arm_holding_the_part(tmp_path: Path) -> None:
     assert html.count('"name":"robot (joints)"') >= 10  # the first frame's trace and every frame's
     data = json.loads(plan.read_text())
     assert data["robot"]["feasible"] is True and re.search(r"reachable through \d+ knots", data["robot"]["reason"])
+
+
+# -- the wrench search inside the arm's own set of pushes ------------------------------------------------
+def _box_fixture(max_force_N: float, max_torque_Nm: float):
+    from dataclasses import replace
+
+    from fixplan.model import Manipulator
+
+    fx = fixplan.load(PROBLEMS / "box-3-2-1.toml")
+    return replace(fx, manipulator=Manipulator(max_force_N, max_torque_Nm))
+
+
+def _planar_box(q: tuple[float, float], at: np.ndarray):
+    """planar2 at ``q`` with its tool at ``at``, and its joint-torque box there."""
+    arm = _arm(PLANAR2, Pose.identity(3), "tool")
+    _, p0 = arm.tool_pose(np.array(q))
+    arm = _arm(PLANAR2, Pose(np.eye(3), at - p0), "tool")
+    box = arm.torque_box(np.array(q), "the test's pose")
+    np.testing.assert_allclose(box.point_world, at, atol=1e-12)
+    return arm, box
+
+
+def test_a_lift_in_free_motion_refuses_where_the_planar_closed_form_says() -> None:
+    """planar2 horizontal, tool at the box's centre: lifting it with a needs F = m (g + a), the elbow carries 0.3 F.
+
+    Every contact opens, so the push is determined; the elbow's 8 N·m binds before the shoulder's 20
+    (0.3 F = 8 before 0.7 F = 20): a* = 8 / (0.3 m) − g, to 1e-6 relative on either side.
+    """
+    from fixplan.jamming import search_wrench
+
+    fx = _box_fixture(1000.0, 100.0)
+    c = np.array([0.10, 0.05, 0.025])
+    _, box = _planar_box((0.0, 0.0), c)
+    m, g = 2.0, 9.81
+    a_star = min(20.0 / 0.7, 8.0 / 0.3) / m - g
+    below = search_wrench(fx, [0, 0, a_star * (1 - 1e-6), 0, 0, 0], ["B1", "B2", "B3"], hand_sets=[box])
+    above = search_wrench(fx, [0, 0, a_star * (1 + 1e-6), 0, 0, 0], ["B1", "B2", "B3"], hand_sets=[box])
+    assert below.found and below.arm_joint == "elbow"
+    assert below.arm_torque_ratio == pytest.approx(1.0, abs=2e-6)
+    assert below.wrench is not None and below.wrench[2] == pytest.approx(m * (g + a_star), rel=2e-6)
+    assert not above.found and above.binding == ["arm"] and "joint elbow" in above.reason
+    assert above.arm_torque_ratio is not None and above.arm_torque_ratio > 1.0
+    # without the arm the hand's 1000 N lift it
+    assert search_wrench(fx, [0, 0, a_star * (1 + 1e-6), 0, 0, 0], ["B1", "B2", "B3"]).found
+
+
+def _joint_torques_by_hand(w: np.ndarray, tool_minus_shoulder: np.ndarray, elbow_lever: np.ndarray) -> np.ndarray:
+    """τ_i = a · (M + r_i × F) with the joint axis a = −y: the planar arm's torques written out."""
+    a = np.array([0.0, -1.0, 0.0])
+    F, M = w[:3], w[3:]
+    return np.array([a @ (M + np.cross(tool_minus_shoulder, F)), a @ (M + np.cross(elbow_lever, F))])
+
+
+def test_the_zonotope_accepts_a_push_its_inscribed_ball_refuses() -> None:
+    """planar2 upright over the box: a vertical push costs its joints nothing, a push along x 0.7 and 0.3 N·m per N.
+
+    Sliding the box up its side wall (S1, S2) at 4 m/s² needs ‖F‖ ≥ m (g + a) = 27.62 N. The ball of
+    pushes inscribed in the arm's zonotope (exertable_scale: 0.3 F + T ≤ 8 at the elbow, 100 N and
+    10 N·m scaled by 8 / 40 = 0.2: 20 N) refuses it; the zonotope itself accepts it, and the push
+    found keeps both joints within their efforts by the torques written out by hand.
+    """
+    from fixplan.jamming import search_wrench
+
+    c = np.array([0.10, 0.05, 0.025])
+    arm, box = _planar_box((math.pi / 2, 0.0), c)
+    s, joint = arm.exertable_scale(np.array([math.pi / 2, 0.0]), 0.0, 100.0, 10.0)
+    assert s == pytest.approx(8.0 / (0.3 * 100.0 + 10.0), abs=1e-9) and arm.joint_names[joint] == "elbow"
+    motion = [0.0, 0.0, 4.0, 0.0, 0.0, 0.0]
+    ball = search_wrench(_box_fixture(100.0 * s, 10.0 * s), motion, ["S1", "S2"])
+    assert not ball.found and "too weak" in ball.reason
+    assert ball.needed_force_N is not None and ball.needed_force_N >= 2.0 * (9.81 + 4.0) * (1 - 1e-6)
+    zono = search_wrench(_box_fixture(100.0, 10.0), motion, ["S1", "S2"], hand_sets=[box])
+    assert zono.found, zono.reason
+    assert zono.wrench is not None and np.linalg.norm(zono.wrench[:3]) > 100.0 * s
+    # the wrench is about the body origin (the centre, where the tool is): torques by hand
+    tau = _joint_torques_by_hand(zono.wrench, np.array([0.0, 0.0, 0.7]), np.array([0.0, 0.0, 0.3]))
+    assert abs(tau[0]) <= 20.0 * (1 + 1e-6) and abs(tau[1]) <= 8.0 * (1 + 1e-6)
+    np.testing.assert_allclose(np.abs(tau), np.abs(box.torques(zono.wrench, c)), atol=1e-9)
+    assert zono.arm_torque_ratio is not None and zono.arm_torque_ratio <= 1.0 + 1e-6
+
+
+def test_the_zonotope_refuses_a_push_the_hand_allows_naming_the_joint() -> None:
+    """planar2 horizontal: the same slide up the wall needs 0.7 m (g + a) ≥ 20 N·m of the shoulder at 4 m/s²."""
+    from fixplan.jamming import search_wrench
+
+    c = np.array([0.10, 0.05, 0.025])
+    _, box = _planar_box((0.0, 0.0), c)
+    motion = [0.0, 0.0, 4.0, 0.0, 0.0, 0.0]
+    fx = _box_fixture(100.0, 10.0)
+    assert search_wrench(fx, motion, ["S1", "S2"]).found
+    res = search_wrench(fx, motion, ["S1", "S2"], hand_sets=[box])
+    assert not res.found and res.binding == ["arm"]
+    assert "the arm cannot exert the push" in res.reason and "at the test's pose" in res.reason
+    assert res.arm_joint in ("shoulder", "elbow") and res.arm_torque_ratio is not None and res.arm_torque_ratio > 1.0
+
+
+def test_a_torque_box_is_the_arm_s_torques_as_linear_rows(rng: np.random.Generator) -> None:
+    """A w ≤ b ⇔ every joint within its effort, for wrenches about any point (arm6, random poses and pushes)."""
+    from fixplan.jamming.hand_set import torque_rows
+
+    arm = _arm(ARM6, Pose.from_rpy_deg([0.1, 0.2, 0.0], [0.0, 0.0, 30.0]), "tool0")
+    zero = np.zeros(arm.nq)
+    for _ in range(20):
+        q = rng.uniform(-2.0, 2.0, arm.nq)
+        box = arm.torque_box(q)
+        about = rng.normal(size=3)
+        A, b = torque_rows([box], about, 0.9)
+        w = rng.normal(size=6) * np.array([200.0, 200.0, 200.0, 40.0, 40.0, 40.0])
+        w_tool = np.concatenate([w[:3], w[3:] + np.cross(about - box.point_world, w[:3])])
+        tau = arm.torques(q, zero, zero, w_tool)
+        np.testing.assert_allclose(box.torques(w, about), tau, atol=1e-9)
+        assert bool(np.all(A @ w <= b)) == bool(np.all(np.abs(tau) <= 0.9 * arm.effort_Nm))
