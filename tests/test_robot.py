@@ -465,3 +465,33 @@ def test_a_torque_box_is_the_arm_s_torques_as_linear_rows(rng: np.random.Generat
         tau = arm.torques(q, zero, zero, w_tool)
         np.testing.assert_allclose(box.torques(w, about), tau, atol=1e-9)
         assert bool(np.all(A @ w <= b)) == bool(np.all(np.abs(tau) <= 0.9 * arm.effort_Nm))
+
+
+@pytest.mark.slow
+def test_the_planner_s_pushes_stay_inside_the_arm_at_both_knots_of_each_segment(tmp_path: Path) -> None:
+    """A 31.5 N·m shoulder (its own weight takes most of it): without the arm's boxes the last transition's
+    pushes need 1.03 times its effort; with them every push of the plan is within every joint at both knots."""
+    from dataclasses import replace
+
+    from fixplan.jamming.hand_set import worst_joint
+    from fixplan.planner.segments import segment_wrenches
+    from fixplan.robot.exertable import knot_boxes
+
+    _, result = _solved()
+    strong = '<limit lower="-6.2832" upper="6.2832" effort="150.0" velocity="3.15"/>\n  </joint>\n  <link name="upper_arm_link">'
+    fx = fixplan.load(_copy_with(tmp_path, urdf_edit=(strong, strong.replace("150.0", "31.5"))))
+    worst = {True: 0.0, False: 0.0}
+    for tr in result.transitions:
+        boxes = knot_boxes(fx, tr.poses)
+        assert all(b is not None for b in boxes)
+        for with_arm in (True, False):
+            w, _, found, reasons = segment_wrenches(
+                fx if with_arm else replace(fx, robot=None), tr.poses, tr.established, tr.kind, 1.0,
+                friction_margin=0.1,
+            )  # fmt: skip
+            assert found.all(), reasons
+            for k in range(len(w)):
+                ratio, _, _ = worst_joint([boxes[k], boxes[k + 1]], w[k], tr.poses[k].p_world)
+                worst[with_arm] = max(worst[with_arm], ratio)
+    assert worst[False] > 1.0
+    assert worst[True] <= 1.0 + 1e-6
