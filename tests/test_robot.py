@@ -8,6 +8,7 @@ a vertical plane, efforts 20 and 8 N·m), whose torques have a closed form.
 from __future__ import annotations
 
 import math
+import re
 import shutil
 from functools import cache
 from pathlib import Path
@@ -495,3 +496,83 @@ def test_the_planner_s_pushes_stay_inside_the_arm_at_both_knots_of_each_segment(
                 worst[with_arm] = max(worst[with_arm], ratio)
     assert worst[False] > 1.0
     assert worst[True] <= 1.0 + 1e-6
+
+
+# -- the links along the simulated load ----------------------------------------------------------------
+def _with_post(fx, center: np.ndarray, half_m: float):
+    from dataclasses import replace
+
+    from fixplan.model import Obstacle
+
+    post = Obstacle("post", "box", np.eye(3), center, np.full(3, half_m), 0.5)
+    return replace(fx, obstacles=(*fx.obstacles, post))
+
+
+def _link_center(fx, q: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """The world centre and axis of a link's collision cylinder at ``q``."""
+    import pinocchio as pin
+
+    from fixplan.robot.exertable import arm_at_start
+
+    arm, _ = arm_at_start(fx)
+    geom = arm.loaded.collision
+    gdata = geom.createData()
+    pin.updateGeometryPlacements(arm.model, arm.data, geom, gdata, q)
+    M = gdata.oMg[[o.name for o in geom.geometryObjects].index(name)]
+    return arm.p_world_root + arm.R_world_root @ M.translation, arm.R_world_root @ M.rotation[:, 2]
+
+
+@pytest.mark.parametrize("direction", [(1.0, 0.0, 0.0), (0.0, -1.0, 0.0)])
+def test_a_link_is_found_where_it_enters_a_post_at_the_time_the_motion_says(direction: tuple[float, ...]) -> None:
+    """The part slides at v = 0.1 m/s; a 1 cm post stands δ = 3 cm beside the flange's cylinder (r = 35 mm).
+
+    The flange moves with the part, so it touches the post at t* = δ / v = 0.3 s: the first sample
+    (every 10 ms) that penetrates is the first at or after t*, v t − δ deep, and it is the flange's link.
+    """
+    from fixplan.robot.clearance import along_trajectory
+    from fixplan.robot.exertable import arm_at_start
+
+    fx = fixplan.load(FIXTURE)
+    _, q0 = arm_at_start(fx)
+    assert q0 is not None
+    c, axis = _link_center(fx, q0, "wrist_3_link_0")
+    assert abs(axis[2]) == pytest.approx(1.0, abs=1e-6)  # upright: its side faces the post
+    u, delta, h, v = np.array(direction), 0.03, 0.005, 0.1
+    fx_post = _with_post(fx, c + (0.035 + delta + h) * u, h)
+    samples = [(k * 1e-3, Pose(fx.start.R_world_body, fx.start.p_world + v * k * 1e-3 * u)) for k in range(600)]
+    clear = along_trajectory(fx, samples, 0.01)
+    assert clear is not None and clear.first_hit is None and clear.least is not None
+    assert clear.least.distance_m > 0.0 and clear.samples == 61 and clear.unreached == 0  # every 10 ms and the last
+    hit = along_trajectory(fx_post, samples, 0.01)
+    assert hit is not None and hit.first_hit is not None and hit.first_hit_time_s is not None
+    t_star = delta / v
+    assert t_star - 1e-9 <= hit.first_hit_time_s <= t_star + 0.01 + 1e-9
+    assert hit.first_hit.link == "link wrist_3_link_0" and hit.first_hit.other == "obstacle post"
+    assert -hit.first_hit.distance_m == pytest.approx(v * hit.first_hit_time_s - delta, abs=1e-5)
+
+
+@pytest.mark.slow
+def test_the_verification_fails_naming_the_link_and_the_time() -> None:
+    """A post around the forearm (away from the part): the links' check fails, naming the link and the time.
+
+    (Run without the policy and re-plans ``solve`` gives the executor, the load itself may also stray.)
+    """
+    from fixplan.planner.execute import ExecutionSettings
+    from fixplan.planner.plan import start_state
+    from fixplan.planner.solve import plan_steps
+    from fixplan.planner.verify import verify
+    from fixplan.robot.exertable import arm_at_start
+
+    fx, result = _solved()
+    ok = result.verification
+    assert ok is not None and ok.passed
+    links = ok.extras["robot_links"]
+    assert links["first_hit"] is None and links["min_clearance_m"] > 0.0 and links["samples"] >= 10
+    _, q0 = arm_at_start(fx)
+    c, _ = _link_center(fx, q0, "forearm_link_0")
+    bad = _with_post(fx, c, 0.03)
+    settings = ExecutionSettings(accel_mps2=1.0, friction_margin=0.1)  # solve's defaults
+    out = verify(bad, start_state(fx), plan_steps(result.transitions), settings=settings)
+    assert not out.passed and "robot links" in out.failed_checks
+    assert re.search(r"at t = 0\.0\d\d s link \w+ of the arm hits obstacle post \(\S+ m deep\)", out.reason), out.reason
+    assert out.extras["robot_links"]["first_hit"]["other"] == "obstacle post"

@@ -34,7 +34,8 @@ FloatArray = NDArray[np.float64]
 _ARMS: dict[int, tuple[object, tuple[float, ...], Arm, FloatArray | None]] = {}
 
 
-def _arm_at_start(fixture: Fixture) -> tuple[Arm, FloatArray | None]:
+def arm_at_start(fixture: Fixture) -> tuple[Arm, FloatArray | None]:
+    """The fixture's arm and its joints at the part's start pose (None: not reached), kept per process."""
     spec = fixture.robot
     if spec is None:
         raise ValueError("the fixture has no [robot]")
@@ -55,7 +56,7 @@ def _arm_at_start(fixture: Fixture) -> tuple[Arm, FloatArray | None]:
 
 def knot_boxes(fixture: Fixture, poses: Sequence[Pose]) -> list[TorqueBox | None]:
     """The arm's joint-torque box at every pose of ``poses`` (a transition's knots), None where it does not reach."""
-    arm, q_start = _arm_at_start(fixture)
+    arm, q_start = arm_at_start(fixture)
     tol = arm.settings.reach_tol_m
     out: list[TorqueBox | None] = []
     q_prev = q_start
@@ -75,4 +76,4 @@ def knot_boxes(fixture: Fixture, poses: Sequence[Pose]) -> list[TorqueBox | None
     return out
 
 
-__all__ = ["knot_boxes"]
+__all__ = ["arm_at_start", "knot_boxes"]
