@@ -576,3 +576,53 @@ def test_the_verification_fails_naming_the_link_and_the_time() -> None:
     assert not out.passed and "robot links" in out.failed_checks
     assert re.search(r"at t = 0\.0\d\d s link \w+ of the arm hits obstacle post \(\S+ m deep\)", out.reason), out.reason
     assert out.extras["robot_links"]["first_hit"]["other"] == "obstacle post"
+
+
+# -- the arm in `haptic` -----------------------------------------------------------------------------
+@pytest.mark.slow
+def test_the_arm_follows_a_recorded_load_to_1e_6() -> None:
+    """The simulated haptic load's trace (the part driven by the device through the coupling), frame by frame:
+    warm-started IK puts the part, through the grasp, where the trace has it."""
+    from fixplan.robot.follow import ArmFollower
+
+    fx, result = _solved()
+    trace = result.verification.trace
+    assert trace is not None and len(trace.poses) >= 10
+    follower = ArmFollower(fx)
+    Q = []
+    for pose in trace.poses:
+        q = follower.follow(pose)
+        assert follower.reached and q is not None
+        got = follower.arm.part_pose_of(q)
+        assert np.linalg.norm(got.p_world - pose.p_world) <= 1e-6
+        assert np.linalg.norm(log_so3(got.R_world_body.T @ pose.R_world_body)) <= 1e-6
+        Q.append(q.copy())
+    assert np.max(np.abs(np.diff(np.array(Q), axis=0))) <= 0.5  # one branch: no flip between frames
+
+
+def test_haptic_draws_the_arm_holding_the_part() -> None:
+    """The live scene's stick figure ends at the tool, which is at the simulated part's pose through the grasp."""
+    from fixplan.interactive.app import HapticApp
+    from fixplan.interactive.session import HapticSession
+
+    fx = fixplan.load(FIXTURE)
+    s = HapticSession(fx, None, realtime=False, synchronous=True, duration_s=1.0, guidance=False)
+    app = HapticApp(s, port=0)
+    app.start()
+    app._stop.set()  # the test draws itself, between ticks
+    app._thread.join()
+    app.always_draw = True
+    try:
+        assert app.arm is not None
+        s._warm_up()
+        for _ in range(50):
+            s.tick(0.0)
+        app.draw()
+        pose = s.snapshot.pose
+        segments = np.asarray(app.arm_lines.points)
+        assert segments.shape == (app.arm.arm.nq + 1, 2, 3)
+        _, p_tool = app.arm.arm.tool_target(pose)
+        np.testing.assert_allclose(segments[-1, 1], p_tool, atol=1e-6)
+        np.testing.assert_allclose(segments[0, 0], fx.robot.base.p_world, atol=1e-12)
+    finally:
+        app.stop()

@@ -10,6 +10,7 @@ tool frame (the hand holds the part there). A negative distance is a penetration
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -182,7 +183,8 @@ def along_trajectory(
         return None
     picked: list[tuple[float, Pose]] = []
     for k, (t, pose) in enumerate(samples):
-        if not picked or t >= picked[-1][0] + every_s * (1 - 1e-9) or k == len(samples) - 1:
+        gap = float(t) - picked[-1][0] if picked else math.inf
+        if gap >= every_s or math.isclose(gap, every_s) or k == len(samples) - 1:
             picked.append((float(t), pose))
     knots: list[tuple[Pose, FloatArray]] = []
     times: list[float] = []
