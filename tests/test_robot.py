@@ -626,3 +626,39 @@ def test_haptic_draws_the_arm_holding_the_part() -> None:
         np.testing.assert_allclose(segments[0, 0], fx.robot.base.p_world, atol=1e-12)
     finally:
         app.stop()
+
+
+# -- the Panda and the UR5 of example-robot-data (the optional extra fixplan[robots]) -------------------
+def _robot_data_missing() -> str | None:
+    try:
+        import example_robot_data  # noqa: F401
+    except ImportError:
+        return "example-robot-data's loaders are not installed (pip install fixplan[robots]): the Panda and UR5 examples need them"
+    return None
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(_robot_data_missing() is not None, reason=str(_robot_data_missing()))
+@pytest.mark.parametrize(
+    ("name", "joint", "top"),
+    [("box-3-2-1-panda.toml", "panda_joint5", 0.5), ("box-3-2-1-ur5.toml", "shoulder_lift_joint", 0.5)],
+)
+def test_the_default_box_loaded_by_a_robot_of_example_robot_data(name: str, joint: str, top: float) -> None:
+    """examples/robots/: planned and verified, every knot's joints put the part at its pose to 1e-9, and the
+    most loaded joint (the one each file names) carries the torque the report says, below ``top`` of its limit."""
+    path = ROOT / "examples" / "robots" / name
+    fx = fixplan.load(path)
+    result = fixplan.solve(fx)
+    assert result.status == "planned", result.reason
+    report = result.robot
+    assert report is not None and report.feasible and report.worst_joint == joint
+    arm = Arm(fx.robot, fx.gravity)
+    for k, (_, pose, _, _) in zip(report.knots, plan_knots(fx, result.plan), strict=True):
+        got = arm.part_pose_of(k.q)
+        assert np.linalg.norm(got.p_world - pose.p_world) <= 1e-9
+        assert np.linalg.norm(log_so3(got.R_world_body.T @ pose.R_world_body)) <= 1e-9
+    i = arm.joint_names.index(joint)
+    worst = max(abs(float(k.torque_Nm[i])) for k in report.knots) / arm.effort_Nm[i]
+    assert report.max_torque_ratio == pytest.approx(worst, rel=1e-12) and worst < top
+    links = result.verification.extras["robot_links"]
+    assert links["first_hit"] is None and links["min_clearance_m"] > 0.0
