@@ -747,6 +747,9 @@ class Verification(JsonObject):
     execution: Execution | None = Field(None, description="The executor's log.")
     trace: Trace | None = Field(None, description="The sampled history.")
     kind: Annotated[str | None, Str(("session",))] = Field(None, description="Recording: session.")
+    robot_links: Annotated[Any, AnyObject(nullable=True)] = Field(
+        None, description="With [robot]: the arm's links along the simulated load (least clearance, first hit)."
+    )
 
 
 class PlanFile(JsonObject):

@@ -881,6 +881,9 @@ class RobotSettings:
         A knot whose best pose error stays above this is out of reach.
     point_radius_m : float
         A point locator tip is measured as a sphere of this radius in the clearance check.
+    clearance_every_s : float
+        The verification measures the links' clearance along the simulated load this often [s]
+        (on the loop's trace, so at most as often as ``verification.trace_every_s``).
     """
 
     ik_tol: float = 1e-10
@@ -892,6 +895,7 @@ class RobotSettings:
     max_step_rad: float = 0.5
     reach_tol_m: float = 1e-6
     point_radius_m: float = 1e-6
+    clearance_every_s: float = 0.01
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,7 @@ a vertical plane, efforts 20 and 8 N·m), whose torques have a closed form.
 from __future__ import annotations
 
 import math
+import re
 import shutil
 from functools import cache
 from pathlib import Path
@@ -353,3 +354,311 @@ def test_view_draws_the_arm_holding_the_part(tmp_path: Path) -> None:
     assert html.count('"name":"robot (joints)"') >= 10  # the first frame's trace and every frame's
     data = json.loads(plan.read_text())
     assert data["robot"]["feasible"] is True and re.search(r"reachable through \d+ knots", data["robot"]["reason"])
+
+
+# -- the wrench search inside the arm's own set of pushes ------------------------------------------------
+def _box_fixture(max_force_N: float, max_torque_Nm: float):
+    from dataclasses import replace
+
+    from fixplan.model import Manipulator
+
+    fx = fixplan.load(PROBLEMS / "box-3-2-1.toml")
+    return replace(fx, manipulator=Manipulator(max_force_N, max_torque_Nm))
+
+
+def _planar_box(q: tuple[float, float], at: np.ndarray):
+    """planar2 at ``q`` with its tool at ``at``, and its joint-torque box there."""
+    arm = _arm(PLANAR2, Pose.identity(3), "tool")
+    _, p0 = arm.tool_pose(np.array(q))
+    arm = _arm(PLANAR2, Pose(np.eye(3), at - p0), "tool")
+    box = arm.torque_box(np.array(q), "the test's pose")
+    np.testing.assert_allclose(box.point_world, at, atol=1e-12)
+    return arm, box
+
+
+def test_a_lift_in_free_motion_refuses_where_the_planar_closed_form_says() -> None:
+    """planar2 horizontal, tool at the box's centre: lifting it with a needs F = m (g + a), the elbow carries 0.3 F.
+
+    Every contact opens, so the push is determined; the elbow's 8 N·m binds before the shoulder's 20
+    (0.3 F = 8 before 0.7 F = 20): a* = 8 / (0.3 m) − g, to 1e-6 relative on either side.
+    """
+    from fixplan.jamming import search_wrench
+
+    fx = _box_fixture(1000.0, 100.0)
+    c = np.array([0.10, 0.05, 0.025])
+    _, box = _planar_box((0.0, 0.0), c)
+    m, g = 2.0, 9.81
+    a_star = min(20.0 / 0.7, 8.0 / 0.3) / m - g
+    below = search_wrench(fx, [0, 0, a_star * (1 - 1e-6), 0, 0, 0], ["B1", "B2", "B3"], hand_sets=[box])
+    above = search_wrench(fx, [0, 0, a_star * (1 + 1e-6), 0, 0, 0], ["B1", "B2", "B3"], hand_sets=[box])
+    assert below.found and below.arm_joint == "elbow"
+    assert below.arm_torque_ratio == pytest.approx(1.0, abs=2e-6)
+    assert below.wrench is not None and below.wrench[2] == pytest.approx(m * (g + a_star), rel=2e-6)
+    assert not above.found and above.binding == ["arm"] and "joint elbow" in above.reason
+    assert above.arm_torque_ratio is not None and above.arm_torque_ratio > 1.0
+    # without the arm the hand's 1000 N lift it
+    assert search_wrench(fx, [0, 0, a_star * (1 + 1e-6), 0, 0, 0], ["B1", "B2", "B3"]).found
+
+
+def _joint_torques_by_hand(w: np.ndarray, tool_minus_shoulder: np.ndarray, elbow_lever: np.ndarray) -> np.ndarray:
+    """τ_i = a · (M + r_i × F) with the joint axis a = −y: the planar arm's torques written out."""
+    a = np.array([0.0, -1.0, 0.0])
+    F, M = w[:3], w[3:]
+    return np.array([a @ (M + np.cross(tool_minus_shoulder, F)), a @ (M + np.cross(elbow_lever, F))])
+
+
+def test_the_zonotope_accepts_a_push_its_inscribed_ball_refuses() -> None:
+    """planar2 upright over the box: a vertical push costs its joints nothing, a push along x 0.7 and 0.3 N·m per N.
+
+    Sliding the box up its side wall (S1, S2) at 4 m/s² needs ‖F‖ ≥ m (g + a) = 27.62 N. The ball of
+    pushes inscribed in the arm's zonotope (exertable_scale: 0.3 F + T ≤ 8 at the elbow, 100 N and
+    10 N·m scaled by 8 / 40 = 0.2: 20 N) refuses it; the zonotope itself accepts it, and the push
+    found keeps both joints within their efforts by the torques written out by hand.
+    """
+    from fixplan.jamming import search_wrench
+
+    c = np.array([0.10, 0.05, 0.025])
+    arm, box = _planar_box((math.pi / 2, 0.0), c)
+    s, joint = arm.exertable_scale(np.array([math.pi / 2, 0.0]), 0.0, 100.0, 10.0)
+    assert s == pytest.approx(8.0 / (0.3 * 100.0 + 10.0), abs=1e-9) and arm.joint_names[joint] == "elbow"
+    motion = [0.0, 0.0, 4.0, 0.0, 0.0, 0.0]
+    ball = search_wrench(_box_fixture(100.0 * s, 10.0 * s), motion, ["S1", "S2"])
+    assert not ball.found and "too weak" in ball.reason
+    assert ball.needed_force_N is not None and ball.needed_force_N >= 2.0 * (9.81 + 4.0) * (1 - 1e-6)
+    zono = search_wrench(_box_fixture(100.0, 10.0), motion, ["S1", "S2"], hand_sets=[box])
+    assert zono.found, zono.reason
+    assert zono.wrench is not None and np.linalg.norm(zono.wrench[:3]) > 100.0 * s
+    # the wrench is about the body origin (the centre, where the tool is): torques by hand
+    tau = _joint_torques_by_hand(zono.wrench, np.array([0.0, 0.0, 0.7]), np.array([0.0, 0.0, 0.3]))
+    assert abs(tau[0]) <= 20.0 * (1 + 1e-6) and abs(tau[1]) <= 8.0 * (1 + 1e-6)
+    np.testing.assert_allclose(np.abs(tau), np.abs(box.torques(zono.wrench, c)), atol=1e-9)
+    assert zono.arm_torque_ratio is not None and zono.arm_torque_ratio <= 1.0 + 1e-6
+
+
+def test_the_zonotope_refuses_a_push_the_hand_allows_naming_the_joint() -> None:
+    """planar2 horizontal: the same slide up the wall needs 0.7 m (g + a) ≥ 20 N·m of the shoulder at 4 m/s²."""
+    from fixplan.jamming import search_wrench
+
+    c = np.array([0.10, 0.05, 0.025])
+    _, box = _planar_box((0.0, 0.0), c)
+    motion = [0.0, 0.0, 4.0, 0.0, 0.0, 0.0]
+    fx = _box_fixture(100.0, 10.0)
+    assert search_wrench(fx, motion, ["S1", "S2"]).found
+    res = search_wrench(fx, motion, ["S1", "S2"], hand_sets=[box])
+    assert not res.found and res.binding == ["arm"]
+    assert "the arm cannot exert the push" in res.reason and "at the test's pose" in res.reason
+    assert res.arm_joint in ("shoulder", "elbow") and res.arm_torque_ratio is not None and res.arm_torque_ratio > 1.0
+
+
+def test_a_torque_box_is_the_arm_s_torques_as_linear_rows(rng: np.random.Generator) -> None:
+    """A w ≤ b ⇔ every joint within its effort, for wrenches about any point (arm6, random poses and pushes)."""
+    from fixplan.jamming.hand_set import torque_rows
+
+    arm = _arm(ARM6, Pose.from_rpy_deg([0.1, 0.2, 0.0], [0.0, 0.0, 30.0]), "tool0")
+    zero = np.zeros(arm.nq)
+    for _ in range(20):
+        q = rng.uniform(-2.0, 2.0, arm.nq)
+        box = arm.torque_box(q)
+        about = rng.normal(size=3)
+        A, b = torque_rows([box], about, 0.9)
+        w = rng.normal(size=6) * np.array([200.0, 200.0, 200.0, 40.0, 40.0, 40.0])
+        w_tool = np.concatenate([w[:3], w[3:] + np.cross(about - box.point_world, w[:3])])
+        tau = arm.torques(q, zero, zero, w_tool)
+        np.testing.assert_allclose(box.torques(w, about), tau, atol=1e-9)
+        assert bool(np.all(A @ w <= b)) == bool(np.all(np.abs(tau) <= 0.9 * arm.effort_Nm))
+
+
+@pytest.mark.slow
+def test_the_planner_s_pushes_stay_inside_the_arm_at_both_knots_of_each_segment(tmp_path: Path) -> None:
+    """A 31.5 N·m shoulder (its own weight takes most of it): without the arm's boxes the last transition's
+    pushes need 1.03 times its effort; with them every push of the plan is within every joint at both knots."""
+    from dataclasses import replace
+
+    from fixplan.jamming.hand_set import worst_joint
+    from fixplan.planner.segments import segment_wrenches
+    from fixplan.robot.exertable import knot_boxes
+
+    _, result = _solved()
+    strong = '<limit lower="-6.2832" upper="6.2832" effort="150.0" velocity="3.15"/>\n  </joint>\n  <link name="upper_arm_link">'
+    fx = fixplan.load(_copy_with(tmp_path, urdf_edit=(strong, strong.replace("150.0", "31.5"))))
+    worst = {True: 0.0, False: 0.0}
+    for tr in result.transitions:
+        boxes = knot_boxes(fx, tr.poses)
+        assert all(b is not None for b in boxes)
+        for with_arm in (True, False):
+            w, _, found, reasons = segment_wrenches(
+                fx if with_arm else replace(fx, robot=None), tr.poses, tr.established, tr.kind, 1.0,
+                friction_margin=0.1,
+            )  # fmt: skip
+            assert found.all(), reasons
+            for k in range(len(w)):
+                ratio, _, _ = worst_joint([boxes[k], boxes[k + 1]], w[k], tr.poses[k].p_world)
+                worst[with_arm] = max(worst[with_arm], ratio)
+    assert worst[False] > 1.0
+    assert worst[True] <= 1.0 + 1e-6
+
+
+# -- the links along the simulated load ----------------------------------------------------------------
+def _with_post(fx, center: np.ndarray, half_m: float):
+    from dataclasses import replace
+
+    from fixplan.model import Obstacle
+
+    post = Obstacle("post", "box", np.eye(3), center, np.full(3, half_m), 0.5)
+    return replace(fx, obstacles=(*fx.obstacles, post))
+
+
+def _link_center(fx, q: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """The world centre and axis of a link's collision cylinder at ``q``."""
+    import pinocchio as pin
+
+    from fixplan.robot.exertable import arm_at_start
+
+    arm, _ = arm_at_start(fx)
+    geom = arm.loaded.collision
+    gdata = geom.createData()
+    pin.updateGeometryPlacements(arm.model, arm.data, geom, gdata, q)
+    M = gdata.oMg[[o.name for o in geom.geometryObjects].index(name)]
+    return arm.p_world_root + arm.R_world_root @ M.translation, arm.R_world_root @ M.rotation[:, 2]
+
+
+@pytest.mark.parametrize("direction", [(1.0, 0.0, 0.0), (0.0, -1.0, 0.0)])
+def test_a_link_is_found_where_it_enters_a_post_at_the_time_the_motion_says(direction: tuple[float, ...]) -> None:
+    """The part slides at v = 0.1 m/s; a 1 cm post stands δ = 3 cm beside the flange's cylinder (r = 35 mm).
+
+    The flange moves with the part, so it touches the post at t* = δ / v = 0.3 s: the first sample
+    (every 10 ms) that penetrates is the first at or after t*, v t − δ deep, and it is the flange's link.
+    """
+    from fixplan.robot.clearance import along_trajectory
+    from fixplan.robot.exertable import arm_at_start
+
+    fx = fixplan.load(FIXTURE)
+    _, q0 = arm_at_start(fx)
+    assert q0 is not None
+    c, axis = _link_center(fx, q0, "wrist_3_link_0")
+    assert abs(axis[2]) == pytest.approx(1.0, abs=1e-6)  # upright: its side faces the post
+    u, delta, h, v = np.array(direction), 0.03, 0.005, 0.1
+    fx_post = _with_post(fx, c + (0.035 + delta + h) * u, h)
+    samples = [(k * 1e-3, Pose(fx.start.R_world_body, fx.start.p_world + v * k * 1e-3 * u)) for k in range(600)]
+    clear = along_trajectory(fx, samples, 0.01)
+    assert clear is not None and clear.first_hit is None and clear.least is not None
+    assert clear.least.distance_m > 0.0 and clear.samples == 61 and clear.unreached == 0  # every 10 ms and the last
+    hit = along_trajectory(fx_post, samples, 0.01)
+    assert hit is not None and hit.first_hit is not None and hit.first_hit_time_s is not None
+    t_star = delta / v
+    assert t_star - 1e-9 <= hit.first_hit_time_s <= t_star + 0.01 + 1e-9
+    assert hit.first_hit.link == "link wrist_3_link_0" and hit.first_hit.other == "obstacle post"
+    assert -hit.first_hit.distance_m == pytest.approx(v * hit.first_hit_time_s - delta, abs=1e-5)
+
+
+@pytest.mark.slow
+def test_the_verification_fails_naming_the_link_and_the_time() -> None:
+    """A post around the forearm (away from the part): the links' check fails, naming the link and the time.
+
+    (Run without the policy and re-plans ``solve`` gives the executor, the load itself may also stray.)
+    """
+    from fixplan.planner.execute import ExecutionSettings
+    from fixplan.planner.plan import start_state
+    from fixplan.planner.solve import plan_steps
+    from fixplan.planner.verify import verify
+    from fixplan.robot.exertable import arm_at_start
+
+    fx, result = _solved()
+    ok = result.verification
+    assert ok is not None and ok.passed
+    links = ok.extras["robot_links"]
+    assert links["first_hit"] is None and links["min_clearance_m"] > 0.0 and links["samples"] >= 10
+    _, q0 = arm_at_start(fx)
+    c, _ = _link_center(fx, q0, "forearm_link_0")
+    bad = _with_post(fx, c, 0.03)
+    settings = ExecutionSettings(accel_mps2=1.0, friction_margin=0.1)  # solve's defaults
+    out = verify(bad, start_state(fx), plan_steps(result.transitions), settings=settings)
+    assert not out.passed and "robot links" in out.failed_checks
+    assert re.search(r"at t = 0\.0\d\d s link \w+ of the arm hits obstacle post \(\S+ m deep\)", out.reason), out.reason
+    assert out.extras["robot_links"]["first_hit"]["other"] == "obstacle post"
+
+
+# -- the arm in `haptic` -----------------------------------------------------------------------------
+@pytest.mark.slow
+def test_the_arm_follows_a_recorded_load_to_1e_6() -> None:
+    """The simulated haptic load's trace (the part driven by the device through the coupling), frame by frame:
+    warm-started IK puts the part, through the grasp, where the trace has it."""
+    from fixplan.robot.follow import ArmFollower
+
+    fx, result = _solved()
+    trace = result.verification.trace
+    assert trace is not None and len(trace.poses) >= 10
+    follower = ArmFollower(fx)
+    Q = []
+    for pose in trace.poses:
+        q = follower.follow(pose)
+        assert follower.reached and q is not None
+        got = follower.arm.part_pose_of(q)
+        assert np.linalg.norm(got.p_world - pose.p_world) <= 1e-6
+        assert np.linalg.norm(log_so3(got.R_world_body.T @ pose.R_world_body)) <= 1e-6
+        Q.append(q.copy())
+    assert np.max(np.abs(np.diff(np.array(Q), axis=0))) <= 0.5  # one branch: no flip between frames
+
+
+def test_haptic_draws_the_arm_holding_the_part() -> None:
+    """The live scene's stick figure ends at the tool, which is at the simulated part's pose through the grasp."""
+    from fixplan.interactive.app import HapticApp
+    from fixplan.interactive.session import HapticSession
+
+    fx = fixplan.load(FIXTURE)
+    s = HapticSession(fx, None, realtime=False, synchronous=True, duration_s=1.0, guidance=False)
+    app = HapticApp(s, port=0)
+    app.start()
+    app._stop.set()  # the test draws itself, between ticks
+    app._thread.join()
+    app.always_draw = True
+    try:
+        assert app.arm is not None
+        s._warm_up()
+        for _ in range(50):
+            s.tick(0.0)
+        app.draw()
+        pose = s.snapshot.pose
+        segments = np.asarray(app.arm_lines.points)
+        assert segments.shape == (app.arm.arm.nq + 1, 2, 3)
+        _, p_tool = app.arm.arm.tool_target(pose)
+        np.testing.assert_allclose(segments[-1, 1], p_tool, atol=1e-6)
+        np.testing.assert_allclose(segments[0, 0], fx.robot.base.p_world, atol=1e-12)
+    finally:
+        app.stop()
+
+
+# -- the Panda and the UR5 of example-robot-data (the optional extra fixplan[robots]) -------------------
+def _robot_data_missing() -> str | None:
+    try:
+        import example_robot_data  # noqa: F401
+    except ImportError:
+        return "example-robot-data's loaders are not installed (pip install fixplan[robots]): the Panda and UR5 examples need them"
+    return None
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(_robot_data_missing() is not None, reason=str(_robot_data_missing()))
+@pytest.mark.parametrize(
+    ("name", "joint", "top"),
+    [("box-3-2-1-panda.toml", "panda_joint5", 0.5), ("box-3-2-1-ur5.toml", "shoulder_lift_joint", 0.5)],
+)
+def test_the_default_box_loaded_by_a_robot_of_example_robot_data(name: str, joint: str, top: float) -> None:
+    """examples/robots/: planned and verified, every knot's joints put the part at its pose to 1e-9, and the
+    most loaded joint (the one each file names) carries the torque the report says, below ``top`` of its limit."""
+    path = ROOT / "examples" / "robots" / name
+    fx = fixplan.load(path)
+    result = fixplan.solve(fx)
+    assert result.status == "planned", result.reason
+    report = result.robot
+    assert report is not None and report.feasible and report.worst_joint == joint
+    arm = Arm(fx.robot, fx.gravity)
+    for k, (_, pose, _, _) in zip(report.knots, plan_knots(fx, result.plan), strict=True):
+        got = arm.part_pose_of(k.q)
+        assert np.linalg.norm(got.p_world - pose.p_world) <= 1e-9
+        assert np.linalg.norm(log_so3(got.R_world_body.T @ pose.R_world_body)) <= 1e-9
+    i = arm.joint_names.index(joint)
+    worst = max(abs(float(k.torque_Nm[i])) for k in report.knots) / arm.effort_Nm[i]
+    assert report.max_torque_ratio == pytest.approx(worst, rel=1e-12) and worst < top
+    links = result.verification.extras["robot_links"]
+    assert links["first_hit"] is None and links["min_clearance_m"] > 0.0

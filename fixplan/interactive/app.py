@@ -4,7 +4,10 @@ The scene: the workpiece, the locators (grey; red while pressed; green: the plan
 target), the goal pose ghosted, contact normals at the locator tips, contact forces as orange
 arrows, the device proxy (a green ghost of the part at the device's pose) joined to the part by
 the virtual coupling drawn as a spring, and the suggested non-jamming push as a green arrow at
-the centre of mass. With ``--device mouse`` the transform gizmo on the proxy is the device
+the centre of mass. With a ``[robot]``, the arm holding the part (a stick figure through its
+joints, red while the part is where it does not reach), its joints solved per frame by
+warm-started inverse kinematics at the display rate (:class:`fixplan.robot.follow.ArmFollower`),
+never in the loop. With ``--device mouse`` the transform gizmo on the proxy is the device
 handle. The panel: contact state with forces, felt force and moment, the verdict of the current
 push (``classify``, with margin; a red JAMMED warning), the guidance, loop statistics, an
 *auto* switch (the planner's executor drives), *reset*, and the mouse's stiffness slider
@@ -47,6 +50,7 @@ NORMAL = (51, 51, 51)
 FORCE = (255, 127, 14)
 SPRING = (120, 120, 120)
 PUSH = (44, 160, 44)
+ARM = (90, 90, 90)
 
 
 def _mesh(fixture: Any) -> tuple[FloatArray, NDArray[np.int64]]:
@@ -143,6 +147,8 @@ class HapticApp:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._last: Snapshot | None = None
+        self.arm: Any = None  # the fixture's arm following the part (fixplan.robot.follow.ArmFollower)
+        self.arm_lines: Any = None
 
     # -- set-up ----------------------------------------------------------------------------------
     def start(self) -> str:
@@ -225,6 +231,7 @@ class HapticApp:
         self.forces = sc.add_line_segments("/forces", z, FORCE, thickness=2 * t)
         self.spring = sc.add_line_segments("/spring", z, SPRING, thickness=t)
         self.push = sc.add_line_segments("/push", z, PUSH, thickness=3 * t)
+        self._build_arm(2 * t)
         if isinstance(s.handle, GizmoHandle):
             self.gizmo = sc.add_transform_controls(
                 "/handle", scale=1.2 * self.bound, position=_xyz(start.p_world), wxyz=_wxyz(start), depth_test=False
@@ -243,6 +250,36 @@ class HapticApp:
             self.server.initial_camera.position = c + np.array([1.3, -2.0, 1.4]) * self.bound * 1.05
         else:  # the plane of motion, seen from the front (+z), y up
             self.server.initial_camera.position = c + np.array([0.0, -0.6, 3.0]) * self.bound * 1.4
+
+    def _build_arm(self, thickness: float) -> None:
+        """The arm's stick figure, at the start (nothing without a [robot] or where it cannot be loaded)."""
+        fx = self.session.fixture
+        if fx.robot is None or fx.dimension != 3:
+            return
+        from fixplan.robot.follow import ArmFollower
+        from fixplan.robot_file import RobotError
+
+        try:
+            self.arm = ArmFollower(fx)
+        except RobotError:
+            return
+        P = self.arm.skeleton_world()
+        pts = np.zeros((1, 2, 3)) if P is None else np.stack([P[:-1], P[1:]], axis=1)
+        self.arm_lines = self.server.scene.add_line_segments("/arm", pts, ARM, thickness=thickness)
+        self._arm_color = ARM
+
+    def _draw_arm(self, pose: Pose) -> None:
+        """The arm at ``pose`` (warm-started IK from the last frame); red where it does not reach."""
+        if self.arm is None:
+            return
+        self.arm.follow(pose)
+        P = self.arm.skeleton_world()
+        if P is not None:
+            self.arm_lines.points = np.stack([P[:-1], P[1:]], axis=1)
+        color = ARM if self.arm.reached else PRESSED
+        if color != self._arm_color:
+            self.arm_lines.colors = np.array(color, dtype=np.uint8)
+            self._arm_color = color
 
     def _build_panel(self) -> None:
         s = self.session
@@ -363,6 +400,7 @@ class HapticApp:
             else:
                 self.forces.points = np.zeros((1, 2, 3))
             self.spring.points = spring_points(pose.p_world, snap.device_pose.p_world, radius=0.06 * self.bound)
+            self._draw_arm(pose)
             g = snap.guidance
             com = _xyz(pose.point_world_from_body(fx.workpiece.com_body))
             if g.push is not None and snap.at_goal is False:

@@ -49,6 +49,7 @@ Without manipulator limits in the file the search bounds the wrench by ``F_max =
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -58,6 +59,7 @@ from numpy.typing import ArrayLike, NDArray
 from fixplan.errors import InputError
 from fixplan.jamming.backends import ClarabelProgram
 from fixplan.jamming.classify import Classification, Classifier
+from fixplan.jamming.hand_set import TorqueBox, torque_rows, worst_joint
 from fixplan.jamming.programs import ConeProgram, force_layout
 from fixplan.kinematics import ContactSet
 from fixplan.locating import contact_set
@@ -142,6 +144,11 @@ class WrenchSearch:
     # ``within_fraction`` says whether the one returned is (None: no push returned)
     limit_fraction: float = 1.0
     within_fraction: bool | None = None
+    # with an arm's joint-torque boxes (``hand_sets``): the most loaded joint at the push found
+    # (``|τ| / τ_max``, its name and where), or at the best push within the hand's limits when
+    # the arm is what refuses; None without boxes
+    arm_torque_ratio: float | None = None
+    arm_joint: str | None = None
 
     @property
     def force_fraction(self) -> float | None:
@@ -162,35 +169,45 @@ class WrenchSearch:
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dictionary; undefined numbers are ``None`` (never NaN or Infinity)."""
         check, bal = self.check, self.balance_check
-        return {
-            "found": self.found,
-            "wrench": None if self.wrench is None else [float(x) for x in self.wrench],
-            "margin": _finite_or_none(self.margin_N),
-            "margin_note": None if self.margin_N is not None else "no kept contact: no normal-force margin",
-            "margin_target": _finite_or_none(self.margin_target_N),
-            "margin_target_met": self.margin_target_met,
-            "acceleration": None if self.acceleration is None else [float(x) for x in self.acceleration],
-            "contact_roles": dict(self.contact_roles),
-            "contact_forces": {k: [float(x) for x in v] for k, v in self.contact_forces.items()},
-            "check_mode": None if check is None else check.mode,
-            "check_margin": None if check is None else _finite_or_none(check.balance_residual),
-            "check_acceleration": None
-            if check is None or check.acceleration is None
-            else [float(x) for x in check.acceleration],
-            "balance_check_mode": None if bal is None else bal.mode,
-            "balance_check_margin": None if bal is None else _finite_or_none(bal.balance_residual),
-            "jam_margin_rel": _finite_or_none(self.jam_margin_rel),
-            "confirmed": self.confirmed,
-            "reason": self.reason,
-            "binding": list(self.binding),
-            "limits": {"max_force": _finite_or_none(self.limits[0]), "max_torque": _finite_or_none(self.limits[1])},
-            "needed_force": _finite_or_none(self.needed_force_N),
-            "needed_torque": _finite_or_none(self.needed_torque_Nm),
-            "limit_fraction": float(self.limit_fraction),
-            "within_fraction": self.within_fraction,
-            "force_fraction": _finite_or_none(self.force_fraction),
-            "torque_fraction": _finite_or_none(self.torque_fraction),
-        } | self._locators_json()
+        return (
+            {
+                "found": self.found,
+                "wrench": None if self.wrench is None else [float(x) for x in self.wrench],
+                "margin": _finite_or_none(self.margin_N),
+                "margin_note": None if self.margin_N is not None else "no kept contact: no normal-force margin",
+                "margin_target": _finite_or_none(self.margin_target_N),
+                "margin_target_met": self.margin_target_met,
+                "acceleration": None if self.acceleration is None else [float(x) for x in self.acceleration],
+                "contact_roles": dict(self.contact_roles),
+                "contact_forces": {k: [float(x) for x in v] for k, v in self.contact_forces.items()},
+                "check_mode": None if check is None else check.mode,
+                "check_margin": None if check is None else _finite_or_none(check.balance_residual),
+                "check_acceleration": None
+                if check is None or check.acceleration is None
+                else [float(x) for x in check.acceleration],
+                "balance_check_mode": None if bal is None else bal.mode,
+                "balance_check_margin": None if bal is None else _finite_or_none(bal.balance_residual),
+                "jam_margin_rel": _finite_or_none(self.jam_margin_rel),
+                "confirmed": self.confirmed,
+                "reason": self.reason,
+                "binding": list(self.binding),
+                "limits": {"max_force": _finite_or_none(self.limits[0]), "max_torque": _finite_or_none(self.limits[1])},
+                "needed_force": _finite_or_none(self.needed_force_N),
+                "needed_torque": _finite_or_none(self.needed_torque_Nm),
+                "limit_fraction": float(self.limit_fraction),
+                "within_fraction": self.within_fraction,
+                "force_fraction": _finite_or_none(self.force_fraction),
+                "torque_fraction": _finite_or_none(self.torque_fraction),
+            }
+            | self._locators_json()
+            | self._arm_json()
+        )
+
+    def _arm_json(self) -> dict[str, Any]:
+        """``{"arm_torque_ratio": …, "arm_joint": …}`` when the search had an arm's boxes (else nothing)."""
+        if self.arm_torque_ratio is None:
+            return {}
+        return {"arm_torque_ratio": _finite_or_none(self.arm_torque_ratio), "arm_joint": self.arm_joint}
 
     def _locators_json(self) -> dict[str, Any]:
         """``{"locators": {locator: [contact names]}}`` where a locator has several contacts (else nothing)."""
@@ -357,6 +374,7 @@ def search_wrench(
     confirm: bool = True,
     limit_fraction: float | None = None,
     lift_below_weight: bool = True,
+    hand_sets: Sequence[TorqueBox] = (),
 ) -> WrenchSearch:
     """The applied wrench that moves the part with acceleration ≥ ``motion``, without jamming.
 
@@ -410,6 +428,13 @@ def search_wrench(
     certified by the program's own constraint. For a feedback loop that re-solves the push many
     times a second and watches the motion it causes, where the check was a quarter of each solve.
 
+    ``hand_sets``: the arm's joint-torque boxes (:class:`~fixplan.jamming.hand_set.TorqueBox`, one
+    per pose the push must be exertable at) in addition to the force and torque limits: every
+    push is sought with ``|τ_g + Jᵀ w| ≤ τ_max`` at each (within ``limit_fraction`` of the
+    effort limits first, like the hand's limits). When the boxes are what refuses (a push within
+    the hand's limits exists, none the arm can exert) the reason names the joint and the pose.
+    ``arm_torque_ratio`` and ``arm_joint`` give the most loaded joint at the push found.
+
     This is the fixture-level form: it builds the contact set at ``pose`` and moves ``motion``
     (and ``slip_twist``) from the body origin (or ``at``) to the centre of mass, then calls
     :func:`search_wrench_in`, which a caller holding a contact set calls directly.
@@ -444,6 +469,7 @@ def search_wrench(
         confirm=confirm,
         limit_fraction=limit_fraction,
         lift_below_weight=lift_below_weight,
+        hand_sets=hand_sets,
     )
 
 
@@ -479,6 +505,7 @@ def search_wrench_in(
     confirm: bool = True,
     limit_fraction: float | None = None,
     lift_below_weight: bool = True,
+    hand_sets: Sequence[TorqueBox] = (),
 ) -> WrenchSearch:
     """:func:`search_wrench` for a contact set already built, with the motion of the centre of mass.
 
@@ -509,9 +536,14 @@ def search_wrench_in(
     w_g = fixture.gravity_wrench()
     target = None if min_margin_N is None else float(min_margin_N)
     kept = [i for i, c in enumerate(cs.contacts) if roles[c.name] != "opening"]
+    boxes = tuple(hand_sets)
+    if boxes and cs.dimension != 3:
+        raise InputError("an arm's joint-torque boxes (hand_sets) are for 3D scenes (expected none in 2D)")
     if not kept:
         clf_free = Classifier(cs, w_g, tolerances=fixture.tolerances)
-        return _free_push(cs, clf_free, a_hat, roles, about, w_g, F_max, T_max, notes, target, frac)
+        return _with_arm(
+            _free_push(cs, clf_free, a_hat, roles, about, w_g, F_max, T_max, notes, target, frac), boxes, about
+        )
 
     def not_found(
         reason: str, binding: list[str] | None = None, needs: tuple[float | None, float | None] = (None, None)
@@ -541,11 +573,12 @@ def search_wrench_in(
         jam=jam_margin_rel,
         s_max=max_accel_factor,
         shared={},  # the builds' common parts (one contact set, one set of roles)
+        hand_sets=boxes,
     )
     # headroom: first within the fraction of the limits, the whole limits only when nothing moves
     # the part inside it (one more program then)
-    F_lim, T_lim = frac * F_max, frac * T_max
-    prog, meta = _build(**build, cert=y, F_max=F_lim, T_max=T_lim)  # type: ignore[arg-type]
+    F_lim, T_lim, h_lim = frac * F_max, frac * T_max, frac
+    prog, meta = _build(**build, cert=y, F_max=F_lim, T_max=T_lim, hand_frac=h_lim)  # type: ignore[arg-type]
     sol = ClarabelProgram(prog).solve(prog.b)
     within = bool(sol.solved and -sol.value > _SEARCH.found_rel * F_max)
     # the headroom must not cost the contacts their hold: where the margin inside the fraction
@@ -558,16 +591,20 @@ def search_wrench_in(
         prog_f, meta_f = _build(**build, cert=y, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
         sol_f = ClarabelProgram(prog_f).solve(prog_f.b)
         if sol_f.solved and -sol_f.value > min(tau_within * _SEARCH.headroom_margin_gain, weight_N):
-            prog, meta, sol, F_lim, T_lim, lifted = prog_f, meta_f, sol_f, F_max, T_max, True
+            prog, meta, sol, F_lim, T_lim, h_lim, lifted = prog_f, meta_f, sol_f, F_max, T_max, 1.0, True
     if not within and frac < 1.0:
-        F_lim, T_lim = F_max, T_max
+        F_lim, T_lim, h_lim = F_max, T_max, 1.0
         prog, meta = _build(**build, cert=y, F_max=F_lim, T_max=T_lim)  # type: ignore[arg-type]
         sol = ClarabelProgram(prog).solve(prog.b)
     n = cs.ndof
     if not sol.solved or -sol.value <= _SEARCH.found_rel * F_max:
-        # Diagnose: is it the limits, or the motion itself?
+        # Diagnose: is it the arm, the hand's limits, or the motion itself?
+        if boxes:
+            arm_said = _arm_refuses(build, y, F_max, T_max, boxes, about)
+            if arm_said is not None:
+                return replace(not_found(arm_said[0], ["arm"]), arm_torque_ratio=arm_said[1], arm_joint=arm_said[2])
         big = _SEARCH.unbounded_factor
-        prog_free, _ = _build(**build, cert=y, F_max=big * F_max, T_max=big * T_max)  # type: ignore[arg-type]
+        prog_free, _ = _build(**build, cert=y, F_max=big * F_max, T_max=big * T_max, hand_frac=None)  # type: ignore[arg-type]
         free = ClarabelProgram(prog_free).solve(prog_free.b)
         if free.solved and -free.value > _SEARCH.found_rel * F_max:
             reason, binding, needs = _too_weak(build, y, F_max, T_max)
@@ -581,7 +618,7 @@ def search_wrench_in(
     # optimum above stays feasible with it, so τ cannot drop)
     y2 = _certificate(cs, x[:n] + w_g, project=False, shared=polar) if certify else None
     if y2 is not None:
-        prog2, meta2 = _build(**build, cert=y2, F_max=F_lim, T_max=T_lim)  # type: ignore[arg-type]
+        prog2, meta2 = _build(**build, cert=y2, F_max=F_lim, T_max=T_lim, hand_frac=h_lim)  # type: ignore[arg-type]
         sol2 = ClarabelProgram(prog2).solve(prog2.b)
         if sol2.solved and -sol2.value >= tau:
             x, tau, meta, y = sol2.x, float(-sol2.value), meta2, y2
@@ -589,7 +626,7 @@ def search_wrench_in(
     if objective == "effort":
         wanted = wp.mass_kg * g if target is None else target
         tau_req = wanted if wanted < tau * (1 - _TARGET_REL) else tau * (1 - _TARGET_REL)
-        prog_e, meta_e = _build(**build, cert=y, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_req)  # type: ignore[arg-type]
+        prog_e, meta_e = _build(**build, cert=y, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_req, hand_frac=h_lim)  # type: ignore[arg-type]
         sol_e = ClarabelProgram(prog_e).solve(prog_e.b)
         if sol_e.solved:
             x, meta = sol_e.x, meta_e
@@ -612,6 +649,9 @@ def search_wrench_in(
         binding.append("max_force")
     if abs(float(np.linalg.norm(w_user[cs.dimension :])) - T_max) <= _SEARCH.binding_rel * T_max:
         binding.append("max_torque")
+    arm_ratio, arm_joint, _ = worst_joint(boxes, w_user, about) if boxes else (None, None, "")
+    if arm_ratio is not None and arm_ratio >= 1.0 - _SEARCH.binding_rel:
+        binding.append(f"joint {arm_joint}")
     if not within and frac < 1.0:
         notes += _beyond_fraction(w_user, cs.dimension, F_max, T_max, frac)
     elif lifted:
@@ -628,6 +668,7 @@ def search_wrench_in(
         return WrenchSearch(
             True, w_user, tau, s * a_hat, roles, forces, None, reason, binding, (F_max, T_max),
             margin_target_N=target, margin_target_met=met, limit_fraction=frac, within_fraction=within,
+            arm_torque_ratio=arm_ratio, arm_joint=arm_joint,
         )  # fmt: skip
     clf_all = Classifier(cs, w_g, tolerances=fixture.tolerances)
     bal = clf_all.classify(w_com, w_user)
@@ -667,7 +708,52 @@ def search_wrench_in(
         confirmed=confirmed and not bal.balanced,
         limit_fraction=frac,
         within_fraction=within,
+        arm_torque_ratio=arm_ratio,
+        arm_joint=arm_joint,
     )
+
+
+def _arm_refuses(
+    build: dict[str, Any],
+    cert: FloatArray | None,
+    F_max: float,
+    T_max: float,
+    boxes: tuple[TorqueBox, ...],
+    about: FloatArray,
+) -> tuple[str, float, str] | None:
+    """``(reason, ratio, joint)`` when a push within the hand's limits exists but the arm cannot exert it, else None.
+
+    The best-margin push without the arm's boxes is found and its most loaded joint named:
+    ``|τ| / τ_max`` there, and the pose (the box's label).
+    """
+    cs: ContactSet = build["cs"]
+    prog, _ = _build(**build, cert=cert, F_max=F_max, T_max=T_max, hand_frac=None)
+    sol = ClarabelProgram(prog).solve(prog.b)
+    if not sol.solved or -sol.value <= _SEARCH.found_rel * F_max:
+        return None
+    w_user = _about_point(cs, sol.x[: cs.ndof], about)
+    ratio, joint, label = worst_joint(boxes, w_user, about)
+    where = f" at {label}" if label else ""
+    reason = (
+        f"the arm cannot exert the push: no non-jamming push within the hand's limits keeps every joint within its"
+        f" effort limit; the best-margin one needs joint {joint} at {ratio:.3g} times its effort limit{where}"
+    )
+    return reason, ratio, joint
+
+
+def _with_arm(res: WrenchSearch, boxes: tuple[TorqueBox, ...], about: FloatArray) -> WrenchSearch:
+    """A free push (every contact opens, the push determined) checked against the arm's boxes too."""
+    if not boxes or res.wrench is None:
+        return res
+    ratio, joint, label = worst_joint(boxes, res.wrench, about)
+    if ratio <= 1.0 + _SEARCH.limit_rel:
+        return replace(res, arm_torque_ratio=ratio, arm_joint=joint)
+    where = f" at {label}" if label else ""
+    reason = f"the arm cannot exert the push M a − w_g: joint {joint} needs {ratio:.3g} times its effort limit{where}"
+    return replace(
+        res, found=False, wrench=None, reason=reason, binding=["arm"], arm_torque_ratio=ratio, arm_joint=joint,
+        confirmed=False, within_fraction=None,
+    )  # fmt: skip
 
 
 def _beyond_fraction(w_user: FloatArray, d: int, F_max: float, T_max: float, frac: float) -> str:
@@ -786,7 +872,9 @@ def _too_weak(
     big = _SEARCH.unbounded_factor
 
     def least(kind: Literal["force", "torque"], F_lim: float, T_lim: float) -> tuple[float, float] | None:
-        prog, _ = _build(**build, cert=cert, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_min, least=kind)
+        prog, _ = _build(
+            **build, cert=cert, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_min, least=kind, hand_frac=None
+        )
         sol = ClarabelProgram(prog).solve(prog.b)
         if not sol.solved:
             return None
@@ -894,6 +982,8 @@ def _build(
     s_max: float = math.inf,
     least: Literal["effort", "force", "torque"] = "effort",
     shared: dict[str, Any] | None = None,
+    hand_sets: tuple[TorqueBox, ...] = (),
+    hand_frac: float | None = 1.0,
 ) -> tuple[ConeProgram, dict]:
     """Variables x = (w [n], f_n sliding [ks], f sticking [reduced], s, τ[, e]).
 
@@ -904,6 +994,8 @@ def _build(
     ``cert`` (``ŷ``, ``‖ŷ‖_M = 1``, ``J_i ŷ ∈ K_i*``): ``ŷᵀ w_e ≥ jam ‖w_e‖_{M⁻¹}``.
     ``shared``: a dictionary kept by the caller across builds with the same ``cs`` and ``roles``
     (one search), which then computes the sticking contacts' layout and ``L⁻¹`` once.
+    ``hand_sets``: the arm's joint-torque boxes, kept within ``hand_frac`` of the effort limits
+    (None: left out, for the diagnoses), as ``A w ≤ b`` with ``w`` about the centre of mass.
     """
     n, d = cs.ndof, cs.dimension
     shared = {} if shared is None else shared
@@ -1011,6 +1103,14 @@ def _build(
         rows_A.append(np.vstack([row, -row]))
         rows_b.append(np.array([T_max, T_max]))
         cones.append(("nonneg", 2))
+    if hand_sets and hand_frac is not None:
+        # the arm: |τ_g + Jᵀ S w| ≤ s τ_max at every box (b − A x ≥ 0)
+        A_arm, b_arm = torque_rows(hand_sets, cs.com_world, hand_frac)
+        A_h = np.zeros((A_arm.shape[0], nx))
+        A_h[:, i_w : i_w + n] = A_arm
+        rows_A.append(A_h)
+        rows_b.append(b_arm)
+        cones.append(("nonneg", A_arm.shape[0]))
     if cert is not None:
         # not jamming: (ŷᵀ w_e / jam, C w_e) ∈ SOC, C = L⁻¹ (‖C x‖ = ‖x‖_{M⁻¹})
         if "C" not in shared:

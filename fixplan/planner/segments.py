@@ -11,6 +11,10 @@ with the contact set of the established contacts at the knot (built once per seg
 :func:`~fixplan.jamming.search.search_wrench_in`. A segment whose search fails makes the
 transition fail with its reason. With no established contact (free motion) the wrench is
 ``M a − w_g``, checked against the limits.
+
+With a ``[robot]`` every segment's push must also be one the arm can exert at both of its knots:
+the arm's joint-torque boxes there (:func:`fixplan.robot.exertable.knot_boxes`, the joints by
+inverse kinematics along the transition) go to the search as ``hand_sets``.
 """
 
 from __future__ import annotations
@@ -26,6 +30,9 @@ from fixplan.settings import DEFAULT
 from fixplan.spatial import Pose, log_so3, shift_twist, shift_wrench
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from fixplan.jamming.hand_set import TorqueBox
     from fixplan.kinematics import ContactSet
     from fixplan.model import Fixture
 
@@ -58,6 +65,11 @@ def segment_wrenches(
     found = np.zeros(K, dtype=bool)
     reasons: list[str] = []
     need: list[tuple[float | None, float | None]] = []
+    arm_boxes: list = [None] * len(poses)
+    if fixture.robot is not None and d == 3:
+        from fixplan.robot.exertable import knot_boxes
+
+        arm_boxes = list(knot_boxes(fixture, poses))
     for k in range(K):
         need.append((None, None))
         a, b = poses[k], poses[k + 1]
@@ -78,8 +90,9 @@ def segment_wrenches(
             reasons.append("the segment does not move")
             continue
         a_com = nu * (acceleration_mps2 / size)
+        boxes = tuple(b for b in (arm_boxes[k], arm_boxes[k + 1]) if b is not None)
         if not est:
-            ok, wr, why = free_wrench(fixture, a, a_com, M)
+            ok, wr, why = free_wrench(fixture, a, a_com, M, boxes)
             found[k], reasons = ok, [*reasons, why]
             wrenches[k] = wr
             if not ok:  # the push is determined: it is the least needed (with the other limit kept, if it is)
@@ -96,6 +109,7 @@ def segment_wrenches(
                 objective="effort",
                 min_margin_N=margin_N,
                 friction_margin=friction_margin,
+                hand_sets=boxes,
             )
         except InputError as exc:
             reasons.append(str(exc))
@@ -124,8 +138,13 @@ def needed_scale(need: tuple[float | None, float | None], F_max: float, T_max: f
     return min(ratios) if ratios else None
 
 
-def free_wrench(fixture: Fixture, pose: Pose, a_com: FloatArray, M: FloatArray) -> tuple[bool, FloatArray, str]:
-    """Free flight: ``w = M a − w_g`` about the centre of mass, reported about the body origin."""
+def free_wrench(
+    fixture: Fixture, pose: Pose, a_com: FloatArray, M: FloatArray, boxes: Sequence[TorqueBox] = ()
+) -> tuple[bool, FloatArray, str]:
+    """Free flight: ``w = M a − w_g`` about the centre of mass, reported about the body origin.
+
+    ``boxes``: the arm's joint-torque boxes the push must also lie in (the most loaded joint is named).
+    """
     d = fixture.dimension
     w_c = M @ a_com - fixture.gravity_wrench()
     w_o = shift_wrench(w_c, pose.point_world_from_body(fixture.workpiece.com_body), pose.p_world)
@@ -138,6 +157,19 @@ def free_wrench(fixture: Fixture, pose: Pose, a_com: FloatArray, M: FloatArray) 
         # the push is determined (no contact force): its force and torque are the least needed
         reason, _ = too_weak_reason(F, F, T, T, F_max, T_max)
         return False, w_o, reason + " (free motion: the push is M a − w_g)"
+    if boxes:
+        from fixplan.jamming.hand_set import worst_joint
+
+        ratio, joint, label = worst_joint(boxes, w_o, pose.p_world)
+        if ratio > 1.0:
+            return (
+                False,
+                w_o,
+                (
+                    f"the arm cannot exert the push M a − w_g: joint {joint} needs {ratio:.3g} times its effort limit at "
+                    f"{label} (free motion)"
+                ),
+            )
     return True, w_o, f"free motion: ‖F‖ = {F:.3g} N, ‖T‖ = {T:.3g} N·m"
 
 

@@ -16,7 +16,12 @@ workpiece (feedforward ``w + b ẋ`` plus PD on the handle). The engine runs at 
   simulated with forces the solver did not find proves nothing: the check names how many steps
   did not converge and the largest residual);
 - the push on the part stays within the manipulator's limits (averaged over 10 ms, 5 % slack
-  for the coupling's transients).
+  for the coupling's transients);
+- with a ``[robot]``, no link of the arm penetrates the fixture or the part along the simulated
+  load: a post-pass over the loop's trace (the part's pose every ``trace_every_s``), one sample
+  every ``robot.clearance_every_s`` at most, the joints by inverse kinematics from sample to
+  sample, coal on the URDF's collision geometry (:func:`link_clearance`). The failure names the
+  link, what it hits and when; ``extras["robot_links"]`` carries the least clearance and when.
 
 The executor's push at every tick (what the hand is asked for) is measured against the headroom
 its searches keep (``settings.search.limit_fraction`` of the limits):
@@ -318,6 +323,18 @@ def verify(
             f"the push on the part exceeded the manipulator's limits: ‖F‖ up to {push_F:.3g} N (max_force {F_max:.3g} N), "
             f"‖T‖ up to {push_T:.3g} N·m (max_torque {T_max:.3g} N·m), averaged over {vs.limit_window_s * 1e3:g} ms"
         )
+    extras: dict[str, Any] = {}
+    if fixture.robot is not None:
+        links = link_clearance(fixture, rec.trace, profile.robot.clearance_every_s)
+        if links is not None:
+            extras["robot_links"] = links.to_json()
+            if links.first_hit is not None:
+                hit = links.first_hit
+                checks.append("robot links")
+                reasons.append(
+                    f"at t = {links.first_hit_time_s:.3f} s {hit.link} of the arm hits {hit.other} "
+                    f"({-hit.distance_m:.3g} m deep)"
+                )
     measures = loop_measures(rec, sim, trace_every)
     if measures["trace"] is not None and len(commands) == len(rec.coupling_wrench):
         # the executor's push at the trace's ticks, beside the coupling's
@@ -336,7 +353,21 @@ def verify(
         max_push_torque_Nm=push_T,
         saturated_ticks=loop.saturated_ticks,
         planner_wall_time_in_loop_s=planner_s[0],
+        extras=extras,
     )
+
+
+def link_clearance(fixture: Fixture, trace: Sequence[tuple[Any, ...]], every_s: float) -> Any:
+    """The arm's links along a loop's trace (``(tick, time [s], pose, ...)`` samples), or None.
+
+    :func:`fixplan.robot.clearance.along_trajectory` on the trace's poses, one every ``every_s``
+    at most; None without a trace or without collision geometry.
+    """
+    if not trace:
+        return None
+    from fixplan.robot.clearance import along_trajectory
+
+    return along_trajectory(fixture, [(float(t), pose) for _, t, pose, *_ in trace], every_s)
 
 
 def headroom(commands: Sequence[FloatArray], d: int, F_max: float, T_max: float, fraction: float) -> dict[str, Any]:

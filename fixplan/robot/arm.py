@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.jamming.hand_set import TorqueBox
 from fixplan.model import RobotSpec
 from fixplan.robot_file import LoadedRobot, load_robot
 from fixplan.settings import DEFAULT, RobotSettings
@@ -197,6 +198,17 @@ class Arm:
             if need[i] > 0.0 and room[i] / need[i] < best:
                 best, joint = float(room[i] / need[i]), i
         return best, joint
+
+    def torque_box(self, q: FloatArray, label: str = "") -> TorqueBox:
+        """The pushes the arm can exert at ``q``: ``|τ_g(q) + J(q)ᵀ w| ≤ τ_max`` (``w`` at the tool origin, world axes).
+
+        The box the wrench search takes as linear inequalities (:mod:`fixplan.jamming.hand_set`):
+        the arm's zonotope of wrenches itself, where :meth:`exertable_scale` gives its inscribed ball.
+        """
+        q = np.asarray(q, dtype=float)
+        J = self.jacobian_world(q)
+        _, p = self.tool_pose(q)
+        return TorqueBox(J.T.copy(), self.gravity_torques(q), self.effort_Nm.copy(), p, self.joint_names, label)
 
     def gravity_torques(self, q: FloatArray) -> FloatArray:
         """The joint torques that hold the arm still against gravity."""

@@ -10,7 +10,8 @@ tool frame (the hand holds the part there). A negative distance is a penetration
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -79,9 +80,18 @@ def _fixture_objects(coal: Any, fixture: Fixture) -> list[tuple[str, Any, Any]]:
 
 def least_clearance(arm: Arm, fixture: Fixture, knots: Sequence[tuple[Pose, FloatArray]]) -> Clearance | None:
     """The least link distance over ``knots`` (part pose, joints), or None without collision geometry."""
+    best = None
+    for c in per_knot(arm, fixture, knots):
+        if best is None or c.distance_m < best.distance_m:
+            best = c
+    return best
+
+
+def per_knot(arm: Arm, fixture: Fixture, knots: Sequence[tuple[Pose, FloatArray]]) -> Iterator[Clearance]:
+    """The least link distance at each of ``knots`` in turn (nothing without collision geometry)."""
     geom = arm.loaded.collision
     if geom is None or geom.ngeoms == 0:
-        return None
+        return
     import coal
     import pinocchio as pin
 
@@ -89,8 +99,9 @@ def least_clearance(arm: Arm, fixture: Fixture, knots: Sequence[tuple[Pose, Floa
     tool_joint = int(arm.model.frames[arm.tool_id].parentJoint)
     fixed = _fixture_objects(coal, fixture)
     part = _part_geometry(coal, fixture.workpiece.shape)
-    request, best = coal.DistanceRequest(), None
+    request = coal.DistanceRequest()
     for j, (pose, q) in enumerate(knots):
+        best: Clearance | None = None
         pin.updateGeometryPlacements(arm.model, arm.data, geom, gdata, np.asarray(q, dtype=float))
         part_tf = coal.Transform3s(np.asarray(pose.R_world_body, dtype=float), np.asarray(pose.p_world, dtype=float))
         for g, obj in enumerate(geom.geometryObjects):
@@ -106,7 +117,8 @@ def least_clearance(arm: Arm, fixture: Fixture, knots: Sequence[tuple[Pose, Floa
                 d = float(coal.distance(obj.geometry, tf, other, other_tf, request, result))
                 if best is None or d < best.distance_m:
                     best = Clearance(d, j, f"link {obj.name}", name)
-    return best
+        if best is not None:
+            yield best
 
 
 def _moves_with(arm: Arm, joint: int, tool_joint: int) -> bool:
@@ -121,4 +133,86 @@ def _moves_with(arm: Arm, joint: int, tool_joint: int) -> bool:
     return False
 
 
-__all__ = ["Clearance", "least_clearance"]
+@dataclass(frozen=True)
+class TrajectoryClearance:
+    """The links' clearance along a trajectory of the part (:func:`along_trajectory`).
+
+    ``least`` is the least distance over the samples measured (its ``knot`` the sample's index),
+    ``least_time_s`` when; ``first_hit`` and ``first_hit_time_s`` the first sample where a link
+    penetrates (None: none does). ``samples`` were measured, ``unreached`` of them the arm does
+    not reach (left out), every ``every_s`` seconds.
+    """
+
+    least: Clearance | None
+    least_time_s: float | None
+    first_hit: Clearance | None
+    first_hit_time_s: float | None
+    samples: int
+    unreached: int
+    every_s: float
+
+    def to_json(self) -> dict[str, Any]:
+        def one(c: Clearance | None, t: float | None) -> dict[str, Any] | None:
+            if c is None:
+                return None
+            return {"distance_m": c.distance_m, "time_s": t, "link": c.link, "other": c.other}
+
+        return {
+            "min_clearance_m": None if self.least is None else self.least.distance_m,
+            "least": one(self.least, self.least_time_s),
+            "first_hit": one(self.first_hit, self.first_hit_time_s),
+            "samples": self.samples,
+            "unreached": self.unreached,
+            "every_s": self.every_s,
+        }
+
+
+def along_trajectory(
+    fixture: Fixture, samples: Sequence[tuple[float, Pose]], every_s: float
+) -> TrajectoryClearance | None:
+    """The links' clearance at the part's poses ``(time [s], pose)``, one every ``every_s`` at most.
+
+    The joints follow the part by inverse kinematics, each sample from the one before (the first
+    from the arm's configuration at the fixture's start, :func:`fixplan.robot.exertable.arm_at_start`).
+    None without collision geometry.
+    """
+    from fixplan.robot.exertable import arm_at_start
+
+    arm, q_start = arm_at_start(fixture)
+    if arm.loaded.collision is None or arm.loaded.collision.ngeoms == 0:
+        return None
+    picked: list[tuple[float, Pose]] = []
+    for k, (t, pose) in enumerate(samples):
+        gap = float(t) - picked[-1][0] if picked else math.inf
+        if gap >= every_s or math.isclose(gap, every_s) or k == len(samples) - 1:
+            picked.append((float(t), pose))
+    knots: list[tuple[Pose, FloatArray]] = []
+    times: list[float] = []
+    q_prev, unreached = q_start, 0
+    for t, pose in picked:
+        R, p = arm.tool_target(pose)
+        if q_prev is None:
+            from fixplan.robot.check import first_configuration
+
+            q, err = first_configuration(arm, fixture, pose)
+        else:
+            q, err = arm.ik(R, p, q_prev)
+        if err > arm.settings.reach_tol_m:
+            unreached += 1
+            continue
+        q_prev = q
+        knots.append((pose, q))
+        times.append(t)
+    least, first = None, None
+    for c in per_knot(arm, fixture, knots):
+        if least is None or c.distance_m < least.distance_m:
+            least = c
+        if first is None and c.distance_m < 0.0:
+            first = c
+    return TrajectoryClearance(
+        least, None if least is None else times[least.knot], first, None if first is None else times[first.knot],
+        len(knots), unreached, every_s,
+    )  # fmt: skip
+
+
+__all__ = ["Clearance", "TrajectoryClearance", "along_trajectory", "least_clearance", "per_knot"]
