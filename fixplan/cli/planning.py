@@ -184,7 +184,13 @@ def solve(
     if perturb_seed is not None:
         if no_verify:
             raise InputError("--perturb-seed verifies the plan on a perturbed world: it cannot go with --no-verify")
-    fixture = _load(file, "solve")
+    fixture = _load(file, "solve", pins=True)
+    if fixture.has_pins and (order or perturb_seed is not None or clamp):
+        used = "--order" if order else ("--perturb-seed" if perturb_seed is not None else "--clamp")
+        raise InputError(
+            f"{fixture.source}: {used} is not supported with pins or bores yet "
+            "(expected 'fixplan solve FILE' or 'fixplan robust FILE' for a part loaded onto pins)"
+        )
     if perturb_seed is not None:
         perturb = _robust_settings(
             seed=seed, mu_spread=mu_spread, pose_sigma=_pose_sigma(pose_sigma, fixture), locator_sigma=locator_sigma,
@@ -205,7 +211,7 @@ def solve(
             _writable(path, force, option)
     target, report_path = out, report
     names = _names(order, "--order")
-    if fixture.is_full:
+    if fixture.is_full and not fixture.has_pins:
         from fixplan.summary import goal_rank
 
         rank = goal_rank(fixture)
