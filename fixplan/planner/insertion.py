@@ -60,7 +60,7 @@ from fixplan.errors import InputError
 from fixplan.geometry.pins import HoleBody, PinBody, radial_play_m
 from fixplan.kinematics import ContactSet
 from fixplan.locating import _hole_body, contact_set, locator_gaps, peg_body
-from fixplan.model import Fixture
+from fixplan.model import Bore, Fixture
 from fixplan.planner.execute import ExecutionLog, ExecutionNoise
 from fixplan.planner.plan import Verification
 from fixplan.settings import DEFAULT, HAPTIC, InsertionSettings, Settings
@@ -174,6 +174,33 @@ def insertion_axis(fixture: Fixture) -> FloatArray:
     return u
 
 
+def located_pose(fixture: Fixture) -> Pose:
+    """The located pose: the file's (pins), or a shaft's in its bore (coaxial, its leading end on the bottom).
+
+    A bore alone is no full fixture of locators, and the loader takes a goal only for those: the
+    shaft is turned the least from its start so that its axis lies along the bore's, its end that
+    leads into the bore on the bottom ``depth_m`` below the mouth.
+    """
+    if fixture.goal_pose is not None:
+        return fixture.goal_pose
+    if not fixture.bores or fixture.pins:
+        raise InputError(f"{fixture.source}: workpiece.goal: a fixture with pins needs its located pose")
+    bore = fixture.bores[0]
+    shape = fixture.workpiece.shape
+    u = np.asarray(bore.axis_world, dtype=float)
+    R0 = fixture.start.R_world_body
+    z = R0[:, 2]
+    lead = -1.0 if float(z @ u) >= 0.0 else 1.0  # the body end along lead·z goes in first (it points down the bore)
+    want = -lead * u  # where body z must point
+    axis = np.cross(z, want)
+    s_, c_ = float(np.linalg.norm(axis)), float(z @ want)
+    turn = np.zeros(3) if s_ == 0.0 else axis / s_ * math.atan2(s_, c_)
+    R = exp_so3(turn) @ R0
+    half = 0.5 * float(getattr(shape, "length", 0.0))
+    centre = bore.p_world - bore.depth_m * u + half * u
+    return Pose(R, centre)
+
+
 def lifted(pose: Pose, u: FloatArray, h_m: float) -> Pose:
     """``pose`` moved by ``h_m`` along ``u``."""
     return Pose(pose.R_world_body, pose.p_world + h_m * u)
@@ -271,9 +298,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     """The staged insertion of ``fixture``'s part (module text); ``ok`` false with the reason when there is none."""
     t0 = time.perf_counter()
     s = settings.insertion
-    if fixture.goal_pose is None:
-        raise InputError(f"{fixture.source}: workpiece.goal: a fixture with pins or bores needs its located pose")
-    G = fixture.goal_pose
+    G = located_pose(fixture)
     u = insertion_axis(fixture)
     plan = InsertionPlan(False, "", u, G)
     ins = inserts(fixture)
@@ -520,14 +545,9 @@ class InsertionRun:
         return frozenset(state)
 
     def _bottom_touches(self, pose: Pose, bore: str) -> bool:
-        from fixplan.locating import bore_contacts
-
         b = next(x for x in self.world.bores if x.name == bore)
         tol = self.world.tolerances.touch_m + DEFAULT.execution.contact_gap_m
-        return any(
-            c.gap_m <= tol and float(c.normal_world @ b.axis_world) > 0.5
-            for c in bore_contacts(self.world.workpiece, pose, b)
-        )
+        return bottom_gap_m(self.world, pose, b) <= tol
 
     def _reference(self, t: float) -> tuple[Pose, FloatArray, bool]:
         """The guide's pose and velocity now, and whether the hand pushes down the axis (stiff axial servo)."""
@@ -701,6 +721,17 @@ class InsertionRun:
             self.log.event(t, "failed", reason)
 
 
+def bottom_gap_m(fixture: Fixture, pose: Pose, bore: Bore) -> float:
+    """The gap of the shaft's end face on the bore's bottom (the contact whose normal is the bore's axis; inf: none)."""
+    from fixplan.locating import bore_contacts
+
+    cos = math.cos(DEFAULT.pins.axis_angle_rad)
+    gaps = [
+        c.gap_m for c in bore_contacts(fixture.workpiece, pose, bore) if float(c.normal_world @ bore.axis_world) >= cos
+    ]
+    return float(min(gaps)) if gaps else math.inf
+
+
 def _up(fixture: Fixture) -> FloatArray:
     g = np.asarray(fixture.gravity, dtype=float)
     n = float(np.linalg.norm(g))
@@ -786,10 +817,7 @@ def verify_insertion(
         checks.append("executor")
     gaps = dict(zip(run.rests, map(float, locator_gaps(wp, pose, world.locators)), strict=True))
     for b in world.bores:
-        from fixplan.locating import bore_contacts
-
-        bottom = [c.gap_m for c in bore_contacts(wp, pose, b) if float(c.normal_world @ b.axis_world) > 0.5]
-        gaps[f"{b.name}.bottom"] = float(min(bottom)) if bottom else math.inf
+        gaps[f"{b.name}.bottom"] = bottom_gap_m(world, pose, b)
     far = {n: g for n, g in gaps.items() if abs(g) > final_gap_m}
     if far:
         checks.append("final gap")
