@@ -410,6 +410,10 @@ def _pose_sigma(given: str | None, fixture: Any) -> str:
     """``--pose-sigma`` as given, else the robot's repeatability with 1 degree, else 1 mm and 1 degree."""
     if given is not None:
         return given
+    if fixture.has_pins:  # pins: three times the largest radial play (errors beyond the clearance), 0.1 degree
+        from fixplan.planner.insertion import inserts
+
+        return f"{3.0 * max(i.play_m for i in inserts(fixture))!r},0.1"
     robot = fixture.robot
     if robot is not None and robot.repeatability_m is not None:
         return f"{robot.repeatability_m!r},1"
@@ -441,7 +445,7 @@ def robust(
     from fixplan.cluster import progress_bar
     from fixplan.robust import robust as run
 
-    fixture = _load(file, "robust")
+    fixture = _load(file, "robust", pins=True)
     settings = _robust_settings(
         samples=samples, seed=seed, mu_spread=mu_spread, pose_sigma=_pose_sigma(pose_sigma, fixture),
         locator_sigma=locator_sigma, force_noise=force_noise, latency_ms=latency_ms,

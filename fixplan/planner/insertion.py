@@ -239,11 +239,12 @@ class InsertionPlan:
     heights_m: dict[str, float] = field(default_factory=dict)  # each insert's engagement height above the goal
     seat_wrench: FloatArray | None = None  # the seating push (about the body origin at the goal, world axes)
     seat_force_N: FloatArray | None = None  # its force (through the centre of mass)
+    start_state: State = frozenset()  # the goal state when the part starts located
     plan_s: float = 0.0
 
     @property
     def states(self) -> list[State]:
-        out: list[State] = [frozenset()]
+        out: list[State] = [self.start_state]
         for st in self.stages:
             out.append(out[-1] | set(st.added))
         return out
@@ -326,12 +327,24 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     plan.order = [tuple(i.name for i in g) for g in groups]
     # the start: above every tip (nothing engaged), or the plan cannot begin with the approach
     start = fixture.start
-    for i in ins:
-        e = engagement(fixture, start, i)
-        if e.engaged:
-            plan.reason = f"{i.name} is already in {i.hole} at the start (expected a start above the pins)"
-            plan.plan_s = time.perf_counter() - t0
-            return plan
+    inside = [i for i in ins if engagement(fixture, start, i).engaged]
+    if inside and len(inside) == len(ins) and _seated(fixture, start, u):
+        # already located: nothing to insert; the run only holds the part with the seating push
+        plan.start_state = goal_state(fixture)
+        w_seat, held = seat_push(fixture, G, u, s)
+        plan.seat_wrench, plan.seat_force_N = w_seat, w_seat[:3].copy()
+        plan.ok = held is None
+        plan.reason = held or "already located at the start pose: every pin in its hole, every rest touching"
+        plan.plan_s = time.perf_counter() - t0
+        return plan
+    if inside:
+        i = inside[0]
+        plan.reason = (
+            f"{i.name} is already in {i.hole} at the start, the part not seated (expected a start above the pins, "
+            "or at the located pose)"
+        )
+        plan.plan_s = time.perf_counter() - t0
+        return plan
     h_top = plan.heights_m[groups[0][0].name]
     staging = lifted(G, u, h_top + s.lead_m)
     poses = [start]
@@ -400,6 +413,14 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     plan.reason = f"approach, insert {seq} along the axis, seat on {', '.join(rests)}"
     plan.plan_s = time.perf_counter() - t0
     return plan
+
+
+def _seated(fixture: Fixture, pose: Pose, u: FloatArray) -> bool:
+    """Every rest (and every bore's bottom) touching at ``pose``."""
+    tol = fixture.tolerances.touch_m
+    gaps = [float(g) for g in locator_gaps(fixture.workpiece, pose, fixture.locators)]
+    gaps += [bottom_gap_m(fixture, pose, b) for b in fixture.bores]
+    return all(abs(g) <= tol for g in gaps)
 
 
 def seat_side_world(fixture: Fixture, pose: Pose, u: FloatArray) -> FloatArray:
@@ -514,15 +535,16 @@ class InsertionRun:
         self._t_stage = 0.0
         self._settled: float | None = None
         self._progress: tuple[float, float] | None = None  # (height, since)
-        self._seating = False
-        self.cap_N = (
-            max(
-                float(abs(np.asarray(st.wrench[:3]) @ self.u + self.weight_N * _up(world) @ self.u))
-                for st in plan.stages
-                if np.all(np.isfinite(st.wrench))
-            )
-            + self.s.seat_press * self.weight_N
-        )
+        self._seating = len(self.states) == 1  # located at the start: the seating push from the first tick
+        if self._seating:
+            self.log.event(0.0, "hold", "located at the start: the seating push")
+        # the hand's push along the axis is capped at the largest planned one (beyond carrying the part)
+        planned = [
+            float(abs(np.asarray(st.wrench[:3]) @ self.u + self.weight_N * _up(world) @ self.u))
+            for st in plan.stages
+            if np.all(np.isfinite(st.wrench))
+        ]
+        self.cap_N = max(planned, default=0.0) + self.s.seat_press * self.weight_N
         # the guide after the approach runs straight down the axis at the insertion speed
         self._h_stage_start = 0.0
         self._ref_h0 = 0.0
