@@ -181,7 +181,7 @@ def test_cli_refuses_pins_outside_validate_classify_search(tmp_path: Path) -> No
     proc = run_cli("validate", bad)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert f"{bad}: pin.P2.hole: no hole 'H9'" in proc.stderr
-    for command in ("solve", "map"):
+    for command in ("map",):  # solve and robust plan the insertion (tests/test_insertion.py)
         proc = run_cli(command, HOUSING)
         assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
         assert (

@@ -238,7 +238,7 @@ class InsertionPlan:
     order: list[tuple[str, ...]] = field(default_factory=list)  # the pins in engagement order, ties together
     heights_m: dict[str, float] = field(default_factory=dict)  # each insert's engagement height above the goal
     seat_wrench: FloatArray | None = None  # the seating push (about the body origin at the goal, world axes)
-    seat_force_N: FloatArray | None = None  # its force (through the centre of mass)
+    seat_wrench_com: FloatArray | None = None  # the same about the centre of mass (what the hand adds to carrying)
     start_state: State = frozenset()  # the goal state when the part starts located
     plan_s: float = 0.0
 
@@ -332,7 +332,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
         # already located: nothing to insert; the run only holds the part with the seating push
         plan.start_state = goal_state(fixture)
         w_seat, held = seat_push(fixture, G, u, s)
-        plan.seat_wrench, plan.seat_force_N = w_seat, w_seat[:3].copy()
+        plan.seat_wrench, plan.seat_wrench_com = w_seat, _about_com(fixture, G, w_seat)
         plan.ok = held is None
         plan.reason = held or "already located at the start pose: every pin in its hole, every rest touching"
         plan.plan_s = time.perf_counter() - t0
@@ -403,7 +403,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
         return plan
     w_seat, held = seat_push(fixture, G, u, s)
     plan.seat_wrench = w_seat
-    plan.seat_force_N = w_seat[:3].copy()
+    plan.seat_wrench_com = _about_com(fixture, G, w_seat)
     if held is not None:
         plan.reason = held
         plan.plan_s = time.perf_counter() - t0
@@ -415,6 +415,10 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     return plan
 
 
+def _about_com(fixture: Fixture, pose: Pose, w: FloatArray) -> FloatArray:
+    return shift_wrench(w, pose.p_world, pose.point_world_from_body(fixture.workpiece.com_body))
+
+
 def _seated(fixture: Fixture, pose: Pose, u: FloatArray) -> bool:
     """Every rest (and every bore's bottom) touching at ``pose``."""
     tol = fixture.tolerances.touch_m
@@ -423,11 +427,11 @@ def _seated(fixture: Fixture, pose: Pose, u: FloatArray) -> bool:
     return all(abs(g) <= tol for g in gaps)
 
 
-def seat_side_world(fixture: Fixture, pose: Pose, u: FloatArray) -> FloatArray:
-    """The unit direction normal to ``u`` the part is seated toward: into the round pin's (or bore's) contact.
+def seat_side_world(fixture: Fixture, pose: Pose, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The unit direction normal to ``u`` the part is seated toward, and where it is pressed: the round pin's (or bore's) contact.
 
     The sum of the first round pin's touching contact normals at ``pose`` (they push the part away
-    from the pin), reversed; zero when none touches.
+    from the pin), reversed, and the mean of those contacts' points; zero direction when none touches.
     """
     from fixplan.locating import bore_contacts, pin_contacts
 
@@ -441,27 +445,32 @@ def seat_side_world(fixture: Fixture, pose: Pose, u: FloatArray) -> FloatArray:
             cs = bore_contacts(wp, pose, bore)
         else:
             cs = pin_contacts(wp, pose, next(p for p in fixture.pins if p.name == ins.name))
-        n = sum((c.normal_world for c in cs if c.gap_m <= tol and abs(float(c.normal_world @ u)) < 0.5), np.zeros(3))
+        side = [c for c in cs if c.gap_m <= tol and abs(float(c.normal_world @ u)) < 0.5]
+        n = sum((c.normal_world for c in side), np.zeros(3))
         n = n - float(n @ u) * u
         norm = float(np.linalg.norm(n))
         if norm > 0.0:
-            return -n / norm
-    return np.zeros(3)
+            return -n / norm, np.mean([c.point_world for c in side], axis=0)
+    return np.zeros(3), pose.point_world_from_body(wp.com_body)
 
 
 def seat_push(fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings) -> tuple[FloatArray, str | None]:
     """The seating push at the located pose and why it does not hold the part there (None: it does).
 
-    ``seat_press`` weights along ``−u`` and ``seat_side`` weights toward the round pin's contact,
-    through the centre of mass, classified on the rests and the pins at ``pose``: ``held``.
+    ``seat_press`` weights along ``−u`` through the centre of mass and ``seat_side`` weights toward
+    the round pin's contact, along a line through that contact (no turn about the pin: the diamond
+    pin, centred in its play, takes none), classified on the rests and the pins at ``pose``: ``held``.
     """
     from fixplan.jamming import classify
 
     wp = fixture.workpiece
     weight = wp.mass_kg * float(np.linalg.norm(fixture.gravity) or 9.81)
-    F = -s.seat_press * weight * u + s.seat_side * weight * seat_side_world(fixture, pose, u)
-    w_com = np.concatenate([F, np.zeros(3)])
-    w = shift_wrench(w_com, pose.point_world_from_body(wp.com_body), pose.p_world)
+    side, at = seat_side_world(fixture, pose, u)
+    com = pose.point_world_from_body(wp.com_body)
+    F_side = s.seat_side * weight * side
+    F = -s.seat_press * weight * u + F_side
+    w_com = np.concatenate([F, np.cross(at - com, F_side)])
+    w = shift_wrench(w_com, com, pose.p_world)
     names = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
     cs = _touching(contact_set(fixture, pose, names), fixture.tolerances.touch_m)
     touching = sorted({c.owner for c in cs.contacts})
@@ -610,8 +619,8 @@ class InsertionRun:
         carry = -self.world.gravity_wrench()
         v, w_ang = twist[:3], twist[3:]
         if self._seating:
-            seat = self.plan.seat_force_N if self.plan.seat_force_N is not None else np.zeros(3)
-            w_com = carry + np.concatenate([seat, np.zeros(3)])
+            seat = self.plan.seat_wrench_com if self.plan.seat_wrench_com is not None else np.zeros(6)
+            w_com = carry + seat
             w_com[3:] += -self.I_max * 2.0 * self.s.rot_omega_radps * w_ang
             w_com[:3] += -self.m * 2.0 * self.s.lateral_omega_radps * (v - float(v @ self.u) * self.u)
             self._check_settled(t, state, twist)
