@@ -882,6 +882,9 @@ class InsertionSettings:
         At the goal state this long with the seating push: located.
     time_factor, time_base_s : float
         The run's time limit: ``time_factor`` × the guide's duration + ``time_base_s``.
+    align_tol_m, align_tol_rad : float
+        The approach ends (and the insertion begins) once the part is this close to the staging
+        pose, in position and in angle: a part still turning as it meets its pins tilts in them.
     axis_play_rel : float
         Slack on the radial play in the final check (relative): the hole's axis within
         ``(D − d)/2 · (1 + axis_play_rel)`` of the pin's, at the mouth and at the pin's tip.
@@ -904,6 +907,8 @@ class InsertionSettings:
     time_factor: float = 3.0
     time_base_s: float = 2.0
     axis_play_rel: float = 0.05
+    align_tol_m: float = 0.0001
+    align_tol_rad: float = 0.001
 
 
 @dataclass(frozen=True)

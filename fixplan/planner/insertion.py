@@ -337,14 +337,8 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
         plan.reason = held or "already located at the start pose: every pin in its hole, every rest touching"
         plan.plan_s = time.perf_counter() - t0
         return plan
-    if inside:
-        i = inside[0]
-        plan.reason = (
-            f"{i.name} is already in {i.hole} at the start, the part not seated (expected a start above the pins, "
-            "or at the located pose)"
-        )
-        plan.plan_s = time.perf_counter() - t0
-        return plan
+    # a part already partly in (a shaft dropped tilted into the chamfer) is lifted straight out first:
+    # the approach below rises along the axis before it turns and moves sideways
     h_top = plan.heights_m[groups[0][0].name]
     staging = lifted(G, u, h_top + s.lead_m)
     poses = [start]
@@ -661,6 +655,8 @@ class InsertionRun:
         key = tuple(sorted(state))
         if key and (not self.log.observed or self.log.observed[-1] != key):
             self.log.observed.append(key)
+        if self.index < len(self.plan.stages) and self.plan.stages[self.index].kind == "free":
+            return  # the approach is a pose target: it ends at the staging pose (step_time), whatever touches
         later = [j for j in range(self.index + 1, len(self.states)) if self.states[j] <= state]
         if later:
             j = later[-1]
@@ -690,7 +686,9 @@ class InsertionRun:
         if st is None or st.kind != "free":
             return
         end = st.poses[-1]
-        close = float(np.linalg.norm(pose.p_world - end.p_world)) <= DEFAULT.insertion.engage_margin_m
+        turn = float(np.linalg.norm(log_so3(end.R_world_body @ pose.R_world_body.T)))
+        off = float(np.linalg.norm(pose.p_world - end.p_world))
+        close = off <= self.s.align_tol_m and turn <= self.s.align_tol_rad
         total = sum(
             float(np.linalg.norm(b.p_world - a.p_world)) for a, b in zip(st.poses[:-1], st.poses[1:], strict=True)
         )
@@ -753,14 +751,18 @@ class InsertionRun:
 
 
 def bottom_gap_m(fixture: Fixture, pose: Pose, bore: Bore) -> float:
-    """The gap of the shaft's end face on the bore's bottom (the contact whose normal is the bore's axis; inf: none)."""
-    from fixplan.locating import bore_contacts
+    """The gap of the shaft's leading end face on the bore's (flat) bottom, in closed form.
 
-    cos = math.cos(DEFAULT.pins.axis_angle_rad)
-    gaps = [
-        c.gap_m for c in bore_contacts(fixture.workpiece, pose, bore) if float(c.normal_world @ bore.axis_world) >= cos
-    ]
-    return float(min(gaps)) if gaps else math.inf
+    The face's deepest point lies ``r sin φ`` beyond its centre along the bore's axis (``φ`` the
+    angle between the shaft's and the bore's axes): gap ``depth − (d_E + r sin φ)``, ``d_E`` the
+    centre's depth below the mouth.
+    """
+    pin = peg_body(fixture.workpiece, pose, bore)
+    u = np.asarray(bore.axis_world, dtype=float)
+    end = pin.base_world + pin.length_m * pin.axis_world
+    d_end = float((bore.p_world - end) @ u)
+    c = min(abs(float(pin.axis_world @ u)), 1.0)
+    return bore.depth_m - (d_end + pin.radius_m * math.sqrt(max(1.0 - c * c, 0.0)))
 
 
 def _up(fixture: Fixture) -> FloatArray:
