@@ -197,7 +197,7 @@ def draw_pin_world(
     e2 = np.cross(u, e1)
     xy = rng.standard_normal(2) * settings.pose_sigma_m
     yaw = math.radians(float(rng.standard_normal()) * settings.pose_sigma_deg)
-    owners = [*fixture.locators, *fixture.pins, *fixture.bores]
+    owners: list[Any] = [*fixture.locators, *fixture.pins, *fixture.bores]
     spread = rng.uniform(-1.0, 1.0, len(owners)) * settings.mu_spread
     noise_seed = int(rng.integers(0, 2**31 - 1))
     mu = {o.name: max(o.friction * (1.0 + float(k)), 0.0) for o, k in zip(owners, spread, strict=True)}

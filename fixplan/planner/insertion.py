@@ -162,13 +162,15 @@ def insertion_axis(fixture: Fixture) -> FloatArray:
 
     :class:`InputError` (one line) when the pins' axes differ: no single straight insertion.
     """
-    axes = [p.axis_world for p in fixture.pins] + [b.axis_world for b in fixture.bores]
-    u = np.asarray(axes[0], dtype=float)
+    named = [(f"pin.{p.name}", p.axis_world) for p in fixture.pins] + [
+        (f"bore.{b.name}", b.axis_world) for b in fixture.bores
+    ]
+    u = np.asarray(named[0][1], dtype=float)
     tol = DEFAULT.pins.axis_angle_rad
-    for p in [*fixture.pins, *fixture.bores]:
-        if math.acos(min(1.0, float(p.axis_world @ u))) > tol:
+    for key, axis in named:
+        if math.acos(min(1.0, float(axis @ u))) > tol:
             raise InputError(
-                f"{fixture.source}: pin.{p.name}.axis: the pins' axes differ by more than {tol:g} rad "
+                f"{fixture.source}: {key}.axis: the pins' axes differ by more than {tol:g} rad "
                 "(expected parallel pins: the part is inserted along one axis)"
             )
     return u
