@@ -185,7 +185,7 @@ def draw_pin_world(
     The pose error of the part in the hand, seen from the part: the pins, bores and rests moved
     together by normal noise of ``pose_sigma_m`` per axis normal to the insertion axis and turned
     about it by ``pose_sigma_deg`` (:func:`fixplan.planner.insertion.shifted_world`), while the plan
-    guides the part to the nominal pins; each pin's, bore's and rest's μ times ``1 + u``, ``u``
+    guides the part to the nominal pins (a start touching them moves with them); each pin's, bore's and rest's μ times ``1 + u``, ``u``
     uniform in ``±mu_spread``; the operator's noise. The start stays.
     """
     from fixplan.planner.insertion import insertion_axis, shifted_world
@@ -208,7 +208,9 @@ def draw_pin_world(
         bores=tuple(dataclasses.replace(o, friction=mu[o.name]) for o in fixture.bores),
     )
     offset = float(xy[0]) * e1 + float(xy[1]) * e2
-    world = shifted_world(world, offset, yaw)
+    # a part that starts touching (a shaft resting in a chamfer) rests where the world put it: it moves too
+    touching = bool(contact_set(fixture, "start").contacts)
+    world = shifted_world(world, offset, yaw, with_start=touching)
     what = Perturbation(sample, mu, {"pins": [float(x) for x in offset] + [yaw]}, fixture.start, 1, noise_seed)
     return world, settings.noise(noise_seed), what
 

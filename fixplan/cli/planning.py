@@ -185,8 +185,8 @@ def solve(
         if no_verify:
             raise InputError("--perturb-seed verifies the plan on a perturbed world: it cannot go with --no-verify")
     fixture = _load(file, "solve", pins=True)
-    if fixture.has_pins and (order or perturb_seed is not None or clamp):
-        used = "--order" if order else ("--perturb-seed" if perturb_seed is not None else "--clamp")
+    if fixture.has_pins and (order or clamp):
+        used = "--order" if order else "--clamp"
         raise InputError(
             f"{fixture.source}: {used} is not supported with pins or bores yet "
             "(expected 'fixplan solve FILE' or 'fixplan robust FILE' for a part loaded onto pins)"

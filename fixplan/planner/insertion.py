@@ -913,10 +913,11 @@ def verify_insertion(
     )
 
 
-def shifted_world(fixture: Fixture, offset_world: FloatArray, yaw_rad: float) -> Fixture:
+def shifted_world(fixture: Fixture, offset_world: FloatArray, yaw_rad: float, with_start: bool = False) -> Fixture:
     """The fixture with its pins, bores and rests moved rigidly: turned by ``yaw_rad`` about the insertion axis through the first pin, then shifted by ``offset_world``.
 
-    The located pose moves with them; the part's start stays. What a pose error of the part in
+    The located pose moves with them; the part's start stays (``with_start``: moves too, for a part
+    that starts resting on them, where the world put it). What a pose error of the part in
     the hand looks like from the part: the plan (made on the nominal fixture) guides it to where
     the pins are not.
     """
@@ -937,6 +938,9 @@ def shifted_world(fixture: Fixture, offset_world: FloatArray, yaw_rad: float) ->
     bores = tuple(replace(b, p_world=move(b.p_world), axis_world=R @ b.axis_world) for b in fixture.bores)
     locators = tuple(replace(loc, p_world=move(loc.p_world)) for loc in fixture.locators)
     out = replace(fixture, pins=pins, bores=bores, locators=locators)
+    if with_start:
+        S = fixture.start
+        out = replace(out, start=Pose(R @ S.R_world_body, move(S.p_world)))
     G = fixture.goal_pose
     if G is not None:
         goal = Pose(R @ G.R_world_body, move(G.p_world))
