@@ -1,4 +1,4 @@
-"""Planning and verifying the insertion onto pins and into a bore (fixplan/planner/insertion.py, issue 24 §3).
+"""Planning and verifying the insertion onto pins and into a bore (fixplan/planner/insertion.py).
 
 Closed forms and hand-derived verdicts: the engagement heights (a tip meets its mouth when the part
 is the pin's length above the located pose), the engagement order, the seating push, the hole's
