@@ -90,7 +90,8 @@ def check_expectations(path: Path, data: dict[str, Any]) -> tuple[list[Issue], d
             elif kind == "touching":
                 _names(r, entry, "names", f"{where}.names", [loc.name for loc in fixture.locators], required=True)
             else:
-                locs = [loc.name for loc in fixture.locators]
+                # a plan's states hold locators, and pins engaged in their holes
+                locs = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins]
                 if not fixture.is_full:
                     r.error(f"{where}.file", f"{name} is not a full fixture (expected one that can be planned)")
                 status = r.string(entry, "status", f"{where}.status", required=True, choices=("planned", "infeasible"))

@@ -126,7 +126,7 @@ MESH_FAMILIES: dict[str, str] = {
     ),
 }
 # Families with pins and holes (a plane and two pins): listed apart, since only the commands that take
-# pins take them (the planner does not model pins yet).
+# pins take them (map and verify do not model pins yet).
 PIN_FAMILIES: dict[str, str] = {
     "plane-2-pins": (
         "3D boxes (edges 6-30 cm by 4-20 cm, 2-6 cm thick) on 3 rests under -z and two bored through holes "

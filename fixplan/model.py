@@ -238,7 +238,7 @@ class Fixture:
 
     @property
     def has_pins(self) -> bool:
-        """Pins or bores: contacts of cylinders in holes (not planned yet: :func:`refuse_pins`)."""
+        """Pins or bores: contacts of cylinders in holes (planned by :mod:`fixplan.planner.insertion`)."""
         return bool(self.pins or self.bores)
 
     @property
@@ -361,15 +361,16 @@ def nearest_symmetric_pose(shape: Shape, pose: Pose, near: Pose) -> Pose:
 def refuse_pins(fixture: Fixture, command: str) -> Fixture:
     """``fixture``, or :class:`~fixplan.errors.InputError` (one line, exit 2) when it has pins or bores.
 
-    Pins, holes and bores are read, checked, classified, searched, simulated and drawn; the planning
-    commands do not model them yet and say so instead of ignoring them.
+    Pins, holes and bores are read, checked, classified, searched, simulated, drawn and planned
+    (``solve``, ``robust``); the other commands (``map``, ``verify``) do not model them yet and say so
+    instead of ignoring them.
     """
     if not fixture.has_pins:
         return fixture
     key = f"pin.{fixture.pins[0].name}" if fixture.pins else f"bore.{fixture.bores[0].name}"
     raise InputError(
         f"{fixture.source}: {key}: pins and bores are not supported by '{command}' yet "
-        "(expected a fixture of locators; 'validate', 'classify', 'search', 'simulate', 'view' and 'haptic' take pins)"
+        "(expected a fixture of locators; 'validate', 'classify', 'search', 'simulate', 'view', 'haptic', 'solve' and 'robust' take pins)"
     )
 
 

@@ -177,6 +177,44 @@ def draw_world(fixture: Fixture, sample: int, settings: RobustSettings) -> tuple
     return perturbed, settings.noise(noise_seed), what
 
 
+def draw_pin_world(
+    fixture: Fixture, sample: int, settings: RobustSettings
+) -> tuple[Fixture, ExecutionNoise, Perturbation]:
+    """The perturbed world of a fixture with pins or bores, for sample ``sample``.
+
+    The pose error of the part in the hand, seen from the part: the pins, bores and rests moved
+    together by normal noise of ``pose_sigma_m`` per axis normal to the insertion axis and turned
+    about it by ``pose_sigma_deg`` (:func:`fixplan.planner.insertion.shifted_world`), while the plan
+    guides the part to the nominal pins (a start touching them moves with them); each pin's, bore's and rest's μ times ``1 + u``, ``u``
+    uniform in ``±mu_spread``; the operator's noise. The start stays.
+    """
+    from fixplan.planner.insertion import insertion_axis, shifted_world
+
+    rng = np.random.default_rng([settings.seed, sample])
+    u = insertion_axis(fixture)
+    e1 = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(u, e1)
+    xy = rng.standard_normal(2) * settings.pose_sigma_m
+    yaw = math.radians(float(rng.standard_normal()) * settings.pose_sigma_deg)
+    owners: list[Any] = [*fixture.locators, *fixture.pins, *fixture.bores]
+    spread = rng.uniform(-1.0, 1.0, len(owners)) * settings.mu_spread
+    noise_seed = int(rng.integers(0, 2**31 - 1))
+    mu = {o.name: max(o.friction * (1.0 + float(k)), 0.0) for o, k in zip(owners, spread, strict=True)}
+    world = dataclasses.replace(
+        fixture,
+        locators=tuple(dataclasses.replace(o, friction=mu[o.name]) for o in fixture.locators),
+        pins=tuple(dataclasses.replace(o, friction=mu[o.name]) for o in fixture.pins),
+        bores=tuple(dataclasses.replace(o, friction=mu[o.name]) for o in fixture.bores),
+    )
+    offset = float(xy[0]) * e1 + float(xy[1]) * e2
+    # a part that starts touching (a shaft resting in a chamfer) rests where the world put it: it moves too
+    touching = bool(contact_set(fixture, "start").contacts)
+    world = shifted_world(world, offset, yaw, with_start=touching)
+    what = Perturbation(sample, mu, {"pins": [float(x) for x in offset] + [yaw]}, fixture.start, 1, noise_seed)
+    return world, settings.noise(noise_seed), what
+
+
 def perturbed_fixture(fixture: Fixture, sample_seed: int, settings: RobustSettings) -> tuple[Fixture, ExecutionNoise]:
     """The perturbed world of sample ``sample_seed`` (drawn from ``default_rng([settings.seed, k])``)."""
     fx, noise, _ = draw_world(fixture, sample_seed, settings)
@@ -226,6 +264,11 @@ def verify_sample(
     from fixplan.planner.solve import Planner
     from fixplan.planner.verify import verify
 
+    if fixture.has_pins:  # the staged insertion, its pins and rests where the plan does not expect them
+        from fixplan.planner.insertion import plan_insertion, verify_insertion
+
+        world, noise, _ = draw_pin_world(fixture, sample, settings)
+        return verify_insertion(world, plan_insertion(fixture), noise=noise)
     world, noise = perturbed_fixture(fixture, sample, settings)
     planner = Planner(
         world, knots=settings.knots, acceleration_mps2=settings.acceleration_mps2,
@@ -247,7 +290,7 @@ def verify_on_world(
     """
     from fixplan.planner.solve import plan_steps
 
-    _, _, what = draw_world(fixture, sample, settings)
+    _, _, what = (draw_pin_world if fixture.has_pins else draw_world)(fixture, sample, settings)
     info = {**what.to_json(), "settings": settings.to_json()}
     if result.status == "infeasible":
         return result, info

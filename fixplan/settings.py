@@ -855,6 +855,70 @@ class PinSettings:
 
 
 @dataclass(frozen=True)
+class InsertionSettings:
+    """Planning and verifying a part's insertion onto pins or into a bore (:mod:`fixplan.planner.insertion`).
+
+    Heights are along the insertion axis (the pins' axis, or the bore's), above the located pose.
+
+    Attributes
+    ----------
+    lead_m : float
+        The staging pose lifts the holes' mouths this far above the first tip to engage.
+    engage_margin_m : float
+        An insertion step ends this far past both chamfers of the pin it engages (the pin is then
+        in the hole's bore, not on its chamfer).
+    approach_speed_mps, insert_speed_mps : float
+        The reference's speed in free flight and along the pins' axis.
+    axial_omega_radps, lateral_omega_radps, rot_omega_radps : float
+        The hand's servo toward the guide per coordinate (natural frequency, critically damped;
+        the gains scale with the part's mass and inertia). Laterally soft, as a remote-centre
+        compliance: a chamfer's push moves the part sideways by its pose error with a force far
+        below the insertion push. Below the coupling's 32 rad/s.
+    push_accel_mps2 : float
+        The acceleration along the axis each insertion step's non-jamming push is searched for.
+    seat_press : float
+        The seating push along the axis, in the part's weights (beyond carrying it).
+    seat_side : float
+        The seating push toward the round pin's (or bore's) contact, in the part's weights.
+    dwell_s : float
+        A state (engaged pins, pressed rests) counts once held this long.
+    stall_s, stall_progress_m : float
+        An insertion step that does not move ``stall_progress_m`` along the axis in ``stall_s`` has
+        stalled: the run fails and says which pin did not enter and by how much it missed.
+    settle_s : float
+        At the goal state this long with the seating push: located.
+    time_factor, time_base_s : float
+        The run's time limit: ``time_factor`` × the guide's duration + ``time_base_s``.
+    align_tol_m, align_tol_rad : float
+        The approach ends (and the insertion begins) once the part is this close to the staging
+        pose, in position and in angle: a part still turning as it meets its pins tilts in them.
+    axis_play_rel : float
+        Slack on the radial play in the final check (relative): the hole's axis within
+        ``(D − d)/2 · (1 + axis_play_rel)`` of the pin's, at the mouth and at the pin's tip.
+    """
+
+    lead_m: float = 0.002
+    engage_margin_m: float = 0.0005
+    approach_speed_mps: float = 0.05
+    insert_speed_mps: float = 0.02
+    axial_omega_radps: float = 12.0
+    lateral_omega_radps: float = 4.0
+    rot_omega_radps: float = 12.0
+    push_accel_mps2: float = 0.2
+    seat_press: float = 1.0
+    seat_side: float = 0.3
+    dwell_s: float = 0.01
+    stall_s: float = 0.6
+    stall_progress_m: float = 0.0002
+    settle_s: float = 0.2
+    time_factor: float = 3.0
+    time_base_s: float = 2.0
+    axis_play_rel: float = 0.05
+    align_tol_m: float = 0.0001
+    align_tol_rad: float = 0.001
+
+
+@dataclass(frozen=True)
 class RobotSettings:
     """The arm that carries the part (:mod:`fixplan.robot`).
 
@@ -972,6 +1036,7 @@ class Settings:
     plan_file: PlanFileSettings = field(default_factory=PlanFileSettings)
     mesh: MeshSettings = field(default_factory=MeshSettings)
     pins: PinSettings = field(default_factory=PinSettings)
+    insertion: InsertionSettings = field(default_factory=InsertionSettings)
     robot: RobotSettings = field(default_factory=RobotSettings)
     clamp: ClampSettings = field(default_factory=ClampSettings)
 

@@ -24,7 +24,7 @@ def _full_fixtures() -> list[str]:
         if path.name == "expected.toml":
             continue
         fixture = fixplan.load(path)
-        if fixture.is_full and not fixture.has_pins:  # planning with pins is not there yet (solve refuses it)
+        if fixture.is_full:
             out.append(path.name)
     return out
 
@@ -59,6 +59,15 @@ def test_plan_matches_the_hand_derived_outcome(entry):
 
 def _check_plan(entry, fx, r):
     assert r.status == entry["status"], r.reason
+    if fx.has_pins:  # the staged insertion (tests/test_insertion.py checks it in detail)
+        assert [list(s) for s in r.sequence] == [sorted(s) for s in entry["sequence"]]
+        v = r.verification
+        assert v is not None and v.passed is entry["verified"], v.reason if v else None
+        goal = sorted([*(n.name for n in fx.locators), *(p.name for p in fx.pins)])
+        assert [list(s) for s in v.observed_sequence][-1] == goal
+        assert max(abs(v.final_gaps_m[n.name]) for n in fx.locators) <= 1e-4
+        assert v.max_penetration_m <= 1e-5
+        return
     if entry["status"] == "infeasible":
         assert r.verification is None and not r.ok
         assert entry["binding"] in r.reason and "too weak" in r.reason

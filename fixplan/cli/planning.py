@@ -184,7 +184,13 @@ def solve(
     if perturb_seed is not None:
         if no_verify:
             raise InputError("--perturb-seed verifies the plan on a perturbed world: it cannot go with --no-verify")
-    fixture = _load(file, "solve")
+    fixture = _load(file, "solve", pins=True)
+    if fixture.has_pins and (order or clamp):
+        used = "--order" if order else "--clamp"
+        raise InputError(
+            f"{fixture.source}: {used} is not supported with pins or bores yet "
+            "(expected 'fixplan solve FILE' or 'fixplan robust FILE' for a part loaded onto pins)"
+        )
     if perturb_seed is not None:
         perturb = _robust_settings(
             seed=seed, mu_spread=mu_spread, pose_sigma=_pose_sigma(pose_sigma, fixture), locator_sigma=locator_sigma,
@@ -205,7 +211,7 @@ def solve(
             _writable(path, force, option)
     target, report_path = out, report
     names = _names(order, "--order")
-    if fixture.is_full:
+    if fixture.is_full and not fixture.has_pins:
         from fixplan.summary import goal_rank
 
         rank = goal_rank(fixture)
@@ -404,6 +410,10 @@ def _pose_sigma(given: str | None, fixture: Any) -> str:
     """``--pose-sigma`` as given, else the robot's repeatability with 1 degree, else 1 mm and 1 degree."""
     if given is not None:
         return given
+    if fixture.has_pins:  # pins: three times the largest radial play (errors beyond the clearance), 0.1 degree
+        from fixplan.planner.insertion import inserts
+
+        return f"{3.0 * max(i.play_m for i in inserts(fixture))!r},0.1"
     robot = fixture.robot
     if robot is not None and robot.repeatability_m is not None:
         return f"{robot.repeatability_m!r},1"
@@ -435,7 +445,7 @@ def robust(
     from fixplan.cluster import progress_bar
     from fixplan.robust import robust as run
 
-    fixture = _load(file, "robust")
+    fixture = _load(file, "robust", pins=True)
     settings = _robust_settings(
         samples=samples, seed=seed, mu_spread=mu_spread, pose_sigma=_pose_sigma(pose_sigma, fixture),
         locator_sigma=locator_sigma, force_noise=force_noise, latency_ms=latency_ms,

@@ -25,7 +25,7 @@ import numpy as np
 
 from fixplan.errors import InputError, SolverError
 from fixplan.locating import contact_set, solve_goal
-from fixplan.model import Fixture, refuse_pins, require_full
+from fixplan.model import Fixture, require_full
 from fixplan.planner.approach import Approach, plan_approach
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
 from fixplan.planner.execute import ExecutionSettings, Step, TransitionKind
@@ -590,7 +590,8 @@ def solve(
     ``noise``).
     """
     vopts = dict(verify_options or {})
-    refuse_pins(fixture, "solve")  # the planner does not model pins yet: one line, not a plan that ignores them
+    if fixture.has_pins:  # pins and bores: the staged insertion (planner/insertion.py)
+        return solve_insertion(fixture, run_verification=run_verification, verify_options=vopts)
     require_full(fixture, "planning")
     arm_limits = None
     if fixture.robot is not None:
@@ -682,6 +683,45 @@ def solve(
     timings["fine_s"] = planner.fine_time_s
     timings["total_s"] = time.perf_counter() - t0
     result.timings = timings
+    return result
+
+
+def solve_insertion(
+    fixture: Fixture, *, run_verification: bool = True, verify_options: dict[str, Any] | None = None
+) -> PlanResult:
+    """Plan (and by default verify) the insertion of a part onto its pins or into its bore (:mod:`.insertion`).
+
+    ``infeasible`` with the reason (the pin named) when no staged plan exists; ``planned`` when the
+    haptic loop confirms it, else ``unverified`` with where and why.
+    """
+    from fixplan.planner.insertion import plan_insertion, transitions_of, verify_insertion
+
+    t0 = time.perf_counter()
+    vopts = {k: v for k, v in (verify_options or {}).items() if k in ("noise", "max_sweeps", "final_gap_m",
+                                                                      "max_penetration_m", "trace_every_s", "profile")}  # fmt: skip
+    plan = plan_insertion(fixture)
+    timings = {"plan_s": plan.plan_s, "fine_s": 0.0}
+    hand = _hand_limits(fixture)
+    if not plan.ok:
+        timings["total_s"] = time.perf_counter() - t0
+        result = PlanResult("infeasible", plan.reason, [], [], [], None, [], timings, hand_limits=hand)
+        result.insertion = plan  # type: ignore[attr-defined]
+        return result
+    transitions = transitions_of(fixture, plan)
+    durations = [_duration(tr, 1.0) for tr in transitions]  # the guide at the default 1 m/s² (the run servos it)
+    verification = None
+    if run_verification:
+        t1 = time.perf_counter()
+        verification = verify_insertion(fixture, plan, **vopts)
+        timings["verify_s"] = time.perf_counter() - t1
+    status, reason = _status(verification, plan.reason)
+    if status == "planned":
+        reason = plan.reason
+    timings["total_s"] = time.perf_counter() - t0
+    sequence = [tuple(sorted(s)) for s in plan.states]
+    result = PlanResult(status, reason, sequence, transitions, [], verification, durations, timings,
+                        [math.inf] * len(transitions), hand_limits=hand)  # fmt: skip
+    result.insertion = plan  # type: ignore[attr-defined]
     return result
 
 

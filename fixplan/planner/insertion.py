@@ -1,0 +1,967 @@
+"""Planning and verifying the insertion of a part onto locating pins, or of a shaft into a bore.
+
+The contact-state graph of a pin fixture has two kinds of elements: a rest locator pressed (as
+for every fixture), and a pin *engaged*: its tip past its hole's mouth (along the hole's axis) with
+the tip's centre within the capture ``(D − d)/2 + c_hole + c_pin`` of the hole's axis, so that the
+pin can only go on into the hole (:func:`engagement`). A bore is the same with the part as the
+pin: the shaft's leading end past the bore's mouth, then its end face on the bore's bottom
+(``"<bore>.bottom"``).
+
+The plan (:func:`plan_insertion`) is staged along the insertion axis ``u`` (the pins' common
+axis, or the bore's; the part moves along ``−u``), from the located pose ``G`` lifted by heights
+``h`` along ``u``:
+
+1. **approach** (a pose target, not a contact target): from the start to the staging pose
+   ``G + u (h₁ + lead_m)``, lifting first when the start is lower, so that every hole's axis lies
+   on its pin's axis ``lead_m`` above the first tip;
+2. **one insertion per pin**, in the order the tips meet their mouths on the way down (the pin
+   whose engagement height ``h_i`` — its tip's depth in its hole at ``G`` — is largest first; pins
+   engaging at the same height are one transition, round before diamond): down to
+   ``h_i − (c_hole + c_pin + engage_margin_m)``, past both chamfers;
+3. **seating**: down to ``G``, where the rests (or the bore's bottom) close together, then the
+   seating push: ``seat_press`` weights along ``−u`` and ``seat_side`` weights toward the round
+   pin's contact at ``G`` (the side the part is located against).
+
+Each step's push is searched on the contacts its motion slides on (the pins touching their walls
+along the planned path, e.g. the round pin on the seated side) with the jamming search
+(:func:`~fixplan.jamming.search.search_wrench_in`: a push that moves the part along ``−u``
+without jamming, pressing the seated side by ``seat_side`` weights), and the same contacts'
+wedging (:func:`~fixplan.jamming.wedge.wedge_force`: forces that balance with no push). A step
+with no push, or whose contacts wedge, makes the plan ``infeasible`` with the pin named. The
+seating push is classified on the rests and the pins at ``G``: it must hold the part there.
+
+The verification (:func:`verify_insertion`) runs the plan in the simulated haptic loop of
+:mod:`.verify` (the same rig, engine with the pins' closed-form contacts, and checks): the hand
+servos the part along the plan's guide — stiff along the axis (its push capped at the step's
+planned push), soft across it as a remote-centre compliance, so that a chamfer's push moves the
+part sideways onto its pin — and, at the goal state, switches to the seating push. It observes
+the state every tick (engaged pins from the pose, pressed rests from the engine's forces), and
+passes when the goal state is reached and held at rest, the rests within ``final_gap_m``, every
+hole's axis within the radial play of its pin's (for a diamond pin: along its lands), penetration
+and the solver's residual within the profile's bounds, the push within the hand's limits. An
+insertion that does not move along the axis for ``stall_s`` fails, naming the pin that did not
+enter and by how much it missed.
+
+The plan is nominal: the guide lies on the nominal pins. ``robust`` runs it in worlds whose pins
+and rests are displaced (pose errors larger than the play): the chamfers must capture the part.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fixplan.errors import InputError
+from fixplan.geometry.pins import HoleBody, PinBody, radial_play_m
+from fixplan.kinematics import ContactSet
+from fixplan.locating import _hole_body, contact_set, locator_gaps, peg_body
+from fixplan.model import Bore, Fixture
+from fixplan.planner.execute import ExecutionLog, ExecutionNoise
+from fixplan.planner.plan import Verification
+from fixplan.settings import DEFAULT, HAPTIC, InsertionSettings, Settings
+from fixplan.spatial import Pose, exp_so3, log_so3, shift_wrench
+
+FloatArray = NDArray[np.float64]
+State = frozenset[str]
+
+
+# -- the geometry of engagement --------------------------------------------------------------------
+@dataclass(frozen=True)
+class Insert:
+    """One thing that enters a hole: a pin in the part's hole, or the part (a shaft) in a bore."""
+
+    name: str  # the pin's or the bore's name: the state element once engaged
+    hole: str  # the hole's name (a bore: its own)
+    kind: str  # "round", "diamond" or "bore"
+    play_m: float  # radial play (D − d)/2
+    capture_m: float  # play + both chamfers: the offset a chamfer still guides into the hole
+    land_direction_world: FloatArray | None = None  # a diamond pin: the one direction it locates along
+
+
+def inserts(fixture: Fixture) -> list[Insert]:
+    """The fixture's pins (round ones first) and bores as :class:`Insert`."""
+    wp = fixture.workpiece
+    out = []
+    for pin in sorted(fixture.pins, key=lambda p: (p.kind != "round", p.name)):
+        hole = wp.hole(pin.hole)
+        play = radial_play_m(hole.diameter_m, pin.diameter_m)
+        out.append(
+            Insert(pin.name, hole.name, pin.kind, play, play + hole.chamfer_m + pin.chamfer_m, pin.land_direction_world)
+        )
+    for bore in fixture.bores:
+        r = float(getattr(wp.shape, "radius", 0.0))
+        play = 0.5 * bore.diameter_m - r
+        out.append(Insert(bore.name, bore.name, "bore", play, play + bore.chamfer_m))
+    return out
+
+
+def _pair(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[PinBody, HoleBody]:
+    """The pin and the hole of ``ins`` at ``pose`` (a bore: the part as the pin)."""
+    wp = fixture.workpiece
+    if ins.kind == "bore":
+        bore = next(b for b in fixture.bores if b.name == ins.name)
+        hole = HoleBody(bore.p_world, bore.axis_world, 0.5 * bore.diameter_m, bore.depth_m, bore.chamfer_m, True)
+        return peg_body(wp, pose, bore), hole
+    pin = next(p for p in fixture.pins if p.name == ins.name)
+    body = PinBody(pin.p_world, pin.axis_world, 0.5 * pin.diameter_m, pin.length_m, pin.chamfer_m)
+    return body, _hole_body(wp, pose, wp.hole(pin.hole))
+
+
+@dataclass(frozen=True)
+class Engagement:
+    """Where a pin's tip is with respect to its hole's mouth at a pose."""
+
+    depth_m: float  # the tip past the mouth, along the hole's axis into it (< 0: still outside)
+    offset_m: float  # the tip's centre from the hole's axis
+    capture_m: float
+
+    @property
+    def engaged(self) -> bool:
+        """The tip inside the mouth: past it, within the capture of the hole's axis."""
+        return self.depth_m > 0.0 and self.offset_m <= self.capture_m
+
+
+def engagement(fixture: Fixture, pose: Pose, ins: Insert) -> Engagement:
+    """The tip's depth in its hole and its offset from the hole's axis at ``pose``."""
+    pin, hole = _pair(fixture, pose, ins)
+    tip = pin.base_world + pin.length_m * pin.axis_world
+    r = tip - hole.mouth_world
+    along = float(r @ hole.axis_world)
+    return Engagement(-along, float(np.linalg.norm(r - along * hole.axis_world)), ins.capture_m)
+
+
+def axis_offsets_m(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[float, float]:
+    """The hole's axis from the pin's at the mouth and at the tip, in the directions the pin locates.
+
+    A round pin (or a bore) locates every direction normal to its axis, a diamond pin only along its
+    lands: its offset across them is free by design.
+    """
+    pin, hole = _pair(fixture, pose, ins)
+    a = pin.axis_world
+    out = []
+    # the pin's axis at the mouth's level and at its tip
+    s_mouth = float((hole.mouth_world - pin.base_world) @ a)
+    for s in (min(max(s_mouth, 0.0), pin.length_m), pin.length_m):
+        q = pin.base_world + s * a
+        r = q - hole.mouth_world
+        r = r - float(r @ hole.axis_world) * hole.axis_world
+        if ins.land_direction_world is not None:
+            out.append(abs(float(r @ ins.land_direction_world)))
+        else:
+            out.append(float(np.linalg.norm(r)))
+    return out[0], out[1]
+
+
+def insertion_axis(fixture: Fixture) -> FloatArray:
+    """The unit axis the part is inserted against (pins: their common axis; a bore: its axis).
+
+    :class:`InputError` (one line) when the pins' axes differ: no single straight insertion.
+    """
+    named = [(f"pin.{p.name}", p.axis_world) for p in fixture.pins] + [
+        (f"bore.{b.name}", b.axis_world) for b in fixture.bores
+    ]
+    u = np.asarray(named[0][1], dtype=float)
+    tol = DEFAULT.pins.axis_angle_rad
+    for key, axis in named:
+        if math.acos(min(1.0, float(axis @ u))) > tol:
+            raise InputError(
+                f"{fixture.source}: {key}.axis: the pins' axes differ by more than {tol:g} rad "
+                "(expected parallel pins: the part is inserted along one axis)"
+            )
+    return u
+
+
+def located_pose(fixture: Fixture) -> Pose:
+    """The located pose: the file's (pins), or a shaft's in its bore (coaxial, its leading end on the bottom).
+
+    A bore alone is no full fixture of locators, and the loader takes a goal only for those: the
+    shaft is turned the least from its start so that its axis lies along the bore's, its end that
+    leads into the bore on the bottom ``depth_m`` below the mouth.
+    """
+    if fixture.goal_pose is not None:
+        return fixture.goal_pose
+    if not fixture.bores or fixture.pins:
+        raise InputError(f"{fixture.source}: workpiece.goal: a fixture with pins needs its located pose")
+    bore = fixture.bores[0]
+    shape = fixture.workpiece.shape
+    u = np.asarray(bore.axis_world, dtype=float)
+    R0 = fixture.start.R_world_body
+    z = R0[:, 2]
+    lead = -1.0 if float(z @ u) >= 0.0 else 1.0  # the body end along lead·z goes in first (it points down the bore)
+    want = -lead * u  # where body z must point
+    axis = np.cross(z, want)
+    s_, c_ = float(np.linalg.norm(axis)), float(z @ want)
+    turn = np.zeros(3) if s_ == 0.0 else axis / s_ * math.atan2(s_, c_)
+    R = exp_so3(turn) @ R0
+    half = 0.5 * float(getattr(shape, "length", 0.0))
+    centre = bore.p_world - bore.depth_m * u + half * u
+    return Pose(R, centre)
+
+
+def lifted(pose: Pose, u: FloatArray, h_m: float) -> Pose:
+    """``pose`` moved by ``h_m`` along ``u``."""
+    return Pose(pose.R_world_body, pose.p_world + h_m * u)
+
+
+# -- the plan --------------------------------------------------------------------------------------
+@dataclass
+class Stage:
+    """One transition of an insertion plan."""
+
+    target: str  # the state element it adds ("" for the approach)
+    together: tuple[str, ...]  # elements added with it
+    kind: str  # "free" (approach), "insert", "seat"
+    poses: list[Pose]  # the guide, start to end
+    wrench: FloatArray  # the planned push (about the body origin, world axes)
+    contacts: tuple[str, ...]  # the contacts the push is searched on
+    reason: str
+    wedge_force: float | None = None  # the contacts' wedging force (of 1); None: fewer than two contacts
+    margin_N: float | None = None
+
+    @property
+    def added(self) -> tuple[str, ...]:
+        return (self.target, *self.together) if self.target else ()
+
+
+@dataclass
+class InsertionPlan:
+    """The staged plan, or why there is none."""
+
+    ok: bool
+    reason: str
+    axis_world: FloatArray
+    goal: Pose
+    stages: list[Stage] = field(default_factory=list)
+    order: list[tuple[str, ...]] = field(default_factory=list)  # the pins in engagement order, ties together
+    heights_m: dict[str, float] = field(default_factory=dict)  # each insert's engagement height above the goal
+    seat_wrench: FloatArray | None = None  # the seating push (about the body origin at the goal, world axes)
+    seat_wrench_com: FloatArray | None = None  # the same about the centre of mass (what the hand adds to carrying)
+    start_state: State = frozenset()  # the goal state when the part starts located
+    plan_s: float = 0.0
+
+    @property
+    def states(self) -> list[State]:
+        out: list[State] = [self.start_state]
+        for st in self.stages:
+            out.append(out[-1] | set(st.added))
+        return out
+
+
+def goal_state(fixture: Fixture) -> State:
+    """Every pin engaged, every rest pressed (a bore: engaged and on its bottom)."""
+    names = {loc.name for loc in fixture.locators} | {p.name for p in fixture.pins}
+    for b in fixture.bores:
+        names |= {b.name, f"{b.name}.bottom"}
+    return frozenset(names)
+
+
+def _touching(cs: ContactSet, tol_m: float) -> ContactSet:
+    keep = tuple(c for c in cs.contacts if c.gap_m <= tol_m)
+    return ContactSet(keep, cs.com_world, cs.mass_matrix, cs.body_origin_world)
+
+
+def _push(fixture: Fixture, pose: Pose, names: list[str], u: FloatArray, s: InsertionSettings) -> tuple[
+    bool, FloatArray, str, tuple[str, ...], float | None, float | None
+]:  # fmt: skip
+    """The non-jamming push moving the part along ``−u`` at ``pose`` on the touching contacts of ``names``.
+
+    ``(found, wrench about the body origin, reason, contacts, wedging force, margin)``. No contact
+    touching: the free push ``M a − w_g``.
+    """
+    from fixplan.jamming.search import search_wrench_in
+    from fixplan.jamming.wedge import wedge_force
+    from fixplan.planner.segments import free_wrench
+
+    cs = _touching(contact_set(fixture, pose, names), fixture.tolerances.touch_m) if names else None
+    a = np.concatenate([-s.push_accel_mps2 * u, np.zeros(3)])
+    if cs is None or len(cs) == 0:
+        ok, w, why = free_wrench(fixture, pose, a, contact_set(fixture, pose, []).mass_matrix)
+        return ok, w, why, (), None, None
+    wedge = wedge_force(cs) if len(cs) >= 2 else None
+    weight = fixture.workpiece.mass_kg * float(np.linalg.norm(fixture.gravity) or 9.81)
+    r = search_wrench_in(cs, a, fixture, objective="effort", min_margin_N=s.seat_side * weight, confirm=True)
+    w = r.wrench if r.wrench is not None else np.full(fixture.ndof, np.nan)
+    return r.found, w, r.reason, tuple(c.name for c in cs.contacts), wedge, r.margin_N
+
+
+def _interpolate(a: Pose, b: Pose, n: int) -> list[Pose]:
+    """``n + 1`` poses from ``a`` to ``b``: the position on the line, the rotation about one axis."""
+    rel = log_so3(b.R_world_body @ a.R_world_body.T)
+    return [
+        Pose(exp_so3(k / n * rel) @ a.R_world_body, a.p_world + k / n * (b.p_world - a.p_world)) for k in range(n + 1)
+    ]
+
+
+def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionPlan:
+    """The staged insertion of ``fixture``'s part (module text); ``ok`` false with the reason when there is none."""
+    t0 = time.perf_counter()
+    s = settings.insertion
+    G = located_pose(fixture)
+    u = insertion_axis(fixture)
+    plan = InsertionPlan(False, "", u, G)
+    ins = inserts(fixture)
+    # every hole over its pin at the located pose: the capture, and the heights the tips meet the mouths
+    for i in ins:
+        e = engagement(fixture, G, i)
+        if e.offset_m > i.capture_m or e.depth_m <= 0.0:
+            where = (
+                f"its hole {i.hole}'s axis is {e.offset_m * 1e3:.3g} mm from its tip (capture {i.capture_m * 1e3:.3g} mm)"
+                if e.offset_m > i.capture_m
+                else f"its tip stays {-e.depth_m * 1e3:.3g} mm outside {i.hole}'s mouth"
+            )
+            plan.reason = f"{i.name} cannot enter {i.hole} at the located pose: {where}"
+            plan.plan_s = time.perf_counter() - t0
+            return plan
+        plan.heights_m[i.name] = e.depth_m
+    # the engagement order: the largest height first; equal heights together (round before diamond)
+    tol = fixture.tolerances.touch_m
+    groups: list[list[Insert]] = []
+    for i in sorted(ins, key=lambda i: -plan.heights_m[i.name]):
+        if groups and abs(plan.heights_m[groups[-1][0].name] - plan.heights_m[i.name]) <= tol:
+            groups[-1].append(i)
+        else:
+            groups.append([i])
+    plan.order = [tuple(i.name for i in g) for g in groups]
+    # the start: above every tip (nothing engaged), or the plan cannot begin with the approach
+    start = fixture.start
+    inside = [i for i in ins if engagement(fixture, start, i).engaged]
+    if inside and len(inside) == len(ins) and _seated(fixture, start, u):
+        # already located: nothing to insert; the run only holds the part with the seating push
+        plan.start_state = goal_state(fixture)
+        w_seat, held = seat_push(fixture, G, u, s)
+        plan.seat_wrench, plan.seat_wrench_com = w_seat, _about_com(fixture, G, w_seat)
+        plan.ok = held is None
+        plan.reason = held or "already located at the start pose: every pin in its hole, every rest touching"
+        plan.plan_s = time.perf_counter() - t0
+        return plan
+    # a part already partly in (a shaft dropped tilted into the chamfer) is lifted straight out first:
+    # the approach below rises along the axis before it turns and moves sideways
+    h_top = plan.heights_m[groups[0][0].name]
+    staging = lifted(G, u, h_top + s.lead_m)
+    poses = [start]
+    rise = float((staging.p_world - start.p_world) @ u)
+    if rise > 0.0:  # lift first: the part never moves sideways lower than the staging height
+        poses.append(Pose(start.R_world_body, start.p_world + rise * u))
+    guide = poses[:1]
+    for a, b in zip([*poses], [*poses[1:], staging], strict=True):
+        guide += _interpolate(a, b, 4)[1:]
+    ok, w, why, _, _, _ = _push(fixture, staging, [], u, s)
+    plan.stages.append(Stage("", (), "free", guide, w, (), f"approach to the staging pose: {why}"))
+    if not ok:
+        plan.reason = f"the approach to the staging pose is beyond the hand: {why}"
+        plan.plan_s = time.perf_counter() - t0
+        return plan
+    # the insertions, down the axis
+    engaged: list[str] = []
+    prev = staging
+    for k, g in enumerate(groups):
+        h = plan.heights_m[g[0].name]
+        nxt = plan.heights_m[groups[k + 1][0].name] if k + 1 < len(groups) else 0.0
+        past = max(i.capture_m - i.play_m for i in g) + s.engage_margin_m
+        end_h = max(h - past, 0.5 * (h + nxt))
+        end = lifted(G, u, end_h)
+        names = [*engaged, *(i.name for i in g if i.kind != "bore")]
+        pin_names = [n for n in names if n in {p.name for p in fixture.pins}] + [i.name for i in g if i.kind == "bore"]
+        ok, w, why, touching, wedge, margin = _push(fixture, end, pin_names, u, s)
+        label = ", ".join(i.name for i in g)
+        st = Stage(g[0].name, tuple(i.name for i in g[1:]), "insert", [prev, end], w, touching,
+                   f"insert {label} along the axis: {why}", wedge, margin)  # fmt: skip
+        plan.stages.append(st)
+        if not ok:
+            plan.reason = f"no push inserts {label} without jamming: {why}"
+            plan.plan_s = time.perf_counter() - t0
+            return plan
+        if wedge is not None and wedge > fixture.tolerances.wedge_force:
+            plan.reason = (
+                f"{label} wedges on the way in: {', '.join(touching)} hold forces that balance with no push "
+                f"({wedge:.3g} of the total normal force), whatever the push"
+            )
+            plan.plan_s = time.perf_counter() - t0
+            return plan
+        engaged += [i.name for i in g]
+        prev = end
+    # the seating: down to the located pose, the rests (or the bore's bottom) closing together
+    rests = [loc.name for loc in fixture.locators] + [f"{b.name}.bottom" for b in fixture.bores]
+    pin_names = [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
+    just_above = lifted(G, u, min(s.engage_margin_m, 0.5 * float((prev.p_world - G.p_world) @ u)))
+    ok, w, why, touching, wedge, margin = _push(fixture, just_above, pin_names, u, s)
+    seat = Stage(rests[0], tuple(rests[1:]), "seat", [prev, G], w, touching, f"seat on {', '.join(rests)}: {why}",
+                 wedge, margin)  # fmt: skip
+    plan.stages.append(seat)
+    if not ok:
+        plan.reason = f"no push seats the part on {', '.join(rests)} without jamming: {why}"
+        plan.plan_s = time.perf_counter() - t0
+        return plan
+    w_seat, held = seat_push(fixture, G, u, s)
+    plan.seat_wrench = w_seat
+    plan.seat_wrench_com = _about_com(fixture, G, w_seat)
+    if held is not None:
+        plan.reason = held
+        plan.plan_s = time.perf_counter() - t0
+        return plan
+    plan.ok = True
+    seq = " → ".join(",".join(g) for g in plan.order)
+    plan.reason = f"approach, insert {seq} along the axis, seat on {', '.join(rests)}"
+    plan.plan_s = time.perf_counter() - t0
+    return plan
+
+
+def _about_com(fixture: Fixture, pose: Pose, w: FloatArray) -> FloatArray:
+    return shift_wrench(w, pose.p_world, pose.point_world_from_body(fixture.workpiece.com_body))
+
+
+def _seated(fixture: Fixture, pose: Pose, u: FloatArray) -> bool:
+    """Every rest (and every bore's bottom) touching at ``pose``."""
+    tol = fixture.tolerances.touch_m
+    gaps = [float(g) for g in locator_gaps(fixture.workpiece, pose, fixture.locators)]
+    gaps += [bottom_gap_m(fixture, pose, b) for b in fixture.bores]
+    return all(abs(g) <= tol for g in gaps)
+
+
+def seat_side_world(fixture: Fixture, pose: Pose, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The unit direction normal to ``u`` the part is seated toward, and where it is pressed: the round pin's (or bore's) contact.
+
+    The sum of the first round pin's touching contact normals at ``pose`` (they push the part away
+    from the pin), reversed, and the mean of those contacts' points; zero direction when none touches.
+    """
+    from fixplan.locating import bore_contacts, pin_contacts
+
+    wp = fixture.workpiece
+    tol = fixture.tolerances.touch_m
+    for ins in inserts(fixture):
+        if ins.kind == "diamond":
+            continue
+        if ins.kind == "bore":
+            bore = next(b for b in fixture.bores if b.name == ins.name)
+            cs = bore_contacts(wp, pose, bore)
+        else:
+            cs = pin_contacts(wp, pose, next(p for p in fixture.pins if p.name == ins.name))
+        side = [c for c in cs if c.gap_m <= tol and abs(float(c.normal_world @ u)) < 0.5]
+        n = sum((c.normal_world for c in side), np.zeros(3))
+        n = n - float(n @ u) * u
+        norm = float(np.linalg.norm(n))
+        if norm > 0.0:
+            return -n / norm, np.mean([c.point_world for c in side], axis=0)
+    return np.zeros(3), pose.point_world_from_body(wp.com_body)
+
+
+def seat_push(fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings) -> tuple[FloatArray, str | None]:
+    """The seating push at the located pose and why it does not hold the part there (None: it does).
+
+    ``seat_press`` weights along ``−u`` through the centre of mass and ``seat_side`` weights toward
+    the round pin's contact, along a line through that contact (no turn about the pin: the diamond
+    pin, centred in its play, takes none), classified on the rests and the pins at ``pose``: ``held``.
+    """
+    from fixplan.jamming import classify
+
+    wp = fixture.workpiece
+    weight = wp.mass_kg * float(np.linalg.norm(fixture.gravity) or 9.81)
+    side, at = seat_side_world(fixture, pose, u)
+    com = pose.point_world_from_body(wp.com_body)
+    F_side = s.seat_side * weight * side
+    F = -s.seat_press * weight * u + F_side
+    w_com = np.concatenate([F, np.cross(at - com, F_side)])
+    w = shift_wrench(w_com, com, pose.p_world)
+    names = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
+    cs = _touching(contact_set(fixture, pose, names), fixture.tolerances.touch_m)
+    touching = sorted({c.owner for c in cs.contacts})
+    if not touching:
+        return w, "nothing touches the part at the located pose: no seat"
+    res = classify(fixture, [w], touching, pose=pose, jobs=1)[0]
+    if res.mode != "held":
+        return w, f"the seating push does not hold the part at the located pose: it {res.mode} ({res.reason})"
+    return w, None
+
+
+# -- the plan as the planner's result ---------------------------------------------------------------
+def transitions_of(fixture: Fixture, plan: InsertionPlan) -> list[Any]:
+    """The stages as :class:`~fixplan.planner.fine.Transition` (what ``solve`` reports and writes)."""
+    from fixplan.planner.execute import mass_speed
+    from fixplan.planner.fine import Transition, twist_from_pose
+
+    wp = fixture.workpiece
+    out = []
+    states = plan.states
+    for k, st in enumerate(plan.stages):
+        n = max(len(st.poses) - 1, 1)
+        found = bool(np.all(np.isfinite(st.wrench)))
+        length = 0.0
+        for a, b in zip(st.poses[:-1], st.poses[1:], strict=True):
+            M = contact_set(fixture, a, []).mass_matrix
+            length += mass_speed(twist_from_pose(a, b, wp.com_body), M, wp.mass_kg)
+        out.append(
+            Transition(
+                tuple(sorted(states[k])), st.target or "staging", "slide" if states[k] else "free", list(st.poses),
+                np.tile(st.wrench, (n, 1)), np.full(n, np.nan if st.margin_N is None else st.margin_N),
+                found, st.reason, 0.0, 0.0, "not run", found=np.full(n, found), segment_reasons=[st.reason] * n,
+                cost=length, formulation="insertion", together=st.together,
+            )
+        )  # fmt: skip
+    return out
+
+
+# -- the verification ------------------------------------------------------------------------------
+class InsertionRun:
+    """The hand along an insertion plan, one :meth:`command` per tick (module text)."""
+
+    def __init__(
+        self,
+        world: Fixture,
+        plan: InsertionPlan,
+        settings: InsertionSettings,
+        noise: ExecutionNoise | None = None,
+        tick_s: float = 1e-3,
+    ):
+        self.world = world
+        self.plan = plan
+        self.s = settings
+        self.u = plan.axis_world
+        self.noise = noise or ExecutionNoise()
+        self.rng = np.random.default_rng(self.noise.seed)
+        wp = world.workpiece
+        self.m = wp.mass_kg
+        self.I_max = float(np.max(np.linalg.eigvalsh(np.atleast_2d(wp.inertia_body))))
+        self.weight_N = self.m * float(np.linalg.norm(world.gravity) or 9.81)
+        self.inserts = inserts(world)
+        self.rests = tuple(loc.name for loc in world.locators)
+        self.states = plan.states
+        self.goal = self.states[-1]
+        self.index = 0  # the current transition
+        self.log = ExecutionLog()
+        self.tick_s = tick_s
+        self._observed: State = frozenset()
+        self._candidate: State | None = None
+        self._since = 0.0
+        self._t_stage = 0.0
+        self._settled: float | None = None
+        self._progress: tuple[float, float] | None = None  # (height, since)
+        self._seating = len(self.states) == 1  # located at the start: the seating push from the first tick
+        if self._seating:
+            self.log.event(0.0, "hold", "located at the start: the seating push")
+        # the hand's push along the axis is capped at the largest planned one (beyond carrying the part)
+        planned = [
+            float(abs(np.asarray(st.wrench[:3]) @ self.u + self.weight_N * _up(world) @ self.u))
+            for st in plan.stages
+            if np.all(np.isfinite(st.wrench))
+        ]
+        self.cap_N = max(planned, default=0.0) + self.s.seat_press * self.weight_N
+        # the guide after the approach runs straight down the axis at the insertion speed
+        self._h_stage_start = 0.0
+        self._ref_h0 = 0.0
+
+    @property
+    def done(self) -> bool:
+        return self.log.outcome != "running"
+
+    def height_m(self, pose: Pose) -> float:
+        """The part's height above the nominal located pose along the axis."""
+        return float((pose.p_world - self.plan.goal.p_world) @ self.u)
+
+    def observe(self, pose: Pose, pressed: tuple[str, ...]) -> State:
+        """The state: the engaged pins (from the pose) and the pressed rests (and a bore's bottom)."""
+        state = {i.name for i in self.inserts if engagement(self.world, pose, i).engaged}
+        state |= {n for n in pressed if n in self.rests}
+        for b in self.world.bores:
+            if b.name in state and b.name in pressed and self._bottom_touches(pose, b.name):
+                state.add(f"{b.name}.bottom")
+        return frozenset(state)
+
+    def _bottom_touches(self, pose: Pose, bore: str) -> bool:
+        b = next(x for x in self.world.bores if x.name == bore)
+        tol = self.world.tolerances.touch_m + DEFAULT.execution.contact_gap_m
+        return bottom_gap_m(self.world, pose, b) <= tol
+
+    def _reference(self, t: float) -> tuple[Pose, FloatArray, bool]:
+        """The guide's pose and velocity now, and whether the hand pushes down the axis (stiff axial servo)."""
+        st = self.plan.stages[min(self.index, len(self.plan.stages) - 1)]
+        if st.kind == "free":
+            poses = st.poses
+            seg = [float(np.linalg.norm(b.p_world - a.p_world)) for a, b in zip(poses[:-1], poses[1:], strict=True)]
+            total = sum(seg)
+            dist = min(self.s.approach_speed_mps * (t - self._t_stage), total)
+            k, acc = 0, 0.0
+            while k < len(seg) - 1 and acc + seg[k] < dist:
+                acc += seg[k]
+                k += 1
+            f = 0.0 if seg[k] <= 0.0 else min((dist - acc) / seg[k], 1.0)
+            a, b = poses[k], poses[k + 1]
+            rel = log_so3(b.R_world_body @ a.R_world_body.T)
+            ref = Pose(exp_so3(f * rel) @ a.R_world_body, a.p_world + f * (b.p_world - a.p_world))
+            v = np.zeros(6)
+            if dist < total and seg[k] > 0.0:
+                v[:3] = self.s.approach_speed_mps * (b.p_world - a.p_world) / seg[k]
+            return ref, v, False
+        # down the axis from where the insertion began, on the located pose's line
+        h = self._ref_h0 - self.s.insert_speed_mps * (t - self._t_stage)
+        v = np.zeros(6)
+        if h > -self.s.lead_m:
+            v[:3] = -self.s.insert_speed_mps * self.u
+        h = max(h, -self.s.lead_m)
+        return lifted(self.plan.goal, self.u, h), v, True
+
+    def command(self, t: float, pose: Pose, twist: FloatArray, pressed: tuple[str, ...]) -> FloatArray:
+        """The push now (about the body origin, world axes)."""
+        state = self.observe(pose, pressed)
+        self._debounce(t, state, pose)
+        if self.done:
+            return np.zeros(6)
+        wp = self.world.workpiece
+        com = pose.point_world_from_body(wp.com_body)
+        carry = -self.world.gravity_wrench()
+        v, w_ang = twist[:3], twist[3:]
+        if self._seating:
+            seat = self.plan.seat_wrench_com if self.plan.seat_wrench_com is not None else np.zeros(6)
+            w_com = carry + seat
+            w_com[3:] += -self.I_max * 2.0 * self.s.rot_omega_radps * w_ang
+            w_com[:3] += -self.m * 2.0 * self.s.lateral_omega_radps * (v - float(v @ self.u) * self.u)
+            self._check_settled(t, state, twist)
+            return self._noisy(shift_wrench(w_com, com, pose.p_world))
+        ref, v_ref, axial = self._reference(t)
+        e = ref.p_world - pose.p_world
+        ev = v_ref[:3] - v
+        e_ax, ev_ax = float(e @ self.u), float(ev @ self.u)
+        e_lat, ev_lat = e - e_ax * self.u, ev - ev_ax * self.u
+        wa = self.s.axial_omega_radps
+        wl = self.s.lateral_omega_radps if axial else self.s.axial_omega_radps
+        f_ax = self.m * (wa * wa * e_ax + 2.0 * wa * ev_ax)
+        if axial:
+            f_ax = min(max(f_ax, -self.cap_N), self.cap_N)
+        F = f_ax * self.u + self.m * (wl * wl * e_lat + 2.0 * wl * ev_lat)
+        wr = self.s.rot_omega_radps
+        T = self.I_max * (wr * wr * log_so3(ref.R_world_body @ pose.R_world_body.T) - 2.0 * wr * w_ang)
+        w_com = carry + np.concatenate([F, T])
+        if axial:
+            self._check_progress(t, pose)
+        return self._noisy(shift_wrench(w_com, com, pose.p_world))
+
+    def _noisy(self, w: FloatArray) -> FloatArray:
+        if self.noise.force_noise <= 0.0:
+            return w
+        return w * (1.0 + self.noise.force_noise * self.rng.standard_normal(w.shape[0]))
+
+    def _debounce(self, t: float, state: State, pose: Pose) -> None:
+        if state == self._observed:
+            self._candidate = None
+            return
+        if state != self._candidate:
+            self._candidate, self._since = state, t
+            return
+        if t - self._since + 1e-12 < self.s.dwell_s:
+            return
+        self._observed, self._candidate = state, None
+        key = tuple(sorted(state))
+        if key and (not self.log.observed or self.log.observed[-1] != key):
+            self.log.observed.append(key)
+        if self.index < len(self.plan.stages) and self.plan.stages[self.index].kind == "free":
+            return  # the approach is a pose target: it ends at the staging pose (step_time), whatever touches
+        later = [j for j in range(self.index + 1, len(self.states)) if self.states[j] <= state]
+        if later:
+            j = later[-1]
+            if j > self.index + 1:
+                self.log.counts["skipped_states"] += j - self.index - 1
+                self.log.event(t, "skipped", f"reached {_fmt(state)} directly")
+            was_free = self.plan.stages[self.index].kind == "free"
+            self.index = j
+            self.log.event(t, "state", f"reached {_fmt(state)}")
+            if was_free:
+                self._begin_insertion(t, pose)
+            if j >= len(self.states) - 1:
+                self._seating = True
+                self.log.event(t, "hold", "every pin engaged and every rest pressed: the seating push")
+        elif self.index > 0 and not (self.states[self.index] <= state):
+            lost = sorted(self.states[self.index] - state)
+            self.log.counts["lost_contact"] += 1
+            self._fail(t, f"lost {', '.join(lost)} in transition {self.index + 1}", "lost contact")
+
+    def _begin_insertion(self, t: float, pose: Pose) -> None:
+        self._t_stage = t
+        self._ref_h0 = min(self.height_m(pose), self.height_m(self.plan.stages[0].poses[-1]))
+
+    def step_time(self, t: float, pose: Pose) -> None:
+        """Called every tick before :meth:`command`: the approach ends when its guide does (a pose target)."""
+        st = self.plan.stages[self.index] if self.index < len(self.plan.stages) else None
+        if st is None or st.kind != "free":
+            return
+        end = st.poses[-1]
+        turn = float(np.linalg.norm(log_so3(end.R_world_body @ pose.R_world_body.T)))
+        off = float(np.linalg.norm(pose.p_world - end.p_world))
+        close = off <= self.s.align_tol_m and turn <= self.s.align_tol_rad
+        total = sum(
+            float(np.linalg.norm(b.p_world - a.p_world)) for a, b in zip(st.poses[:-1], st.poses[1:], strict=True)
+        )
+        if close and t - self._t_stage >= total / self.s.approach_speed_mps:
+            self.index += 1
+            self.log.event(t, "state", "at the staging pose: every hole over its pin")
+            self._begin_insertion(t, pose)
+
+    def _check_progress(self, t: float, pose: Pose) -> None:
+        h = self.height_m(pose)
+        if self._progress is None or self._progress[0] - h >= self.s.stall_progress_m:
+            self._progress = (h, t)
+            return
+        if t - self._progress[1] < self.s.stall_s:
+            return
+        self.log.counts["stalls"] += 1
+        self._fail(t, self.why_stuck(pose), "stall")
+
+    def why_stuck(self, pose: Pose) -> str:
+        """One line: the first pin the plan expects next that is not in its hole, and by how much it missed."""
+        expect = self.states[min(self.index + 1, len(self.states) - 1)]
+        for i in self.inserts:
+            if i.name not in expect:
+                continue
+            e = engagement(self.world, pose, i)
+            if e.engaged:
+                continue
+            miss = (
+                f"its tip {-e.depth_m * 1e3:.3g} mm short of the mouth"
+                if e.offset_m <= i.capture_m
+                else f"{i.hole}'s axis {e.offset_m * 1e3:.3g} mm from its tip, beyond the capture "
+                f"{i.capture_m * 1e3:.3g} mm (play + chamfers), {max(-e.depth_m, 0.0) * 1e3:.3g} mm above"
+            )
+            return f"{i.name} did not enter {i.hole} (transition {self.index + 1}): {miss}"
+        missing = sorted(expect - self._observed)
+        return (
+            f"stuck in transition {self.index + 1}: {', '.join(missing) or 'the seat'} not reached, "
+            f"the part {self.height_m(pose) * 1e3:.3g} mm above the located pose and not moving down"
+        )
+
+    def _check_settled(self, t: float, state: State, twist: FloatArray) -> None:
+        if state >= self.goal and float(np.linalg.norm(twist[:3])) < DEFAULT.execution.stall_speed_mps * 10:
+            if self._settled is None:
+                self._settled = t
+            elif t - self._settled >= self.s.settle_s:
+                self.log.outcome = "reached"
+                self.log.reason = "every pin engaged, every rest pressed, at rest"
+                self.log.transition_at_end = len(self.plan.stages)
+                self.log.event(t, "reached", self.log.reason)
+        else:
+            self._settled = None
+
+    def _fail(self, t: float, reason: str, kind: str) -> None:
+        if not self.done:
+            self.log.outcome = "failed"
+            self.log.reason = reason
+            self.log.failure_kind = kind
+            self.log.transition_at_end = self.index + 1
+            self.log.event(t, "failed", reason)
+
+
+def bottom_gap_m(fixture: Fixture, pose: Pose, bore: Bore) -> float:
+    """The gap of the shaft's leading end face on the bore's (flat) bottom, in closed form.
+
+    The face's deepest point lies ``r sin φ`` beyond its centre along the bore's axis (``φ`` the
+    angle between the shaft's and the bore's axes): gap ``depth − (d_E + r sin φ)``, ``d_E`` the
+    centre's depth below the mouth.
+    """
+    pin = peg_body(fixture.workpiece, pose, bore)
+    u = np.asarray(bore.axis_world, dtype=float)
+    end = pin.base_world + pin.length_m * pin.axis_world
+    d_end = float((bore.p_world - end) @ u)
+    c = min(abs(float(pin.axis_world @ u)), 1.0)
+    return bore.depth_m - (d_end + pin.radius_m * math.sqrt(max(1.0 - c * c, 0.0)))
+
+
+def _up(fixture: Fixture) -> FloatArray:
+    g = np.asarray(fixture.gravity, dtype=float)
+    n = float(np.linalg.norm(g))
+    return -g / n if n > 0 else np.zeros(3)
+
+
+def _fmt(state: State) -> str:
+    return "{" + ", ".join(sorted(state)) + "}"
+
+
+def verify_insertion(
+    world: Fixture,
+    plan: InsertionPlan,
+    *,
+    profile: Settings = HAPTIC,
+    noise: ExecutionNoise | None = None,
+    max_sweeps: int | None = None,
+    final_gap_m: float | None = None,
+    max_penetration_m: float | None = None,
+    trace_every_s: float | None = None,
+) -> Verification:
+    """Run ``plan`` (made on the nominal fixture) in the haptic loop on ``world`` and check the outcome (module text)."""
+    from fixplan.engine.simulator import Simulator
+    from fixplan.errors import SolverError
+    from fixplan.jamming.search import hand_limits
+    from fixplan.planner.verify import haptic_rig, headroom, loop_measures, pose_coordinates
+
+    vs = profile.verification
+    s = profile.insertion
+    final_gap_m = vs.final_gap_m if final_gap_m is None else final_gap_m
+    max_penetration_m = vs.max_penetration_m if max_penetration_m is None else max_penetration_m
+    trace_every_s = vs.trace_every_s if trace_every_s is None else trace_every_s
+    sim = Simulator(world, max_iterations=max_sweeps, settings=profile.engine)
+    R0 = world.start.R_world_body.copy()
+    F_max, T_max, _ = hand_limits(world)
+    run = InsertionRun(world, plan, s, noise, sim.dt)
+    wp = world.workpiece
+    x0 = pose_coordinates(world.start, R0)
+    carry0 = shift_wrench(-world.gravity_wrench(), world.start.point_world_from_body(wp.com_body), world.start.p_world)
+    rig = haptic_rig(world, sim, x0, F_max, T_max, profile.haptic)
+    rig = haptic_rig(world, sim, x0 + carry0 / rig.K, F_max, T_max, profile.haptic)
+    loop = rig.loop
+    contact_gap_m = profile.execution.contact_gap_m
+    threshold = max(profile.execution.press_fraction * run.weight_N, 1e-6)
+    commands: list[FloatArray] = []
+
+    def operator(tt: float, device: Any) -> FloatArray:
+        pose = sim.pose
+        pressed = sim.in_contact(threshold, contact_gap_m)
+        run.step_time(tt, pose)
+        w = run.command(tt, pose, sim.twist, pressed)
+        commands.append(np.array(w, dtype=float))
+        return rig.operator_wrench(w, device)
+
+    guide = sum(
+        float(np.linalg.norm(b.p_world - a.p_world))
+        for st in plan.stages
+        for a, b in zip(st.poses[:-1], st.poses[1:], strict=True)
+    )
+    time_limit = s.time_factor * guide / s.insert_speed_mps + s.time_base_s
+    trace_every = max(int(round(trace_every_s / sim.dt)), 1) if trace_every_s > 0 else 0
+    try:
+        rec = loop.run(time_limit, operator, trace_every=trace_every, until=lambda: run.done)
+    except SolverError as exc:
+        why = f"the simulated insertion diverged at t = {sim.time_s:.3f} s (transition {run.index + 1}): {exc}"
+        run._fail(sim.time_s, why, "diverged")
+        return Verification(
+            passed=False, reason=why, failed_checks=["executor"], final_pose=sim.pose,
+            max_penetration_m=sim.max_penetration_m, deadline_misses=None, tick_mean_us=None, tick_max_us=None,
+            observed_sequence=list(run.log.observed), final_gaps_m={}, duration_s=sim.time_s,
+            felt_force_max_N=None, execution=run.log,
+        )  # fmt: skip
+    if run.log.outcome == "running":
+        run._fail(
+            sim.time_s,
+            f"timed out after {sim.time_s:.2f} s in transition {run.index + 1}: {run.why_stuck(sim.pose)}",
+            "timeout",
+        )
+    pose = sim.pose
+    reasons, checks = [], []
+    if run.log.outcome != "reached":
+        reasons.append(run.log.reason)
+        checks.append("executor")
+    gaps = dict(zip(run.rests, map(float, locator_gaps(wp, pose, world.locators)), strict=True))
+    for b in world.bores:
+        gaps[f"{b.name}.bottom"] = bottom_gap_m(world, pose, b)
+    far = {n: g for n, g in gaps.items() if abs(g) > final_gap_m}
+    if far:
+        checks.append("final gap")
+        reasons.append(
+            "at the end "
+            + ", ".join(f"{n} is {g:.3g} m away" for n, g in far.items())
+            + f" (expected ≤ {final_gap_m:g} m)"
+        )
+    for i in run.inserts:
+        mouth, tip = axis_offsets_m(world, pose, i)
+        gaps[f"{i.name}.axis_offset"] = max(mouth, tip)
+        if max(mouth, tip) > i.play_m * (1.0 + s.axis_play_rel) + final_gap_m:
+            checks.append("pin axis")
+            reasons.append(
+                f"at the end {i.hole}'s axis is {max(mouth, tip) * 1e3:.3g} mm from {i.name}'s "
+                f"(expected ≤ the play {i.play_m * 1e3:.3g} mm)"
+            )
+    pen = sim.max_penetration_m
+    if pen > max_penetration_m:
+        checks.append("penetration")
+        reasons.append(f"penetration reached {pen:.3g} m (expected ≤ {max_penetration_m:g} m)")
+    worst = rec.max_solver_error
+    if worst is not None and worst > vs.max_solver_error:
+        checks.append("solver")
+        reasons.append(
+            f"the contact solver did not converge in {rec.unconverged_steps} of {len(rec.compute_s)} steps "
+            f"(largest residual {worst:.2g}, expected ≤ {vs.max_solver_error:g})"
+        )
+    W = np.array(rec.coupling_wrench) if rec.coupling_wrench else np.zeros((1, 6))
+    win = max(int(round(vs.limit_window_s / sim.dt)), 1)
+    Wf = (
+        np.array([np.convolve(W[:, j], np.ones(win) / win, mode="valid") for j in range(6)]).T
+        if W.shape[0] >= win
+        else W
+    )
+    push_F = float(np.max(np.linalg.norm(Wf[:, :3], axis=1)))
+    push_T = float(np.max(np.linalg.norm(Wf[:, 3:], axis=1)))
+    if push_F > (1 + vs.limit_slack) * F_max or push_T > (1 + vs.limit_slack) * T_max:
+        checks.append("limits")
+        reasons.append(
+            f"the push on the part exceeded the manipulator's limits: ‖F‖ up to {push_F:.3g} N (max_force {F_max:.3g} N), "
+            f"‖T‖ up to {push_T:.3g} N·m (max_torque {T_max:.3g} N·m)"
+        )
+    measures = loop_measures(rec, sim, trace_every)
+    return Verification(
+        passed=not reasons,
+        reason="; ".join(reasons) if reasons else "every check passed",
+        failed_checks=checks,
+        **measures,
+        **headroom(commands, 3, F_max, T_max, DEFAULT.search.limit_fraction),
+        observed_sequence=list(run.log.observed),
+        final_gaps_m=gaps,
+        execution=run.log,
+        max_push_force_N=push_F,
+        max_push_torque_Nm=push_T,
+        saturated_ticks=loop.saturated_ticks,
+        planner_wall_time_in_loop_s=0.0,
+    )
+
+
+def shifted_world(fixture: Fixture, offset_world: FloatArray, yaw_rad: float, with_start: bool = False) -> Fixture:
+    """The fixture with its pins, bores and rests moved rigidly: turned by ``yaw_rad`` about the insertion axis through the first pin, then shifted by ``offset_world``.
+
+    The located pose moves with them; the part's start stays (``with_start``: moves too, for a part
+    that starts resting on them, where the world put it). What a pose error of the part in
+    the hand looks like from the part: the plan (made on the nominal fixture) guides it to where
+    the pins are not.
+    """
+    u = insertion_axis(fixture)
+    pivot = (fixture.pins[0].p_world if fixture.pins else fixture.bores[0].p_world).copy()
+    R = exp_so3(yaw_rad * u)
+
+    def move(p: FloatArray) -> FloatArray:
+        return pivot + R @ (np.asarray(p) - pivot) + offset_world
+
+    pins = tuple(
+        replace(
+            p, p_world=move(p.p_world), axis_world=R @ p.axis_world,
+            land_direction_world=None if p.land_direction_world is None else R @ p.land_direction_world,
+        )
+        for p in fixture.pins
+    )  # fmt: skip
+    bores = tuple(replace(b, p_world=move(b.p_world), axis_world=R @ b.axis_world) for b in fixture.bores)
+    locators = tuple(replace(loc, p_world=move(loc.p_world)) for loc in fixture.locators)
+    out = replace(fixture, pins=pins, bores=bores, locators=locators)
+    if with_start:
+        S = fixture.start
+        out = replace(out, start=Pose(R @ S.R_world_body, move(S.p_world)))
+    G = fixture.goal_pose
+    if G is not None:
+        goal = Pose(R @ G.R_world_body, move(G.p_world))
+        out = replace(out, goal_given=goal, goal_pose=goal)
+    return out
+
+
+__all__ = [
+    "Engagement",
+    "Insert",
+    "InsertionPlan",
+    "InsertionRun",
+    "Stage",
+    "axis_offsets_m",
+    "engagement",
+    "goal_state",
+    "insertion_axis",
+    "inserts",
+    "plan_insertion",
+    "seat_push",
+    "shifted_world",
+    "transitions_of",
+    "verify_insertion",
+]

@@ -1,0 +1,208 @@
+"""Planning and verifying the insertion onto pins and into a bore (fixplan/planner/insertion.py).
+
+Closed forms and hand-derived verdicts: the engagement heights (a tip meets its mouth when the part
+is the pin's length above the located pose), the engagement order, the seating push, the hole's
+axis within the radial play (D − d)/2 of the pin's after the plan, a pin whose hole is out of reach
+named in an infeasible plan, and a pose error captured by the chamfers or not.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from conftest import PROBLEMS, run_cli
+
+import fixplan
+from fixplan.errors import InputError
+from fixplan.planner.insertion import (
+    axis_offsets_m,
+    engagement,
+    inserts,
+    lifted,
+    located_pose,
+    plan_insertion,
+    shifted_world,
+    verify_insertion,
+)
+from fixplan.planner.solve import solve
+
+HOUSING = PROBLEMS / "housing-2-pins.toml"
+LOAD = PROBLEMS / "housing-2-pins-load.toml"
+SHAFT = PROBLEMS / "shaft-into-bore.toml"
+G_N = 2.0 * 9.81  # the housing's weight
+
+
+def _load(path=LOAD):
+    return fixplan.load(path)
+
+
+def test_engagement_depth_and_offset_in_closed_form() -> None:
+    """Lifted by h along the pins' axis, a tip is L − h past its mouth; P1's tip stands 0.1 mm off H1's axis."""
+    fx = _load()
+    G = fx.goal
+    u = np.array([0.0, 0.0, 1.0])
+    p1, p2 = inserts(fx)
+    assert (p1.name, p2.name) == ("P1", "P2")  # the round pin first
+    assert p1.play_m == pytest.approx(1e-4, abs=1e-15)  # (D − d)/2 = (10 − 9.8)/2 mm
+    assert p1.capture_m == pytest.approx(1e-4 + 5e-4 + 1e-3, abs=1e-15)  # play + both chamfers
+    for h in (0.0, 0.004, 0.0115, 0.013):
+        e1, e2 = engagement(fx, lifted(G, u, h), p1), engagement(fx, lifted(G, u, h), p2)
+        assert e1.depth_m == pytest.approx(0.012 - h, abs=1e-12)
+        assert e2.depth_m == pytest.approx(0.010 - h, abs=1e-12)
+        assert e1.offset_m == pytest.approx(1e-4, abs=1e-12) and e2.offset_m == pytest.approx(0.0, abs=1e-12)
+        assert e1.engaged is (h < 0.012) and e2.engaged is (h < 0.010)
+    # off by more than the capture: not engaged whatever the depth
+    far = dataclasses.replace(G, p_world=G.p_world + np.array([0.002, 0.0, 0.0]))
+    assert not engagement(fx, far, p1).engaged
+
+
+def test_the_plan_engages_the_round_pin_then_the_diamond_then_seats() -> None:
+    """Heights 12 mm (P1) and 10 mm (P2): P1 first; each insertion ends past both chamfers; the rests close together."""
+    plan = plan_insertion(_load())
+    assert plan.ok, plan.reason
+    assert plan.order == [("P1",), ("P2",)]
+    assert plan.heights_m == pytest.approx({"P1": 0.012, "P2": 0.010}, abs=1e-12)
+    assert [s.kind for s in plan.stages] == ["free", "insert", "insert", "seat"]
+    assert [tuple(sorted(s)) for s in plan.states] == [
+        (), (), ("P1",), ("P1", "P2"), ("B1", "B2", "B3", "P1", "P2")
+    ]  # fmt: skip
+    z = [float(s.poses[-1].p_world[2]) - 0.015 for s in plan.stages]
+    # staging 2 mm above P1's tip (12 mm); P1 in by c_h + c_p + 0.5 mm = 2 mm, but only halfway down to P2's
+    # height (10 mm) so that P2 is not in yet: 11 mm; P2 in by its 2 mm: 8 mm; seated: 0
+    assert z == pytest.approx([0.014, 0.011, 0.008, 0.0], abs=1e-12)
+    staging = plan.stages[0].poses[-1]
+    np.testing.assert_allclose(staging.R_world_body, np.eye(3), atol=1e-12)  # the start's roll taken out
+    # while P2 enters, P1 slides on H1's -x wall (rim and mouth edge): a push without jamming, no wedging
+    p2 = plan.stages[2]
+    assert set(p2.contacts) == {"P1", "P1#2"} and p2.wedge_force is not None and p2.wedge_force < 1e-9
+    assert p2.margin_N == pytest.approx(0.3 * G_N, rel=1e-6)  # pressed toward the seated side by 0.3 m g
+
+
+def test_the_seating_push_is_hand_derived_and_held() -> None:
+    """m g down through the centre, 0.3 m g toward P1's contact (+x: its normals are −x) through that contact.
+
+    P1's rim (−0.045, 0, 0.011) and mouth edge (−0.045, 0, 0.0005) touch: the side push acts at their
+    mean (−0.045, 0, 0.00575), lever (−0.045, 0, −0.00925) from the centre (0, 0, 0.015): moment
+    (0, −0.00925 · 0.3 m g, 0). Held (as expected.toml's +x case).
+    """
+    plan = plan_insertion(_load())
+    assert plan.ok, plan.reason
+    np.testing.assert_allclose(plan.seat_wrench_com, [0.3 * G_N, 0.0, -G_N, 0.0, -0.00925 * 0.3 * G_N, 0.0], atol=1e-9)
+
+
+def test_equal_pins_engage_together_round_first() -> None:
+    """Pins of equal length meet their mouths at the same height: one transition, the round pin its target."""
+    text = LOAD.read_text().replace("length = 0.010", "length = 0.012")
+    plan = plan_insertion(fixplan.loads(text, source="equal.toml"))
+    assert plan.ok, plan.reason
+    assert plan.order == [("P1", "P2")]
+    assert plan.stages[1].target == "P1" and plan.stages[1].together == ("P2",)
+
+
+def test_a_pin_whose_hole_is_out_of_reach_is_named() -> None:
+    """P2 moved 3 mm off H2 (beyond its 1.6 mm capture): infeasible, saying which pin and by how much."""
+    fx = _load()
+    p2 = fx.pins[1]
+    moved = dataclasses.replace(p2, p_world=p2.p_world + np.array([0.003, 0.0, 0.0]))
+    fx = dataclasses.replace(fx, pins=(fx.pins[0], moved))
+    r = solve(fx)
+    assert r.status == "infeasible" and r.verification is None
+    assert (
+        r.reason == "P2 cannot enter H2 at the located pose: its hole H2's axis is 3 mm from its tip (capture 1.6 mm)"
+    )
+
+
+def test_pins_that_are_not_parallel_are_refused_in_one_line() -> None:
+    fx = _load()
+    p2 = fx.pins[1]
+    a = np.array([np.sin(0.05), 0.0, np.cos(0.05)])
+    fx = dataclasses.replace(fx, pins=(fx.pins[0], dataclasses.replace(p2, axis_world=a)))
+    with pytest.raises(InputError) as exc:
+        plan_insertion(fx)
+    assert "pin.P2.axis: the pins' axes differ" in str(exc.value) and "\n" not in str(exc.value)
+
+
+@pytest.mark.slow
+def test_solve_verifies_the_housing_and_the_holes_end_within_the_play() -> None:
+    """Verified in the haptic loop: P1, then P2, then the rests; H1's axis (D − d)/2 = 0.1 mm from P1's, H2 on P2's lands."""
+    fx = _load()
+    r = solve(fx)
+    assert r.status == "planned", r.reason
+    v = r.verification
+    assert v is not None and v.passed
+    assert v.observed_sequence == [("P1",), ("P1", "P2"), ("B1", "B2", "B3", "P1", "P2")]
+    assert max(abs(v.final_gaps_m[n]) for n in ("B1", "B2", "B3")) <= 1e-4
+    assert v.max_penetration_m <= 1e-5
+    pose = v.final_pose
+    p1, p2 = inserts(fx)
+    # seated toward +x: H1's axis lies the play from P1's (its wall touches), within the slack
+    assert max(axis_offsets_m(fx, pose, p1)) == pytest.approx(1e-4, abs=2e-6)
+    assert max(axis_offsets_m(fx, pose, p2)) <= 1e-4
+    assert r.plan.to_json()["status"] == "planned"
+
+
+@pytest.mark.slow
+def test_a_pose_error_beyond_the_play_is_captured_by_the_chamfers() -> None:
+    """The pins and rests 0.6 mm off the plan's (six times the play, within the 1.6 mm capture): verified."""
+    fx = _load()
+    world = shifted_world(fx, np.array([-0.0004, 0.00045, 0.0]), 0.0)
+    v = verify_insertion(world, plan_insertion(fx))
+    assert v.passed, v.reason
+    assert max(axis_offsets_m(world, v.final_pose, inserts(world)[0])) == pytest.approx(1e-4, abs=2e-6)
+
+
+@pytest.mark.slow
+def test_a_pose_error_beyond_the_capture_fails_naming_the_pin() -> None:
+    """The fixture 2.5 mm off (beyond play + chamfers): P1 lands on the part's face; the run says so in one line."""
+    fx = _load()
+    world = shifted_world(fx, np.array([0.0025, 0.0, 0.0]), 0.0)
+    v = verify_insertion(world, plan_insertion(fx))
+    assert not v.passed
+    ex = v.execution
+    assert ex is not None and ex.failure_kind in ("stall", "timeout")
+    assert "P1 did not enter H1" in ex.reason and "beyond the capture 1.6 mm" in ex.reason
+    assert "\n" not in ex.reason
+
+
+def test_the_shaft_s_located_pose_in_closed_form() -> None:
+    """Coaxial with the bore, its end 40 mm down on the bottom: centre (0, 0, −0.04 + 0.05), upright."""
+    fx = fixplan.load(SHAFT)
+    G = located_pose(fx)
+    np.testing.assert_allclose(G.p_world, [0.0, 0.0, 0.01], atol=1e-12)
+    np.testing.assert_allclose(G.R_world_body[:, 2], [0.0, 0.0, 1.0], atol=1e-12)
+    (b,) = inserts(fx)
+    assert b.play_m == pytest.approx(2e-5, abs=1e-15)
+    assert engagement(fx, G, b).depth_m == pytest.approx(0.04, abs=1e-12)
+
+
+@pytest.mark.slow
+def test_the_shaft_enters_its_bore_from_a_tilted_start() -> None:
+    """Straightened over the bore, inserted, seated on the bottom: coaxial within the 20 µm play."""
+    fx = fixplan.load(SHAFT)
+    r = solve(fx)
+    assert r.status == "planned", r.reason
+    v = r.verification
+    assert v is not None
+    assert v.observed_sequence == [("B1",), ("B1", "B1.bottom")]
+    assert abs(v.final_gaps_m["B1.bottom"]) <= 1e-4
+    assert v.final_gaps_m["B1.axis_offset"] <= 2e-5 * 1.05
+
+
+def test_a_located_start_is_held() -> None:
+    """housing-2-pins starts at its located pose: nothing to insert; the seating push holds it (verified)."""
+    r = solve(fixplan.load(HOUSING))
+    assert r.status == "planned", r.reason
+    assert r.reason.startswith("already located") and r.transitions == []
+
+
+def test_cli_solve_takes_pins_and_map_still_refuses(tmp_path) -> None:
+    proc = run_cli("solve", LOAD, "--json", "--no-verify", check_rc=1)  # unverified: exit 1
+    doc = json.loads(proc.stdout)
+    assert doc["status"] == "unverified"
+    assert [t["added"] for t in doc["transitions"]][1:] == ["P1", "P2", ["B1", "B2", "B3"]]
+    proc = run_cli("solve", LOAD, "--order", "P1,P2")
+    assert proc.returncode == 2 and "--order is not supported with pins" in proc.stderr
+    assert "Traceback" not in proc.stderr
