@@ -172,7 +172,15 @@ def analyse_clamping(
     if not verify:
         return replace(base, holds=True, order=found, reason=_held(found, total, preload, len(held) - 1, None))
     points = {c.name: c.point_world for c in scene.clamps}
-    verification = verify_clamping(fixture, found, forces, points, settings)
+    verification = verify_clamping(
+        fixture,
+        found,
+        forces,
+        points,
+        settings,
+        watched=scene.owners,
+        program_forces_N=answer.locator_forces_N.get("clamped"),
+    )
     if not verification.passed:
         return replace(
             base, order=found, verification=verification, reason=f"the engine refutes it: {verification.reason}"
