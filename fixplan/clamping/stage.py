@@ -59,16 +59,16 @@ class ClampStage:
         points_world: dict[str, FloatArray],
         dt_s: float,
         settings: Settings = DEFAULT,
-        located: Pose | None = None,
     ):
         st = settings.clamp
         self.fixture = fixture
         self.order = tuple(order)
         self.forces_N = {k: float(forces_N[k]) for k in self.order}
-        self.located = fixture.goal if located is None else located
+        self.located = fixture.goal
         clamps = {k.name: k for k in fixture.clamps}
         self._direction = {k: clamps[k].direction_world for k in self.order}
-        self._p_body = {k: self.located.point_body_from_world(points_world[k]) for k in self.order}
+        # the clamps' points are the part's, given at the goal (where the tips touch it)
+        self._p_body = {k: fixture.goal.point_body_from_world(points_world[k]) for k in self.order}
         self.dimension = fixture.dimension
         self.n_ramp = max(1, math.ceil(st.ramp_s / dt_s))
         self.n_settle = max(1, math.ceil(st.settle_s / dt_s))
@@ -139,9 +139,24 @@ class StageRecord:
     final_forces_N: dict[str, float] = field(default_factory=dict)  # each watched contact's, at the last step
 
     @classmethod
-    def for_stage(cls, stage: ClampStage, watched: tuple[str, ...], settings: Settings = DEFAULT) -> StageRecord:
+    def for_stage(
+        cls, stage: ClampStage, watched: tuple[str, ...], settings: Settings = DEFAULT, reference: Pose | None = None
+    ) -> StageRecord:
+        """A record of ``stage`` watching ``watched``; displacements from ``reference`` (default: the located pose)."""
         corners, _ = collision_points(stage.fixture.workpiece.shape, settings.engine.rim_points)
-        return cls(tuple(watched), stage.located, np.asarray(corners, dtype=float))
+        return cls(tuple(watched), stage.located if reference is None else reference, np.asarray(corners, dtype=float))
+
+    def verdict(self, settings: Settings = DEFAULT) -> tuple[bool, str]:
+        """Whether the part stayed put with every watched contact kept, and why not (one line)."""
+        limit = settings.clamp.displacement_m
+        reasons = []
+        if self.max_displacement_m > limit:
+            reasons.append(f"the part moved {self.max_displacement_m:.3g} m (expected ≤ {limit:g} m)")
+        if self.max_gap_m > limit:
+            reasons.append(
+                f"locator {self.widest} lost contact (its gap opened to {self.max_gap_m:.3g} m, expected ≤ {limit:g} m)"
+            )
+        return not reasons, "; ".join(reasons)
 
     def displacement_m(self, pose: Pose) -> float:
         """The largest distance of a point of the part at ``pose`` from where it is at the located pose."""
