@@ -103,18 +103,15 @@ class ClampStage:
 
     def clamp_wrench(self, scales: dict[str, float], pose: Pose) -> FloatArray:
         """The clamps at ``scales[name] × force`` as one wrench about the body origin, world axes, at ``pose``."""
-        R = pose.R_world_body
-        w = np.zeros(self.fixture.ndof)
-        for name, s in scales.items():
-            f = s * self.forces_N[name] * self._direction[name]
-            lever = R @ self._p_body[name]
-            if self.dimension == 3:
-                w[:3] += f
-                w[3:] += np.cross(lever, f)
-            else:
-                w[:2] += f
-                w[2] += lever[0] * f[1] - lever[1] * f[0]
-        return w
+        names = [k for k in self.order if k in scales]
+        if not names:
+            return np.zeros(self.fixture.ndof)
+        f = np.array([scales[k] * self.forces_N[k] * self._direction[k] for k in names])  # (k, d)
+        lever = np.array([self._p_body[k] for k in names]) @ pose.R_world_body.T
+        if self.dimension == 3:
+            m = lever[:, [1, 2, 0]] * f[:, [2, 0, 1]] - lever[:, [2, 0, 1]] * f[:, [1, 2, 0]]  # lever × f, row-wise
+            return np.concatenate([f.sum(axis=0), m.sum(axis=0)])
+        return np.array([*f.sum(axis=0), float(np.sum(lever[:, 0] * f[:, 1] - lever[:, 1] * f[:, 0]))])
 
     def wrench(self, tick: StageTick, pose: Pose) -> FloatArray:
         """Everything the stage applies at ``tick`` (clamps and load) about the body origin, world axes."""
@@ -164,25 +161,33 @@ class StageRecord:
         b = self.corners_body @ self.located.R_world_body.T + self.located.p_world
         return float(np.max(np.linalg.norm(a - b, axis=1)))
 
-    def observe(self, sim: Simulator, tick: StageTick, error: float = 0.0) -> None:
-        """Record the step just taken (only once the hand has let go)."""
+    def observe(self, sim: Simulator, tick: StageTick, error: float = 0.0, contacts: bool = True) -> None:
+        """Record the step just taken (only once the hand has let go).
+
+        ``contacts`` False records the displacement only: the contact reports cost a real-time
+        tick a tenth of a millisecond, so the haptic loop samples them (its ``trace_every``).
+        """
         if tick.hand:
             return
         moved = self.displacement_m(sim.pose)
+        self.steps += 1
+        self.max_displacement_m = max(self.max_displacement_m, moved)
+        self.max_error = max(self.max_error, float(error))
+        if tick.case is not None:
+            rec = self.per_case.setdefault(tick.case, {})
+            rec["max_displacement_m"] = max(rec.get("max_displacement_m", 0.0), moved)
+        if not contacts:
+            return
         watched = set(self.watched)
         reports = [r for r in sim.contacts() if r.name in watched]
         least, who = min((r.normal_force_N, r.name) for r in reports)
         gap, opened = max((r.gap_m, r.name) for r in reports)
-        self.steps += 1
-        self.max_displacement_m = max(self.max_displacement_m, moved)
-        self.max_error = max(self.max_error, float(error))
         if least < self.min_force_N:
             self.min_force_N, self.weakest = least, who
         if gap > self.max_gap_m:
             self.max_gap_m, self.widest = gap, opened
         if tick.case is not None:
-            rec = self.per_case.setdefault(tick.case, {})
-            rec["max_displacement_m"] = max(rec.get("max_displacement_m", 0.0), moved)
+            rec = self.per_case[tick.case]
             rec["min_locator_force_N"] = min(rec.get("min_locator_force_N", math.inf), least)
         self.final_forces_N = {r.name: float(r.normal_force_N) for r in reports}
 

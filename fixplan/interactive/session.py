@@ -812,7 +812,8 @@ class HapticSession:
         self.clamp_phase = tick.phase
         if k < stage.n_ticks:
             last = self.sim.last
-            record.observe(self.sim, tick, 0.0 if last is None else last.error)
+            sample = k % self.trace_every == 0 or k == stage.n_ticks - 1  # the contact reports: sampled
+            record.observe(self.sim, tick, 0.0 if last is None else last.error, contacts=sample)
             self._stage_k = k + 1
 
     def clamping_result(self) -> dict[str, Any] | None:
