@@ -73,3 +73,30 @@ def test_frictionless_the_engine_forces_equal_the_force_programs() -> None:
 def test_clamp_without_clamps_is_bad_input() -> None:
     with pytest.raises(InputError, match=r"--clamp: .* has no \[\[clamp\]\] entries"):
         HapticSession(load(PROBLEMS / "box-3-2-1.toml"), None, realtime=False, guidance=False, clamp=True)
+
+
+@pytest.mark.parametrize("path", [BOX_CLAMPED, HOUSING_CLAMPED, PROBLEMS / "clamp-tall-2d.toml"], ids=lambda p: p.stem)
+def test_the_simulated_haptic_loop_plays_the_stage_and_the_part_stays_put(path) -> None:
+    """:class:`~fixplan.haptics.loop.HapticLoop` (the planner's verification rig) with the stage's clamps."""
+    from fixplan.clamping import analyse_clamping
+    from fixplan.clamping.forces import clamp_scene
+    from fixplan.clamping.stage import ClampStage
+    from fixplan.engine.simulator import Simulator
+    from fixplan.haptics.clamping import play_clamping
+    from fixplan.planner.verify import haptic_rig, pose_coordinates
+    from fixplan.settings import HAPTIC
+
+    fixture = load(path)
+    plan = analyse_clamping(fixture, verify=False)
+    scene = clamp_scene(fixture)
+    sim = Simulator(fixture, settings=HAPTIC.engine, tolerance=fixture.simulation.tolerance)
+    sim.set_state(fixture.goal)
+    x0 = pose_coordinates(fixture.goal, fixture.start.R_world_body)
+    rig = haptic_rig(fixture, sim, x0, 40.0, 2.0)
+    points = {c.name: c.point_world for c in scene.clamps}
+    stage = ClampStage(fixture, plan.order, plan.forces_N, points, sim.dt)
+    record, felt = play_clamping(rig.loop, stage, scene.owners)
+    assert record.verdict()[0], record.verdict()[1]
+    assert record.max_displacement_m <= 1e-9 and record.max_gap_m <= 1e-9
+    assert felt == 0.0  # let go: the device shows nothing
+    assert record.steps == stage.n_ticks - stage.n_hand
