@@ -444,3 +444,24 @@ def test_solve_clamp_continues_the_loading_plan_with_the_clamping_stage(tmp_path
     run_cli("verify", plan, check_rc=0)  # and verify replays the loading as before
     proc = run_cli("solve", PROBLEMS / "box-3-2-1.toml", "--clamp", check_rc=2)
     assert "--clamp: no [[clamp]] entries" in proc.stderr
+
+
+def test_engine_forces_beside_the_programs_and_a_preload_check_would_refuse_a_clamping_that_holds() -> None:
+    """The measurement behind not checking the preload in the engine (docs/fixture-format.md).
+
+    The program's ``clamped`` case is seated by normal forces alone, so its forces are the closed
+    form: K1 above c, K2 and K3 through c's height and x: the base carries m g + K1 at 1/4, 1/4,
+    1/2; S1 = S2 = K2/2; E1 = K3. The engine keeps the part within 1e-9 m while a locator the
+    program gave ≥ 1 N ends below half of it (friction elsewhere carries its share).
+    """
+    result = analyse_clamping(load(BOX_CLAMPED))
+    v = result.verification
+    assert v is not None and v.passed
+    f = result.forces_N
+    program = {name: x["program_N"] for name, x in v.locator_forces_N.items()}
+    t = 2.0 * G + f["K1"]
+    expected = {"B1": t / 4, "B2": t / 4, "B3": t / 2, "S1": f["K2"] / 2, "S2": f["K2"] / 2, "E1": f["K3"]}
+    assert program == pytest.approx(expected, abs=1e-6)
+    engine = {name: x["engine_N"] for name, x in v.locator_forces_N.items()}
+    assert min(engine.values()) < 0.5 * result.preload_N <= min(program.values()) + 1e-6
+    assert v.max_displacement_m <= 1e-9 and v.max_gap_m <= 1e-9
