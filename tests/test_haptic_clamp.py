@@ -100,3 +100,33 @@ def test_the_simulated_haptic_loop_plays_the_stage_and_the_part_stays_put(path) 
     assert record.max_displacement_m <= 1e-9 and record.max_gap_m <= 1e-9
     assert felt == 0.0  # let go: the device shows nothing
     assert record.steps == stage.n_ticks - stage.n_hand
+
+
+def test_cli_haptic_clamp_over_the_udp_bridge() -> None:
+    """``fixplan haptic --clamp --clock device`` driven by ``device-sim --lockstep``: exit 0, strict JSON."""
+    import subprocess
+
+    from conftest import CLI
+    from test_interactive_cli import fixplan_cli, free_udp_port, strict_json
+
+    port = free_udp_port()
+    haptic = subprocess.Popen(
+        [*CLI, "haptic", str(BOX_CLAMPED), "--device", f"udp:{port}", "--port", "0", "--no-browser",
+         "--until", "goal", "--clock", "device", "--clamp", "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        fixplan_cli("device-sim", "--port", str(port), "--lockstep", "--seed", "3", "--json", timeout=180)
+        stdout, stderr = haptic.communicate(timeout=60)
+    finally:
+        if haptic.poll() is None:
+            haptic.kill()
+            haptic.communicate()
+    assert haptic.returncode == 0, stderr
+    out = strict_json(stdout)
+    c = out["clamping"]
+    assert out["status"] == "reached" and c["played"] and c["passed"], c
+    assert c["order"] == ["K1", "K2", "K3"] and c["max_displacement_m"] <= 1e-9
+    r = fixplan_cli("haptic", str(PROBLEMS / "box-3-2-1.toml"), "--no-browser", "--clamp", "--until", "1")
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "--clamp: " in r.stderr and "no [[clamp]] entries" in r.stderr
