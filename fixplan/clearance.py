@@ -1,7 +1,7 @@
 """The locating error from clearance: the range of located poses the pins' clearances allow.
 
 A part on rests and pins is located up to the play of its holes on the pins. With pins,
-"located" means the rest locators touch and every pin is in its hole (issue 24 §2): the set of
+"located" means the rest locators touch and every pin is in its hole: the set of
 poses that satisfy both is small, and this module measures it about the located pose ``X``
 (``fixture.goal``, the part pushed to one side of the clearance).
 

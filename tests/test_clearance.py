@@ -1,4 +1,4 @@
-"""The range of located poses the pins' clearances allow (issue 24 §2), against closed forms.
+"""The range of located poses the pins' clearances allow, against closed forms.
 
 A housing on three rests (they fix z and the tilt) with a round pin P1 in hole H1 (play
 ``c1 = (D1 − d1)/2``) at ``x1`` and a diamond pin P2 with lands along y in H2 (``c2``) at ``x2``,

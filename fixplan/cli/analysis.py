@@ -93,7 +93,7 @@ def validate(
 
 
 def _clearance_lines(fixture) -> list[str]:  # type: ignore[no-untyped-def]
-    """The range of located poses the pins' clearances allow (issue 24 §2), or why it is not there."""
+    """The range of located poses the pins' clearances allow, or why it is not there."""
     from fixplan.clearance import clearance_pose_range
     from fixplan.errors import FixplanError
 
