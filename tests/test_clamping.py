@@ -30,6 +30,7 @@ G = 9.81
 TALL_2D = PROBLEMS / "clamp-tall-2d.toml"
 TALL_3D = PROBLEMS / "clamp-tall-3d.toml"
 BOX_CLAMPED = PROBLEMS / "box-3-2-1-clamped.toml"
+HOUSING_CLAMPED = PROBLEMS / "housing-2-pins-clamped.toml"
 
 # a low, wide 2D part: 0.2 x 0.05 m, 1 kg, on B1, B2 (mu = 0.4) with E1 on its -x face; a toggle
 # clamp of F newtons on the top face above the centre of mass (0.1, 0.025)
@@ -285,7 +286,7 @@ def test_the_least_total_force_matches_a_sweep(path, first, second, fixed, grid)
 
 
 # -- the engine -----------------------------------------------------------------------------------
-@pytest.mark.parametrize("path", [TALL_2D, TALL_3D, BOX_CLAMPED], ids=lambda p: p.stem)
+@pytest.mark.parametrize("path", [TALL_2D, TALL_3D, BOX_CLAMPED, HOUSING_CLAMPED], ids=lambda p: p.stem)
 def test_the_engine_keeps_the_clamped_part_still(path) -> None:
     result = analyse_clamping(load(path))
     v = result.verification
@@ -303,6 +304,59 @@ def test_the_engine_slides_the_plate_above_mu_times_clamp_plus_weight_and_not_be
     v = verify_clamping(fx, ("K1",), {"K1": force}, {c.name: c.point_world for c in scene.clamps})
     assert (v.max_displacement_m > 1e-6) is moves, v
     assert v.passed is not moves
+
+
+# -- a part on pins -------------------------------------------------------------------------------
+def _frictionless_housing(loads_toml: str):
+    """problems/housing-2-pins-clamped.toml with every rest and pin frictionless and the given loads."""
+    import re
+
+    text = re.sub(r"friction = 0\.(25|2)\n", "friction = 0.0\n", HOUSING_CLAMPED.read_text())
+    return loads(text[: text.index("[[load]]")] + loads_toml, source="housing")
+
+
+def test_the_round_pin_touching_at_the_located_pose_is_a_contact_and_the_clear_diamond_pin_is_not() -> None:
+    scene = clamp_scene(load(HOUSING_CLAMPED))
+    assert scene.owners == ("B1", "B2", "B3", "P1")  # P2 is 0.1 mm clear on both lands
+    assert [c.name for c in scene.cs.contacts if c.owner == "P1"] == ["P1", "P1#2"]
+    for c in scene.cs.contacts[3:]:
+        assert np.allclose(c.normal_world, [-1.0, 0.0, 0.0], atol=1e-12)  # radial: the hole's -x wall on P1
+
+
+def test_pins_closed_form_least_forces_of_the_frictionless_housing() -> None:
+    """Frictionless rests and pins, preload 1 N, loads pull-x (12 N along -x) and lift (25 N up).
+
+    pull-x: only K2 (+x) and P1 (-x, ≥ 1 N) take x forces: K2 = 12 + 1 = 13 N.
+    lift: the rests carry T = F1 + m g - 25; K2 presses P1 with 13 N at best at its rim, 0.004 m below
+    c, a moment about y the rests take as N_B3 - (N_B1 + N_B2) = 0.004 x 13 / 0.05 = 1.04 N; with
+    N_B1 = N_B2 = 1 N: T = 4 + 1.04, F1 = 25 - 19.62 + 5.04 = 10.42 N.
+    """
+    fx = _frictionless_housing(
+        '[[load]]\nname = "pull-x"\nwrench = [-12.0, 0.0, 0.0, 0.0, 0.0, 0.0]\n\n'
+        '[[load]]\nname = "lift"\nwrench = [0.0, 0.0, 25.0, 0.0, 0.0, 0.0]\n'
+    )
+    result = analyse_clamping(fx)
+    assert result.holds, result.reason
+    assert result.forces_N["K2"] == pytest.approx(13.0, abs=1e-6)
+    assert result.forces_N["K1"] == pytest.approx(25.0 - 2.0 * G + 4.0 + 0.004 * 13.0 / 0.05, abs=1e-6)
+    v = result.verification
+    assert v is not None and v.passed and v.max_displacement_m <= 1e-9
+    assert v.locator_forces_N["P1"]["engine_N"] == pytest.approx(13.0, abs=1e-5)  # K2's push, no friction to share it
+
+
+def test_pins_a_load_only_the_clear_diamond_pin_could_take_is_not_held() -> None:
+    """Frictionless, a 2 N load along +y: no counted contact has a y normal (P2 is 0.1 mm away)."""
+    fx = _frictionless_housing('[[load]]\nname = "mill-y"\nwrench = [0.0, 2.0, 0.0, 0.0, 0.0, 0.0]\n')
+    result = analyse_clamping(fx, verify=False)
+    assert not result.holds
+    assert result.reason == "load mill-y is not balanced by the locators with any clamp forces up to max_force"
+
+
+def test_the_cli_clamps_a_part_on_pins() -> None:
+    proc = run_cli("clamp", HOUSING_CLAMPED, "--json", check_rc=0)
+    out = json.loads(proc.stdout)
+    assert out["holds"] is True and out["order"] == ["K1", "K2"]
+    assert set(out["verification"]["locator_forces_N"]) == {"B1", "B2", "B3", "P1"}
 
 
 # -- the command line -----------------------------------------------------------------------------
@@ -390,3 +444,24 @@ def test_solve_clamp_continues_the_loading_plan_with_the_clamping_stage(tmp_path
     run_cli("verify", plan, check_rc=0)  # and verify replays the loading as before
     proc = run_cli("solve", PROBLEMS / "box-3-2-1.toml", "--clamp", check_rc=2)
     assert "--clamp: no [[clamp]] entries" in proc.stderr
+
+
+def test_engine_forces_beside_the_programs_and_a_preload_check_would_refuse_a_clamping_that_holds() -> None:
+    """The measurement behind not checking the preload in the engine (docs/fixture-format.md).
+
+    The program's ``clamped`` case is seated by normal forces alone, so its forces are the closed
+    form: K1 above c, K2 and K3 through c's height and x: the base carries m g + K1 at 1/4, 1/4,
+    1/2; S1 = S2 = K2/2; E1 = K3. The engine keeps the part within 1e-9 m while a locator the
+    program gave ≥ 1 N ends below half of it (friction elsewhere carries its share).
+    """
+    result = analyse_clamping(load(BOX_CLAMPED))
+    v = result.verification
+    assert v is not None and v.passed
+    f = result.forces_N
+    program = {name: x["program_N"] for name, x in v.locator_forces_N.items()}
+    t = 2.0 * G + f["K1"]
+    expected = {"B1": t / 4, "B2": t / 4, "B3": t / 2, "S1": f["K2"] / 2, "S2": f["K2"] / 2, "E1": f["K3"]}
+    assert program == pytest.approx(expected, abs=1e-6)
+    engine = {name: x["engine_N"] for name, x in v.locator_forces_N.items()}
+    assert min(engine.values()) < 0.5 * result.preload_N <= min(program.values()) + 1e-6
+    assert v.max_displacement_m <= 1e-9 and v.max_gap_m <= 1e-9

@@ -52,7 +52,7 @@ _LAYER_LIST: list[tuple[str, list[str]]] = [
         ],
     ),
     # the contact dynamics engine and the jamming cone programs: physics, no planning
-    ("mechanics", ["engine", "simulator", "jamming", "robot"]),
+    ("mechanics", ["engine", "simulator", "jamming", "robot", "clearance"]),
     # the planner (coarse, fine, executor, verification) and the simulated haptic rig it runs in
     ("planning", ["haptics", "planner", "clamping"]),
     # what is built on plans: batches and Monte Carlo on Dask, generated fixtures, pictures, the app

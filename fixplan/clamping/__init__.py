@@ -69,6 +69,8 @@ class ClampResult:
     cone_violation_N: float | None = None
     order_programs: int = 0  # prefixes classified by the order search
     extras: dict[str, Any] = field(default_factory=dict)
+    # each counted contact's normal force in the program's answer for the ``clamped`` case [N]
+    clamped_forces_N: dict[str, float] | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -165,6 +167,7 @@ def analyse_clamping(
         balance_residual_N=answer.balance_residual,
         cone_violation_N=answer.cone_violation,
         order_programs=search.programs,
+        clamped_forces_N=answer.locator_forces_N.get("clamped"),
     )
     if found is None:
         return replace(base, reason=head + (failed.reason if failed is not None else "no clamp can come first"))
@@ -172,7 +175,15 @@ def analyse_clamping(
     if not verify:
         return replace(base, holds=True, order=found, reason=_held(found, total, preload, len(held) - 1, None))
     points = {c.name: c.point_world for c in scene.clamps}
-    verification = verify_clamping(fixture, found, forces, points, settings)
+    verification = verify_clamping(
+        fixture,
+        found,
+        forces,
+        points,
+        settings,
+        watched=scene.owners,
+        program_forces_N=base.clamped_forces_N,
+    )
     if not verification.passed:
         return replace(
             base, order=found, verification=verification, reason=f"the engine refutes it: {verification.reason}"

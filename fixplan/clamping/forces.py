@@ -69,7 +69,7 @@ class ClampScene:
     B: FloatArray  # (ndof × nf): the wrench about the centre of mass per reduced locator force
     clamps: tuple[ClampContact, ...]
     gravity_com: FloatArray
-    owners: tuple[str, ...]  # the locators, in fixture order
+    owners: tuple[str, ...]  # the locators in fixture order, then the pins and bores touching at the located pose
     owner_rows: tuple[NDArray[np.int64], ...]  # per locator: the indices in f of its normal forces
 
     @property
@@ -94,7 +94,12 @@ class ClampScene:
 def clamp_scene(fixture: Fixture) -> ClampScene:
     """The scene at the located pose (``fixture.goal``): every locator's contact and every clamp's."""
     pose = fixture.goal
-    cs = contact_set(fixture, pose, [loc.name for loc in fixture.locators])
+    cylinders = [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
+    cs = contact_set(fixture, pose, [loc.name for loc in fixture.locators] + cylinders)
+    if cylinders:  # a pin or bore takes part where it touches at the located pose (see the module docstring)
+        tol = fixture.tolerances.touch_m
+        kept = tuple(c for c in cs.contacts if c.kind not in ("pin", "bore") or c.gap_m <= tol)
+        cs = ContactSet(kept, cs.com_world, cs.mass_matrix, cs.body_origin_world)
     layout = force_layout(cs)
     B = cs.J.T @ layout.S
     clamps = []
@@ -104,7 +109,8 @@ def clamp_scene(fixture: Fixture) -> ClampScene:
         d = k.direction_world
         w = np.concatenate([d, np.cross(r, d)]) if fixture.dimension == 3 else np.array([d[0], d[1], cross2(r, d)])
         clamps.append(ClampContact(k, touch.point_world, touch.normal_world, w))
-    owners = tuple(loc.name for loc in fixture.locators)
+    # the locators, then the pins and bores touching at the located pose
+    owners = tuple(dict.fromkeys([*(loc.name for loc in fixture.locators), *(c.owner for c in cs.contacts)]))
     rows = tuple(
         np.array([layout.normal_index[i] for i, c in enumerate(cs.contacts) if c.owner == name], dtype=np.int64)
         for name in owners
@@ -261,6 +267,8 @@ class ForceAnswer:
     value: float
     status: str
     extras: dict[str, float] = field(default_factory=dict)
+    # per case: each locator's (and touching pin's) normal force in the answer [N], the scene's owners
+    locator_forces_N: dict[str, dict[str, float]] = field(default_factory=dict)
 
 
 def solve_force_program(scene: ClampScene, fp: ForceProgram, settings: Settings = DEFAULT) -> ForceAnswer:
@@ -272,6 +280,7 @@ def solve_force_program(scene: ClampScene, fp: ForceProgram, settings: Settings 
     worst_res, worst_cone = 0.0, 0.0
     least: dict[str, float] = {}
     weakest: dict[str, str] = {}
+    per_owner: dict[str, dict[str, float]] = {}
     for j, case in enumerate(fp.cases):
         f = fp.locator_forces(x, j)
         lam = scene.layout.S @ f
@@ -280,6 +289,7 @@ def solve_force_program(scene: ClampScene, fp: ForceProgram, settings: Settings 
         worst_cone = max(worst_cone, force_cone_violation(scene.cs, lam))
         per = [(float(f[idx].sum()), name) for idx, name in zip(scene.owner_rows, scene.owners, strict=True)]
         least[case.name], weakest[case.name] = min(per)
+        per_owner[case.name] = {name: force for force, name in per}
     scale = max(
         1.0,
         float(np.abs(scene.gravity_com).max()),
@@ -289,5 +299,14 @@ def solve_force_program(scene: ClampScene, fp: ForceProgram, settings: Settings 
     tol = settings.clamp.residual_N * scale
     found = sol.solved and worst_res <= tol and worst_cone <= tol
     return ForceAnswer(
-        found, forces, least, weakest, worst_res, worst_cone, sol.value, sol.status, {"solve_time_s": sol.solve_time_s}
+        found,
+        forces,
+        least,
+        weakest,
+        worst_res,
+        worst_cone,
+        sol.value,
+        sol.status,
+        {"solve_time_s": sol.solve_time_s},
+        per_owner,
     )

@@ -85,8 +85,22 @@ def validate(
         if verbose:
             for line in summary.details:
                 typer.echo(one_line(f"  {line}"))
+            if fixture.pins and fixture.is_full:
+                for line in _clearance_lines(fixture):
+                    typer.echo(one_line(f"  {line}"))
     if bad:
         raise typer.Exit(2)
+
+
+def _clearance_lines(fixture) -> list[str]:  # type: ignore[no-untyped-def]
+    """The range of located poses the pins' clearances allow, or why it is not there."""
+    from fixplan.clearance import clearance_pose_range
+    from fixplan.errors import FixplanError
+
+    try:
+        return clearance_pose_range(fixture).lines()
+    except FixplanError as exc:
+        return [f"clearance: not computed ({exc})"]
 
 
 CLASSIFY_TABLE_ROWS = 50  # above this many wrenches, classify prints counts per mode instead of every row

@@ -35,7 +35,7 @@ def clamp(
     from fixplan.clamping import analyse_clamping
     from fixplan.limits import FORCE_MAX_N
 
-    fixture = _load(file, "clamp")
+    fixture = _load(file, "clamp", pins=True)
     if preload is not None and not (math.isfinite(preload) and 0.0 <= preload <= FORCE_MAX_N):
         raise InputError(f"--preload is {quote_number(preload)} (expected a force [N] in [0, {FORCE_MAX_N:g}])")
     result = analyse_clamping(fixture, _names(order, "--order"), preload, verify=verify)
@@ -82,6 +82,15 @@ def _table(fixture, result) -> None:  # type: ignore[no-untyped-def]
             loads.add_row(c.name, "yes" if c.holds else "no", least, c.weakest_locator or "-")
         _console().print(loads)
     v = result.verification
+    if v is not None and v.locator_forces_N:
+        both = Table(title="locator forces at the end of the engine's run (clamps on, no load)")
+        both.add_column("locator")
+        both.add_column("engine [N]", justify="right")
+        both.add_column("program [N]", justify="right")
+        for name, f in v.locator_forces_N.items():
+            engine, program = f.get("engine_N"), f.get("program_N")
+            both.add_row(name, "-" if engine is None else f"{engine:.4g}", "-" if program is None else f"{program:.4g}")
+        _console().print(both)
     if v is not None:
         typer.echo(
             f"engine: {'passed' if v.passed else 'FAILED'}; largest displacement {v.max_displacement_m:.3g} m, "

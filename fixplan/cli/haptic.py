@@ -37,16 +37,25 @@ def haptic(
     clock: Annotated[
         str, typer.Option("--clock", help="wall: 1 kHz real time; device: one tick per UDP pose (reproducible).")
     ] = "wall",
+    clamp: Annotated[
+        bool,
+        typer.Option(
+            "--clamp",
+            help="Once the part is located, play the clamping stage: each clamp ramped in the order "
+            "'fixplan clamp' finds, the hand let go, each [[load]] applied (docs/haptic.md).",
+        ),
+    ] = False,
     json_out: JsonOpt = False,
 ) -> None:
     """Drive the part yourself: a live web app (viser) around the 1 kHz haptic loop, with the planner's guidance.
 
-    Exit 0 when the session reached the goal (every locator pressed, at rest), 1 otherwise, 2 on bad input.
+    Exit 0 when the session reached the goal (every locator pressed, at rest; with --clamp, and the
+    clamped part stayed put), 1 otherwise, 2 on bad input.
     """
     from fixplan.interactive.commands import run_haptic
 
     code = run_haptic(file, device=device, port=port, record=record, force=force, no_browser=no_browser,
-                      host=host, token=token, until=until, json_out=json_out, clock=clock)  # fmt: skip
+                      host=host, token=token, until=until, json_out=json_out, clock=clock, clamp=clamp)  # fmt: skip
     if code:
         raise typer.Exit(code)
 

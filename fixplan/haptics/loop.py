@@ -128,15 +128,22 @@ class HapticLoop:
             return np.concatenate([pose.p_world, log_so3(pose.R_world_body @ self._R0.T)]), nu_origin
         return np.array([pose.p_world[0], pose.p_world[1], pose.angle_rad]), nu_origin
 
-    def tick(self, operator_wrench: ArrayLike) -> tuple[FloatArray, FloatArray, float]:
+    def tick(
+        self, operator_wrench: ArrayLike, *, external: FloatArray | None = None, hand: bool = True
+    ) -> tuple[FloatArray, FloatArray, float]:
         """One sample period; returns (coupling wrench on the workpiece, felt wrench, compute time [s]).
 
         The compute time is steps 2–4's; :meth:`run` adds the time the operator's command took.
+        ``external``: a wrench about the body origin (world axes) the engine applies besides the
+        coupling's (the clamps of a clamping stage); ``hand`` False: the hand has let go of the
+        part, the coupling's wrench is 0 and so is what the device shows.
         """
         t0 = time.perf_counter()
         d = self.sim.dimension
         x_d, v_d = self.device.position(), self.device.velocity()
-        if d == 3:
+        if not hand:
+            w_c = np.zeros(6 if d == 3 else 3)
+        elif d == 3:
             R, p, v, w = self.sim.body_state
             w_c = _coupling3(R, p, self._com_b, v, w, self._R0, x_d, v_d, self._K, self._B)
         else:
@@ -144,7 +151,7 @@ class HapticLoop:
             w_c = self._K * (x_d - x_w) + self._B * (v_d - v_w)
         if self.push_limits is not None:
             w_c = self._saturate(w_c, *self.push_limits)
-        self.sim.step(w_c)
+        self.sim.step(w_c if external is None else w_c + external)
         felt = self.device.set_force_and_torque(-w_c)
         compute = time.perf_counter() - t0
         self.device.advance(self.coupling.period_s, operator_wrench)

@@ -419,7 +419,10 @@ class HapticApp:
         s = self.session
         d = s.dimension
         g = snap.guidance
-        if snap.at_goal:
+        if s.clamp_phase:  # --clamp: the stage after the goal
+            hand = "the hand holds the part" if s.clamp_phase.endswith("ramps") else "the hand has let go"
+            verdict = f"<span style='color:#1f77b4'>**CLAMPING**</span>: {s.clamp_phase} ({hand})"
+        elif snap.at_goal:
             verdict = "<span style='color:#2ca02c'>**GOAL**</span>: every locator pressed, at rest"
         elif snap.jammed:
             verdict = "<span style='color:#d62728'>**JAMMED**</span>: friction holds the part against this push — push another way"

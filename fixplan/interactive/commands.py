@@ -61,8 +61,9 @@ def run_haptic(
     until: str | None,
     json_out: bool,
     clock: str = "wall",
+    clamp: bool = False,
 ) -> int:
-    """Run a session; 0 when the goal was reached, 1 otherwise."""
+    """Run a session; 0 when the goal was reached (and with ``clamp`` the clamping stage held), 1 otherwise."""
     from fixplan.files import check_distinct, check_output
     from fixplan.fixture import default_fixture_path, load
     from fixplan.interactive.handles import GizmoHandle, Handle, SpaceMouseHandle, UdpHandle, parse_device
@@ -91,7 +92,7 @@ def run_haptic(
     else:
         handle = GizmoHandle(x0, period_s=fixture.simulation.timestep_s)
     try:
-        session = HapticSession(fixture, handle, until_goal=until_goal, duration_s=seconds, clock=clock)
+        session = HapticSession(fixture, handle, until_goal=until_goal, duration_s=seconds, clock=clock, clamp=clamp)
     except Exception:
         handle.close()
         raise
@@ -127,6 +128,8 @@ def run_haptic(
         "coupling_cap": {"force_N": session.F_max, "torque_Nm": session.T_max, "note": session.cap_note},
         "bridge": result.bridge,
     }
+    if result.clamping is not None:
+        payload["clamping"] = result.clamping
     if record is not None:
         from fixplan.files import write_text
         from fixplan.interactive.record import plan_json
@@ -149,9 +152,26 @@ def run_haptic(
                 else ""
             )
         )
+        if result.clamping is not None:
+            _echo(clamping_line(result.clamping))
         if record is not None:
             _echo(f"wrote {record}")
-    return 0 if result.reached else 1
+    held = result.clamping is None or bool(result.clamping.get("passed"))
+    return 0 if result.reached and held else 1
+
+
+def clamping_line(c: dict[str, Any]) -> str:
+    """The clamping stage of a session in one line."""
+    order = ", then ".join(f"{k} {c['forces_N'][k]:.3g} N" for k in c["order"])
+    if not c.get("played"):
+        return f"clamping: {order}: {c.get('reason', 'not played')}"
+    verdict = "held" if c["passed"] else f"FAILED ({c['reason']})"
+    least = c.get("min_locator_force_N")
+    return (
+        f"clamping: {order}, the hand let go, {len(c['loads']) - 1} load(s): {verdict}; the part moved at most "
+        f"{c['max_displacement_m']:.2g} m, the least locator force {least if least is None else f'{least:.3g}'} N "
+        f"({c['weakest_locator']})"
+    )
 
 
 def run_device_sim(

@@ -34,8 +34,9 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.clamping.stage import ClampStage, StageRecord, StageTick
 from fixplan.engine.simulator import Simulator
-from fixplan.errors import InputError, SolverError
+from fixplan.errors import InfeasibleError, InputError, SolverError, one_line
 from fixplan.haptics import SimulatedDevice
 from fixplan.haptics.coupling import check_passivity
 from fixplan.interactive import _kernels, protocol
@@ -149,6 +150,7 @@ class SessionResult:
     saturated_ticks: int
     felt_equals_coupling_max_N: float  # max |felt + coupling| over the ticks the device did not saturate
     rates: dict[str, float | None] = field(default_factory=dict)  # guidance and verdict updates per second
+    clamping: dict[str, Any] | None = None  # the clamping stage played after the goal (``--clamp``), None: not played
 
     @property
     def reached(self) -> bool:
@@ -443,6 +445,7 @@ class HapticSession:
         settle_s: float = 0.2,
         max_sweeps: int | None = None,
         profile: Settings = HAPTIC,
+        clamp: bool = False,
     ):
         from fixplan.locating import contact_set
         from fixplan.model import require_full
@@ -532,7 +535,30 @@ class HapticSession:
         self._coords: tuple[FloatArray, FloatArray] | None = None
         if isinstance(handle, UdpHandle) and not handle.config:
             handle.config = self.bridge_config()
+        self.profile = profile
+        self._loop_tolerance = self.sim.tolerance
+        self.clamp_stage: ClampStage | None = None
+        self.clamp_plan: Any = None
+        if clamp:
+            self._plan_clamping()
         self._init_state()
+
+    def _plan_clamping(self) -> None:
+        """The clamping stage to play once the part is located (``--clamp``): forces and order from the cone programs."""
+        from fixplan.clamping import analyse_clamping
+        from fixplan.clamping.forces import clamp_scene
+
+        fixture = self.fixture
+        if not fixture.clamps:
+            raise InputError(f"--clamp: {fixture.source} has no [[clamp]] entries (expected clamps to play)")
+        plan = analyse_clamping(fixture, verify=False, settings=self.profile)
+        if not plan.holds:
+            raise InfeasibleError(f"--clamp: {one_line(plan.reason)}")
+        scene = clamp_scene(fixture)
+        points = {c.name: c.point_world for c in scene.clamps}
+        self.clamp_plan = plan
+        self.clamp_watched = scene.owners
+        self.clamp_stage = ClampStage(fixture, plan.order, plan.forces_N, points, self.period_s, self.profile)
 
     # -- state ---------------------------------------------------------------------------------
     def _init_state(self) -> None:
@@ -547,6 +573,10 @@ class HapticSession:
         self.goal_reached_at: float | None = None
         self._jammed_since: float | None = None
         self.jammed_where: dict[str, Any] | None = None
+        self._stage_k: int | None = None  # the clamping stage's next step (None: not started)
+        self.stage_record: StageRecord | None = None
+        self.located_at: float | None = None  # when the clamping stage began (the part located)
+        self.clamp_phase = ""
         self._compute: list[float] = []
         self._compute_sum = 0.0
         self._compute_max = 0.0
@@ -627,6 +657,8 @@ class HapticSession:
         self._observed = self._candidate = None
         self._settled_since = self._jammed_since = None
         self.goal_reached_at = None
+        self._stage_k, self.stage_record, self.located_at, self.clamp_phase = None, None, None, ""
+        self.sim.tolerance = self._loop_tolerance
         if isinstance(self.guide, Guide):
             self.guide = Guide(self.guide_fixture, self.start_state, tick_s=self.guide.tick_s)
         elif isinstance(self.guide, RemoteGuide):
@@ -701,7 +733,16 @@ class HapticSession:
         w_c, saturated = self._saturate(K * (x_d - x_w) + self.B * (v_d - v_w), self.F_max, self.T_max)
         if saturated:
             self.saturated_ticks += 1
-        sim.step(w_c)
+        stage = self._stage_tick()
+        if stage is None:
+            sim.step(w_c)
+        else:  # the clamping stage: the clamps (and a load) on the part; the hand let go after the ramps
+            if not stage.hand:
+                w_c = np.zeros(self.ndof)
+                if self._stage_k == getattr(self.clamp_stage, "n_hand", -1) and self.stage_record is not None:
+                    self.stage_record.located = sim.pose  # the hand lets go: the part must stay where it is now
+            sim.step(w_c + self.clamp_stage.wrench(stage, sim.pose))  # type: ignore[union-attr]
+            self._stage_step(stage)
         felt, shown_saturated = self._saturate(-w_c, *self.device_limits)
         if not shown_saturated:
             self.felt_error_max = max(self.felt_error_max, float(np.max(np.abs(felt + w_c))))
@@ -725,12 +766,80 @@ class HapticSession:
                 self._run_guide(self.snapshot)
         if self.duration_s is not None and sim.time_s >= self.duration_s - DEFAULT.numerics.same_time_s:
             self._end(None)
-        elif self.until_goal and self.goal_reached_at is not None:
+        elif self.clamp_stage is not None and self._stage_k is None and self.goal_reached_at is not None:
+            self._start_stage()
+        elif self.until_goal and self._goal_done():
             self._end(None)
         if self.handle is not None:  # the answer carries the goal and end flags of this tick
             x_new, v_new = self._coords
             self.handle.display(felt, self._answer(felt, x_new, v_new))
         return True
+
+    # -- the clamping stage (``--clamp``) ---------------------------------------------------------
+    def _goal_done(self) -> bool:
+        """The goal is reached, and the clamping stage (when asked for) has been played."""
+        if self.clamp_stage is None:
+            return self.goal_reached_at is not None
+        return self._stage_k is not None and self._stage_k >= self.clamp_stage.n_ticks
+
+    def _start_stage(self) -> None:
+        """The part is located: the clamping stage starts at this pose (the hand still holds it)."""
+        stage = self.clamp_stage
+        if stage is None:
+            return
+        self._stage_k = 0
+        self.located_at = self.sim.time_s
+        # the stage runs the engine at the fixture's own NSGS tolerance (as `fixplan clamp` verifies it), not the
+        # loop's looser one: whether the part stays within 1e-9 m is then the contacts' answer, not the solver's
+        self._loop_tolerance = self.sim.tolerance
+        self.sim.tolerance = min(self.sim.tolerance, self.fixture.simulation.tolerance)
+        # displacements from where the hand lets go (reset then): the hand's coupling may ease the part meanwhile
+        self.stage_record = StageRecord.for_stage(stage, self.clamp_watched, self.profile, reference=self.sim.pose)
+
+    def _stage_tick(self) -> StageTick | None:
+        """What the clamping stage applies this tick: its schedule, then the clamps held on (None: no stage)."""
+        stage, k = self.clamp_stage, self._stage_k
+        if stage is None or k is None:
+            return None
+        if k < stage.n_ticks:
+            return stage.at(k)
+        return StageTick(False, dict.fromkeys(stage.order, 1.0), np.zeros(self.ndof), "clamped", None)
+
+    def _stage_step(self, tick: StageTick) -> None:
+        stage, record, k = self.clamp_stage, self.stage_record, self._stage_k
+        if stage is None or record is None or k is None:
+            return
+        self.clamp_phase = tick.phase
+        if k < stage.n_ticks:
+            last = self.sim.last
+            sample = k % self.trace_every == 0 or k == stage.n_ticks - 1  # the contact reports: sampled
+            record.observe(self.sim, tick, 0.0 if last is None else last.error, contacts=sample)
+            self._stage_k = k + 1
+
+    def clamping_result(self) -> dict[str, Any] | None:
+        """The clamping stage as played: the order and forces, and what the engine did (None: not asked for)."""
+        plan, record, stage = self.clamp_plan, self.stage_record, self.clamp_stage
+        if plan is None or stage is None:
+            return None
+        out: dict[str, Any] = {"order": list(plan.order), "forces_N": dict(plan.forces_N), "played": False}
+        if record is None or self._stage_k is None:
+            out["reason"] = "not played: the part was not located"
+            return out
+        played = self._stage_k >= stage.n_ticks
+        passed, why = record.verdict(self.profile)
+        program = plan.clamped_forces_N or {}
+        out |= {
+            "played": played,
+            "passed": played and passed,
+            "located_at_s": self.located_at,
+            **record.to_json(),
+            "locator_forces_N": {
+                name: {"engine_N": record.final_forces_N.get(name), "program_N": program.get(name)}
+                for name in self.clamp_watched
+            },
+            "reason": why if played else f"stopped during the stage ({self.clamp_phase})",
+        }
+        return out
 
     def coordinates(self) -> tuple[FloatArray, FloatArray]:
         """The part's device coordinates and rates (what ``HapticLoop.workpiece_coordinates`` gives, compiled)."""
@@ -950,6 +1059,9 @@ class HapticSession:
         t = self.sim.time_s
         if why is not None:
             self.status, self.reason = status, why
+        elif self.located_at is not None:  # located, then clamped (the stage may unload a locator: still located)
+            self.status = "reached"
+            self.reason = f"every locator pressed, at rest at t = {self.located_at:.3f} s; then the clamping stage"
         elif self.goal_reached_at is not None:
             self.status = "reached"
             self.reason = f"every locator pressed, at rest at t = {self.goal_reached_at:.3f} s"
@@ -1161,6 +1273,7 @@ class HapticSession:
             saturated_ticks=self.saturated_ticks,
             felt_equals_coupling_max_N=self.felt_error_max,
             rates=self.guidance_rates(),
+            clamping=self.clamping_result(),
         )
 
     def bridge_config(self) -> dict[str, Any]:
