@@ -362,7 +362,7 @@ def refuse_pins(fixture: Fixture, command: str) -> Fixture:
     """``fixture``, or :class:`~fixplan.errors.InputError` (one line, exit 2) when it has pins or bores.
 
     Pins, holes and bores are read, checked, classified, searched, simulated, drawn and planned
-    (``solve``, ``robust``); the other commands (``map``, ``verify``) do not model them yet and say so
+    (``solve``, ``robust``) and clamped (``clamp``); the other commands (``map``, ``verify``) do not model them yet and say so
     instead of ignoring them.
     """
     if not fixture.has_pins:
@@ -370,7 +370,7 @@ def refuse_pins(fixture: Fixture, command: str) -> Fixture:
     key = f"pin.{fixture.pins[0].name}" if fixture.pins else f"bore.{fixture.bores[0].name}"
     raise InputError(
         f"{fixture.source}: {key}: pins and bores are not supported by '{command}' yet "
-        "(expected a fixture of locators; 'validate', 'classify', 'search', 'simulate', 'view', 'haptic', 'solve' and 'robust' take pins)"
+        "(expected a fixture of locators; 'validate', 'classify', 'search', 'simulate', 'view', 'haptic', 'clamp', 'solve' and 'robust' take pins)"
     )
 
 

@@ -189,7 +189,7 @@ def test_cli_refuses_pins_outside_validate_classify_search(tmp_path: Path) -> No
             .splitlines()[-1]
             .endswith(
                 f"pin.P1: pins and bores are not supported by '{command}' yet (expected a fixture of locators; "
-                "'validate', 'classify', 'search', 'simulate', 'view', 'haptic', 'solve' and 'robust' take pins)"
+                "'validate', 'classify', 'search', 'simulate', 'view', 'haptic', 'clamp', 'solve' and 'robust' take pins)"
             )
         ), proc.stderr
 
