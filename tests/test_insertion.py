@@ -206,3 +206,28 @@ def test_cli_solve_takes_pins_and_map_still_refuses(tmp_path) -> None:
     proc = run_cli("solve", LOAD, "--order", "P1,P2")
     assert proc.returncode == 2 and "--order is not supported with pins" in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_cli_solve_reports_the_clearance_pose_range_and_clamps_on_pins() -> None:
+    """solve --clamp on the clamped housing: the clearance range and the clamping stage in one answer.
+
+    The round pin P1 (9.8 mm in a 10 mm hole: c1 = 0.1 mm of radial play) is seated on the hole's
+    -x wall, so the hole may move 2 c1 = 0.2 mm toward -x and no further; with the diamond P2's
+    c2 = 0.1 mm, linearised (clearance.py's closed forms), y moves ±0.1 mm and the part turns about z
+    by ±(c1 + c2)/L = ±0.2 mm / 80 mm = ±2.5 mrad. The rests hold z and the tilts.
+    """
+    proc = run_cli("solve", PROBLEMS / "housing-2-pins-clamped.toml", "--clamp", "--json")
+    doc = json.loads(proc.stdout)
+    assert doc["status"] == "planned"
+    rng = doc["clearance_pose_range"]
+    assert rng["pins"] == ["P1", "P2"]
+    assert rng["translation_m"]["x"] == pytest.approx([-2e-4, 0.0], abs=1e-9)
+    assert rng["translation_m"]["y"] == pytest.approx([-1e-4, 1e-4], abs=1e-9)
+    assert rng["rotation_rad"]["z"] == pytest.approx([-2.5e-3, 2.5e-3], abs=1e-9)
+    for axis in ("z",):
+        assert rng["translation_m"][axis] == pytest.approx([0.0, 0.0], abs=1e-12)
+    for axis in ("x", "y"):
+        assert rng["rotation_rad"][axis] == pytest.approx([0.0, 0.0], abs=1e-12)
+    clamping = doc["clamping"]
+    assert clamping["holds"] is True and clamping["order"] == ["K1", "K2"]
+    assert clamping["verification"]["passed"] is True

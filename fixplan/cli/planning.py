@@ -22,7 +22,7 @@ from fixplan.cli._app import (
     _writable,
     app,
 )
-from fixplan.errors import InputError, one_line
+from fixplan.errors import FixplanError, InputError, one_line
 from fixplan.files import check_distinct, write_text
 from fixplan.settings import DEFAULT
 
@@ -185,11 +185,10 @@ def solve(
         if no_verify:
             raise InputError("--perturb-seed verifies the plan on a perturbed world: it cannot go with --no-verify")
     fixture = _load(file, "solve", pins=True)
-    if fixture.has_pins and (order or clamp):
-        used = "--order" if order else "--clamp"
+    if fixture.has_pins and order:
         raise InputError(
-            f"{fixture.source}: {used} is not supported with pins or bores yet "
-            "(expected 'fixplan solve FILE' or 'fixplan robust FILE' for a part loaded onto pins)"
+            f"{fixture.source}: --order is not supported with pins or bores yet "
+            "(expected 'fixplan solve FILE': the insertion's order is the pins' engagement heights)"
         )
     if perturb_seed is not None:
         perturb = _robust_settings(
@@ -247,6 +246,8 @@ def solve(
 
         result, perturbation = verify_on_world(fixture, result, perturb_seed, perturb)
     plan = result.plan.with_extras(**stamp)
+    if fixture.pins:
+        plan = plan.with_extras(clearance_pose_range=_clearance_json(fixture))
     if perturbation is not None:
         plan = plan.with_extras(perturbation=perturbation)
     clamped = None
@@ -406,6 +407,16 @@ def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | No
         raise typer.Exit(1)
 
 
+def _clearance_json(fixture: Fixture) -> dict[str, Any]:
+    """``solve``'s ``clearance_pose_range``: the located poses the pins' clearances allow, or why not."""
+    from fixplan.clearance import clearance_pose_range
+
+    try:
+        return clearance_pose_range(fixture).to_json()
+    except FixplanError as exc:
+        return {"error": str(exc)}
+
+
 def _pose_sigma(given: str | None, fixture: Any) -> str:
     """``--pose-sigma`` as given, else the robot's repeatability with 1 degree, else 1 mm and 1 degree."""
     if given is not None:
@@ -521,7 +532,6 @@ def view(
     clamp_forces = None
     if fixture.clamps:  # the clamps at their least forces (fixplan clamp's program), drawn at the located pose
         from fixplan.clamping import analyse_clamping
-        from fixplan.errors import FixplanError
 
         try:
             clamp_forces = analyse_clamping(fixture, verify=False).forces_N or None
