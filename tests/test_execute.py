@@ -490,3 +490,19 @@ def test_a_transition_that_met_a_wrong_face_is_set_aside_before_the_replan():
     assert planner.set_aside[(frozenset({"B1", "B2"}), "S1")] == seen[0][2]
     plan = planner.plan_from(fx.start, frozenset({"B1", "B2"}))
     assert not plan.found and "S1 presses face '-y'" in plan.reason
+
+
+def test_a_set_aside_transition_is_not_taken_from_the_cache():
+    """The planner planned {B1, B2} + S1 before (cached), then the executor set it aside: a re-plan
+    from the same state and pose must not take it again. It did: the cached success was returned
+    before the set-aside was looked at, so a generated box re-planned from free space along the same
+    sequence, met the same wrong face and was lifted off six times until the time ran out."""
+    from fixplan.planner.solve import Planner
+
+    fx, _, _, _ = _rect_on_s1()
+    planner = Planner(fx)
+    first = planner.plan_from(fx.start, frozenset({"B1", "B2"}))
+    assert first.found and first.sequence[-1] == ("B1", "B2", "S1")
+    planner.avoid(frozenset({"B1", "B2"}), "S1", "S1 pressed the wrong face")
+    again = planner.plan_from(fx.start, frozenset({"B1", "B2"}))
+    assert not again.found and "S1 pressed the wrong face" in again.reason

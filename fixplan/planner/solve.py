@@ -293,12 +293,15 @@ class Planner:
 
         def evaluate(pose_: Pose, state_: frozenset[str], target: str) -> Transition:
             key = (tuple(sorted(state_)), target, _pose_key(pose_), self.full_ladder)
-            plain = cache.get((*key[:3], False))
-            if plain is not None and plain.success:
-                return plain  # the second pass keeps what the plain program found
+            # set aside first: a transition the executor saw fail must not come back from the cache
+            # (a re-plan from free space reached the same state at the same pose, took the cached
+            # transition, met the same wrong face and was lifted off again, six times in 17 s)
             why = self.set_aside.get((frozenset(state_), target))
             if why is not None:
                 return _set_aside(self.fixture, pose_, state_, target, why)
+            plain = cache.get((*key[:3], False))
+            if plain is not None and plain.success:
+                return plain  # the second pass keeps what the plain program found
             if key not in cache:
                 t = time.perf_counter()
                 found, tr = spare.take(("fine", key))
