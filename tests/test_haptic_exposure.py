@@ -116,3 +116,29 @@ def test_json_stays_one_document_when_viser_prints_and_no_inner_url_is_shown(ses
     ports = {int(p) for p in re.findall(r"(?:https?|wss?)://[^\s:/]+:(\d+)", stderr)}
     assert ports == {session["port"]}, stderr
     assert "viser.sock" not in stderr and "Websocket" not in stderr
+
+
+def test_ctrl_c_ends_a_session_started_with_sigint_ignored():
+    """A session started in the background of a script inherits SIGINT ignored (``cmd &`` in a
+    non-interactive shell); it promises "Ctrl-C ends the session", so it must still end on SIGINT
+    (with its one JSON document once the session runs). Before the fix it waited for ever (found when
+    this suite ran in the background)."""
+    proc = subprocess.Popen(
+        [*CLI, "haptic", "--host", "127.0.0.2", "--token", TOKEN, "--port", "0", "--device", "udp:0",
+         "--no-browser", "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),  # noqa: PLW1509 - the test's point
+    )  # fmt: skip
+    try:
+        while "Ctrl-C ends the session" not in (line := proc.stderr.readline()):
+            assert line, "haptic ended early"
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    # ended (not killed): in the session, with its JSON; or while it was still starting, 130 as any command
+    assert proc.returncode in (0, 1, 130)
+    if proc.returncode != 130:
+        assert json.loads(out)["status"] in ("short", "reached")

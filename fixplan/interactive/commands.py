@@ -99,6 +99,7 @@ def run_haptic(
     from fixplan.interactive.app import HapticApp
 
     app = HapticApp(session, host=host, port=port, token=token)
+    _ctrl_c_ends_the_session()
     try:
         url = app.start()
         where = f"udp:{handle.port}" if isinstance(handle, UdpHandle) else kind
@@ -264,3 +265,18 @@ def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
 def _us(value: float | None) -> str:
     """A tick time [µs] in words: ``n/a`` when unknown (no tick ran)."""
     return "n/a" if value is None else f"{value:.0f}"
+
+
+def _ctrl_c_ends_the_session() -> None:
+    """Make Ctrl-C (SIGINT) end the session, as the command promises, even where it was ignored.
+
+    A command started in the background of a non-interactive shell (``cmd &`` in a script, or under
+    a supervisor) inherits SIGINT ignored, and Python then installs no handler: the session said
+    "Ctrl-C ends the session" and then could not be ended by it (found when the test suite itself
+    ran in the background). The default handler raises KeyboardInterrupt in the main thread.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
