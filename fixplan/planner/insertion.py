@@ -792,7 +792,14 @@ def verify_insertion(
     from fixplan.engine.simulator import Simulator
     from fixplan.errors import SolverError
     from fixplan.jamming.search import hand_limits
-    from fixplan.planner.verify import haptic_rig, headroom, loop_measures, pose_coordinates
+    from fixplan.planner.verify import (
+        final_gap_check,
+        haptic_rig,
+        headroom,
+        loop_checks,
+        loop_measures,
+        pose_coordinates,
+    )
 
     vs = profile.verification
     s = profile.insertion
@@ -853,14 +860,7 @@ def verify_insertion(
     gaps = dict(zip(run.rests, map(float, locator_gaps(wp, pose, world.locators)), strict=True))
     for b in world.bores:
         gaps[f"{b.name}.bottom"] = bottom_gap_m(world, pose, b)
-    far = {n: g for n, g in gaps.items() if abs(g) > final_gap_m}
-    if far:
-        checks.append("final gap")
-        reasons.append(
-            "at the end "
-            + ", ".join(f"{n} is {g:.3g} m away" for n, g in far.items())
-            + f" (expected ≤ {final_gap_m:g} m)"
-        )
+    final_gap_check(gaps, final_gap_m, checks, reasons)
     for i in run.inserts:
         mouth, tip = axis_offsets_m(world, pose, i)
         gaps[f"{i.name}.axis_offset"] = max(mouth, tip)
@@ -870,32 +870,7 @@ def verify_insertion(
                 f"at the end {i.hole}'s axis is {max(mouth, tip) * 1e3:.3g} mm from {i.name}'s "
                 f"(expected ≤ the play {i.play_m * 1e3:.3g} mm)"
             )
-    pen = sim.max_penetration_m
-    if pen > max_penetration_m:
-        checks.append("penetration")
-        reasons.append(f"penetration reached {pen:.3g} m (expected ≤ {max_penetration_m:g} m)")
-    worst = rec.max_solver_error
-    if worst is not None and worst > vs.max_solver_error:
-        checks.append("solver")
-        reasons.append(
-            f"the contact solver did not converge in {rec.unconverged_steps} of {len(rec.compute_s)} steps "
-            f"(largest residual {worst:.2g}, expected ≤ {vs.max_solver_error:g})"
-        )
-    W = np.array(rec.coupling_wrench) if rec.coupling_wrench else np.zeros((1, 6))
-    win = max(int(round(vs.limit_window_s / sim.dt)), 1)
-    Wf = (
-        np.array([np.convolve(W[:, j], np.ones(win) / win, mode="valid") for j in range(6)]).T
-        if W.shape[0] >= win
-        else W
-    )
-    push_F = float(np.max(np.linalg.norm(Wf[:, :3], axis=1)))
-    push_T = float(np.max(np.linalg.norm(Wf[:, 3:], axis=1)))
-    if push_F > (1 + vs.limit_slack) * F_max or push_T > (1 + vs.limit_slack) * T_max:
-        checks.append("limits")
-        reasons.append(
-            f"the push on the part exceeded the manipulator's limits: ‖F‖ up to {push_F:.3g} N (max_force {F_max:.3g} N), "
-            f"‖T‖ up to {push_T:.3g} N·m (max_torque {T_max:.3g} N·m)"
-        )
+    push_F, push_T = loop_checks(rec, sim, max_penetration_m, vs, F_max, T_max, vs.limit_slack, checks, reasons)
     measures = loop_measures(rec, sim, trace_every)
     return Verification(
         passed=not reasons,

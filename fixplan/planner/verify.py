@@ -50,6 +50,7 @@ from numpy.typing import NDArray
 from fixplan.engine.simulator import Simulator
 from fixplan.errors import SolverError
 from fixplan.haptics import DeviceSpecs, HapticLoop, SimulatedDevice, VirtualCoupling
+from fixplan.haptics.loop import LoopRecord
 from fixplan.kinematics import mass_matrix
 from fixplan.model import Fixture
 from fixplan.planner.execute import (
@@ -65,7 +66,7 @@ from fixplan.planner.execute import (
 from fixplan.planner.fine import twist_from_pose
 from fixplan.planner.plan import Timeline, Verification
 from fixplan.planner.policy import Policy
-from fixplan.settings import DEFAULT, HAPTIC, HapticRigSettings, Settings
+from fixplan.settings import DEFAULT, HAPTIC, HapticRigSettings, Settings, VerificationSettings
 from fixplan.spatial import Pose, log_so3
 
 FloatArray = NDArray[np.float64]
@@ -101,6 +102,68 @@ class HapticRig:
             + self.kp * (x_w + w / self.K - device.position())
             + self.kd * (v_w - device.velocity())
         )
+
+
+def final_gap_check(gaps: dict[str, float], final_gap_m: float, checks: list[str], reasons: list[str]) -> None:
+    """The check "final gap": every named gap at the end within ``final_gap_m`` (appended when not)."""
+    far = {n: g for n, g in gaps.items() if abs(g) > final_gap_m}
+    if far:
+        checks.append("final gap")
+        reasons.append(
+            "at the end "
+            + ", ".join(f"{n} is {g:.3g} m away" for n, g in far.items())
+            + f" (expected ≤ {final_gap_m:g} m)"
+        )
+
+
+def loop_checks(
+    rec: LoopRecord,
+    sim: Simulator,
+    max_penetration_m: float,
+    vs: VerificationSettings,
+    F_max: float,
+    T_max: float,
+    limit_slack: float,
+    checks: list[str],
+    reasons: list[str],
+) -> tuple[float, float]:
+    """The loop's own checks, appended in this order: "penetration", "solver", "limits".
+
+    Returns the largest push force [N] and moment [N·m] on the part, averaged over
+    ``vs.limit_window_s`` (the limits check compares them with the manipulator's limits).
+    """
+    d = sim.dimension
+    ndof = 6 if d == 3 else 3
+    pen = sim.max_penetration_m
+    if pen > max_penetration_m:
+        checks.append("penetration")
+        reasons.append(f"penetration reached {pen:.3g} m (expected ≤ {max_penetration_m:g} m)")
+    # a load simulated with contact forces the solver did not find proves nothing: the steps that
+    # stopped at the sweep cap are allowed while their residual stays small
+    worst = rec.max_solver_error
+    if worst is not None and worst > vs.max_solver_error:
+        checks.append("solver")
+        reasons.append(
+            f"the contact solver did not converge in {rec.unconverged_steps} of {len(rec.compute_s)} steps "
+            f"(largest residual {worst:.2g}, expected ≤ {vs.max_solver_error:g})"
+        )
+    # the push on the part, averaged over 10 ms, against the manipulator's limits
+    W = np.array(rec.coupling_wrench) if rec.coupling_wrench else np.zeros((1, ndof))
+    win = max(int(round(vs.limit_window_s / sim.dt)), 1)
+    if W.shape[0] >= win:
+        kernel = np.ones(win) / win
+        Wf = np.array([np.convolve(W[:, j], kernel, mode="valid") for j in range(ndof)]).T
+    else:
+        Wf = W
+    push_F = float(np.max(np.linalg.norm(Wf[:, :d], axis=1)))
+    push_T = float(np.max(np.linalg.norm(Wf[:, d:], axis=1)))
+    if push_F > (1 + limit_slack) * F_max or push_T > (1 + limit_slack) * T_max:
+        checks.append("limits")
+        reasons.append(
+            f"the push on the part exceeded the manipulator's limits: ‖F‖ up to {push_F:.3g} N (max_force {F_max:.3g} N), "
+            f"‖T‖ up to {push_T:.3g} N·m (max_torque {T_max:.3g} N·m), averaged over {vs.limit_window_s * 1e3:g} ms"
+        )
+    return push_F, push_T
 
 
 def haptic_rig(
@@ -203,7 +266,6 @@ def verify(
     # worst residual reached is reported.
     sim = Simulator(fixture, max_iterations=max_sweeps, settings=profile.engine)
     R0 = fixture.start.R_world_body.copy()
-    ndof = 6 if fixture.dimension == 3 else 3
     x0 = pose_coordinates(fixture.start, R0)
     # every re-plan the executor runs from inside a tick is timed: its wall time is the loop's
     # (the tick that waits for it misses its deadline), and the verification reports the sum
@@ -281,48 +343,13 @@ def verify(
             "timeout",
         )
     gaps = {c.name: float(c.gap_m) for c in sim.contacts()}
-    pen = sim.max_penetration_m
     reasons = []
     checks = []
     if log.outcome != "reached":
         reasons.append(log.reason)
         checks.append("executor")
-    far = {n: g for n, g in gaps.items() if abs(g) > final_gap_m}
-    if far:
-        checks.append("final gap")
-        reasons.append(
-            "at the end "
-            + ", ".join(f"{n} is {g:.3g} m away" for n, g in far.items())
-            + f" (expected ≤ {final_gap_m:g} m)"
-        )
-    if pen > max_penetration_m:
-        checks.append("penetration")
-        reasons.append(f"penetration reached {pen:.3g} m (expected ≤ {max_penetration_m:g} m)")
-    # a load simulated with contact forces the solver did not find proves nothing: the steps that
-    # stopped at the sweep cap are allowed while their residual stays small
-    worst = rec.max_solver_error
-    if worst is not None and worst > vs.max_solver_error:
-        checks.append("solver")
-        reasons.append(
-            f"the contact solver did not converge in {rec.unconverged_steps} of {len(rec.compute_s)} steps "
-            f"(largest residual {worst:.2g}, expected ≤ {vs.max_solver_error:g})"
-        )
-    # the push on the part, averaged over 10 ms, against the manipulator's limits
-    W = np.array(rec.coupling_wrench) if rec.coupling_wrench else np.zeros((1, ndof))
-    win = max(int(round(vs.limit_window_s / sim.dt)), 1)
-    if W.shape[0] >= win:
-        kernel = np.ones(win) / win
-        Wf = np.array([np.convolve(W[:, j], kernel, mode="valid") for j in range(ndof)]).T
-    else:
-        Wf = W
-    push_F = float(np.max(np.linalg.norm(Wf[:, :d], axis=1)))
-    push_T = float(np.max(np.linalg.norm(Wf[:, d:], axis=1)))
-    if push_F > (1 + limit_slack) * F_max or push_T > (1 + limit_slack) * T_max:
-        checks.append("limits")
-        reasons.append(
-            f"the push on the part exceeded the manipulator's limits: ‖F‖ up to {push_F:.3g} N (max_force {F_max:.3g} N), "
-            f"‖T‖ up to {push_T:.3g} N·m (max_torque {T_max:.3g} N·m), averaged over {vs.limit_window_s * 1e3:g} ms"
-        )
+    final_gap_check(gaps, final_gap_m, checks, reasons)
+    push_F, push_T = loop_checks(rec, sim, max_penetration_m, vs, F_max, T_max, limit_slack, checks, reasons)
     extras: dict[str, Any] = {}
     if fixture.robot is not None:
         links = link_clearance(fixture, rec.trace, profile.robot.clearance_every_s)
