@@ -826,8 +826,8 @@ def _solve_path(
     y_guess = xi_guess / scale[:, None]
     y0 = np.zeros(nv) if first is None else np.asarray(first, dtype=float) / scale
 
-    # SX symbols and one nlpsol, not Opti: Opti builds MX graphs that IPOPT then evaluates through
-    # the MX virtual machine; the same program in SX builds and evaluates 2-3x faster
+    # SX symbols for the rows and the objective (Opti's MX graph of scalar rows built and evaluated
+    # 2-3x slower); IPOPT is handed the program of _PathDerivatives: one knot's derivatives, mapped
     Y = ca.SX.sym("Y", nv, K)
     c0 = start.point_world_from_body(com_b)
     R0 = start.R_world_body
@@ -875,7 +875,14 @@ def _solve_path(
     knot_rows = ca.Function(
         "knot_rows", [y_sym], [gap_of(q_sym(n), n) for n in gap_names] + bounds_sym + floors_sym
     )  # fmt: skip
-    per_knot: list[Any] = [None] + [knot_rows.call([Y[:, k - 1]]) for k in range(1, K + 1)]
+    # every row below is affine in the knots' rows: it is written on placeholders Z (column k-1:
+    # knot k's rows stacked) and its derivatives are assembled from one knot's (_PathDerivatives)
+    sizes = [knot_rows.size1_out(i) for i in range(knot_rows.n_out())]
+    Z = ca.SX.sym("Z", int(sum(sizes)), K)
+    starts = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+    per_knot: list[Any] = [None] + [
+        [Z[int(starts[i]) : int(starts[i + 1]), k - 1] for i in range(len(sizes))] for k in range(1, K + 1)
+    ]
     gap_index = {n: i for i, n in enumerate(gap_names)}
     bound_index = {n: len(gap_names) + i for i, n in enumerate(bound_names)}
 
@@ -931,11 +938,13 @@ def _solve_path(
             return ca.mtimes(R.T, ca.DM(locs[name].p_world) - c) + ca.DM(com_b)
 
         rows_ns = _no_slip(ca, pair, 0, est, features, locs, q_pair, com_b, start, d)
-        no_slip = ca.Function("no_slip", [y_a, y_b], [row for _, row in rows_ns])
-        ys = [ca.DM(y0)] + [Y[:, k] for k in range(K)]
+        no_slip = ca.Function("no_slip", [y_a, y_b], [ca.vertcat(*[row for _, row in rows_ns])])
+        Wp = ca.SX.sym("W", len(rows_ns), K)  # placeholders: segment k's no-slip rows
         for k in range(K):
-            for (n, _), row in zip(rows_ns, no_slip.call([ys[k], ys[k + 1]]), strict=True):
-                add(("no-slip", n), "eq", [row / L])
+            for i, (n, _) in enumerate(rows_ns):
+                add(("no-slip", n), "eq", [Wp[i, k] / L])
+    else:
+        no_slip, Wp = None, ca.SX(0, K)
     keys = [g for g in groups if groups[g][1] and g[0] in elastic]
     eqs: list[Any] = [end_row]
     ineqs: list[Any] = []
@@ -969,14 +978,14 @@ def _solve_path(
         e_goal = Y[:, K - 1] - ca.DM(y_goal)
         objective = objective + GOAL_PULL * ca.dot(e_goal, ca.mtimes(ca.DM(W), e_goal)) / norm
     x0 = y_guess[:, 1:].reshape(-1, order="F")  # ca.vec stacks columns
-    x_sym = ca.vec(Y)
     if S is not None:
         objective = ca.sum1(S) + prob.settings.elastic_regularisation * objective
-        x_sym = ca.vertcat(x_sym, S)
         x0 = np.concatenate([x0, np.ones(len(keys))])
+    derivs = _PathDerivatives(Y, S, Z, Wp, knot_rows, no_slip, y0, ca.vertcat(g_eq, g_ge), objective)
     solver = ca.nlpsol(
-        "fine_path", "ipopt", {"x": x_sym, "f": objective, "g": ca.vertcat(g_eq, g_ge)},
-        {"print_time": False, "error_on_fail": False, "ipopt": prob.settings.ipopt_options(tol, max_iter)},
+        "fine_path", "ipopt", {"x": derivs.x, "f": derivs.f, "g": derivs.g},
+        {"print_time": False, "error_on_fail": False, "jac_g": derivs.jac_g, "hess_lag": derivs.hess_lag,
+         "ipopt": prob.settings.ipopt_options(tol, max_iter)},
     )  # fmt: skip
     t0 = time.perf_counter()
     try:
@@ -999,6 +1008,108 @@ def _solve_path(
     y_sol = np.asarray(y_val, dtype=float).reshape(nv, K, order="F")
     xi_sol = np.concatenate([y0[:, None], y_sol], axis=1) * scale[:, None]
     return xi_sol, status, int(stats.get("iter_count", 0)), solve_time
+
+
+class _PathDerivatives:
+    """The path program as IPOPT sees it: rows, their Jacobian and the Lagrangian's Hessian from one knot's.
+
+    The rows ``g`` are affine in the knots' rows ``z(y_k)`` (each knot's gaps, feature bounds and
+    obstacle rows: one function ``knot_rows`` of its twist) and in the segments' no-slip rows
+    ``w(y_{k-1}, y_k)``: ``g = A_z vec(Z) + A_w vec(W) + A_s S + g₀``, read off the rows written on
+    placeholders ``Z``, ``W``. So ``∂g/∂y_k`` is ``A_z`` times one knot's Jacobian ``∂z/∂y`` and
+    the Hessian of ``λᵀg`` is the block diagonal of ``∇²(μ_kᵀ z)(y_k)`` with ``μ = A_zᵀ λ``, plus
+    the no-slip pairs' blocks; ``f`` is quadratic (its Hessian a constant). The knot functions
+    are differentiated once and mapped over the knots. CasADi's own derivatives of the whole
+    program, every knot inlined, were most of a transition's time (30-150 ms to build against
+    5-40 ms for IPOPT to solve).
+    """
+
+    def __init__(
+        self,
+        Y_sx: Any,
+        S_sx: Any,
+        Z: Any,
+        W: Any,
+        knot_rows: Any,
+        no_slip: Any,
+        y0: FloatArray,
+        g_rows: Any,
+        f_sx: Any,
+    ) -> None:
+        import casadi as ca
+
+        nv, K = Y_sx.shape
+        n_z, n_w = Z.shape[0], W.shape[0]
+        n_s = 0 if S_sx is None else int(S_sx.numel())
+        s_sym = S_sx if S_sx is not None else ca.SX(0, 1)
+        z_sym, w_sym = ca.vec(Z), ca.vec(W)
+        everything = ca.vertcat(z_sym, w_sym, s_sym)
+        # the affine map (numbers): A_z, A_w, A_s and the constant g₀; a row that is not affine in
+        # the placeholders leaves a free symbol, which Function refuses
+        affine = ca.Function("affine", [], [
+            ca.jacobian(g_rows, z_sym), ca.jacobian(g_rows, w_sym), ca.jacobian(g_rows, s_sym),
+            ca.substitute(g_rows, everything, ca.SX.zeros(everything.numel())),
+        ])  # fmt: skip
+        A_z, A_w, A_s, g0 = affine.call([])
+        x_sx = ca.vec(Y_sx) if S_sx is None else ca.vertcat(ca.vec(Y_sx), S_sx)
+        hess_f = ca.Function("hess_f", [x_sx], [ca.hessian(f_sx, x_sx)[0]]).call([ca.DM.zeros(x_sx.numel())])[0]
+        f_fn = ca.Function("f", [x_sx], [f_sx])
+
+        # one knot's rows, Jacobian and weighted Hessian, mapped over the knots
+        y = ca.SX.sym("y", nv)
+        z_of = ca.vertcat(*knot_rows.call([y]))
+        mu = ca.SX.sym("mu", n_z)
+        z_map = ca.Function("z", [y], [z_of]).map(K)
+        jz_map = ca.Function("jz", [y], [ca.jacobian(z_of, y)]).map(K)
+        hz_map = ca.Function("hz", [y, mu], [ca.hessian(ca.dot(mu, z_of), y)[0]]).map(K)
+
+        X = ca.MX.sym("x", nv * K + n_s)
+        Y = ca.reshape(X[: nv * K], nv, K)
+        lam_f = ca.MX.sym("lam_f")
+        lam_g = ca.MX.sym("lam_g", g_rows.numel())
+        g = ca.mtimes(A_z, ca.vec(z_map.call([Y])[0])) + g0
+        JZ = jz_map.call([Y])[0]  # n_z × (nv K): knot k's block in columns k nv .. (k+1) nv
+        J_blocks = [ca.mtimes(A_z[:, k * n_z : (k + 1) * n_z], JZ[:, k * nv : (k + 1) * nv]) for k in range(K)]
+        HZ = hz_map.call([Y, ca.reshape(ca.mtimes(A_z.T, lam_g), n_z, K)])[0]
+        H_blocks: list[list[Any]] = [[ca.MX(nv, nv) for _ in range(K)] for _ in range(K)]
+        for k in range(K):
+            H_blocks[k][k] = HZ[:, k * nv : (k + 1) * nv]
+        if n_w:
+            ya, yb = ca.SX.sym("ya", nv), ca.SX.sym("yb", nv)
+            w_of = no_slip.call([ya, yb])[0]
+            nu = ca.SX.sym("nu", n_w)
+            pair = ca.vertcat(ya, yb)
+            w_map = ca.Function("w", [ya, yb], [w_of]).map(K)
+            jw_map = ca.Function("jw", [ya, yb], [ca.jacobian(w_of, pair)]).map(K)
+            hw_map = ca.Function("hw", [ya, yb, nu], [ca.hessian(ca.dot(nu, w_of), pair)[0]]).map(K)
+            before = ca.horzcat(ca.DM(y0), Y[:, : K - 1])
+            g = g + ca.mtimes(A_w, ca.vec(w_map.call([before, Y])[0]))
+            JW = jw_map.call([before, Y])[0]  # n_w × (2 nv K): segment k's [∂/∂y_(k-1), ∂/∂y_k]
+            HW = hw_map.call([before, Y, ca.reshape(ca.mtimes(A_w.T, lam_g), n_w, K)])[0]  # 2nv × 2nv K
+            for k in range(K):
+                A_k = A_w[:, k * n_w : (k + 1) * n_w]
+                c = 2 * nv * k
+                J_blocks[k] = J_blocks[k] + ca.mtimes(A_k, JW[:, c + nv : c + 2 * nv])
+                H_blocks[k][k] = H_blocks[k][k] + HW[nv:, c + nv : c + 2 * nv]
+                if k:  # knot 0 is fixed: only a segment from a free knot couples two knots
+                    J_blocks[k - 1] = J_blocks[k - 1] + ca.mtimes(A_k, JW[:, c : c + nv])
+                    H_blocks[k - 1][k - 1] = H_blocks[k - 1][k - 1] + HW[:nv, c : c + nv]
+                    H_blocks[k - 1][k] = HW[:nv, c + nv : c + 2 * nv]
+                    H_blocks[k][k - 1] = HW[nv:, c : c + nv]
+        J = ca.horzcat(*J_blocks)
+        H = ca.blockcat(H_blocks)
+        if n_s:
+            S = X[nv * K :]
+            g = g + ca.mtimes(A_s, S)
+            J = ca.horzcat(J, A_s)
+            H = ca.diagcat(H, ca.MX(n_s, n_s))
+        H = H + lam_f * hess_f
+        p = ca.MX.sym("p", 0)
+        self.x, self.g, self.f = X, g, f_fn.call([X])[0]
+        self.jac_g = ca.Function("nlp_jac_g", [X, p], [g, J], ["x", "p"], ["g", "jac_g_x"])
+        self.hess_lag = ca.Function(
+            "nlp_hess_l", [X, p, lam_f, lam_g], [ca.triu(H)], ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]
+        )
 
 
 HULL_MIN_POINTS = 64  # fewer collision points than this are kept whole (primitives' corners and rims)
