@@ -487,6 +487,10 @@ class ExecutionSettings:
     min_speed_mps: float = 0.004  # speed kept up to the very end of a transition
     accel_mps2: float = 1.0  # largest commanded acceleration
     brake_mps2: float = 0.1  # deceleration of the speed profile toward the target
+    # free flight brakes harder, down to the speed the gentle profile has soft_approach_m before the
+    # target, then as gently as any transition: the same impact, a shorter approach
+    free_brake_mps2: float = 0.5
+    soft_approach_m: float = 0.002
     speed_time_s: float = 0.05  # the speed error is closed in about this long
     min_accel_fraction: float = 0.05  # least |acceleration| asked (of accel_mps2): never a jamming push
     max_accel_factor: float = 1.5  # the push may accelerate at most this × the acceleration asked

@@ -509,3 +509,46 @@ def test_a_set_aside_transition_is_not_taken_from_the_cache():
     planner.avoid(frozenset({"B1", "B2"}), "S1", "S1 pressed the wrong face")
     again = planner.plan_from(start, frozenset({"B1", "B2"}))
     assert not again.found and "S1 pressed the wrong face" in again.reason
+
+
+# -- the speed profile -----------------------------------------------------------------------------
+def _stopping(settings, left_m, free, dt=1e-5):
+    """Integrate dx/dt = −v(x) from ``left_m`` to the target: (time [s], speed at the last soft_approach_m)."""
+    from fixplan.planner.execute import braking_speed
+
+    x, t, v_soft = left_m, 0.0, None
+    floor = settings.min_speed_mps
+    while x > 0.0:
+        v = max(floor, braking_speed(settings, x, free=free))
+        if v_soft is None and x <= settings.soft_approach_m:
+            v_soft = v
+        x -= v * dt
+        t += dt
+    return t, v_soft
+
+
+def test_free_flight_brakes_harder_then_touches_as_gently():
+    """v² is linear in the distance left: slope 2 a_free above soft_approach_m, 2 a below; continuous.
+
+    Closed form of the gentle profile's stopping time from d: √(2 d / a). The free approach reaches
+    the last soft_approach_m at the gentle profile's speed √(2 a d), so it touches alike.
+    """
+    from fixplan.planner.execute import braking_speed
+
+    s = ExecutionSettings()
+    a, af, d = s.brake_mps2, s.free_brake_mps2, s.soft_approach_m
+    for left in (0.0, 0.5 * d, d):
+        assert braking_speed(s, left, free=True) == pytest.approx(np.sqrt(2 * a * left), abs=1e-15)
+    for left in (1.5 * d, 0.01, 0.05):
+        assert braking_speed(s, left, free=True) ** 2 == pytest.approx(2 * a * d + 2 * af * (left - d), rel=1e-12)
+        assert braking_speed(s, left, free=False) == pytest.approx(np.sqrt(2 * a * left), rel=1e-12)
+    eps = 1e-12
+    assert braking_speed(s, d + eps, free=True) == pytest.approx(braking_speed(s, d, free=True), rel=1e-6)
+    # a 50 mm approach: the gentle profile's closed form, and the free one's shorter time
+    t_gentle, v_gentle = _stopping(s, 0.05, free=False)
+    t_free, v_free = _stopping(s, 0.05, free=True)
+    x_floor = s.min_speed_mps**2 / (2 * a)  # where the profile meets the speed kept to the end
+    t_closed = np.sqrt(2 * 0.05 / a) - np.sqrt(2 * x_floor / a) + x_floor / s.min_speed_mps
+    assert t_gentle == pytest.approx(t_closed, rel=1e-3)
+    assert v_free == pytest.approx(v_gentle, rel=1e-3)  # the same speed over the last soft_approach_m
+    assert t_free < 0.65 * t_gentle
