@@ -11,12 +11,14 @@ Moreau–Jean step of :mod:`.step`; the rest of this package solves one contact 
   the part's collision points against collision-only bodies (``[[obstacle]]``);
 - :mod:`.linalg` — small dense products and inverses without BLAS;
 - :mod:`.local` — the exact one-contact solvers and their closed-form shortcuts;
-- :mod:`.nsgs` — the contact problem, its solution, and nonsmooth Gauss–Seidel (sparse for
-  FCLib problems, dense for the time step);
-- :mod:`.residual` — the FCLib residual, in NumPy and compiled;
+- :mod:`.problem` — the contact problem, its builder, its solution, the FCLib residual in NumPy
+  and the helpers every solver shares (no numba);
+- :mod:`.status` — how a solve ended: the one status vocabulary of kernels and solvers (no numba);
+- :mod:`.nsgs` — nonsmooth Gauss–Seidel (sparse for FCLib problems, dense for the time step);
+- :mod:`.residual` — the FCLib residual, compiled;
 - :mod:`.socp`, :mod:`.newton`, :mod:`.auto` — the other solvers and the automatic chain;
 - :mod:`.budget` — time limits and iteration caps; :mod:`.fclib` — FCLib files;
-- :mod:`.outcome` — what a finished run says, and the step's status codes (no numba);
+- :mod:`.outcome` — what a finished run says (no numba);
 
 Solvers share one signature, ``solver(problem, r0=None, tol=..., max_iter=...) ->
 ContactSolution``, and are looked up by name in :data:`SOLVERS` (imported lazily, so
@@ -46,10 +48,10 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from collections.abc import Callable
 
-    from fixplan.engine.nsgs import ContactProblem, ContactSolution
+    from fixplan.engine.problem import ContactProblem, ContactSolution
 
 SOLVERS: dict[str, tuple[str, str]] = {
-    "auto": ("fixplan.engine.socp", "solve_auto"),
+    "auto": ("fixplan.engine.auto", "solve_auto"),
     "nsgs": ("fixplan.engine.nsgs", "solve_nsgs"),
     "nsgs-numpy": ("fixplan.engine.nsgs", "solve_nsgs_reference"),
     "nsn": ("fixplan.engine.newton", "solve_newton"),
@@ -59,14 +61,14 @@ SOLVERS: dict[str, tuple[str, str]] = {
 """Solver registry: name → (module, function), imported on first use."""
 
 _LAZY = {
-    "ContactProblem": ("fixplan.engine.nsgs", "ContactProblem"),
-    "ContactSolution": ("fixplan.engine.nsgs", "ContactSolution"),
-    "build_problem": ("fixplan.engine.nsgs", "build_problem"),
-    "fclib_error": ("fixplan.engine.residual", "fclib_error"),
+    "ContactProblem": ("fixplan.engine.problem", "ContactProblem"),
+    "ContactSolution": ("fixplan.engine.problem", "ContactSolution"),
+    "build_problem": ("fixplan.engine.problem", "build_problem"),
+    "fclib_error": ("fixplan.engine.problem", "fclib_error"),
     "solve_nsgs": ("fixplan.engine.nsgs", "solve_nsgs"),
     "solve_nsgs_reference": ("fixplan.engine.nsgs", "solve_nsgs_reference"),
     "solve_socp": ("fixplan.engine.socp", "solve_socp"),
-    "solve_auto": ("fixplan.engine.socp", "solve_auto"),
+    "solve_auto": ("fixplan.engine.auto", "solve_auto"),
     "solve_newton": ("fixplan.engine.newton", "solve_newton"),
     "solve_prox": ("fixplan.engine.newton", "solve_prox"),
     "FclibProblem": ("fixplan.engine.fclib", "FclibProblem"),

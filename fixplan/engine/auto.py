@@ -39,13 +39,13 @@ from typing import Any
 import numpy as np
 
 from fixplan.engine.budget import DEFAULT_TIME_LIMIT_S, Budget, check_time_limit
-from fixplan.engine.nsgs import (
+from fixplan.engine.nsgs import error_kernel
+from fixplan.engine.problem import (
     DEFAULT_TOL,
     ContactProblem,
     ContactSolution,
-    _check_settings,
-    _initial_scaled,
-    error_kernel,
+    check_settings,
+    initial_scaled,
     kernel_arrays,
 )
 
@@ -268,12 +268,12 @@ def solve_auto(
         :func:`immobile_contact_violation` finds the problem unsolvable; an answer that
         :func:`runaway_reason` rejects is not converged whatever its residual).
     """
-    _check_settings(tol, 0 if max_iter is None else max_iter, 1.0)
+    check_settings(tol, 0 if max_iter is None else max_iter, 1.0)
     check_time_limit(time_limit)
     budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     arrays = kernel_arrays(problem)
-    r_scaled = _initial_scaled(problem, r0)
+    r_scaled = initial_scaled(problem, r0)
     best_error = error_kernel(*arrays, r_scaled, np.empty(problem.size))  # type: ignore[call-arg]  # numba dispatcher
     best_error = best_error if math.isfinite(best_error) else math.inf
     best_r = problem.row_scale * r_scaled

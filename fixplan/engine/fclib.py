@@ -40,7 +40,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from fixplan.engine.budget import DEFAULT_TIME_LIMIT_S, Budget
-from fixplan.engine.nsgs import DEFAULT_TOL, ContactProblem, build_problem
+from fixplan.engine.problem import DEFAULT_TOL, ContactProblem, build_problem
 from fixplan.errors import InputError, shorten
 from fixplan.limits import (
     FCLIB_ENTRY,
@@ -696,7 +696,7 @@ def _warm_up(dims: np.ndarray) -> None:
     import clarabel  # noqa: F401 - loaded here, not inside the SOCP solver's time
 
     from fixplan.engine.newton import solve_newton
-    from fixplan.engine.nsgs import build_problem, solve_nsgs, solve_nsgs_reference
+    from fixplan.engine.nsgs import solve_nsgs, solve_nsgs_reference
 
     d = int(np.max(dims)) if len(dims) else 3
     tiny = build_problem(np.eye(d), -np.ones(d) * 0.1, np.array([0.3]), dims=d)

@@ -68,9 +68,11 @@ satisfy the standard law in a 4-dimensional second-order cone, with ``W̃ = diag
 and ``α̃ = s ∘ α̂`` (the power ``P·u = P̃·ũ`` is unchanged). :func:`solve_soft_finger` solves the
 scaled problem with :func:`solve_cone` and maps back: ``P = s ∘ P̃``.
 
-Status codes
+Regime codes
 ------------
-``OPEN = 0``, ``STICK = 1``, ``SLIDE = 2``; ``FAILED = -1`` when no regime could be established
+What the one-contact solvers return is the contact's *regime*, not how a solve ended (that is
+the engine's one status vocabulary, :mod:`fixplan.engine.status`, whose 1 and 2 mean other
+things): ``OPEN = 0``, ``STICK = 1``, ``SLIDE = 2``; ``FAILED = -1`` when no regime could be established
 (e.g. ``W_nn = 0`` with ``α̂_n < 0``: the contact cannot stop its own approach; or a singular
 PSD ``W`` for which no finite solution exists); ``P`` is then the candidate of least
 natural-map residual among ``0`` and the normal-only impulse, always finite.
@@ -95,7 +97,8 @@ STICK = 1
 SLIDE = 2
 FAILED = -1
 
-STATUS_NAMES = {OPEN: "open", STICK: "stick", SLIDE: "slide", FAILED: "failed"}
+REGIME_NAMES = {OPEN: "open", STICK: "stick", SLIDE: "slide", FAILED: "failed"}
+"""The words of the regime codes."""
 
 _EPS = 2.220446049250313e-16
 _PIVOT_REL = 1e-13  # a pivot below this fraction of its column's max counts as zero
@@ -363,9 +366,9 @@ def _newton_psi(x, P, dP, mu):
 
 @numba.njit(cache=True, error_model="numpy")
 def _slide_root(A, alpha, mu, P, ws):
-    """Sliding regime by the root of ``φ(γ)``; returns ``(status, iterations)``.
+    """Sliding regime by the root of ``φ(γ)``; returns ``(regime, iterations)``.
 
-    ``status`` is ``SLIDE``, or ``STICK`` when the root sits at ``γ ≈ 0`` (a singular ``W_jj``
+    ``regime`` is ``SLIDE``, or ``STICK`` when the root sits at ``γ ≈ 0`` (a singular ``W_jj``
     whose stick solution the LU could not produce directly), or ``FAILED``.
     """
     d = alpha.shape[0]
@@ -620,16 +623,16 @@ def _normalized_solve(A, alpha, mu, P, planar, ws):
         for j in range(d):
             As[i, j] = A[i, j] / amax
     if planar:
-        status, it = _coulomb_2d_core(As, als, mu, P, ws)
+        regime, it = _coulomb_2d_core(As, als, mu, P, ws)
     else:
-        status, it = _cone_solve_core(As, als, mu, P, ws)
+        regime, it = _cone_solve_core(As, als, mu, P, ws)
     for i in range(d):
         P[i] = (P[i] * alm) / amax if alm < amax else P[i] * (alm / amax)
     for i in range(d):
         if not math.isfinite(P[i]):
             _fallback(A, alpha, mu, P, ws)
             return FAILED, it
-    return status, it
+    return regime, it
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -652,8 +655,8 @@ def cone_solve_into(A, alpha, mu, P):
 
     Returns
     -------
-    status : int
-        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    regime : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED`` (the contact's regime, not a solve status).
     iterations : int
         Root-finding iterations (0 for the closed-form regimes).
     """
@@ -695,9 +698,9 @@ def _cone_solve_core(A, alpha, mu, P, ws):
         _lu_solve(LU, alpha, -1.0, P)
         if P[0] >= 0.0 and _tangent_norm(P) <= mu * P[0]:
             return STICK, 0
-    status, it = _slide_root(A, alpha, mu, P, ws)
-    if status != FAILED:
-        return status, it
+    regime, it = _slide_root(A, alpha, mu, P, ws)
+    if regime != FAILED:
+        return regime, it
     _fallback(A, alpha, mu, P, ws)
     return FAILED, it
 
@@ -736,9 +739,9 @@ def _coulomb_2d_core(A, alpha, mu, P, ws):
                 P[0] = pn
                 P[1] = pt
                 return SLIDE, 0
-    status, it = _slide_root(A, alpha, mu, P, ws)
-    if status != FAILED:
-        return status, it
+    regime, it = _slide_root(A, alpha, mu, P, ws)
+    if regime != FAILED:
+        return regime, it
     _fallback(A, alpha, mu, P, ws)
     return FAILED, it
 
@@ -760,8 +763,8 @@ def coulomb_2d_into(A, alpha, mu, P):
 
     Returns
     -------
-    status : int
-        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    regime : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED`` (the contact's regime, not a solve status).
     iterations : int
         0, unless rounding rejected every closed-form regime and the root find ran.
     """
@@ -793,7 +796,7 @@ def soft_finger_into(A, alpha, mu, torsion_radius, P):
 
     Returns
     -------
-    status, iterations : int
+    regime, iterations : int
         As :func:`cone_solve_into`.
     """
     As = np.empty((4, 4))
@@ -803,9 +806,9 @@ def soft_finger_into(A, alpha, mu, torsion_radius, P):
         al[i] = sc[i] * alpha[i]
         for j in range(4):
             As[i, j] = sc[i] * A[i, j] * sc[j]
-    status, it = cone_solve_into(As, al, mu, P)
+    regime, it = cone_solve_into(As, al, mu, P)
     P[3] *= torsion_radius
-    return status, it
+    return regime, it
 
 
 # --------------------------------------------------------------------------- public wrappers
@@ -828,14 +831,14 @@ def solve_cone(W, alpha, mu):
     -------
     P : ndarray, shape (d,)
         Impulse satisfying the law.
-    status : int
-        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    regime : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED`` (the contact's regime, not a solve status).
     iterations : int
         Root-finding iterations.
     """
     P = np.empty(alpha.shape[0])
-    status, it = cone_solve_into(W, alpha, mu, P)
-    return P, status, it
+    regime, it = cone_solve_into(W, alpha, mu, P)
+    return P, regime, it
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -855,14 +858,14 @@ def solve_coulomb_2d(W, alpha, mu):
     -------
     P : ndarray, shape (2,)
         Impulse ``(P_n, P_t)``.
-    status : int
-        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    regime : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED`` (the contact's regime, not a solve status).
     iterations : int
         0 for the closed forms.
     """
     P = np.empty(2)
-    status, it = coulomb_2d_into(W, alpha, mu, P)
-    return P, status, it
+    regime, it = coulomb_2d_into(W, alpha, mu, P)
+    return P, regime, it
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -882,14 +885,14 @@ def solve_coulomb_3d(W, alpha, mu):
     -------
     P : ndarray, shape (3,)
         Impulse ``(P_n, P_t1, P_t2)``.
-    status : int
-        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    regime : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED`` (the contact's regime, not a solve status).
     iterations : int
         Root-finding iterations of the sliding case.
     """
     P = np.empty(3)
-    status, it = cone_solve_into(W, alpha, mu, P)
-    return P, status, it
+    regime, it = cone_solve_into(W, alpha, mu, P)
+    return P, regime, it
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -911,14 +914,14 @@ def solve_soft_finger(W, alpha, mu, torsion_radius):
     -------
     P : ndarray, shape (4,)
         Impulse ``(P_n, P_t1, P_t2, P_s)``.
-    status : int
-        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED``.
+    regime : int
+        ``OPEN``, ``STICK``, ``SLIDE`` or ``FAILED`` (the contact's regime, not a solve status).
     iterations : int
         Root-finding iterations of the sliding case.
     """
     P = np.empty(4)
-    status, it = soft_finger_into(W, alpha, mu, torsion_radius, P)
-    return P, status, it
+    regime, it = soft_finger_into(W, alpha, mu, torsion_radius, P)
+    return P, regime, it
 
 
 # ------------------------------------------------- shortcuts the time step tries before the solvers

@@ -7,7 +7,7 @@ one weight ``ρ_j > 0`` per contact::
 
 is zero exactly at the solutions of the frictional contact problem, for any ``ρ > 0``. Here
 ``ρ_j = 1 / W_nn,j`` (the normal diagonal entry), so that every contact's map has unit scale.
-Contacts are in the scaled variables of :mod:`fixplan.engine.nsgs` (standard second-order
+Contacts are in the scaled variables of :mod:`fixplan.engine.problem` (standard second-order
 cones only).
 
 Newton step
@@ -60,26 +60,27 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from fixplan.engine.budget import Budget
-from fixplan.engine.nsgs import (
-    DEFAULT_TOL,
-    STATUS_CONVERGED,
-    STATUS_MAX_ITER,
-    STATUS_NAN,
-    STATUS_STALLED,
-    STATUS_TIME_LIMIT,
-    ContactProblem,
-    ContactSolution,
-    _check_settings,
-    _finish,
-    _initial_scaled,
-    _spmv,
-    error_kernel,
-    kernel_arrays,
-    stalled,
-)
+from fixplan.engine.nsgs import error_kernel, spmv
 from fixplan.engine.polish import (  # the Jacobian blocks and the natural map, shared with the step's dense polish
     jacobian_blocks,
     natural_map_rows,
+)
+from fixplan.engine.problem import (
+    DEFAULT_TOL,
+    ContactProblem,
+    ContactSolution,
+    check_settings,
+    finish,
+    initial_scaled,
+    kernel_arrays,
+    stalled,
+)
+from fixplan.engine.status import (
+    STATUS_CONVERGED,
+    STATUS_MAX_ITER,
+    STATUS_NONFINITE,
+    STATUS_STALLED,
+    STATUS_TIME_LIMIT,
 )
 
 DEFAULT_MAX_STEPS = 100
@@ -102,7 +103,7 @@ MIN_STEP = 2.0**-12
 @numba.njit(cache=True, error_model="numpy")
 def natural_map_kernel(indptr, indices, data, q, mu, offsets, dims, rho, r, u, phi):
     """``Φ_ρ(r)`` into ``phi`` and ``u = W r + q`` into ``u``; returns ``‖Φ_ρ(r)‖₂``."""
-    _spmv(indptr, indices, data, r, q, u)
+    spmv(indptr, indices, data, r, q, u)
     return natural_map_rows(mu, offsets, dims, rho, r, u, phi, np.empty(4), np.empty(4))
 
 
@@ -180,7 +181,7 @@ def run_newton(
     Parameters
     ----------
     arrays : tuple
-        :func:`~fixplan.engine.nsgs.kernel_arrays` of the problem whose natural map is zeroed.
+        :func:`~fixplan.engine.problem.kernel_arrays` of the problem whose natural map is zeroed.
     r : ndarray
         Start; not modified.
     tol : float
@@ -226,7 +227,7 @@ def run_newton(
     err = error_kernel(*err_arrays, r, u_err)  # type: ignore[call-arg]  # numba dispatcher
     run = NewtonRun(r.copy(), err if math.isfinite(err) else math.inf, 0, STATUS_MAX_ITER, step_s=step_s)
     if not (math.isfinite(norm) and math.isfinite(err)):
-        run.status, run.reason = STATUS_NAN, "the start overflows"
+        run.status, run.reason = STATUS_NONFINITE, "the start overflows"
         return run
     if err <= tol:
         run.status = STATUS_CONVERGED
@@ -300,7 +301,7 @@ def solve_newton(
     Parameters
     ----------
     problem : ContactProblem
-        From :func:`fixplan.engine.nsgs.build_problem`.
+        From :func:`fixplan.engine.problem.build_problem`.
     r0 : array_like, shape (m,), optional
         Start (zeros by default). Newton converges fast from a good start (e.g. NSGS's).
     tol : float
@@ -321,11 +322,11 @@ def solve_newton(
         The best iterate; ``extras`` has ``history``, ``factorizations``,
         ``line_search_failures`` and ``step_s`` (the last step's duration).
     """
-    _check_settings(tol, max_iter, 1.0)
+    check_settings(tol, max_iter, 1.0)
     budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     arrays = kernel_arrays(problem)
-    run = run_newton(arrays, _initial_scaled(problem, r0), tol, int(max_iter), budget, stall_window, step_s=step_s)
+    run = run_newton(arrays, initial_scaled(problem, r0), tol, int(max_iter), budget, stall_window, step_s=step_s)
     extras: dict[str, Any] = {
         "history": np.array(run.history),
         "factorizations": run.factorizations,
@@ -335,7 +336,7 @@ def solve_newton(
         "max_iter": int(max_iter),
         "time_limit": time_limit,
     }
-    solution = _finish(problem, run.best_r, run.best_err, run.iterations, run.status, t0, "nsn", extras)
+    solution = finish(problem, run.best_r, run.best_err, run.iterations, run.status, t0, "nsn", extras)
     if run.reason and not solution.converged:
         solution.extras["reason"] += f" ({run.reason})"
     return solution
@@ -464,11 +465,11 @@ def solve_prox(
     ContactSolution
         The best iterate; ``extras`` has ``history``, ``factorizations`` and ``step_s``.
     """
-    _check_settings(tol, max_iter, 1.0)
+    check_settings(tol, max_iter, 1.0)
     budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     arrays = kernel_arrays(problem)
-    run = run_prox(arrays, _initial_scaled(problem, r0), tol, int(max_iter), budget, stall_window, step_s=step_s)
+    run = run_prox(arrays, initial_scaled(problem, r0), tol, int(max_iter), budget, stall_window, step_s=step_s)
     extras: dict[str, Any] = {
         "history": np.array(run.history),
         "factorizations": run.factorizations,
@@ -477,4 +478,4 @@ def solve_prox(
         "max_iter": int(max_iter),
         "time_limit": time_limit,
     }
-    return _finish(problem, run.best_r, run.best_err, run.iterations, run.status, t0, "prox", extras)
+    return finish(problem, run.best_r, run.best_err, run.iterations, run.status, t0, "prox", extras)

@@ -1,21 +1,8 @@
 """Nonsmooth Gauss–Seidel (NSGS) for the local frictional contact problem ``u = W r + q``.
 
-The problem (docs/math.md, "Transfer equations" and "Contact laws"; FCLib's "local" problem): find
-the impulses ``r`` and velocities ``u = W r + q`` such that every contact ``j`` obeys its law
-``K_μj ∋ r_j ⊥ ũ_j ∈ K_μj*``. Contact ``j`` occupies rows ``offset[j] : offset[j] + dim[j]``,
-ordered ``(normal, tangent1[, tangent2[, spin]])``; ``dim`` is 2 (planar Coulomb), 3 (Coulomb)
-or 4 (soft finger with torsion radius ``e_r``).
-
-Soft-finger contacts are solved in the scaled variables of :mod:`fixplan.engine.local`:
-with ``s = 1`` on every row except ``s = e_r`` on spin rows, ``W̃ = diag(s) W diag(s)``,
-``q̃ = s ∘ q``, ``r = s ∘ r̃``, ``ũ = s ∘ u``. The scaled problem has only second-order cones,
-so the sweep, the residual and the SOCP solver see one kind of cone.
-
-Stopping rule: the Siconos/FCLib residual (natural map, ``ρ = 1``), in the scaled variables::
-
-    err = sqrt(Σ_j ‖r̃_j − Proj_{K_μj}(r̃_j − ũ_j − μ_j‖ũ_t,j‖ e_n)‖²) / max(‖q̃‖, ‖r̃‖, ‖ũ‖)
-
-(0 when the denominator is 0, i.e. ``q = 0`` and ``r = 0``). ``max_iter`` only caps the sweeps.
+The problem, its scaled variables (soft fingers) and the FCLib residual the sweeps stop on are
+those of :mod:`fixplan.engine.problem`; ``max_iter`` only caps the sweeps, and how a run ended is
+a code of :mod:`fixplan.engine.status`.
 
 A sweep visits the contacts in order; contact ``j`` gets ``α̂_j = q_j + Σ_{k≠j} W_jk r_k`` from
 the current ``r`` and solves its one-contact problem exactly, then
@@ -28,7 +15,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numba
@@ -45,11 +32,20 @@ from fixplan.engine.local import (
     open_or_stick,
     slide3_newton,
 )
-from fixplan.engine.residual import fclib_error, fclib_error_rows
-from fixplan.errors import InputError
+from fixplan.engine.problem import (
+    DEFAULT_STALL_RATIO,
+    DEFAULT_TOL,
+    ContactProblem,
+    ContactSolution,
+    check_settings,
+    fclib_error,
+    finish,
+    initial_scaled,
+    kernel_arrays,
+)
+from fixplan.engine.residual import fclib_error_rows
+from fixplan.engine.status import STATUS_CONVERGED, STATUS_MAX_ITER, STATUS_NONFINITE, STATUS_STALLED, STATUS_TIME_LIMIT
 
-DEFAULT_TOL = 1e-8
-"""Default stopping tolerance on the FCLib residual (relative, dimensionless)."""
 DEFAULT_MAX_ITER = 10_000
 """Default cap on NSGS sweeps (a cap, never the stopping rule)."""
 DEFAULT_OMEGA = 1.0
@@ -63,247 +59,6 @@ problems that ω = 1 solves. Plain Gauss–Seidel is kept as the default: never 
 failure of its own; pass ``omega`` to tune a known family of problems."""
 
 _HISTORY_CAP = 100_000  # errors recorded per run (the sweeps themselves are not capped by it)
-
-STATUS_CONVERGED = 0
-STATUS_MAX_ITER = 1
-STATUS_NAN = 2
-STATUS_TIME_LIMIT = 3
-STATUS_STALLED = 4
-_STATUS_TEXT = {
-    STATUS_CONVERGED: "converged",
-    STATUS_MAX_ITER: "max_iter reached before tol",
-    STATUS_NAN: "a non-finite value appeared; returned the best finite iterate",
-    STATUS_TIME_LIMIT: "time limit reached before tol",
-    STATUS_STALLED: "stalled: the residual stopped improving",
-}
-DEFAULT_STALL_RATIO = 0.9
-
-
-def stalled(marks: list[float], error: float, window: int | None, ratio: float = DEFAULT_STALL_RATIO) -> bool:
-    """Stagnation: ``error`` has not dropped below ``ratio`` × the mark ``window`` rounds back."""
-    return window is not None and 0 < window < len(marks) and error > ratio * marks[-1 - window]
-
-
-"""A run stalls when its best residual did not drop below this fraction of the best residual
-``window`` iterations earlier (a 10 % gain per window)."""
-
-
-# --------------------------------------------------------------------------- the problem
-
-
-@dataclass(frozen=True, eq=False)
-class ContactProblem:
-    """A local frictional contact problem ``u = W r + q`` (read-only copies of the data).
-
-    Build it with :func:`build_problem`, which validates every argument.
-
-    Attributes
-    ----------
-    W : scipy.sparse.csr_matrix, shape (m, m)
-        Delassus operator ``J M⁻¹ Jᵀ`` [m/s per N·s]; symmetric PSD in mechanics (FCLib
-        files may carry a slightly non-symmetric one, which is accepted).
-    q : ndarray, shape (m,)
-        Free velocity [m/s].
-    mu : ndarray, shape (n_c,)
-        Friction coefficient per contact.
-    dims : ndarray of int, shape (n_c,)
-        Rows per contact: 2, 3 or 4.
-    offsets : ndarray of int, shape (n_c,)
-        First row of each contact.
-    torsion_radius : ndarray, shape (n_c,)
-        ``e_r`` [m] of soft-finger (``dim = 4``) contacts; 0 elsewhere.
-    """
-
-    W: sp.csr_matrix
-    q: np.ndarray
-    mu: np.ndarray
-    dims: np.ndarray
-    offsets: np.ndarray
-    torsion_radius: np.ndarray
-
-    @property
-    def n_contacts(self) -> int:
-        """Number of contacts."""
-        return int(self.mu.shape[0])
-
-    @property
-    def size(self) -> int:
-        """Number of rows ``m``."""
-        return int(self.q.shape[0])
-
-    @property
-    def row_scale(self) -> np.ndarray:
-        """``s``: 1 on every row, ``e_r`` on soft-finger spin rows."""
-        s = np.ones(self.size)
-        spin = self.dims == 4
-        s[self.offsets[spin] + 3] = self.torsion_radius[spin]
-        return s
-
-    def scaled(self) -> tuple[sp.csr_matrix, np.ndarray]:
-        """``(W̃, q̃)`` of the scaled problem (the same arrays when there is no soft finger)."""
-        if not np.any(self.dims == 4):
-            return self.W, self.q
-        s = self.row_scale
-        S = sp.diags(s)
-        return sp.csr_matrix(S @ self.W @ S), s * self.q
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    a = np.array(a, copy=True)
-    a.setflags(write=False)
-    return a
-
-
-def build_problem(
-    W: Any,
-    q: Any,
-    mu: Any,
-    dims: Any = 3,
-    torsion_radius: Any = None,
-) -> ContactProblem:
-    """Validate and copy the data of ``u = W r + q`` into a :class:`ContactProblem`.
-
-    Parameters
-    ----------
-    W : array_like or scipy.sparse matrix, shape (m, m)
-        Delassus operator.
-    q : array_like, shape (m,)
-        Free velocity.
-    mu : float or array_like, shape (n_c,)
-        Friction coefficients (a scalar is used for every contact).
-    dims : int or array_like of int, shape (n_c,)
-        Rows per contact, each 2, 3 or 4 (an int is used for every contact).
-    torsion_radius : float or array_like, optional
-        ``e_r ≥ 0`` [m] per contact, required for ``dim = 4`` contacts, ignored elsewhere.
-
-    Returns
-    -------
-    ContactProblem
-        The validated problem.
-
-    Raises
-    ------
-    InputError
-        When shapes disagree, a value is not finite, ``μ < 0`` or ``e_r`` is missing/negative.
-    """
-    q_arr = np.asarray(q, dtype=float).reshape(-1)
-    m = q_arr.shape[0]
-    if sp.issparse(W):
-        W_csr = sp.csr_matrix(W, dtype=float)
-    else:
-        W_arr = np.asarray(W, dtype=float)
-        if W_arr.ndim != 2:
-            raise InputError(f"expected W with shape ({m}, {m}), got shape {W_arr.shape}")
-        W_csr = sp.csr_matrix(W_arr)
-    if W_csr.shape != (m, m):
-        raise InputError(f"expected W with shape ({m}, {m}) to match q, got {W_csr.shape}")
-    W_csr.sort_indices()
-    W_csr.sum_duplicates()
-    if not (np.all(np.isfinite(W_csr.data)) and np.all(np.isfinite(q_arr))):
-        raise InputError("W and q must be finite (found NaN or inf)")
-    dims_in = np.asarray(dims)
-    if dims_in.ndim == 0:
-        d = int(dims_in)
-        if d not in (2, 3, 4) or m % d:
-            raise InputError(f"expected contact dimension 2, 3 or 4 dividing m={m}, got {d}")
-        dims_arr = np.full(m // d, d, dtype=np.int64)
-    else:
-        dims_arr = dims_in.astype(np.int64).reshape(-1)
-    if not np.all(np.isin(dims_arr, (2, 3, 4))):
-        raise InputError(f"expected every contact dimension in (2, 3, 4), got {set(dims_arr)}")
-    if int(dims_arr.sum()) != m:
-        raise InputError(f"contact dimensions sum to {int(dims_arr.sum())}, expected m={m}")
-    nc = dims_arr.shape[0]
-    offsets = np.zeros(nc, dtype=np.int64)
-    if nc:
-        offsets[1:] = np.cumsum(dims_arr)[:-1]
-    mu_arr = np.broadcast_to(np.asarray(mu, dtype=float), (nc,)).copy()
-    if mu_arr.shape != (nc,) or not np.all(np.isfinite(mu_arr)) or np.any(mu_arr < 0):
-        raise InputError(f"expected {nc} finite friction coefficients μ ≥ 0")
-    e_r = np.zeros(nc)
-    if np.any(dims_arr == 4):
-        if torsion_radius is None:
-            raise InputError("soft-finger contacts (dim 4) need torsion_radius [m]")
-        e_in = np.broadcast_to(np.asarray(torsion_radius, dtype=float), (nc,))
-        e_r = np.where(dims_arr == 4, e_in, 0.0)
-        if not np.all(np.isfinite(e_r)) or np.any(e_r < 0):
-            raise InputError("expected finite torsion_radius ≥ 0 [m] for every dim-4 contact")
-    W_csr.data.setflags(write=False)
-    return ContactProblem(
-        W=W_csr,
-        q=_readonly(q_arr),
-        mu=_readonly(mu_arr),
-        dims=_readonly(dims_arr),
-        offsets=_readonly(offsets),
-        torsion_radius=_readonly(e_r),
-    )
-
-
-# --------------------------------------------------------------------------- the solution
-
-
-@dataclass(frozen=True, eq=False)
-class ContactSolution:
-    """Answer of a contact solver, with its quality.
-
-    Attributes
-    ----------
-    reaction : ndarray, shape (m,)
-        Impulses ``r`` [N·s] (spin rows [N·m·s]).
-    velocity : ndarray, shape (m,)
-        ``u = W r + q`` [m/s] (spin rows [rad/s]).
-    error : float
-        FCLib residual of ``reaction`` (module docstring).
-    iterations : int
-        Sweeps (NSGS) or Newton steps.
-    converged : bool
-        ``error ≤ tol`` was reached.
-    time_s : float
-        Wall time of the solve [s].
-    solver : str
-        Name of the method.
-    extras : dict
-        Backend details: ``status`` text, ``history`` of errors, settings, ``reason`` when not
-        converged.
-    problem : ContactProblem
-        The problem solved (for :meth:`residual`).
-    """
-
-    reaction: np.ndarray
-    velocity: np.ndarray
-    error: float
-    iterations: int
-    converged: bool
-    time_s: float
-    solver: str
-    extras: dict = field(default_factory=dict)
-    problem: ContactProblem | None = field(default=None, repr=False)
-
-    def residual(self, W: Any = None, q: Any = None) -> float:
-        """Recompute the FCLib residual of :attr:`reaction` from ``(W, q)`` in plain NumPy.
-
-        Parameters
-        ----------
-        W, q : optional
-            Data to check against; default the solved problem's.
-
-        Returns
-        -------
-        float
-            The residual, independent of the solver's own bookkeeping.
-        """
-        prob = self.problem
-        if prob is None:
-            raise InputError("this solution carries no problem; pass W and q")
-        if W is not None or q is not None:
-            prob = build_problem(
-                prob.W if W is None else W,
-                prob.q if q is None else q,
-                prob.mu,
-                prob.dims,
-                prob.torsion_radius,
-            )
-        return fclib_error(prob, self.reaction)
 
 
 # --------------------------------------------------------------------------- compiled kernels
@@ -327,7 +82,7 @@ def diagonal_blocks(indptr, indices, data, offsets, dims):
 
 
 @numba.njit(cache=True, error_model="numpy")
-def _spmv(indptr, indices, data, x, q, out):
+def spmv(indptr, indices, data, x, q, out):
     """``out = W x + q`` for CSR ``W``."""
     m = q.shape[0]
     for i in range(m):
@@ -341,10 +96,10 @@ def _spmv(indptr, indices, data, x, q, out):
 def error_kernel(indptr, indices, data, q, mu, offsets, dims, r, u):
     """FCLib residual of ``r`` for CSR ``W`` (standard cones); fills ``u = W r + q``.
 
-    ``u`` by :func:`_spmv`, the residual by :func:`~fixplan.engine.residual.fclib_error_rows`
+    ``u`` by :func:`spmv`, the residual by :func:`~fixplan.engine.residual.fclib_error_rows`
     (the one compiled residual, shared with the time step's dense sweep).
     """
-    _spmv(indptr, indices, data, r, q, u)
+    spmv(indptr, indices, data, r, q, u)
     return fclib_error_rows(q, mu, offsets, dims, offsets.shape[0], q.shape[0], r, u, np.empty(4), np.empty(4))
 
 
@@ -407,15 +162,16 @@ def nsgs_kernel(indptr, indices, data, q, mu, offsets, dims, diag, r, tol, max_i
     iterate seen so far and its error; they are updated in place whenever a sweep beats them.
 
     Returns ``(iterations, error, status, local_failures)`` with ``error`` the residual of the
-    last iterate; ``status``: 0 converged, 1 cap reached, 2 non-finite value (``r`` is then
-    restored to the last finite iterate).
+    last iterate; ``status`` a code of :mod:`fixplan.engine.status`: ``STATUS_CONVERGED``,
+    ``STATUS_MAX_ITER`` (cap reached) or ``STATUS_NONFINITE`` (``r`` is then restored to the last
+    finite iterate).
     """
     m = q.shape[0]
     u = np.empty(m)
     r_prev = np.empty(m)
     failures = 0
     it = 0
-    status = 1
+    status = STATUS_MAX_ITER
     err = math.inf
     while it < max_iter:
         r_prev[:] = r
@@ -424,7 +180,7 @@ def nsgs_kernel(indptr, indices, data, q, mu, offsets, dims, diag, r, tol, max_i
         err_new = error_kernel(indptr, indices, data, q, mu, offsets, dims, r, u)
         if not (math.isfinite(err_new) and _all_finite(r)):
             r[:] = r_prev
-            status = 2
+            status = STATUS_NONFINITE
             break
         err = err_new
         if it - 1 < history.shape[0]:
@@ -433,7 +189,7 @@ def nsgs_kernel(indptr, indices, data, q, mu, offsets, dims, diag, r, tol, max_i
             best[0] = err
             best_r[:] = r
         if err <= tol:
-            status = 0
+            status = STATUS_CONVERGED
             break
     return it, err, status, failures
 
@@ -546,92 +302,6 @@ def nsgs_dense(W, q, mu, offsets, sizes, nc, m, P, tol, max_iter, diag, inv, has
 # --------------------------------------------------------------------------- drivers
 
 
-def _csr_arrays(W: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Writable int64/float64 copies of the CSR arrays (one compiled signature for all)."""
-    return (
-        np.array(W.indptr, dtype=np.int64),
-        np.array(W.indices, dtype=np.int64),
-        np.array(W.data, dtype=np.float64),
-    )
-
-
-def kernel_arrays(problem: ContactProblem) -> tuple[np.ndarray, ...]:
-    """``(indptr, indices, data, q̃, μ, offsets, dims)`` of the scaled problem, for the kernels."""
-    Wt, qt = problem.scaled()
-    return (
-        *_csr_arrays(Wt),
-        np.array(qt, dtype=np.float64),
-        np.array(problem.mu, dtype=np.float64),
-        np.array(problem.offsets, dtype=np.int64),
-        np.array(problem.dims, dtype=np.int64),
-    )
-
-
-def _initial_scaled(problem: ContactProblem, r0: Any) -> np.ndarray:
-    m = problem.size
-    if r0 is None:
-        return np.zeros(m)
-    r0_arr = np.asarray(r0, dtype=float).reshape(-1)
-    if r0_arr.shape != (m,):
-        raise InputError(f"expected r0 with {m} entries, got {r0_arr.shape[0]}")
-    if not np.all(np.isfinite(r0_arr)):
-        raise InputError("r0 must be finite")
-    s = problem.row_scale
-    return np.divide(r0_arr, s, out=np.zeros(m), where=s > 0)
-
-
-def _check_settings(tol: float, max_iter: int, omega: float) -> None:
-    if not (tol >= 0 and math.isfinite(tol)):
-        raise InputError(f"expected a finite tol ≥ 0, got {tol}")
-    if int(max_iter) < 0:
-        raise InputError(f"expected max_iter ≥ 0, got {max_iter}")
-    if not (0.0 < omega < 2.0):
-        raise InputError(f"expected relaxation 0 < ω < 2, got {omega}")
-
-
-def _finish(
-    problem: ContactProblem,
-    r_tilde: np.ndarray,
-    error: float,
-    iterations: int,
-    status: int,
-    t0: float,
-    solver: str,
-    extras: dict,
-) -> ContactSolution:
-    s = problem.row_scale
-    r = s * r_tilde
-    with np.errstate(all="ignore"):
-        u = problem.W @ r + problem.q
-    extras = dict(extras)
-    extras["status"] = _STATUS_TEXT[status]
-    if not math.isfinite(error):
-        error = math.inf  # never NaN: an overflowed residual reads as "infinitely wrong"
-    if not np.all(np.isfinite(u)):
-        extras["velocity_overflow"] = True
-        u = np.nan_to_num(u, nan=np.inf)
-    converged = status == STATUS_CONVERGED
-    if status == STATUS_NAN:
-        extras["reason"] = "NaN/inf during the sweep; reaction is the best finite iterate"
-    elif not converged:
-        extras["reason"] = (
-            f"{_STATUS_TEXT.get(status, 'not converged')}: error {error:.3g} > tol after {iterations} iterations"
-        )
-    r.setflags(write=False)
-    u.setflags(write=False)
-    return ContactSolution(
-        reaction=r,
-        velocity=u,
-        error=float(error),
-        iterations=int(iterations),
-        converged=converged,
-        time_s=time.perf_counter() - t0,
-        solver=solver,
-        extras=extras,
-        problem=problem,
-    )
-
-
 @dataclass
 class NsgsRun:
     """Outcome of :func:`run_nsgs` (the kernels' arrays, in scaled variables)."""
@@ -720,8 +390,8 @@ def run_nsgs(
         if st == STATUS_CONVERGED:
             status = STATUS_CONVERGED
             break
-        if st == STATUS_NAN:
-            status = STATUS_NAN
+        if st == STATUS_NONFINITE:
+            status = STATUS_NONFINITE
             break
         # next chunk: about CHUNK_S of work, at most 4× the last one
         per_sweep = elapsed / max(it, 1)
@@ -772,15 +442,15 @@ def solve_nsgs(
         ``False`` (with ``extras["reason"]``) when the cap, the time limit or stagnation
         stopped the sweeps, or a non-finite value appeared.
     """
-    _check_settings(tol, max_iter, omega)
+    check_settings(tol, max_iter, omega)
     budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     arrays = kernel_arrays(problem)
-    r = _initial_scaled(problem, r0)
+    r = initial_scaled(problem, r0)
     u = np.empty(problem.size)
     err = error_kernel(*arrays, r, u)  # type: ignore[call-arg]  # numba dispatcher
     if not math.isfinite(err):  # the warm start overflows: report it rather than sweep from it
-        run = NsgsRun(r, math.inf, 0, STATUS_NAN, 0, np.zeros(0))
+        run = NsgsRun(r, math.inf, 0, STATUS_NONFINITE, 0, np.zeros(0))
     else:
         run = run_nsgs(arrays, r, err, tol, max_iter, omega, budget, stall_window)
     extras = {
@@ -792,9 +462,9 @@ def solve_nsgs(
         "local_failures": int(run.failures),
     }
     status = run.status
-    if status == STATUS_NAN and math.isfinite(run.best_err) and run.best_err <= tol:
+    if status == STATUS_NONFINITE and math.isfinite(run.best_err) and run.best_err <= tol:
         status = STATUS_CONVERGED
-    return _finish(problem, run.best_r, run.best_err, run.iterations, status, t0, "nsgs", extras)
+    return finish(problem, run.best_r, run.best_err, run.iterations, status, t0, "nsgs", extras)
 
 
 def solve_nsgs_reference(
@@ -825,13 +495,13 @@ def solve_nsgs_reference(
     ContactSolution
         With ``solver == "nsgs-numpy"``: the best iterate after a whole sweep (lowest residual).
     """
-    _check_settings(tol, max_iter, omega)
+    check_settings(tol, max_iter, omega)
     budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     Wt_sparse, qt = problem.scaled()
     Wt = sp.csr_matrix(Wt_sparse)
     s = problem.row_scale
-    r = _initial_scaled(problem, r0)
+    r = initial_scaled(problem, r0)
     history: list[float] = []
 
     def error_of(r_tilde: np.ndarray) -> float:
@@ -862,7 +532,7 @@ def solve_nsgs_reference(
             break
         it += 1
         if not np.all(np.isfinite(r)):
-            status = STATUS_NAN
+            status = STATUS_NONFINITE
             break
         err = error_of(r)
         history.append(err)
@@ -877,4 +547,4 @@ def solve_nsgs_reference(
         "max_iter": int(max_iter),
         "time_limit": time_limit,
     }
-    return _finish(problem, best_r, best, it, status, t0, "nsgs-numpy", extras)
+    return finish(problem, best_r, best, it, status, t0, "nsgs-numpy", extras)

@@ -17,10 +17,6 @@ if TYPE_CHECKING:
 
 FloatArray = NDArray[np.float64]
 
-# What one compiled step returns as its status (numba-free here, so that the simulator can read it
-# when its kernels come from fixplan.aot's extension).
-STATUS_OK, STATUS_NOT_CONVERGED, STATUS_NONFINITE = 0, 1, 2
-
 
 @dataclass(frozen=True)
 class RunOutcome:

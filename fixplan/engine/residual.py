@@ -1,72 +1,28 @@
-"""The Siconos/FCLib residual of a frictional contact problem: one NumPy and one compiled version.
+"""The Siconos/FCLib residual of a frictional contact problem, compiled: what every sweep stops on.
 
 For ``u = W r + q`` and contacts ``j`` with rows ``o_j : o_j + d_j`` (natural map, ``ρ = 1``)::
 
     err = sqrt(Σ_j ‖r_j − Proj_{K_μj}(r_j − u_j − μ_j‖u_t,j‖ e_n)‖²) / max(‖q‖, ‖r‖, ‖u‖)
 
-(0 when the denominator is 0). :func:`fclib_error` is the plain NumPy version on a
-:class:`~fixplan.engine.nsgs.ContactProblem` (in its scaled variables, so soft fingers see a
-standard cone), the independent check of every solver; :func:`fclib_error_rows` is the
-compiled one the sweeps stop on. ``tests/engine/test_residual.py`` pins the two together.
+(0 when the denominator is 0). :func:`fclib_error_rows` is the compiled one the sweeps (sparse
+and dense) and the polish stop on; the plain NumPy version on a
+:class:`~fixplan.engine.problem.ContactProblem` (in its scaled variables, so soft fingers see a
+standard cone), the independent check of every solver, is
+:func:`fixplan.engine.problem.fclib_error`. ``tests/engine/test_residual.py`` pins the two together.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
-import numpy as np
 from numba import njit
 
 from fixplan.engine.local import project_cone_into
 
-if TYPE_CHECKING:
-    from fixplan.engine.nsgs import ContactProblem
-
-
-def fclib_error(problem: ContactProblem, reaction: np.ndarray) -> float:
-    """FCLib/Siconos residual (natural map, ``ρ = 1``) of ``reaction``, plain NumPy.
-
-    Parameters
-    ----------
-    problem : ContactProblem
-        The problem.
-    reaction : ndarray, shape (m,)
-        Impulses ``r`` in the problem's own (unscaled) variables.
-
-    Returns
-    -------
-    float
-        ``sqrt(Σ_j ‖r̃_j − Proj(r̃_j − ũ_j^mod)‖²) / max(‖q̃‖, ‖r̃‖, ‖ũ‖)``, computed in the
-        scaled variables (identical to the unscaled ones without soft fingers).
-    """
-    r = np.asarray(reaction, dtype=float)
-    s = problem.row_scale
-    u_tilde = s * (problem.W @ r + problem.q)
-    r_tilde = np.divide(r, s, out=np.zeros_like(r), where=s > 0)
-    q_tilde = s * problem.q
-    total = 0.0
-    for j in range(problem.n_contacts):
-        o, d, mu = problem.offsets[j], problem.dims[j], problem.mu[j]
-        rj, uj = r_tilde[o : o + d], u_tilde[o : o + d]
-        x = rj - uj
-        x[0] -= mu * np.linalg.norm(uj[1:])
-        xn, nt = x[0], np.linalg.norm(x[1:])
-        if mu * nt <= -xn:
-            proj = np.zeros(d)
-        elif nt <= mu * xn:
-            proj = x
-        else:
-            pn = (xn + mu * nt) / (1.0 + mu * mu)
-            proj = np.concatenate(([pn], mu * pn * x[1:] / nt))
-        total += float(np.sum((rj - proj) ** 2))
-    scale = max(np.linalg.norm(q_tilde), np.linalg.norm(r_tilde), np.linalg.norm(u_tilde))
-    return math.sqrt(total) / float(scale) if scale > 0 else math.sqrt(total)
-
 
 @njit(cache=True)
 def fclib_error_rows(q, mu, offsets, sizes, nc, m, P, u, x, pr):
-    """The FCLib residual of :func:`fclib_error`, compiled, on the leading ``nc`` contacts / ``m`` rows.
+    """The FCLib residual of :func:`~fixplan.engine.problem.fclib_error`, compiled, on the leading ``nc`` contacts / ``m`` rows.
 
     ``u = W P + q`` is given (the caller computes it from its own ``W``, dense or sparse);
     ``offsets``/``sizes`` locate each contact's rows; ``x`` and ``pr`` are caller-owned scratch

@@ -26,8 +26,8 @@ from numpy.typing import ArrayLike, NDArray
 from fixplan.aot import kernel
 from fixplan.engine.encode import OBSTACLE_PLANE, encode, encode_obstacles
 from fixplan.engine.mesh_slots import MeshSlots, MeshStepper, mesh_slots
-from fixplan.engine.outcome import STATUS_NONFINITE, STATUS_NOT_CONVERGED, STATUS_OK
 from fixplan.engine.pin_slots import PinGeometry, PinSlots
+from fixplan.engine.status import STATUS_CONVERGED, STATUS_MAX_ITER, STATUS_NONFINITE
 from fixplan.errors import InputError, SolverError
 from fixplan.geometry.mesh import Mesh
 from fixplan.model import Fixture
@@ -513,7 +513,7 @@ class Simulator:
                 f"step {self.steps} at t = {self.time_s:.6g} s produced a non-finite state; the state was kept",
                 extras={"error": err, "iterations": iters},
             )
-        if status == STATUS_NOT_CONVERGED and self.strict:
+        if status == STATUS_MAX_ITER and self.strict:
             raise SolverError(f"NSGS did not reach {self.tolerance:g} at t = {self.time_s:.6g} s (error {err:.3g})")
         self.time_s += h
         self.steps += 1
@@ -522,7 +522,7 @@ class Simulator:
         self.last = StepInfo(
             float(err),
             int(iters),
-            status == STATUS_OK,
+            status == STATUS_CONVERGED,
             int(failures),
             float(pen),
             self._names_t,
@@ -951,7 +951,7 @@ class Simulator:
         chunk = max(every, (5000 // every) * every)
         done = 0
         wall = 0.0
-        status = STATUS_OK
+        status = STATUS_CONVERGED
         last_err, last_it = 0.0, 0  # a run of 0 steps solved nothing
         d = self.dimension
         if n_steps == 0:
@@ -979,7 +979,7 @@ class Simulator:
                 raise SolverError(
                     f"step {self.steps} at t = {self.time_s:.6g} s produced a non-finite state; the state before it was kept"
                 )
-            if status_k == STATUS_NOT_CONVERGED:
+            if status_k == STATUS_MAX_ITER:
                 status = status_k
                 if self.strict:
                     raise SolverError(f"NSGS did not reach {self.tolerance:g} in some step (worst error {worst_k:.3g})")
@@ -991,7 +991,7 @@ class Simulator:
         traj.steps = n_steps
         if n_steps > 0:
             self.last = StepInfo(
-                float(last_err), int(last_it), status == STATUS_OK, None, float(self.max_penetration_m),
+                float(last_err), int(last_it), status == STATUS_CONVERGED, None, float(self.max_penetration_m),
                 self._names_t, self._active[: self._k_loc].copy(),
             )  # fmt: skip
         return traj

@@ -24,7 +24,7 @@ between chunks of polishing sweeps); the best iterate is returned.
 ``W_sym = (W + Wᵀ)/2``: a non-symmetric ``W`` (one FCLib file has a relative asymmetry of
 1.3e-3) only slows the fixed point; the NSGS polish and the residual use the true ``W``.
 Cones are exact (``μ = 0``: ``r_n ≥ 0``, ``r_t = 0``); soft-finger contacts are solved in the
-scaled variables of :mod:`fixplan.engine.nsgs`. No cone is linearized.
+scaled variables of :mod:`fixplan.engine.problem`. No cone is linearized.
 
 Why this solver (measured, 2-core x86-64, numba 0.68, Clarabel 0.11, tol 1e-8)
 -------------------------------------------------------------------------------
@@ -68,25 +68,19 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from fixplan.engine.auto import solve_auto as solve_auto  # the registry's "auto" (re-exported)
 from fixplan.engine.budget import Budget
-from fixplan.engine.nsgs import (
+from fixplan.engine.nsgs import diagonal_blocks, error_kernel, run_nsgs
+from fixplan.engine.problem import (
     DEFAULT_TOL,
-    STATUS_CONVERGED,
-    STATUS_MAX_ITER,
-    STATUS_STALLED,
-    STATUS_TIME_LIMIT,
     ContactProblem,
     ContactSolution,
-    _check_settings,
-    _finish,
-    _initial_scaled,
-    diagonal_blocks,
-    error_kernel,
+    check_settings,
+    finish,
+    initial_scaled,
     kernel_arrays,
-    run_nsgs,
     stalled,
 )
+from fixplan.engine.status import STATUS_CONVERGED, STATUS_MAX_ITER, STATUS_STALLED, STATUS_TIME_LIMIT
 from fixplan.errors import SolverError
 
 DEFAULT_MAX_ROUNDS = 30
@@ -274,7 +268,7 @@ def solve_socp(
     Parameters
     ----------
     problem : ContactProblem
-        From :func:`fixplan.engine.nsgs.build_problem`.
+        From :func:`fixplan.engine.problem.build_problem`.
     r0 : array_like, shape (m,), optional
         Warm start: the first ``s`` is computed from ``u = W r0 + q`` (zeros by default).
     tol : float
@@ -302,13 +296,13 @@ def solve_socp(
     SolverError
         When Clarabel itself raises (the message and the round are in ``extras``).
     """
-    _check_settings(tol, max_iter, 1.0)
+    check_settings(tol, max_iter, 1.0)
     if polish_sweeps < 0:
         raise SolverError(f"expected polish_sweeps ≥ 0, got {polish_sweeps}")
     budget = Budget.start(time_limit)
     t0 = time.perf_counter()
     arrays = kernel_arrays(problem)
-    r = _initial_scaled(problem, r0)
+    r = initial_scaled(problem, r0)
     u = np.empty(problem.size)
     err = error_kernel(*arrays, r, u)  # type: ignore[call-arg]  # numba dispatcher
     if not math.isfinite(err):
@@ -382,4 +376,4 @@ def solve_socp(
         "max_iter": int(max_iter),
         "time_limit": time_limit,
     }
-    return _finish(problem, r, err, rounds, status, t0, "socp", extras)
+    return finish(problem, r, err, rounds, status, t0, "socp", extras)

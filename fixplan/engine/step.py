@@ -62,8 +62,8 @@ from fixplan.engine.encode import BOX
 from fixplan.engine.linalg import mm, mm3_into, mtv, mtv3_into, mv, mv3_into
 from fixplan.engine.local import WORKSPACE_SIZE, project_cone_into
 from fixplan.engine.nsgs import nsgs_dense
-from fixplan.engine.outcome import STATUS_NONFINITE, STATUS_NOT_CONVERGED, STATUS_OK
 from fixplan.engine.polish import newton_polish
+from fixplan.engine.status import STATUS_CONVERGED, STATUS_MAX_ITER, STATUS_NONFINITE
 
 
 @njit(cache=True)
@@ -217,7 +217,7 @@ def step2(theta, p, v, w, mass, Izz, com_b, kind, params, verts, enorm, loc_p, l
     dnu = mv(MinvJt, P)
     nu = nu_free + dnu
     u = mv(W, P) + q
-    status = STATUS_OK if converged else STATUS_NOT_CONVERGED
+    status = STATUS_CONVERGED if converged else STATUS_MAX_ITER
     if not (np.all(np.isfinite(nu)) and math.isfinite(err)):
         return (
             theta,
@@ -533,7 +533,7 @@ def step3_ws(R, p, v, w, mass, Ib, Ib_inv, com_b, kind, params, verts, enorm, lo
         gap_full[i] = gap[i]
     if not finite:
         return err, iters, STATUS_NONFINITE, failures, 0.0
-    status = STATUS_OK if converged else STATUS_NOT_CONVERGED
+    status = STATUS_CONVERGED if converged else STATUS_MAX_ITER
     for a in range(3):
         c_new[a] = c[a] + h * v_new[a]
     exp_so3_into(h * w_new[0], h * w_new[1], h * w_new[2], Ex)
@@ -688,7 +688,7 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
         r = 1
     t = t_start
     max_pen = 0.0
-    status = np.int64(STATUS_OK)  # not a literal: st (int64) is assigned to it below
+    status = np.int64(STATUS_CONVERGED)  # not a literal: st (int64) is assigned to it below
     worst_err = 0.0
     last_err, last_it = 0.0, 0
     done = 0
@@ -715,7 +715,7 @@ def run3(n_steps, record_every, first, t_start, R, p, v, w, mass, Ib, Ib_inv, co
         if st == STATUS_NONFINITE:
             status = st
             break
-        if st == STATUS_NOT_CONVERGED:
+        if st == STATUS_MAX_ITER:
             status = st
         t += h
         done = s
@@ -789,7 +789,7 @@ def run2(n_steps, record_every, first, t_start, theta, p, v, w, mass, Izz, com_b
         r = 1
     t = t_start
     max_pen = 0.0
-    status = np.int64(STATUS_OK)  # not a literal: st (int64) is assigned to it below
+    status = np.int64(STATUS_CONVERGED)  # not a literal: st (int64) is assigned to it below
     worst_err = 0.0
     last_err, last_it = 0.0, 0
     done = 0
@@ -811,7 +811,7 @@ def run2(n_steps, record_every, first, t_start, theta, p, v, w, mass, Izz, com_b
         if st == STATUS_NONFINITE:
             status = st
             break
-        if st == STATUS_NOT_CONVERGED:
+        if st == STATUS_MAX_ITER:
             status = st
         theta, p, v, w, P, active, u, n_w = th2, p2, v2, w2, P2, act2, u2, nw2
         t += h

@@ -13,9 +13,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from fixplan.engine import residual
+from fixplan.engine import problem as contact_problem
 from fixplan.engine.local import solve_cone, solve_coulomb_2d
-from fixplan.engine.nsgs import build_problem
+from fixplan.engine.problem import build_problem
 from fixplan.geometry.collision import BOX, PLANE, collision_points, obstacle_gap
 from fixplan.kinematics import Contact
 from fixplan.locating import locator_contact
@@ -28,7 +28,7 @@ def fclib_error(W, q, mu, offsets, sizes, P):
     """The FCLib residual of the dense problem (rows already scaled: a spin row is a standard cone row)."""
     if len(sizes) == 0:
         return 0.0
-    return residual.fclib_error(build_problem(W, q, mu, np.asarray(sizes), torsion_radius=1.0), P)
+    return contact_problem.fclib_error(build_problem(W, q, mu, np.asarray(sizes), torsion_radius=1.0), P)
 
 
 def obstacle_contacts(fixture: Fixture, pose: Pose) -> list[SimpleNamespace]:

@@ -10,7 +10,7 @@ import pytest
 import scipy.sparse as sp
 
 from fixplan.engine.fclib import read_fclib, read_matrix, solve_fclib_file
-from fixplan.engine.residual import fclib_error
+from fixplan.engine.problem import fclib_error
 from fixplan.errors import InputError
 
 REAL_PROBLEMS = [

@@ -23,8 +23,8 @@ from fixplan.engine import SOLVERS, get_solver
 from fixplan.engine.auto import STAGES, solve_auto
 from fixplan.engine.fclib import read_fclib, solve_fclib_file
 from fixplan.engine.newton import _Pattern, contact_weights, jacobian_blocks, natural_map_kernel, solve_newton
-from fixplan.engine.nsgs import build_problem, kernel_arrays, solve_nsgs
-from fixplan.engine.residual import fclib_error
+from fixplan.engine.nsgs import solve_nsgs
+from fixplan.engine.problem import build_problem, fclib_error, kernel_arrays
 from fixplan.engine.socp import MAX_POLISH_SWEEPS, solve_socp
 from fixplan.errors import InputError
 from fixplan.settings import DEFAULT

@@ -9,14 +9,11 @@ import numpy as np
 import pytest
 
 from fixplan.engine import SOLVERS, get_solver, solve
+from fixplan.engine.auto import solve_auto
 from fixplan.engine.local import law_violation
-from fixplan.engine.nsgs import (
-    build_problem,
-    solve_nsgs,
-    solve_nsgs_reference,
-)
-from fixplan.engine.residual import fclib_error
-from fixplan.engine.socp import solve_auto, solve_socp
+from fixplan.engine.nsgs import solve_nsgs, solve_nsgs_reference
+from fixplan.engine.problem import build_problem, fclib_error
+from fixplan.engine.socp import solve_socp
 from fixplan.errors import InputError
 
 # --------------------------------------------------------------------------- problem builders

@@ -15,9 +15,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import fixplan
-from fixplan.engine.nsgs import build_problem, solve_nsgs
+from fixplan.engine.nsgs import solve_nsgs
 from fixplan.engine.polish import _lu_solve, newton_polish
-from fixplan.engine.residual import fclib_error
+from fixplan.engine.problem import build_problem, fclib_error
 from fixplan.engine.simulator import Simulator
 from fixplan.engine.socp import solve_socp
 

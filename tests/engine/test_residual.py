@@ -2,7 +2,7 @@
 
 :func:`fixplan.engine.residual.fclib_error_rows` (what every compiled sweep stops on, through
 :func:`fixplan.engine.nsgs.error_kernel` for sparse ``W``) must give the number
-:func:`fixplan.engine.residual.fclib_error` gives, on the FCLib library's problems (with ``../shared``)
+:func:`fixplan.engine.problem.fclib_error` gives, on the FCLib library's problems (with ``../shared``)
 and on random problems of every cone kind, at the origin, at random impulses and near a solution.
 The residual is relative (divided by ``max(‖q‖, ‖r‖, ‖u‖)``), so near a solution the two agree to
 rounding of the O(1) terms (``abs=1e-14``), elsewhere to ``rel=1e-12``.
@@ -15,8 +15,9 @@ import pytest
 import scipy.sparse as sp
 
 from fixplan.engine.fclib import read_fclib
-from fixplan.engine.nsgs import build_problem, error_kernel, kernel_arrays, solve_nsgs
-from fixplan.engine.residual import fclib_error, fclib_error_rows
+from fixplan.engine.nsgs import error_kernel, solve_nsgs
+from fixplan.engine.problem import build_problem, fclib_error, kernel_arrays
+from fixplan.engine.residual import fclib_error_rows
 
 
 def _compiled(problem, reaction):
