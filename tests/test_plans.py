@@ -114,7 +114,8 @@ def _check_plan(entry, fx, r):
         assert max(abs(g) for g in v.final_gaps_m.values()) <= 1e-4
         assert v.max_penetration_m <= 1e-5
         for tr in r.transitions:
-            assert tr.success and min(tr.margins) > 0
+            # (a free flight keeps no contact: it has no margin to keep, the approach from a free start)
+            assert tr.success and (not tr.established or min(tr.margins) > 0)
 
 
 def test_validate_checks_plan_entries(tmp_path):
