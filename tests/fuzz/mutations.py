@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from conftest import library
+from conftest import PROBLEMS, library  # noqa: F401  (re-exported: the fuzz tests import PROBLEMS from here)
 from hypothesis import strategies as st
 
 SEEDS = library()  # less the fixtures whose robot needs a missing extra
