@@ -1170,7 +1170,8 @@ class Executor:
     def _search(self, t: float, pose: Pose, motion: FloatArray, contacts: list[str], **options: Any) -> Any:
         """:func:`~fixplan.jamming.search.search_wrench` at ``pose``, within the arm's joint-torque box there.
 
-        The box's rows cost a solve about a quarter more (1.7 of 7 ms on box-3-2-1-arm6): while
+        The box's rows cost a solve about a quarter more (2.8 against 2.3 ms on box-3-2-1-arm6,
+        ``benchmarks/bench_robot.py``; following the arm and building its box 0.2 ms): while
         the last push left the joints inside the headroom, the push is first sought without them,
         and kept when it is inside too (where the arm does not bind, the same push); otherwise,
         and from then on while the box binds, it is sought within the box.

@@ -6,8 +6,8 @@ arm's joint-torque box at the pose the part is at (:meth:`ArmFollower.torque_box
 damped least squares from them (:meth:`Arm.ik`, warm-started: a few steps between frames), the
 first from the arm's configuration at the fixture's start (the branch
 :func:`~fixplan.robot.check.first_configuration` picks). It runs at the display rate, in the
-display thread, or at the executor's control rate (200 Hz: a few hundred microseconds a call, the
-search it feeds about 8 ms), never per tick of the 1 kHz loop. A pose the arm does not reach keeps the last reached
+display thread, or at the executor's control rate (200 Hz: about 0.2 ms a call with the box, the
+search it feeds 2–3 ms), never per tick of the 1 kHz loop. A pose the arm does not reach keeps the last reached
 joints and says so (``reached`` false, ``error`` how far the tool stays from its target).
 """
 
