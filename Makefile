@@ -11,7 +11,8 @@ install: $(STAMP)
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,bench]'
+	@# robots: example-robot-data (about 135 MB) for the library's Panda and UR5 problems, run in CI too
+	$(BIN)/python -m pip install --quiet -e '.[dev,bench,robots]'
 	@test -x $(BIN)/fixplan
 	@# Headless Chromium for `fixplan view`'s browser test and `make gallery` (Debian's package; Playwright
 	@# drives it, `playwright install` is never run). As root apt-get runs directly, else through sudo if present.

@@ -670,6 +670,10 @@ class Execution(JsonObject):
     max_command_force_N: Annotated[float, Real(QUANTITY)] = Field(0.0, description="[N]")
     max_command_torque_Nm: Annotated[float, Real(QUANTITY)] = Field(0.0, description="[N·m]")
     beyond_fraction_solves: Annotated[int, Count()] = Field(0, description="Solves beyond the headroom.")
+    max_arm_torque_ratio: Annotated[float | None, _OPTIONAL_QUANTITY] = Field(
+        None, description="With a [robot]: the most loaded joint's |τ| / τ_max under the pushes commanded."
+    )
+    arm_unreached_solves: Annotated[int, Count()] = Field(0, description="Solves where the arm does not reach.")
 
 
 _FORCES = Range("a force", "N", -limits.FORCE_MAX_N, limits.FORCE_MAX_N)

@@ -75,6 +75,32 @@ def urdf_path(urdf: str, base_dir: Path) -> Path | None:
     return path
 
 
+def robot_data_installed() -> bool:
+    """Whether example-robot-data's loaders (the optional extra ``fixplan[robots]``) can be imported."""
+    import importlib.util
+
+    return importlib.util.find_spec("example_robot_data") is not None
+
+
+def names_robot_data(path: Path) -> str | None:
+    """The robot of example-robot-data a fixture file's ``[robot] urdf`` names (``"panda"``), else None.
+
+    Read from the TOML alone (None where it does not parse): for a caller that must know, before
+    loading the file, that it needs the extra.
+    """
+    import tomllib
+
+    try:
+        with open(path, "rb") as fh:
+            robot = tomllib.load(fh).get("robot")
+    except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError):
+        return None
+    urdf = robot.get("urdf") if isinstance(robot, dict) else None
+    if isinstance(urdf, str) and ROBOT_NAME.match(urdf) and not urdf.endswith(".urdf"):
+        return urdf
+    return None
+
+
 def load_robot(spec: RobotSpec) -> LoadedRobot:
     """The robot ``spec`` names, loaded (cached per file and tool frame); :class:`RobotError` when it cannot be."""
     if spec.urdf_path is None:

@@ -509,6 +509,10 @@ class ExecutionSettings:
     recover_s: float = 0.15  # after a lost contact, press the part back this long before re-planning
     smoothing_s: float = 0.02  # first-order lag on the applied push (0: none)
     hold_fraction: float = 0.25  # at the goal, each locator is pressed by this fraction of the weight
+    # with a [robot]: a push found within the arm's joint-torque box that loads a joint beyond this
+    # share of the headroom (limit_fraction of its effort) keeps the next searches within the box at
+    # once; below it the next push is first sought without the box's rows (the box does not bind)
+    box_binds_fraction: float = 0.9
     speed_limit_factor: float = 25.0  # speed beyond this × the cruise speed (and ≥ 1 m/s) is divergence
     # a pressed locator whose contact normal (in the part's frame) makes less than this cosine with
     # its normal at the goal presses another face of the part (a side tip under the base)

@@ -10,15 +10,46 @@ import subprocess
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 import fixplan
+from fixplan.robot_file import names_robot_data, robot_data_installed
 
 ROOT = Path(__file__).resolve().parents[1]
 PROBLEMS = ROOT / "problems"
 SHARED = ROOT.parent / "shared"
+ROBOT_DATA_MISSING: str | None = (
+    None
+    if robot_data_installed()
+    else "example-robot-data is not installed (the optional extra fixplan[robots]: make install installs it, "
+    "or pip install -e '.[robots]'): the library's Panda and UR5 problems need it"
+)
+"""Why the fixtures that name a robot of example-robot-data are skipped here (None: they run)."""
+
+
+def needs_robot_data(path: Path) -> bool:
+    """A fixture file naming a robot of example-robot-data while that extra is missing: its tests skip."""
+    return ROBOT_DATA_MISSING is not None and names_robot_data(path) is not None
+
+
+def library(folder: Path = PROBLEMS) -> list[Path]:
+    """The fixture files of a library folder (not its ``expected.toml``), less those :func:`needs_robot_data`."""
+    return sorted(p for p in folder.glob("*.toml") if p.name != "expected.toml" and not needs_robot_data(p))
+
+
+def library_params(folder: Path = PROBLEMS) -> list[Any]:
+    """Every fixture file of a library folder as a pytest parameter, those that need the missing extra skipped."""
+    marks = pytest.mark.skip(reason=str(ROBOT_DATA_MISSING))
+    return [
+        pytest.param(p, marks=marks) if needs_robot_data(p) else p
+        for p in sorted(folder.glob("*.toml"))
+        if p.name != "expected.toml"
+    ]
+
+
 CLI = [sys.executable, "-c", "import sys; from fixplan.cli import main; sys.exit(main())"]
 """``fixplan`` as a fresh process, from this checkout's package (not an installed entry point)."""
 

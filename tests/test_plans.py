@@ -11,7 +11,7 @@ from __future__ import annotations
 import tomllib
 
 import pytest
-from conftest import PROBLEMS, run_cli
+from conftest import PROBLEMS, ROBOT_DATA_MISSING, library, needs_robot_data, run_cli
 
 import fixplan
 
@@ -20,9 +20,7 @@ ENTRIES = tomllib.loads((PROBLEMS / "expected.toml").read_text())["plan"]
 
 def _full_fixtures() -> list[str]:
     out = []
-    for path in sorted(PROBLEMS.glob("*.toml")):
-        if path.name == "expected.toml":
-            continue
+    for path in library():
         fixture = fixplan.load(path)
         if fixture.is_full:
             out.append(path.name)
@@ -37,7 +35,7 @@ def ex_limit(fx):
 
 
 def test_every_full_fixture_has_a_plan_entry():
-    assert sorted(e["file"] for e in ENTRIES) == _full_fixtures()
+    assert sorted(e["file"] for e in ENTRIES if not needs_robot_data(PROBLEMS / e["file"])) == _full_fixtures()
 
 
 @pytest.mark.slow
@@ -45,6 +43,8 @@ def test_every_full_fixture_has_a_plan_entry():
 def test_plan_matches_the_hand_derived_outcome(entry):
     """The derived outcome; an entry with ``xfail_reason`` (the planner disagrees with the physics)
     is a visible xfail while it fails, and a failure once it passes (drop the key then)."""
+    if needs_robot_data(PROBLEMS / entry["file"]):
+        pytest.skip(str(ROBOT_DATA_MISSING))
     fx = fixplan.load(PROBLEMS / entry["file"])
     r = fixplan.solve(fx)
     if "xfail_reason" not in entry:
@@ -114,7 +114,8 @@ def _check_plan(entry, fx, r):
         assert max(abs(g) for g in v.final_gaps_m.values()) <= 1e-4
         assert v.max_penetration_m <= 1e-5
         for tr in r.transitions:
-            assert tr.success and min(tr.margins) > 0
+            # (a free flight keeps no contact: it has no margin to keep, the approach from a free start)
+            assert tr.success and (not tr.established or min(tr.margins) > 0)
 
 
 def test_validate_checks_plan_entries(tmp_path):

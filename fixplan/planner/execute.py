@@ -18,7 +18,10 @@ plan's knot poses). The :class:`Executor` does not replay that path. At the cont
 4. regulates speed along that motion (cruise at ``speed_mps``, slow down near the target) and
    re-solves the non-jamming wrench (:func:`~fixplan.jamming.search.search_wrench`, least
    effort, friction robust to ``±friction_margin``) at the current pose; the wrench is held
-   between solves.
+   between solves. With a ``[robot]`` every push is sought within the arm's own set at the
+   current pose, its joint-torque box ``|τ_g(q) + J(q)ᵀ w| ≤ τ_max`` (the joints ``q`` followed
+   by inverse kinematics from solve to solve, :class:`~fixplan.robot.follow.ArmFollower`), as
+   the plan's searches are at its knots: not a ball of pushes inscribed in it.
 
 Guards, each counted and reported in :class:`ExecutionLog`:
 
@@ -53,6 +56,7 @@ from fixplan.settings import DEFAULT, ExecutionNoise, ExecutionSettings
 from fixplan.spatial import Pose, shift_twist, shift_wrench
 
 if TYPE_CHECKING:
+    from fixplan.jamming.hand_set import TorqueBox
     from fixplan.model import Fixture
     from fixplan.planner.policy import Policy
 
@@ -120,6 +124,10 @@ class ExecutionLog:
     # wrench solves that used more than the headroom (limit_fraction of the hand's limits): no
     # non-jamming push inside it, or none inside pressing the kept contacts by the weight
     beyond_fraction_solves: int = 0
+    # with a [robot]: the most loaded joint's |τ| / τ_max under the pushes commanded (None: no arm), and
+    # the solves at a pose the arm does not reach (searched without its box)
+    max_arm_torque_ratio: float | None = None
+    arm_unreached_solves: int = 0
 
     def event(self, t: float, kind: str, message: str) -> None:
         self.events.append((t, kind, message))
@@ -134,6 +142,8 @@ class ExecutionLog:
             "max_command_force_N": self.max_command_force_N,
             "max_command_torque_Nm": self.max_command_torque_Nm,
             "beyond_fraction_solves": self.beyond_fraction_solves,
+            "max_arm_torque_ratio": self.max_arm_torque_ratio,
+            "arm_unreached_solves": self.arm_unreached_solves,
         }
 
 
@@ -291,6 +301,15 @@ class Executor:
         self._goal_normals = _goal_normals_body(fixture)
         self._release: tuple[str, float] | None = None  # (why, since): lifting the part off a wrong face
         self._beyond_noted = -1  # the transition in which a push beyond the headroom was last reported
+        self._arm = None  # the arm that carries the part, followed from solve to solve (a [robot] in 3D)
+        if fixture.robot is not None and fixture.dimension == 3:
+            from fixplan.robot.follow import ArmFollower
+
+            self._arm = ArmFollower(fixture)
+            self.log.max_arm_torque_ratio = 0.0
+        self._box: TorqueBox | None = None  # the arm's box at the last solve's pose
+        self._box_about = np.zeros(3)  # that pose's body origin, the point the pushes are about
+        self._box_binds = False  # the last push searched within the box loaded a joint near the headroom
 
     # -- plan bookkeeping ----------------------------------------------------------------------
     def _set_plan(self, start_state: State, steps: list[Step]) -> None:
@@ -668,7 +687,7 @@ class Executor:
         desired = np.concatenate([direction * s.speed_mps, np.zeros(self.ndof - d)])
         a_com = self._carry_accel((desired - twist_ahead) / s.speed_time_s, M, s.accel_mps2)
         self.log.counts["solves"] += 1
-        ok, w, reason = free_wrench(fx, pose, a_com, M)
+        ok, w, reason = free_wrench(fx, pose, a_com, M, self._arm_boxes(t, pose))
         if ok:
             self._accept(w)
         else:
@@ -713,6 +732,18 @@ class Executor:
 
         return free_wrench(self.fixture, pose, np.zeros(self.ndof), self._mass_matrix(pose))[1]
 
+    def arm_start_push(self, pose: Pose, pressed: State) -> FloatArray | None:
+        """The hold push (:meth:`hold_wrench`) on ``pressed`` where the arm cannot hold itself at ``pose`` without pushing.
+
+        None without an arm, or where its joints carry its own weight within their efforts (no
+        push, ``|τ_g| ≤ τ_max``). An arm whose weight alone is beyond a joint's effort holds the
+        part pressed into its contacts from the first tick, instead of starting from no push.
+        """
+        boxes = self._arm_boxes(None, pose)
+        if not boxes or not pressed or float(np.max(boxes[0].ratios(np.zeros(6), pose.p_world))) <= 1.0:
+            return None
+        return self.hold_wrench(pose, sorted(pressed))
+
     def preload(self, w: FloatArray) -> None:
         """Start with ``w`` already applied (a part that is carried when the run begins)."""
         self.wrench = np.asarray(w, dtype=float).copy()
@@ -725,7 +756,10 @@ class Executor:
         The contact forces that carry gravity (least squares, ≥ 0) plus ``hold_fraction`` of the
         weight pressed into every locator: ``w = r − τ Σ_i G_iᵀ``, with ``r`` the part of gravity
         the locators cannot carry; τ is reduced until the push is within ``limit_fraction`` of the
-        hand's limits (the headroom every push keeps where it can).
+        hand's limits (the headroom every push keeps where it can). With a ``[robot]`` the push is
+        also kept within ``limit_fraction`` of the joints' efforts at ``pose`` (its torque box): τ
+        is reduced, or raised while within the hand's limits (pressing the part down can carry an
+        arm's own weight), and where no τ does it the push that loads the joints least is taken.
         """
         from fixplan.nnls import nnls
 
@@ -739,14 +773,26 @@ class Executor:
         com = cs.com_world
         d = fx.dimension
         F_cap, T_cap = self.limit_fraction * self.F_max, self.limit_fraction * self.T_max
-        w_o = np.zeros(self.ndof)
-        for _ in range(30):
-            w_c = r - tau * G.sum(axis=0)
-            w_o = shift_wrench(w_c, com, pose.p_world)
-            if np.linalg.norm(w_o[:d]) <= F_cap and np.linalg.norm(w_o[d:]) <= T_cap:
+        boxes = self._arm_boxes(None, pose)
+        taus = [tau * 0.7**k for k in range(30)]
+        if boxes:
+            taus += [tau / 0.7**k for k in range(1, 30)]
+        best: tuple[float, FloatArray] | None = None
+        for tau_k in taus:
+            w_o = shift_wrench(r - tau_k * G.sum(axis=0), com, pose.p_world)
+            if np.linalg.norm(w_o[:d]) > F_cap or np.linalg.norm(w_o[d:]) > T_cap:
+                continue
+            ratio = float(np.max(boxes[0].ratios(w_o, pose.p_world))) if boxes else 0.0
+            if ratio <= self.limit_fraction:
+                best = (ratio, w_o)
                 break
-            tau *= 0.7
-        return w_o
+            if best is None or ratio < best[0]:
+                best = (ratio, w_o)
+        if best is None:  # none within the hand's limits: the least pressing
+            return shift_wrench(r - taus[29] * G.sum(axis=0), com, pose.p_world)
+        if boxes and self.log.max_arm_torque_ratio is not None:
+            self.log.max_arm_torque_ratio = max(self.log.max_arm_torque_ratio, best[0])
+        return best[1]
 
     def _with_noise(self, w: FloatArray) -> FloatArray:
         if self.noise.force_noise <= 0:
@@ -933,7 +979,6 @@ class Executor:
         return nu / size, left
 
     def _solve(self, t: float, pose: Pose, twist: FloatArray, M: FloatArray) -> None:
-        from fixplan.jamming.search import search_wrench
         from fixplan.planner.segments import free_wrench
 
         s = self.settings
@@ -997,7 +1042,7 @@ class Executor:
             # (a part that fell off a contact kept falling while the push only set its speed
             # toward the target: 1 m/s within 0.7 s); the velocity error is closed in speed_time_s
             a_com = self._carry_accel((nu_hat * v_des - twist_ahead) / s.speed_time_s, M, s.accel_mps2 * boost)
-            ok, w, why = free_wrench(self.fixture, pose, a_com, M)
+            ok, w, why = free_wrench(self.fixture, pose, a_com, M, self._arm_boxes(t, pose))
             if ok:
                 self._accept(w)
             else:
@@ -1009,11 +1054,11 @@ class Executor:
         # get a push computed for friction pointing elsewhere, and leave a kept contact
         slip = origin_motion(twist + a_com / s.control_rate_hz, com, pose.p_world)
         try:
-            res = search_wrench(
-                self.fixture,
+            res = self._search(
+                t,
+                pose,
                 motion,
                 list(step.established),
-                pose=pose,
                 objective="effort",
                 min_margin_N=s.margin_N,
                 friction_margin=s.friction_margin * boost,
@@ -1093,16 +1138,14 @@ class Executor:
         the dynamics of the deceleration ``a_com`` with friction against the slip, without the
         not-jamming constraint (held at rest is what braking aims at). False when none is found.
         """
-        from fixplan.jamming.search import search_wrench
-
         s = self.settings
         self.log.counts["solves"] += 1
         try:
-            res = search_wrench(
-                self.fixture,
+            res = self._search(
+                t,
+                pose,
                 origin_motion(a_com, com, pose.p_world),
                 list(step.established),
-                pose=pose,
                 objective="effort",
                 min_margin_N=s.margin_N,
                 friction_margin=0.0,
@@ -1138,8 +1181,47 @@ class Executor:
                 f" {res.torque_fraction:.0%} of max_torque",
             )
 
+    def _search(self, t: float, pose: Pose, motion: FloatArray, contacts: list[str], **options: Any) -> Any:
+        """:func:`~fixplan.jamming.search.search_wrench` at ``pose``, within the arm's joint-torque box there.
+
+        The box's rows cost a solve about a quarter more (2.8 against 2.3 ms on box-3-2-1-arm6,
+        ``benchmarks/bench_robot.py``; following the arm and building its box 0.2 ms): while
+        the last push left the joints inside the headroom, the push is first sought without them,
+        and kept when it is inside too (where the arm does not bind, the same push); otherwise,
+        and from then on while the box binds, it is sought within the box.
+        """
+        from fixplan.jamming.search import search_wrench
+
+        boxes = self._arm_boxes(t, pose)
+        if boxes and not self._box_binds:
+            res = search_wrench(self.fixture, motion, contacts, pose=pose, **options)
+            if res.found and res.wrench is not None:
+                ratio = float(np.max(boxes[0].ratios(res.wrench, pose.p_world)))
+                if ratio <= self.limit_fraction:
+                    return res
+            self._box_binds = True
+        res = search_wrench(self.fixture, motion, contacts, pose=pose, hand_sets=boxes, **options)
+        if boxes and res.found and res.arm_torque_ratio is not None:
+            self._box_binds = res.arm_torque_ratio >= self.settings.box_binds_fraction * self.limit_fraction
+        return res
+
+    def _arm_boxes(self, t: float | None, pose: Pose) -> tuple[TorqueBox, ...]:
+        """The arm's joint-torque box at ``pose`` for the search (none without an arm, or where it does not reach)."""
+        self._box = None
+        if self._arm is None:
+            return ()
+        self._box = self._arm.torque_box(pose, "the part's pose" + ("" if t is None else f" at t = {t:.3f} s"))
+        self._box_about = pose.p_world
+        if self._box is None:
+            self.log.arm_unreached_solves += 1
+            return ()
+        return (self._box,)
+
     def _accept(self, w: FloatArray) -> None:
         self.wrench = np.asarray(w, dtype=float).copy()
+        if self._box is not None and self.log.max_arm_torque_ratio is not None:
+            ratio = float(np.max(self._box.ratios(self.wrench, self._box_about)))
+            self.log.max_arm_torque_ratio = max(self.log.max_arm_torque_ratio, ratio)
         d = self.fixture.dimension
         self.log.max_command_force_N = max(self.log.max_command_force_N, float(np.linalg.norm(w[:d])))
         self.log.max_command_torque_Nm = max(self.log.max_command_torque_Nm, float(np.linalg.norm(w[d:])))

@@ -506,6 +506,8 @@ def execution_from_json(obj: Any, where: str = "execution") -> ExecutionLog:
         max_command_force_N=float(obj.get("max_command_force_N", 0.0)),
         max_command_torque_Nm=float(obj.get("max_command_torque_Nm", 0.0)),
         beyond_fraction_solves=int(obj.get("beyond_fraction_solves", 0)),
+        max_arm_torque_ratio=None if obj.get("max_arm_torque_ratio") is None else float(obj["max_arm_torque_ratio"]),
+        arm_unreached_solves=int(obj.get("arm_unreached_solves", 0)),
     )
     log.counts = {str(k): int(v) for k, v in counts.items()}
     return log

@@ -598,7 +598,13 @@ def solve(
     require_full(fixture, "planning")
     arm_limits = None
     if fixture.robot is not None:
-        fixture, arm_limits = _with_arm_limits(fixture)
+        # the hand's limits stay the fixture's: every push is searched within the arm's own set,
+        # its joint-torque box at the pose (the fine planner at both knots of each segment, the
+        # executor at the part's pose every solve). The ball of pushes inscribed in that set at the
+        # start and goal is only reported (robot.hand_limits): cutting the limits to it refused
+        # pushes the arm exerts (an arm whose weight alone loads a joint beyond its effort has an
+        # empty ball, yet carries the part by pressing it down)
+        arm_limits = _with_arm_limits(fixture)[1]
     if order is not None:
         _check_order(fixture, order)
     t0 = time.perf_counter()
@@ -729,7 +735,11 @@ def solve_insertion(
 
 
 def _with_arm_limits(fixture: Fixture) -> tuple[Fixture, Any]:
-    """The fixture with its hand limits cut to what its arm exerts at the start and goal (:func:`fixplan.robot.check.arm_hand_limits`)."""
+    """The fixture with its hand limits cut to the ball of pushes its arm exerts at the start and goal.
+
+    (:func:`fixplan.robot.check.arm_hand_limits`.) :func:`solve` reports the cut (``robot.hand_limits``)
+    and plans with the fixture's own limits and the arm's joint-torque boxes.
+    """
     from dataclasses import replace
 
     from fixplan.jamming.search import hand_limits

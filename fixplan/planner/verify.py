@@ -291,6 +291,12 @@ def verify(
         w0 = executor.carry_wrench(fixture.start)
         rig = haptic_rig(fixture, sim, x0 + w0 / rig.K, F_max, T_max, profile.haptic)
         executor.preload(w0)
+    else:
+        press = executor.arm_start_push(fixture.start, start_state)
+        if press is not None:
+            # an arm that cannot hold itself without pushing: it presses the part from the first tick
+            rig = haptic_rig(fixture, sim, x0 + press / rig.K, F_max, T_max, profile.haptic)
+            executor.preload(press)
     loop = rig.loop
     d = fixture.dimension
     threshold = executor.threshold_N

@@ -72,7 +72,9 @@ class RobotReport:
     worst_joint: str | None = None
     worst_knot: int | None = None
     notes: list[str] = field(default_factory=list)
-    hand_limits: ArmLimits | None = None  # the hand limits the planner used, cut to the arm's (solve sets it)
+    hand_limits: ArmLimits | None = (
+        None  # the ball of pushes inscribed in the arm's set at start and goal (solve sets it)
+    )
 
     @property
     def feasible(self) -> bool:
@@ -262,9 +264,9 @@ def first_configuration(arm: Arm, fixture: Fixture, pose: Pose) -> tuple[FloatAr
 def arm_hand_limits(fixture: Fixture, force_N: float, torque_Nm: float) -> ArmLimits | None:
     """The hand limits ``(F, T)`` scaled to what the arm exerts at the start and goal poses (None: no robot).
 
-    The planner's wrench searches then keep every push inside the ball of pushes the arm can
-    exert there (:meth:`Arm.exertable_scale`); between those poses the plan check measures the
-    torques themselves. A pose the arm cannot reach leaves the limits as they are (the plan
+    The ball of pushes the arm can exert there (:meth:`Arm.exertable_scale`), inscribed in its
+    set: what a hand with only force and torque limits could be given. :func:`~fixplan.solve`
+    reports it; its searches use the arm's set itself (:meth:`Arm.torque_box`). A pose the arm cannot reach leaves the limits as they are (the plan
     check then refuses the plan, naming the knot).
     """
     if fixture.robot is None:
