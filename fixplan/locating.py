@@ -175,6 +175,15 @@ def locator_gaps(workpiece: Workpiece, pose: Pose, locators: Sequence[Locator]) 
     return np.array([locator_contact(workpiece, pose, loc).gap_m for loc in locators])
 
 
+def start_state(fixture: Fixture, kinds: Sequence[str] = ("locator",)) -> frozenset[str]:
+    """Who touches the part at its start pose: the locators (``kinds``: also ``"pin"``, ``"bore"``).
+
+    Every plan's sequence starts here; a part in free space starts in the empty state.
+    """
+    touching = contact_set(fixture, "start")
+    return frozenset(c.owner for c in touching.contacts if c.kind in kinds)
+
+
 def contact_set(
     fixture: Fixture,
     pose: Pose | str | None = None,

@@ -22,6 +22,9 @@ from fixplan.spatial import Pose, exp_so3, rot2, skew
 FloatArray = NDArray[np.float64]
 
 
+STANDARD_GRAVITY_M_S2 = 9.81  # [m/s²]: the scale of default pushes and limits in a weightless scene
+
+
 @dataclass(frozen=True)
 class Locator:
     """A fixed locator: a spherical tip (radius 0: a point) at ``p_world``."""
@@ -297,6 +300,32 @@ class Fixture:
         if self.goal_pose is None:
             raise InfeasibleError(f"{self.source}: no goal pose (the model was built without locating it)")
         return self.goal_pose
+
+    @property
+    def gravity_m_s2(self) -> float:
+        """``|g|`` [m/s²]; standard gravity for a weightless scene (the scale of default pushes and limits)."""
+        return float(np.linalg.norm(self.gravity)) or STANDARD_GRAVITY_M_S2
+
+    @property
+    def weight_N(self) -> float:
+        """The part's weight ``m |g|`` [N] (with standard gravity in a weightless scene)."""
+        return self.workpiece.mass_kg * self.gravity_m_s2
+
+    def hand_limits(self) -> tuple[float, float, str]:
+        """The hand's force [N] and torque [N·m] limits, with the defaults used without them, and a note.
+
+        Without ``[manipulator]`` limits: ``5 m |g|`` and that force times the part's bounding radius;
+        the note says so. The wrench search, the planner's executor and its verification use these.
+        """
+        F_max, T_max = self.manipulator.max_force_N, self.manipulator.max_torque_Nm
+        notes = ""
+        if not np.isfinite(F_max):
+            F_max = 5.0 * self.weight_N
+            notes += f" (no manipulator.max_force: bounded at 5 m|g| = {F_max:.4g} N)"
+        if not np.isfinite(T_max):
+            T_max = F_max * self.workpiece.shape.bounding_radius
+            notes += f" (no manipulator.max_torque: bounded at {T_max:.4g} N·m)"
+        return F_max, T_max, notes
 
     def gravity_wrench(self) -> FloatArray:
         """Gravity as a wrench about the centre of mass, world axes."""

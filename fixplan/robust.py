@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan import locating
 from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.locating import contact_set, locator_contact, locator_gaps, solve_goal, with_goal
 from fixplan.model import Fixture, Locator
@@ -294,7 +295,7 @@ def verify_on_world(
     info = {**what.to_json(), "settings": settings.to_json()}
     if result.status == "infeasible":
         return result, info
-    start_state = frozenset(c.owner for c in contact_set(fixture, "start").contacts if c.kind == "locator")
+    start_state = locating.start_state(fixture)
     t0 = time.perf_counter()
     v = verify_sample(fixture, start_state, plan_steps(result.transitions), sample, settings, result.policy)
     timings = {**result.timings, "verify_s": time.perf_counter() - t0}
@@ -390,7 +391,7 @@ def nominal_plan(fixture: Fixture, settings: RobustSettings) -> tuple[PlanResult
         fixture, run_verification=False, acceleration_mps2=settings.acceleration_mps2,
         margin_N=settings.margin_N, friction_margin=settings.friction_margin, knots=settings.knots,
     )  # fmt: skip
-    start_state = frozenset(c.owner for c in contact_set(fixture, "start").contacts if c.kind == "locator")
+    start_state = locating.start_state(fixture)
     return result, start_state, plan_steps(result.transitions)
 
 

@@ -24,8 +24,9 @@ from fixplan.fixture import fixture_stamp
 from fixplan.interactive import record
 from fixplan.interactive.record import plan_json, push_disagreement, verify_plan_file, verify_recording
 from fixplan.interactive.session import HapticSession
+from fixplan.locating import start_state
 from fixplan.plan_schema import validate_plan_document
-from fixplan.planner.plan import Plan, plan_for_fixture, start_state
+from fixplan.planner.plan import Plan, plan_for_fixture
 
 
 def strict(obj: dict) -> dict:
@@ -236,9 +237,7 @@ def test_a_recording_without_transitions_cannot_pass(capsys, tmp_path, recording
 
 
 def test_pushes_beyond_the_hands_limits_are_refused(recording, box):
-    from fixplan.jamming.search import hand_limits
-
-    F_max, _, _ = hand_limits(box)
+    F_max, _, _ = box.hand_limits()
     data = copy.deepcopy(recording)
     data["transitions"][1]["pushes"]["wrench"][2][:3] = [0.0, 0.0, -2.0 * F_max]
     with pytest.raises(InputError, match=r"transitions\[1\]\.pushes\.wrench\[2\]: a push of .* hand's limits"):

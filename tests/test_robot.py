@@ -600,8 +600,8 @@ def test_the_verification_fails_naming_the_link_and_the_time() -> None:
 
     (Run without the policy and re-plans ``solve`` gives the executor, the load itself may also stray.)
     """
+    from fixplan.locating import start_state
     from fixplan.planner.execute import ExecutionSettings
-    from fixplan.planner.plan import start_state
     from fixplan.planner.solve import plan_steps
     from fixplan.planner.verify import verify
     from fixplan.robot.exertable import arm_at_start

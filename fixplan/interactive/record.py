@@ -284,14 +284,13 @@ def push_disagreement(data: dict[str, Any], fixture: Fixture) -> str | None:
     sample of the same session time (within half a sampling step), component by component within
     ``push_match_abs + push_match_rel × limit`` (the hand's force or torque limit).
     """
-    from fixplan.jamming.search import hand_limits
     from fixplan.settings import DEFAULT
 
     trace = data["verification"]["trace"]
     times = np.asarray(trace["time_s"], dtype=float)
     measured = np.asarray(trace["coupling_wrench"], dtype=float)
     step = float(trace.get("every_s") or (np.min(np.diff(times)) if len(times) > 1 else 0.0))
-    F_max, T_max, _ = hand_limits(fixture)
+    F_max, T_max, _ = fixture.hand_limits()
     d = fixture.dimension
     s = DEFAULT.plan_file
     tol = np.array([s.push_match_abs + s.push_match_rel * (F_max if j < d else T_max) for j in range(fixture.ndof)])
@@ -353,7 +352,6 @@ def verify_recording(
     """Re-run a session's recorded pushes in the haptic loop; a :class:`~fixplan.planner.verify.Verification`."""
     from fixplan.engine.simulator import Simulator
     from fixplan.jamming import classify
-    from fixplan.jamming.search import hand_limits
     from fixplan.planner.execute import ExecutionSettings
     from fixplan.planner.plan import Verification, plan_for_fixture
     from fixplan.planner.verify import haptic_rig, loop_measures, pose_coordinates
@@ -370,11 +368,11 @@ def verify_recording(
         )  # fmt: skip
     sim = Simulator(fixture, settings=HAPTIC.engine)
     R0 = fixture.start.R_world_body.copy()
-    F_max, T_max, _ = hand_limits(fixture)
+    F_max, T_max, _ = fixture.hand_limits()
     rig = haptic_rig(fixture, sim, pose_coordinates(fixture.start, R0), F_max, T_max, HAPTIC.haptic)
     settings = ExecutionSettings()
     wp = fixture.workpiece
-    weight = wp.mass_kg * (float(np.linalg.norm(fixture.gravity)) or 9.81)
+    weight = fixture.weight_N
     threshold = max(settings.press_fraction * weight, 1e-6)
     r_gyr = math.sqrt(float(np.max(np.linalg.eigvalsh(np.atleast_2d(wp.inertia_body)))) / wp.mass_kg)
     # what the file claims was pushed: the transitions' pushes (not the trace, which is only compared)
@@ -473,7 +471,7 @@ def verify_recording(
 
 def verify_plan_file(fixture: Fixture, data: dict[str, Any], *, source: str = "plan") -> Any:
     """``fixplan verify``: a session's recorded pushes, or a solved plan's transitions through the executor."""
-    from fixplan.locating import contact_set
+    from fixplan.locating import start_state as locating_start_state
     from fixplan.planner.execute import Step, TransitionKind
     from fixplan.planner.plan import plan_for_fixture
     from fixplan.planner.solve import Planner
@@ -495,8 +493,7 @@ def verify_plan_file(fixture: Fixture, data: dict[str, Any], *, source: str = "p
                 f"{source}: transitions[{i}].motion: expected one of {', '.join(get_args(TransitionKind))}, got {tr.motion!r}"
             )
         steps.append(Step(tr.from_state, tr.added, cast(TransitionKind, tr.motion), tr.poses, tr.together))
-    touching = contact_set(fixture, "start")
-    start_state = frozenset(c.owner for c in touching.contacts if c.kind == "locator")
+    start_state = locating_start_state(fixture)
     # the plan's policy (solve --json's "policy"), as solve verified it: the executor takes it from
     # a state the plan does not expect before it re-plans
     v = verify(fixture, start_state, steps, replan=Planner(fixture).replan, policy=plan.policy)

@@ -171,7 +171,7 @@ def coupling_cap(fixture: Fixture, rig: HapticRigSettings) -> tuple[float, float
     part's weight ``m |g|`` and ``coupling_torque_weights`` × ``m |g|`` × its bounding radius.
     """
     wp = fixture.workpiece
-    weight_N = wp.mass_kg * (float(np.linalg.norm(fixture.gravity)) or 9.81)
+    weight_N = fixture.weight_N
     r_m = wp.shape.bounding_radius
     F, T = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
     notes = []
@@ -447,7 +447,7 @@ class HapticSession:
         profile: Settings = HAPTIC,
         clamp: bool = False,
     ):
-        from fixplan.locating import contact_set
+        from fixplan.locating import contact_set, start_state
         from fixplan.model import require_full
         from fixplan.planner.execute import DivergenceGuard, ExecutionSettings
         from fixplan.planner.verify import haptic_rig, pose_coordinates
@@ -490,7 +490,7 @@ class HapticSession:
         self.stiffness_scale_max = self._passive_scale_max()
         settings = ExecutionSettings()
         wp = fixture.workpiece
-        g = float(np.linalg.norm(fixture.gravity)) or 9.81
+        g = fixture.gravity_m_s2
         self.weight_N = wp.mass_kg * g
         # the executor's guard of the fixture's neighbourhood; a person's push may be the whole cap
         self.guard = DivergenceGuard.for_fixture(fixture, settings, accel_mps2=self.F_max / wp.mass_kg + g)
@@ -505,8 +505,7 @@ class HapticSession:
         self.realtime = realtime
         self.synchronous = synchronous
         self.trace_every = max(int(trace_every), 1)
-        touching = contact_set(fixture, "start")
-        self.start_state = frozenset(x.owner for x in touching.contacts if x.kind in ("locator", "pin", "bore"))
+        self.start_state = start_state(fixture, ("locator", "pin", "bore"))
         # the goal: every locator pressed; a pin or bore pressed when it touches at the located pose
         # (its clearance leaves the others free: a diamond pin centred in its hole touches nothing)
         self.goal_names = frozenset(self.names)

@@ -338,25 +338,6 @@ def _certificate(
     return y / size
 
 
-def hand_limits(fixture: Fixture) -> tuple[float, float, str]:
-    """The hand's force [N] and torque [N·m] limits, with the defaults the search uses without them.
-
-    Without ``[manipulator]`` limits: ``5 m |g|`` and that force times the part's bounding radius;
-    the note says so. The planner's executor and its verification use the same limits.
-    """
-    wp = fixture.workpiece
-    g = float(np.linalg.norm(fixture.gravity)) or 9.81
-    F_max, T_max = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
-    notes = ""
-    if not np.isfinite(F_max):
-        F_max = 5.0 * wp.mass_kg * g
-        notes += f" (no manipulator.max_force: bounded at 5 m|g| = {F_max:.4g} N)"
-    if not np.isfinite(T_max):
-        T_max = F_max * wp.shape.bounding_radius
-        notes += f" (no manipulator.max_torque: bounded at {T_max:.4g} N·m)"
-    return F_max, T_max, notes
-
-
 def search_wrench(
     fixture: Fixture,
     motion: ArrayLike,
@@ -531,8 +512,8 @@ def search_wrench_in(
         raise InputError(f"limit_fraction must lie in (0, 1], got {limit_fraction}")
     roles, directions = _roles(cs, a_hat, _SEARCH.role_rel, slip)
     wp = fixture.workpiece
-    g = float(np.linalg.norm(fixture.gravity)) or 9.81
-    F_max, T_max, notes = hand_limits(fixture)
+    g = fixture.gravity_m_s2
+    F_max, T_max, notes = fixture.hand_limits()
     w_g = fixture.gravity_wrench()
     target = None if min_margin_N is None else float(min_margin_N)
     kept = [i for i, c in enumerate(cs.contacts) if roles[c.name] != "opening"]

@@ -256,7 +256,7 @@ class Executor:
         self.tick_s = tick_s
         wp = fixture.workpiece
         self.mass = wp.mass_kg
-        self.weight_N = wp.mass_kg * (float(np.linalg.norm(fixture.gravity)) or 9.81)
+        self.weight_N = fixture.weight_N
         self.threshold_N = max(s.press_fraction * self.weight_N, 1e-6)
         self.names = tuple(loc.name for loc in fixture.locators)
         self.goal_state: State = frozenset(self.names)
@@ -290,9 +290,8 @@ class Executor:
         self._prev_solve: tuple[float, FloatArray] | None = None  # (time, twist) at the last solve
         self._delay_ticks = int(round(self.noise.latency_s / tick_s))
         self._history: deque[tuple[Pose, FloatArray, State]] = deque(maxlen=self._delay_ticks + 1)
-        from fixplan.jamming.search import hand_limits
 
-        self.F_max, self.T_max, _ = hand_limits(fixture)
+        self.F_max, self.T_max, _ = fixture.hand_limits()
         # headroom: pushes are sought within this fraction of the limits first (the search's own)
         self.limit_fraction = DEFAULT.search.limit_fraction
         self.guard = DivergenceGuard.for_fixture(fixture, s)

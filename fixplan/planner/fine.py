@@ -526,9 +526,8 @@ def with_wrenches(
     scale = None
     if bad:
         # where the hand is too weak, the most demanding segment says what the transition needs
-        from fixplan.jamming.search import hand_limits
 
-        F_max, T_max, _ = hand_limits(fixture)
+        F_max, T_max, _ = fixture.hand_limits()
         scales = {k: needed_scale(needs[k], F_max, T_max) for k in bad}
         weak = {k: x for k, x in scales.items() if x is not None}
         k = max(weak, key=lambda j: (weak[j], -j)) if weak else bad[0]
@@ -553,9 +552,7 @@ def _beyond_headroom(fixture: Fixture, wrenches: FloatArray) -> str:
     The segments' searches keep within ``settings.search.limit_fraction`` of the limits wherever a
     non-jamming push exists inside; the pushes beyond it are those where none does.
     """
-    from fixplan.jamming.search import hand_limits
-
-    F_max, T_max, _ = hand_limits(fixture)
+    F_max, T_max, _ = fixture.hand_limits()
     frac = DEFAULT.search.limit_fraction
     d = fixture.dimension
     rows = wrenches[np.isfinite(wrenches).all(axis=1)]

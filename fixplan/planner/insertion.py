@@ -283,7 +283,7 @@ def _push(fixture: Fixture, pose: Pose, names: list[str], u: FloatArray, s: Inse
         ok, w, why = free_wrench(fixture, pose, a, contact_set(fixture, pose, []).mass_matrix)
         return ok, w, why, (), None, None
     wedge = wedge_force(cs) if len(cs) >= 2 else None
-    weight = fixture.workpiece.mass_kg * float(np.linalg.norm(fixture.gravity) or 9.81)
+    weight = fixture.weight_N
     r = search_wrench_in(cs, a, fixture, objective="effort", min_margin_N=s.seat_side * weight, confirm=True)
     w = r.wrench if r.wrench is not None else np.full(fixture.ndof, np.nan)
     return r.found, w, r.reason, tuple(c.name for c in cs.contacts), wedge, r.margin_N
@@ -460,7 +460,7 @@ def seat_push(fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings)
     from fixplan.jamming import classify
 
     wp = fixture.workpiece
-    weight = wp.mass_kg * float(np.linalg.norm(fixture.gravity) or 9.81)
+    weight = fixture.weight_N
     side, at = seat_side_world(fixture, pose, u)
     com = pose.point_world_from_body(wp.com_body)
     F_side = s.seat_side * weight * side
@@ -526,7 +526,7 @@ class InsertionRun:
         wp = world.workpiece
         self.m = wp.mass_kg
         self.I_max = float(np.max(np.linalg.eigvalsh(np.atleast_2d(wp.inertia_body))))
-        self.weight_N = self.m * float(np.linalg.norm(world.gravity) or 9.81)
+        self.weight_N = world.weight_N
         self.inserts = inserts(world)
         self.rests = tuple(loc.name for loc in world.locators)
         self.states = plan.states
@@ -791,7 +791,6 @@ def verify_insertion(
     """Run ``plan`` (made on the nominal fixture) in the haptic loop on ``world`` and check the outcome (module text)."""
     from fixplan.engine.simulator import Simulator
     from fixplan.errors import SolverError
-    from fixplan.jamming.search import hand_limits
     from fixplan.planner.verify import (
         final_gap_check,
         haptic_rig,
@@ -808,7 +807,7 @@ def verify_insertion(
     trace_every_s = vs.trace_every_s if trace_every_s is None else trace_every_s
     sim = Simulator(world, max_iterations=max_sweeps, settings=profile.engine)
     R0 = world.start.R_world_body.copy()
-    F_max, T_max, _ = hand_limits(world)
+    F_max, T_max, _ = world.hand_limits()
     run = InsertionRun(world, plan, s, noise, sim.dt)
     wp = world.workpiece
     x0 = pose_coordinates(world.start, R0)

@@ -1000,19 +1000,11 @@ def _check_same_fixture(data: Any, fixture: Fixture, source: str) -> None:
         )
 
 
-def start_state(fixture: Fixture) -> frozenset[str]:
-    """The locators touching the part at its start pose: where every plan's sequence starts."""
-    from fixplan.locating import contact_set
-
-    touching = contact_set(fixture, "start")
-    return frozenset(c.owner for c in touching.contacts if c.kind == "locator")
-
-
 def check_plan_claims(plan: Plan, fixture: Fixture, source: str) -> None:
     """Refuse a plan whose claims ``fixture`` rules out, before it is replayed.
 
     - every push it names (a transition's mean wrench, a policy's, a recording's pushes) is within
-      the hand's limits (``manipulator.max_force``, ``max_torque``; :func:`~fixplan.jamming.search.hand_limits`);
+      the hand's limits (``manipulator.max_force``, ``max_torque``; :meth:`~fixplan.model.Fixture.hand_limits`);
     - a solved plan (not infeasible): its sequence starts in the state the part starts in (the
       locators touching at the start pose) and ends with every locator; its transitions are that
       sequence's steps, each closing its ``added`` locators; its knot poses start at the start
@@ -1021,11 +1013,10 @@ def check_plan_claims(plan: Plan, fixture: Fixture, source: str) -> None:
 
     Raises :class:`InputError` naming the key and what was expected.
     """
-    from fixplan.jamming.search import hand_limits
     from fixplan.planner.execute import DivergenceGuard
     from fixplan.settings import DEFAULT
 
-    F_max, T_max, _ = hand_limits(fixture)
+    F_max, T_max, _ = fixture.hand_limits()
     slack = 1.0 + DEFAULT.plan_file.limit_rel
     d = fixture.dimension
 
@@ -1055,6 +1046,8 @@ def check_plan_claims(plan: Plan, fixture: Fixture, source: str) -> None:
     if plan.extras.get("source") == "haptic session" or plan.status == "infeasible":
         return  # a recording claims what a person did: its replay judges it
     names = frozenset(loc.name for loc in fixture.locators)
+    from fixplan.locating import start_state
+
     start = start_state(fixture)
 
     def state(s: Iterable[str]) -> str:

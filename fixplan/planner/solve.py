@@ -25,6 +25,7 @@ import numpy as np
 
 from fixplan.errors import InputError, SolverError
 from fixplan.locating import contact_set, solve_goal
+from fixplan.locating import start_state as locating_start_state
 from fixplan.model import Fixture, require_full
 from fixplan.planner.approach import Approach, plan_approach
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
@@ -609,8 +610,7 @@ def solve(
         _check_order(fixture, order)
     t0 = time.perf_counter()
     names = [loc.name for loc in fixture.locators]
-    touching = contact_set(fixture, "start")
-    start_state = frozenset(c.owner for c in touching.contacts if c.kind == "locator")
+    start_state = locating_start_state(fixture)
     settings = vopts.pop("settings", None) or ExecutionSettings(
         accel_mps2=acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N
     )
@@ -742,11 +742,10 @@ def _with_arm_limits(fixture: Fixture) -> tuple[Fixture, Any]:
     """
     from dataclasses import replace
 
-    from fixplan.jamming.search import hand_limits
     from fixplan.model import Manipulator
     from fixplan.robot.check import arm_hand_limits
 
-    F_max, T_max, _ = hand_limits(fixture)
+    F_max, T_max, _ = fixture.hand_limits()
     limits = arm_hand_limits(fixture, F_max, T_max)
     if limits is None or limits.scale >= 1.0:
         return fixture, limits
@@ -775,9 +774,8 @@ def _policy_and_memo(
 
 
 def _hand_limits(fixture: Fixture) -> tuple[float, float]:
-    from fixplan.jamming.search import hand_limits
 
-    F_max, T_max, _ = hand_limits(fixture)
+    F_max, T_max, _ = fixture.hand_limits()
     return F_max, T_max
 
 
