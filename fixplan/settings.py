@@ -483,7 +483,9 @@ class ExecutionSettings:
 
     control_rate_hz: float = 200.0  # wrench re-solves per second (held between solves)
     speed_mps: float = 0.04  # cruise speed
-    free_speed_mps: float = 0.1  # cruise speed in free flight (no contact kept)
+    # cruise speed in free flight (no contact kept): free starts 5-80 mm and up to 23 cm of path away
+    # spent 1-2.5 s of their simulated load cruising at 0.1 m/s; the contact speed is the braking's
+    free_speed_mps: float = 0.25
     min_speed_mps: float = 0.004  # speed kept up to the very end of a transition
     accel_mps2: float = 1.0  # largest commanded acceleration
     brake_mps2: float = 0.1  # deceleration of the speed profile toward the target
