@@ -101,9 +101,12 @@ def check_expectations(path: Path, data: dict[str, Any]) -> tuple[list[Issue], d
             elif kind == "touching":
                 _names(r, entry, "names", f"{where}.names", [loc.name for loc in fixture.locators], required=True)
             else:
-                # a plan's states hold locators, and pins engaged in their holes
+                # a plan's states hold locators, pins engaged in their holes, and a bore's wall and
+                # bottom ("B1", "B1.bottom") for a part loaded into a bore (the bore locates it)
+                bores = [b.name for b in fixture.bores]
                 locs = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins]
-                if not fixture.is_full:
+                locs += bores + [f"{b}.bottom" for b in bores]
+                if not (fixture.is_full or bores):
                     r.error(f"{where}.file", f"{name} is not a full fixture (expected one that can be planned)")
                 status = r.string(entry, "status", f"{where}.status", required=True, choices=("planned", "infeasible"))
                 if "verified" in entry and not isinstance(entry["verified"], bool):
