@@ -491,7 +491,7 @@ class HapticSession:
         settings = ExecutionSettings()
         wp = fixture.workpiece
         g = fixture.gravity_m_s2
-        self.weight_N = wp.mass_kg * g
+        self.weight_N = fixture.weight_N
         # the executor's guard of the fixture's neighbourhood; a person's push may be the whole cap
         self.guard = DivergenceGuard.for_fixture(fixture, settings, accel_mps2=self.F_max / wp.mass_kg + g)
         self.threshold_N = max(settings.press_fraction * self.weight_N, 1e-6)

@@ -511,8 +511,6 @@ def search_wrench_in(
     if not (0.0 < frac <= 1.0):
         raise InputError(f"limit_fraction must lie in (0, 1], got {limit_fraction}")
     roles, directions = _roles(cs, a_hat, _SEARCH.role_rel, slip)
-    wp = fixture.workpiece
-    g = fixture.gravity_m_s2
     F_max, T_max, notes = fixture.hand_limits()
     w_g = fixture.gravity_wrench()
     target = None if min_margin_N is None else float(min_margin_N)
@@ -565,7 +563,7 @@ def search_wrench_in(
     # the headroom must not cost the contacts their hold: where the margin inside the fraction
     # stays below the weight m|g| (or the target asked for), the whole limits are tried too and
     # kept when they press the kept contacts clearly harder
-    weight_N = wp.mass_kg * g if target is None else target
+    weight_N = fixture.weight_N if target is None else target
     tau_within = float(-sol.value) if within else 0.0
     lifted = False
     if lift_below_weight and within and frac < 1.0 and tau_within < weight_N * (1 - _TARGET_REL):
@@ -605,7 +603,7 @@ def search_wrench_in(
             x, tau, meta, y = sol2.x, float(-sol2.value), meta2, y2
     tau_best = tau
     if objective == "effort":
-        wanted = wp.mass_kg * g if target is None else target
+        wanted = fixture.weight_N if target is None else target
         tau_req = wanted if wanted < tau * (1 - _TARGET_REL) else tau * (1 - _TARGET_REL)
         prog_e, meta_e = _build(**build, cert=y, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_req, hand_frac=h_lim)  # type: ignore[arg-type]
         sol_e = ClarabelProgram(prog_e).solve(prog_e.b)
