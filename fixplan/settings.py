@@ -524,6 +524,9 @@ class ExecutionSettings:
     # a state no plan leads on from (a re-plan fails there even after pressing back): lift the part
     # off and approach again, with the transition that led there set aside, at most this often
     dead_end_releases: int = 1
+    # a transition that loses a contact this often in one load is a loop (pressing back and the
+    # policy lead into it again): it is set aside and the part re-planned around it
+    max_losses: int = 3
     carry_torque_fraction: float = 0.5  # a carried part's spin is stopped with up to this fraction of the hand's torque
     reach_factor: float = 3.0  # the part this × (farthest locator + bounding radius) from its start has diverged
 

@@ -228,6 +228,41 @@ def test_a_dead_end_is_left_through_free_space_with_its_transition_set_aside():
     assert calls[-1] == frozenset() and ex.states[0] == frozenset() and not ex.done
 
 
+def test_a_transition_that_keeps_losing_a_contact_is_set_aside_and_planned_around():
+    """A slide that loses S2 each time it is tried, and each time S2 is pressed back: a loop
+    (a box lost B2 and S2 24 times in its last slide until the 12 s time-out). At the
+    ``max_losses``-th loss the transition is set aside, the part re-planned from what it touches
+    at once (no press back), and a policy chain through the looping transition is not followed."""
+    calls, seen = [], []
+    base = {"B1", "B2", "B3"}
+
+    def replan(pose, state):
+        calls.append(state)
+        return [Step(tuple(sorted(state)), "S1", "slide", (pose, pose))]
+
+    class Policy:  # leads back into the slide that looped
+        def chain_from(self, fixture, state, pose, goal):
+            return [Step(tuple(sorted(state)), "S2", "slide", (pose, pose)),
+                    Step((*sorted(base), "S2"), "S1", "slide", (pose, pose))]  # fmt: skip
+
+    fx, ex = _box_executor(replan=replan)
+    ex.avoid = lambda state, target, why: seen.append((state, target, why))
+    t = _feed(ex, fx, [(base, 20), (base | {"S2"}, 20)])
+    assert ex.index == 1  # closing S1 with S2 kept
+    n = ex.settings.max_losses
+    for k in range(1, n):  # lost and pressed back, n - 1 times: recovered each time
+        t = _feed(ex, fx, [(base, 20), (base | {"S2"}, 20)], t0=t)
+        assert ex.log.counts["lost_contact"] == k and ex.log.counts["recovered"] == k
+    assert not calls and not seen and ex.index == 1
+    ex.policy = Policy()
+    _feed(ex, fx, [(base, 20)], t0=t)  # the n-th loss: a loop
+    assert ex.log.counts["loops"] == 1 and ex.log.counts["policy_switches"] == 0
+    assert [(s_, t_) for s_, t_, _ in seen] == [(frozenset(base | {"S2"}), "S1")]
+    assert f"lost a contact {n} times, a loop" in seen[0][2]
+    assert calls == [frozenset(base)] and ex.states[0] == frozenset(base) and ex.steps[0].target == "S1"
+    assert not ex.done
+
+
 def test_a_second_dead_end_fails_with_the_reason():
     fx, ex = _box_executor(replan=lambda pose, state: "no sequence of transitions reaches every locator")
     base = {"B1", "B2", "B3"}

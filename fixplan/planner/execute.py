@@ -111,6 +111,7 @@ class ExecutionLog:
             "policy_switches": 0,
             "wrong_face": 0,
             "dead_ends": 0,
+            "loops": 0,
         }
     )
     observed: list[tuple[str, ...]] = field(default_factory=list)  # debounced pressed sets, in order
@@ -286,6 +287,10 @@ class Executor:
         self._recover_why = ""
         self._pressed_back_for = -1  # the transition in which a failed re-plan last pressed the part back
         self._left_plan_in: tuple[State, str] | None = None  # (established, target) of the step a contact was lost in
+        # contacts lost in each transition (established, target): a transition that keeps losing
+        # one is a loop (settings.max_losses), set aside and planned around
+        self._losses: dict[tuple[State, str], int] = {}
+        self._looping: set[tuple[State, str]] = set()  # transitions set aside as loops in this load
         self._dead_ends = 0  # dead-end states left by lifting the part off (settings.dead_end_releases)
         self._prev_solve: tuple[float, FloatArray] | None = None  # (time, twist) at the last solve
         self._delay_ticks = int(round(self.noise.latency_s / tick_s))
@@ -401,10 +406,24 @@ class Executor:
             return
         if lost:
             self.log.counts["lost_contact"] += 1
+            why = f"lost contact with {', '.join(lost)} in transition {self.index + 1}"
             if self.index < len(self.steps):
                 step = self.steps[self.index]
-                self._left_plan_in = (frozenset(step.established), step.target)
-            why = f"lost contact with {', '.join(lost)} in transition {self.index + 1}"
+                self._left_plan_in = key = (frozenset(step.established), step.target)
+                self._losses[key] = n = self._losses.get(key, 0) + 1
+                if n >= self.settings.max_losses:
+                    # the same transition lost a contact again and again: pressing back and the
+                    # policy lead the part into it once more (a box lost B2 and S2 24 times in
+                    # its last slide until the time ran out). Set it aside and plan around it.
+                    self._looping.add(key)
+                    loop = f"{why}: {_fmt(key[0])} + {key[1]} lost a contact {n} times, a loop"
+                    if self.avoid is not None:
+                        self.avoid(key[0], key[1], loop)
+                    self._recover_until = None
+                    self.log.counts["loops"] += 1
+                    self.log.event(t, "guard", loop + "; set aside, re-planning around it")
+                    self._replan(t, pose, P, loop, "lost contact")
+                    return
             added = set(self.steps[self.index].added) if self.index < len(self.steps) else set()
             if self._recover_until is None and (P - current) <= added:
                 # first press the part back into what it left (a part that rocks off a contact
@@ -435,6 +454,8 @@ class Executor:
         chain = self.policy.chain_from(self.fixture, state, pose, self.goal_state)
         if not chain:
             return False
+        if any((frozenset(st.established), st.target) in self._looping for st in chain):
+            return False  # it leads through a transition that looped here: the re-planner plans around it
         self.log.counts["policy_switches"] += 1
         self._set_plan(state, chain)
         self._retry, self._use_direct, self._still_since = 0, False, None
