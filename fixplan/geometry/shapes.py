@@ -62,24 +62,30 @@ class Shape(ABC):
 
 
 def _box_project(p: FloatArray, half: FloatArray) -> Projection:
-    """Closest point on an axis-aligned box of half extents ``half`` (any dimension)."""
-    q = np.abs(p) - half
-    sign = np.where(p >= 0.0, 1.0, -1.0)
-    outside = np.maximum(q, 0.0)
-    n_out = math.sqrt(float(outside @ outside))  # lengths of a part: no overflow to guard against
-    scale = float(half.max())
-    if n_out > 1e-12 * scale:
+    """Closest point on an axis-aligned box of half extents ``half`` (any dimension).
+
+    Scalar arithmetic on Python floats: the box has 2 or 3 axes, and a dozen NumPy calls on
+    arrays that small cost ten times the arithmetic (this runs for every locator at every pose
+    the planner and the executor look at).
+    """
+    ps = p.tolist()
+    hs = half.tolist()
+    q = [abs(pi) - hi for pi, hi in zip(ps, hs, strict=True)]
+    sign = [1.0 if pi >= 0.0 else -1.0 for pi in ps]
+    outside = [qi if qi > 0.0 else 0.0 for qi in q]
+    n_out = math.sqrt(math.fsum(o * o for o in outside))  # lengths of a part: no overflow to guard against
+    if n_out > 1e-12 * max(hs):
         # Outside: a face, edge or corner region; the normal is exact in each.
-        closest = np.clip(p, -half, half)
-        normal = sign * outside / n_out
-        return Projection(n_out, closest, normal)
-    # Inside or on the surface: the nearest face.
-    k = int(np.argmax(q))
-    closest = p.copy()
-    closest[k] = sign[k] * half[k]
-    normal = np.zeros_like(p)
+        closest = [min(max(pi, -hi), hi) for pi, hi in zip(ps, hs, strict=True)]
+        normal = [si * oi / n_out for si, oi in zip(sign, outside, strict=True)]
+        return Projection(n_out, np.array(closest), np.array(normal))
+    # Inside or on the surface: the nearest face (the first of equals, as argmax).
+    k = max(range(len(q)), key=q.__getitem__)
+    closest = list(ps)
+    closest[k] = sign[k] * hs[k]
+    normal = [0.0] * len(ps)
     normal[k] = sign[k]
-    return Projection(float(q[k]), closest, normal)
+    return Projection(q[k], np.array(closest), np.array(normal))
 
 
 def _face_name(axis: int, sign: float) -> str:
@@ -269,25 +275,49 @@ class Polygon(Shape):
             a.setflags(write=False)
         return V, E, normals
 
-    def project(self, p_body: FloatArray) -> Projection:
-        p = np.asarray(p_body, dtype=float)
+    @functools.cached_property
+    def _edge_lists(self) -> tuple[tuple[float, float, float, float, float, float, float], ...]:
+        """Per edge: vertex (x, y), edge vector (x, y), outward unit normal (x, y), |edge|²."""
         V, E, N = self._edges()
-        plane = np.einsum("ij,ij->i", p - V, N)  # signed distance to each edge's line
-        if plane.max() <= 0.0:
-            k = int(np.argmax(plane))
-            return Projection(float(plane[k]), p - plane[k] * N[k], N[k].copy())
+        return tuple(
+            (float(v[0]), float(v[1]), float(e[0]), float(e[1]), float(n[0]), float(n[1]), float(e @ e))
+            for v, e, n in zip(V, E, N, strict=True)
+        )
+
+    def project(self, p_body: FloatArray) -> Projection:
+        # scalar arithmetic on Python floats: a polygon has a handful of edges, and the NumPy
+        # version's dozen calls on arrays that small cost ten times the arithmetic
+        px, py = (float(c) for c in np.asarray(p_body, dtype=float))
+        edges = self._edge_lists
+        plane = [
+            (px - vx) * nx + (py - vy) * ny for vx, vy, _, _, nx, ny, _ in edges
+        ]  # signed distance to each edge's line
+        k_in = max(range(len(plane)), key=plane.__getitem__)
+        if plane[k_in] <= 0.0:
+            _, _, _, _, nx, ny, _ = edges[k_in]
+            d = plane[k_in]
+            return Projection(d, np.array([px - d * nx, py - d * ny]), np.array([nx, ny]))
         # Outside: nearest point over the edge segments.
-        t = np.clip(np.einsum("ij,ij->i", p - V, E) / np.einsum("ij,ij->i", E, E), 0.0, 1.0)
-        C = V + t[:, None] * E
-        d = np.linalg.norm(p - C, axis=1)
-        k = int(np.argmin(d))
-        if d[k] > 1e-12 * self.bounding_radius and 0.0 < t[k] < 1.0:
-            normal = N[k].copy()
-        elif d[k] > 1e-12 * self.bounding_radius:
-            normal = (p - C[k]) / d[k]
+        best: tuple[float, int, float, float, float] | None = None
+        for i, (vx, vy, ex, ey, _, _, ee) in enumerate(edges):
+            t = ((px - vx) * ex + (py - vy) * ey) / ee
+            t = 0.0 if t < 0.0 else 1.0 if t > 1.0 else t
+            cx, cy = vx + t * ex, vy + t * ey
+            d = math.hypot(px - cx, py - cy)
+            if best is None or d < best[0]:
+                best = (d, i, t, cx, cy)
+        assert best is not None
+        d, k, t, cx, cy = best
+        _, _, _, _, nx, ny, _ = edges[k]
+        tiny = 1e-12 * self.bounding_radius
+        if d > tiny and 0.0 < t < 1.0:
+            normal = [nx, ny]
+        elif d > tiny:
+            normal = [(px - cx) / d, (py - cy) / d]
         else:
-            normal = N[int(np.argmax(plane))].copy()
-        return Projection(float(d[k]), C[k], normal)
+            _, _, _, _, nx, ny, _ = edges[k_in]
+            normal = [nx, ny]
+        return Projection(d, np.array([cx, cy]), np.array(normal))
 
     def _area_terms(self) -> tuple[float, FloatArray, float]:
         area, c, j = self._area_terms_once

@@ -584,7 +584,9 @@ class Executor:
                 self.log.event(t, "reached", "every locator pressed, at rest")
         else:
             self._settled_since = None
-        if not at_goal and self._recover_until is None:
+        if not at_goal and self._recover_until is None and tick % self.every == 0:
+            # at the control rate: a stall is judged over stall_s (0.12 s) or progress_s, and the
+            # target's exact gap at every tick was a tenth of the executor's time
             self._check_stall(t, pose, speed)
             if self.done:
                 return self._applied
