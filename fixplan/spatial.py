@@ -30,6 +30,7 @@ The power ``w · t = f·v + m·ω`` is the same at every point:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,15 +78,21 @@ def exp_so3(omega: ArrayLike) -> FloatArray:
 
 
 def log_so3(R: ArrayLike) -> FloatArray:
-    """The rotation vector ``ω`` with ``exp(ω̂) = R``."""
+    """The rotation vector ``ω`` with ``exp(ω̂) = R``.
+
+    Scalar arithmetic on Python floats (the haptic loop asks for it twice a tick, and NumPy's
+    per-call cost on a 3 × 3 matrix was ten times the arithmetic); the branch near π uses NumPy.
+    """
     R = np.asarray(R, dtype=float)
-    cos_t = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    theta = float(np.arccos(cos_t))
-    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
+    cos_t = min(max((r00 + r11 + r22 - 1.0) / 2.0, -1.0), 1.0)
+    theta = math.acos(cos_t)
+    vx, vy, vz = r21 - r12, r02 - r20, r10 - r01
     if theta < 1e-8:
-        return 0.5 * v
-    if np.pi - theta < 1e-6:
+        return np.array([0.5 * vx, 0.5 * vy, 0.5 * vz])
+    if math.pi - theta < 1e-6:
         # Near π: take the axis from the symmetric part.
+        v = np.array([vx, vy, vz])
         B = (R + np.eye(3)) / 2.0
         k = int(np.argmax(np.diag(B)))
         axis = B[:, k] / np.sqrt(max(B[k, k], 1e-300))
@@ -93,7 +100,8 @@ def log_so3(R: ArrayLike) -> FloatArray:
         if axis @ v < 0:
             axis = -axis
         return theta * axis
-    return theta / (2.0 * np.sin(theta)) * v
+    c = theta / (2.0 * math.sin(theta))
+    return np.array([c * vx, c * vy, c * vz])
 
 
 def quaternion_wxyz_from_matrix(R: ArrayLike) -> FloatArray:
