@@ -63,7 +63,7 @@ from fixplan.jamming.hand_set import TorqueBox, torque_rows, worst_joint
 from fixplan.jamming.programs import ConeProgram, force_layout
 from fixplan.kinematics import ContactSet
 from fixplan.locating import contact_set
-from fixplan.settings import DEFAULT
+from fixplan.settings import DEFAULT, SearchSettings, Settings
 from fixplan.spatial import shift_twist, shift_wrench, skew
 
 if TYPE_CHECKING:
@@ -72,11 +72,7 @@ if TYPE_CHECKING:
 
 FloatArray = NDArray[np.float64]
 
-_SEARCH = DEFAULT.search  # the search's thresholds (fixplan.settings.SearchSettings)
-JAM_MARGIN_REL = _SEARCH.jam_margin_rel  # default least relative distance of the wrench found from static balance
-_TARGET_REL = _SEARCH.target_rel  # a margin target counts as met within this relative shortfall (solver accuracy)
 _MOVING = ("slides", "pivots", "rolls")
-SLIP_REL = _SEARCH.slip_rel  # a kept contact slipping at ≥ 5 % of the part's speed slides against its slip
 
 
 def floor_sig(x: float, digits: int = 4) -> str:
@@ -232,17 +228,18 @@ def _tangential_slip(c: Any, u: FloatArray) -> FloatArray:
 
 
 def _roles(
-    cs: ContactSet, a_hat: FloatArray, tol: float, slip: FloatArray | None = None
+    cs: ContactSet, a_hat: FloatArray, ss: SearchSettings, slip: FloatArray | None = None
 ) -> tuple[dict[str, str], dict[str, FloatArray]]:
     """Each contact's role under the motion ``a_hat`` and, for sliding ones, the unit slip direction.
 
     Without ``slip`` a kept contact slides when ``a_hat`` makes it slip (a part at rest starting to
     move: friction opposes the acceleration). With ``slip`` (a twist of the centre of mass: the
     velocity the part has, plus what the push adds within a control period) a kept contact whose
-    slip under ``slip`` is at least ``SLIP_REL`` of the twist's speed slides *against that slip*:
+    slip under ``slip`` is at least ``ss.slip_rel`` of the twist's speed slides *against that slip*:
     Coulomb friction opposes the velocity, not the acceleration asked for. Opening or closing is
-    always judged from ``a_hat``.
+    always judged from ``a_hat`` (within ``ss.role_rel``).
     """
+    tol = ss.role_rel
     scale = float(np.linalg.norm(a_hat[: cs.dimension])) + float(np.linalg.norm(a_hat[cs.dimension :])) * cs.max_lever_m
     v_scale = 0.0
     if slip is not None:
@@ -263,7 +260,7 @@ def _roles(
             continue
         t_v = _tangential_slip(c, Ji @ slip) if slip is not None and v_scale > 0 else None
         t_a = _tangential_slip(c, u)
-        if t_v is not None and float(np.linalg.norm(t_v)) > SLIP_REL * v_scale:
+        if t_v is not None and float(np.linalg.norm(t_v)) > ss.slip_rel * v_scale:
             roles[c.name] = "sliding"
             directions[c.name] = t_v / float(np.linalg.norm(t_v))
         elif float(np.linalg.norm(t_a)) > tol * scale:
@@ -287,7 +284,7 @@ def _polar_rows(cs: ContactSet) -> tuple[FloatArray, tuple[tuple[str, int], ...]
 
 
 def _certificate(
-    cs: ContactSet, target: FloatArray, *, project: bool, shared: dict[str, Any] | None = None
+    cs: ContactSet, target: FloatArray, *, project: bool, shared: dict[str, Any] | None = None, zero_rel: float
 ) -> FloatArray | None:
     """A unit (``‖ŷ‖_M = 1``) motion ``ŷ`` with ``J_i ŷ ∈ K_i*`` at every contact, or None.
 
@@ -295,7 +292,8 @@ def _certificate(
     ``project=False``: the direction maximising ``ŷᵀ target`` for the wrench ``target`` (the
     dual of the classifier's margin program: its optimum *is* the margin).
     ``shared``: a dictionary kept by the caller across calls on the same ``cs``, which then
-    computes ``M``'s Cholesky factor and the polar rows once.
+    computes ``M``'s Cholesky factor and the polar rows once. A direction shorter than ``zero_rel``
+    (``settings.numerics.zero_rel``) of the target's size is none.
     """
     n = cs.ndof
     shared = {} if shared is None else shared
@@ -333,7 +331,7 @@ def _certificate(
     y = sol.x[:n]
     size = float(np.linalg.norm(L.T @ y))
     ref = float(np.linalg.norm(L.T @ target)) if project else float(np.linalg.norm(np.linalg.solve(L, target)))
-    if size <= DEFAULT.numerics.zero_rel * max(ref, 1e-300) or (not project and float(y @ target) <= 0.0):
+    if size <= zero_rel * max(ref, 1e-300) or (not project and float(y @ target) <= 0.0):
         return None
     return y / size
 
@@ -347,7 +345,7 @@ def search_wrench(
     at: ArrayLike | None = None,
     objective: Literal["margin", "effort"] = "margin",
     min_margin_N: float | None = None,
-    jam_margin_rel: float = JAM_MARGIN_REL,
+    jam_margin_rel: float | None = None,
     friction_margin: float = 0.0,
     max_accel_factor: float = math.inf,
     slip_twist: ArrayLike | None = None,
@@ -356,6 +354,7 @@ def search_wrench(
     limit_fraction: float | None = None,
     lift_below_weight: bool = True,
     hand_sets: Sequence[TorqueBox] = (),
+    settings: Settings = DEFAULT,
 ) -> WrenchSearch:
     """The applied wrench that moves the part with acceleration ≥ ``motion``, without jamming.
 
@@ -372,8 +371,8 @@ def search_wrench(
     ``min_margin_N`` given explicitly is a *target*: when τ* falls short of it the best push is
     still returned (``found`` true) but ``margin_target_met`` is ``False`` and the reason says
     "margin target … N not met: best … N". Every wrench returned is certified at least
-    ``jam_margin_rel`` (relative, in the ``M⁻¹``-norm) away from static balance (see the module
-    docstring). When the motion opens every contact the push is ``M â − w_g``.
+    ``jam_margin_rel`` (relative, in the ``M⁻¹``-norm; default ``settings.search.jam_margin_rel``)
+    away from static balance (see the module docstring). When the motion opens every contact the push is ``M â − w_g``.
 
     ``friction_margin = δ ≥ 0`` makes the push robust to friction known only within a factor
     ``1 ± δ``: the program gives sliding contacts ``μ(1 + δ)`` (the push overcomes the worst
@@ -385,7 +384,7 @@ def search_wrench(
     ``slip_twist`` (same point and axes as ``motion``, [m/s, rad/s]) is for a part that already
     moves: sliding friction opposes the slip of this twist — pass the velocity the part has plus
     what the push adds within one control period — instead of the slip of ``motion`` (a part at
-    rest). A kept contact that slips under it at ≥ ``SLIP_REL`` of its speed slides against that
+    rest). A kept contact that slips under it at ≥ ``settings.search.slip_rel`` of its speed slides against that
     slip even where ``motion`` alone would keep it sticking. The jamming certificate is unchanged
     (the wrench would also move the part from rest).
 
@@ -419,12 +418,16 @@ def search_wrench(
     This is the fixture-level form: it builds the contact set at ``pose`` and moves ``motion``
     (and ``slip_twist``) from the body origin (or ``at``) to the centre of mass, then calls
     :func:`search_wrench_in`, which a caller holding a contact set calls directly.
+
+    ``settings`` (default: the ``default`` profile) gives every threshold of the search
+    (:class:`fixplan.settings.SearchSettings`, ``settings.search``).
     """
     m = np.asarray(motion, dtype=float)
     if m.shape != (fixture.ndof,) or not np.all(np.isfinite(m)):
         raise InputError(f"--motion expects {fixture.ndof} finite numbers, got {list(np.atleast_1d(m))}")
     if float(np.linalg.norm(m)) == 0.0:
         raise InputError("--motion is zero (expected the desired acceleration of the part)")
+    jam_margin_rel = settings.search.jam_margin_rel if jam_margin_rel is None else jam_margin_rel
     _check_options(objective, min_margin_N, friction_margin, jam_margin_rel)
     cs = contact_set(fixture, pose, contacts)
     _check_contacts(cs)
@@ -451,6 +454,7 @@ def search_wrench(
         limit_fraction=limit_fraction,
         lift_below_weight=lift_below_weight,
         hand_sets=hand_sets,
+        settings=settings,
     )
 
 
@@ -478,7 +482,7 @@ def search_wrench_in(
     about_world: ArrayLike | None = None,
     objective: str = "margin",
     min_margin_N: float | None = None,
-    jam_margin_rel: float = JAM_MARGIN_REL,
+    jam_margin_rel: float | None = None,
     friction_margin: float = 0.0,
     max_accel_factor: float = math.inf,
     slip_com: ArrayLike | None = None,
@@ -487,6 +491,7 @@ def search_wrench_in(
     limit_fraction: float | None = None,
     lift_below_weight: bool = True,
     hand_sets: Sequence[TorqueBox] = (),
+    settings: Settings = DEFAULT,
 ) -> WrenchSearch:
     """:func:`search_wrench` for a contact set already built, with the motion of the centre of mass.
 
@@ -494,8 +499,10 @@ def search_wrench_in(
     ``slip_com`` the slip twist, see :func:`search_wrench`), world axes: no shift to and from
     the body origin. ``fixture`` gives gravity, the hand's limits and the tolerances; the wrench
     found is reported about ``about_world`` (default: the body origin ``cs.body_origin_world``).
-    The other arguments and the answer are those of :func:`search_wrench`.
+    The other arguments (``settings`` among them) and the answer are those of :func:`search_wrench`.
     """
+    ss = settings.search
+    jam_margin_rel = ss.jam_margin_rel if jam_margin_rel is None else jam_margin_rel
     a_hat = np.asarray(a_com, dtype=float)
     if a_hat.shape != (cs.ndof,) or not np.all(np.isfinite(a_hat)):
         raise InputError(f"--motion expects {cs.ndof} finite numbers, got {list(np.atleast_1d(a_hat))}")
@@ -507,10 +514,10 @@ def search_wrench_in(
     slip = None if slip_com is None else np.asarray(slip_com, dtype=float)
     if slip is not None and (slip.shape != (cs.ndof,) or not np.all(np.isfinite(slip))):
         raise InputError(f"slip_twist expects {cs.ndof} finite numbers, got {list(np.atleast_1d(slip))}")
-    frac = _SEARCH.limit_fraction if limit_fraction is None else float(limit_fraction)
+    frac = ss.limit_fraction if limit_fraction is None else float(limit_fraction)
     if not (0.0 < frac <= 1.0):
         raise InputError(f"limit_fraction must lie in (0, 1], got {limit_fraction}")
-    roles, directions = _roles(cs, a_hat, _SEARCH.role_rel, slip)
+    roles, directions = _roles(cs, a_hat, ss, slip)
     F_max, T_max, notes = fixture.hand_limits()
     w_g = fixture.gravity_wrench()
     target = None if min_margin_N is None else float(min_margin_N)
@@ -519,9 +526,9 @@ def search_wrench_in(
     if boxes and cs.dimension != 3:
         raise InputError("an arm's joint-torque boxes (hand_sets) are for 3D scenes (expected none in 2D)")
     if not kept:
-        clf_free = Classifier(cs, w_g, tolerances=fixture.tolerances)
+        clf_free = Classifier(cs, w_g, tolerances=fixture.tolerances, witness=settings.witness)
         return _with_arm(
-            _free_push(cs, clf_free, a_hat, roles, about, w_g, F_max, T_max, notes, target, frac), boxes, about
+            _free_push(cs, clf_free, a_hat, roles, about, w_g, F_max, T_max, notes, target, ss, frac), boxes, about, ss
         )
 
     def not_found(
@@ -533,7 +540,7 @@ def search_wrench_in(
         )  # fmt: skip
 
     polar: dict[str, Any] = {}  # the certificates' factors of cs, computed once
-    y = _certificate(cs, a_hat, project=True, shared=polar) if certify else None
+    y = _certificate(cs, a_hat, project=True, shared=polar, zero_rel=settings.numerics.zero_rel) if certify else None
     if certify and (y is None or float(y @ cs.mass_matrix @ a_hat) <= 0.0):
         return not_found(
             "every push that produces this motion can also be balanced by the contact forces (M a is a contact"
@@ -559,34 +566,34 @@ def search_wrench_in(
     F_lim, T_lim, h_lim = frac * F_max, frac * T_max, frac
     prog, meta = _build(**build, cert=y, F_max=F_lim, T_max=T_lim, hand_frac=h_lim)  # type: ignore[arg-type]
     sol = ClarabelProgram(prog).solve(prog.b)
-    within = bool(sol.solved and -sol.value > _SEARCH.found_rel * F_max)
+    within = bool(sol.solved and -sol.value > ss.found_rel * F_max)
     # the headroom must not cost the contacts their hold: where the margin inside the fraction
     # stays below the weight m|g| (or the target asked for), the whole limits are tried too and
     # kept when they press the kept contacts clearly harder
     weight_N = fixture.weight_N if target is None else target
     tau_within = float(-sol.value) if within else 0.0
     lifted = False
-    if lift_below_weight and within and frac < 1.0 and tau_within < weight_N * (1 - _TARGET_REL):
+    if lift_below_weight and within and frac < 1.0 and tau_within < weight_N * (1 - ss.target_rel):
         prog_f, meta_f = _build(**build, cert=y, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
         sol_f = ClarabelProgram(prog_f).solve(prog_f.b)
-        if sol_f.solved and -sol_f.value > min(tau_within * _SEARCH.headroom_margin_gain, weight_N):
+        if sol_f.solved and -sol_f.value > min(tau_within * ss.headroom_margin_gain, weight_N):
             prog, meta, sol, F_lim, T_lim, h_lim, lifted = prog_f, meta_f, sol_f, F_max, T_max, 1.0, True
     if not within and frac < 1.0:
         F_lim, T_lim, h_lim = F_max, T_max, 1.0
         prog, meta = _build(**build, cert=y, F_max=F_lim, T_max=T_lim)  # type: ignore[arg-type]
         sol = ClarabelProgram(prog).solve(prog.b)
     n = cs.ndof
-    if not sol.solved or -sol.value <= _SEARCH.found_rel * F_max:
+    if not sol.solved or -sol.value <= ss.found_rel * F_max:
         # Diagnose: is it the arm, the hand's limits, or the motion itself?
         if boxes:
-            arm_said = _arm_refuses(build, y, F_max, T_max, boxes, about)
+            arm_said = _arm_refuses(build, y, F_max, T_max, boxes, about, ss)
             if arm_said is not None:
                 return replace(not_found(arm_said[0], ["arm"]), arm_torque_ratio=arm_said[1], arm_joint=arm_said[2])
-        big = _SEARCH.unbounded_factor
+        big = ss.unbounded_factor
         prog_free, _ = _build(**build, cert=y, F_max=big * F_max, T_max=big * T_max, hand_frac=None)  # type: ignore[arg-type]
         free = ClarabelProgram(prog_free).solve(prog_free.b)
-        if free.solved and -free.value > _SEARCH.found_rel * F_max:
-            reason, binding, needs = _too_weak(build, y, F_max, T_max)
+        if free.solved and -free.value > ss.found_rel * F_max:
+            reason, binding, needs = _too_weak(build, y, F_max, T_max, ss)
             return not_found(reason + notes, binding, needs)
         return not_found(
             "no wrench moves the part this way while keeping the contacts pressed and clear of jamming"
@@ -595,7 +602,11 @@ def search_wrench_in(
     x, tau = sol.x, float(-sol.value)
     # a better certificate: the classifier's own dual direction for the wrench found (the
     # optimum above stays feasible with it, so τ cannot drop)
-    y2 = _certificate(cs, x[:n] + w_g, project=False, shared=polar) if certify else None
+    y2 = (
+        _certificate(cs, x[:n] + w_g, project=False, shared=polar, zero_rel=settings.numerics.zero_rel)
+        if certify
+        else None
+    )
     if y2 is not None:
         prog2, meta2 = _build(**build, cert=y2, F_max=F_lim, T_max=T_lim, hand_frac=h_lim)  # type: ignore[arg-type]
         sol2 = ClarabelProgram(prog2).solve(prog2.b)
@@ -604,7 +615,7 @@ def search_wrench_in(
     tau_best = tau
     if objective == "effort":
         wanted = fixture.weight_N if target is None else target
-        tau_req = wanted if wanted < tau * (1 - _TARGET_REL) else tau * (1 - _TARGET_REL)
+        tau_req = wanted if wanted < tau * (1 - ss.target_rel) else tau * (1 - ss.target_rel)
         prog_e, meta_e = _build(**build, cert=y, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_req, hand_frac=h_lim)  # type: ignore[arg-type]
         sol_e = ClarabelProgram(prog_e).solve(prog_e.b)
         if sol_e.solved:
@@ -612,7 +623,7 @@ def search_wrench_in(
             tau = float(x[meta["tau"]])
         else:
             notes += " (the least-effort program did not solve: the best-margin push is returned)"
-        if target is None and wanted > tau_best * (1 + _TARGET_REL):
+        if target is None and wanted > tau_best * (1 + ss.target_rel):
             within_text = f" within {frac:.0%} of the hand's limits" if within and frac < 1.0 else ""
             notes += (
                 f" (default margin m|g| = {wanted:.4g} N not reachable{within_text}: best {floor_sig(tau_best)} N used;"
@@ -624,12 +635,12 @@ def search_wrench_in(
     forces = {c.name: lam[o : o + c.size] for c, o in zip(cs.contacts, cs.offsets, strict=True)}
     w_user = _about_point(cs, w_com, about)  # the applied wrench about the user's point
     binding = []
-    if abs(float(np.linalg.norm(w_com[: cs.dimension])) - F_max) <= _SEARCH.binding_rel * F_max:
+    if abs(float(np.linalg.norm(w_com[: cs.dimension])) - F_max) <= ss.binding_rel * F_max:
         binding.append("max_force")
-    if abs(float(np.linalg.norm(w_user[cs.dimension :])) - T_max) <= _SEARCH.binding_rel * T_max:
+    if abs(float(np.linalg.norm(w_user[cs.dimension :])) - T_max) <= ss.binding_rel * T_max:
         binding.append("max_torque")
     arm_ratio, arm_joint, _ = worst_joint(boxes, w_user, about) if boxes else (None, None, "")
-    if arm_ratio is not None and arm_ratio >= 1.0 - _SEARCH.binding_rel:
+    if arm_ratio is not None and arm_ratio >= 1.0 - ss.binding_rel:
         binding.append(f"joint {arm_joint}")
     if not within and frac < 1.0:
         notes += _beyond_fraction(w_user, cs.dimension, F_max, T_max, frac)
@@ -637,7 +648,7 @@ def search_wrench_in(
         notes += _lifted_fraction(w_user, cs.dimension, F_max, T_max, frac, tau_within)
         within = False
 
-    met = None if target is None else bool(tau_best >= target * (1 - _TARGET_REL))
+    met = None if target is None else bool(tau_best >= target * (1 - ss.target_rel))
     if not confirm:
         reason = ("decelerates the sliding part as asked" if not certify else "moves as asked") + (
             f" with every kept contact pressed by ≥ {floor_sig(tau)} N (not checked by the classifier){notes}"
@@ -649,7 +660,7 @@ def search_wrench_in(
             margin_target_N=target, margin_target_met=met, limit_fraction=frac, within_fraction=within,
             arm_torque_ratio=arm_ratio, arm_joint=arm_joint,
         )  # fmt: skip
-    clf_all = Classifier(cs, w_g, tolerances=fixture.tolerances)
+    clf_all = Classifier(cs, w_g, tolerances=fixture.tolerances, witness=settings.witness)
     bal = clf_all.classify(w_com, w_user)
     w_e_norm = clf_all.builder.m_inv_norm(w_com + w_g)
     jam_rel = bal.balance_residual / w_e_norm if w_e_norm > 0 and math.isfinite(bal.balance_residual) else None
@@ -657,8 +668,10 @@ def search_wrench_in(
         check = bal
     else:
         kept_cs = ContactSet(tuple(cs.contacts[i] for i in kept), cs.com_world, cs.mass_matrix, cs.body_origin_world)
-        check = Classifier(kept_cs, w_g, tolerances=fixture.tolerances).classify(w_com, w_user)
-    confirmed, why_not = _confirm(cs, check, a_hat, roles)
+        check = Classifier(kept_cs, w_g, tolerances=fixture.tolerances, witness=settings.witness).classify(
+            w_com, w_user
+        )
+    confirmed, why_not = _confirm(cs, check, a_hat, roles, ss)
     if bal.balanced and certify:
         reason = f"the wrench found is statically balanced ({bal.mode}): it would not move the part"
     elif not certify:
@@ -699,6 +712,7 @@ def _arm_refuses(
     T_max: float,
     boxes: tuple[TorqueBox, ...],
     about: FloatArray,
+    ss: SearchSettings,
 ) -> tuple[str, float, str] | None:
     """``(reason, ratio, joint)`` when a push within the hand's limits exists but the arm cannot exert it, else None.
 
@@ -708,7 +722,7 @@ def _arm_refuses(
     cs: ContactSet = build["cs"]
     prog, _ = _build(**build, cert=cert, F_max=F_max, T_max=T_max, hand_frac=None)
     sol = ClarabelProgram(prog).solve(prog.b)
-    if not sol.solved or -sol.value <= _SEARCH.found_rel * F_max:
+    if not sol.solved or -sol.value <= ss.found_rel * F_max:
         return None
     w_user = _about_point(cs, sol.x[: cs.ndof], about)
     ratio, joint, label = worst_joint(boxes, w_user, about)
@@ -720,12 +734,12 @@ def _arm_refuses(
     return reason, ratio, joint
 
 
-def _with_arm(res: WrenchSearch, boxes: tuple[TorqueBox, ...], about: FloatArray) -> WrenchSearch:
+def _with_arm(res: WrenchSearch, boxes: tuple[TorqueBox, ...], about: FloatArray, ss: SearchSettings) -> WrenchSearch:
     """A free push (every contact opens, the push determined) checked against the arm's boxes too."""
     if not boxes or res.wrench is None:
         return res
     ratio, joint, label = worst_joint(boxes, res.wrench, about)
-    if ratio <= 1.0 + _SEARCH.limit_rel:
+    if ratio <= 1.0 + ss.limit_rel:
         return replace(res, arm_torque_ratio=ratio, arm_joint=joint)
     where = f" at {label}" if label else ""
     reason = f"the arm cannot exert the push M a − w_g: joint {joint} needs {ratio:.3g} times its effort limit{where}"
@@ -755,7 +769,9 @@ def _lifted_fraction(w_user: FloatArray, d: int, F_max: float, T_max: float, fra
     )
 
 
-def _confirm(cs: ContactSet, check: Classification, a_hat: FloatArray, roles: dict[str, str]) -> tuple[bool, str]:
+def _confirm(
+    cs: ContactSet, check: Classification, a_hat: FloatArray, roles: dict[str, str], ss: SearchSettings
+) -> tuple[bool, str]:
     """Check the classifier's motion against the request: kind, acceleration ≥ â along â, openings."""
     kept_roles = [r for r in roles.values() if r != "opening"]
     if all(r == "sliding" for r in kept_roles):
@@ -771,9 +787,9 @@ def _confirm(cs: ContactSet, check: Classification, a_hat: FloatArray, roles: di
     ref = float(a_hat @ M @ a_hat)
     along = float(a @ M @ a_hat) / ref
     off_axis = a - along * a_hat
-    if along < 1 - _SEARCH.along_rel:
+    if along < 1 - ss.along_rel:
         return False, f"its acceleration is {along:.4g} × the requested one"
-    if float(off_axis @ M @ off_axis) > _SEARCH.off_axis_rel**2 * float(a @ M @ a):
+    if float(off_axis @ M @ off_axis) > ss.off_axis_rel**2 * float(a @ M @ a):
         return False, "its acceleration points elsewhere than the requested motion"
     for c, off in zip(cs.contacts, cs.offsets, strict=True):
         if roles[c.name] == "opening" and float(cs.J[off] @ a) <= 0.0:
@@ -798,15 +814,16 @@ def too_weak_reason(
     T_with: float | None,
     F_max: float,
     T_max: float,
+    settings: SearchSettings = DEFAULT.search,
 ) -> tuple[str, list[str]]:
     """The "too weak" message and the binding limits, from the least force and the least torque.
 
     ``F_need`` is the least force [N] a push needs with its torque within ``T_max`` (``T_with`` its
     torque there), ``T_need`` the least torque [N·m] with the force within ``F_max`` (``F_with`` its
     force); None: no push within that limit. A limit binds alone when the least push beyond it keeps
-    the other limit slack; otherwise both bind.
+    the other limit slack (below ``1 − settings.binding_rel`` of it); otherwise both bind.
     """
-    slack = 1 - _SEARCH.binding_rel
+    slack = 1 - settings.binding_rel
     torque_alone = T_need is not None and T_need > T_max and F_with is not None and F_with < slack * F_max
     force_alone = F_need is not None and F_need > F_max and T_with is not None and T_with < slack * T_max
     head = "the manipulator is too weak: "
@@ -836,7 +853,7 @@ def too_weak_reason(
 
 
 def _too_weak(
-    build: dict[str, Any], cert: FloatArray | None, F_max: float, T_max: float
+    build: dict[str, Any], cert: FloatArray | None, F_max: float, T_max: float, ss: SearchSettings
 ) -> tuple[str, list[str], tuple[float | None, float | None]]:
     """Why no push within the limits exists: the least force and the least torque it needs.
 
@@ -847,8 +864,8 @@ def _too_weak(
     """
     cs: ContactSet = build["cs"]
     d = cs.dimension
-    tau_min = _SEARCH.found_rel * F_max
-    big = _SEARCH.unbounded_factor
+    tau_min = ss.found_rel * F_max
+    big = ss.unbounded_factor
 
     def least(kind: Literal["force", "torque"], F_lim: float, T_lim: float) -> tuple[float, float] | None:
         prog, _ = _build(
@@ -865,7 +882,7 @@ def _too_weak(
     by_torque = least("torque", F_max, big * T_max)
     F_need, T_with = by_force if by_force is not None else (None, None)
     F_with, T_need = by_torque if by_torque is not None else (None, None)
-    reason, binding = too_weak_reason(F_need, F_with, T_need, T_with, F_max, T_max)
+    reason, binding = too_weak_reason(F_need, F_with, T_need, T_with, F_max, T_max, ss)
     return reason, binding, (F_need, T_need)
 
 
@@ -880,6 +897,7 @@ def _free_push(
     T_max: float,
     notes: str,
     target: float | None,
+    ss: SearchSettings,
     frac: float = 1.0,
 ) -> WrenchSearch:
     """Every contact opens: no contact force, the push is ``w = M â − w_g`` (checked, not optimised)."""
@@ -891,9 +909,9 @@ def _free_push(
     limits = (F_max, T_max)
     forces = {c.name: np.zeros(c.size) for c in cs.contacts}
     met = None if target is None else True  # no kept contact: the least normal force is vacuous
-    if F > F_max * (1 + _SEARCH.limit_rel) or T > T_max * (1 + _SEARCH.limit_rel):
+    if F > F_max * (1 + ss.limit_rel) or T > T_max * (1 + ss.limit_rel):
         # the push is determined: its force and torque are the least needed
-        reason, binding = too_weak_reason(F, F, T, T, F_max, T_max)
+        reason, binding = too_weak_reason(F, F, T, T, F_max, T_max, ss)
         reason += f" (every contact opens: the push is M a − w_g){notes}"
         return WrenchSearch(
             False, None, None, None, roles, {}, None, reason, binding, limits, margin_target_N=target,
@@ -903,7 +921,7 @@ def _free_push(
     w_e_norm = clf.builder.m_inv_norm(w_com + w_g)
     jam_rel = bal.balance_residual / w_e_norm if w_e_norm > 0 and math.isfinite(bal.balance_residual) else None
     # the push is determined: inside the headroom or not, it is the only one
-    within = F <= frac * F_max * (1 + _SEARCH.limit_rel) and T <= frac * T_max * (1 + _SEARCH.limit_rel)
+    within = F <= frac * F_max * (1 + ss.limit_rel) and T <= frac * T_max * (1 + ss.limit_rel)
     if not within:
         notes += _beyond_fraction(w_user, d, F_max, T_max, frac)
     if bal.balanced:
