@@ -569,10 +569,14 @@ class RobustSettings:
         return any(x > 0 for x in (self.mu_spread, self.pose_sigma_m, self.pose_sigma_deg, self.locator_sigma_m))
 
     def execution_settings(self) -> ExecutionSettings:
-        """The executor's settings, as ``solve`` builds them."""
+        """The executor's settings: the pushes' acceleration and margins, the others' defaults."""
         return ExecutionSettings(
             accel_mps2=self.acceleration_mps2, friction_margin=self.friction_margin, margin_N=self.margin_N
         )
+
+    def profile(self) -> Settings:
+        """The settings the plans and loads of a study use: the ``haptic`` profile with :meth:`execution_settings`."""
+        return HAPTIC.with_(execution=self.execution_settings())
 
     def noise(self, seed: int) -> ExecutionNoise:
         return ExecutionNoise(force_noise=self.force_noise, latency_s=self.latency_s, seed=seed)

@@ -24,7 +24,7 @@ from fixplan.cli._app import (
 )
 from fixplan.errors import FixplanError, InputError, one_line
 from fixplan.files import check_distinct, write_text
-from fixplan.settings import DEFAULT
+from fixplan.settings import DEFAULT, Settings
 
 if TYPE_CHECKING:
     from fixplan.model import Fixture
@@ -83,6 +83,13 @@ def _robust_settings(
     )
     settings.check()
     return settings
+
+
+def _solve_settings(accel: float, margin: float | None, friction_margin: float) -> Settings:
+    """The settings ``fixplan solve`` plans and verifies with: the ``haptic`` profile with the pushes' options."""
+    from fixplan.settings import HAPTIC, ExecutionSettings
+
+    return HAPTIC.with_(execution=ExecutionSettings(accel_mps2=accel, friction_margin=friction_margin, margin_N=margin))
 
 
 @app.command()
@@ -236,9 +243,7 @@ def solve(
         order=names,
         run_verification=not no_verify and perturb is None,
         progress=progress,
-        acceleration_mps2=accel,
-        margin_N=margin,
-        friction_margin=friction_margin,
+        settings=_solve_settings(accel, margin, friction_margin),
     )
     perturbation = None
     if perturb is not None and perturb_seed is not None:
@@ -380,8 +385,7 @@ def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | No
     from fixplan.cluster import progress_bar
 
     files = fixture_files(directory)
-    options = {"run_verification": verify, "acceleration_mps2": accel, "margin_N": margin,
-               "friction_margin": friction_margin}  # fmt: skip
+    options = {"run_verification": verify, "settings": _solve_settings(accel, margin, friction_margin)}
     with progress_bar("solving", len(files), enabled=not json_out) as progress:
         rows = solve_batch(files, options, scheduler=scheduler, progress=progress)
     if json_out:
