@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan import fixture_schema, limits
-from fixplan.errors import FixtureError, Issue
+from fixplan.errors import FixtureError, Issue, shorten
 from fixplan.fixture_schema import validate_document
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
 from fixplan.geometry.collision import BOX as OBSTACLE_BOX
@@ -48,7 +48,7 @@ from fixplan.model import (
     SimulationSettings,
     Workpiece,
 )
-from fixplan.schema import Reader, shorten
+from fixplan.schema import Reader
 from fixplan.settings import DEFAULT as DEFAULT_SETTINGS
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
 from fixplan.settings import Tolerances

@@ -119,7 +119,7 @@ def _numbers(
 
 def _shown(text: str) -> str:
     """A user's text quoted in a message: escaped, and cut when long."""
-    from fixplan.schema import shorten
+    from fixplan.errors import shorten
 
     return shorten(text)
 
