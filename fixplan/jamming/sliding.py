@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.aot import kernel
-from fixplan.jamming._roles import OPEN, STICK
+from fixplan.jamming._roles import ROLE_OPENING, ROLE_SLIDING, ROLE_STICKING
 from fixplan.kinematics import ContactSet
 from fixplan.settings import DEFAULT, WitnessSettings
 
@@ -80,10 +80,10 @@ class Rows:
         self.lever = cs.max_lever_m
 
     def code(self, roles: Roles) -> NDArray[np.int64]:
-        """Role codes for the kernels: 0 slide, 1 stick, 2 open."""
-        m = np.zeros(len(self.cs), dtype=np.int64)
-        m[list(roles[0])] = STICK
-        m[list(roles[1])] = OPEN
+        """Role codes for the kernels (:mod:`._roles`): sliding unless sticking or opening."""
+        m = np.full(len(self.cs), ROLE_SLIDING, dtype=np.int64)
+        m[list(roles[0])] = ROLE_STICKING
+        m[list(roles[1])] = ROLE_OPENING
         return m
 
     def system(self, w_e: FloatArray, z: FloatArray, roles: Roles) -> tuple[FloatArray, FloatArray, FloatArray]:
