@@ -18,13 +18,16 @@ def test_unknown_profile_lists_the_known_ones():
         settings.profile("fast")
 
 
-def test_tolerances_module_is_an_alias():
-    from fixplan import tolerances
+def test_the_settings_are_the_one_way_in():
+    """``fixplan.tolerances`` and ``fixplan.Tolerances`` are gone; a fixture carries its profile's tolerances."""
+    import importlib
 
-    assert tolerances.DEFAULT is settings.DEFAULT.tolerances
-    assert tolerances.Tolerances is settings.Tolerances
-    assert tolerances.PROFILES["strict"] == settings.STRICT.tolerances
-    assert fixplan.load(fixplan.default_fixture_path()).tolerances == settings.DEFAULT.tolerances
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module("fixplan.tolerances")
+    assert "Tolerances" not in fixplan.__all__ and not hasattr(fixplan, "Tolerances")
+    path = fixplan.default_fixture_path()
+    assert fixplan.load(path).tolerances == settings.DEFAULT.tolerances
+    assert fixplan.load(path, settings=settings.STRICT).tolerances == settings.STRICT.tolerances
 
 
 def test_engine_settings_reach_the_simulator():
@@ -73,10 +76,10 @@ def test_strict_profile_tightens_the_closed_form_check():
     f = box_on_supports(mu=0.3, mass=2.0)
     strict = settings.STRICT.tolerances
     limit = 0.3 * 2.0 * 9.81
-    r = classify(f, [0.9 * limit, 0, 0, 0, 0, 0], tolerances=strict)[0]
+    r = classify(f, [0.9 * limit, 0, 0, 0, 0, 0], settings=settings.STRICT)[0]
     assert r.mode == "jammed" and r.margin <= strict.balance_rel * limit
     F = 2 * limit
-    r = classify(f, [F, 0, 0, 0, 0, 0], tolerances=strict)[0]
+    r = classify(f, [F, 0, 0, 0, 0, 0], settings=settings.STRICT)[0]
     assert r.mode == "slides"
     assert r.acceleration[0] == pytest.approx((F - limit) / 2.0, rel=1e-9)
     assert np.allclose(r.acceleration[1:], 0, atol=1e-10)
