@@ -50,7 +50,7 @@ def check_address(address: str) -> tuple[str, int]:
     """
 
     def bad(reason: str) -> InputError:
-        return InputError(f"--scheduler expects {_ADDRESS_RULE}, got {shorten(address)}: {reason}")
+        return InputError(f"check_address.address expects {_ADDRESS_RULE}, got {shorten(address)}: {reason}")
 
     if not isinstance(address, str) or not address.isprintable() or any(c.isspace() for c in address):
         raise bad("spaces or control characters")

@@ -548,16 +548,17 @@ class RobustSettings:
     max_penetration_m: float = 1e-6  # no locator penetrates the perturbed start by more [m]
 
     def check(self) -> None:
-        """Raise :class:`InputError` naming the option that is out of range."""
+        """Raise :class:`InputError` naming the setting that is out of range (``RobustSettings.mu_spread``)."""
+        n = "RobustSettings."
         checks = [
-            ("--samples", self.samples, self.samples >= 0 and self.samples == int(self.samples), "an integer ≥ 0"),
-            ("--seed", self.seed, self.seed >= 0 and self.seed == int(self.seed), "an integer ≥ 0"),
-            ("--mu-spread", self.mu_spread, 0.0 <= self.mu_spread <= 1.0, "a fraction in [0, 1]"),
-            ("--pose-sigma (translation)", self.pose_sigma_m, 0.0 <= self.pose_sigma_m <= 0.1, "0 .. 0.1 m"),
-            ("--pose-sigma (rotation)", self.pose_sigma_deg, 0.0 <= self.pose_sigma_deg <= 30.0, "0 .. 30 deg"),
-            ("--locator-sigma", self.locator_sigma_m, 0.0 <= self.locator_sigma_m <= 0.01, "0 .. 0.01 m"),
-            ("--force-noise", self.force_noise, 0.0 <= self.force_noise <= 1.0, "a fraction in [0, 1]"),
-            ("--latency-ms", self.latency_s * 1e3, 0.0 <= self.latency_s <= 0.1, "0 .. 100 ms"),
+            (n + "samples", self.samples, self.samples >= 0 and self.samples == int(self.samples), "an integer ≥ 0"),
+            (n + "seed", self.seed, self.seed >= 0 and self.seed == int(self.seed), "an integer ≥ 0"),
+            (n + "mu_spread", self.mu_spread, 0.0 <= self.mu_spread <= 1.0, "a fraction in [0, 1]"),
+            (n + "pose_sigma_m", self.pose_sigma_m, 0.0 <= self.pose_sigma_m <= 0.1, "0 .. 0.1 m"),
+            (n + "pose_sigma_deg", self.pose_sigma_deg, 0.0 <= self.pose_sigma_deg <= 30.0, "0 .. 30 deg"),
+            (n + "locator_sigma_m", self.locator_sigma_m, 0.0 <= self.locator_sigma_m <= 0.01, "0 .. 0.01 m"),
+            (n + "force_noise", self.force_noise, 0.0 <= self.force_noise <= 1.0, "a fraction in [0, 1]"),
+            (n + "latency_s [ms]", self.latency_s * 1e3, 0.0 <= self.latency_s <= 0.1, "0 .. 100 ms"),
         ]
         for name, value, ok, expected in checks:
             if not (isinstance(value, int | float) and math.isfinite(value) and ok):
@@ -594,30 +595,6 @@ class RobustSettings:
             "margin_N": self.margin_N,
             "friction_margin": self.friction_margin,
         }
-
-    def replay_options(self) -> list[str]:
-        """The command-line options that reproduce these settings (those not at their defaults)."""
-        d = RobustSettings()
-        out: list[str] = []
-        if self.seed != d.seed:
-            out += ["--seed", str(self.seed)]
-        if self.mu_spread != d.mu_spread:
-            out += ["--mu-spread", f"{self.mu_spread:g}"]
-        if (self.pose_sigma_m, self.pose_sigma_deg) != (d.pose_sigma_m, d.pose_sigma_deg):
-            out += ["--pose-sigma", f"{self.pose_sigma_m:g},{self.pose_sigma_deg:g}"]
-        if self.locator_sigma_m != d.locator_sigma_m:
-            out += ["--locator-sigma", f"{self.locator_sigma_m:g}"]
-        if self.force_noise != d.force_noise:
-            out += ["--force-noise", f"{self.force_noise:g}"]
-        if self.latency_s != d.latency_s:
-            out += ["--latency-ms", f"{self.latency_s * 1e3:g}"]
-        if self.acceleration_mps2 != d.acceleration_mps2:
-            out += ["--accel", f"{self.acceleration_mps2:g}"]
-        if self.margin_N is not None:
-            out += ["--margin", f"{self.margin_N:g}"]
-        if self.friction_margin != d.friction_margin:
-            out += ["--friction-margin", f"{self.friction_margin:g}"]
-        return out
 
 
 @dataclass(frozen=True)

@@ -91,7 +91,9 @@ def classify(
     if at is not None:
         at = np.asarray(at, dtype=float)
         if at.shape != (fixture.dimension,):
-            raise InputError(f"--at expects {fixture.dimension} coordinates, got {at.shape[0] if at.ndim else 1}")
+            raise InputError(
+                f"classify.at expects {fixture.dimension} coordinates, got {at.shape[0] if at.ndim else 1}"
+            )
     tol = fixture.tolerances if settings is None else settings.tolerances
     witness = DEFAULT.witness if settings is None else settings.witness
     W_com = np.array([cs.wrench_about_com(w, at) for w in W])

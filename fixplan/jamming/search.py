@@ -424,9 +424,9 @@ def search_wrench(
     """
     m = np.asarray(motion, dtype=float)
     if m.shape != (fixture.ndof,) or not np.all(np.isfinite(m)):
-        raise InputError(f"--motion expects {fixture.ndof} finite numbers, got {list(np.atleast_1d(m))}")
+        raise InputError(f"search_wrench.motion expects {fixture.ndof} finite numbers, got {list(np.atleast_1d(m))}")
     if float(np.linalg.norm(m)) == 0.0:
-        raise InputError("--motion is zero (expected the desired acceleration of the part)")
+        raise InputError("search_wrench.motion is zero (expected the desired acceleration of the part)")
     jam_margin_rel = settings.search.jam_margin_rel if jam_margin_rel is None else jam_margin_rel
     _check_options(objective, min_margin_N, friction_margin, jam_margin_rel)
     cs = contact_set(fixture, pose, contacts)
@@ -505,9 +505,9 @@ def search_wrench_in(
     jam_margin_rel = ss.jam_margin_rel if jam_margin_rel is None else jam_margin_rel
     a_hat = np.asarray(a_com, dtype=float)
     if a_hat.shape != (cs.ndof,) or not np.all(np.isfinite(a_hat)):
-        raise InputError(f"--motion expects {cs.ndof} finite numbers, got {list(np.atleast_1d(a_hat))}")
+        raise InputError(f"search_wrench_in.a_com expects {cs.ndof} finite numbers, got {list(np.atleast_1d(a_hat))}")
     if float(np.linalg.norm(a_hat)) == 0.0:
-        raise InputError("--motion is zero (expected the desired acceleration of the part)")
+        raise InputError("search_wrench_in.a_com is zero (expected the desired acceleration of the part)")
     _check_options(objective, min_margin_N, friction_margin, jam_margin_rel)
     _check_contacts(cs)
     about = cs.body_origin_world if about_world is None else np.asarray(about_world, dtype=float)

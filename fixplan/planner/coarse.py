@@ -166,15 +166,17 @@ def search(
         missing = goal - start_state - set(order)
         extra = [n for n in order if n not in goal]
         if extra:
-            raise InputError(f"--order names unknown locators: {', '.join(extra)} (known: {', '.join(all_locators)})")
+            raise InputError(
+                f"solve.order names unknown locators: {', '.join(extra)} (known: {', '.join(all_locators)})"
+            )
         if len(set(order)) != len(order):
-            raise InputError(f"--order repeats a locator: {','.join(order)}")
+            raise InputError(f"solve.order repeats a locator: {','.join(order)}")
         already = [n for n in order if n in start_state]
         if already:
-            raise InputError(f"--order names locators already touching at the start: {', '.join(already)}")
+            raise InputError(f"solve.order names locators already touching at the start: {', '.join(already)}")
         if missing:
             raise InputError(
-                f"--order leaves out {', '.join(sorted(missing))} (expected every locator not touching at the start)"
+                f"solve.order leaves out {', '.join(sorted(missing))} (expected every locator not touching at the start)"
             )
     attempts: list[Attempt] = []
 

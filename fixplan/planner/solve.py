@@ -800,6 +800,6 @@ def _check_order(fixture: Fixture, order: Sequence[str]) -> None:
     names = [loc.name for loc in fixture.locators]
     extra = [n for n in order if n not in names]
     if extra:
-        raise InputError(f"--order names unknown locators: {', '.join(extra)} (known: {', '.join(names)})")
+        raise InputError(f"solve.order names unknown locators: {', '.join(extra)} (known: {', '.join(names)})")
     if len(set(order)) != len(order):
-        raise InputError(f"--order repeats a locator: {','.join(order)}")
+        raise InputError(f"solve.order repeats a locator: {','.join(order)}")
