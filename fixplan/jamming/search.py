@@ -617,8 +617,9 @@ def search_wrench_in(
         wanted = fixture.weight_N if target is None else target
         tau_req = wanted if wanted < tau * (1 - ss.target_rel) else tau * (1 - ss.target_rel)
         prog_e, meta_e = wrench_search_program(
-            **build, cert=y, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_req, hand_frac=h_lim
-        )  # type: ignore[arg-type]
+            **build,  # type: ignore[arg-type]
+            cert=y, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_req, hand_frac=h_lim,
+        )  # fmt: skip
         sol_e = ClarabelProgram(prog_e).solve(prog_e.b)
         if sol_e.solved:
             x, meta = sol_e.x, meta_e
