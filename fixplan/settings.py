@@ -40,6 +40,7 @@ A :class:`Settings` bundles one of each. The named profiles in :data:`PROFILES`:
     What every function uses when not told otherwise (the planner, ``classify``, ``simulate``).
 ``haptic``
     Selected by everything that runs the 1 kHz haptic loop: :func:`fixplan.planner.verify.verify`,
+    :func:`fixplan.planner.solve.solve` (which verifies its plan there),
     :class:`fixplan.interactive.session.Session` and
     :func:`fixplan.interactive.record.verify_recording`. Its engine bounds the work per tick
     (a haptic-grade residual of 10⁻⁶ and at most 1000 NSGS sweeps); its tolerances are the default
@@ -49,7 +50,9 @@ A :class:`Settings` bundles one of each. The named profiles in :data:`PROFILES`:
     forms to many digits (``tests/test_settings.py``; the engine's in
     ``tests/engine/test_validation.py``).
 
-Pass settings explicitly (``settings=profile("strict").tolerances``); there is no global state.
+Pass settings explicitly: a function that uses a threshold takes ``settings=`` (a profile,
+``settings=profile("strict")``, or the group it needs) from its caller, and only the public entry
+points default to a profile; no module keeps a threshold of its own, and there is no global state.
 """
 
 from __future__ import annotations
