@@ -159,7 +159,7 @@ def test_solver_options_only_in_settings():
     assert settings.DEFAULT.planner.ipopt_options(tol=1e-6, max_iter=3)["max_iter"] == 3
 
 
-# -- a profile reaches every threshold that was once captured at import time (issue 27 §4) ----------
+# -- a profile reaches every threshold that was once captured at import time -------------------------
 def _search_with(**changes):
     from dataclasses import replace
 
