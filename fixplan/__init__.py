@@ -25,7 +25,6 @@ _LAZY = {
     "InputError": ("fixplan.errors", "InputError"),
     "InfeasibleError": ("fixplan.errors", "InfeasibleError"),
     "SolverError": ("fixplan.errors", "SolverError"),
-    "Tolerances": ("fixplan.settings", "Tolerances"),
     "Settings": ("fixplan.settings", "Settings"),
 }
 

@@ -19,7 +19,9 @@ def fixture_files(directory: Path) -> list[Path]:
     from fixplan.expectations import looks_like_expectations, read_toml
 
     if not directory.is_dir():
-        raise InputError(f"--batch {directory}: not a directory (expected a directory of fixture files)")
+        raise InputError(
+            f"fixture_files.directory {directory}: not a directory (expected a directory of fixture files)"
+        )
     files = []
     for path in sorted(directory.glob("*.toml")):
         data = read_toml(path)
@@ -27,7 +29,7 @@ def fixture_files(directory: Path) -> list[Path]:
             continue
         files.append(path)
     if not files:
-        raise InputError(f"--batch {directory}: no *.toml fixture files")
+        raise InputError(f"fixture_files.directory {directory}: no *.toml fixture files")
     return files
 
 

@@ -33,7 +33,6 @@ from typing import Any
 from fixplan.errors import InputError, shorten
 from fixplan.settings import DEFAULT
 
-CONNECT_TIMEOUT_S = DEFAULT.cluster.connect_timeout_s
 DEFAULT_PORT = 8786  # Dask's scheduler port, as ``dask scheduler`` and ``Client("tcp://HOST")`` assume
 _HOST_LABEL = re.compile(r"[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?")
 _REASON_CHARS = 160
@@ -51,7 +50,7 @@ def check_address(address: str) -> tuple[str, int]:
     """
 
     def bad(reason: str) -> InputError:
-        return InputError(f"--scheduler expects {_ADDRESS_RULE}, got {shorten(address)}: {reason}")
+        return InputError(f"check_address.address expects {_ADDRESS_RULE}, got {shorten(address)}: {reason}")
 
     if not isinstance(address, str) or not address.isprintable() or any(c.isspace() for c in address):
         raise bad("spaces or control characters")
@@ -200,7 +199,7 @@ def dask_client(
     tasks: int = 1,
     processes: bool = True,
     workers: int | None = None,
-    timeout_s: float = CONNECT_TIMEOUT_S,
+    timeout_s: float = DEFAULT.cluster.connect_timeout_s,
 ) -> Iterator[Any]:
     """A :class:`distributed.Client`: to ``address``, or to a local cluster closed on exit.
 

@@ -182,7 +182,7 @@ def _file_kind(mode: int) -> str:
     return "a special file"
 
 
-def check_output(path: Path, force: bool, *, option: str = "--out") -> Path:
+def check_output(path: Path, force: bool, *, option: str = "check_output.path") -> Path:
     """Refuse an output path that would lose a user's file or write where they did not ask.
 
     Returns ``path``; creates its missing parent folders. Nothing is written here.
@@ -205,7 +205,7 @@ def check_output(path: Path, force: bool, *, option: str = "--out") -> Path:
                 f"{option} {path} is the same file as the input {source} (an output must not replace an input)"
             )
         if not force:
-            raise InputError(f"{path} exists (use --force to overwrite it)")
+            raise InputError(f"{path} exists (use check_output.force to overwrite it)")
     parent = path.parent
     if parent.is_symlink() and not parent.exists():
         raise InputError(f"{option} {path}: the folder {parent} is a dangling symbolic link")

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan import fixture_schema, limits
-from fixplan.errors import FixtureError, Issue
+from fixplan.errors import FixtureError, Issue, shorten
 from fixplan.fixture_schema import validate_document
 from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
 from fixplan.geometry.collision import BOX as OBSTACLE_BOX
@@ -48,10 +48,9 @@ from fixplan.model import (
     SimulationSettings,
     Workpiece,
 )
-from fixplan.schema import Reader, shorten
+from fixplan.schema import Reader
 from fixplan.settings import DEFAULT as DEFAULT_SETTINGS
-from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
-from fixplan.settings import Tolerances
+from fixplan.settings import Settings, Tolerances
 from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]
@@ -80,10 +79,14 @@ def default_fixture_path() -> Path:
     return _DATA / "default.toml"
 
 
-def load(path: str | Path, tolerances: Tolerances = DEFAULT) -> Fixture:
-    """Read and validate a fixture file; raise :class:`FixtureError` listing every problem."""
+def load(path: str | Path, settings: Settings = DEFAULT_SETTINGS) -> Fixture:
+    """Read and validate a fixture file; raise :class:`FixtureError` listing every problem.
+
+    The fixture carries ``settings.tolerances`` (what touching and penetrating mean, checked at
+    load and used by every analysis of it).
+    """
     path = Path(path)
-    return loads(read_fixture_text(path), source=str(path), base_dir=path.parent, tolerances=tolerances)
+    return loads(read_fixture_text(path), source=str(path), base_dir=path.parent, settings=settings)
 
 
 # -- the fixture a plan file names ------------------------------------------------------------------
@@ -254,10 +257,10 @@ def parse_toml(text: str, source: str) -> dict[str, Any]:
 
 
 def loads(
-    text: str, source: str = "<string>", base_dir: Path | None = None, tolerances: Tolerances = DEFAULT
+    text: str, source: str = "<string>", base_dir: Path | None = None, settings: Settings = DEFAULT_SETTINGS
 ) -> Fixture:
     """Validate fixture TOML text (see :func:`load`)."""
-    return _Builder(parse_toml(text, source), source, base_dir or Path("."), tolerances).build()
+    return _Builder(parse_toml(text, source), source, base_dir or Path("."), settings.tolerances).build()
 
 
 class _Builder:

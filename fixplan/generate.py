@@ -254,7 +254,9 @@ def generate(
 def _check_pin_options(family: str, rotate_world: bool) -> None:
     """The pin families are not turned (the world rotation of pins and holes is not written yet)."""
     if rotate_world and family in PIN_FAMILIES:
-        raise InputError(f"--rotate-world does not take the {family} family yet (expected a family without pins)")
+        raise InputError(
+            f"generate.rotate_world does not take the {family} family yet (expected a family without pins)"
+        )
 
 
 def generate_one(

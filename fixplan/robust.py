@@ -52,8 +52,6 @@ if TYPE_CHECKING:
 FloatArray = NDArray[np.float64]
 
 Z95 = 1.959963984540054  # the standard normal's 97.5 % quantile
-REST_GAP_M = DEFAULT.robust.rest_gap_m  # the nominally touching locators touch the perturbed start within this
-MAX_PENETRATION_M = DEFAULT.robust.max_penetration_m  # no locator penetrates the perturbed start by more
 MAX_DRAWS = 100  # start-pose redraws before a sample is declared impossible
 
 
@@ -154,11 +152,11 @@ def draw_world(fixture: Fixture, sample: int, settings: RobustSettings) -> tuple
         gaps = locator_gaps(wp, trial, locators)
         rest = [i for i, loc in enumerate(locators) if loc.name in touching]
         free = [i for i, loc in enumerate(locators) if loc.name not in touching]
-        if rest and np.max(np.abs(gaps[rest])) > REST_GAP_M:
+        if rest and np.max(np.abs(gaps[rest])) > settings.rest_gap_m:
             continue
         if free and np.min(gaps[free]) <= tol_touch:
             continue
-        if np.min(gaps) < -MAX_PENETRATION_M:
+        if np.min(gaps) < -settings.max_penetration_m:
             continue
         start = trial
     goal_given = fixture.goal_given
@@ -271,12 +269,10 @@ def verify_sample(
         world, noise, _ = draw_pin_world(fixture, sample, settings)
         return verify_insertion(world, plan_insertion(fixture), noise=noise)
     world, noise = perturbed_fixture(fixture, sample, settings)
-    planner = Planner(
-        world, knots=settings.knots, acceleration_mps2=settings.acceleration_mps2,
-        friction_margin=settings.friction_margin, margin_N=settings.margin_N,
-    )  # fmt: skip
+    profile = settings.profile()
+    planner = Planner(world, knots=settings.knots, settings=profile)
     return verify(
-        world, start_state, list(steps), settings=settings.execution_settings(), noise=noise, replan=planner.replan,
+        world, start_state, list(steps), settings=profile, noise=noise, replan=planner.replan,
         policy=policy, avoid=planner.avoid,
     )  # fmt: skip
 
@@ -387,10 +383,7 @@ def nominal_plan(fixture: Fixture, settings: RobustSettings) -> tuple[PlanResult
     """The nominal plan (not verified), the start state and the executor's policy."""
     from fixplan.planner.solve import plan_steps, solve
 
-    result = solve(
-        fixture, run_verification=False, acceleration_mps2=settings.acceleration_mps2,
-        margin_N=settings.margin_N, friction_margin=settings.friction_margin, knots=settings.knots,
-    )  # fmt: skip
+    result = solve(fixture, run_verification=False, settings=settings.profile(), knots=settings.knots)
     start_state = locating.start_state(fixture)
     return result, start_state, plan_steps(result.transitions)
 

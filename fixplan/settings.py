@@ -40,6 +40,7 @@ A :class:`Settings` bundles one of each. The named profiles in :data:`PROFILES`:
     What every function uses when not told otherwise (the planner, ``classify``, ``simulate``).
 ``haptic``
     Selected by everything that runs the 1 kHz haptic loop: :func:`fixplan.planner.verify.verify`,
+    :func:`fixplan.planner.solve.solve` (which verifies its plan there),
     :class:`fixplan.interactive.session.Session` and
     :func:`fixplan.interactive.record.verify_recording`. Its engine bounds the work per tick
     (a haptic-grade residual of 10⁻⁶ and at most 1000 NSGS sweeps); its tolerances are the default
@@ -49,7 +50,9 @@ A :class:`Settings` bundles one of each. The named profiles in :data:`PROFILES`:
     forms to many digits (``tests/test_settings.py``; the engine's in
     ``tests/engine/test_validation.py``).
 
-Pass settings explicitly (``settings=profile("strict").tolerances``); there is no global state.
+Pass settings explicitly: a function that uses a threshold takes ``settings=`` (a profile,
+``settings=profile("strict")``, or the group it needs) from its caller, and only the public entry
+points default to a profile; no module keeps a threshold of its own, and there is no global state.
 """
 
 from __future__ import annotations
@@ -551,16 +554,17 @@ class RobustSettings:
     max_penetration_m: float = 1e-6  # no locator penetrates the perturbed start by more [m]
 
     def check(self) -> None:
-        """Raise :class:`InputError` naming the option that is out of range."""
+        """Raise :class:`InputError` naming the setting that is out of range (``RobustSettings.mu_spread``)."""
+        n = "RobustSettings."
         checks = [
-            ("--samples", self.samples, self.samples >= 0 and self.samples == int(self.samples), "an integer ≥ 0"),
-            ("--seed", self.seed, self.seed >= 0 and self.seed == int(self.seed), "an integer ≥ 0"),
-            ("--mu-spread", self.mu_spread, 0.0 <= self.mu_spread <= 1.0, "a fraction in [0, 1]"),
-            ("--pose-sigma (translation)", self.pose_sigma_m, 0.0 <= self.pose_sigma_m <= 0.1, "0 .. 0.1 m"),
-            ("--pose-sigma (rotation)", self.pose_sigma_deg, 0.0 <= self.pose_sigma_deg <= 30.0, "0 .. 30 deg"),
-            ("--locator-sigma", self.locator_sigma_m, 0.0 <= self.locator_sigma_m <= 0.01, "0 .. 0.01 m"),
-            ("--force-noise", self.force_noise, 0.0 <= self.force_noise <= 1.0, "a fraction in [0, 1]"),
-            ("--latency-ms", self.latency_s * 1e3, 0.0 <= self.latency_s <= 0.1, "0 .. 100 ms"),
+            (n + "samples", self.samples, self.samples >= 0 and self.samples == int(self.samples), "an integer ≥ 0"),
+            (n + "seed", self.seed, self.seed >= 0 and self.seed == int(self.seed), "an integer ≥ 0"),
+            (n + "mu_spread", self.mu_spread, 0.0 <= self.mu_spread <= 1.0, "a fraction in [0, 1]"),
+            (n + "pose_sigma_m", self.pose_sigma_m, 0.0 <= self.pose_sigma_m <= 0.1, "0 .. 0.1 m"),
+            (n + "pose_sigma_deg", self.pose_sigma_deg, 0.0 <= self.pose_sigma_deg <= 30.0, "0 .. 30 deg"),
+            (n + "locator_sigma_m", self.locator_sigma_m, 0.0 <= self.locator_sigma_m <= 0.01, "0 .. 0.01 m"),
+            (n + "force_noise", self.force_noise, 0.0 <= self.force_noise <= 1.0, "a fraction in [0, 1]"),
+            (n + "latency_s [ms]", self.latency_s * 1e3, 0.0 <= self.latency_s <= 0.1, "0 .. 100 ms"),
         ]
         for name, value, ok, expected in checks:
             if not (isinstance(value, int | float) and math.isfinite(value) and ok):
@@ -572,10 +576,14 @@ class RobustSettings:
         return any(x > 0 for x in (self.mu_spread, self.pose_sigma_m, self.pose_sigma_deg, self.locator_sigma_m))
 
     def execution_settings(self) -> ExecutionSettings:
-        """The executor's settings, as ``solve`` builds them."""
+        """The executor's settings: the pushes' acceleration and margins, the others' defaults."""
         return ExecutionSettings(
             accel_mps2=self.acceleration_mps2, friction_margin=self.friction_margin, margin_N=self.margin_N
         )
+
+    def profile(self) -> Settings:
+        """The settings the plans and loads of a study use: the ``haptic`` profile with :meth:`execution_settings`."""
+        return HAPTIC.with_(execution=self.execution_settings())
 
     def noise(self, seed: int) -> ExecutionNoise:
         return ExecutionNoise(force_noise=self.force_noise, latency_s=self.latency_s, seed=seed)
@@ -593,30 +601,6 @@ class RobustSettings:
             "margin_N": self.margin_N,
             "friction_margin": self.friction_margin,
         }
-
-    def replay_options(self) -> list[str]:
-        """The command-line options that reproduce these settings (those not at their defaults)."""
-        d = RobustSettings()
-        out: list[str] = []
-        if self.seed != d.seed:
-            out += ["--seed", str(self.seed)]
-        if self.mu_spread != d.mu_spread:
-            out += ["--mu-spread", f"{self.mu_spread:g}"]
-        if (self.pose_sigma_m, self.pose_sigma_deg) != (d.pose_sigma_m, d.pose_sigma_deg):
-            out += ["--pose-sigma", f"{self.pose_sigma_m:g},{self.pose_sigma_deg:g}"]
-        if self.locator_sigma_m != d.locator_sigma_m:
-            out += ["--locator-sigma", f"{self.locator_sigma_m:g}"]
-        if self.force_noise != d.force_noise:
-            out += ["--force-noise", f"{self.force_noise:g}"]
-        if self.latency_s != d.latency_s:
-            out += ["--latency-ms", f"{self.latency_s * 1e3:g}"]
-        if self.acceleration_mps2 != d.acceleration_mps2:
-            out += ["--accel", f"{self.acceleration_mps2:g}"]
-        if self.margin_N is not None:
-            out += ["--margin", f"{self.margin_N:g}"]
-        if self.friction_margin != d.friction_margin:
-            out += ["--friction-margin", f"{self.friction_margin:g}"]
-        return out
 
 
 @dataclass(frozen=True)

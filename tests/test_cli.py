@@ -123,3 +123,42 @@ def test_a_repeated_option_is_refused_not_dropped(capsys, monkeypatch, tmp_path,
 def test_repeated_flags_and_values_that_look_like_options_are_not_refused(capsys):
     rc = main(["classify", "--wrench", "0,0,-5,0,0,0", "--json", "--json"])
     assert rc == 0 and json.loads(capsys.readouterr().out)["results"][0]["mode"]
+
+
+# -- the library names settings and arguments; the CLI prints the user's flags -------------------------
+def test_library_errors_name_the_setting_and_the_cli_prints_the_flag(capsys):
+    """``RobustSettings.check`` and ``search_wrench`` raise with the setting's or argument's name (an API
+    caller sets that); the command line puts the flag the user typed in its place (one table, cli/flags.py)."""
+    import fixplan
+    from fixplan.cli.flags import FLAGS, with_flags
+    from fixplan.errors import InputError
+    from fixplan.jamming.search import search_wrench
+    from fixplan.robust import RobustSettings
+
+    with pytest.raises(InputError, match=r"^RobustSettings\.mu_spread must be a fraction in \[0, 1\], got 1.5$"):
+        RobustSettings(mu_spread=1.5).check()
+    fx = fixplan.load(PROBLEMS / "rect-3.toml")
+    with pytest.raises(InputError, match=r"^search_wrench\.motion is zero"):
+        search_wrench(fx, [0.0, 0.0, 0.0])
+    assert all(flag.startswith("--") and not name.startswith("-") for name, flag in FLAGS.items())
+    assert with_flags("RobustSettings.latency_s [ms] must be 0 .. 100 ms, got 200.0") == (
+        "--latency-ms must be 0 .. 100 ms, got 200.0"
+    )
+    path = str(PROBLEMS / "naive-order-jams.toml")
+    cases = [
+        (["robust", path, "--mu-spread", "1.5"], "fixplan: --mu-spread must be a fraction in [0, 1], got 1.5\n"),
+        (
+            ["search", path, "--motion", "0,0,0"],
+            "fixplan: --motion is zero (expected the desired acceleration of the part)\n",
+        ),
+        (
+            ["robust", path, "--scheduler", "localhost:8786"],
+            "fixplan: --scheduler expects an address like tcp://HOST:8786",
+        ),
+        (["solve", path, "--order", "NOPE"], "fixplan: --order names unknown locators: NOPE"),
+    ]
+    for args, start in cases:
+        assert main(args) == 2, args
+        err = capsys.readouterr().err
+        assert err.strip().splitlines()[-1].startswith(start.strip()), (args, err)
+        assert not any(name in err for name in FLAGS), err

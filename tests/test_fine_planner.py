@@ -237,7 +237,10 @@ def test_clearance_features_are_lower_bounds_that_keep_a_turned_part_clear(defau
     s log 2 below that. The goal's face alone has a negative plane gap for some of them (a side
     locator beside the end face of a turned box), which let a planned path run the part's corner
     into the locator."""
-    from fixplan.planner.features import SMOOTH_MAX_M, clearance_features, smooth_max
+    from fixplan.planner.features import clearance_features, smooth_max
+    from fixplan.settings import DEFAULT
+
+    SMOOTH_MAX_M = DEFAULT.planner.smooth_max_m
 
     rng = np.random.default_rng(11)
     goal = default.goal
@@ -271,7 +274,10 @@ def test_close_side_locators_need_the_smaller_clearance():
 
     from fixplan.fixture import loads
     from fixplan.generate import generate_one
-    from fixplan.planner.solve import CLEARANCES_M, Planner
+    from fixplan.planner.solve import Planner
+    from fixplan.settings import DEFAULT
+
+    CLEARANCES_M = DEFAULT.planner.clearances_m
 
     g = generate_one("box-321", 101, 25)
     fx = loads(g.toml_text, source=g.name)

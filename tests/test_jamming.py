@@ -240,13 +240,14 @@ def test_search_reports_weak_manipulator():
 def test_witness_jacobian_matches_finite_differences(roles, soft, rng):
     """The analytic Jacobian of the kept/sliding/sticking/open system, against central differences."""
     from fixplan.jamming.sliding import Rows, _start_for
+    from fixplan.settings import DEFAULT
 
     f = box_on_supports(mu=0.4, torsion=0.01 if soft else 0.0)
     cs = fixplan.contact_set(f)
     rows = Rows(cs)
     w = rng.normal(size=6)
     base = np.concatenate([rng.normal(size=6), rng.uniform(0.5, 2.0, size=3)])
-    z = _start_for(cs, base, roles)
+    z = _start_for(cs, base, roles, DEFAULT.witness.seed_force)
     z[6:] += rng.normal(size=z.shape[0] - 6) * 0.1
     F, Jac, _ = rows.system(w, z, roles)
     eps = 1e-6

@@ -601,7 +601,6 @@ def test_the_verification_fails_naming_the_link_and_the_time() -> None:
     (Run without the policy and re-plans ``solve`` gives the executor, the load itself may also stray.)
     """
     from fixplan.locating import start_state
-    from fixplan.planner.execute import ExecutionSettings
     from fixplan.planner.solve import plan_steps
     from fixplan.planner.verify import verify
     from fixplan.robot.exertable import arm_at_start
@@ -614,8 +613,7 @@ def test_the_verification_fails_naming_the_link_and_the_time() -> None:
     _, q0 = arm_at_start(fx)
     c, _ = _link_center(fx, q0, "forearm_link_0")
     bad = _with_post(fx, c, 0.03)
-    settings = ExecutionSettings(accel_mps2=1.0, friction_margin=0.1)  # solve's defaults
-    out = verify(bad, start_state(fx), plan_steps(result.transitions), settings=settings)
+    out = verify(bad, start_state(fx), plan_steps(result.transitions))  # solve's defaults: the haptic profile
     assert not out.passed and "robot links" in out.failed_checks
     assert re.search(r"at t = 0\.0\d\d s link \w+ of the arm hits obstacle post \(\S+ m deep\)", out.reason), out.reason
     assert out.extras["robot_links"]["first_hit"]["other"] == "obstacle post"

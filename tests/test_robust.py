@@ -119,9 +119,9 @@ def test_the_same_sample_is_the_same_world():
 def test_bad_settings_are_refused():
     from fixplan.errors import InputError
 
-    with pytest.raises(InputError, match="--mu-spread"):
+    with pytest.raises(InputError, match="RobustSettings.mu_spread"):
         RobustSettings(mu_spread=1.5).check()
-    with pytest.raises(InputError, match="--locator-sigma"):
+    with pytest.raises(InputError, match="RobustSettings.locator_sigma_m"):
         RobustSettings(locator_sigma_m=-1e-4).check()
 
 

@@ -153,7 +153,7 @@ def test_a_closed_port_exits_2_within_the_bound():
     ],
 )
 def test_malformed_addresses_are_refused_before_connecting(address, reason):
-    with pytest.raises(InputError, match="--scheduler expects an address like tcp://HOST:8786") as err:
+    with pytest.raises(InputError, match="check_address.address expects an address like tcp://HOST:8786") as err:
         check_address(address)
     assert reason in str(err.value)
     assert "\n" not in str(err.value) and str(err.value).isprintable()

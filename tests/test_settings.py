@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from conftest import PROBLEMS
 
 import fixplan
 from fixplan import settings
@@ -17,13 +18,16 @@ def test_unknown_profile_lists_the_known_ones():
         settings.profile("fast")
 
 
-def test_tolerances_module_is_an_alias():
-    from fixplan import tolerances
+def test_the_settings_are_the_one_way_in():
+    """``fixplan.tolerances`` and ``fixplan.Tolerances`` are gone; a fixture carries its profile's tolerances."""
+    from pathlib import Path
 
-    assert tolerances.DEFAULT is settings.DEFAULT.tolerances
-    assert tolerances.Tolerances is settings.Tolerances
-    assert tolerances.PROFILES["strict"] == settings.STRICT.tolerances
-    assert fixplan.load(fixplan.default_fixture_path()).tolerances == settings.DEFAULT.tolerances
+    # the package's own folder (an import could be served by another checkout's editable install)
+    assert not (Path(fixplan.__file__).parent / "tolerances.py").exists()
+    assert "Tolerances" not in fixplan.__all__ and not hasattr(fixplan, "Tolerances")
+    path = fixplan.default_fixture_path()
+    assert fixplan.load(path).tolerances == settings.DEFAULT.tolerances
+    assert fixplan.load(path, settings=settings.STRICT).tolerances == settings.STRICT.tolerances
 
 
 def test_engine_settings_reach_the_simulator():
@@ -72,10 +76,10 @@ def test_strict_profile_tightens_the_closed_form_check():
     f = box_on_supports(mu=0.3, mass=2.0)
     strict = settings.STRICT.tolerances
     limit = 0.3 * 2.0 * 9.81
-    r = classify(f, [0.9 * limit, 0, 0, 0, 0, 0], tolerances=strict)[0]
+    r = classify(f, [0.9 * limit, 0, 0, 0, 0, 0], settings=settings.STRICT)[0]
     assert r.mode == "jammed" and r.margin <= strict.balance_rel * limit
     F = 2 * limit
-    r = classify(f, [F, 0, 0, 0, 0, 0], tolerances=strict)[0]
+    r = classify(f, [F, 0, 0, 0, 0, 0], settings=settings.STRICT)[0]
     assert r.mode == "slides"
     assert r.acceleration[0] == pytest.approx((F - limit) / 2.0, rel=1e-9)
     assert np.allclose(r.acceleration[1:], 0, atol=1e-10)
@@ -153,3 +157,94 @@ def test_solver_options_only_in_settings():
     options = settings.DEFAULT.planner.ipopt_options()
     assert options["tol"] == 1e-9 and options["max_iter"] == 500 and options["constr_viol_tol"] == 1e-10
     assert settings.DEFAULT.planner.ipopt_options(tol=1e-6, max_iter=3)["max_iter"] == 3
+
+
+# -- a profile reaches every threshold that was once captured at import time -------------------------
+def _search_with(**changes):
+    from dataclasses import replace
+
+    return settings.DEFAULT.with_(search=replace(settings.DEFAULT.search, **changes))
+
+
+def test_search_slip_rel_comes_from_the_settings_passed():
+    """Rolling about B1 (μ = 0.15) while the part already slips at B1: a slip twist ``(v, 0, ω)`` at B1
+    slips there at the fraction ``r = v / (v + |ω| L)`` of its speed. B1 slides against that slip when
+    ``search.slip_rel`` is below ``r`` and keeps sticking (the motion asked for) when above."""
+    from fixplan.jamming.search import search_wrench
+
+    fx = fixplan.load(PROBLEMS / "naive-order-jams.toml")
+    cs = fixplan.contact_set(fx, "start", ["B1"])
+    B1 = cs.contacts[0].point_world
+    v, w = 0.01, -1.0
+    r = v / (v + abs(w) * cs.max_lever_m)  # 0.11 (B1's tangent is 5° off x: slip 0.996 v)
+    for slip_rel, role in ((r / 2, "sliding"), (2 * r, "sticking")):
+        res = search_wrench(
+            fx,
+            [0.0, 0.0, -1.0],
+            ["B1"],
+            pose="start",
+            at=B1,
+            slip_twist=[v, 0.0, w],
+            settings=_search_with(slip_rel=slip_rel),
+        )
+        assert res.contact_roles == {"B1": role}, slip_rel
+
+
+def test_search_jam_margin_and_target_rel_come_from_the_settings_passed():
+    """rect-3 sliding on B1, B2 at 1 m/s²: the push found is certified ``search.jam_margin_rel`` from static
+    balance (the classifier measures at least that, and pressing the contacts less hard buys it), and a margin
+    target 0.1 % above the best τ* counts as met only when ``search.target_rel`` allows 0.1 %."""
+    from fixplan.jamming.search import search_wrench
+
+    fx = fixplan.load(PROBLEMS / "rect-3.toml")
+    args = (fx, [1.0, 0.0, 0.0], ["B1", "B2"])
+    best = search_wrench(*args, limit_fraction=1.0)
+    assert best.found and best.jam_margin_rel is not None and best.jam_margin_rel < 0.2
+    far = search_wrench(*args, limit_fraction=1.0, settings=_search_with(jam_margin_rel=0.2))
+    assert far.found and far.jam_margin_rel >= 0.2 * (1 - 1e-6)
+    assert far.margin_N < best.margin_N
+    with pytest.raises(InputError, match="jam_margin_rel must lie in"):
+        search_wrench(*args, settings=_search_with(jam_margin_rel=1.5))
+    target = best.margin_N * (1 + 1e-3)
+    tight = search_wrench(*args, limit_fraction=1.0, min_margin_N=target)
+    loose = search_wrench(*args, limit_fraction=1.0, min_margin_N=target, settings=_search_with(target_rel=1e-2))
+    assert tight.margin_target_met is False and "not met" in tight.reason
+    assert loose.margin_target_met is True and loose.margin_N == pytest.approx(best.margin_N, rel=1e-9)
+
+
+def test_witness_settings_reach_the_classifier_and_its_witness_search():
+    """The box pushed along +x on its base slides (Theorem 1's witness); with ``witness.root_rel = 0`` (no
+    Newton root is exact) or ``witness.normal_rel = 0`` (no kept contact's normal rate is exactly 0) the same
+    witness search accepts none, and the classifier cannot name the motion."""
+    from dataclasses import replace
+
+    from fixplan.jamming.classify import Classifier
+
+    fx = fixplan.load(PROBLEMS / "box-3-2-1.toml")
+    cs = fixplan.contact_set(fx, "start", ["B1", "B2", "B3"])
+    w = [30.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    assert Classifier(cs, fx.gravity_wrench()).classify(w).mode == "slides"
+    for change in ({"root_rel": 0.0}, {"normal_rel": 0.0}):
+        witness = replace(settings.DEFAULT.witness, **change)
+        clf = Classifier(cs, fx.gravity_wrench(), witness=witness)
+        assert clf._witness.settings is witness
+        assert clf.classify(w).mode == "indeterminate", change
+
+
+def test_planner_settings_reach_the_clearances_and_the_friction_grid():
+    """``solve(settings=)``: the friction-robustness grid is the settings' (0.5 on the default grid, 0.07 on
+    (0.05, 0.07)), and a planner given no clearances to try says so."""
+    from dataclasses import replace
+
+    from fixplan.errors import SolverError
+    from fixplan.locating import start_state
+    from fixplan.planner.solve import Planner, solve
+
+    fx = fixplan.load(PROBLEMS / "gen-plate-2d-s2026-000.toml")
+    nominal = solve(fx, run_verification=False)
+    assert nominal.friction_robustness == [0.5, 0.5]
+    grid = settings.HAPTIC.with_(planner=replace(settings.HAPTIC.planner, robust_grid=(0.05, 0.07)))
+    assert solve(fx, run_verification=False, settings=grid).friction_robustness == [0.07, 0.07]
+    none = settings.DEFAULT.with_(planner=replace(settings.DEFAULT.planner, clearances_m=()))
+    with pytest.raises(SolverError, match="planner.clearances_m is empty"):
+        Planner(fx, settings=none).plan_from(fx.start, start_state(fx))

@@ -220,7 +220,7 @@ def test_a_load_simulated_with_unconverged_contact_solves_fails_and_says_so():
     start = frozenset(r.sequence[0])
     planner = Planner(fx)
     no_polish = replace(HAPTIC, engine=replace(HAPTIC.engine, polish_steps=0))
-    starved = verify(fx, start, plan_steps(r.transitions), replan=planner.replan, max_sweeps=8, profile=no_polish)
+    starved = verify(fx, start, plan_steps(r.transitions), replan=planner.replan, max_sweeps=8, settings=no_polish)
     bound = HAPTIC.verification.max_solver_error
     assert not starved.passed and "solver" in starved.failed_checks
     assert starved.max_solver_error > bound

@@ -29,7 +29,7 @@ BEGIN, END = "<!-- module-graph:begin -->", "<!-- module-graph:end -->"
 LAYERS: dict[str, int] = {}
 _LAYER_LIST: list[tuple[str, list[str]]] = [
     # vocabulary: errors, settings, frames and poses, small numerics; import nothing of fixplan
-    ("foundation", ["errors", "tolerances", "settings", "pose", "spatial", "nnls", "_spatial_kernels", "aot"]),
+    ("foundation", ["errors", "settings", "pose", "spatial", "nnls", "_spatial_kernels", "aot"]),
     # shapes and their distances
     ("geometry", ["geometry"]),
     # the fixture file -> validated model; contact frames, Jacobians; locators touching

@@ -105,7 +105,7 @@ def analyse_clamping(
     st = settings.clamp
     preload = st.preload_N if preload_N is None else float(preload_N)
     if not (np.isfinite(preload) and preload >= 0.0):
-        raise InputError(f"--preload is {preload!r} (expected a force [N] ≥ 0)")
+        raise InputError(f"analyse_clamping.preload_N is {preload!r} (expected a force [N] ≥ 0)")
     if not fixture.clamps:
         raise InputError(f"{fixture.source}: no [[clamp]] entries (expected at least one clamp to analyse)")
     require_full(fixture, "clamping")
@@ -114,15 +114,17 @@ def analyse_clamping(
         order = list(order)
         unknown = [k for k in order if k not in names]
         if unknown:
-            raise InputError(f"--order: unknown clamp {unknown[0]!r} (expected the clamps {', '.join(names)})")
+            raise InputError(
+                f"analyse_clamping.order: unknown clamp {unknown[0]!r} (expected the clamps {', '.join(names)})"
+            )
         twice = [k for i, k in enumerate(order) if k in order[:i]]
         missing = [k for k in names if k not in order]
         if twice or missing:
             what = f"names a clamp twice ({twice[0]})" if twice else f"misses {', '.join(missing)}"
-            raise InputError(f"--order {what} (expected every clamp once: {', '.join(names)})")
+            raise InputError(f"analyse_clamping.order {what} (expected every clamp once: {', '.join(names)})")
     if len(names) > st.max_order_clamps and order is None:
         raise InputError(
-            f"{len(names)} clamps (the order search takes at most {st.max_order_clamps}; give --order to check one)"
+            f"{len(names)} clamps (the order search takes at most {st.max_order_clamps}; give analyse_clamping.order to check one)"
         )
     scene = clamp_scene(fixture)
     cases = cases_of(scene)

@@ -17,6 +17,7 @@ import numpy as np
 import typer
 
 from fixplan import limits
+from fixplan.cli.flags import with_flags
 from fixplan.errors import FixplanError, FixtureError, InputError, InputFileError, SolverError, one_line
 from fixplan.files import CommandStreams, StdoutError, check_output, document_stream
 
@@ -119,7 +120,7 @@ def _numbers(
 
 def _shown(text: str) -> str:
     """A user's text quoted in a message: escaped, and cut when long."""
-    from fixplan.schema import shorten
+    from fixplan.errors import shorten
 
     return shorten(text)
 
@@ -281,7 +282,7 @@ def _run(args: list[str]) -> int:
             typer.echo(issue.format(exc.source), err=True)
         return 2
     except FixplanError as exc:
-        _err(str(exc))
+        _err(with_flags(str(exc)))
         return 2
     except (typer.Exit, *_CLICK_EXIT) as exc:
         return int(exc.exit_code)

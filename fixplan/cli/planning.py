@@ -24,11 +24,12 @@ from fixplan.cli._app import (
 )
 from fixplan.errors import FixplanError, InputError, one_line
 from fixplan.files import check_distinct, write_text
-from fixplan.settings import DEFAULT
+from fixplan.settings import DEFAULT, Settings
 
 if TYPE_CHECKING:
     from fixplan.model import Fixture
     from fixplan.planner.plan import Plan, Verification
+    from fixplan.robust import RobustSettings
 
 # -- the perturbed world of `fixplan robust` (and `solve --perturb-seed`) -------------------------
 SeedOpt = Annotated[int, typer.Option("--seed", help="Base seed of the perturbed worlds (sample k: rng([seed, k])).")]
@@ -83,6 +84,13 @@ def _robust_settings(
     )
     settings.check()
     return settings
+
+
+def _solve_settings(accel: float, margin: float | None, friction_margin: float) -> Settings:
+    """The settings ``fixplan solve`` plans and verifies with: the ``haptic`` profile with the pushes' options."""
+    from fixplan.settings import HAPTIC, ExecutionSettings
+
+    return HAPTIC.with_(execution=ExecutionSettings(accel_mps2=accel, friction_margin=friction_margin, margin_N=margin))
 
 
 @app.command()
@@ -236,9 +244,7 @@ def solve(
         order=names,
         run_verification=not no_verify and perturb is None,
         progress=progress,
-        acceleration_mps2=accel,
-        margin_N=margin,
-        friction_margin=friction_margin,
+        settings=_solve_settings(accel, margin, friction_margin),
     )
     perturbation = None
     if perturb is not None and perturb_seed is not None:
@@ -380,8 +386,7 @@ def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | No
     from fixplan.cluster import progress_bar
 
     files = fixture_files(directory)
-    options = {"run_verification": verify, "acceleration_mps2": accel, "margin_N": margin,
-               "friction_margin": friction_margin}  # fmt: skip
+    options = {"run_verification": verify, "settings": _solve_settings(accel, margin, friction_margin)}
     with progress_bar("solving", len(files), enabled=not json_out) as progress:
         rows = solve_batch(files, options, scheduler=scheduler, progress=progress)
     if json_out:
@@ -499,8 +504,36 @@ def _print_robust(result, fixture, file: Path | None) -> None:  # type: ignore[n
     base = ["fixplan", "solve", *([] if file is None else [str(file)])]
     for f in result.failures:
         typer.echo(f"seed {f['seed']}: {f['cause']} — {f['reason']}")
-        cmd = [*base, "--perturb-seed", str(f["seed"]), *result.settings.replay_options()]
+        cmd = [*base, "--perturb-seed", str(f["seed"]), *_replay_options(result.settings)]
         typer.echo(f"  replay: {shlex.join(cmd)}")
+
+
+def _replay_options(settings: RobustSettings) -> list[str]:
+    """The command-line options that reproduce ``settings`` (those not at their defaults)."""
+    from fixplan.robust import RobustSettings
+
+    d = RobustSettings()
+    s = settings
+    out: list[str] = []
+    if s.seed != d.seed:
+        out += ["--seed", str(s.seed)]
+    if s.mu_spread != d.mu_spread:
+        out += ["--mu-spread", f"{s.mu_spread:g}"]
+    if (s.pose_sigma_m, s.pose_sigma_deg) != (d.pose_sigma_m, d.pose_sigma_deg):
+        out += ["--pose-sigma", f"{s.pose_sigma_m:g},{s.pose_sigma_deg:g}"]
+    if s.locator_sigma_m != d.locator_sigma_m:
+        out += ["--locator-sigma", f"{s.locator_sigma_m:g}"]
+    if s.force_noise != d.force_noise:
+        out += ["--force-noise", f"{s.force_noise:g}"]
+    if s.latency_s != d.latency_s:
+        out += ["--latency-ms", f"{s.latency_s * 1e3:g}"]
+    if s.acceleration_mps2 != d.acceleration_mps2:
+        out += ["--accel", f"{s.acceleration_mps2:g}"]
+    if s.margin_N is not None:
+        out += ["--margin", f"{s.margin_N:g}"]
+    if s.friction_margin != d.friction_margin:
+        out += ["--friction-margin", f"{s.friction_margin:g}"]
+    return out
 
 
 @app.command()

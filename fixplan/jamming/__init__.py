@@ -19,7 +19,7 @@ from fixplan.jamming.classify import MODES, Classification, Classifier, wrench_a
 from fixplan.jamming.search import WrenchSearch, search_wrench, search_wrench_in
 from fixplan.jamming.wedge import can_wedge, wedge_force
 from fixplan.locating import contact_set
-from fixplan.settings import Tolerances
+from fixplan.settings import DEFAULT, Settings
 
 if TYPE_CHECKING:
     from fixplan.model import Fixture
@@ -46,7 +46,7 @@ def classify(
     *,
     pose: Pose | str | None = None,
     backend: str = "clarabel",
-    tolerances: Tolerances | None = None,
+    settings: Settings | None = None,
     jobs: int | None = None,
     progress: Callable[[int], None] | None = None,
     as_json: bool | str = False,
@@ -67,6 +67,10 @@ def classify(
         Where the workpiece is (default: the start pose).
     backend : {"clarabel", "cvxpy"}
         The fast matrix path or the cvxpy reference model.
+    settings : Settings, optional
+        A profile (:mod:`fixplan.settings`) whose ``tolerances`` say what balanced and slipping
+        mean and whose ``witness`` when a motion witness is accepted; default: the fixture's
+        tolerances and the default profile's witness settings.
     jobs : int, optional
         Worker processes for large batches (default: the CPUs available; 1 = in-process).
     progress : callable, optional
@@ -87,11 +91,15 @@ def classify(
     if at is not None:
         at = np.asarray(at, dtype=float)
         if at.shape != (fixture.dimension,):
-            raise InputError(f"--at expects {fixture.dimension} coordinates, got {at.shape[0] if at.ndim else 1}")
-    tol = tolerances or fixture.tolerances
+            raise InputError(
+                f"classify.at expects {fixture.dimension} coordinates, got {at.shape[0] if at.ndim else 1}"
+            )
+    tol = fixture.tolerances if settings is None else settings.tolerances
+    witness = DEFAULT.witness if settings is None else settings.witness
     W_com = np.array([cs.wrench_about_com(w, at) for w in W])
     if len(cs) == 0:
         Classifier(cs, fixture.gravity_wrench(), tolerances=tol, backend=backend)  # raises the clear error
     return classify_batch(
-        cs, fixture.gravity_wrench(), tol, backend, W_com, W, jobs=jobs, progress=progress, as_json=as_json
-    )
+        cs, fixture.gravity_wrench(), tol, backend, W_com, W, jobs=jobs, progress=progress, as_json=as_json,
+        witness=witness,
+    )  # fmt: skip

@@ -5,8 +5,9 @@ Data layout shared with the Python side:
 - ``J`` (m × ndof): stacked contact rows, contact ``i`` at rows ``off[i] : off[i] + size[i]``
   (normal, tangents, [spin]);
 - ``D`` (k × 3): scale of the tangent rows in the cone's standard form (1, 1, e_r);
-- ``role`` (k,): 0 sliding (kept, friction at its limit), 1 sticking (no relative
-  acceleration), 2 open (no force, no equation; its opening is checked afterwards);
+- ``role`` (k,): the codes of :mod:`._roles`, ``ROLE_SLIDING`` (kept, friction at its limit),
+  ``ROLE_STICKING`` (no relative acceleration), ``ROLE_OPENING`` (no force, no equation; its
+  opening is checked afterwards);
 - unknowns ``z = (a, per contact: f_n,i if sliding, λ_i if sticking, nothing if open)``.
 """
 
@@ -14,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from fixplan.jamming._roles import ROLE_OPENING, ROLE_STICKING
 
 
 @njit(cache=True)
@@ -37,9 +40,9 @@ def system(M, J, off, size, mu, D, w, z, role):
     for i in range(k):
         o = off[i]
         sz = size[i]
-        if role[i] == 2:
+        if role[i] == ROLE_OPENING:
             continue
-        if role[i] == 1:
+        if role[i] == ROLE_STICKING:
             for q in range(sz):
                 li = z[col + q]
                 lam[o + q] = li

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from fixplan.jamming.classify import Classifier
 from fixplan.kinematics import ContactSet
-from fixplan.settings import Tolerances
+from fixplan.settings import DEFAULT, Tolerances, WitnessSettings
 
 FloatArray = NDArray[np.float64]
 PARALLEL_MIN = 400  # wrenches below which one process is faster
@@ -40,8 +40,8 @@ def _finish(out: list, as_json: bool | str) -> list:
 
 
 def _chunk(args: tuple) -> list:
-    cs, gravity, tol, backend, W_com, W_given, as_json = args
-    clf = Classifier(cs, gravity, tolerances=tol, backend=backend)
+    cs, gravity, tol, backend, W_com, W_given, as_json, witness = args
+    clf = Classifier(cs, gravity, tolerances=tol, backend=backend, witness=witness)
     out = [clf.classify(w, g) for w, g in zip(W_com, W_given, strict=True)]
     return _finish(out, as_json)
 
@@ -65,6 +65,7 @@ def classify_batch(
     jobs: int | None = None,
     progress: Callable[[int], None] | None = None,
     as_json: bool | str = False,
+    witness: WitnessSettings = DEFAULT.witness,
 ) -> list:
     """Classify every row of ``W_com`` (about the centre of mass); results in input order.
 
@@ -75,7 +76,7 @@ def classify_batch(
     n = W_com.shape[0]
     jobs = default_jobs() if jobs is None else max(1, jobs)
     if jobs == 1 or n < PARALLEL_MIN or backend != "clarabel":
-        clf = Classifier(cs, gravity, tolerances=tol, backend=backend)
+        clf = Classifier(cs, gravity, tolerances=tol, backend=backend, witness=witness)
         out = []
         for i in range(n):
             out.append(clf.classify(W_com[i], W_given[i]))
@@ -87,7 +88,7 @@ def classify_batch(
     n_chunks = max(jobs * 4, 1)
     bounds = np.linspace(0, n, n_chunks + 1).astype(int)
     tasks = [
-        (cs, gravity, tol, backend, W_com[a:b], W_given[a:b], as_json)
+        (cs, gravity, tol, backend, W_com[a:b], W_given[a:b], as_json, witness)
         for a, b in zip(bounds[:-1], bounds[1:], strict=True)
         if b > a
     ]

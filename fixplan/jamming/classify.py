@@ -43,7 +43,7 @@ from fixplan.kinematics import ContactSet
 from fixplan.nnls import nnls
 from fixplan.settings import DEFAULT as DEFAULT_SETTINGS
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
-from fixplan.settings import Tolerances
+from fixplan.settings import Tolerances, WitnessSettings
 
 _nnls_kernel = kernel("fixplan.jamming._classify_kernels", "nnls")
 
@@ -137,8 +137,15 @@ class Classifier:
     """Classifies many wrenches for one contact set; programs are built once and reused."""
 
     def __init__(
-        self, cs: ContactSet, gravity_wrench: ArrayLike, *, tolerances: Tolerances = DEFAULT, backend: str = "clarabel"
+        self,
+        cs: ContactSet,
+        gravity_wrench: ArrayLike,
+        *,
+        tolerances: Tolerances = DEFAULT,
+        backend: str = "clarabel",
+        witness: WitnessSettings = DEFAULT_SETTINGS.witness,
     ):
+        """``tolerances`` say what balanced and slipping mean, ``witness`` when a motion witness is accepted."""
         if backend not in BACKENDS:
             raise InputError(f"unknown backend {backend!r} (expected one of: {', '.join(BACKENDS)})")
         if len(cs) == 0:
@@ -161,7 +168,8 @@ class Classifier:
             b.C,
             b.N_maintain,
             slip_rel=tolerances.slip_rel,
-            res_tol=max(tolerances.balance_rel * DEFAULT_SETTINGS.witness.residual_fraction, 1e-12),
+            res_tol=max(tolerances.balance_rel * witness.residual_fraction, 1e-12),
+            settings=witness,
         )
         self.frames = {c.name: np.vstack([c.normal_world, c.tangents_world]) for c in cs.contacts}
         self._names = cs.names
@@ -196,7 +204,9 @@ class Classifier:
             sub_cs = ContactSet(
                 tuple(cs.contacts[i] for i in loaded), cs.com_world, cs.mass_matrix, cs.body_origin_world
             )
-            sub = Classifier(sub_cs, self.gravity, tolerances=self.tol, backend=self.backend)
+            sub = Classifier(
+                sub_cs, self.gravity, tolerances=self.tol, backend=self.backend, witness=self._witness.settings
+            )
             self._loaded[loaded] = sub
         other = sub.classify(wrench_com, wrench_given)
         if other.mode in ("jammed", "held"):

@@ -31,18 +31,26 @@ allowed by the question:
 
 The optimum is the least ``M⁻¹``-weighted residual: 0 exactly when the question's motion
 (or rest) is consistent with forces in the cones.
+
+:func:`wrench_search_program` builds the wrench search's program (docs/math.md program 2, solved
+by :mod:`fixplan.jamming.search`): the push of largest kept-contact margin, or of least effort,
+that produces a motion without jamming.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.jamming.hand_set import TorqueBox, torque_rows
 from fixplan.kinematics import Contact, ContactSet
 from fixplan.settings import DEFAULT
+from fixplan.spatial import skew
 
 FloatArray = NDArray[np.float64]
 
@@ -265,3 +273,212 @@ class ProgramBuilder:
     def m_inv_norm(self, w: FloatArray) -> float:
         """``‖w‖_{M⁻¹}``."""
         return float(np.linalg.norm(self.C @ w))
+
+
+def wrench_search_program(
+    cs: ContactSet,
+    a_hat: FloatArray,
+    roles: dict[str, str],
+    directions: dict[str, FloatArray],
+    w_g: FloatArray,
+    about: FloatArray,
+    F_max: float,
+    T_max: float,
+    effort_margin_N: float | None = None,
+    *,
+    cert: FloatArray | None,
+    jam: float,
+    s_max: float = math.inf,
+    least: Literal["effort", "force", "torque"] = "effort",
+    shared: dict[str, Any] | None = None,
+    hand_sets: tuple[TorqueBox, ...] = (),
+    hand_frac: float | None = 1.0,
+) -> tuple[ConeProgram, dict]:
+    """The wrench search's cone program (:mod:`fixplan.jamming.search`, program 2 of docs/math.md).
+
+    Variables x = (w [n], f_n sliding [ks], f sticking [reduced], s, τ[, e]).
+
+    Without ``effort_margin_N`` the program maximises τ. With it, it minimises ``e`` subject to
+    ``τ ≥ effort_margin_N``: the effort ``e ≥ ‖(F, T_c / L)‖`` (``least="effort"``), the force
+    ``e ≥ ‖F‖`` or the torque about the user's point ``e ≥ ‖T‖``. All keep the total wrench
+    ``w_e = w + w_g`` a relative distance ``jam`` from static balance, certified by the motion
+    ``cert`` (``ŷ``, ``‖ŷ‖_M = 1``, ``J_i ŷ ∈ K_i*``): ``ŷᵀ w_e ≥ jam ‖w_e‖_{M⁻¹}``.
+    ``shared``: a dictionary kept by the caller across builds with the same ``cs`` and ``roles``
+    (one search), which then computes the sticking contacts' layout and ``L⁻¹`` once.
+    ``hand_sets``: the arm's joint-torque boxes, kept within ``hand_frac`` of the effort limits
+    (None: left out, for the diagnoses), as ``A w ≤ b`` with ``w`` about the centre of mass.
+    """
+    n, d = cs.ndof, cs.dimension
+    shared = {} if shared is None else shared
+    slide = [i for i, c in enumerate(cs.contacts) if roles[c.name] == "sliding"]
+    stick = [i for i, c in enumerate(cs.contacts) if roles[c.name] == "sticking"]
+    if "stick_cs" not in shared:
+        stick_cs = ContactSet(tuple(cs.contacts[i] for i in stick), cs.com_world, cs.mass_matrix, cs.body_origin_world)
+        shared["stick_cs"] = stick_cs
+        # unscaled cones (the earlier form): the search's answers are confirmed by the
+        # classifier, whose programs are scaled; with scaled cones here the optimum moved by
+        # 1e-4 N·m and cylinder-5's spin landed where the pivot witness is not found
+        shared["lay"] = force_layout(stick_cs, scaled=False) if stick else None
+    stick_cs, lay = shared["stick_cs"], shared["lay"]
+    nf_stick = lay.nf if lay else 0
+    ks = len(slide)
+    i_w, i_fn, i_fs = 0, n, n + ks
+    i_s, i_tau = n + ks + nf_stick, n + ks + nf_stick + 1
+    effort = effort_margin_N is not None
+    i_e = i_tau + 1
+    nx = i_tau + 1 + (1 if effort else 0)
+    J = cs.J
+    # sliding contact wrench columns J_iᵀ φ_i
+    phis = []
+    for i in slide:
+        c = cs.contacts[i]
+        dvec = directions[c.name]  # unit slip (torsion scaled to metres for soft fingers)
+        phi = np.zeros(c.size)
+        phi[0] = 1.0
+        if c.friction > 0:
+            if c.soft:
+                phi[1:3] = -c.friction * dvec[:2]
+                phi[3] = -c.friction * c.torsion_m * dvec[2]
+            else:
+                phi[1 : 1 + dvec.shape[0]] = -c.friction * dvec
+        phis.append(phi)
+    rows_A: list[FloatArray] = []
+    rows_b: list[FloatArray] = []
+    cones: list[tuple[str, int]] = []
+    # dynamics: s M â − w − Σ f_n J_iᵀ φ_i − B_stick f = w_g   (zero cone: b − A x = 0)
+    A_dyn = np.zeros((n, nx))
+    A_dyn[:, i_s] = cs.mass_matrix @ a_hat
+    A_dyn[:, i_w : i_w + n] = -np.eye(n)
+    for k, i in enumerate(slide):
+        off, c = cs.offsets[i], cs.contacts[i]
+        A_dyn[:, i_fn + k] = -(J[off : off + c.size].T @ phis[k])
+    if lay is not None:
+        A_dyn[:, i_fs : i_fs + nf_stick] = -(stick_cs.J.T @ lay.S)
+    rows_A.append(A_dyn)
+    rows_b.append(w_g.copy())
+    cones.append(("zero", n))
+    # s ≥ 1 ; f_n,i − τ ≥ 0 for kept contacts ; τ ≥ 0
+    lin = []
+    e = np.zeros(nx)
+    e[i_s] = -1.0
+    lin.append((e, -1.0))  # b − A x = s − 1 ≥ 0
+    if math.isfinite(s_max):
+        e = np.zeros(nx)
+        e[i_s] = 1.0
+        lin.append((e, s_max))  # s_max − s ≥ 0: no more than s_max times the requested acceleration
+    for k in range(ks):
+        e = np.zeros(nx)
+        e[i_fn + k] = -1.0
+        e[i_tau] = 1.0
+        lin.append((e, 0.0))
+    if lay is not None:
+        for idx in lay.normal_index:
+            e = np.zeros(nx)
+            e[i_fs + idx] = -1.0
+            e[i_tau] = 1.0
+            lin.append((e, 0.0))
+    e = np.zeros(nx)
+    e[i_tau] = -1.0
+    lin.append((e, -effort_margin_N if effort_margin_N is not None else 0.0))  # τ ≥ τ_req (effort) or τ ≥ 0
+    rows_A.append(np.array([r for r, _ in lin]))
+    rows_b.append(np.array([b for _, b in lin]))
+    cones.append(("nonneg", len(lin)))
+    # friction cones of sticking contacts
+    if lay is not None:
+        A_c = np.zeros((lay.cone_rows.shape[0], nx))
+        A_c[:, i_fs : i_fs + nf_stick] = -lay.cone_rows
+        rows_A.append(A_c)
+        rows_b.append(np.zeros(lay.cone_rows.shape[0]))
+        cones.extend(lay.cones)
+    # ‖F‖ ≤ F_max
+    A_f = np.zeros((d + 1, nx))
+    A_f[1:, i_w : i_w + d] = -np.eye(d)
+    rows_A.append(A_f)
+    rows_b.append(np.concatenate([[F_max], np.zeros(d)]))
+    cones.append(("soc", d + 1))
+    # ‖T about the user's point‖ ≤ T_max: T_p = T_c + (c − p) × F
+    off = cs.com_world - about
+    if d == 3:
+        Kx = skew(off)  # the linear map F ↦ (c − p) × F of spatial.shift_wrench
+        A_t = np.zeros((4, nx))
+        A_t[1:, 3:6] = -np.eye(3)
+        A_t[1:, 0:3] = -Kx
+        rows_A.append(A_t)
+        rows_b.append(np.array([T_max, 0.0, 0.0, 0.0]))
+        cones.append(("soc", 4))
+    else:
+        row = np.zeros(nx)
+        row[2] = 1.0
+        row[0] = -off[1]
+        row[1] = off[0]
+        rows_A.append(np.vstack([row, -row]))
+        rows_b.append(np.array([T_max, T_max]))
+        cones.append(("nonneg", 2))
+    if hand_sets and hand_frac is not None:
+        # the arm: |τ_g + Jᵀ S w| ≤ s τ_max at every box (b − A x ≥ 0)
+        A_arm, b_arm = torque_rows(hand_sets, cs.com_world, hand_frac)
+        A_h = np.zeros((A_arm.shape[0], nx))
+        A_h[:, i_w : i_w + n] = A_arm
+        rows_A.append(A_h)
+        rows_b.append(b_arm)
+        cones.append(("nonneg", A_arm.shape[0]))
+    if cert is not None:
+        # not jamming: (ŷᵀ w_e / jam, C w_e) ∈ SOC, C = L⁻¹ (‖C x‖ = ‖x‖_{M⁻¹})
+        if "C" not in shared:
+            shared["C"] = np.linalg.inv(np.linalg.cholesky(cs.mass_matrix))
+        C = shared["C"]
+        A_j = np.zeros((n + 1, nx))
+        A_j[0, i_w : i_w + n] = -cert / jam
+        A_j[1:, i_w : i_w + n] = -C
+        rows_A.append(A_j)
+        rows_b.append(np.concatenate([[float(cert @ w_g) / jam], C @ w_g]))
+        cones.append(("soc", n + 1))
+    c_vec = np.zeros(nx)
+    if effort and least == "effort":
+        # e ≥ ‖(F, T_c / L)‖ with the moment about the centre of mass (w is about the com)
+        L = max(cs.max_lever_m, 1e-9)
+        A_e = np.zeros((n + 1, nx))
+        A_e[0, i_e] = -1.0
+        A_e[1 : 1 + d, i_w : i_w + d] = -np.eye(d)
+        A_e[1 + d :, i_w + d : i_w + n] = -np.eye(n - d) / L
+        rows_A.append(A_e)
+        rows_b.append(np.zeros(n + 1))
+        cones.append(("soc", n + 1))
+        c_vec[i_e] = 1.0
+    elif effort:
+        # e ≥ ‖F‖, or e ≥ ‖T about the user's point‖ (the moment the torque limit bounds)
+        T_rows = np.zeros((n - d, nx))
+        if d == 3:
+            T_rows[:, 3:6] = np.eye(3)
+            T_rows[:, 0:3] = skew(off)
+        else:
+            T_rows[0] = row
+        A_e = np.zeros((1 + (d if least == "force" else n - d), nx))
+        A_e[0, i_e] = -1.0
+        if least == "force":
+            A_e[1:, i_w : i_w + d] = -np.eye(d)
+        else:
+            A_e[1:] = -T_rows
+        rows_A.append(A_e)
+        rows_b.append(np.zeros(A_e.shape[0]))
+        cones.append(("soc", A_e.shape[0]))
+        c_vec[i_e] = 1.0
+    else:
+        c_vec[i_tau] = -1.0
+    A = np.vstack(rows_A)
+    b = np.concatenate(rows_b)
+
+    def expand(x: FloatArray) -> FloatArray:
+        lam = np.zeros(J.shape[0])
+        for k, i in enumerate(slide):
+            off_i, c = cs.offsets[i], cs.contacts[i]
+            lam[off_i : off_i + c.size] = x[i_fn + k] * phis[k]
+        if lay is not None:
+            lam_stick = lay.S @ x[i_fs : i_fs + nf_stick]
+            for j, i in enumerate(stick):
+                off_i, c = cs.offsets[i], cs.contacts[i]
+                o = stick_cs.offsets[j]
+                lam[off_i : off_i + c.size] = lam_stick[o : o + c.size]
+        return lam
+
+    return ConeProgram(c_vec, A, b, tuple(cones), "wrench-search", 0), {"s": i_s, "tau": i_tau, "expand": expand}

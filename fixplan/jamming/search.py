@@ -59,12 +59,12 @@ from numpy.typing import ArrayLike, NDArray
 from fixplan.errors import InputError
 from fixplan.jamming.backends import ClarabelProgram
 from fixplan.jamming.classify import Classification, Classifier
-from fixplan.jamming.hand_set import TorqueBox, torque_rows, worst_joint
-from fixplan.jamming.programs import ConeProgram, force_layout
+from fixplan.jamming.hand_set import TorqueBox, worst_joint
+from fixplan.jamming.programs import ConeProgram, force_layout, wrench_search_program
 from fixplan.kinematics import ContactSet
 from fixplan.locating import contact_set
-from fixplan.settings import DEFAULT
-from fixplan.spatial import shift_twist, shift_wrench, skew
+from fixplan.settings import DEFAULT, SearchSettings, Settings
+from fixplan.spatial import shift_twist, shift_wrench
 
 if TYPE_CHECKING:
     from fixplan.model import Fixture
@@ -72,11 +72,7 @@ if TYPE_CHECKING:
 
 FloatArray = NDArray[np.float64]
 
-_SEARCH = DEFAULT.search  # the search's thresholds (fixplan.settings.SearchSettings)
-JAM_MARGIN_REL = _SEARCH.jam_margin_rel  # default least relative distance of the wrench found from static balance
-_TARGET_REL = _SEARCH.target_rel  # a margin target counts as met within this relative shortfall (solver accuracy)
 _MOVING = ("slides", "pivots", "rolls")
-SLIP_REL = _SEARCH.slip_rel  # a kept contact slipping at ≥ 5 % of the part's speed slides against its slip
 
 
 def floor_sig(x: float, digits: int = 4) -> str:
@@ -232,17 +228,18 @@ def _tangential_slip(c: Any, u: FloatArray) -> FloatArray:
 
 
 def _roles(
-    cs: ContactSet, a_hat: FloatArray, tol: float, slip: FloatArray | None = None
+    cs: ContactSet, a_hat: FloatArray, ss: SearchSettings, slip: FloatArray | None = None
 ) -> tuple[dict[str, str], dict[str, FloatArray]]:
     """Each contact's role under the motion ``a_hat`` and, for sliding ones, the unit slip direction.
 
     Without ``slip`` a kept contact slides when ``a_hat`` makes it slip (a part at rest starting to
     move: friction opposes the acceleration). With ``slip`` (a twist of the centre of mass: the
     velocity the part has, plus what the push adds within a control period) a kept contact whose
-    slip under ``slip`` is at least ``SLIP_REL`` of the twist's speed slides *against that slip*:
+    slip under ``slip`` is at least ``ss.slip_rel`` of the twist's speed slides *against that slip*:
     Coulomb friction opposes the velocity, not the acceleration asked for. Opening or closing is
-    always judged from ``a_hat``.
+    always judged from ``a_hat`` (within ``ss.role_rel``).
     """
+    tol = ss.role_rel
     scale = float(np.linalg.norm(a_hat[: cs.dimension])) + float(np.linalg.norm(a_hat[cs.dimension :])) * cs.max_lever_m
     v_scale = 0.0
     if slip is not None:
@@ -263,7 +260,7 @@ def _roles(
             continue
         t_v = _tangential_slip(c, Ji @ slip) if slip is not None and v_scale > 0 else None
         t_a = _tangential_slip(c, u)
-        if t_v is not None and float(np.linalg.norm(t_v)) > SLIP_REL * v_scale:
+        if t_v is not None and float(np.linalg.norm(t_v)) > ss.slip_rel * v_scale:
             roles[c.name] = "sliding"
             directions[c.name] = t_v / float(np.linalg.norm(t_v))
         elif float(np.linalg.norm(t_a)) > tol * scale:
@@ -287,7 +284,7 @@ def _polar_rows(cs: ContactSet) -> tuple[FloatArray, tuple[tuple[str, int], ...]
 
 
 def _certificate(
-    cs: ContactSet, target: FloatArray, *, project: bool, shared: dict[str, Any] | None = None
+    cs: ContactSet, target: FloatArray, *, project: bool, shared: dict[str, Any] | None = None, zero_rel: float
 ) -> FloatArray | None:
     """A unit (``‖ŷ‖_M = 1``) motion ``ŷ`` with ``J_i ŷ ∈ K_i*`` at every contact, or None.
 
@@ -295,7 +292,8 @@ def _certificate(
     ``project=False``: the direction maximising ``ŷᵀ target`` for the wrench ``target`` (the
     dual of the classifier's margin program: its optimum *is* the margin).
     ``shared``: a dictionary kept by the caller across calls on the same ``cs``, which then
-    computes ``M``'s Cholesky factor and the polar rows once.
+    computes ``M``'s Cholesky factor and the polar rows once. A direction shorter than ``zero_rel``
+    (``settings.numerics.zero_rel``) of the target's size is none.
     """
     n = cs.ndof
     shared = {} if shared is None else shared
@@ -333,7 +331,7 @@ def _certificate(
     y = sol.x[:n]
     size = float(np.linalg.norm(L.T @ y))
     ref = float(np.linalg.norm(L.T @ target)) if project else float(np.linalg.norm(np.linalg.solve(L, target)))
-    if size <= DEFAULT.numerics.zero_rel * max(ref, 1e-300) or (not project and float(y @ target) <= 0.0):
+    if size <= zero_rel * max(ref, 1e-300) or (not project and float(y @ target) <= 0.0):
         return None
     return y / size
 
@@ -347,7 +345,7 @@ def search_wrench(
     at: ArrayLike | None = None,
     objective: Literal["margin", "effort"] = "margin",
     min_margin_N: float | None = None,
-    jam_margin_rel: float = JAM_MARGIN_REL,
+    jam_margin_rel: float | None = None,
     friction_margin: float = 0.0,
     max_accel_factor: float = math.inf,
     slip_twist: ArrayLike | None = None,
@@ -356,6 +354,7 @@ def search_wrench(
     limit_fraction: float | None = None,
     lift_below_weight: bool = True,
     hand_sets: Sequence[TorqueBox] = (),
+    settings: Settings = DEFAULT,
 ) -> WrenchSearch:
     """The applied wrench that moves the part with acceleration ≥ ``motion``, without jamming.
 
@@ -372,8 +371,8 @@ def search_wrench(
     ``min_margin_N`` given explicitly is a *target*: when τ* falls short of it the best push is
     still returned (``found`` true) but ``margin_target_met`` is ``False`` and the reason says
     "margin target … N not met: best … N". Every wrench returned is certified at least
-    ``jam_margin_rel`` (relative, in the ``M⁻¹``-norm) away from static balance (see the module
-    docstring). When the motion opens every contact the push is ``M â − w_g``.
+    ``jam_margin_rel`` (relative, in the ``M⁻¹``-norm; default ``settings.search.jam_margin_rel``)
+    away from static balance (see the module docstring). When the motion opens every contact the push is ``M â − w_g``.
 
     ``friction_margin = δ ≥ 0`` makes the push robust to friction known only within a factor
     ``1 ± δ``: the program gives sliding contacts ``μ(1 + δ)`` (the push overcomes the worst
@@ -385,7 +384,7 @@ def search_wrench(
     ``slip_twist`` (same point and axes as ``motion``, [m/s, rad/s]) is for a part that already
     moves: sliding friction opposes the slip of this twist — pass the velocity the part has plus
     what the push adds within one control period — instead of the slip of ``motion`` (a part at
-    rest). A kept contact that slips under it at ≥ ``SLIP_REL`` of its speed slides against that
+    rest). A kept contact that slips under it at ≥ ``settings.search.slip_rel`` of its speed slides against that
     slip even where ``motion`` alone would keep it sticking. The jamming certificate is unchanged
     (the wrench would also move the part from rest).
 
@@ -419,12 +418,16 @@ def search_wrench(
     This is the fixture-level form: it builds the contact set at ``pose`` and moves ``motion``
     (and ``slip_twist``) from the body origin (or ``at``) to the centre of mass, then calls
     :func:`search_wrench_in`, which a caller holding a contact set calls directly.
+
+    ``settings`` (default: the ``default`` profile) gives every threshold of the search
+    (:class:`fixplan.settings.SearchSettings`, ``settings.search``).
     """
     m = np.asarray(motion, dtype=float)
     if m.shape != (fixture.ndof,) or not np.all(np.isfinite(m)):
-        raise InputError(f"--motion expects {fixture.ndof} finite numbers, got {list(np.atleast_1d(m))}")
+        raise InputError(f"search_wrench.motion expects {fixture.ndof} finite numbers, got {list(np.atleast_1d(m))}")
     if float(np.linalg.norm(m)) == 0.0:
-        raise InputError("--motion is zero (expected the desired acceleration of the part)")
+        raise InputError("search_wrench.motion is zero (expected the desired acceleration of the part)")
+    jam_margin_rel = settings.search.jam_margin_rel if jam_margin_rel is None else jam_margin_rel
     _check_options(objective, min_margin_N, friction_margin, jam_margin_rel)
     cs = contact_set(fixture, pose, contacts)
     _check_contacts(cs)
@@ -451,6 +454,7 @@ def search_wrench(
         limit_fraction=limit_fraction,
         lift_below_weight=lift_below_weight,
         hand_sets=hand_sets,
+        settings=settings,
     )
 
 
@@ -478,7 +482,7 @@ def search_wrench_in(
     about_world: ArrayLike | None = None,
     objective: str = "margin",
     min_margin_N: float | None = None,
-    jam_margin_rel: float = JAM_MARGIN_REL,
+    jam_margin_rel: float | None = None,
     friction_margin: float = 0.0,
     max_accel_factor: float = math.inf,
     slip_com: ArrayLike | None = None,
@@ -487,6 +491,7 @@ def search_wrench_in(
     limit_fraction: float | None = None,
     lift_below_weight: bool = True,
     hand_sets: Sequence[TorqueBox] = (),
+    settings: Settings = DEFAULT,
 ) -> WrenchSearch:
     """:func:`search_wrench` for a contact set already built, with the motion of the centre of mass.
 
@@ -494,23 +499,25 @@ def search_wrench_in(
     ``slip_com`` the slip twist, see :func:`search_wrench`), world axes: no shift to and from
     the body origin. ``fixture`` gives gravity, the hand's limits and the tolerances; the wrench
     found is reported about ``about_world`` (default: the body origin ``cs.body_origin_world``).
-    The other arguments and the answer are those of :func:`search_wrench`.
+    The other arguments (``settings`` among them) and the answer are those of :func:`search_wrench`.
     """
+    ss = settings.search
+    jam_margin_rel = ss.jam_margin_rel if jam_margin_rel is None else jam_margin_rel
     a_hat = np.asarray(a_com, dtype=float)
     if a_hat.shape != (cs.ndof,) or not np.all(np.isfinite(a_hat)):
-        raise InputError(f"--motion expects {cs.ndof} finite numbers, got {list(np.atleast_1d(a_hat))}")
+        raise InputError(f"search_wrench_in.a_com expects {cs.ndof} finite numbers, got {list(np.atleast_1d(a_hat))}")
     if float(np.linalg.norm(a_hat)) == 0.0:
-        raise InputError("--motion is zero (expected the desired acceleration of the part)")
+        raise InputError("search_wrench_in.a_com is zero (expected the desired acceleration of the part)")
     _check_options(objective, min_margin_N, friction_margin, jam_margin_rel)
     _check_contacts(cs)
     about = cs.body_origin_world if about_world is None else np.asarray(about_world, dtype=float)
     slip = None if slip_com is None else np.asarray(slip_com, dtype=float)
     if slip is not None and (slip.shape != (cs.ndof,) or not np.all(np.isfinite(slip))):
         raise InputError(f"slip_twist expects {cs.ndof} finite numbers, got {list(np.atleast_1d(slip))}")
-    frac = _SEARCH.limit_fraction if limit_fraction is None else float(limit_fraction)
+    frac = ss.limit_fraction if limit_fraction is None else float(limit_fraction)
     if not (0.0 < frac <= 1.0):
         raise InputError(f"limit_fraction must lie in (0, 1], got {limit_fraction}")
-    roles, directions = _roles(cs, a_hat, _SEARCH.role_rel, slip)
+    roles, directions = _roles(cs, a_hat, ss, slip)
     F_max, T_max, notes = fixture.hand_limits()
     w_g = fixture.gravity_wrench()
     target = None if min_margin_N is None else float(min_margin_N)
@@ -519,9 +526,9 @@ def search_wrench_in(
     if boxes and cs.dimension != 3:
         raise InputError("an arm's joint-torque boxes (hand_sets) are for 3D scenes (expected none in 2D)")
     if not kept:
-        clf_free = Classifier(cs, w_g, tolerances=fixture.tolerances)
+        clf_free = Classifier(cs, w_g, tolerances=fixture.tolerances, witness=settings.witness)
         return _with_arm(
-            _free_push(cs, clf_free, a_hat, roles, about, w_g, F_max, T_max, notes, target, frac), boxes, about
+            _free_push(cs, clf_free, a_hat, roles, about, w_g, F_max, T_max, notes, target, ss, frac), boxes, about, ss
         )
 
     def not_found(
@@ -533,7 +540,7 @@ def search_wrench_in(
         )  # fmt: skip
 
     polar: dict[str, Any] = {}  # the certificates' factors of cs, computed once
-    y = _certificate(cs, a_hat, project=True, shared=polar) if certify else None
+    y = _certificate(cs, a_hat, project=True, shared=polar, zero_rel=settings.numerics.zero_rel) if certify else None
     if certify and (y is None or float(y @ cs.mass_matrix @ a_hat) <= 0.0):
         return not_found(
             "every push that produces this motion can also be balanced by the contact forces (M a is a contact"
@@ -557,36 +564,36 @@ def search_wrench_in(
     # headroom: first within the fraction of the limits, the whole limits only when nothing moves
     # the part inside it (one more program then)
     F_lim, T_lim, h_lim = frac * F_max, frac * T_max, frac
-    prog, meta = _build(**build, cert=y, F_max=F_lim, T_max=T_lim, hand_frac=h_lim)  # type: ignore[arg-type]
+    prog, meta = wrench_search_program(**build, cert=y, F_max=F_lim, T_max=T_lim, hand_frac=h_lim)  # type: ignore[arg-type]
     sol = ClarabelProgram(prog).solve(prog.b)
-    within = bool(sol.solved and -sol.value > _SEARCH.found_rel * F_max)
+    within = bool(sol.solved and -sol.value > ss.found_rel * F_max)
     # the headroom must not cost the contacts their hold: where the margin inside the fraction
     # stays below the weight m|g| (or the target asked for), the whole limits are tried too and
     # kept when they press the kept contacts clearly harder
     weight_N = fixture.weight_N if target is None else target
     tau_within = float(-sol.value) if within else 0.0
     lifted = False
-    if lift_below_weight and within and frac < 1.0 and tau_within < weight_N * (1 - _TARGET_REL):
-        prog_f, meta_f = _build(**build, cert=y, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
+    if lift_below_weight and within and frac < 1.0 and tau_within < weight_N * (1 - ss.target_rel):
+        prog_f, meta_f = wrench_search_program(**build, cert=y, F_max=F_max, T_max=T_max)  # type: ignore[arg-type]
         sol_f = ClarabelProgram(prog_f).solve(prog_f.b)
-        if sol_f.solved and -sol_f.value > min(tau_within * _SEARCH.headroom_margin_gain, weight_N):
+        if sol_f.solved and -sol_f.value > min(tau_within * ss.headroom_margin_gain, weight_N):
             prog, meta, sol, F_lim, T_lim, h_lim, lifted = prog_f, meta_f, sol_f, F_max, T_max, 1.0, True
     if not within and frac < 1.0:
         F_lim, T_lim, h_lim = F_max, T_max, 1.0
-        prog, meta = _build(**build, cert=y, F_max=F_lim, T_max=T_lim)  # type: ignore[arg-type]
+        prog, meta = wrench_search_program(**build, cert=y, F_max=F_lim, T_max=T_lim)  # type: ignore[arg-type]
         sol = ClarabelProgram(prog).solve(prog.b)
     n = cs.ndof
-    if not sol.solved or -sol.value <= _SEARCH.found_rel * F_max:
+    if not sol.solved or -sol.value <= ss.found_rel * F_max:
         # Diagnose: is it the arm, the hand's limits, or the motion itself?
         if boxes:
-            arm_said = _arm_refuses(build, y, F_max, T_max, boxes, about)
+            arm_said = _arm_refuses(build, y, F_max, T_max, boxes, about, ss)
             if arm_said is not None:
                 return replace(not_found(arm_said[0], ["arm"]), arm_torque_ratio=arm_said[1], arm_joint=arm_said[2])
-        big = _SEARCH.unbounded_factor
-        prog_free, _ = _build(**build, cert=y, F_max=big * F_max, T_max=big * T_max, hand_frac=None)  # type: ignore[arg-type]
+        big = ss.unbounded_factor
+        prog_free, _ = wrench_search_program(**build, cert=y, F_max=big * F_max, T_max=big * T_max, hand_frac=None)  # type: ignore[arg-type]
         free = ClarabelProgram(prog_free).solve(prog_free.b)
-        if free.solved and -free.value > _SEARCH.found_rel * F_max:
-            reason, binding, needs = _too_weak(build, y, F_max, T_max)
+        if free.solved and -free.value > ss.found_rel * F_max:
+            reason, binding, needs = _too_weak(build, y, F_max, T_max, ss)
             return not_found(reason + notes, binding, needs)
         return not_found(
             "no wrench moves the part this way while keeping the contacts pressed and clear of jamming"
@@ -595,24 +602,31 @@ def search_wrench_in(
     x, tau = sol.x, float(-sol.value)
     # a better certificate: the classifier's own dual direction for the wrench found (the
     # optimum above stays feasible with it, so τ cannot drop)
-    y2 = _certificate(cs, x[:n] + w_g, project=False, shared=polar) if certify else None
+    y2 = (
+        _certificate(cs, x[:n] + w_g, project=False, shared=polar, zero_rel=settings.numerics.zero_rel)
+        if certify
+        else None
+    )
     if y2 is not None:
-        prog2, meta2 = _build(**build, cert=y2, F_max=F_lim, T_max=T_lim, hand_frac=h_lim)  # type: ignore[arg-type]
+        prog2, meta2 = wrench_search_program(**build, cert=y2, F_max=F_lim, T_max=T_lim, hand_frac=h_lim)  # type: ignore[arg-type]
         sol2 = ClarabelProgram(prog2).solve(prog2.b)
         if sol2.solved and -sol2.value >= tau:
             x, tau, meta, y = sol2.x, float(-sol2.value), meta2, y2
     tau_best = tau
     if objective == "effort":
         wanted = fixture.weight_N if target is None else target
-        tau_req = wanted if wanted < tau * (1 - _TARGET_REL) else tau * (1 - _TARGET_REL)
-        prog_e, meta_e = _build(**build, cert=y, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_req, hand_frac=h_lim)  # type: ignore[arg-type]
+        tau_req = wanted if wanted < tau * (1 - ss.target_rel) else tau * (1 - ss.target_rel)
+        prog_e, meta_e = wrench_search_program(
+            **build,  # type: ignore[arg-type]
+            cert=y, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_req, hand_frac=h_lim,
+        )  # fmt: skip
         sol_e = ClarabelProgram(prog_e).solve(prog_e.b)
         if sol_e.solved:
             x, meta = sol_e.x, meta_e
             tau = float(x[meta["tau"]])
         else:
             notes += " (the least-effort program did not solve: the best-margin push is returned)"
-        if target is None and wanted > tau_best * (1 + _TARGET_REL):
+        if target is None and wanted > tau_best * (1 + ss.target_rel):
             within_text = f" within {frac:.0%} of the hand's limits" if within and frac < 1.0 else ""
             notes += (
                 f" (default margin m|g| = {wanted:.4g} N not reachable{within_text}: best {floor_sig(tau_best)} N used;"
@@ -624,12 +638,12 @@ def search_wrench_in(
     forces = {c.name: lam[o : o + c.size] for c, o in zip(cs.contacts, cs.offsets, strict=True)}
     w_user = _about_point(cs, w_com, about)  # the applied wrench about the user's point
     binding = []
-    if abs(float(np.linalg.norm(w_com[: cs.dimension])) - F_max) <= _SEARCH.binding_rel * F_max:
+    if abs(float(np.linalg.norm(w_com[: cs.dimension])) - F_max) <= ss.binding_rel * F_max:
         binding.append("max_force")
-    if abs(float(np.linalg.norm(w_user[cs.dimension :])) - T_max) <= _SEARCH.binding_rel * T_max:
+    if abs(float(np.linalg.norm(w_user[cs.dimension :])) - T_max) <= ss.binding_rel * T_max:
         binding.append("max_torque")
     arm_ratio, arm_joint, _ = worst_joint(boxes, w_user, about) if boxes else (None, None, "")
-    if arm_ratio is not None and arm_ratio >= 1.0 - _SEARCH.binding_rel:
+    if arm_ratio is not None and arm_ratio >= 1.0 - ss.binding_rel:
         binding.append(f"joint {arm_joint}")
     if not within and frac < 1.0:
         notes += _beyond_fraction(w_user, cs.dimension, F_max, T_max, frac)
@@ -637,7 +651,7 @@ def search_wrench_in(
         notes += _lifted_fraction(w_user, cs.dimension, F_max, T_max, frac, tau_within)
         within = False
 
-    met = None if target is None else bool(tau_best >= target * (1 - _TARGET_REL))
+    met = None if target is None else bool(tau_best >= target * (1 - ss.target_rel))
     if not confirm:
         reason = ("decelerates the sliding part as asked" if not certify else "moves as asked") + (
             f" with every kept contact pressed by ≥ {floor_sig(tau)} N (not checked by the classifier){notes}"
@@ -649,7 +663,7 @@ def search_wrench_in(
             margin_target_N=target, margin_target_met=met, limit_fraction=frac, within_fraction=within,
             arm_torque_ratio=arm_ratio, arm_joint=arm_joint,
         )  # fmt: skip
-    clf_all = Classifier(cs, w_g, tolerances=fixture.tolerances)
+    clf_all = Classifier(cs, w_g, tolerances=fixture.tolerances, witness=settings.witness)
     bal = clf_all.classify(w_com, w_user)
     w_e_norm = clf_all.builder.m_inv_norm(w_com + w_g)
     jam_rel = bal.balance_residual / w_e_norm if w_e_norm > 0 and math.isfinite(bal.balance_residual) else None
@@ -657,8 +671,10 @@ def search_wrench_in(
         check = bal
     else:
         kept_cs = ContactSet(tuple(cs.contacts[i] for i in kept), cs.com_world, cs.mass_matrix, cs.body_origin_world)
-        check = Classifier(kept_cs, w_g, tolerances=fixture.tolerances).classify(w_com, w_user)
-    confirmed, why_not = _confirm(cs, check, a_hat, roles)
+        check = Classifier(kept_cs, w_g, tolerances=fixture.tolerances, witness=settings.witness).classify(
+            w_com, w_user
+        )
+    confirmed, why_not = _confirm(cs, check, a_hat, roles, ss)
     if bal.balanced and certify:
         reason = f"the wrench found is statically balanced ({bal.mode}): it would not move the part"
     elif not certify:
@@ -699,6 +715,7 @@ def _arm_refuses(
     T_max: float,
     boxes: tuple[TorqueBox, ...],
     about: FloatArray,
+    ss: SearchSettings,
 ) -> tuple[str, float, str] | None:
     """``(reason, ratio, joint)`` when a push within the hand's limits exists but the arm cannot exert it, else None.
 
@@ -706,9 +723,9 @@ def _arm_refuses(
     ``|τ| / τ_max`` there, and the pose (the box's label).
     """
     cs: ContactSet = build["cs"]
-    prog, _ = _build(**build, cert=cert, F_max=F_max, T_max=T_max, hand_frac=None)
+    prog, _ = wrench_search_program(**build, cert=cert, F_max=F_max, T_max=T_max, hand_frac=None)
     sol = ClarabelProgram(prog).solve(prog.b)
-    if not sol.solved or -sol.value <= _SEARCH.found_rel * F_max:
+    if not sol.solved or -sol.value <= ss.found_rel * F_max:
         return None
     w_user = _about_point(cs, sol.x[: cs.ndof], about)
     ratio, joint, label = worst_joint(boxes, w_user, about)
@@ -720,12 +737,12 @@ def _arm_refuses(
     return reason, ratio, joint
 
 
-def _with_arm(res: WrenchSearch, boxes: tuple[TorqueBox, ...], about: FloatArray) -> WrenchSearch:
+def _with_arm(res: WrenchSearch, boxes: tuple[TorqueBox, ...], about: FloatArray, ss: SearchSettings) -> WrenchSearch:
     """A free push (every contact opens, the push determined) checked against the arm's boxes too."""
     if not boxes or res.wrench is None:
         return res
     ratio, joint, label = worst_joint(boxes, res.wrench, about)
-    if ratio <= 1.0 + _SEARCH.limit_rel:
+    if ratio <= 1.0 + ss.limit_rel:
         return replace(res, arm_torque_ratio=ratio, arm_joint=joint)
     where = f" at {label}" if label else ""
     reason = f"the arm cannot exert the push M a − w_g: joint {joint} needs {ratio:.3g} times its effort limit{where}"
@@ -755,7 +772,9 @@ def _lifted_fraction(w_user: FloatArray, d: int, F_max: float, T_max: float, fra
     )
 
 
-def _confirm(cs: ContactSet, check: Classification, a_hat: FloatArray, roles: dict[str, str]) -> tuple[bool, str]:
+def _confirm(
+    cs: ContactSet, check: Classification, a_hat: FloatArray, roles: dict[str, str], ss: SearchSettings
+) -> tuple[bool, str]:
     """Check the classifier's motion against the request: kind, acceleration ≥ â along â, openings."""
     kept_roles = [r for r in roles.values() if r != "opening"]
     if all(r == "sliding" for r in kept_roles):
@@ -771,9 +790,9 @@ def _confirm(cs: ContactSet, check: Classification, a_hat: FloatArray, roles: di
     ref = float(a_hat @ M @ a_hat)
     along = float(a @ M @ a_hat) / ref
     off_axis = a - along * a_hat
-    if along < 1 - _SEARCH.along_rel:
+    if along < 1 - ss.along_rel:
         return False, f"its acceleration is {along:.4g} × the requested one"
-    if float(off_axis @ M @ off_axis) > _SEARCH.off_axis_rel**2 * float(a @ M @ a):
+    if float(off_axis @ M @ off_axis) > ss.off_axis_rel**2 * float(a @ M @ a):
         return False, "its acceleration points elsewhere than the requested motion"
     for c, off in zip(cs.contacts, cs.offsets, strict=True):
         if roles[c.name] == "opening" and float(cs.J[off] @ a) <= 0.0:
@@ -798,15 +817,16 @@ def too_weak_reason(
     T_with: float | None,
     F_max: float,
     T_max: float,
+    settings: SearchSettings = DEFAULT.search,
 ) -> tuple[str, list[str]]:
     """The "too weak" message and the binding limits, from the least force and the least torque.
 
     ``F_need`` is the least force [N] a push needs with its torque within ``T_max`` (``T_with`` its
     torque there), ``T_need`` the least torque [N·m] with the force within ``F_max`` (``F_with`` its
     force); None: no push within that limit. A limit binds alone when the least push beyond it keeps
-    the other limit slack; otherwise both bind.
+    the other limit slack (below ``1 − settings.binding_rel`` of it); otherwise both bind.
     """
-    slack = 1 - _SEARCH.binding_rel
+    slack = 1 - settings.binding_rel
     torque_alone = T_need is not None and T_need > T_max and F_with is not None and F_with < slack * F_max
     force_alone = F_need is not None and F_need > F_max and T_with is not None and T_with < slack * T_max
     head = "the manipulator is too weak: "
@@ -836,7 +856,7 @@ def too_weak_reason(
 
 
 def _too_weak(
-    build: dict[str, Any], cert: FloatArray | None, F_max: float, T_max: float
+    build: dict[str, Any], cert: FloatArray | None, F_max: float, T_max: float, ss: SearchSettings
 ) -> tuple[str, list[str], tuple[float | None, float | None]]:
     """Why no push within the limits exists: the least force and the least torque it needs.
 
@@ -847,11 +867,11 @@ def _too_weak(
     """
     cs: ContactSet = build["cs"]
     d = cs.dimension
-    tau_min = _SEARCH.found_rel * F_max
-    big = _SEARCH.unbounded_factor
+    tau_min = ss.found_rel * F_max
+    big = ss.unbounded_factor
 
     def least(kind: Literal["force", "torque"], F_lim: float, T_lim: float) -> tuple[float, float] | None:
-        prog, _ = _build(
+        prog, _ = wrench_search_program(
             **build, cert=cert, F_max=F_lim, T_max=T_lim, effort_margin_N=tau_min, least=kind, hand_frac=None
         )
         sol = ClarabelProgram(prog).solve(prog.b)
@@ -865,7 +885,7 @@ def _too_weak(
     by_torque = least("torque", F_max, big * T_max)
     F_need, T_with = by_force if by_force is not None else (None, None)
     F_with, T_need = by_torque if by_torque is not None else (None, None)
-    reason, binding = too_weak_reason(F_need, F_with, T_need, T_with, F_max, T_max)
+    reason, binding = too_weak_reason(F_need, F_with, T_need, T_with, F_max, T_max, ss)
     return reason, binding, (F_need, T_need)
 
 
@@ -880,6 +900,7 @@ def _free_push(
     T_max: float,
     notes: str,
     target: float | None,
+    ss: SearchSettings,
     frac: float = 1.0,
 ) -> WrenchSearch:
     """Every contact opens: no contact force, the push is ``w = M â − w_g`` (checked, not optimised)."""
@@ -891,9 +912,9 @@ def _free_push(
     limits = (F_max, T_max)
     forces = {c.name: np.zeros(c.size) for c in cs.contacts}
     met = None if target is None else True  # no kept contact: the least normal force is vacuous
-    if F > F_max * (1 + _SEARCH.limit_rel) or T > T_max * (1 + _SEARCH.limit_rel):
+    if F > F_max * (1 + ss.limit_rel) or T > T_max * (1 + ss.limit_rel):
         # the push is determined: its force and torque are the least needed
-        reason, binding = too_weak_reason(F, F, T, T, F_max, T_max)
+        reason, binding = too_weak_reason(F, F, T, T, F_max, T_max, ss)
         reason += f" (every contact opens: the push is M a − w_g){notes}"
         return WrenchSearch(
             False, None, None, None, roles, {}, None, reason, binding, limits, margin_target_N=target,
@@ -903,7 +924,7 @@ def _free_push(
     w_e_norm = clf.builder.m_inv_norm(w_com + w_g)
     jam_rel = bal.balance_residual / w_e_norm if w_e_norm > 0 and math.isfinite(bal.balance_residual) else None
     # the push is determined: inside the headroom or not, it is the only one
-    within = F <= frac * F_max * (1 + _SEARCH.limit_rel) and T <= frac * T_max * (1 + _SEARCH.limit_rel)
+    within = F <= frac * F_max * (1 + ss.limit_rel) and T <= frac * T_max * (1 + ss.limit_rel)
     if not within:
         notes += _beyond_fraction(w_user, d, F_max, T_max, frac)
     if bal.balanced:
@@ -943,210 +964,3 @@ def _robust_friction(cs: ContactSet, roles: dict[str, str], delta: float) -> Con
 def _about_point(cs: ContactSet, w_com: FloatArray, point: FloatArray) -> FloatArray:
     """Re-express a wrench about the centre of mass as one about ``point``."""
     return shift_wrench(w_com, cs.com_world, point)
-
-
-def _build(
-    cs: ContactSet,
-    a_hat: FloatArray,
-    roles: dict[str, str],
-    directions: dict[str, FloatArray],
-    w_g: FloatArray,
-    about: FloatArray,
-    F_max: float,
-    T_max: float,
-    effort_margin_N: float | None = None,
-    *,
-    cert: FloatArray | None,
-    jam: float,
-    s_max: float = math.inf,
-    least: Literal["effort", "force", "torque"] = "effort",
-    shared: dict[str, Any] | None = None,
-    hand_sets: tuple[TorqueBox, ...] = (),
-    hand_frac: float | None = 1.0,
-) -> tuple[ConeProgram, dict]:
-    """Variables x = (w [n], f_n sliding [ks], f sticking [reduced], s, τ[, e]).
-
-    Without ``effort_margin_N`` the program maximises τ. With it, it minimises ``e`` subject to
-    ``τ ≥ effort_margin_N``: the effort ``e ≥ ‖(F, T_c / L)‖`` (``least="effort"``), the force
-    ``e ≥ ‖F‖`` or the torque about the user's point ``e ≥ ‖T‖``. All keep the total wrench
-    ``w_e = w + w_g`` a relative distance ``jam`` from static balance, certified by the motion
-    ``cert`` (``ŷ``, ``‖ŷ‖_M = 1``, ``J_i ŷ ∈ K_i*``): ``ŷᵀ w_e ≥ jam ‖w_e‖_{M⁻¹}``.
-    ``shared``: a dictionary kept by the caller across builds with the same ``cs`` and ``roles``
-    (one search), which then computes the sticking contacts' layout and ``L⁻¹`` once.
-    ``hand_sets``: the arm's joint-torque boxes, kept within ``hand_frac`` of the effort limits
-    (None: left out, for the diagnoses), as ``A w ≤ b`` with ``w`` about the centre of mass.
-    """
-    n, d = cs.ndof, cs.dimension
-    shared = {} if shared is None else shared
-    slide = [i for i, c in enumerate(cs.contacts) if roles[c.name] == "sliding"]
-    stick = [i for i, c in enumerate(cs.contacts) if roles[c.name] == "sticking"]
-    if "stick_cs" not in shared:
-        stick_cs = ContactSet(tuple(cs.contacts[i] for i in stick), cs.com_world, cs.mass_matrix, cs.body_origin_world)
-        shared["stick_cs"] = stick_cs
-        # unscaled cones (the earlier form): the search's answers are confirmed by the
-        # classifier, whose programs are scaled; with scaled cones here the optimum moved by
-        # 1e-4 N·m and cylinder-5's spin landed where the pivot witness is not found
-        shared["lay"] = force_layout(stick_cs, scaled=False) if stick else None
-    stick_cs, lay = shared["stick_cs"], shared["lay"]
-    nf_stick = lay.nf if lay else 0
-    ks = len(slide)
-    i_w, i_fn, i_fs = 0, n, n + ks
-    i_s, i_tau = n + ks + nf_stick, n + ks + nf_stick + 1
-    effort = effort_margin_N is not None
-    i_e = i_tau + 1
-    nx = i_tau + 1 + (1 if effort else 0)
-    J = cs.J
-    # sliding contact wrench columns J_iᵀ φ_i
-    phis = []
-    for i in slide:
-        c = cs.contacts[i]
-        dvec = directions[c.name]  # unit slip (torsion scaled to metres for soft fingers)
-        phi = np.zeros(c.size)
-        phi[0] = 1.0
-        if c.friction > 0:
-            if c.soft:
-                phi[1:3] = -c.friction * dvec[:2]
-                phi[3] = -c.friction * c.torsion_m * dvec[2]
-            else:
-                phi[1 : 1 + dvec.shape[0]] = -c.friction * dvec
-        phis.append(phi)
-    rows_A: list[FloatArray] = []
-    rows_b: list[FloatArray] = []
-    cones: list[tuple[str, int]] = []
-    # dynamics: s M â − w − Σ f_n J_iᵀ φ_i − B_stick f = w_g   (zero cone: b − A x = 0)
-    A_dyn = np.zeros((n, nx))
-    A_dyn[:, i_s] = cs.mass_matrix @ a_hat
-    A_dyn[:, i_w : i_w + n] = -np.eye(n)
-    for k, i in enumerate(slide):
-        off, c = cs.offsets[i], cs.contacts[i]
-        A_dyn[:, i_fn + k] = -(J[off : off + c.size].T @ phis[k])
-    if lay is not None:
-        A_dyn[:, i_fs : i_fs + nf_stick] = -(stick_cs.J.T @ lay.S)
-    rows_A.append(A_dyn)
-    rows_b.append(w_g.copy())
-    cones.append(("zero", n))
-    # s ≥ 1 ; f_n,i − τ ≥ 0 for kept contacts ; τ ≥ 0
-    lin = []
-    e = np.zeros(nx)
-    e[i_s] = -1.0
-    lin.append((e, -1.0))  # b − A x = s − 1 ≥ 0
-    if math.isfinite(s_max):
-        e = np.zeros(nx)
-        e[i_s] = 1.0
-        lin.append((e, s_max))  # s_max − s ≥ 0: no more than s_max times the requested acceleration
-    for k in range(ks):
-        e = np.zeros(nx)
-        e[i_fn + k] = -1.0
-        e[i_tau] = 1.0
-        lin.append((e, 0.0))
-    if lay is not None:
-        for idx in lay.normal_index:
-            e = np.zeros(nx)
-            e[i_fs + idx] = -1.0
-            e[i_tau] = 1.0
-            lin.append((e, 0.0))
-    e = np.zeros(nx)
-    e[i_tau] = -1.0
-    lin.append((e, -effort_margin_N if effort_margin_N is not None else 0.0))  # τ ≥ τ_req (effort) or τ ≥ 0
-    rows_A.append(np.array([r for r, _ in lin]))
-    rows_b.append(np.array([b for _, b in lin]))
-    cones.append(("nonneg", len(lin)))
-    # friction cones of sticking contacts
-    if lay is not None:
-        A_c = np.zeros((lay.cone_rows.shape[0], nx))
-        A_c[:, i_fs : i_fs + nf_stick] = -lay.cone_rows
-        rows_A.append(A_c)
-        rows_b.append(np.zeros(lay.cone_rows.shape[0]))
-        cones.extend(lay.cones)
-    # ‖F‖ ≤ F_max
-    A_f = np.zeros((d + 1, nx))
-    A_f[1:, i_w : i_w + d] = -np.eye(d)
-    rows_A.append(A_f)
-    rows_b.append(np.concatenate([[F_max], np.zeros(d)]))
-    cones.append(("soc", d + 1))
-    # ‖T about the user's point‖ ≤ T_max: T_p = T_c + (c − p) × F
-    off = cs.com_world - about
-    if d == 3:
-        Kx = skew(off)  # the linear map F ↦ (c − p) × F of spatial.shift_wrench
-        A_t = np.zeros((4, nx))
-        A_t[1:, 3:6] = -np.eye(3)
-        A_t[1:, 0:3] = -Kx
-        rows_A.append(A_t)
-        rows_b.append(np.array([T_max, 0.0, 0.0, 0.0]))
-        cones.append(("soc", 4))
-    else:
-        row = np.zeros(nx)
-        row[2] = 1.0
-        row[0] = -off[1]
-        row[1] = off[0]
-        rows_A.append(np.vstack([row, -row]))
-        rows_b.append(np.array([T_max, T_max]))
-        cones.append(("nonneg", 2))
-    if hand_sets and hand_frac is not None:
-        # the arm: |τ_g + Jᵀ S w| ≤ s τ_max at every box (b − A x ≥ 0)
-        A_arm, b_arm = torque_rows(hand_sets, cs.com_world, hand_frac)
-        A_h = np.zeros((A_arm.shape[0], nx))
-        A_h[:, i_w : i_w + n] = A_arm
-        rows_A.append(A_h)
-        rows_b.append(b_arm)
-        cones.append(("nonneg", A_arm.shape[0]))
-    if cert is not None:
-        # not jamming: (ŷᵀ w_e / jam, C w_e) ∈ SOC, C = L⁻¹ (‖C x‖ = ‖x‖_{M⁻¹})
-        if "C" not in shared:
-            shared["C"] = np.linalg.inv(np.linalg.cholesky(cs.mass_matrix))
-        C = shared["C"]
-        A_j = np.zeros((n + 1, nx))
-        A_j[0, i_w : i_w + n] = -cert / jam
-        A_j[1:, i_w : i_w + n] = -C
-        rows_A.append(A_j)
-        rows_b.append(np.concatenate([[float(cert @ w_g) / jam], C @ w_g]))
-        cones.append(("soc", n + 1))
-    c_vec = np.zeros(nx)
-    if effort and least == "effort":
-        # e ≥ ‖(F, T_c / L)‖ with the moment about the centre of mass (w is about the com)
-        L = max(cs.max_lever_m, 1e-9)
-        A_e = np.zeros((n + 1, nx))
-        A_e[0, i_e] = -1.0
-        A_e[1 : 1 + d, i_w : i_w + d] = -np.eye(d)
-        A_e[1 + d :, i_w + d : i_w + n] = -np.eye(n - d) / L
-        rows_A.append(A_e)
-        rows_b.append(np.zeros(n + 1))
-        cones.append(("soc", n + 1))
-        c_vec[i_e] = 1.0
-    elif effort:
-        # e ≥ ‖F‖, or e ≥ ‖T about the user's point‖ (the moment the torque limit bounds)
-        T_rows = np.zeros((n - d, nx))
-        if d == 3:
-            T_rows[:, 3:6] = np.eye(3)
-            T_rows[:, 0:3] = skew(off)
-        else:
-            T_rows[0] = row
-        A_e = np.zeros((1 + (d if least == "force" else n - d), nx))
-        A_e[0, i_e] = -1.0
-        if least == "force":
-            A_e[1:, i_w : i_w + d] = -np.eye(d)
-        else:
-            A_e[1:] = -T_rows
-        rows_A.append(A_e)
-        rows_b.append(np.zeros(A_e.shape[0]))
-        cones.append(("soc", A_e.shape[0]))
-        c_vec[i_e] = 1.0
-    else:
-        c_vec[i_tau] = -1.0
-    A = np.vstack(rows_A)
-    b = np.concatenate(rows_b)
-
-    def expand(x: FloatArray) -> FloatArray:
-        lam = np.zeros(J.shape[0])
-        for k, i in enumerate(slide):
-            off_i, c = cs.offsets[i], cs.contacts[i]
-            lam[off_i : off_i + c.size] = x[i_fn + k] * phis[k]
-        if lay is not None:
-            lam_stick = lay.S @ x[i_fs : i_fs + nf_stick]
-            for j, i in enumerate(stick):
-                off_i, c = cs.offsets[i], cs.contacts[i]
-                o = stick_cs.offsets[j]
-                lam[off_i : off_i + c.size] = lam_stick[o : o + c.size]
-        return lam
-
-    return ConeProgram(c_vec, A, b, tuple(cones), "wrench-search", 0), {"s": i_s, "tau": i_tau, "expand": expand}

@@ -37,11 +37,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.aot import kernel
-from fixplan.jamming._roles import OPEN, STICK
+from fixplan.jamming._roles import ROLE_OPENING, ROLE_SLIDING, ROLE_STICKING
 from fixplan.kinematics import ContactSet
-from fixplan.settings import DEFAULT
-
-_W = DEFAULT.witness  # the acceptance thresholds (fixplan.settings.WitnessSettings)
+from fixplan.settings import DEFAULT, WitnessSettings
 
 FloatArray = NDArray[np.float64]
 _KERNELS = "fixplan.jamming._witness_kernels"
@@ -82,10 +80,10 @@ class Rows:
         self.lever = cs.max_lever_m
 
     def code(self, roles: Roles) -> NDArray[np.int64]:
-        """Role codes for the kernels: 0 slide, 1 stick, 2 open."""
-        m = np.zeros(len(self.cs), dtype=np.int64)
-        m[list(roles[0])] = STICK
-        m[list(roles[1])] = OPEN
+        """Role codes for the kernels (:mod:`._roles`): sliding unless sticking or opening."""
+        m = np.full(len(self.cs), ROLE_SLIDING, dtype=np.int64)
+        m[list(roles[0])] = ROLE_STICKING
+        m[list(roles[1])] = ROLE_OPENING
         return m
 
     def system(self, w_e: FloatArray, z: FloatArray, roles: Roles) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -102,7 +100,14 @@ class Rows:
 
 
 def _accept(
-    rows: Rows, w_e: FloatArray, z: FloatArray, roles: Roles, C: FloatArray, slip_rel: float, res_tol: float
+    rows: Rows,
+    w_e: FloatArray,
+    z: FloatArray,
+    roles: Roles,
+    C: FloatArray,
+    slip_rel: float,
+    res_tol: float,
+    witness: WitnessSettings,
 ) -> MotionWitness | None:
     cs = rows.cs
     n = cs.ndof
@@ -128,24 +133,24 @@ def _accept(
     for i, (c, off) in enumerate(zip(cs.contacts, cs.offsets, strict=True)):
         un = float(cs.J[off] @ a)
         if i in opened:
-            if un <= _W.normal_rel * acc_ref:
+            if un <= witness.normal_rel * acc_ref:
                 return None
             continue
-        if abs(un) > _W.normal_rel * acc_ref:
+        if abs(un) > witness.normal_rel * acc_ref:
             return None
         li = lam[off : off + c.size]
-        if li[0] < -_W.force_rel * f_scale:
+        if li[0] < -witness.force_rel * f_scale:
             return None
         if i in stick:
             tang = li[1:].copy()
             if c.soft:
                 tang[-1] /= c.torsion_m
-            if float(np.linalg.norm(tang)) > c.friction * li[0] + _W.force_rel * f_scale:
+            if float(np.linalg.norm(tang)) > c.friction * li[0] + witness.force_rel * f_scale:
                 return None
         elif c.friction > 0.0:
             s = rows.Dm[i, : c.size - 1] * (cs.J[off + 1 : off + c.size] @ a)
             slip = float(np.linalg.norm(s)) / acc_ref
-            if slip <= slip_rel and li[0] <= _W.force_rel * f_scale:
+            if slip <= slip_rel and li[0] <= witness.force_rel * f_scale:
                 # idle: kept, no slip and no force (a point on the motion's axis, e.g. an end stop
                 # on a spinning cylinder's axis). Zero force satisfies Coulomb's law whatever the
                 # slip direction, so it does not stop the others from sliding.
@@ -169,14 +174,15 @@ def frictionless_start(cs: ContactSet, w_e: FloatArray) -> FloatArray:
     return np.linalg.lstsq(K, rhs, rcond=None)[0]
 
 
-def _start_for(cs: ContactSet, base: FloatArray, roles: Roles) -> FloatArray:
+def _start_for(cs: ContactSet, base: FloatArray, roles: Roles, seed_force: float) -> FloatArray:
+    """A Newton start for ``roles`` from ``base`` ``(a, f_n)``: every kept contact's normal force at least ``seed_force``."""
     n = cs.ndof
     stick, opened = roles
     parts = [base[:n]]
     for i, c in enumerate(cs.contacts):
         if i in opened:
             continue
-        fn = abs(base[n + i]) + _W.seed_force
+        fn = abs(base[n + i]) + seed_force
         parts.append(np.concatenate([[fn], np.zeros(c.size - 1)]) if i in stick else np.array([fn]))
     return np.concatenate(parts)
 
@@ -212,9 +218,18 @@ class WitnessSearch:
         null_G: FloatArray,
         *,
         slip_rel: float = DEFAULT.tolerances.slip_rel,
-        res_tol: float = DEFAULT.tolerances.balance_rel * _W.residual_fraction,
+        res_tol: float | None = None,
         rng_seed: int = 0,
+        settings: WitnessSettings = DEFAULT.witness,
     ):
+        """The search over ``cs``; ``settings`` says when a root counts as a witness.
+
+        ``res_tol`` (the largest dynamics residual accepted) defaults to
+        ``DEFAULT.tolerances.balance_rel × settings.residual_fraction``.
+        """
+        if res_tol is None:
+            res_tol = DEFAULT.tolerances.balance_rel * settings.residual_fraction
+        self.settings = settings
         self.cs = cs
         self.C = C
         self.rows = Rows(cs)
@@ -254,15 +269,15 @@ class WitnessSearch:
             for _ in range(2):
                 a = self.N @ rng.standard_normal(self.N.shape[1])
                 a *= max(float(np.linalg.norm(base[:n])), 1e-3) / max(float(np.linalg.norm(a)), 1e-300)
-                starts.append(np.concatenate([a, np.abs(base[n:]) + _W.seed_force_open]))
+                starts.append(np.concatenate([a, np.abs(base[n:]) + self.settings.seed_force_open]))
         w_norm = max(float(np.linalg.norm(w_e)), 1e-300)
         for roles in patterns:
             for z0 in starts if roles == ((), ()) else starts[:2]:
-                z = rows.newton(w_e, _start_for(cs, z0, roles), roles)
+                z = rows.newton(w_e, _start_for(cs, z0, roles, self.settings.seed_force), roles)
                 F, _, _ = rows.system(w_e, z, roles)
-                if not float(np.linalg.norm(F)) <= _W.root_rel * w_norm:  # not a root (or NaN)
+                if not float(np.linalg.norm(F)) <= self.settings.root_rel * w_norm:  # not a root (or NaN)
                     continue
-                witness = _accept(rows, w_e, z, roles, self.C, self.slip_rel, self.res_tol)
+                witness = _accept(rows, w_e, z, roles, self.C, self.slip_rel, self.res_tol, self.settings)
                 if witness is not None:
                     return witness
         return None
@@ -272,6 +287,7 @@ class WitnessSearch:
         cs, rows = self.cs, self.rows
         n, k = cs.ndof, len(cs)
         J = cs.J
+        solve_rel = self.settings.solve_rel
         choices: tuple[str, ...] = ("+", "-", "s") if allow_stick else ("+", "-")
         if not kept:
             choices = (*choices, "o")
@@ -311,7 +327,7 @@ class WitnessSearch:
             if (
                 z is None
                 or not np.all(np.isfinite(z))
-                or float(np.linalg.norm(K @ z - rhs)) > _W.solve_rel * max(float(np.linalg.norm(rhs)), 1e-300)
+                or float(np.linalg.norm(K @ z - rhs)) > solve_rel * max(float(np.linalg.norm(rhs)), 1e-300)
             ):
                 # singular (rank-deficient G, e.g. concurrent normals): the least-norm solution is
                 # one of many consistent motions; _accept checks its residual like any other
@@ -324,7 +340,7 @@ class WitnessSearch:
                 for i, r in enumerate(pat)
             ):
                 continue
-            witness = _accept(rows, w_e, z, (stick, opened), self.C, self.slip_rel, self.res_tol)
+            witness = _accept(rows, w_e, z, (stick, opened), self.C, self.slip_rel, self.res_tol, self.settings)
             if witness is not None:
                 return witness
         return None

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from fixplan.errors import InputError
-from fixplan.settings import DEFAULT
+from fixplan.settings import DEFAULT, PlannerSettings
 from fixplan.spatial import Pose
 
 State = frozenset[str]
@@ -60,8 +60,6 @@ Upcoming = Callable[[Sequence[tuple[Pose, State, str, Any]]], None]
 # the locators a transition adds with ``target`` (sorted, ``target`` among them): ``(target,)`` unless
 # geometry closes others at the same instant
 Group = Callable[[State, str], "tuple[str, ...]"]
-# how much dearer a transition that failed its precheck is made: it is tried after the others
-PRECHECK_PENALTY = DEFAULT.planner.precheck_penalty
 
 
 @dataclass(frozen=True)
@@ -129,6 +127,7 @@ def search(
     group: Group | None = None,
     confirm: Confirm | None = None,
     upcoming: Upcoming | None = None,
+    settings: PlannerSettings = DEFAULT.planner,
 ) -> CoarsePlan:
     """Cheapest monotone sequence of contact states from ``start_state`` to all locators.
 
@@ -138,7 +137,7 @@ def search(
     transitions only. Without it every transition out of a settled state is evaluated.
 
     ``precheck`` (lazy search only) is run on a transition of the best sequence before its fine
-    plan; one that fails it is not dropped but made :data:`PRECHECK_PENALTY` times dearer, so the
+    plan; one that fails it is not dropped but made ``settings.precheck_penalty`` times dearer, so the
     search first tries the sequences that pass and still fine-plans this one when they all fail.
 
     ``group`` names the locators a transition adds with its target (default: the target alone);
@@ -155,7 +154,8 @@ def search(
     grp = group or _single
     if estimate is not None and order is None:
         return _lazy_search(
-            start_state, all_locators, start_pose, evaluate, estimate, progress, precheck, grp, confirm, upcoming
+            start_state, all_locators, start_pose, evaluate, estimate, progress, precheck, grp, confirm, upcoming,
+            settings,
         )  # fmt: skip
     goal: State = frozenset(all_locators)
     unknown = start_state - goal
@@ -166,15 +166,17 @@ def search(
         missing = goal - start_state - set(order)
         extra = [n for n in order if n not in goal]
         if extra:
-            raise InputError(f"--order names unknown locators: {', '.join(extra)} (known: {', '.join(all_locators)})")
+            raise InputError(
+                f"solve.order names unknown locators: {', '.join(extra)} (known: {', '.join(all_locators)})"
+            )
         if len(set(order)) != len(order):
-            raise InputError(f"--order repeats a locator: {','.join(order)}")
+            raise InputError(f"solve.order repeats a locator: {','.join(order)}")
         already = [n for n in order if n in start_state]
         if already:
-            raise InputError(f"--order names locators already touching at the start: {', '.join(already)}")
+            raise InputError(f"solve.order names locators already touching at the start: {', '.join(already)}")
         if missing:
             raise InputError(
-                f"--order leaves out {', '.join(sorted(missing))} (expected every locator not touching at the start)"
+                f"solve.order leaves out {', '.join(sorted(missing))} (expected every locator not touching at the start)"
             )
     attempts: list[Attempt] = []
 
@@ -334,6 +336,7 @@ def _lazy_search(
     group: Group = _single,
     confirm: Confirm | None = None,
     upcoming: Upcoming | None = None,
+    settings: PlannerSettings = DEFAULT.planner,
 ) -> CoarsePlan:
     """LazySP over the lattice: fine-plan only the transitions on the current best sequence."""
     goal: State = frozenset(all_locators)
@@ -370,7 +373,7 @@ def _lazy_search(
         path = _dijkstra(start_state, goal, start_pose, weight, lambda state: _leads(group, state, goal), group)
         return path, (float("inf") if path is None else cost_of(path))
 
-    slack = DEFAULT.planner.lazy_slack
+    slack = settings.lazy_slack
     # each round evaluates or prechecks at least one transition (at most n·2ⁿ⁻¹ of each)
     for _ in range(4 * 2 ** len(goal) + len(goal) * 2 ** len(goal)):
         # Dijkstra on evaluated costs where known, estimates elsewhere
@@ -391,7 +394,7 @@ def _lazy_search(
                         suspect.add(key)
                         # the cheap check fails: try the other sequences first, this one later
                         guessed[key] = (
-                            max(PRECHECK_PENALTY * guess[0], guess[0] + DEFAULT.planner.precheck_floor),
+                            max(settings.precheck_penalty * guess[0], guess[0] + settings.precheck_floor),
                             guess[1],
                         )
                         _log(

@@ -216,9 +216,6 @@ def _plane_features(fixture: Fixture) -> list[Feature]:
     return []
 
 
-SMOOTH_MAX_M = DEFAULT.planner.smooth_max_m  # length scale of the smooth maximum of two face planes' gaps [m]
-
-
 def clearance_features(fixture: Fixture, locator: Locator, start: Pose, feature: Feature) -> tuple[Feature, ...]:
     """The face planes that keep ``locator`` clear along a path from ``start``.
 
@@ -245,9 +242,12 @@ def clearance_features(fixture: Fixture, locator: Locator, start: Pose, feature:
     return (feature, best) if plane_gap(best) > plane_gap(feature) else (feature,)
 
 
-def smooth_max(ca: Any, a: Any, b: Any, scale_m: float = SMOOTH_MAX_M) -> Any:
-    """``s log(eᵃᐟˢ + eᵇᐟˢ) − s log 2``: smooth, ≤ max(a, b), equal to it where a = b (stable form)."""
+def smooth_max(ca: Any, a: Any, b: Any, scale_m: float = DEFAULT.planner.smooth_max_m) -> Any:
+    """``s log(eᵃᐟˢ + eᵇᐟˢ) − s log 2``: smooth, ≤ max(a, b), equal to it where a = b (stable form).
+
+    ``s = scale_m`` [m] (the fine planner passes its ``PlannerSettings.smooth_max_m``).
+    """
     return ca.fmax(a, b) + scale_m * ca.log1p(ca.exp(-ca.fabs(a - b) / scale_m)) - scale_m * np.log(2.0)
 
 
-__all__ = ["SMOOTH_MAX_M", "Feature", "clearance_features", "feature_at", "smooth_max", "surface_feature"]
+__all__ = ["Feature", "clearance_features", "feature_at", "smooth_max", "surface_feature"]

@@ -746,7 +746,7 @@ def _checked(
     """The exact check of a solved path: constraint violation, slip and mass-weighted length."""
     fx = prob.fixture
     # the other locators are held against the model's start gaps (a lower bound of the exact
-    # ones: with a second face the smooth maximum sits up to ~0.7 SMOOTH_MAX_M below), which is
+    # ones: with a second face the smooth maximum sits up to ~0.7 smooth_max_m below), which is
     # what the NLP enforced; the exact start gap asked 28 µm more of a generated box and
     # rejected a sound path ("a feature's closed form does not hold")
     held = {n: min(prob.start_gaps[n], _model_gap(prob, n, prob.start)) for n in prob.others}
@@ -782,7 +782,7 @@ def _model_gap(prob: _Problem, name: str, pose: Pose) -> float:
     q = ca.DM(pose.point_body_from_world(loc.p_world))
     dist = prob.features[name].distance(ca, q)
     if name in prob.second:
-        dist = smooth_max(ca, dist, prob.second[name].distance(ca, q))
+        dist = smooth_max(ca, dist, prob.second[name].distance(ca, q), prob.settings.smooth_max_m)
     return float(dist) - loc.radius_m
 
 
@@ -839,7 +839,7 @@ def _solve_path(
     def gap_of(q: Any, name: str) -> Any:
         dist = features[name].distance(ca, q)
         if name in prob.second:
-            dist = smooth_max(ca, dist, prob.second[name].distance(ca, q))
+            dist = smooth_max(ca, dist, prob.second[name].distance(ca, q), prob.settings.smooth_max_m)
         return dist - locs[name].radius_m
 
     # every knot's rows are the same function of its twist: built once on a symbol and called per

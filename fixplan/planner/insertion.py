@@ -781,14 +781,19 @@ def verify_insertion(
     world: Fixture,
     plan: InsertionPlan,
     *,
-    profile: Settings = HAPTIC,
+    settings: Settings = HAPTIC,
     noise: ExecutionNoise | None = None,
     max_sweeps: int | None = None,
     final_gap_m: float | None = None,
     max_penetration_m: float | None = None,
     trace_every_s: float | None = None,
 ) -> Verification:
-    """Run ``plan`` (made on the nominal fixture) in the haptic loop on ``world`` and check the outcome (module text)."""
+    """Run ``plan`` (made on the nominal fixture) in the haptic loop on ``world`` and check the outcome (module text).
+
+    ``settings`` (default: the ``haptic`` profile) give the engine, the rig, the insertion's and the
+    verification's thresholds; ``final_gap_m``, ``max_penetration_m``, ``trace_every_s`` and
+    ``max_sweeps`` override single ones.
+    """
     from fixplan.engine.simulator import Simulator
     from fixplan.errors import SolverError
     from fixplan.planner.verify import (
@@ -800,23 +805,23 @@ def verify_insertion(
         pose_coordinates,
     )
 
-    vs = profile.verification
-    s = profile.insertion
+    vs = settings.verification
+    s = settings.insertion
     final_gap_m = vs.final_gap_m if final_gap_m is None else final_gap_m
     max_penetration_m = vs.max_penetration_m if max_penetration_m is None else max_penetration_m
     trace_every_s = vs.trace_every_s if trace_every_s is None else trace_every_s
-    sim = Simulator(world, max_iterations=max_sweeps, settings=profile.engine)
+    sim = Simulator(world, max_iterations=max_sweeps, settings=settings.engine)
     R0 = world.start.R_world_body.copy()
     F_max, T_max, _ = world.hand_limits()
     run = InsertionRun(world, plan, s, noise, sim.dt)
     wp = world.workpiece
     x0 = pose_coordinates(world.start, R0)
     carry0 = shift_wrench(-world.gravity_wrench(), world.start.point_world_from_body(wp.com_body), world.start.p_world)
-    rig = haptic_rig(world, sim, x0, F_max, T_max, profile.haptic)
-    rig = haptic_rig(world, sim, x0 + carry0 / rig.K, F_max, T_max, profile.haptic)
+    rig = haptic_rig(world, sim, x0, F_max, T_max, settings.haptic)
+    rig = haptic_rig(world, sim, x0 + carry0 / rig.K, F_max, T_max, settings.haptic)
     loop = rig.loop
-    contact_gap_m = profile.execution.contact_gap_m
-    threshold = max(profile.execution.press_fraction * run.weight_N, 1e-6)
+    contact_gap_m = settings.execution.contact_gap_m
+    threshold = max(settings.execution.press_fraction * run.weight_N, 1e-6)
     commands: list[FloatArray] = []
 
     def operator(tt: float, device: Any) -> FloatArray:

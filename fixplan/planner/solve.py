@@ -29,7 +29,7 @@ from fixplan.locating import start_state as locating_start_state
 from fixplan.model import Fixture, require_full
 from fixplan.planner.approach import Approach, plan_approach
 from fixplan.planner.coarse import Attempt, CoarsePlan, search
-from fixplan.planner.execute import ExecutionSettings, Step, TransitionKind
+from fixplan.planner.execute import Step, TransitionKind
 from fixplan.planner.fine import (
     IPOPT_PATH_FOUND,
     LADDER,
@@ -47,17 +47,8 @@ from fixplan.planner.policy_job import PendingPolicy
 from fixplan.planner.segments import segment_wrenches
 from fixplan.planner.spare import SpareCore
 from fixplan.planner.verify import Verification, verify
-from fixplan.settings import DEFAULT
+from fixplan.settings import DEFAULT, HAPTIC, Settings
 from fixplan.spatial import Pose
-
-ROBUST_GRID = DEFAULT.planner.robust_grid
-# Gaps kept at the other locators along a fine path [m], tried in turn when IPOPT finds no path:
-# a fixed 1 mm is an angle on a part whose locators sit close together (two side locators 11 mm
-# apart on a 44 mm face hold a part touching one of them ≥ 5° away from the other; the next
-# transition can then not touch the end locator without closing that gap): the smaller
-# clearance still keeps the path clear of every locator, with less room for the executor.
-CLEARANCES_M = DEFAULT.planner.clearances_m  # fixplan.settings.PlannerSettings.clearances_m
-
 
 PlanStatus = Literal["planned", "unverified", "infeasible"]
 
@@ -74,7 +65,7 @@ class PlanResult:
     verification: Verification | None
     durations_s: list[float]
     timings: dict[str, float] = field(default_factory=dict)
-    friction_robustness: list[float] = field(default_factory=list)  # per transition: largest δ of ROBUST_GRID
+    friction_robustness: list[float] = field(default_factory=list)  # per transition: largest δ of planner.robust_grid
     policy: Policy | None = None  # the next transition from every contact state (planner/policy.py)
     # the hand's force [N] and torque [N·m] limits the pushes were planned within (the search's,
     # with its defaults when the file has none); None: not known
@@ -205,9 +196,12 @@ def friction_robustness(
     tr: Transition,
     acceleration_mps2: float,
     margin_N: float | None,
-    grid: Sequence[float] = ROBUST_GRID,
+    grid: Sequence[float] | None = None,
 ) -> float:
     """The largest δ of ``grid`` for which the first segment's push survives friction ``μ(1 ± δ)``.
+
+    ``grid`` defaults to the ``default`` profile's ``planner.robust_grid`` (:func:`solve` passes
+    its settings' grid).
 
     The push must move the part as planned within the hand's limits; 0 when only the nominal μ
     allows it, ``inf`` for a transition from no contact (nothing to slip).
@@ -215,7 +209,7 @@ def friction_robustness(
     if not tr.established or len(tr.poses) < 2:
         return float("inf")
     best = 0.0
-    for delta in grid:
+    for delta in DEFAULT.planner.robust_grid if grid is None else grid:
         _, _, found, _ = segment_wrenches(
             fixture, tr.poses[:2], tuple(tr.established), tr.kind, acceleration_mps2,
             friction_margin=delta, margin_N=margin_N,
@@ -234,17 +228,23 @@ class Planner:
         fixture: Fixture,
         *,
         knots: int = 10,
-        acceleration_mps2: float = 1.0,
-        friction_margin: float = 0.1,
-        margin_N: float | None = None,
+        settings: Settings = DEFAULT,
         progress: Callable[[Attempt], None] | None = None,
     ):
+        """The planner of ``fixture``.
+
+        ``settings`` give its thresholds (``planner``) and the pushes' acceleration, normal-force
+        margin and friction margin (``execution``: ``accel_mps2``, ``margin_N``,
+        ``friction_margin``; the executor's own).
+        """
         self.fixture = fixture
         self.names = [loc.name for loc in fixture.locators]
         self.knots = knots
-        self.acceleration_mps2 = acceleration_mps2
-        self.friction_margin = friction_margin
-        self.margin_N = margin_N
+        self.settings = settings
+        ex = settings.execution
+        self.acceleration_mps2 = ex.accel_mps2
+        self.friction_margin = ex.friction_margin
+        self.margin_N = ex.margin_N
         self.progress = progress
         self.fine_time_s = 0.0
         self.prechecks = 0  # cheap checks run before fine plans, and how many failed
@@ -345,7 +345,7 @@ class Planner:
             first = search(
                 state, self.names, pose, evaluate, order=order, progress=self.progress,
                 estimate=self.estimate, precheck=self.precheck, group=self.group, confirm=confirm,
-                upcoming=upcoming_set,
+                upcoming=upcoming_set, settings=self.settings.planner,
             )  # fmt: skip
             if first.found:
                 return first
@@ -354,7 +354,7 @@ class Planner:
                 second = search(
                     state, self.names, pose, evaluate, order=order, progress=self.progress,
                     estimate=self.estimate, precheck=self.precheck, group=self.group, confirm=confirm,
-                    upcoming=upcoming_set,
+                    upcoming=upcoming_set, settings=self.settings.planner,
                 )  # fmt: skip
             finally:
                 self.full_ladder = False
@@ -371,15 +371,16 @@ class Planner:
         kind = None if g is None else g[2]
         if full_ladder and kind == default_kind(self.fixture.dimension, len(state)):
             kind = None  # the ladder may then try the other kind too
-        for i, clearance in enumerate(CLEARANCES_M):
+        clearances_m = self.settings.planner.clearances_m
+        for i, clearance in enumerate(clearances_m):
             # the ladder of formulations and the diagnosis at the last clearance, and only in the
             # second pass (a failing transition costs 2-9 s with them)
-            last = i == len(CLEARANCES_M) - 1
+            last = i == len(clearances_m) - 1
             full = full_ladder and last
             tr = plan_transition(
                 self.fixture, pose, sorted(state), target, knots=self.knots,
                 acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
-                margin_N=self.margin_N, clearance_m=clearance, kind=kind,
+                margin_N=self.margin_N, clearance_m=clearance, kind=kind, settings=self.settings.planner,
                 ladder=LADDER if full else LADDER[:1], diagnose=full,
                 together=[n for n in self.group(state, target) if n != target],
                 wrenches=False,
@@ -495,7 +496,7 @@ class Planner:
         start = pose
         if state:  # a part touching nothing (knocked free) is planned from where it is
             settled = solve_goal(
-                fx.workpiece, [fx.locator(n) for n in sorted(state)], pose, tol_m=DEFAULT.planner.settle_tol_m
+                fx.workpiece, [fx.locator(n) for n in sorted(state)], pose, tol_m=self.settings.planner.settle_tol_m
             )
             if not settled.converged:
                 return f"no pose near the observed one keeps {{{', '.join(sorted(state))}}} touching"
@@ -576,18 +577,18 @@ def solve(
     *,
     order: Sequence[str] | None = None,
     run_verification: bool = True,
-    acceleration_mps2: float = 1.0,
-    margin_N: float | None = None,
-    friction_margin: float = 0.1,
+    settings: Settings = HAPTIC,
     knots: int = 10,
     progress: Callable[[Attempt], None] | None = None,
     verify_options: dict[str, Any] | None = None,
 ) -> PlanResult:
     """Plan (and by default verify) the loading of ``fixture``.
 
-    ``acceleration_mps2`` is the acceleration each push asks for, ``margin_N`` the least normal
-    force on the kept contacts (default: the part's weight) and ``friction_margin`` the δ the
-    pushes are robust to (friction anywhere in ``μ(1 ± δ)``); the executor uses the same values.
+    ``settings`` (default: the ``haptic`` profile, whose planning thresholds are the default
+    ones: the verification runs the haptic loop) give the planner's thresholds and, in
+    ``settings.execution``, the acceleration each push asks for (``accel_mps2``), the least normal
+    force on the kept contacts (``margin_N``; default: the part's weight) and the δ the pushes are
+    robust to (``friction_margin``: friction anywhere in ``μ(1 ± δ)``); the executor uses the same.
     ``knots`` per transition: 10 by default — on the default box the exact gaps between knots
     stay within 1e-17 m at 10 as at 20 (``benchmarks/bench_planner.py``) for half the time.
     ``verify_options`` are passed to :func:`~fixplan.planner.verify.verify` (e.g. ``max_sweeps``,
@@ -595,7 +596,7 @@ def solve(
     """
     vopts = dict(verify_options or {})
     if fixture.has_pins:  # pins and bores: the staged insertion (planner/insertion.py)
-        return solve_insertion(fixture, run_verification=run_verification, verify_options=vopts)
+        return solve_insertion(fixture, run_verification=run_verification, settings=settings, verify_options=vopts)
     require_full(fixture, "planning")
     arm_limits = None
     if fixture.robot is not None:
@@ -611,11 +612,8 @@ def solve(
     t0 = time.perf_counter()
     names = [loc.name for loc in fixture.locators]
     start_state = locating_start_state(fixture)
-    settings = vopts.pop("settings", None) or ExecutionSettings(
-        accel_mps2=acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N
-    )
-    planner = Planner(fixture, knots=knots, acceleration_mps2=acceleration_mps2, friction_margin=friction_margin,
-                      margin_N=margin_N, progress=progress)  # fmt: skip
+    acceleration_mps2, margin_N = settings.execution.accel_mps2, settings.execution.margin_N
+    planner = Planner(fixture, knots=knots, settings=settings, progress=progress)
     replan = planner.replan
     if start_state == frozenset(names):
         # already located: nothing to plan; verification checks that the part stays there
@@ -635,13 +633,16 @@ def solve(
         return PlanResult("infeasible", coarse.reason, [], [], coarse.attempts, None, [], timings)
     attempts = list(coarse.attempts)
     first: PlanResult | None = None
-    budget = max(DEFAULT.policy.max_verifications, 1) if run_verification else 1
+    budget = max(settings.policy.max_verifications, 1) if run_verification else 1
     for round_ in range(budget):
         transitions = list(coarse.transitions)
         if approach is not None and transitions:
             transitions[0] = with_approach(fixture, transitions[0], approach)
         durations = [_duration(tr, acceleration_mps2) for tr in transitions]
-        robustness = [friction_robustness(fixture, tr, acceleration_mps2, margin_N) for tr in transitions]
+        robustness = [
+            friction_robustness(fixture, tr, acceleration_mps2, margin_N, settings.planner.robust_grid)
+            for tr in transitions
+        ]
         # the policy is built on the second core while the simulated load runs (policy_job's text)
         pending = PendingPolicy(
             functools.partial(_policy_and_memo, fixture, planner, start_state, transitions),
@@ -696,7 +697,11 @@ def solve(
 
 
 def solve_insertion(
-    fixture: Fixture, *, run_verification: bool = True, verify_options: dict[str, Any] | None = None
+    fixture: Fixture,
+    *,
+    run_verification: bool = True,
+    settings: Settings = HAPTIC,
+    verify_options: dict[str, Any] | None = None,
 ) -> PlanResult:
     """Plan (and by default verify) the insertion of a part onto its pins or into its bore (:mod:`.insertion`).
 
@@ -707,7 +712,7 @@ def solve_insertion(
 
     t0 = time.perf_counter()
     vopts = {k: v for k, v in (verify_options or {}).items() if k in ("noise", "max_sweeps", "final_gap_m",
-                                                                      "max_penetration_m", "trace_every_s", "profile")}  # fmt: skip
+                                                                      "max_penetration_m", "trace_every_s")}  # fmt: skip
     plan = plan_insertion(fixture)
     timings = {"plan_s": plan.plan_s, "fine_s": 0.0}
     hand = _hand_limits(fixture)
@@ -721,7 +726,7 @@ def solve_insertion(
     verification = None
     if run_verification:
         t1 = time.perf_counter()
-        verification = verify_insertion(fixture, plan, **vopts)
+        verification = verify_insertion(fixture, plan, settings=settings, **vopts)
         timings["verify_s"] = time.perf_counter() - t1
     status, reason = _status(verification, plan.reason)
     if status == "planned":
@@ -795,6 +800,6 @@ def _check_order(fixture: Fixture, order: Sequence[str]) -> None:
     names = [loc.name for loc in fixture.locators]
     extra = [n for n in order if n not in names]
     if extra:
-        raise InputError(f"--order names unknown locators: {', '.join(extra)} (known: {', '.join(names)})")
+        raise InputError(f"solve.order names unknown locators: {', '.join(extra)} (known: {', '.join(names)})")
     if len(set(order)) != len(order):
-        raise InputError(f"--order repeats a locator: {','.join(order)}")
+        raise InputError(f"solve.order repeats a locator: {','.join(order)}")

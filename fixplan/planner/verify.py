@@ -56,7 +56,6 @@ from fixplan.model import Fixture
 from fixplan.planner.execute import (
     Avoid,
     ExecutionNoise,
-    ExecutionSettings,
     Executor,
     Replan,
     Step,
@@ -235,7 +234,7 @@ def verify(
     start_state: frozenset[str],
     steps: Sequence[Step],
     *,
-    settings: ExecutionSettings | None = None,
+    settings: Settings = HAPTIC,
     noise: ExecutionNoise | None = None,
     replan: Replan | None = None,
     time_limit_s: float | None = None,
@@ -244,19 +243,18 @@ def verify(
     limit_slack: float | None = None,
     trace_every_s: float | None = None,
     max_sweeps: int | None = None,
-    profile: Settings = HAPTIC,
     policy: Policy | None = None,
     avoid: Avoid | None = None,
 ) -> Verification:
     """Execute the plan (``steps`` from ``start_state``) in the haptic loop and check the outcome.
 
-    ``profile`` (default: the ``haptic`` profile, :mod:`fixplan.settings`) gives the engine, the
-    rig and the thresholds; ``final_gap_m``, ``max_penetration_m``, ``limit_slack``,
+    ``settings`` (default: the ``haptic`` profile, :mod:`fixplan.settings`) give the engine, the
+    rig, the thresholds and how the executor pushes (``settings.execution``); ``final_gap_m``, ``max_penetration_m``, ``limit_slack``,
     ``trace_every_s`` and ``max_sweeps`` override single ones. ``policy`` (:mod:`.policy`) is
     what the executor consults when it observes a state the plan does not expect, before it
     re-plans.
     """
-    vs = profile.verification
+    vs = settings.verification
     final_gap_m = vs.final_gap_m if final_gap_m is None else final_gap_m
     max_penetration_m = vs.max_penetration_m if max_penetration_m is None else max_penetration_m
     limit_slack = vs.limit_slack if limit_slack is None else limit_slack
@@ -264,7 +262,7 @@ def verify(
     # a real-time loop bounds its work: a haptic-grade residual and at most ``max_sweeps`` NSGS
     # sweeps per tick (the profile's engine). Steps that stop at the cap are counted, and the
     # worst residual reached is reported.
-    sim = Simulator(fixture, max_iterations=max_sweeps, settings=profile.engine)
+    sim = Simulator(fixture, max_iterations=max_sweeps, settings=settings.engine)
     R0 = fixture.start.R_world_body.copy()
     x0 = pose_coordinates(fixture.start, R0)
     # every re-plan the executor runs from inside a tick is timed: its wall time is the loop's
@@ -275,7 +273,7 @@ def verify(
         fixture,
         start_state,
         steps,
-        settings,
+        settings.execution,
         replan=timed_replan,
         noise=noise,
         tick_s=sim.dt,
@@ -283,19 +281,19 @@ def verify(
         avoid=avoid,
     )
     F_max, T_max = executor.F_max, executor.T_max
-    rig = haptic_rig(fixture, sim, x0, F_max, T_max, profile.haptic)
+    rig = haptic_rig(fixture, sim, x0, F_max, T_max, settings.haptic)
     if not start_state:
         # a part starting in free space is already carried: the hand holds it against gravity
         # from the first tick (the handle displaced w / K ahead), instead of letting it drop
         # until the coupling's spring catches up (a 2 kg box fell 12 mm before it did)
         w0 = executor.carry_wrench(fixture.start)
-        rig = haptic_rig(fixture, sim, x0 + w0 / rig.K, F_max, T_max, profile.haptic)
+        rig = haptic_rig(fixture, sim, x0 + w0 / rig.K, F_max, T_max, settings.haptic)
         executor.preload(w0)
     else:
         press = executor.arm_start_push(fixture.start, start_state)
         if press is not None:
             # an arm that cannot hold itself without pushing: it presses the part from the first tick
-            rig = haptic_rig(fixture, sim, x0 + press / rig.K, F_max, T_max, profile.haptic)
+            rig = haptic_rig(fixture, sim, x0 + press / rig.K, F_max, T_max, settings.haptic)
             executor.preload(press)
     loop = rig.loop
     d = fixture.dimension
@@ -358,7 +356,7 @@ def verify(
     push_F, push_T = loop_checks(rec, sim, max_penetration_m, vs, F_max, T_max, limit_slack, checks, reasons)
     extras: dict[str, Any] = {}
     if fixture.robot is not None:
-        links = link_clearance(fixture, rec.trace, profile.robot.clearance_every_s)
+        links = link_clearance(fixture, rec.trace, settings.robot.clearance_every_s)
         if links is not None:
             extras["robot_links"] = links.to_json()
             if links.first_hit is not None:

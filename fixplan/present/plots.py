@@ -53,7 +53,7 @@ def figure_path(report: Path) -> Path:
     """The PNG written beside a report: ``plan.md`` → ``plan.png``."""
     png = report.with_suffix(".png")
     if png == report:
-        raise InputError(f"--report {report}: the report is Markdown; the figure {png} would overwrite it")
+        raise InputError(f"figure_path.report {report}: the report is Markdown; the figure {png} would overwrite it")
     return png
 
 

@@ -164,7 +164,7 @@ def test_scheduler_addresses_are_checked_before_connecting(parts: list[str]) -> 
         message = str(exc)
         event("refused")
         assert "\n" not in message and message.isprintable()
-        assert message.startswith("--scheduler expects an address like tcp://HOST:8786")
+        assert message.startswith("check_address.address expects an address like tcp://HOST:8786")
         return
     event("accepted")
     assert address.startswith("tcp://")

@@ -1,0 +1,39 @@
+"""The command line's names for the library's settings and arguments: one table.
+
+The library names what is wrong by the setting or argument a caller of the API sets
+(``RobustSettings.mu_spread``, ``solve.order``); a command's user sets it with a flag. When the
+CLI prints an error it puts the flag in place of the name (:func:`with_flags`), so the library
+knows nothing of flags and the user reads the option they typed.
+"""
+
+from __future__ import annotations
+
+FLAGS: dict[str, str] = {
+    "RobustSettings.samples": "--samples",
+    "RobustSettings.seed": "--seed",
+    "RobustSettings.mu_spread": "--mu-spread",
+    "RobustSettings.pose_sigma_m": "--pose-sigma (translation)",
+    "RobustSettings.pose_sigma_deg": "--pose-sigma (rotation)",
+    "RobustSettings.locator_sigma_m": "--locator-sigma",
+    "RobustSettings.force_noise": "--force-noise",
+    "RobustSettings.latency_s [ms]": "--latency-ms",
+    "search_wrench.motion": "--motion",
+    "classify.at": "--at",
+    "solve.order": "--order",
+    "analyse_clamping.order": "--order",
+    "analyse_clamping.preload_N": "--preload",
+    "fixture_files.directory": "--batch",
+    "check_address.address": "--scheduler",
+    "check_output.force": "--force",
+    "generate.rotate_world": "--rotate-world",
+    "figure_path.report": "--report",
+}
+_LONGEST_FIRST = sorted(FLAGS, key=len, reverse=True)
+
+
+def with_flags(message: str) -> str:
+    """``message`` with every setting or argument name of :data:`FLAGS` replaced by its flag."""
+    for name in _LONGEST_FIRST:
+        if name in message:
+            message = message.replace(name, FLAGS[name])
+    return message
