@@ -36,6 +36,7 @@ from typing import Any, cast, get_args
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.contact_state import format_state
 from fixplan.errors import InputError, SolverError
 from fixplan.haptics import SimulatedDevice
 from fixplan.interactive.session import SessionResult
@@ -449,7 +450,7 @@ def verify_recording(
         reasons.append(
             state["reason"]
             if state["outcome"] == "jammed"
-            else f"did not reach the goal in {limit:.3g} s: ended in {{{', '.join(sorted(policy._observed or ()))}}}"
+            else f"did not reach the goal in {limit:.3g} s: ended in {format_state(policy._observed or (), empty='{}')}"
         )
     pen = sim.max_penetration_m
     if pen > max_penetration_m:

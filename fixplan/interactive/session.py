@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.clamping.stage import ClampStage, StageRecord, StageTick
+from fixplan.contact_state import Debounce, format_state
 from fixplan.engine.simulator import Simulator
 from fixplan.errors import InfeasibleError, InputError, SolverError, one_line
 from fixplan.haptics import SimulatedDevice
@@ -248,7 +249,7 @@ class Guide:
             steps = self._planner.replan(pose, state)
         if isinstance(steps, str):
             self._executor = None
-            self.note = f"no plan from {{{', '.join(sorted(state))}}}: {steps}"
+            self.note = f"no plan from {format_state(state, empty='{}')}: {steps}"
             self._next_replan = t + 1.0
             return
         self._executor = Executor(
@@ -288,7 +289,7 @@ class Guide:
             if switched and ex.steps and ex.index < len(ex.steps):
                 here = ex.states[ex.index]
                 self.note = (
-                    f"following the policy from {{{', '.join(sorted(here))}}}"
+                    f"following the policy from {format_state(here, empty='{}')}"
                     f" ({switched} switch{'es' if switched != 1 else ''} off the plan)"
                 )
             if ex.done and ex.log.outcome == "reached":
@@ -565,9 +566,7 @@ class HapticSession:
         self.trace = Trace()
         self.states: list[tuple[float, tuple[str, ...]]] = []
         self.resets = 0
-        self._observed: frozenset[str] | None = None
-        self._candidate: frozenset[str] | None = None
-        self._candidate_since = 0.0
+        self._debounced = Debounce(self.dwell_s)  # the observed contact state (None: none accepted yet)
         self._settled_since: float | None = None
         self.goal_reached_at: float | None = None
         self._jammed_since: float | None = None
@@ -653,7 +652,7 @@ class HapticSession:
         self.sim.set_state(self.fixture.start, None)
         self._coords = None
         self._auto_dev = self._auto_device(self.x0, np.zeros(self.ndof))
-        self._observed = self._candidate = None
+        self._debounced.reset()
         self._settled_since = self._jammed_since = None
         self.goal_reached_at = None
         self._stage_k, self.stage_record, self.located_at, self.clamp_phase = None, None, None, ""
@@ -689,6 +688,11 @@ class HapticSession:
             )  # fmt: skip
 
         return build
+
+    @property
+    def _observed(self) -> frozenset[str] | None:
+        """The debounced contact state (None: none accepted yet)."""
+        return self._debounced.observed
 
     def _jammed_flag(self) -> bool:
         return self._jammed_since is not None and self.sim.time_s - self._jammed_since >= 0.3
@@ -857,15 +861,8 @@ class HapticSession:
 
     def _observe(self, t: float) -> None:
         pressed = frozenset(self.sim.in_contact(self.threshold_N, self.contact_gap_m))
-        if pressed != self._observed:
-            if pressed != self._candidate:
-                self._candidate, self._candidate_since = pressed, t
-            elif t - self._candidate_since + 1e-12 >= self.dwell_s:
-                self._observed = pressed
-                self._candidate = None
-                self.states.append((t, tuple(sorted(pressed))))
-        else:
-            self._candidate = None
+        if self._debounced.observe(t, pressed):
+            self.states.append((t, tuple(sorted(pressed))))
         at_rest = self._speed() < self.rest_speed_mps
         if self._observed == self.goal_names and at_rest:
             if self._settled_since is None:
@@ -1075,7 +1072,7 @@ class HapticSession:
             missing = sorted(self.goal_names - set(self._observed or ()))
             self.status = "short"
             self.reason = (
-                f"ended at t = {t:.3f} s short of the goal in {{{', '.join(sorted(self._observed or ()))}}}"
+                f"ended at t = {t:.3f} s short of the goal in {format_state(self._observed or (), empty='{}')}"
                 + (f": {', '.join(missing)} not in contact" if missing else ": not yet at rest")
             )
         self._ended.set()

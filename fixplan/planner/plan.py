@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING, Any, cast, get_args
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.contact_state import format_state
 from fixplan.errors import InputError
 from fixplan.planner.policy import Policy
 from fixplan.spatial import Pose, matrix_from_quaternion_wxyz, rot2
@@ -150,10 +151,6 @@ def pose_from_json(obj: Any, dimension: int, where: str) -> Pose:
 
 def _poses(objs: list[Any], dimension: int, where: str) -> tuple[Pose, ...]:
     return tuple(pose_from_json(p, dimension, f"{where}[{k}]") for k, p in enumerate(objs))
-
-
-def _state(s: Sequence[str]) -> str:
-    return "{" + ", ".join(s) + "}"
 
 
 # -- the timeline ----------------------------------------------------------------------------------
@@ -1051,7 +1048,7 @@ def check_plan_claims(plan: Plan, fixture: Fixture, source: str) -> None:
     start = start_state(fixture)
 
     def state(s: Iterable[str]) -> str:
-        return _state(sorted(s))
+        return format_state(s, empty="{}")  # a plan file's messages spell the free state {}
 
     seq = [frozenset(s) for s in plan.sequence]
     if not start and seq and seq[0] and plan.transitions and not plan.transitions[0].from_state:

@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.contact_state import format_state
 from fixplan.engine.simulator import Simulator
 from fixplan.errors import SolverError
 from fixplan.haptics import DeviceSpecs, HapticLoop, SimulatedDevice, VirtualCoupling
@@ -60,7 +61,6 @@ from fixplan.planner.execute import (
     Executor,
     Replan,
     Step,
-    _fmt,
     mass_speed,
 )
 from fixplan.planner.fine import twist_from_pose
@@ -343,7 +343,7 @@ def verify(
         executor._fail(
             sim.time_s,
             f"timed out after {sim.time_s:.2f} s in transition {executor.index + 1} "
-            f"({_fmt(executor.states[min(executor.index, len(executor.states) - 1)])}"
+            f"({format_state(executor.states[min(executor.index, len(executor.states) - 1)])}"
             + (f" + {executor.steps[executor.index].target}" if executor.index < len(executor.steps) else "")
             + ")",
             "timeout",
