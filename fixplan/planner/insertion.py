@@ -783,14 +783,9 @@ def verify_insertion(
     """Run ``plan`` (made on the nominal fixture) in the haptic loop on ``world`` and check the outcome (module text)."""
     from fixplan.engine.simulator import Simulator
     from fixplan.errors import SolverError
-    from fixplan.planner.verify import (
-        final_gap_check,
-        haptic_rig,
-        headroom,
-        loop_checks,
-        loop_measures,
-        pose_coordinates,
-    )
+    from fixplan.haptics.coordinates import coordinates_from_pose
+    from fixplan.haptics.rig import haptic_rig
+    from fixplan.planner.verify import final_gap_check, headroom, loop_checks, loop_measures
 
     vs = profile.verification
     s = profile.insertion
@@ -802,7 +797,7 @@ def verify_insertion(
     F_max, T_max, _ = world.hand_limits()
     run = InsertionRun(world, plan, s, noise, sim.dt)
     wp = world.workpiece
-    x0 = pose_coordinates(world.start, R0)
+    x0 = coordinates_from_pose(world.start, R0)
     carry0 = shift_wrench(-world.gravity_wrench(), world.start.point_world_from_body(wp.com_body), world.start.p_world)
     rig = haptic_rig(world, sim, x0, F_max, T_max, profile.haptic)
     rig = haptic_rig(world, sim, x0 + carry0 / rig.K, F_max, T_max, profile.haptic)
