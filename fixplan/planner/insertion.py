@@ -63,7 +63,7 @@ from fixplan.kinematics import ContactSet
 from fixplan.locating import _hole_body, contact_set, locator_gaps, peg_body
 from fixplan.model import Bore, Fixture
 from fixplan.planner.execute import ExecutionLog, ExecutionNoise
-from fixplan.planner.plan import Verification
+from fixplan.planner.plan_types import Verification
 from fixplan.settings import DEFAULT, HAPTIC, InsertionSettings, Settings
 from fixplan.spatial import Pose, exp_so3, log_so3, shift_wrench
 

@@ -42,7 +42,7 @@ from fixplan.planner.fine import (
     plan_transition,
     with_wrenches,
 )
-from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
+from fixplan.planner.plan_types import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.policy import Policy, build_policy
 from fixplan.planner.policy_job import PendingPolicy
 from fixplan.planner.segments import segment_wrenches

@@ -66,7 +66,7 @@ from fixplan.planner.execute import (
     mass_speed,
 )
 from fixplan.planner.fine import twist_from_pose
-from fixplan.planner.plan import Timeline, Verification
+from fixplan.planner.plan_types import Timeline, Verification
 from fixplan.planner.policy import Policy
 from fixplan.settings import DEFAULT, HAPTIC, Settings, VerificationSettings
 from fixplan.spatial import Pose
