@@ -11,13 +11,13 @@ The loop (its own thread, one tick per engine step, 1 kHz for the bundled fixtur
 3. the engine steps the part under ``w_c`` and gravity;
 4. the device displays the felt wrench ``−w_c`` (saturated at its limits); the bridge's answer
    carries the part's state and the guidance;
-Steps 2–4 are the rig's :class:`~fixplan.haptics.loop.HapticLoop` tick (the one the verification
-runs), which the session holds and calls with the tick's device: the person's handle as read
-(:class:`~fixplan.haptics.device.ReadDevice`) or the simulated one.
-
 5. the contact state (locators pressing or within ``contact_gap_m``, debounced) and the goal
    (every locator in contact, at rest for ``settle_s``) are observed; every ``trace_every`` ticks
    the contacts are sampled for the recording and a :class:`Snapshot` is published for the display.
+
+Steps 2–4 are the rig's :class:`~fixplan.haptics.loop.HapticLoop` tick (the one the verification
+runs), which the session holds and calls with the tick's device: the person's handle as read
+(:class:`~fixplan.haptics.device.ReadDevice`) or the simulated one.
 
 The guidance (:class:`Guide`: the planner's contact-state executor, re-solving the non-jamming
 push at the observed state, and ``classify`` of the push the part receives) runs in a second
@@ -720,9 +720,10 @@ class HapticSession:
         if self.clock == "device" and not getattr(self.handle, "fresh", False):
             return False  # no new pose (a HELLO, a dropped datagram): the device's clock has not ticked
         hand, scale = True, 1.0
+        auto_dev = self._auto_dev  # (set_auto may replace it meanwhile: this tick keeps the one it reads)
         device: HapticDevice
         if self._auto:
-            device = self._auto_dev
+            device = auto_dev
             self._x_d = device.position()
         elif reading is None:
             device = self._read  # no device input: the coupling goes limp (the handle is where the part is)
@@ -735,9 +736,8 @@ class HapticSession:
             scale = self._stiffness_scale
         stage = self._stage_tick()
         external = None
-        if (
-            stage is not None
-        ):  # the clamping stage: the clamps (and a load) on the part; the hand let go after the ramps
+        if stage is not None:
+            # the clamping stage: the clamps (and a load) on the part; the hand let go after the ramps
             if not stage.hand:
                 hand = False
                 if self._stage_k == getattr(self.clamp_stage, "n_hand", -1) and self.stage_record is not None:
@@ -746,7 +746,7 @@ class HapticSession:
 
         def auto_hand() -> FloatArray:  # the simulated hand reacts to this tick: the part moved, the handle felt
             push = self.guidance.push if self.guidance.push is not None else np.zeros(self.ndof)
-            return self.rig.operator_wrench(push, self._auto_dev)
+            return self.rig.operator_wrench(push, auto_dev)
 
         w_c, felt, _ = self.loop.tick(
             auto_hand if self._auto else self._zeros_ndof,
