@@ -38,25 +38,16 @@ def _free_udp_port() -> int:
 
 def _watch_page(url: str, proc: subprocess.Popen, deadline: float) -> dict:
     """Keep the page open in headless Chromium until the session ends; what the page did."""
-    from playwright.sync_api import sync_playwright
-
-    from fixplan.present.browser import CHROMIUM, CHROMIUM_ARGS
+    from fixplan.present.browser import headless_page
 
     info = {"console_errors": 0, "opened": False}
-    with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=list(CHROMIUM_ARGS), headless=True)
-        try:
-            page = browser.new_page(viewport={"width": 1100, "height": 700})
-            page.on(
-                "console", lambda m: info.__setitem__("console_errors", info["console_errors"] + (m.type == "error"))
-            )
-            page.goto(url, wait_until="load", timeout=60_000)
-            page.wait_for_selector("canvas", timeout=60_000)
-            info["opened"] = True
-            while proc.poll() is None and time.perf_counter() < deadline:
-                page.wait_for_timeout(200)
-        finally:
-            browser.close()
+    with headless_page(url, width=1100, height=700) as page:
+        page.on("console", lambda m: info.__setitem__("console_errors", info["console_errors"] + (m.type == "error")))
+        page.goto(url, wait_until="load", timeout=60_000)
+        page.wait_for_selector("canvas", timeout=60_000)
+        info["opened"] = True
+        while proc.poll() is None and time.perf_counter() < deadline:
+            page.wait_for_timeout(200)
     return info
 
 

@@ -203,11 +203,12 @@ def _mesh_twin_of_default(folder: Path) -> Path:
 def held_loop_tick_us(fixture, push: np.ndarray, ticks: int) -> float:
     """Mean tick of the haptic loop a person holds [µs]: coupling, engine step and display (no executor)."""
     from fixplan.engine.simulator import Simulator
-    from fixplan.planner.verify import haptic_rig, pose_coordinates
+    from fixplan.haptics.coordinates import coordinates_from_pose
+    from fixplan.haptics.rig import haptic_rig
     from fixplan.settings import HAPTIC
 
     sim = Simulator(fixture, settings=HAPTIC.engine)
-    x0 = pose_coordinates(fixture.start, fixture.start.R_world_body)
+    x0 = coordinates_from_pose(fixture.start, fixture.start.R_world_body)
     rig = haptic_rig(fixture, sim, x0, 50.0, 5.0, HAPTIC.haptic)
     rec = rig.loop.run(ticks * sim.dt, lambda _t, _device: push)
     return 1e6 * float(np.mean(np.subtract(rec.compute_s, rec.command_s)))

@@ -162,7 +162,7 @@ class HapticRigSettings:
     The coupling is scaled to the part: ``stiffness_per_kg`` N/m per kg of mass and
     ``rot_stiffness_per_kgm2`` N·m/rad per kg·m² of its largest principal inertia (2000 N/m and
     40 N·m/rad for the 2 kg default box), so the part-on-coupling frequency is about 32 rad/s in
-    translation and 69 rad/s in rotation for every part (see :func:`fixplan.planner.verify.haptic_rig`).
+    translation and 69 rad/s in rotation for every part (see :func:`fixplan.haptics.rig.haptic_rig`).
 
     Attributes
     ----------

@@ -333,14 +333,15 @@ def test_the_rig_transmits_the_push_as_one_wrench(name):
     6 ms on a 33 cm tall box, which tipped off a base locator as every push began."""
     import fixplan
     from fixplan.engine.simulator import Simulator
-    from fixplan.planner.verify import haptic_rig, pose_coordinates
+    from fixplan.haptics.coordinates import coordinates_from_pose
+    from fixplan.haptics.rig import haptic_rig
 
     fx = fixplan.load(fixplan.default_fixture_path())
     if name == "generated":  # a 14.7 kg box, 36 × 31 × 17 cm
         fx = fixplan.load(PROBLEMS / "gen-box-321-s2026-000.toml")
     sim = Simulator(fx)
     F_max, T_max, _ = fx.hand_limits()
-    rig = haptic_rig(fx, sim, pose_coordinates(fx.start, fx.start.R_world_body), F_max, T_max)
+    rig = haptic_rig(fx, sim, coordinates_from_pose(fx.start, fx.start.R_world_body), F_max, T_max)
     w = np.array([0.4, -0.3, -0.5 * F_max, 0.05 * T_max, -0.04 * T_max, 0.02 * T_max])  # presses it down: held
     rec = rig.loop.run(0.06, lambda t, dev: rig.operator_wrench(w, dev))
     W = np.array(rec.coupling_wrench)

@@ -83,7 +83,8 @@ def test_the_simulated_haptic_loop_plays_the_stage_and_the_part_stays_put(path) 
     from fixplan.clamping.stage import ClampStage
     from fixplan.engine.simulator import Simulator
     from fixplan.haptics.clamping import play_clamping
-    from fixplan.planner.verify import haptic_rig, pose_coordinates
+    from fixplan.haptics.coordinates import coordinates_from_pose
+    from fixplan.haptics.rig import haptic_rig
     from fixplan.settings import HAPTIC
 
     fixture = load(path)
@@ -91,7 +92,7 @@ def test_the_simulated_haptic_loop_plays_the_stage_and_the_part_stays_put(path) 
     scene = clamp_scene(fixture)
     sim = Simulator(fixture, settings=HAPTIC.engine, tolerance=fixture.simulation.tolerance)
     sim.set_state(fixture.goal)
-    x0 = pose_coordinates(fixture.goal, fixture.start.R_world_body)
+    x0 = coordinates_from_pose(fixture.goal, fixture.start.R_world_body)
     rig = haptic_rig(fixture, sim, x0, 40.0, 2.0)
     points = {c.name: c.point_world for c in scene.clamps}
     stage = ClampStage(fixture, plan.order, plan.forces_N, points, sim.dt)

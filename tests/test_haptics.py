@@ -66,6 +66,30 @@ def test_compiled_coupling_matches_the_python_formula(rng):
     assert np.allclose(got, expected, atol=1e-12)
 
 
+def test_compiled_device_coordinates_match_the_numpy_ones(rng):
+    """The interactive loop's compiled device coordinates equal ``workpiece_coordinates`` (origin, rotation vector, rates)."""
+    from fixplan.haptics.coordinates import coordinates_from_pose, pose_from_coordinates, workpiece_coordinates
+    from fixplan.spatial import Pose
+
+    f = fixplan.load(fixplan.default_fixture_path())
+    sim = Simulator(f)
+    R0 = f.start.R_world_body
+    for _ in range(5):
+        sim.set_state(Pose.from_rpy_deg(f.start.p_world + 0.01 * rng.normal(size=3), rng.normal(size=3) * 20.0),
+                      rng.normal(size=6))  # fmt: skip
+        x, v = workpiece_coordinates(sim, R0)
+        x_c, v_c = workpiece_coordinates(sim, R0, compiled=True)
+        np.testing.assert_allclose(x_c, x, atol=1e-14)
+        np.testing.assert_allclose(v_c, v, atol=1e-14)
+        # the body origin's velocity is the centre of mass's plus ω × (p − c)
+        twist = sim.twist
+        np.testing.assert_allclose(v[:3], twist[:3] + np.cross(twist[3:], sim.pose.p_world - sim.com_world), atol=1e-14)
+        # and the coordinates invert to the pose
+        back = pose_from_coordinates(x, R0, 3)
+        np.testing.assert_allclose(back.R_world_body, sim.pose.R_world_body, atol=1e-12)
+        np.testing.assert_allclose(coordinates_from_pose(back, R0), x, atol=1e-12)
+
+
 def test_tick_applies_the_coupling_of_the_rotating_part(rng):
     """The wrench a tick applies is K (x_d − x_w) + B (ẋ_d − ẋ_w) of the part's state before the step (spinning part)."""
     from fixplan.spatial import Pose

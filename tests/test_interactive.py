@@ -13,13 +13,13 @@ from conftest import PROBLEMS
 
 import fixplan
 from fixplan.errors import InputError
+from fixplan.haptics.coordinates import coordinates_from_pose, pose_from_coordinates
 from fixplan.interactive import protocol
 from fixplan.interactive.commands import check_host, parse_until
 from fixplan.interactive.device_sim import LockstepHandle, OperatorDevice
 from fixplan.interactive.handles import UdpHandle, parse_device
 from fixplan.interactive.record import plan_json, verify_recording
-from fixplan.interactive.session import HapticSession, pose_from_coordinates
-from fixplan.planner.verify import pose_coordinates
+from fixplan.interactive.session import HapticSession
 from fixplan.present.replay import replay_from_plan
 
 
@@ -131,7 +131,7 @@ def test_coordinates_match_the_haptic_loops(box):
     np.testing.assert_allclose(v, v_ref, atol=1e-14)
     # the proxy pose drawn for device coordinates x is the pose whose coordinates are x
     pose = pose_from_coordinates(x, s.R0, 3)
-    np.testing.assert_allclose(pose_coordinates(pose, s.R0), x, atol=1e-12)
+    np.testing.assert_allclose(coordinates_from_pose(pose, s.R0), x, atol=1e-12)
 
 
 def test_first_tick_pushes_with_the_spring_and_the_device_feels_its_reaction(box):

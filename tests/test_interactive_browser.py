@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 import fixplan
+from fixplan.haptics.coordinates import coordinates_from_pose, pose_from_coordinates
 from fixplan.interactive.app import HapticApp, _wxyz, _xyz
 from fixplan.interactive.gate import COOKIE, token_ok
 from fixplan.interactive.handles import GizmoHandle
 from fixplan.interactive.record import plan_json, verify_recording
-from fixplan.interactive.session import HapticSession, pose_from_coordinates
-from fixplan.planner.verify import pose_coordinates
+from fixplan.interactive.session import HapticSession
 from fixplan.present.browser import browser_available
 
 browser = pytest.mark.skipif(browser_available() is not None, reason=str(browser_available()))
@@ -28,7 +28,7 @@ def box():
 
 
 def gizmo_session(box, **options):
-    handle = GizmoHandle(pose_coordinates(box.start, box.start.R_world_body))
+    handle = GizmoHandle(coordinates_from_pose(box.start, box.start.R_world_body))
     return handle, HapticSession(box, handle, **options)
 
 

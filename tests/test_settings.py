@@ -8,8 +8,9 @@ import fixplan
 from fixplan import settings
 from fixplan.engine.simulator import Simulator
 from fixplan.errors import InputError
+from fixplan.haptics.coordinates import coordinates_from_pose
+from fixplan.haptics.rig import haptic_rig
 from fixplan.jamming import classify
-from fixplan.planner.verify import haptic_rig, pose_coordinates
 
 
 def test_unknown_profile_lists_the_known_ones():
@@ -44,7 +45,7 @@ def test_haptic_rig_follows_its_settings():
     """K = k·m, b = max(b_min, s (K T/2 + B)) (passive with safety s), operator PD m ω², 2 ζ ω m."""
     f = fixplan.load(fixplan.default_fixture_path())
     sim = Simulator(f, settings=settings.HAPTIC.engine)
-    x0 = pose_coordinates(f.start, f.start.R_world_body)
+    x0 = coordinates_from_pose(f.start, f.start.R_world_body)
     for rig_settings in (
         settings.HAPTIC.haptic,
         settings.HapticRigSettings(stiffness_per_kg=400.0, passivity_safety=3.0),

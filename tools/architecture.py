@@ -39,6 +39,7 @@ _LAYER_LIST: list[tuple[str, list[str]]] = [
             "schema",
             "fixture_schema",
             "plan_schema",
+            "contact_state",
             "model",
             "fixture",
             "kinematics",

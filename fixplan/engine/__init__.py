@@ -20,8 +20,9 @@ Moreau–Jean step of :mod:`.step`; the rest of this package solves one contact 
 - :mod:`.budget` — time limits and iteration caps; :mod:`.fclib` — FCLib files;
 - :mod:`.outcome` — what a finished run says (no numba);
 
-Solvers share one signature, ``solver(problem, r0=None, tol=..., max_iter=...) ->
-ContactSolution``, and are looked up by name in :data:`SOLVERS` (imported lazily, so
+Solvers share one signature, ``solver(problem, r0=None, tol=..., max_iter=..., time_limit=...)
+-> ContactSolution`` (the protocol :class:`~fixplan.engine.problem.ContactSolver`, which documents
+the shared parameters once), and are looked up by name in :data:`SOLVERS` (imported lazily, so
 ``import fixplan.engine`` does not compile numba kernels or import Clarabel):
 
 - ``"nsgs"``: compiled nonsmooth Gauss–Seidel (``max_iter`` = sweeps);
@@ -46,9 +47,7 @@ from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
-
-    from fixplan.engine.problem import ContactProblem, ContactSolution
+    from fixplan.engine.problem import ContactProblem, ContactSolution, ContactSolver
 
 SOLVERS: dict[str, tuple[str, str]] = {
     "auto": ("fixplan.engine.auto", "solve_auto"),
@@ -89,7 +88,7 @@ _LAZY = {
 __all__ = sorted([*_LAZY, "SOLVERS", "get_solver", "solve"])
 
 
-def get_solver(name: str) -> Callable[..., ContactSolution]:
+def get_solver(name: str) -> ContactSolver:
     """The solver registered under ``name``.
 
     Parameters
@@ -99,8 +98,8 @@ def get_solver(name: str) -> Callable[..., ContactSolution]:
 
     Returns
     -------
-    callable
-        ``solver(problem, r0=None, tol=..., max_iter=...) -> ContactSolution``.
+    ContactSolver
+        ``solver(problem, r0=None, tol=..., max_iter=..., time_limit=...) -> ContactSolution``.
 
     Raises
     ------
@@ -114,7 +113,8 @@ def get_solver(name: str) -> Callable[..., ContactSolution]:
     except (KeyError, TypeError):
         known = ", ".join(sorted(SOLVERS))
         raise InputError(f"unknown contact solver {name!r}; known solvers: {known}") from None
-    return getattr(import_module(module_name), attr)
+    solver: ContactSolver = getattr(import_module(module_name), attr)
+    return solver
 
 
 def solve(problem: ContactProblem, solver: str = "auto", **options: Any) -> ContactSolution:

@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -44,6 +44,7 @@ from fixplan.engine.problem import (
     DEFAULT_TOL,
     ContactProblem,
     ContactSolution,
+    ContactSolver,
     check_settings,
     initial_scaled,
     kernel_arrays,
@@ -243,30 +244,21 @@ def solve_auto(
 ) -> ContactSolution:
     """Solve ``u = W r + q`` with the contact laws by NSGS → SOCP → NSN → PROX on stagnation.
 
+    A :class:`~fixplan.engine.problem.ContactSolver` (the shared parameters are documented
+    there): ``r0`` starts the first stage; ``max_iter`` caps the iterations of every stage
+    (each stage's own default when ``None``); ``time_limit`` bounds the whole solve (default
+    60 s). The answer is the best iterate of all stages: ``solver`` is
+    ``"auto(" + "+".join(stages run) + ")"`` (``"auto(nsgs)"`` when NSGS sufficed);
+    ``iterations`` sums the stages' iterations; ``extras["stages"]`` has one
+    :meth:`StageRecord.as_dict` per stage run and ``extras["reason"]`` says why the solve ended
+    unconverged (no stage runs when :func:`immobile_contact_violation` finds the problem
+    unsolvable; an answer that :func:`runaway_reason` rejects is not converged whatever its
+    residual).
+
     Parameters
     ----------
-    problem : ContactProblem
-        The contact problem.
-    r0 : array_like, optional
-        Warm start of the first stage.
-    tol : float
-        Target FCLib residual.
-    max_iter : int, optional
-        Cap on the iterations of every stage (each stage's own default when ``None``).
-    time_limit : float, optional
-        Wall-clock bound of the whole solve [s] (``None``: none; default 60 s).
     stages : tuple of StagePlan
         The stages (default :data:`STAGES`).
-
-    Returns
-    -------
-    ContactSolution
-        The best iterate of all stages. ``solver`` is ``"auto(" + "+".join(stages run) + ")"``
-        (``"auto(nsgs)"`` when NSGS sufficed); ``iterations`` sums the stages' iterations;
-        ``extras["stages"]`` has one :meth:`StageRecord.as_dict` per stage run and
-        ``extras["reason"]`` says why the solve ended unconverged (no stage runs when
-        :func:`immobile_contact_violation` finds the problem unsolvable; an answer that
-        :func:`runaway_reason` rejects is not converged whatever its residual).
     """
     check_settings(tol, 0 if max_iter is None else max_iter, 1.0)
     check_time_limit(time_limit)
@@ -343,3 +335,7 @@ def solve_auto(
         time_s=time.perf_counter() - t0,
         extras=extras,
     )
+
+
+if TYPE_CHECKING:  # the registry's one signature (engine.SOLVERS), checked by mypy
+    _SOLVERS: tuple[ContactSolver, ...] = (solve_auto,)

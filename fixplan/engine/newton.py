@@ -52,7 +52,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numba
 import numpy as np
@@ -69,6 +69,7 @@ from fixplan.engine.problem import (
     DEFAULT_TOL,
     ContactProblem,
     ContactSolution,
+    ContactSolver,
     check_settings,
     finish,
     initial_scaled,
@@ -298,29 +299,17 @@ def solve_newton(
 ) -> ContactSolution:
     """Solve ``u = W r + q`` with the contact laws by semismooth Newton on the natural map.
 
+    A :class:`~fixplan.engine.problem.ContactSolver` (the shared parameters are documented
+    there): ``max_iter`` caps Newton steps and ``stall_window`` counts them; ``time_limit`` is
+    checked before every step: a step starts only when the last one (or ``step_s``, before the
+    first) fits in the time left. Newton converges fast from a good ``r0`` (e.g. NSGS's).
+    ``extras`` has ``history``, ``factorizations``, ``line_search_failures`` and ``step_s``
+    (the last step's duration).
+
     Parameters
     ----------
-    problem : ContactProblem
-        From :func:`fixplan.engine.problem.build_problem`.
-    r0 : array_like, shape (m,), optional
-        Start (zeros by default). Newton converges fast from a good start (e.g. NSGS's).
-    tol : float
-        Stop when the FCLib residual is ``≤ tol``.
-    max_iter : int
-        Cap on Newton steps.
-    time_limit : float, optional
-        Wall-clock limit [s], checked before every step: a step starts only when the last one
-        (or ``step_s``, before the first) fits in the time left.
-    stall_window : int, optional
-        Stop when the best residual gained less than 10 % over this many steps.
     step_s : float
         Expected duration of one step [s] (``auto`` passes what the Newton stages before took).
-
-    Returns
-    -------
-    ContactSolution
-        The best iterate; ``extras`` has ``history``, ``factorizations``,
-        ``line_search_failures`` and ``step_s`` (the last step's duration).
     """
     check_settings(tol, max_iter, 1.0)
     budget = Budget.start(time_limit)
@@ -443,27 +432,15 @@ def solve_prox(
 ) -> ContactSolution:
     """Solve ``u = W r + q`` with the contact laws by the proximal point method (PROX).
 
+    A :class:`~fixplan.engine.problem.ContactSolver` (the shared parameters are documented
+    there): ``max_iter`` caps proximal rounds (each at most :data:`PROX_INNER_STEPS` Newton
+    steps) and ``stall_window`` counts them; ``time_limit`` is checked before every Newton step
+    as in :func:`solve_newton`. ``extras`` has ``history``, ``factorizations`` and ``step_s``.
+
     Parameters
     ----------
-    problem : ContactProblem
-        The contact problem.
-    r0 : array_like, optional
-        Start (zeros by default).
-    tol : float
-        Target FCLib residual.
-    max_iter : int
-        Cap on proximal rounds (each at most :data:`PROX_INNER_STEPS` Newton steps).
-    time_limit : float, optional
-        Wall-clock limit [s], checked before every Newton step as in :func:`solve_newton`.
-    stall_window : int, optional
-        Stop when the best residual gained less than 10 % over this many rounds.
     step_s : float
         Expected duration of one Newton step [s], as in :func:`solve_newton`.
-
-    Returns
-    -------
-    ContactSolution
-        The best iterate; ``extras`` has ``history``, ``factorizations`` and ``step_s``.
     """
     check_settings(tol, max_iter, 1.0)
     budget = Budget.start(time_limit)
@@ -479,3 +456,7 @@ def solve_prox(
         "time_limit": time_limit,
     }
     return finish(problem, run.best_r, run.best_err, run.iterations, run.status, t0, "prox", extras)
+
+
+if TYPE_CHECKING:  # the registry's one signature (engine.SOLVERS), checked by mypy
+    _SOLVERS: tuple[ContactSolver, ...] = (solve_newton, solve_prox)

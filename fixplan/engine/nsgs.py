@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numba
 import numpy as np
@@ -37,6 +37,7 @@ from fixplan.engine.problem import (
     DEFAULT_TOL,
     ContactProblem,
     ContactSolution,
+    ContactSolver,
     check_settings,
     fclib_error,
     finish,
@@ -418,29 +419,14 @@ def solve_nsgs(
 ) -> ContactSolution:
     """Solve ``u = W r + q`` with the contact laws by compiled nonsmooth Gauss–Seidel.
 
+    A :class:`~fixplan.engine.problem.ContactSolver` (the shared parameters are documented
+    there): ``max_iter`` caps sweeps, ``time_limit`` is checked between chunks of sweeps,
+    ``stall_window`` counts sweeps.
+
     Parameters
     ----------
-    problem : ContactProblem
-        From :func:`build_problem`.
-    r0 : array_like, shape (m,), optional
-        Warm start (e.g. the previous time step's impulses); zeros by default.
-    tol : float
-        Stop when the FCLib residual is ``≤ tol``.
-    max_iter : int
-        Cap on sweeps.
     omega : float
         Sweep relaxation ``0 < ω < 2``.
-    time_limit : float, optional
-        Wall-clock limit [s] (checked between chunks of sweeps; ``None``: no limit).
-    stall_window : int, optional
-        Stop when the best residual gained less than 10 % over this many sweeps.
-
-    Returns
-    -------
-    ContactSolution
-        The best iterate seen (lowest residual, not necessarily the last). ``converged`` is
-        ``False`` (with ``extras["reason"]``) when the cap, the time limit or stagnation
-        stopped the sweeps, or a non-finite value appeared.
     """
     check_settings(tol, max_iter, omega)
     budget = Budget.start(time_limit)
@@ -482,18 +468,10 @@ def solve_nsgs_reference(
     one-contact solves are the shared compiled ones of :mod:`fixplan.engine.local`. Slow (a
     Python loop over contacts): meant for small problems and for checking the compiled kernel.
 
-    Parameters
-    ----------
-    problem, r0, tol, max_iter, omega
-        As :func:`solve_nsgs`.
-    time_limit : float, optional
-        Wall-clock limit [s], checked before every contact of a sweep (a sweep of a large problem
-        takes seconds here); a sweep cut short is dropped. ``None``: no limit.
-
-    Returns
-    -------
-    ContactSolution
-        With ``solver == "nsgs-numpy"``: the best iterate after a whole sweep (lowest residual).
+    A :class:`~fixplan.engine.problem.ContactSolver` with :func:`solve_nsgs`'s ``omega``;
+    ``time_limit`` is checked before every contact of a sweep (a sweep of a large problem takes
+    seconds here), and a sweep cut short is dropped. The answer (``solver == "nsgs-numpy"``) is
+    the best iterate after a whole sweep.
     """
     check_settings(tol, max_iter, omega)
     budget = Budget.start(time_limit)
@@ -548,3 +526,7 @@ def solve_nsgs_reference(
         "time_limit": time_limit,
     }
     return finish(problem, best_r, best, it, status, t0, "nsgs-numpy", extras)
+
+
+if TYPE_CHECKING:  # the registry's one signature (engine.SOLVERS), checked by mypy
+    _SOLVERS: tuple[ContactSolver, ...] = (solve_nsgs, solve_nsgs_reference)

@@ -21,6 +21,7 @@ NumPy version, the independent check of every solver; the compiled one the sweep
 :func:`fixplan.engine.residual.fclib_error_rows`.
 
 Here: :class:`ContactProblem` and its builder :func:`build_problem`, :class:`ContactSolution`,
+:class:`ContactSolver` (the one signature of the solvers, with their shared parameters' meaning),
 :func:`fclib_error`, and the helpers every solver (:mod:`.nsgs`, :mod:`.socp`, :mod:`.newton`,
 :mod:`.auto`) uses: :func:`check_settings`, :func:`initial_scaled`, :func:`kernel_arrays`,
 :func:`stalled` and :func:`finish`, which turns a solver's scaled iterate and
@@ -32,7 +33,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -268,6 +269,51 @@ class ContactSolution:
                 prob.torsion_radius,
             )
         return fclib_error(prob, self.reaction)
+
+
+class ContactSolver(Protocol):
+    """The signature every solver of :data:`fixplan.engine.SOLVERS` shares, and what its parameters mean.
+
+    ``solver(problem, r0=None, tol=..., max_iter=..., time_limit=..., **its own options)``. Each
+    solver's docstring documents only what differs: what ``max_iter`` counts, where
+    ``time_limit`` is checked, and its own options.
+
+    Parameters
+    ----------
+    problem : ContactProblem
+        From :func:`build_problem`.
+    r0 : array_like, shape (m,), optional
+        Warm start (e.g. the previous time step's impulses, or another solver's answer); zeros
+        by default.
+    tol : float
+        Stop when the FCLib residual is ``≤ tol``.
+    max_iter : int
+        Cap on the solver's iterations (sweeps, rounds or steps: each solver says which).
+    time_limit : float, optional
+        Wall-clock limit [s] (``None``: no limit); each solver says where it checks it.
+
+    Returns
+    -------
+    ContactSolution
+        The best iterate seen (lowest residual, not necessarily the last), with its residual.
+        ``converged`` is ``False`` (with ``extras["reason"]``) when a cap, the time limit,
+        stagnation or a non-finite value stopped the solver.
+
+    Notes
+    -----
+    Every solver but ``auto`` also takes ``stall_window`` (int, optional): stop when the best
+    residual gained less than 10 % (:data:`DEFAULT_STALL_RATIO`) over this many iterations.
+    """
+
+    def __call__(
+        self,
+        problem: ContactProblem,
+        r0: Any = None,
+        *,
+        tol: float = ...,
+        max_iter: int = ...,
+        time_limit: float | None = ...,
+    ) -> ContactSolution: ...
 
 
 def fclib_error(problem: ContactProblem, reaction: np.ndarray) -> float:

@@ -42,8 +42,11 @@ _LOADED: set[int] = set()  # dimensions whose compiled loop this process has alr
 WrenchInput = ArrayLike | Callable[[float, "Simulator"], ArrayLike] | None
 
 
-class State(NamedTuple):
-    """The workpiece's state: a ``(pose, twist)`` tuple with named fields."""
+class PoseTwist(NamedTuple):
+    """The workpiece's pose and twist: a ``(pose, twist)`` tuple with named fields.
+
+    (Not a contact state: that is :data:`fixplan.contact_state.State`, the pressed contacts.)
+    """
 
     pose: Pose  # T_world_body
     twist: FloatArray  # (v, ω) of the centre of mass, world axes
@@ -443,9 +446,9 @@ class Simulator:
         return np.concatenate([self._v, w])
 
     @property
-    def state(self) -> State:
+    def state(self) -> PoseTwist:
         """``(pose, twist)``, also readable as ``.pose`` and ``.twist``."""
-        return State(self.pose, self.twist)
+        return PoseTwist(self.pose, self.twist)
 
     @property
     def body_state(self) -> BodyState:

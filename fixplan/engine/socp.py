@@ -63,7 +63,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -74,6 +74,7 @@ from fixplan.engine.problem import (
     DEFAULT_TOL,
     ContactProblem,
     ContactSolution,
+    ContactSolver,
     check_settings,
     finish,
     initial_scaled,
@@ -265,31 +266,19 @@ def solve_socp(
 ) -> ContactSolution:
     """Solve ``u = W r + q`` with the contact laws by successive SOCPs and NSGS polishing.
 
+    A :class:`~fixplan.engine.problem.ContactSolver` (the shared parameters are documented
+    there): the first ``s`` is computed from ``u = W r0 + q``; ``max_iter`` caps rounds (one
+    SOCP + a polish of at most :data:`MAX_POLISH_SWEEPS` sweeps each), which ``iterations`` and
+    ``stall_window`` count; ``time_limit`` is passed to Clarabel and checked before every SOCP
+    and between chunks of polishing sweeps. ``extras`` holds ``ipm_iterations``,
+    ``nsgs_sweeps``, ``history`` (error after each SOCP and after each polish) and
+    ``asymmetry``.
+
     Parameters
     ----------
-    problem : ContactProblem
-        From :func:`fixplan.engine.problem.build_problem`.
-    r0 : array_like, shape (m,), optional
-        Warm start: the first ``s`` is computed from ``u = W r0 + q`` (zeros by default).
-    tol : float
-        Stop when the FCLib residual is ``≤ tol``.
-    max_iter : int
-        Cap on rounds (one SOCP + a polish of at most :data:`MAX_POLISH_SWEEPS` sweeps each).
     polish_sweeps : int
         NSGS sweeps after each SOCP that did not reach ``tol`` (0: pure fixed point); ×4 each
         time an SOCP fails to improve, up to :data:`MAX_POLISH_SWEEPS`.
-    time_limit : float, optional
-        Wall-clock limit [s]: passed to Clarabel, checked before every SOCP and between chunks
-        of polishing sweeps.
-    stall_window : int, optional
-        Stop when the best residual gained less than 10 % over this many rounds.
-
-    Returns
-    -------
-    ContactSolution
-        The best iterate; ``iterations`` counts rounds; ``extras`` holds ``ipm_iterations``,
-        ``nsgs_sweeps``, ``history`` (error after each SOCP and after each polish) and
-        ``asymmetry``.
 
     Raises
     ------
@@ -377,3 +366,7 @@ def solve_socp(
         "time_limit": time_limit,
     }
     return finish(problem, r, err, rounds, status, t0, "socp", extras)
+
+
+if TYPE_CHECKING:  # the registry's one signature (engine.SOLVERS), checked by mypy
+    _SOLVERS: tuple[ContactSolver, ...] = (solve_socp,)

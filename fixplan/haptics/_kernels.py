@@ -1,4 +1,4 @@
-"""Compiled per-tick arithmetic of the haptic loop (numba, cached)."""
+"""Compiled per-tick arithmetic of the haptic loop (numba, cached): the coupling, and the device coordinates."""
 
 from __future__ import annotations
 
@@ -24,3 +24,21 @@ def coupling3(R, p, com_b, v, w, R0, x_d, v_d, K, B):
         out[i] = K[i] * (x_d[i] - p[i]) + B[i] * (v_d[i] - v_origin[i])
         out[3 + i] = K[3 + i] * (x_d[3 + i] - rot[i]) + B[3 + i] * (v_d[3 + i] - w[i])
     return out
+
+
+@njit(cache=True)
+def coordinates3(R, p, com_world, twist, R0):
+    """Device coordinates of the part (body origin, rotation vector of R R0ᵀ) and their rates.
+
+    The compiled twin of :func:`fixplan.haptics.coordinates.workpiece_coordinates` in 3D.
+    ``twist`` is ``(v, ω)`` of the centre of mass; the origin's velocity is ``v + ω × (p − c)``.
+    """
+    rot = log_so3(relative_rotation3(R, R0))
+    r = p - com_world  # lever from the centre of mass to the body origin
+    x = np.empty(6)
+    v = np.empty(6)
+    x[:3] = p
+    x[3:] = rot
+    v[0], v[1], v[2] = shifted_velocity3(twist[0], twist[1], twist[2], twist[3], twist[4], twist[5], r[0], r[1], r[2])
+    v[3:] = twist[3:]
+    return x, v

@@ -42,6 +42,23 @@ class DeviceSpecs:
         return self.physical_damping_rot_Nms_per_rad
 
 
+def saturate(w: FloatArray, d: int, F_max: float, T_max: float) -> tuple[FloatArray, bool]:
+    """``w`` with its force and moment scaled down to ``F_max`` [N] and ``T_max`` [N·m], and whether it was.
+
+    The force is the first ``d`` components; ``w`` itself is returned when within both limits.
+    """
+    F = math.sqrt(float(w[:d] @ w[:d]))
+    T = math.sqrt(float(w[d:] @ w[d:]))
+    if F <= F_max and T <= T_max:
+        return w, False
+    out = np.array(w, dtype=float)
+    if F > F_max:
+        out[:d] *= F_max / F
+    if T > T_max:
+        out[d:] *= T_max / T
+    return out, True
+
+
 class HapticDevice(ABC):
     """The calls a loop makes on a device, real or simulated."""
 
@@ -66,6 +83,49 @@ class HapticDevice(ABC):
     @abstractmethod
     def set_force_and_torque(self, wrench: ArrayLike) -> FloatArray:
         """Display a wrench (saturated at the device's limits); returns what is displayed."""
+
+    def advance(self, dt: float, operator_wrench: ArrayLike) -> None:  # noqa: B027 - a real handle: nothing to do
+        """The handle over one tick under the operator's hand: a real one moves by itself."""
+
+
+class ReadDevice(HapticDevice):
+    """A real device's handle as a loop sees it for a tick: the pose and twist it reported.
+
+    :meth:`read` gives the tick's reading; :meth:`set_force_and_torque` saturates the wrench
+    at the device's limits and keeps it for the caller to send (with its answer) to the device.
+    """
+
+    def __init__(self, ndof: int, specs: DeviceSpecs):
+        self.ndof = ndof
+        self._specs = specs
+        self._x = np.zeros(ndof)
+        self._v = np.zeros(ndof)
+        self.displayed = np.zeros(ndof)
+
+    def read(self, x: FloatArray, v: FloatArray) -> None:
+        """The handle's pose and twist this tick, in device coordinates."""
+        self._x, self._v = x, v
+
+    def open(self) -> None:
+        pass
+
+    def close(self) -> None:
+        self.displayed = np.zeros(self.ndof)
+
+    @property
+    def specs(self) -> DeviceSpecs:
+        return self._specs
+
+    def position(self) -> FloatArray:
+        return self._x
+
+    def velocity(self) -> FloatArray:
+        return self._v
+
+    def set_force_and_torque(self, wrench: ArrayLike) -> FloatArray:
+        w = np.asarray(wrench, dtype=float)
+        self.displayed, _ = saturate(w, 2 if self.ndof == 3 else 3, self._specs.max_force_N, self._specs.max_torque_Nm)
+        return self.displayed
 
 
 class SimulatedDevice(HapticDevice):
@@ -128,14 +188,8 @@ class SimulatedDevice(HapticDevice):
         return self._v.copy()
 
     def set_force_and_torque(self, wrench: ArrayLike) -> FloatArray:
-        w = np.array(wrench, dtype=float)
         d = 2 if self.ndof == 3 else 3
-        nF = math.sqrt(float(w[:d] @ w[:d]))
-        nT = math.sqrt(float(w[d:] @ w[d:]))
-        if nF > self._specs.max_force_N:
-            w[:d] *= self._specs.max_force_N / nF
-        if nT > self._specs.max_torque_Nm:
-            w[d:] *= self._specs.max_torque_Nm / nT
+        w, _ = saturate(np.array(wrench, dtype=float), d, self._specs.max_force_N, self._specs.max_torque_Nm)
         self._displayed = w
         return w.copy()
 

@@ -20,7 +20,6 @@ a tick longer than ``T`` is a deadline miss. The command's share is kept apart
 from __future__ import annotations
 
 import gc
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -31,9 +30,10 @@ from numpy.typing import ArrayLike, NDArray
 from fixplan.aot import kernel
 from fixplan.engine.simulator import ContactReport, Simulator
 from fixplan.errors import InputError
+from fixplan.haptics.coordinates import workpiece_coordinates
 from fixplan.haptics.coupling import VirtualCoupling
-from fixplan.haptics.device import SimulatedDevice
-from fixplan.spatial import Pose, log_so3, shift_twist
+from fixplan.haptics.device import HapticDevice, SimulatedDevice, saturate
+from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]
 Operator = Callable[[float, SimulatedDevice], ArrayLike]
@@ -120,60 +120,68 @@ class HapticLoop:
         self._K = np.concatenate([np.full(d, coupling.K_lin), np.full(n - d, coupling.K_rot)])
         self._B = np.concatenate([np.full(d, coupling.B_lin), np.full(n - d, coupling.B_rot)])
 
-    def workpiece_coordinates(self) -> tuple[FloatArray, FloatArray]:
-        """Workpiece coordinates matching the device's: body origin (+ rotation vector), and their rates."""
-        pose, nu_com = self.sim.state
-        nu_origin = shift_twist(nu_com, self.sim.com_world, pose.p_world)
-        if self.sim.dimension == 3:
-            return np.concatenate([pose.p_world, log_so3(pose.R_world_body @ self._R0.T)]), nu_origin
-        return np.array([pose.p_world[0], pose.p_world[1], pose.angle_rad]), nu_origin
+    def workpiece_coordinates(self, *, compiled: bool = False) -> tuple[FloatArray, FloatArray]:
+        """Workpiece coordinates matching the device's: body origin (+ rotation vector), and their rates.
+
+        (:func:`fixplan.haptics.coordinates.workpiece_coordinates` relative to the start orientation.)
+        """
+        return workpiece_coordinates(self.sim, self._R0, compiled=compiled)
 
     def tick(
-        self, operator_wrench: ArrayLike, *, external: FloatArray | None = None, hand: bool = True
+        self,
+        operator_wrench: ArrayLike | Callable[[], ArrayLike],
+        *,
+        external: FloatArray | None = None,
+        hand: bool = True,
+        device: HapticDevice | None = None,
+        stiffness_scale: float = 1.0,
     ) -> tuple[FloatArray, FloatArray, float]:
         """One sample period; returns (coupling wrench on the workpiece, felt wrench, compute time [s]).
 
         The compute time is steps 2–4's; :meth:`run` adds the time the operator's command took.
-        ``external``: a wrench about the body origin (world axes) the engine applies besides the
-        coupling's (the clamps of a clamping stage); ``hand`` False: the hand has let go of the
-        part, the coupling's wrench is 0 and so is what the device shows.
+        ``operator_wrench``: the operator's push on the handle over the tick, or a callable that
+        gives it once the part has moved and the device displays (a hand that reacts to this
+        tick: the interactive session's). ``external``: a wrench about the body origin (world
+        axes) the engine applies besides the coupling's (the clamps of a clamping stage);
+        ``hand`` False: the hand has let go of the part (or the device gave no reading), the
+        coupling's wrench is 0 and so is what the device shows. ``device``: the device of this
+        tick in place of :attr:`device` (the session switches between a person's and the
+        simulated one); ``stiffness_scale`` scales the coupling's stiffness (within its passivity
+        bound, the caller's check).
         """
         t0 = time.perf_counter()
         d = self.sim.dimension
-        x_d, v_d = self.device.position(), self.device.velocity()
+        dev = self.device if device is None else device
         if not hand:
             w_c = np.zeros(6 if d == 3 else 3)
-        elif d == 3:
-            R, p, v, w = self.sim.body_state
-            w_c = _coupling3(R, p, self._com_b, v, w, self._R0, x_d, v_d, self._K, self._B)
         else:
-            x_w, v_w = self.workpiece_coordinates()
-            w_c = self._K * (x_d - x_w) + self._B * (v_d - v_w)
-        if self.push_limits is not None:
-            w_c = self._saturate(w_c, *self.push_limits)
+            x_d, v_d = dev.position(), dev.velocity()
+            K = self._K if stiffness_scale == 1.0 else self._K * stiffness_scale
+            if d == 3:
+                R, p, v, w = self.sim.body_state
+                w_c = _coupling3(R, p, self._com_b, v, w, self._R0, x_d, v_d, K, self._B)
+            else:
+                x_w, v_w = self.workpiece_coordinates()
+                w_c = K * (x_d - x_w) + self._B * (v_d - v_w)
+            if self.push_limits is not None:
+                w_c = self._saturate(w_c, *self.push_limits)
         self.sim.step(w_c if external is None else w_c + external)
-        felt = self.device.set_force_and_torque(-w_c)
+        felt = dev.set_force_and_torque(-w_c)
         compute = time.perf_counter() - t0
-        self.device.advance(self.coupling.period_s, operator_wrench)
+        dev.advance(self.coupling.period_s, operator_wrench() if callable(operator_wrench) else operator_wrench)
         return w_c, felt, compute
 
     def _saturate(self, w: FloatArray, F_max: float, T_max: float) -> FloatArray:
         """``w`` with its force and moment scaled down to the hand's limits (counted when it was)."""
-        d = self.sim.dimension
-        F = math.sqrt(float(w[:d] @ w[:d]))
-        T = math.sqrt(float(w[d:] @ w[d:]))
-        if F <= F_max and T <= T_max:
-            return w
-        self.saturated_ticks += 1
-        out = np.array(w, dtype=float)
-        if F > F_max:
-            out[:d] *= F_max / F
-        if T > T_max:
-            out[d:] *= T_max / T
+        out, saturated = saturate(w, self.sim.dimension, F_max, T_max)
+        self.saturated_ticks += saturated
         return out
 
-    def _warm_up(self) -> None:
-        """Load every compiled kernel once on a scratch copy, so no tick pays for compilation."""
+    def warm_up(self) -> Simulator:
+        """Load every compiled kernel once on a scratch copy, so no tick pays for compilation.
+
+        Returns the scratch copy (stepped once), for a caller to load its own kernels on.
+        """
         import copy
 
         scratch = copy.deepcopy(self.sim)
@@ -182,6 +190,7 @@ class HapticLoop:
             R, p, v, w = scratch.body_state
             _coupling3(R, p, self._com_b, v, w, self._R0, x_d, v_d, self._K, self._B)
         scratch.step(np.zeros(6 if scratch.dimension == 3 else 3))
+        return scratch
 
     def run(
         self,
@@ -199,7 +208,7 @@ class HapticLoop:
         """
         rec = LoopRecord(period_s=self.coupling.period_s)
         n = int(round(duration_s / self.coupling.period_s))
-        self._warm_up()
+        self.warm_up()
         self.device.open()
         # like any real-time loop, no garbage collection pauses inside the ticks (a collection of
         # the young generation costs 0.1–1 ms); the loop allocates little, collected afterwards

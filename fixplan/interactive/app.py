@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import contextlib
 import io
-import math
 import sys
 import threading
 import time
@@ -33,9 +32,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import InputError
+from fixplan.haptics.coordinates import coordinates_from_pose
 from fixplan.interactive.handles import GizmoHandle
 from fixplan.interactive.session import HapticSession, Snapshot, real_time_priority
-from fixplan.spatial import Pose, log_so3, quaternion_wxyz_from_matrix
+from fixplan.spatial import Pose, quaternion_wxyz_from_matrix
 
 FloatArray = NDArray[np.float64]
 
@@ -328,11 +328,8 @@ class HapticApp:
         from fixplan.spatial import matrix_from_quaternion_wxyz
 
         R = matrix_from_quaternion_wxyz(q)
-        if s.dimension == 3:
-            x = np.concatenate([p, log_so3(R @ s.R0.T)])
-        else:
-            x = np.array([p[0], p[1], math.atan2(R[1, 0], R[0, 0])])
-        h.set_pose(x)
+        pose = Pose(R, p) if s.dimension == 3 else Pose(R[:2, :2], p[:2])
+        h.set_pose(coordinates_from_pose(pose, s.R0))
         self._gizmo_seen = (p.copy(), q.copy())
 
     # -- drawing ---------------------------------------------------------------------------------

@@ -12,8 +12,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
-from fixplan.errors import FixplanError
-from fixplan.present.browser import BrowserErrors
+from fixplan.present.browser import BrowserErrors, headless_page
 
 
 @dataclass
@@ -37,14 +36,6 @@ def open_live_page(
     timeout_s: float = 60.0,
 ) -> LivePageReport:
     """Open ``url``, wait for the viser canvas (and ``wait_text`` in the panel), keep it open ``hold_s``."""
-    from fixplan.present.browser import CHROMIUM, CHROMIUM_ARGS, browser_available
-
-    why = browser_available()
-    if why is not None:
-        raise FixplanError(f"cannot open {url}: {why}")
-    from playwright.sync_api import Error as PlaywrightError
-    from playwright.sync_api import sync_playwright
-
     report = LivePageReport()
     own = urlsplit(url).hostname
 
@@ -62,40 +53,30 @@ def open_live_page(
         if msg.type == "error":
             report.console_errors.append(msg.text)
 
-    try:
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(
-                executable_path=str(CHROMIUM),
-                args=[*CHROMIUM_ARGS, "--use-gl=swiftshader", "--enable-unsafe-swiftshader"],
-                headless=True,
-            )
-            try:
-                page = browser.new_page(viewport={"width": width, "height": height})
-                page.on("console", on_console)
-                page.on("pageerror", lambda exc: report.page_errors.append(str(exc)))
-                page.route("**/*", route)
-                page.goto(url, wait_until="load", timeout=timeout_s * 1e3)
-                page.wait_for_selector("canvas", timeout=timeout_s * 1e3)
-                if wait_text:
-                    page.wait_for_function(f"document.body.innerText.includes({wait_text!r})", timeout=timeout_s * 1e3)
-                end = time.perf_counter() + hold_s
-                while time.perf_counter() < end:
-                    page.wait_for_timeout(100)
-                report.canvases = int(page.evaluate("document.querySelectorAll('canvas').length"))
-                report.text = str(page.evaluate("document.body.innerText"))
-                if screenshot is not None:
-                    # viser's "software WebGL" notice (headless Chromium has no GPU) would cover the scene
-                    for button in page.locator("[class*=Notification] button").all():
-                        try:
-                            button.click(timeout=1000)
-                        except PlaywrightError:
-                            pass
-                    page.wait_for_timeout(500)
-                    Path(screenshot).parent.mkdir(parents=True, exist_ok=True)
-                    page.screenshot(path=str(screenshot), full_page=False)
-                    report.screenshot = Path(screenshot)
-            finally:
-                browser.close()
-    except PlaywrightError as exc:
-        raise FixplanError(f"{url}: the browser failed: {str(exc).splitlines()[0]}") from exc
+    with headless_page(url, width=width, height=height, software_gl=True) as page:
+        page.on("console", on_console)
+        page.on("pageerror", lambda exc: report.page_errors.append(str(exc)))
+        page.route("**/*", route)
+        page.goto(url, wait_until="load", timeout=timeout_s * 1e3)
+        page.wait_for_selector("canvas", timeout=timeout_s * 1e3)
+        if wait_text:
+            page.wait_for_function(f"document.body.innerText.includes({wait_text!r})", timeout=timeout_s * 1e3)
+        end = time.perf_counter() + hold_s
+        while time.perf_counter() < end:
+            page.wait_for_timeout(100)
+        report.canvases = int(page.evaluate("document.querySelectorAll('canvas').length"))
+        report.text = str(page.evaluate("document.body.innerText"))
+        if screenshot is not None:
+            from playwright.sync_api import Error as PlaywrightError
+
+            # viser's "software WebGL" notice (headless Chromium has no GPU) would cover the scene
+            for button in page.locator("[class*=Notification] button").all():
+                try:
+                    button.click(timeout=1000)
+                except PlaywrightError:
+                    pass
+            page.wait_for_timeout(500)
+            Path(screenshot).parent.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(screenshot), full_page=False)
+            report.screenshot = Path(screenshot)
     return report

@@ -77,10 +77,10 @@ def run_haptic(
     if record is not None:
         check_distinct([("FILE", file), ("--record", record)])
         check_output(record, force, option="--record")
+    from fixplan.haptics.coordinates import coordinates_from_pose
     from fixplan.interactive.session import HapticSession
-    from fixplan.planner.verify import pose_coordinates
 
-    x0 = pose_coordinates(fixture.start, fixture.start.R_world_body)
+    x0 = coordinates_from_pose(fixture.start, fixture.start.R_world_body)
     handle: Handle
     if kind == "udp":
         if udp_port is None:  # parse_device gives udp a port

@@ -5,7 +5,7 @@ damping that keeps the coupling passive), integrated at 1 kHz under the operator
 felt wrench fixplan sends back. The operator follows the guidance like a person would: it pushes
 with the suggested wrench ``w`` (seen ``delay`` late, with relative force noise redrawn every
 10 ms) and holds the handle ``w / K`` ahead of the part with the arm's impedance (PD gains from
-CONFIG, those of :func:`~fixplan.planner.verify.haptic_rig`):
+CONFIG, those of :func:`~fixplan.haptics.rig.haptic_rig`):
 
     f_hand = w + b ẋ_part + kp (x_part + w/K − x_handle) + kd (ẋ_part − ẋ_handle).
 

@@ -18,12 +18,12 @@ from pathlib import Path
 import numpy as np
 
 import fixplan
+from fixplan.haptics.coordinates import coordinates_from_pose, pose_from_coordinates
 from fixplan.interactive.app import HapticApp, _wxyz, _xyz
 from fixplan.interactive.browser import open_live_page
 from fixplan.interactive.device_sim import LockstepHandle
 from fixplan.interactive.handles import GizmoHandle
-from fixplan.interactive.session import HapticSession, pose_from_coordinates
-from fixplan.planner.verify import pose_coordinates
+from fixplan.interactive.session import HapticSession
 
 
 def _app(session: HapticSession) -> HapticApp:
@@ -39,7 +39,7 @@ def _app(session: HapticSession) -> HapticApp:
 def sliding_shot(path: Path, until_s: float = 0.32) -> None:
     """The gizmo session, photographed at ``until_s`` of simulated time."""
     fx = fixplan.load(fixplan.default_fixture_path())
-    handle = GizmoHandle(pose_coordinates(fx.start, fx.start.R_world_body))
+    handle = GizmoHandle(coordinates_from_pose(fx.start, fx.start.R_world_body))
     s = HapticSession(fx, handle, realtime=False, synchronous=True, duration_s=10.0)
     app = _app(s)
     try:

@@ -15,7 +15,7 @@ The file is the JSON that ``fixplan solve --out`` writes (``status``, ``sequence
   timing, the bridge's counters, and the check that the felt wrench is the coupling's reaction.
 
 :func:`verify_recording` re-runs the recording in the simulated haptic loop (device, virtual
-coupling and engine at 1 kHz, :func:`~fixplan.planner.verify.haptic_rig`'s gains): a contact-state
+coupling and engine at 1 kHz, :func:`~fixplan.haptics.rig.haptic_rig`'s gains): a contact-state
 policy (:class:`RecordedPushes`) plays, from each observed state, the pushes the session used from
 the time it entered that state; an ideal operator places the handle where the coupling transmits
 each push at once (``x_d = x_part + w / K``). It passes when the part reaches the goal (every
@@ -36,6 +36,7 @@ from typing import Any, cast, get_args
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.contact_state import format_state
 from fixplan.errors import InputError, SolverError
 from fixplan.haptics import SimulatedDevice
 from fixplan.interactive.session import SessionResult
@@ -351,10 +352,12 @@ def verify_recording(
 ) -> Any:
     """Re-run a session's recorded pushes in the haptic loop; a :class:`~fixplan.planner.verify.Verification`."""
     from fixplan.engine.simulator import Simulator
+    from fixplan.haptics.coordinates import coordinates_from_pose
+    from fixplan.haptics.rig import haptic_rig
     from fixplan.jamming import classify
     from fixplan.planner.execute import ExecutionSettings
     from fixplan.planner.plan import Verification, plan_for_fixture
-    from fixplan.planner.verify import haptic_rig, loop_measures, pose_coordinates
+    from fixplan.planner.verify import loop_measures
 
     plan_for_fixture(data, fixture, source)  # the format, the fixture's locators and start, pushes within limits
     transitions = data["transitions"]
@@ -369,7 +372,7 @@ def verify_recording(
     sim = Simulator(fixture, settings=HAPTIC.engine)
     R0 = fixture.start.R_world_body.copy()
     F_max, T_max, _ = fixture.hand_limits()
-    rig = haptic_rig(fixture, sim, pose_coordinates(fixture.start, R0), F_max, T_max, HAPTIC.haptic)
+    rig = haptic_rig(fixture, sim, coordinates_from_pose(fixture.start, R0), F_max, T_max, HAPTIC.haptic)
     settings = ExecutionSettings()
     wp = fixture.workpiece
     weight = fixture.weight_N
@@ -449,7 +452,7 @@ def verify_recording(
         reasons.append(
             state["reason"]
             if state["outcome"] == "jammed"
-            else f"did not reach the goal in {limit:.3g} s: ended in {{{', '.join(sorted(policy._observed or ()))}}}"
+            else f"did not reach the goal in {limit:.3g} s: ended in {format_state(policy._observed or (), empty='{}')}"
         )
     pen = sim.max_penetration_m
     if pen > max_penetration_m:

@@ -3,7 +3,7 @@
 The loop (its own thread, one tick per engine step, 1 kHz for the bundled fixtures):
 
 1. read the device handle (:mod:`.handles`: the viser gizmo, the UDP bridge, a SpaceMouse) or,
-   in *auto*, the simulated device the planner's executor drives (:func:`~fixplan.planner.verify.haptic_rig`'s
+   in *auto*, the simulated device the planner's executor drives (:func:`~fixplan.haptics.rig.haptic_rig`'s
    operator);
 2. the coupling wrench ``w_c = K (x_d − x_w) + B (ẋ_d − ẋ_w)`` on the part, saturated at the
    hand's limits (the gains are ``haptic_rig``'s: scaled to the part, passive for the handle's
@@ -14,6 +14,10 @@ The loop (its own thread, one tick per engine step, 1 kHz for the bundled fixtur
 5. the contact state (locators pressing or within ``contact_gap_m``, debounced) and the goal
    (every locator in contact, at rest for ``settle_s``) are observed; every ``trace_every`` ticks
    the contacts are sampled for the recording and a :class:`Snapshot` is published for the display.
+
+Steps 2–4 are the rig's :class:`~fixplan.haptics.loop.HapticLoop` tick (the one the verification
+runs), which the session holds and calls with the tick's device: the person's handle as read
+(:class:`~fixplan.haptics.device.ReadDevice`) or the simulated one.
 
 The guidance (:class:`Guide`: the planner's contact-state executor, re-solving the non-jamming
 push at the observed state, and ``classify`` of the push the part receives) runs in a second
@@ -35,16 +39,20 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.clamping.stage import ClampStage, StageRecord, StageTick
+from fixplan.contact_state import Debounce, format_state
 from fixplan.engine.simulator import Simulator
 from fixplan.errors import InfeasibleError, InputError, SolverError, one_line
 from fixplan.haptics import SimulatedDevice
+from fixplan.haptics.coordinates import coordinates_from_pose, pose_from_coordinates
 from fixplan.haptics.coupling import check_passivity
-from fixplan.interactive import _kernels, protocol
+from fixplan.haptics.device import HapticDevice, ReadDevice, saturate
+from fixplan.haptics.rig import haptic_rig
+from fixplan.interactive import protocol
 from fixplan.interactive.handles import Handle, UdpHandle
 from fixplan.jamming.classify import MODES as CLASSIFY_MODES
 from fixplan.model import Fixture
 from fixplan.settings import DEFAULT, HAPTIC, HapticRigSettings, Settings
-from fixplan.spatial import Pose, exp_so3, rot2
+from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]
 
@@ -157,13 +165,6 @@ class SessionResult:
         return self.status == "reached"
 
 
-def pose_from_coordinates(x: FloatArray, R0: FloatArray, dimension: int) -> Pose:
-    """The pose whose device coordinates are ``x`` (inverse of ``verify.pose_coordinates``)."""
-    if dimension == 3:
-        return Pose(exp_so3(x[3:6]) @ R0, np.array(x[:3], dtype=float))
-    return Pose(rot2(float(x[2])), np.array(x[:2], dtype=float))
-
-
 def coupling_cap(fixture: Fixture, rig: HapticRigSettings) -> tuple[float, float, str]:
     """The coupling's force [N] and torque [N·m] caps, and where they come from, in words.
 
@@ -248,7 +249,7 @@ class Guide:
             steps = self._planner.replan(pose, state)
         if isinstance(steps, str):
             self._executor = None
-            self.note = f"no plan from {{{', '.join(sorted(state))}}}: {steps}"
+            self.note = f"no plan from {format_state(state, empty='{}')}: {steps}"
             self._next_replan = t + 1.0
             return
         self._executor = Executor(
@@ -288,7 +289,7 @@ class Guide:
             if switched and ex.steps and ex.index < len(ex.steps):
                 here = ex.states[ex.index]
                 self.note = (
-                    f"following the policy from {{{', '.join(sorted(here))}}}"
+                    f"following the policy from {format_state(here, empty='{}')}"
                     f" ({switched} switch{'es' if switched != 1 else ''} off the plan)"
                 )
             if ex.done and ex.log.outcome == "reached":
@@ -450,7 +451,6 @@ class HapticSession:
         from fixplan.locating import contact_set, start_state
         from fixplan.model import require_full
         from fixplan.planner.execute import DivergenceGuard, ExecutionSettings
-        from fixplan.planner.verify import haptic_rig, pose_coordinates
 
         require_full(fixture, "a haptic session")
         if clock not in ("wall", "device"):
@@ -474,11 +474,15 @@ class HapticSession:
         self.dimension = fixture.dimension
         self.ndof = fixture.ndof
         self.R0 = fixture.start.R_world_body.copy()
-        self.x0 = pose_coordinates(fixture.start, self.R0)
+        self.x0 = coordinates_from_pose(fixture.start, self.R0)
         self.F_max, self.T_max, self.cap_note = coupling_cap(fixture, profile.haptic)
         # the guidance plans within the same cap (a push the coupling cannot deliver is no advice)
         self.guide_fixture = capped_fixture(fixture, self.F_max, self.T_max)
         self.rig = haptic_rig(fixture, self.sim, self.x0, self.F_max, self.T_max, profile.haptic)
+        # the loop: coupling, saturation at the hand's limits, engine step, display (one tick's work)
+        self.loop = self.rig.loop
+        self._read = ReadDevice(self.ndof, self.loop.device.specs)  # a person's device, as the loop sees it
+        self._zeros_ndof = np.zeros(self.ndof)  # the push on a person's handle: theirs, not ours
         c = self.rig.loop.coupling
         d = self.dimension
         self.K = self.rig.K.copy()
@@ -565,9 +569,7 @@ class HapticSession:
         self.trace = Trace()
         self.states: list[tuple[float, tuple[str, ...]]] = []
         self.resets = 0
-        self._observed: frozenset[str] | None = None
-        self._candidate: frozenset[str] | None = None
-        self._candidate_since = 0.0
+        self._debounced = Debounce(self.dwell_s)  # the observed contact state (None: none accepted yet)
         self._settled_since: float | None = None
         self.goal_reached_at: float | None = None
         self._jammed_since: float | None = None
@@ -586,7 +588,6 @@ class HapticSession:
         self._acc_f = np.zeros(self.ndof)
         self._acc_n = 0
         self._push_recent = np.zeros(self.ndof)
-        self.saturated_ticks = 0
         self.felt_error_max = 0.0
         self.guidance = Guidance()
         self.guide_updates = 0  # guidance answers received
@@ -653,7 +654,7 @@ class HapticSession:
         self.sim.set_state(self.fixture.start, None)
         self._coords = None
         self._auto_dev = self._auto_device(self.x0, np.zeros(self.ndof))
-        self._observed = self._candidate = None
+        self._debounced.reset()
         self._settled_since = self._jammed_since = None
         self.goal_reached_at = None
         self._stage_k, self.stage_record, self.located_at, self.clamp_phase = None, None, None, ""
@@ -690,21 +691,24 @@ class HapticSession:
 
         return build
 
+    @property
+    def _observed(self) -> frozenset[str] | None:
+        """The debounced contact state (None: none accepted yet)."""
+        return self._debounced.observed
+
     def _jammed_flag(self) -> bool:
         return self._jammed_since is not None and self.sim.time_s - self._jammed_since >= 0.3
 
-    def _saturate(self, w: FloatArray, F_max: float, T_max: float) -> tuple[FloatArray, bool]:
-        d = self.dimension
-        F = float(np.linalg.norm(w[:d]))
-        T = float(np.linalg.norm(w[d:]))
-        if F <= F_max and T <= T_max:
-            return w, False
-        out = np.array(w, dtype=float)
-        if F > F_max:
-            out[:d] *= F_max / F
-        if T > T_max:
-            out[d:] *= T_max / T
-        return out, True
+    @property
+    def saturated_ticks(self) -> int:
+        """Ticks whose coupling wrench was capped at the hand's limits (the loop's count)."""
+        return self.loop.saturated_ticks
+
+    def _coordinates(self) -> tuple[FloatArray, FloatArray]:
+        """:meth:`coordinates`, computed once per state of the part."""
+        if self._coords is None:
+            self._coords = self.coordinates()
+        return self._coords
 
     def tick(self, wall_s: float) -> bool:
         """One period of the loop (steps 1–5 of the module's docstring); False when the device clock did not tick."""
@@ -712,45 +716,50 @@ class HapticSession:
             self._reset_requested = False
             self._reset()
         sim = self.sim
-        if self._coords is None:
-            self._coords = self.coordinates()
-        x_w, v_w = self._coords
         reading = None if self.handle is None else self.handle.read(wall_s)
         if self.clock == "device" and not getattr(self.handle, "fresh", False):
             return False  # no new pose (a HELLO, a dropped datagram): the device's clock has not ticked
+        hand, scale = True, 1.0
+        auto_dev = self._auto_dev  # (set_auto may replace it meanwhile: this tick keeps the one it reads)
+        device: HapticDevice
         if self._auto:
-            dev = self._auto_dev
-            x_d, v_d = dev.position(), dev.velocity()
-            K = self.K
+            device = auto_dev
+            self._x_d = device.position()
         elif reading is None:
-            x_d, v_d = x_w, v_w  # no device input: the coupling goes limp
-            K = self.K
+            device = self._read  # no device input: the coupling goes limp (the handle is where the part is)
+            self._x_d = self._coordinates()[0]
+            hand = False
         else:
-            x_d, v_d = reading
-            K = self.K * self._stiffness_scale
-        self._x_d = x_d
-        w_c, saturated = self._saturate(K * (x_d - x_w) + self.B * (v_d - v_w), self.F_max, self.T_max)
-        if saturated:
-            self.saturated_ticks += 1
+            device = self._read
+            device.read(*reading)
+            self._x_d = reading[0]
+            scale = self._stiffness_scale
         stage = self._stage_tick()
-        if stage is None:
-            sim.step(w_c)
-        else:  # the clamping stage: the clamps (and a load) on the part; the hand let go after the ramps
+        external = None
+        if stage is not None:
+            # the clamping stage: the clamps (and a load) on the part; the hand let go after the ramps
             if not stage.hand:
-                w_c = np.zeros(self.ndof)
+                hand = False
                 if self._stage_k == getattr(self.clamp_stage, "n_hand", -1) and self.stage_record is not None:
                     self.stage_record.located = sim.pose  # the hand lets go: the part must stay where it is now
-            sim.step(w_c + self.clamp_stage.wrench(stage, sim.pose))  # type: ignore[union-attr]
-            self._stage_step(stage)
-        felt, shown_saturated = self._saturate(-w_c, *self.device_limits)
-        if not shown_saturated:
-            self.felt_error_max = max(self.felt_error_max, float(np.max(np.abs(felt + w_c))))
-        if self._auto:
-            dev = self._auto_dev
-            dev.set_force_and_torque(felt)
+            external = self.clamp_stage.wrench(stage, sim.pose)  # type: ignore[union-attr]
+
+        def auto_hand() -> FloatArray:  # the simulated hand reacts to this tick: the part moved, the handle felt
             push = self.guidance.push if self.guidance.push is not None else np.zeros(self.ndof)
-            dev.advance(self.period_s, self.rig.operator_wrench(push, dev))
-        self._coords = self.coordinates()
+            return self.rig.operator_wrench(push, auto_dev)
+
+        w_c, felt, _ = self.loop.tick(
+            auto_hand if self._auto else self._zeros_ndof,
+            external=external,
+            hand=hand,
+            device=device,
+            stiffness_scale=scale,
+        )
+        self._coords = None
+        if stage is not None:
+            self._stage_step(stage)
+        if not saturate(-w_c, self.dimension, *self.device_limits)[1]:
+            self.felt_error_max = max(self.felt_error_max, float(np.max(np.abs(felt + w_c))))
         why = self.guard.check(sim.pose, self._speed())
         if why is not None:  # fell off the locators, or blew up: end now, the recording keeps what led there
             self._end(f"the part left the fixture at t = {sim.time_s:.3f} s (divergence guard): {why}")
@@ -770,7 +779,7 @@ class HapticSession:
         elif self.until_goal and self._goal_done():
             self._end(None)
         if self.handle is not None:  # the answer carries the goal and end flags of this tick
-            x_new, v_new = self._coords
+            x_new, v_new = self._coordinates()
             self.handle.display(felt, self._answer(felt, x_new, v_new))
         return True
 
@@ -841,12 +850,8 @@ class HapticSession:
         return out
 
     def coordinates(self) -> tuple[FloatArray, FloatArray]:
-        """The part's device coordinates and rates (what ``HapticLoop.workpiece_coordinates`` gives, compiled)."""
-        sim = self.sim
-        pose, twist = sim.pose, sim.twist
-        if self.dimension == 3:
-            return _kernels.coordinates3(pose.R_world_body, pose.p_world, sim.com_world, twist, self.R0)
-        return self.rig.loop.workpiece_coordinates()
+        """The part's device coordinates and rates (``HapticLoop.workpiece_coordinates``, compiled in 3D)."""
+        return self.loop.workpiece_coordinates(compiled=True)
 
     def _speed(self) -> float:
         tw = self.sim.twist
@@ -857,15 +862,8 @@ class HapticSession:
 
     def _observe(self, t: float) -> None:
         pressed = frozenset(self.sim.in_contact(self.threshold_N, self.contact_gap_m))
-        if pressed != self._observed:
-            if pressed != self._candidate:
-                self._candidate, self._candidate_since = pressed, t
-            elif t - self._candidate_since + 1e-12 >= self.dwell_s:
-                self._observed = pressed
-                self._candidate = None
-                self.states.append((t, tuple(sorted(pressed))))
-        else:
-            self._candidate = None
+        if self._debounced.observe(t, pressed):
+            self.states.append((t, tuple(sorted(pressed))))
         at_rest = self._speed() < self.rest_speed_mps
         if self._observed == self.goal_names and at_rest:
             if self._settled_since is None:
@@ -1075,7 +1073,7 @@ class HapticSession:
             missing = sorted(self.goal_names - set(self._observed or ()))
             self.status = "short"
             self.reason = (
-                f"ended at t = {t:.3f} s short of the goal in {{{', '.join(sorted(self._observed or ()))}}}"
+                f"ended at t = {t:.3f} s short of the goal in {format_state(self._observed or (), empty='{}')}"
                 + (f": {', '.join(missing)} not in contact" if missing else ": not yet at rest")
             )
         self._ended.set()
@@ -1178,10 +1176,7 @@ class HapticSession:
 
     def _warm_up(self) -> None:
         """Load the engine's compiled kernels on a scratch copy, so that no tick pays for it."""
-        import copy
-
-        scratch = copy.deepcopy(self.sim)
-        scratch.step(np.zeros(self.ndof))
+        scratch = self.loop.warm_up()  # the coupling and the engine step
         scratch.contacts()
         scratch.in_contact(self.threshold_N, self.contact_gap_m)
         self.coordinates()

@@ -23,11 +23,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from fixplan.contact_state import State, format_state
 from fixplan.errors import InputError
 from fixplan.settings import DEFAULT, PlannerSettings
 from fixplan.spatial import Pose
-
-State = frozenset[str]
 
 
 class TransitionResult(Protocol):
@@ -195,7 +194,7 @@ def search(
             if set(together) != set(order[i : i + len(together)]):
                 # geometry closes these at the same instant: the order must name them together
                 why = (
-                    f"{', '.join(together)} close together from {{{', '.join(sorted(state))}}} "
+                    f"{', '.join(together)} close together from {format_state(state, empty='{}')} "
                     f"(a redundant layout): --order must name them one after the other"
                 )
                 _log(attempts, progress, Attempt(_key(state), t, False, float("inf"), why))

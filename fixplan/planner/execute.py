@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.contact_state import Debounce, State, format_state
 from fixplan.errors import InputError
 from fixplan.locating import contact_set, locator_contact
 from fixplan.planner.fine import twist_from_pose
@@ -61,7 +62,6 @@ if TYPE_CHECKING:
     from fixplan.planner.policy import Policy
 
 FloatArray = NDArray[np.float64]
-State = frozenset[str]
 
 FAILURE_KINDS = ("lost contact", "unplanned contact", "replan failed", "stall", "diverged", "timeout")
 
@@ -269,9 +269,7 @@ class Executor:
         self._applied = np.zeros(self.ndof)
         self._target = np.zeros(self.ndof)  # the policy's push before smoothing
         self._tick = 0
-        self._candidate: State | None = None
-        self._candidate_since = 0.0
-        self._observed: State | None = None  # nothing seen yet
+        self._debounced = Debounce(s.dwell_s)  # the observed contact state (None: nothing seen yet)
         self._still_since: float | None = None
         self._retry = 0
         self._use_direct = False
@@ -349,19 +347,16 @@ class Executor:
             self.log.event(t, "failed", reason)
 
     # -- observation ---------------------------------------------------------------------------
+    @property
+    def _observed(self) -> State | None:
+        """The debounced contact state (None: nothing seen yet)."""
+        return self._debounced.observed
+
     def _observe(self, t: float, pressed: State) -> bool:
         """Debounce the pressed set; True when a new state has just been accepted."""
-        if pressed == self._observed:
-            self._candidate = None
+        if not self._debounced.observe(t, pressed):
             return False
-        if pressed != self._candidate:
-            self._candidate, self._candidate_since = pressed, t
-            return False
-        if t - self._candidate_since + 1e-12 < self.settings.dwell_s:
-            return False
-        self._observed = pressed
         self._seen |= pressed
-        self._candidate = None
         key = tuple(sorted(pressed))
         if key and (not self.log.observed or self.log.observed[-1] != key):
             self.log.observed.append(key)
@@ -380,20 +375,20 @@ class Executor:
             j = later[0]
             if j > self.index + 1:
                 self.log.counts["skipped_states"] += j - self.index - 1
-                self.log.event(t, "skipped", f"reached {_fmt(P)} directly")
+                self.log.event(t, "skipped", f"reached {format_state(P)} directly")
             self.index = j
             self._retry, self._use_direct, self._still_since, self._arrived = 0, False, None, False
             if self._recover_until is not None:
                 self._recover_until = None
                 self.log.counts["recovered"] += 1
-            self.log.event(t, "state", f"reached {_fmt(P)}")
+            self.log.event(t, "state", f"reached {format_state(P)}")
             return
         current = self.states[self.index]
         if P == current:
             if self._recover_until is not None:
                 self._recover_until = None
                 self.log.counts["recovered"] += 1
-                self.log.event(t, "recovered", f"back in {_fmt(P)}")
+                self.log.event(t, "recovered", f"back in {format_state(P)}")
             return
         if self._recover_until is not None and t < self._recover_until:
             # pressing the part back: only the state it left (or a later planned one) ends the
@@ -436,7 +431,7 @@ class Executor:
                 return
         else:
             self.log.counts["unplanned_contact"] += 1
-            why = f"unplanned contact state {_fmt(P)} in transition {self.index + 1} (planned {_fmt(self.states[self.index + 1]) if self.index + 1 < len(self.states) else 'the goal'})"
+            why = f"unplanned contact state {format_state(P)} in transition {self.index + 1} (planned {format_state(self.states[self.index + 1]) if self.index + 1 < len(self.states) else 'the goal'})"
         self._recover_until = None
         self.log.event(t, "guard", why)
         if self._follow_policy(t, P, why, pose):
@@ -459,8 +454,8 @@ class Executor:
         self.log.counts["policy_switches"] += 1
         self._set_plan(state, chain)
         self._retry, self._use_direct, self._still_since = 0, False, None
-        seq = " → ".join(_fmt(s) for s in self.states)
-        self.log.event(t, "policy", f"{why}: the policy's transitions from {_fmt(state)}: {seq}")
+        seq = " → ".join(format_state(s) for s in self.states)
+        self.log.event(t, "policy", f"{why}: the policy's transitions from {format_state(state)}: {seq}")
         return True
 
     def _replan(self, t: float, pose: Pose, state: State, why: str, kind_of_guard: str) -> None:
@@ -480,23 +475,23 @@ class Executor:
                 self._pressed_back_for = self.index
                 press_s = 3.0 * self.settings.recover_s
                 self._recover_until = t + press_s
-                self._recover_why = f"{why}; re-planning from {_fmt(state)} failed: {result}"
+                self._recover_why = f"{why}; re-planning from {format_state(state)} failed: {result}"
                 self.wrench = self.hold_wrench(pose, sorted(current | state))
                 self._target = self._with_noise(self.wrench)
                 self.log.event(
                     t,
                     "guard",
-                    f"re-planning from {_fmt(state)} failed: pressing the part back into {_fmt(current | state)} for {press_s:g} s",
+                    f"re-planning from {format_state(state)} failed: pressing the part back into {format_state(current | state)} for {press_s:g} s",
                 )
                 return
-            if self._leave_dead_end(t, state, f"{why}; re-planning from {_fmt(state)} failed: {result}"):
+            if self._leave_dead_end(t, state, f"{why}; re-planning from {format_state(state)} failed: {result}"):
                 return
-            self._fail(t, f"{why}; re-planning from {_fmt(state)} failed: {result}", "replan failed")
+            self._fail(t, f"{why}; re-planning from {format_state(state)} failed: {result}", "replan failed")
             return
         self._set_plan(state, result)
         self._retry, self._use_direct, self._still_since = 0, False, None
-        seq = " → ".join(_fmt(s) for s in self.states)
-        self.log.event(t, "replan", f"re-planned from {_fmt(state)}: {seq}")
+        seq = " → ".join(format_state(s) for s in self.states)
+        self.log.event(t, "replan", f"re-planned from {format_state(state)}: {seq}")
 
     def _leave_dead_end(self, t: float, state: State, why: str) -> bool:
         """Lift the part off a state no plan leads on from, then approach again; True if it does.
@@ -519,7 +514,7 @@ class Executor:
         aside = ""
         if culprit is not None and self.avoid is not None:
             self.avoid(culprit[0], culprit[1], why)
-            aside = f", {_fmt(culprit[0])} + {culprit[1]} set aside"
+            aside = f", {format_state(culprit[0])} + {culprit[1]} set aside"
         self.log.event(t, "guard", f"{why}: a dead end; lifting the part off, then approaching again{aside}")
         self._release = (why, t)
         self._recover_until = None
@@ -690,7 +685,7 @@ class Executor:
         if float(np.min(gaps)) >= s.release_gap_m:
             self._release = None
             self.log.event(t, "released", f"every locator at least {s.release_gap_m:g} m away")
-            self._observed = frozenset()
+            self._debounced.observed = frozenset()
             self._replan(t, pose, frozenset(), why, "unplanned contact")
             return
         if t - since > s.release_s:
@@ -873,14 +868,14 @@ class Executor:
             # policy's at once: it was planned at a representative pose, not where the part is)
             # does not move the part from where it is now: a fine plan from here is the last resort
             self._policy_failed.add(state)
-            why = f"{what}: {_fmt(state)} + {step.target} stalled after {self._retry} re-searches"
+            why = f"{what}: {format_state(state)} + {step.target} stalled after {self._retry} re-searches"
             self.log.event(t, "guard", why)
             self._replan(t, pose, state, why, "stall")
             return
         if self._retry >= s.max_retries:
             self._fail(
                 t,
-                f"stalled in transition {self.index + 1} ({_fmt(self.states[self.index])} + {step.target}) at t = {t:.3f} s "
+                f"stalled in transition {self.index + 1} ({format_state(self.states[self.index])} + {step.target}) at t = {t:.3f} s "
                 f"after {self._retry} re-searches ({what}): "
                 + (
                     self._last_reason or f"it stays at rest under pushes found to move it ({self._verdict(pose, step)})"
@@ -1270,10 +1265,6 @@ def _goal_normals_body(fixture: Fixture) -> dict[str, FloatArray]:
         loc.name: np.asarray(shape.project(goal.point_body_from_world(loc.p_world)).normal_body, dtype=float)
         for loc in fixture.locators
     }
-
-
-def _fmt(state: State | Sequence[str]) -> str:
-    return "{" + ", ".join(sorted(state)) + "}" if state else "free"
 
 
 __all__ = [

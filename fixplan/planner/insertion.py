@@ -56,18 +56,18 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.contact_state import Debounce, State, format_state
 from fixplan.errors import InputError
 from fixplan.geometry.pins import HoleBody, PinBody, radial_play_m
 from fixplan.kinematics import ContactSet
 from fixplan.locating import _hole_body, contact_set, locator_gaps, peg_body
 from fixplan.model import Bore, Fixture
 from fixplan.planner.execute import ExecutionLog, ExecutionNoise
-from fixplan.planner.plan import Verification
+from fixplan.planner.plan_types import Verification
 from fixplan.settings import DEFAULT, HAPTIC, InsertionSettings, Settings
 from fixplan.spatial import Pose, exp_so3, log_so3, shift_wrench
 
 FloatArray = NDArray[np.float64]
-State = frozenset[str]
 
 
 # -- the geometry of engagement --------------------------------------------------------------------
@@ -534,9 +534,7 @@ class InsertionRun:
         self.index = 0  # the current transition
         self.log = ExecutionLog()
         self.tick_s = tick_s
-        self._observed: State = frozenset()
-        self._candidate: State | None = None
-        self._since = 0.0
+        self._debounced = Debounce(settings.dwell_s, initial=frozenset())
         self._t_stage = 0.0
         self._settled: float | None = None
         self._progress: tuple[float, float] | None = None  # (height, since)
@@ -644,16 +642,14 @@ class InsertionRun:
             return w
         return w * (1.0 + self.noise.force_noise * self.rng.standard_normal(w.shape[0]))
 
+    @property
+    def _observed(self) -> State:
+        """The debounced contact state."""
+        return self._debounced.observed or frozenset()
+
     def _debounce(self, t: float, state: State, pose: Pose) -> None:
-        if state == self._observed:
-            self._candidate = None
+        if not self._debounced.observe(t, state):
             return
-        if state != self._candidate:
-            self._candidate, self._since = state, t
-            return
-        if t - self._since + 1e-12 < self.s.dwell_s:
-            return
-        self._observed, self._candidate = state, None
         key = tuple(sorted(state))
         if key and (not self.log.observed or self.log.observed[-1] != key):
             self.log.observed.append(key)
@@ -664,10 +660,10 @@ class InsertionRun:
             j = later[-1]
             if j > self.index + 1:
                 self.log.counts["skipped_states"] += j - self.index - 1
-                self.log.event(t, "skipped", f"reached {_fmt(state)} directly")
+                self.log.event(t, "skipped", f"reached {format_state(state)} directly")
             was_free = self.plan.stages[self.index].kind == "free"
             self.index = j
-            self.log.event(t, "state", f"reached {_fmt(state)}")
+            self.log.event(t, "state", f"reached {format_state(state)}")
             if was_free:
                 self._begin_insertion(t, pose)
             if j >= len(self.states) - 1:
@@ -773,10 +769,6 @@ def _up(fixture: Fixture) -> FloatArray:
     return -g / n if n > 0 else np.zeros(3)
 
 
-def _fmt(state: State) -> str:
-    return "{" + ", ".join(sorted(state)) + "}"
-
-
 def verify_insertion(
     world: Fixture,
     plan: InsertionPlan,
@@ -796,14 +788,9 @@ def verify_insertion(
     """
     from fixplan.engine.simulator import Simulator
     from fixplan.errors import SolverError
-    from fixplan.planner.verify import (
-        final_gap_check,
-        haptic_rig,
-        headroom,
-        loop_checks,
-        loop_measures,
-        pose_coordinates,
-    )
+    from fixplan.haptics.coordinates import coordinates_from_pose
+    from fixplan.haptics.rig import haptic_rig
+    from fixplan.planner.verify import final_gap_check, headroom, loop_checks, loop_measures
 
     vs = settings.verification
     s = settings.insertion
@@ -815,7 +802,7 @@ def verify_insertion(
     F_max, T_max, _ = world.hand_limits()
     run = InsertionRun(world, plan, s, noise, sim.dt)
     wp = world.workpiece
-    x0 = pose_coordinates(world.start, R0)
+    x0 = coordinates_from_pose(world.start, R0)
     carry0 = shift_wrench(-world.gravity_wrench(), world.start.point_world_from_body(wp.com_body), world.start.p_world)
     rig = haptic_rig(world, sim, x0, F_max, T_max, settings.haptic)
     rig = haptic_rig(world, sim, x0 + carry0 / rig.K, F_max, T_max, settings.haptic)

@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.contact_state import State
 from fixplan.errors import InputError
 from fixplan.locating import contact_set, locator_gaps, solve_goal
 from fixplan.planner.segments import carry_factor
@@ -58,12 +59,7 @@ if TYPE_CHECKING:
     from fixplan.planner.fine import Transition
 
 FloatArray = NDArray[np.float64]
-State = frozenset[str]
 Source = Literal["plan", "pre-image"]
-
-
-def _fmt(state: State | Sequence[str]) -> str:
-    return "{" + ", ".join(sorted(state)) + "}" if state else "free"
 
 
 @dataclass(frozen=True, eq=False)

@@ -23,6 +23,7 @@ from typing import Any, Literal, cast
 
 import numpy as np
 
+from fixplan.contact_state import format_state
 from fixplan.errors import InputError, SolverError
 from fixplan.locating import contact_set, solve_goal
 from fixplan.locating import start_state as locating_start_state
@@ -41,7 +42,7 @@ from fixplan.planner.fine import (
     plan_transition,
     with_wrenches,
 )
-from fixplan.planner.plan import Plan, PlannedTransition, TriedTransition
+from fixplan.planner.plan_types import Plan, PlannedTransition, TriedTransition
 from fixplan.planner.policy import Policy, build_policy
 from fixplan.planner.policy_job import PendingPolicy
 from fixplan.planner.segments import segment_wrenches
@@ -499,7 +500,7 @@ class Planner:
                 fx.workpiece, [fx.locator(n) for n in sorted(state)], pose, tol_m=self.settings.planner.settle_tol_m
             )
             if not settled.converged:
-                return f"no pose near the observed one keeps {{{', '.join(sorted(state))}}} touching"
+                return f"no pose near the observed one keeps {format_state(state, empty='{}')} touching"
             start = settled.pose
         # a part knocked free (or lifted off a locator it pressed on the wrong face) is first carried
         # to the staging pose, as a free start is: its first contacts are then the planned ones

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -97,6 +99,39 @@ def browser_available() -> str | None:
     return None
 
 
+@contextmanager
+def headless_page(subject: str, *, width: int, height: int, software_gl: bool = False) -> Iterator[Any]:
+    """A page of headless Chromium (Debian's, at :data:`CHROMIUM`) with a ``width`` × ``height`` viewport.
+
+    The one place fixplan starts a browser: ``fixplan view``'s page check, the live haptic page
+    and the haptic benchmark all open theirs here. ``software_gl``: WebGL through SwiftShader
+    (headless Chromium has no GPU; viser's scene needs it). The browser is closed on leaving.
+
+    Raises
+    ------
+    FixplanError
+        No browser (``subject``: what was to be opened, for the message), or the browser failed.
+    """
+    why = browser_available()
+    if why is not None:
+        raise FixplanError(f"cannot open {subject}: {why}")
+    from playwright.sync_api import Error as PlaywrightError
+    from playwright.sync_api import sync_playwright
+
+    args = (
+        [*CHROMIUM_ARGS, "--use-gl=swiftshader", "--enable-unsafe-swiftshader"] if software_gl else list(CHROMIUM_ARGS)
+    )
+    try:
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=args, headless=True)
+            try:
+                yield browser.new_page(viewport={"width": width, "height": height})
+            finally:
+                browser.close()
+    except PlaywrightError as exc:
+        raise FixplanError(f"{subject}: the browser failed: {str(exc).splitlines()[0]}") from exc
+
+
 def open_page(
     html: Path,
     screenshot: Path | None = None,
@@ -120,12 +155,6 @@ def open_page(
     FixplanError
         No browser, or the page never finished drawing within ``timeout_s``.
     """
-    why = browser_available()
-    if why is not None:
-        raise FixplanError(f"cannot open {html}: {why}")
-    from playwright.sync_api import Error as PlaywrightError
-    from playwright.sync_api import sync_playwright
-
     report = PageReport()
     url = Path(html).resolve().as_uri()
     timeout_ms = timeout_s * 1e3
@@ -141,29 +170,21 @@ def open_page(
             report.blocked_requests.append(r.request.url)
             r.abort()
 
-    try:
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=list(CHROMIUM_ARGS), headless=True)
-            try:
-                page = browser.new_page(viewport={"width": width, "height": height})
-                page.on("console", on_console)
-                page.on("pageerror", lambda exc: report.page_errors.append(str(exc)))
-                page.route("**/*", route)
-                page.goto(url, wait_until="load", timeout=timeout_ms)
-                page.wait_for_function(f"({_STATE_JS})() !== null", timeout=timeout_ms)
-                page.wait_for_timeout(500)  # let the WebGL scene draw its first frame
-                if last_frame:
-                    report.last_frame_shown = page.evaluate(_LAST_FRAME_JS)
-                    page.wait_for_timeout(300)
-                report.state = page.evaluate(_STATE_JS)
-                if screenshot is not None:
-                    Path(screenshot).parent.mkdir(parents=True, exist_ok=True)
-                    page.screenshot(path=str(screenshot), full_page=False)
-                    report.screenshot = Path(screenshot)
-            finally:
-                browser.close()
-    except PlaywrightError as exc:
-        raise FixplanError(f"{html}: the browser failed: {str(exc).splitlines()[0]}") from exc
+    with headless_page(str(html), width=width, height=height) as page:
+        page.on("console", on_console)
+        page.on("pageerror", lambda exc: report.page_errors.append(str(exc)))
+        page.route("**/*", route)
+        page.goto(url, wait_until="load", timeout=timeout_ms)
+        page.wait_for_function(f"({_STATE_JS})() !== null", timeout=timeout_ms)
+        page.wait_for_timeout(500)  # let the WebGL scene draw its first frame
+        if last_frame:
+            report.last_frame_shown = page.evaluate(_LAST_FRAME_JS)
+            page.wait_for_timeout(300)
+        report.state = page.evaluate(_STATE_JS)
+        if screenshot is not None:
+            Path(screenshot).parent.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(screenshot), full_page=False)
+            report.screenshot = Path(screenshot)
     return report
 
 
