@@ -411,7 +411,7 @@ class Executor:
                     # policy lead the part into it once more (a box lost B2 and S2 24 times in
                     # its last slide until the time ran out). Set it aside and plan around it.
                     self._looping.add(key)
-                    loop = f"{why}: {_fmt(key[0])} + {key[1]} lost a contact {n} times, a loop"
+                    loop = f"{why}: {format_state(key[0])} + {key[1]} lost a contact {n} times, a loop"
                     if self.avoid is not None:
                         self.avoid(key[0], key[1], loop)
                     self._recover_until = None
