@@ -156,7 +156,7 @@ def test_solver_options_only_in_settings():
                     found.append(f"{path.relative_to(root)}:{node.lineno}")
     assert not found, f"solver option dicts outside settings.py: {found}"
     options = settings.DEFAULT.planner.ipopt_options()
-    assert options["tol"] == 1e-9 and options["max_iter"] == 500 and options["constr_viol_tol"] == 1e-10
+    assert options["tol"] == 1e-9 and options["max_iter"] == 150 and options["constr_viol_tol"] == 1e-10
     assert settings.DEFAULT.planner.ipopt_options(tol=1e-6, max_iter=3)["max_iter"] == 3
 
 
