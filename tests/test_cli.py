@@ -1,6 +1,7 @@
 """The command line: JSON contracts, exit codes, and never overwriting a user's file."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -162,3 +163,25 @@ def test_library_errors_name_the_setting_and_the_cli_prints_the_flag(capsys):
         err = capsys.readouterr().err
         assert err.strip().splitlines()[-1].startswith(start.strip()), (args, err)
         assert not any(name in err for name in FLAGS), err
+
+
+def test_no_library_error_message_starts_with_a_flag():
+    """Outside ``cli/`` an error names the argument or setting, never the command-line flag: every
+    ``raise SomeError(...)`` whose message is a literal (or f-string) is read, and none begins with
+    ``--`` (the CLI maps names to flags through ``cli/flags.py``)."""
+    import ast
+    import importlib
+
+    root = Path(importlib.import_module("fixplan").__file__).parent
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        if "cli" in path.relative_to(root).parts:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not (isinstance(node, ast.Raise) and isinstance(node.exc, ast.Call) and node.exc.args):
+                continue
+            first = node.exc.args[0]
+            head = first.values[0] if isinstance(first, ast.JoinedStr) and first.values else first
+            if isinstance(head, ast.Constant) and isinstance(head.value, str) and head.value.startswith("--"):
+                found.append(f"{path.relative_to(root)}:{node.lineno}")
+    assert not found, f"library errors that start with a flag: {found}"

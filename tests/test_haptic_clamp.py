@@ -71,7 +71,7 @@ def test_frictionless_the_engine_forces_equal_the_force_programs() -> None:
 
 
 def test_clamp_without_clamps_is_bad_input() -> None:
-    with pytest.raises(InputError, match=r"--clamp: .* has no \[\[clamp\]\] entries"):
+    with pytest.raises(InputError, match=r"HapticSession.clamp: .* has no \[\[clamp\]\] entries"):
         HapticSession(load(PROBLEMS / "box-3-2-1.toml"), None, realtime=False, guidance=False, clamp=True)
 
 

@@ -105,17 +105,17 @@ def test_device_option_and_until_and_host_parsing():
     assert parse_device("UDP:9000") == ("udp", 9000)
     assert parse_device("mouse") == ("mouse", None)
     for bad in ("joystick", "udp:x", "udp:70000"):
-        with pytest.raises(InputError, match="--device"):
+        with pytest.raises(InputError, match="run_session.device"):
             parse_device(bad)
     assert parse_until("goal") == (True, None)
     assert parse_until("2.5") == (False, 2.5)
     for bad in ("soon", "-1", "nan", "1e9"):
-        with pytest.raises(InputError, match="--until"):
+        with pytest.raises(InputError, match="parse_until.text"):
             parse_until(bad)
     assert check_host("127.0.0.1", None) is None
     generated = check_host("0.0.0.0", None)  # noqa: S104 - the check under test
     assert generated is not None and len(generated) >= 16
-    with pytest.raises(InputError, match="--token"):
+    with pytest.raises(InputError, match="check_host.token"):
         check_host("0.0.0.0", "short")  # noqa: S104
 
 

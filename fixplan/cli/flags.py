@@ -27,6 +27,24 @@ FLAGS: dict[str, str] = {
     "check_output.force": "--force",
     "generate.rotate_world": "--rotate-world",
     "figure_path.report": "--report",
+    # the haptic commands (fixplan haptic, device-sim, verify)
+    "DeviceSim.noise": "--noise",
+    "DeviceSim.delay_ms": "--delay-ms",
+    "DeviceSim.duration_s": "--duration",
+    "DeviceSim.peer_timeout_s": "--peer-timeout",
+    "DeviceSim.port": "--port",
+    "parse_until.text": "--until",
+    "check_host.token": "--token",
+    "run_session.port": "--port",
+    "run_session.device": "--device",
+    "run_device_sim.push": "--push",
+    "run_device_sim.wait_s": "--wait",
+    "run_verify.fixture_path": "--fixture FILE",
+    "TokenGate.host": "--host",
+    "TokenGate.port": "--port",
+    "HapticSession.clock": "--clock",
+    "HapticSession.clamp": "--clamp",
+    "HapticApp.port": "--port",
 }
 _LONGEST_FIRST = sorted(FLAGS, key=len, reverse=True)
 

@@ -166,7 +166,7 @@ class HapticApp:
             if self.port not in (0, bound):
                 with contextlib.redirect_stdout(sys.stderr):
                     self.server.stop()
-                raise InputError(f"--port {self.port} is in use (choose another, or 0 for any free port)")
+                raise InputError(f"HapticApp.port {self.port} is in use (choose another, or 0 for any free port)")
             url_port = bound
         else:
             from fixplan.interactive.gate import PrivateSocket, TokenGate, viser_on_unix_socket

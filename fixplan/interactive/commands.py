@@ -30,9 +30,9 @@ def parse_until(text: str | None) -> tuple[bool, float | None]:
     try:
         s = float(t)
     except ValueError:
-        raise InputError(f"--until expects 'goal' or a number of seconds, got {text!r}") from None
+        raise InputError(f"parse_until.text expects 'goal' or a number of seconds, got {text!r}") from None
     if not (math.isfinite(s) and 0 < s <= 86400):
-        raise InputError(f"--until SECONDS must be within (0, 86400], got {text!r}")
+        raise InputError(f"parse_until.text SECONDS must be within (0, 86400], got {text!r}")
     return False, s
 
 
@@ -44,7 +44,7 @@ def check_host(host: str, token: str | None) -> str | None:
         token = secrets.token_urlsafe(16)
         _echo(f"fixplan haptic: --host {host} without --token: generated token {token}")
     elif len(token) < 8 or not token.isprintable() or any(c in token for c in " ;=&?#/"):
-        raise InputError("--token must be at least 8 printable characters without spaces or ; = & ? # /")
+        raise InputError("check_host.token must be at least 8 printable characters without spaces or ; = & ? # /")
     return token
 
 
@@ -71,7 +71,7 @@ def run_haptic(
     kind, udp_port = parse_device(device)
     until_goal, seconds = parse_until(until)
     if not (0 <= port <= 65535):
-        raise InputError(f"--port must be 0..65535, got {port}")
+        raise InputError(f"run_session.port must be 0..65535, got {port}")
     token = check_host(host, token)
     fixture = load(file if file is not None else default_fixture_path())  # pins and bores too
     if record is not None:
@@ -84,7 +84,7 @@ def run_haptic(
     handle: Handle
     if kind == "udp":
         if udp_port is None:  # parse_device gives udp a port
-            raise InputError("--device udp needs a port (udp:PORT)")
+            raise InputError("run_session.device udp needs a port (udp:PORT)")
         # the bridge listens where the web app does; off 127.0.0.1 a device's HELLO must carry the token
         handle = UdpHandle("127.0.0.1" if host == "localhost" else host, udp_port, fixture.ndof, token=token)
     elif kind == "spacemouse":
@@ -198,18 +198,18 @@ def run_device_sim(
         try:
             w = np.array([float(x) for x in push.split(",")], dtype=float)
         except ValueError:
-            raise InputError(f"--push must be comma-separated numbers, got {push!r}") from None
+            raise InputError(f"run_device_sim.push must be comma-separated numbers, got {push!r}") from None
         if not np.all(np.isfinite(w)) or w.shape[0] not in (3, 6):
-            raise InputError(f"--push expects 3 (2D) or 6 (3D) finite numbers, got {push!r}")
+            raise InputError(f"run_device_sim.push expects 3 (2D) or 6 (3D) finite numbers, got {push!r}")
     if not (math.isfinite(wait_s) and 0 < wait_s <= 3600):
-        raise InputError(f"--wait must be within (0, 3600] s, got {wait_s}")
+        raise InputError(f"run_device_sim.wait_s must be within (0, 3600] s, got {wait_s}")
     sim = DeviceSim(host, port, noise=noise, delay_ms=delay_ms, duration_s=duration, push=w, seed=seed,
                     lockstep=lockstep, connect_timeout_s=wait_s, token=token,
                     **({} if peer_timeout_s is None else {"peer_timeout_s": peer_timeout_s}))  # fmt: skip
     try:
         cfg = sim.connect()
         if w is not None and w.shape[0] != int(cfg["ndof"]):
-            raise InputError(f"--push has {w.shape[0]} numbers, the scene has {cfg['ndof']} coordinates")
+            raise InputError(f"run_device_sim.push has {w.shape[0]} numbers, the scene has {cfg['ndof']} coordinates")
         if not json_out:
             _echo(f"device-sim: connected to {host}:{port} ({cfg['ndof']} coordinates, {1 / cfg['period_s']:.0f} Hz)")
         res = sim.run()
@@ -244,7 +244,7 @@ def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
     except InputError as exc:
         if "another fixture" not in str(exc) or fixture_path is not None:
             raise
-        raise InputError(f"{exc} (pass the plan's fixture with --fixture FILE)") from None
+        raise InputError(f"{exc} (pass the plan's fixture with run_verify.fixture_path)") from None
     if note:  # after the plan was read: bad input stays one line
         _echo(f"fixplan: {note}")
     if json_out:

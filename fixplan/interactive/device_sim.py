@@ -170,19 +170,19 @@ class DeviceSim:
         token: str | None = None,
         peer_timeout_s: float = HAPTIC.haptic.peer_timeout_s,
     ):
-        for name, value, lo in (("--noise", noise, 0.0), ("--delay-ms", delay_ms, 0.0)):
+        for name, value, lo in (("DeviceSim.noise", noise, 0.0), ("DeviceSim.delay_ms", delay_ms, 0.0)):
             if not (math.isfinite(value) and value >= lo):
                 raise InputError(f"{name} must be a finite number ≥ {lo:g}, got {value}")
         if noise > 1.0:
-            raise InputError(f"--noise is relative (0..1), got {noise}")
+            raise InputError(f"DeviceSim.noise is relative (0..1), got {noise}")
         if delay_ms > 2000.0:
-            raise InputError(f"--delay-ms must be at most 2000 ms, got {delay_ms}")
+            raise InputError(f"DeviceSim.delay_ms must be at most 2000 ms, got {delay_ms}")
         if duration_s is not None and not (math.isfinite(duration_s) and duration_s > 0):
-            raise InputError(f"--duration must be a positive number of seconds, got {duration_s}")
+            raise InputError(f"DeviceSim.duration_s must be a positive number of seconds, got {duration_s}")
         if not (math.isfinite(peer_timeout_s) and peer_timeout_s > 0):
-            raise InputError(f"--peer-timeout must be a positive number of seconds, got {peer_timeout_s}")
+            raise InputError(f"DeviceSim.peer_timeout_s must be a positive number of seconds, got {peer_timeout_s}")
         if not (0 < port <= 65535):
-            raise InputError(f"--port must be 1..65535, got {port}")
+            raise InputError(f"DeviceSim.port must be 1..65535, got {port}")
         self.addr = (host, port)
         self.noise = noise
         self.delay_s = delay_ms * 1e-3

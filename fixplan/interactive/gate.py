@@ -127,7 +127,7 @@ class TokenGate:
         self._thread.start()
         self._ready.wait(10.0)
         if self._error is not None:
-            raise InputError(f"--host {self.host} --port {self.port}: cannot listen: {self._error}")
+            raise InputError(f"TokenGate.host {self.host} TokenGate.port {self.port}: cannot listen: {self._error}")
         return self.port
 
     def _run(self) -> None:

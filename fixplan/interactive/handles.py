@@ -128,7 +128,7 @@ class UdpHandle(Handle):
             self.sock.bind((host, port))
         except OSError as exc:
             self.sock.close()
-            raise InputError(f"--device udp:{port}: cannot bind {host}:{port}: {exc.strerror or exc}") from None
+            raise InputError(f"run_session.device udp:{port}: cannot bind {host}:{port}: {exc.strerror or exc}") from None
         self.sock.setblocking(False)
         self.port = int(self.sock.getsockname()[1])
         self.stats = BridgeStats()
@@ -241,14 +241,14 @@ class SpaceMouseHandle(Handle):
             import pyspacemouse  # type: ignore[import-not-found]
         except ImportError:
             raise InputError(
-                "--device spacemouse needs the optional package pyspacemouse: pip install 'fixplan[devices]'"
+                "run_session.device spacemouse needs the optional package pyspacemouse: pip install 'fixplan[devices]'"
             ) from None
         try:
             ok = pyspacemouse.open()
         except Exception as exc:  # noqa: BLE001 - a vendor library's failure, reported as one line
-            raise InputError(f"--device spacemouse: cannot open the SpaceMouse: {exc}") from None
+            raise InputError(f"run_session.device spacemouse: cannot open the SpaceMouse: {exc}") from None
         if not ok:
-            raise InputError("--device spacemouse: no SpaceMouse found (is it plugged in and readable?)")
+            raise InputError("run_session.device spacemouse: no SpaceMouse found (is it plugged in and readable?)")
         self._mod = pyspacemouse
         self._x = np.array(x0, dtype=float)
         self._rate = np.zeros_like(self._x)
@@ -297,8 +297,8 @@ def parse_device(text: str) -> tuple[str, int | None]:
         try:
             port = int(t[4:])
         except ValueError:
-            raise InputError(f"--device udp:PORT expects a port number, got {text!r}") from None
+            raise InputError(f"run_session.device udp:PORT expects a port number, got {text!r}") from None
         if not 0 <= port <= 65535:
-            raise InputError(f"--device udp:PORT: port must be 0..65535, got {port}")
+            raise InputError(f"run_session.device udp:PORT: port must be 0..65535, got {port}")
         return "udp", port
-    raise InputError(f"--device must be mouse, spacemouse or udp[:PORT], got {text!r}")
+    raise InputError(f"run_session.device must be mouse, spacemouse or udp[:PORT], got {text!r}")

@@ -454,9 +454,9 @@ class HapticSession:
 
         require_full(fixture, "a haptic session")
         if clock not in ("wall", "device"):
-            raise InputError(f"--clock must be 'wall' or 'device', got {clock!r}")
+            raise InputError(f"HapticSession.clock must be 'wall' or 'device', got {clock!r}")
         if clock == "device" and not isinstance(handle, UdpHandle):
-            raise InputError("--clock device needs --device udp[:PORT] (the device's poses drive the loop)")
+            raise InputError("HapticSession.clock device needs run_session.device udp[:PORT] (the device's poses drive the loop)")
         self.clock = clock
         if clock == "device":
             # one tick per pose, no wall clock: the guidance runs inside the loop (reproducible)
@@ -553,10 +553,10 @@ class HapticSession:
 
         fixture = self.fixture
         if not fixture.clamps:
-            raise InputError(f"--clamp: {fixture.source} has no [[clamp]] entries (expected clamps to play)")
+            raise InputError(f"HapticSession.clamp: {fixture.source} has no [[clamp]] entries (expected clamps to play)")
         plan = analyse_clamping(fixture, verify=False, settings=self.profile)
         if not plan.holds:
-            raise InfeasibleError(f"--clamp: {one_line(plan.reason)}")
+            raise InfeasibleError(f"HapticSession.clamp: {one_line(plan.reason)}")
         scene = clamp_scene(fixture)
         points = {c.name: c.point_world for c in scene.clamps}
         self.clamp_plan = plan
