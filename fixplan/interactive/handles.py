@@ -128,7 +128,9 @@ class UdpHandle(Handle):
             self.sock.bind((host, port))
         except OSError as exc:
             self.sock.close()
-            raise InputError(f"run_session.device udp:{port}: cannot bind {host}:{port}: {exc.strerror or exc}") from None
+            raise InputError(
+                f"run_session.device udp:{port}: cannot bind {host}:{port}: {exc.strerror or exc}"
+            ) from None
         self.sock.setblocking(False)
         self.port = int(self.sock.getsockname()[1])
         self.stats = BridgeStats()

@@ -456,7 +456,9 @@ class HapticSession:
         if clock not in ("wall", "device"):
             raise InputError(f"HapticSession.clock must be 'wall' or 'device', got {clock!r}")
         if clock == "device" and not isinstance(handle, UdpHandle):
-            raise InputError("HapticSession.clock device needs run_session.device udp[:PORT] (the device's poses drive the loop)")
+            raise InputError(
+                "HapticSession.clock device needs run_session.device udp[:PORT] (the device's poses drive the loop)"
+            )
         self.clock = clock
         if clock == "device":
             # one tick per pose, no wall clock: the guidance runs inside the loop (reproducible)
@@ -553,7 +555,9 @@ class HapticSession:
 
         fixture = self.fixture
         if not fixture.clamps:
-            raise InputError(f"HapticSession.clamp: {fixture.source} has no [[clamp]] entries (expected clamps to play)")
+            raise InputError(
+                f"HapticSession.clamp: {fixture.source} has no [[clamp]] entries (expected clamps to play)"
+            )
         plan = analyse_clamping(fixture, verify=False, settings=self.profile)
         if not plan.holds:
             raise InfeasibleError(f"HapticSession.clamp: {one_line(plan.reason)}")
