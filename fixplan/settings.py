@@ -32,7 +32,7 @@ Groups
 :class:`Numerics`
     Rank and pseudo-inverse cut-offs of the numerical linear algebra, Clarabel's options.
 :class:`ClusterSettings`
-    How long ``robust`` and ``solve --batch`` wait for a Dask scheduler given with ``--scheduler``.
+    How long ``robust`` and batch solves wait for a Dask scheduler given by its address.
 
 A :class:`Settings` bundles one of each. The named profiles in :data:`PROFILES`:
 
@@ -968,7 +968,7 @@ class ClampSettings:
     Attributes
     ----------
     preload_N : float
-        Least normal force every locator keeps once clamped, under every load (``--preload``).
+        Least normal force every locator keeps once clamped, under every load.
     balance_rel : float
         A clamping prefix holds when the least ``M⁻¹``-weighted balance residual of gravity and
         its clamps, over the wrench's own norm, is at most this (as the classifier's ``balance_rel``).
