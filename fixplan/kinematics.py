@@ -142,6 +142,11 @@ class ContactSet:
             chosen = tuple(self.contacts[i] for i in self.rows_of(owners))
         return ContactSet(chosen, self.com_world, self.mass_matrix, self.body_origin_world)
 
+    def touching(self, gap_m: float) -> ContactSet:
+        """The contacts whose gap is at most ``gap_m``, same configuration and mass matrix."""
+        chosen = tuple(c for c in self.contacts if c.gap_m <= gap_m)
+        return ContactSet(chosen, self.com_world, self.mass_matrix, self.body_origin_world)
+
     def nearest_of(self, owner: str) -> ContactSet:
         """The set with only the nearest (first) contact of ``owner`` (itself when no locator has several).
 

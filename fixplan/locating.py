@@ -17,6 +17,7 @@ of the locators' faces, then on the exact gaps — and checks it, or says why th
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
@@ -25,7 +26,7 @@ from numpy.typing import NDArray
 
 from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.geometry import Box, Cylinder, Mesh, Polygon, Rectangle, Shape
-from fixplan.geometry.pins import HoleBody, PinBody, pin_hole_contacts
+from fixplan.geometry.pins import HoleBody, PinBody, pin_hole_contacts, radial_play_m
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
 from fixplan.model import (
     Bore,
@@ -173,6 +174,187 @@ def cylinder_contacts(fixture: Fixture, pose: Pose) -> list[Contact]:
 def locator_gaps(workpiece: Workpiece, pose: Pose, locators: Sequence[Locator]) -> FloatArray:
     """Signed gaps [m] of the locators at ``pose`` (negative: penetration)."""
     return np.array([locator_contact(workpiece, pose, loc).gap_m for loc in locators])
+
+
+# -- pins and bores: how far each has entered ---------------------------------------------------------
+@dataclass(frozen=True)
+class Insert:
+    """One thing that enters a hole: a pin in the part's hole, or the part (a shaft) in a bore."""
+
+    name: str  # the pin's or the bore's name: the state element once engaged
+    hole: str  # the hole's name (a bore: its own)
+    kind: str  # "round", "diamond" or "bore"
+    play_m: float  # radial play (D − d)/2
+    capture_m: float  # play + both chamfers: the offset a chamfer still guides into the hole
+    land_direction_world: FloatArray | None = None  # a diamond pin: the one direction it locates along
+
+
+def inserts(fixture: Fixture) -> list[Insert]:
+    """The fixture's pins (round ones first) and bores as :class:`Insert`."""
+    wp = fixture.workpiece
+    out = []
+    for pin in sorted(fixture.pins, key=lambda p: (p.kind != "round", p.name)):
+        hole = wp.hole(pin.hole)
+        play = radial_play_m(hole.diameter_m, pin.diameter_m)
+        out.append(
+            Insert(pin.name, hole.name, pin.kind, play, play + hole.chamfer_m + pin.chamfer_m, pin.land_direction_world)
+        )
+    for bore in fixture.bores:
+        r = float(getattr(wp.shape, "radius", 0.0))
+        play = 0.5 * bore.diameter_m - r
+        out.append(Insert(bore.name, bore.name, "bore", play, play + bore.chamfer_m))
+    return out
+
+
+def _pair(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[PinBody, HoleBody]:
+    """The pin and the hole of ``ins`` at ``pose`` (a bore: the part as the pin)."""
+    wp = fixture.workpiece
+    if ins.kind == "bore":
+        bore = next(b for b in fixture.bores if b.name == ins.name)
+        hole = HoleBody(bore.p_world, bore.axis_world, 0.5 * bore.diameter_m, bore.depth_m, bore.chamfer_m, True)
+        return peg_body(wp, pose, bore), hole
+    pin = next(p for p in fixture.pins if p.name == ins.name)
+    body = PinBody(pin.p_world, pin.axis_world, 0.5 * pin.diameter_m, pin.length_m, pin.chamfer_m)
+    return body, _hole_body(wp, pose, wp.hole(pin.hole))
+
+
+@dataclass(frozen=True)
+class Engagement:
+    """Where a pin's tip is with respect to its hole's mouth at a pose."""
+
+    depth_m: float  # the tip past the mouth, along the hole's axis into it (< 0: still outside)
+    offset_m: float  # the tip's centre from the hole's axis
+    capture_m: float
+
+    @property
+    def engaged(self) -> bool:
+        """The tip inside the mouth: past it, within the capture of the hole's axis."""
+        return self.depth_m > 0.0 and self.offset_m <= self.capture_m
+
+
+def engagement(fixture: Fixture, pose: Pose, ins: Insert) -> Engagement:
+    """The tip's depth in its hole and its offset from the hole's axis at ``pose``."""
+    pin, hole = _pair(fixture, pose, ins)
+    tip = pin.base_world + pin.length_m * pin.axis_world
+    r = tip - hole.mouth_world
+    along = float(r @ hole.axis_world)
+    return Engagement(-along, float(np.linalg.norm(r - along * hole.axis_world)), ins.capture_m)
+
+
+def axis_offsets_m(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[float, float]:
+    """The hole's axis from the pin's at the mouth and at the tip, in the directions the pin locates.
+
+    A round pin (or a bore) locates every direction normal to its axis, a diamond pin only along its
+    lands: its offset across them is free by design.
+    """
+    pin, hole = _pair(fixture, pose, ins)
+    a = pin.axis_world
+    out = []
+    # the pin's axis at the mouth's level and at its tip
+    s_mouth = float((hole.mouth_world - pin.base_world) @ a)
+    for s in (min(max(s_mouth, 0.0), pin.length_m), pin.length_m):
+        q = pin.base_world + s * a
+        r = q - hole.mouth_world
+        r = r - float(r @ hole.axis_world) * hole.axis_world
+        if ins.land_direction_world is not None:
+            out.append(abs(float(r @ ins.land_direction_world)))
+        else:
+            out.append(float(np.linalg.norm(r)))
+    return out[0], out[1]
+
+
+def insertion_axis(fixture: Fixture) -> FloatArray:
+    """The unit axis the part is inserted against (pins: their common axis; a bore: its axis).
+
+    :class:`InputError` (one line) when the pins' axes differ: no single straight insertion.
+    """
+    named = [(f"pin.{p.name}", p.axis_world) for p in fixture.pins] + [
+        (f"bore.{b.name}", b.axis_world) for b in fixture.bores
+    ]
+    u = np.asarray(named[0][1], dtype=float)
+    tol = DEFAULT.pins.axis_angle_rad
+    for key, axis in named:
+        if math.acos(min(1.0, float(axis @ u))) > tol:
+            raise InputError(
+                f"{fixture.source}: {key}.axis: the pins' axes differ by more than {tol:g} rad "
+                "(expected parallel pins: the part is inserted along one axis)"
+            )
+    return u
+
+
+def located_pose(fixture: Fixture) -> Pose:
+    """The located pose: the file's (pins), or a shaft's in its bore (coaxial, its leading end on the bottom).
+
+    A bore alone is no full fixture of locators, and the loader takes a goal only for those: the
+    shaft is turned the least from its start so that its axis lies along the bore's, its end that
+    leads into the bore on the bottom ``depth_m`` below the mouth.
+    """
+    if fixture.goal_pose is not None:
+        return fixture.goal_pose
+    if not fixture.bores or fixture.pins:
+        raise InputError(f"{fixture.source}: workpiece.goal: a fixture with pins needs its located pose")
+    bore = fixture.bores[0]
+    shape = fixture.workpiece.shape
+    u = np.asarray(bore.axis_world, dtype=float)
+    R0 = fixture.start.R_world_body
+    z = R0[:, 2]
+    lead = -1.0 if float(z @ u) >= 0.0 else 1.0  # the body end along lead·z goes in first (it points down the bore)
+    want = -lead * u  # where body z must point
+    axis = np.cross(z, want)
+    s_, c_ = float(np.linalg.norm(axis)), float(z @ want)
+    turn = np.zeros(3) if s_ == 0.0 else axis / s_ * math.atan2(s_, c_)
+    R = exp_so3(turn) @ R0
+    half = 0.5 * float(getattr(shape, "length", 0.0))
+    centre = bore.p_world - bore.depth_m * u + half * u
+    return Pose(R, centre)
+
+
+def bottom_gap_m(fixture: Fixture, pose: Pose, bore: Bore) -> float:
+    """The gap of the shaft's leading end face on the bore's (flat) bottom, in closed form.
+
+    The face's deepest point lies ``r sin φ`` beyond its centre along the bore's axis (``φ`` the
+    angle between the shaft's and the bore's axes): gap ``depth − (d_E + r sin φ)``, ``d_E`` the
+    centre's depth below the mouth.
+    """
+    pin = peg_body(fixture.workpiece, pose, bore)
+    u = np.asarray(bore.axis_world, dtype=float)
+    end = pin.base_world + pin.length_m * pin.axis_world
+    d_end = float((bore.p_world - end) @ u)
+    c = min(abs(float(pin.axis_world @ u)), 1.0)
+    return bore.depth_m - (d_end + pin.radius_m * math.sqrt(max(1.0 - c * c, 0.0)))
+
+
+def seated(fixture: Fixture, pose: Pose) -> bool:
+    """Every rest (and every bore's bottom) touching at ``pose``."""
+    tol = fixture.tolerances.touch_m
+    gaps = [float(g) for g in locator_gaps(fixture.workpiece, pose, fixture.locators)]
+    gaps += [bottom_gap_m(fixture, pose, b) for b in fixture.bores]
+    return all(abs(g) <= tol for g in gaps)
+
+
+def seat_side_world(fixture: Fixture, pose: Pose, u: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The unit direction normal to ``u`` the part is seated toward, and where it is pressed: the round pin's (or bore's) contact.
+
+    The sum of the first round pin's touching contact normals at ``pose`` (they push the part away
+    from the pin), reversed, and the mean of those contacts' points; zero direction when none touches.
+    """
+    wp = fixture.workpiece
+    tol = fixture.tolerances.touch_m
+    for ins in inserts(fixture):
+        if ins.kind == "diamond":
+            continue
+        if ins.kind == "bore":
+            bore = next(b for b in fixture.bores if b.name == ins.name)
+            cs = bore_contacts(wp, pose, bore)
+        else:
+            cs = pin_contacts(wp, pose, next(p for p in fixture.pins if p.name == ins.name))
+        side = [c for c in cs if c.gap_m <= tol and abs(float(c.normal_world @ u)) < 0.5]
+        n = sum((c.normal_world for c in side), np.zeros(3))
+        n = n - float(n @ u) * u
+        norm = float(np.linalg.norm(n))
+        if norm > 0.0:
+            return -n / norm, np.mean([c.point_world for c in side], axis=0)
+    return np.zeros(3), pose.point_world_from_body(wp.com_body)
 
 
 def start_state(fixture: Fixture, kinds: Sequence[str] = ("locator",)) -> frozenset[str]:
@@ -980,6 +1162,16 @@ def with_goal(fixture: Fixture) -> Fixture:
 
 
 __all__ = [
+    "Engagement",
+    "Insert",
+    "axis_offsets_m",
+    "bottom_gap_m",
+    "engagement",
+    "insertion_axis",
+    "inserts",
+    "located_pose",
+    "seat_side_world",
+    "seated",
     "GoalResult",
     "GoalSearch",
     "contact_set",

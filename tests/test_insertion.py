@@ -17,16 +17,8 @@ from conftest import PROBLEMS, run_cli
 
 import fixplan
 from fixplan.errors import InputError
-from fixplan.planner.insertion import (
-    axis_offsets_m,
-    engagement,
-    inserts,
-    lifted,
-    located_pose,
-    plan_insertion,
-    shifted_world,
-    verify_insertion,
-)
+from fixplan.locating import axis_offsets_m, engagement, inserts, located_pose
+from fixplan.planner.insertion import lifted, plan_insertion, shifted_world, verify_insertion
 from fixplan.planner.solve import solve
 
 HOUSING = PROBLEMS / "housing-2-pins.toml"

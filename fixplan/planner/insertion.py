@@ -3,7 +3,7 @@
 The contact-state graph of a pin fixture has two kinds of elements: a rest locator pressed (as
 for every fixture), and a pin *engaged*: its tip past its hole's mouth (along the hole's axis) with
 the tip's centre within the capture ``(D − d)/2 + c_hole + c_pin`` of the hole's axis, so that the
-pin can only go on into the hole (:func:`engagement`). A bore is the same with the part as the
+pin can only go on into the hole (:func:`~fixplan.locating.engagement`). A bore is the same with the part as the
 pin: the shaft's leading end past the bore's mouth, then its end face on the bore's bottom
 (``"<bore>.bottom"``).
 
@@ -48,7 +48,6 @@ and rests are displaced (pose errors larger than the play): the chamfers must ca
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -56,11 +55,20 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fixplan.errors import InputError
-from fixplan.geometry.pins import HoleBody, PinBody, radial_play_m
-from fixplan.kinematics import ContactSet
-from fixplan.locating import _hole_body, contact_set, locator_gaps, peg_body
-from fixplan.model import Bore, Fixture
+from fixplan.locating import (
+    Insert,
+    axis_offsets_m,
+    bottom_gap_m,
+    contact_set,
+    engagement,
+    insertion_axis,
+    inserts,
+    located_pose,
+    locator_gaps,
+    seat_side_world,
+    seated,
+)
+from fixplan.model import Fixture
 from fixplan.planner.execute import ExecutionLog, ExecutionNoise
 from fixplan.planner.plan import Verification
 from fixplan.settings import DEFAULT, HAPTIC, InsertionSettings, Settings
@@ -70,145 +78,12 @@ FloatArray = NDArray[np.float64]
 State = frozenset[str]
 
 
-# -- the geometry of engagement --------------------------------------------------------------------
-@dataclass(frozen=True)
-class Insert:
-    """One thing that enters a hole: a pin in the part's hole, or the part (a shaft) in a bore."""
-
-    name: str  # the pin's or the bore's name: the state element once engaged
-    hole: str  # the hole's name (a bore: its own)
-    kind: str  # "round", "diamond" or "bore"
-    play_m: float  # radial play (D − d)/2
-    capture_m: float  # play + both chamfers: the offset a chamfer still guides into the hole
-    land_direction_world: FloatArray | None = None  # a diamond pin: the one direction it locates along
-
-
-def inserts(fixture: Fixture) -> list[Insert]:
-    """The fixture's pins (round ones first) and bores as :class:`Insert`."""
-    wp = fixture.workpiece
-    out = []
-    for pin in sorted(fixture.pins, key=lambda p: (p.kind != "round", p.name)):
-        hole = wp.hole(pin.hole)
-        play = radial_play_m(hole.diameter_m, pin.diameter_m)
-        out.append(
-            Insert(pin.name, hole.name, pin.kind, play, play + hole.chamfer_m + pin.chamfer_m, pin.land_direction_world)
-        )
-    for bore in fixture.bores:
-        r = float(getattr(wp.shape, "radius", 0.0))
-        play = 0.5 * bore.diameter_m - r
-        out.append(Insert(bore.name, bore.name, "bore", play, play + bore.chamfer_m))
-    return out
-
-
-def _pair(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[PinBody, HoleBody]:
-    """The pin and the hole of ``ins`` at ``pose`` (a bore: the part as the pin)."""
-    wp = fixture.workpiece
-    if ins.kind == "bore":
-        bore = next(b for b in fixture.bores if b.name == ins.name)
-        hole = HoleBody(bore.p_world, bore.axis_world, 0.5 * bore.diameter_m, bore.depth_m, bore.chamfer_m, True)
-        return peg_body(wp, pose, bore), hole
-    pin = next(p for p in fixture.pins if p.name == ins.name)
-    body = PinBody(pin.p_world, pin.axis_world, 0.5 * pin.diameter_m, pin.length_m, pin.chamfer_m)
-    return body, _hole_body(wp, pose, wp.hole(pin.hole))
-
-
-@dataclass(frozen=True)
-class Engagement:
-    """Where a pin's tip is with respect to its hole's mouth at a pose."""
-
-    depth_m: float  # the tip past the mouth, along the hole's axis into it (< 0: still outside)
-    offset_m: float  # the tip's centre from the hole's axis
-    capture_m: float
-
-    @property
-    def engaged(self) -> bool:
-        """The tip inside the mouth: past it, within the capture of the hole's axis."""
-        return self.depth_m > 0.0 and self.offset_m <= self.capture_m
-
-
-def engagement(fixture: Fixture, pose: Pose, ins: Insert) -> Engagement:
-    """The tip's depth in its hole and its offset from the hole's axis at ``pose``."""
-    pin, hole = _pair(fixture, pose, ins)
-    tip = pin.base_world + pin.length_m * pin.axis_world
-    r = tip - hole.mouth_world
-    along = float(r @ hole.axis_world)
-    return Engagement(-along, float(np.linalg.norm(r - along * hole.axis_world)), ins.capture_m)
-
-
-def axis_offsets_m(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[float, float]:
-    """The hole's axis from the pin's at the mouth and at the tip, in the directions the pin locates.
-
-    A round pin (or a bore) locates every direction normal to its axis, a diamond pin only along its
-    lands: its offset across them is free by design.
-    """
-    pin, hole = _pair(fixture, pose, ins)
-    a = pin.axis_world
-    out = []
-    # the pin's axis at the mouth's level and at its tip
-    s_mouth = float((hole.mouth_world - pin.base_world) @ a)
-    for s in (min(max(s_mouth, 0.0), pin.length_m), pin.length_m):
-        q = pin.base_world + s * a
-        r = q - hole.mouth_world
-        r = r - float(r @ hole.axis_world) * hole.axis_world
-        if ins.land_direction_world is not None:
-            out.append(abs(float(r @ ins.land_direction_world)))
-        else:
-            out.append(float(np.linalg.norm(r)))
-    return out[0], out[1]
-
-
-def insertion_axis(fixture: Fixture) -> FloatArray:
-    """The unit axis the part is inserted against (pins: their common axis; a bore: its axis).
-
-    :class:`InputError` (one line) when the pins' axes differ: no single straight insertion.
-    """
-    named = [(f"pin.{p.name}", p.axis_world) for p in fixture.pins] + [
-        (f"bore.{b.name}", b.axis_world) for b in fixture.bores
-    ]
-    u = np.asarray(named[0][1], dtype=float)
-    tol = DEFAULT.pins.axis_angle_rad
-    for key, axis in named:
-        if math.acos(min(1.0, float(axis @ u))) > tol:
-            raise InputError(
-                f"{fixture.source}: {key}.axis: the pins' axes differ by more than {tol:g} rad "
-                "(expected parallel pins: the part is inserted along one axis)"
-            )
-    return u
-
-
-def located_pose(fixture: Fixture) -> Pose:
-    """The located pose: the file's (pins), or a shaft's in its bore (coaxial, its leading end on the bottom).
-
-    A bore alone is no full fixture of locators, and the loader takes a goal only for those: the
-    shaft is turned the least from its start so that its axis lies along the bore's, its end that
-    leads into the bore on the bottom ``depth_m`` below the mouth.
-    """
-    if fixture.goal_pose is not None:
-        return fixture.goal_pose
-    if not fixture.bores or fixture.pins:
-        raise InputError(f"{fixture.source}: workpiece.goal: a fixture with pins needs its located pose")
-    bore = fixture.bores[0]
-    shape = fixture.workpiece.shape
-    u = np.asarray(bore.axis_world, dtype=float)
-    R0 = fixture.start.R_world_body
-    z = R0[:, 2]
-    lead = -1.0 if float(z @ u) >= 0.0 else 1.0  # the body end along lead·z goes in first (it points down the bore)
-    want = -lead * u  # where body z must point
-    axis = np.cross(z, want)
-    s_, c_ = float(np.linalg.norm(axis)), float(z @ want)
-    turn = np.zeros(3) if s_ == 0.0 else axis / s_ * math.atan2(s_, c_)
-    R = exp_so3(turn) @ R0
-    half = 0.5 * float(getattr(shape, "length", 0.0))
-    centre = bore.p_world - bore.depth_m * u + half * u
-    return Pose(R, centre)
-
-
+# -- the plan --------------------------------------------------------------------------------------
 def lifted(pose: Pose, u: FloatArray, h_m: float) -> Pose:
     """``pose`` moved by ``h_m`` along ``u``."""
     return Pose(pose.R_world_body, pose.p_world + h_m * u)
 
 
-# -- the plan --------------------------------------------------------------------------------------
 @dataclass
 class Stage:
     """One transition of an insertion plan."""
@@ -260,11 +135,6 @@ def goal_state(fixture: Fixture) -> State:
     return frozenset(names)
 
 
-def _touching(cs: ContactSet, tol_m: float) -> ContactSet:
-    keep = tuple(c for c in cs.contacts if c.gap_m <= tol_m)
-    return ContactSet(keep, cs.com_world, cs.mass_matrix, cs.body_origin_world)
-
-
 def _push(fixture: Fixture, pose: Pose, names: list[str], u: FloatArray, s: InsertionSettings) -> tuple[
     bool, FloatArray, str, tuple[str, ...], float | None, float | None
 ]:  # fmt: skip
@@ -277,7 +147,7 @@ def _push(fixture: Fixture, pose: Pose, names: list[str], u: FloatArray, s: Inse
     from fixplan.jamming.wedge import wedge_force
     from fixplan.planner.segments import free_wrench
 
-    cs = _touching(contact_set(fixture, pose, names), fixture.tolerances.touch_m) if names else None
+    cs = contact_set(fixture, pose, names).touching(fixture.tolerances.touch_m) if names else None
     a = np.concatenate([-s.push_accel_mps2 * u, np.zeros(3)])
     if cs is None or len(cs) == 0:
         ok, w, why = free_wrench(fixture, pose, a, contact_set(fixture, pose, []).mass_matrix)
@@ -330,7 +200,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     # the start: above every tip (nothing engaged), or the plan cannot begin with the approach
     start = fixture.start
     inside = [i for i in ins if engagement(fixture, start, i).engaged]
-    if inside and len(inside) == len(ins) and _seated(fixture, start, u):
+    if inside and len(inside) == len(ins) and seated(fixture, start):
         # already located: nothing to insert; the run only holds the part with the seating push
         plan.start_state = goal_state(fixture)
         w_seat, held = seat_push(fixture, G, u, s)
@@ -415,41 +285,6 @@ def _about_com(fixture: Fixture, pose: Pose, w: FloatArray) -> FloatArray:
     return shift_wrench(w, pose.p_world, pose.point_world_from_body(fixture.workpiece.com_body))
 
 
-def _seated(fixture: Fixture, pose: Pose, u: FloatArray) -> bool:
-    """Every rest (and every bore's bottom) touching at ``pose``."""
-    tol = fixture.tolerances.touch_m
-    gaps = [float(g) for g in locator_gaps(fixture.workpiece, pose, fixture.locators)]
-    gaps += [bottom_gap_m(fixture, pose, b) for b in fixture.bores]
-    return all(abs(g) <= tol for g in gaps)
-
-
-def seat_side_world(fixture: Fixture, pose: Pose, u: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """The unit direction normal to ``u`` the part is seated toward, and where it is pressed: the round pin's (or bore's) contact.
-
-    The sum of the first round pin's touching contact normals at ``pose`` (they push the part away
-    from the pin), reversed, and the mean of those contacts' points; zero direction when none touches.
-    """
-    from fixplan.locating import bore_contacts, pin_contacts
-
-    wp = fixture.workpiece
-    tol = fixture.tolerances.touch_m
-    for ins in inserts(fixture):
-        if ins.kind == "diamond":
-            continue
-        if ins.kind == "bore":
-            bore = next(b for b in fixture.bores if b.name == ins.name)
-            cs = bore_contacts(wp, pose, bore)
-        else:
-            cs = pin_contacts(wp, pose, next(p for p in fixture.pins if p.name == ins.name))
-        side = [c for c in cs if c.gap_m <= tol and abs(float(c.normal_world @ u)) < 0.5]
-        n = sum((c.normal_world for c in side), np.zeros(3))
-        n = n - float(n @ u) * u
-        norm = float(np.linalg.norm(n))
-        if norm > 0.0:
-            return -n / norm, np.mean([c.point_world for c in side], axis=0)
-    return np.zeros(3), pose.point_world_from_body(wp.com_body)
-
-
 def seat_push(fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings) -> tuple[FloatArray, str | None]:
     """The seating push at the located pose and why it does not hold the part there (None: it does).
 
@@ -468,7 +303,7 @@ def seat_push(fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings)
     w_com = np.concatenate([F, np.cross(at - com, F_side)])
     w = shift_wrench(w_com, com, pose.p_world)
     names = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
-    cs = _touching(contact_set(fixture, pose, names), fixture.tolerances.touch_m)
+    cs = contact_set(fixture, pose, names).touching(fixture.tolerances.touch_m)
     touching = sorted({c.owner for c in cs.contacts})
     if not touching:
         return w, "nothing touches the part at the located pose: no seat"
@@ -752,21 +587,6 @@ class InsertionRun:
             self.log.event(t, "failed", reason)
 
 
-def bottom_gap_m(fixture: Fixture, pose: Pose, bore: Bore) -> float:
-    """The gap of the shaft's leading end face on the bore's (flat) bottom, in closed form.
-
-    The face's deepest point lies ``r sin φ`` beyond its centre along the bore's axis (``φ`` the
-    angle between the shaft's and the bore's axes): gap ``depth − (d_E + r sin φ)``, ``d_E`` the
-    centre's depth below the mouth.
-    """
-    pin = peg_body(fixture.workpiece, pose, bore)
-    u = np.asarray(bore.axis_world, dtype=float)
-    end = pin.base_world + pin.length_m * pin.axis_world
-    d_end = float((bore.p_world - end) @ u)
-    c = min(abs(float(pin.axis_world @ u)), 1.0)
-    return bore.depth_m - (d_end + pin.radius_m * math.sqrt(max(1.0 - c * c, 0.0)))
-
-
 def _up(fixture: Fixture) -> FloatArray:
     g = np.asarray(fixture.gravity, dtype=float)
     n = float(np.linalg.norm(g))
@@ -928,16 +748,10 @@ def shifted_world(fixture: Fixture, offset_world: FloatArray, yaw_rad: float, wi
 
 
 __all__ = [
-    "Engagement",
-    "Insert",
     "InsertionPlan",
     "InsertionRun",
     "Stage",
-    "axis_offsets_m",
-    "engagement",
     "goal_state",
-    "insertion_axis",
-    "inserts",
     "plan_insertion",
     "seat_push",
     "shifted_world",
