@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -89,6 +89,15 @@ class Contact:
         if self.soft:
             J[3, 3:] = n
         return J
+
+
+def numbered(contacts: Sequence[Contact], owner: str) -> list[Contact]:
+    """The contacts of one owner (a pin, a bore) named ``owner``, ``owner#2`` ...; each carries its owner when there are several."""
+    several = len(contacts) > 1
+    return [
+        replace(c, name=owner if k == 0 else f"{owner}#{k + 1}", locator=owner if several else None)
+        for k, c in enumerate(contacts)
+    ]
 
 
 @dataclass(frozen=True)

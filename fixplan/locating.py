@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.geometry import Box, Cylinder, Mesh, Polygon, Rectangle, Shape
 from fixplan.geometry.pins import HoleBody, PinBody, pin_hole_contacts, radial_play_m
-from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
+from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix, numbered
 from fixplan.model import (
     Bore,
     ExplicitContact,
@@ -106,37 +106,6 @@ def _hole_body(workpiece: Workpiece, pose: Pose, hole: Hole) -> HoleBody:
     )
 
 
-def _named(raw: Sequence[Contact], owner: str) -> list[Contact]:
-    """Contacts of one pin or bore named ``owner``, ``owner#2`` ... (each carries its owner when there are several)."""
-    several = len(raw) > 1
-    return [
-        replace(c, name=owner if k == 0 else f"{owner}#{k + 1}", locator=owner if several else None)
-        for k, c in enumerate(raw)
-    ]
-
-
-def pin_contacts(workpiece: Workpiece, pose: Pose, pin: Pin) -> list[Contact]:
-    """The contacts of a ``[[pin]]`` with its hole in the part at ``pose`` (:func:`~fixplan.geometry.pins.pin_hole_contacts`).
-
-    The workpiece's material point is the hole's; the normal pushes the part away from the pin.
-    Named ``"<pin>"``, ``"<pin>#2"`` ... (rim, mouth, exit, bottom, those the pose makes possible).
-    """
-    body = PinBody(
-        pin.p_world,
-        pin.axis_world,
-        0.5 * pin.diameter_m,
-        pin.length_m,
-        pin.chamfer_m,
-        pin.land_direction_world,
-        pin.land_width_m,
-    )
-    raw = pin_hole_contacts(body, _hole_body(workpiece, pose, workpiece.hole(pin.hole)))
-    return _named(
-        [Contact(pin.name, c.point_hole_world, c.normal_world, pin.friction, 0.0, c.gap_m, "pin") for c in raw],
-        pin.name,
-    )
-
-
 def peg_body(workpiece: Workpiece, pose: Pose, bore: Bore) -> PinBody:
     """The cylindrical part as a pin entering ``bore``: from its end farther out of the bore to the deeper one."""
     shape = workpiece.shape
@@ -150,25 +119,48 @@ def peg_body(workpiece: Workpiece, pose: Pose, bore: Bore) -> PinBody:
     return PinBody(base, (ends[lead] - base) / shape.length, shape.radius, shape.length)
 
 
-def bore_contacts(workpiece: Workpiece, pose: Pose, bore: Bore) -> list[Contact]:
-    """The contacts of a cylindrical part (a peg) at ``pose`` with a ``[[bore]]`` of the fixture.
-
-    The workpiece's material point is the peg's; the normal pushes the peg away from the bore's
-    wall, edge or bottom. Named ``"<bore>"``, ``"<bore>#2"`` ...
-    """
-    hole = HoleBody(bore.p_world, bore.axis_world, 0.5 * bore.diameter_m, bore.depth_m, bore.chamfer_m, blind=True)
-    raw = pin_hole_contacts(peg_body(workpiece, pose, bore), hole)
-    return _named(
-        [Contact(bore.name, c.point_pin_world, -c.normal_world, bore.friction, 0.0, c.gap_m, "bore") for c in raw],
-        bore.name,
+def pin_and_hole(workpiece: Workpiece, pose: Pose, owner: Pin | Bore) -> tuple[PinBody, HoleBody]:
+    """The pin and the hole of a ``[[pin]]`` (the hole is the part's) or of a ``[[bore]]`` (the part is the pin) at ``pose``."""
+    if isinstance(owner, Bore):
+        bore = HoleBody(owner.p_world, owner.axis_world, 0.5 * owner.diameter_m, owner.depth_m, owner.chamfer_m, True)
+        return peg_body(workpiece, pose, owner), bore
+    pin = PinBody(
+        owner.p_world,
+        owner.axis_world,
+        0.5 * owner.diameter_m,
+        owner.length_m,
+        owner.chamfer_m,
+        owner.land_direction_world,
+        owner.land_width_m,
     )
+    return pin, _hole_body(workpiece, pose, workpiece.hole(owner.hole))
+
+
+def insert_contacts(workpiece: Workpiece, pose: Pose, owner: Pin | Bore) -> list[Contact]:
+    """The contacts of a ``[[pin]]`` with its hole in the part, or of the part (a peg) with a ``[[bore]]``, at ``pose``.
+
+    One pin-in-hole geometry (:func:`~fixplan.geometry.pins.pin_hole_contacts`) on the pair of
+    :func:`pin_and_hole`. The workpiece's material point is the part's (the hole's, or the peg's);
+    the normal pushes the part away from the pin, or from the bore's wall, edge or bottom. Named
+    ``"<owner>"``, ``"<owner>#2"`` ... (rim, mouth, exit, bottom: those the pose makes possible).
+    """
+    pin, hole = pin_and_hole(workpiece, pose, owner)
+    raw = pin_hole_contacts(pin, hole)
+    if isinstance(owner, Bore):  # the part is the pin
+        found = [
+            Contact(owner.name, c.point_pin_world, -c.normal_world, owner.friction, 0.0, c.gap_m, "bore") for c in raw
+        ]
+    else:
+        found = [
+            Contact(owner.name, c.point_hole_world, c.normal_world, owner.friction, 0.0, c.gap_m, "pin") for c in raw
+        ]
+    return numbered(found, owner.name)
 
 
 def cylinder_contacts(fixture: Fixture, pose: Pose) -> list[Contact]:
     """Every contact of the fixture's pins and bores at ``pose`` (touching or not), pin by pin."""
-    wp = fixture.workpiece
-    out = [c for pin in fixture.pins for c in pin_contacts(wp, pose, pin)]
-    return out + [c for bore in fixture.bores for c in bore_contacts(wp, pose, bore)]
+    owners: list[Pin | Bore] = [*fixture.pins, *fixture.bores]
+    return [c for owner in owners for c in insert_contacts(fixture.workpiece, pose, owner)]
 
 
 def locator_gaps(workpiece: Workpiece, pose: Pose, locators: Sequence[Locator]) -> FloatArray:
@@ -208,14 +200,8 @@ def inserts(fixture: Fixture) -> list[Insert]:
 
 def _pair(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[PinBody, HoleBody]:
     """The pin and the hole of ``ins`` at ``pose`` (a bore: the part as the pin)."""
-    wp = fixture.workpiece
-    if ins.kind == "bore":
-        bore = next(b for b in fixture.bores if b.name == ins.name)
-        hole = HoleBody(bore.p_world, bore.axis_world, 0.5 * bore.diameter_m, bore.depth_m, bore.chamfer_m, True)
-        return peg_body(wp, pose, bore), hole
-    pin = next(p for p in fixture.pins if p.name == ins.name)
-    body = PinBody(pin.p_world, pin.axis_world, 0.5 * pin.diameter_m, pin.length_m, pin.chamfer_m)
-    return body, _hole_body(wp, pose, wp.hole(pin.hole))
+    owners: tuple[Pin | Bore, ...] = fixture.bores if ins.kind == "bore" else fixture.pins
+    return pin_and_hole(fixture.workpiece, pose, next(o for o in owners if o.name == ins.name))
 
 
 @dataclass(frozen=True)
@@ -332,29 +318,32 @@ def seated(fixture: Fixture, pose: Pose) -> bool:
     return all(abs(g) <= tol for g in gaps)
 
 
-def seat_side_world(fixture: Fixture, pose: Pose, u: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """The unit direction normal to ``u`` the part is seated toward, and where it is pressed: the round pin's (or bore's) contact.
+@dataclass(frozen=True)
+class Seat:
+    """What the part sits on at a pose, and the side it is seated toward."""
 
-    The sum of the first round pin's touching contact normals at ``pose`` (they push the part away
-    from the pin), reversed, and the mean of those contacts' points; zero direction when none touches.
+    contacts: ContactSet  # every rest, pin and bore touching
+    side_world: FloatArray  # unit, normal to the insertion axis, toward the round pin's contact; zero when none touches
+    at_world: FloatArray  # where it is pressed: the mean of those contacts' points (the centre of mass when none)
+
+
+def seat_at(fixture: Fixture, pose: Pose, u: FloatArray) -> Seat:
+    """The rests', pins' and bores' touching contacts at ``pose``, and the side the round pin (or bore) seats the part toward.
+
+    The side is the sum of the first round pin's touching contact normals across ``u`` (they push
+    the part away from the pin), reversed; it is pressed at the mean of those contacts' points.
     """
-    wp = fixture.workpiece
-    tol = fixture.tolerances.touch_m
-    for ins in inserts(fixture):
-        if ins.kind == "diamond":
-            continue
-        if ins.kind == "bore":
-            bore = next(b for b in fixture.bores if b.name == ins.name)
-            cs = bore_contacts(wp, pose, bore)
-        else:
-            cs = pin_contacts(wp, pose, next(p for p in fixture.pins if p.name == ins.name))
-        side = [c for c in cs if c.gap_m <= tol and abs(float(c.normal_world @ u)) < 0.5]
+    round_first = [i.name for i in inserts(fixture) if i.kind != "diamond"]
+    names = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
+    cs = contact_set(fixture, pose, names).touching(fixture.tolerances.touch_m)
+    for owner in round_first:
+        side = [c for c in cs.contacts if c.owner == owner and abs(float(c.normal_world @ u)) < 0.5]
         n = sum((c.normal_world for c in side), np.zeros(3))
         n = n - float(n @ u) * u
         norm = float(np.linalg.norm(n))
         if norm > 0.0:
-            return -n / norm, np.mean([c.point_world for c in side], axis=0)
-    return np.zeros(3), pose.point_world_from_body(wp.com_body)
+            return Seat(cs, -n / norm, np.mean([c.point_world for c in side], axis=0))
+    return Seat(cs, np.zeros(3), pose.point_world_from_body(fixture.workpiece.com_body))
 
 
 def start_state(fixture: Fixture, kinds: Sequence[str] = ("locator",)) -> frozenset[str]:
@@ -420,10 +409,8 @@ def contact_set(
             for n in names:
                 if n in explicits:
                     chosen.append(explicit(explicits[n]))
-                elif n in pins:
-                    chosen += pin_contacts(wp, pose, pins[n])
-                elif n in bores:
-                    chosen += bore_contacts(wp, pose, bores[n])
+                elif n in pins or n in bores:
+                    chosen += insert_contacts(wp, pose, pins[n] if n in pins else bores[n])
                 else:
                     chosen += locator_contacts(wp, pose, locators[n])
         elif isinstance(wp.shape, Mesh):  # a named locator brings every one of its contacts
@@ -1170,7 +1157,8 @@ __all__ = [
     "insertion_axis",
     "inserts",
     "located_pose",
-    "seat_side_world",
+    "Seat",
+    "seat_at",
     "seated",
     "GoalResult",
     "GoalSearch",
@@ -1182,8 +1170,8 @@ __all__ = [
     "locator_contacts",
     "locator_gaps",
     "peg_body",
-    "pin_contacts",
-    "bore_contacts",
+    "insert_contacts",
+    "pin_and_hole",
     "cylinder_contacts",
     "named_faces",
     "no_pose_proof",

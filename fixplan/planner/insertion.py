@@ -65,25 +65,20 @@ from fixplan.locating import (
     inserts,
     located_pose,
     locator_gaps,
-    seat_side_world,
+    seat_at,
     seated,
 )
 from fixplan.model import Fixture
 from fixplan.planner.execute import ExecutionLog, ExecutionNoise
 from fixplan.planner.plan import Verification
 from fixplan.settings import DEFAULT, HAPTIC, InsertionSettings, Settings
-from fixplan.spatial import Pose, exp_so3, log_so3, shift_wrench
+from fixplan.spatial import Pose, exp_so3, log_so3, pose_between, shift_wrench
 
 FloatArray = NDArray[np.float64]
 State = frozenset[str]
 
 
 # -- the plan --------------------------------------------------------------------------------------
-def lifted(pose: Pose, u: FloatArray, h_m: float) -> Pose:
-    """``pose`` moved by ``h_m`` along ``u``."""
-    return Pose(pose.R_world_body, pose.p_world + h_m * u)
-
-
 @dataclass
 class Stage:
     """One transition of an insertion plan."""
@@ -147,24 +142,16 @@ def _push(fixture: Fixture, pose: Pose, names: list[str], u: FloatArray, s: Inse
     from fixplan.jamming.wedge import wedge_force
     from fixplan.planner.segments import free_wrench
 
-    cs = contact_set(fixture, pose, names).touching(fixture.tolerances.touch_m) if names else None
+    cs = contact_set(fixture, pose, names).touching(fixture.tolerances.touch_m)
     a = np.concatenate([-s.push_accel_mps2 * u, np.zeros(3)])
-    if cs is None or len(cs) == 0:
-        ok, w, why = free_wrench(fixture, pose, a, contact_set(fixture, pose, []).mass_matrix)
+    if len(cs) == 0:
+        ok, w, why = free_wrench(fixture, pose, a, cs.mass_matrix)
         return ok, w, why, (), None, None
     wedge = wedge_force(cs) if len(cs) >= 2 else None
     weight = fixture.weight_N
     r = search_wrench_in(cs, a, fixture, objective="effort", min_margin_N=s.seat_side * weight, confirm=True)
     w = r.wrench if r.wrench is not None else np.full(fixture.ndof, np.nan)
     return r.found, w, r.reason, tuple(c.name for c in cs.contacts), wedge, r.margin_N
-
-
-def _interpolate(a: Pose, b: Pose, n: int) -> list[Pose]:
-    """``n + 1`` poses from ``a`` to ``b``: the position on the line, the rotation about one axis."""
-    rel = log_so3(b.R_world_body @ a.R_world_body.T)
-    return [
-        Pose(exp_so3(k / n * rel) @ a.R_world_body, a.p_world + k / n * (b.p_world - a.p_world)) for k in range(n + 1)
-    ]
 
 
 def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionPlan:
@@ -203,8 +190,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     if inside and len(inside) == len(ins) and seated(fixture, start):
         # already located: nothing to insert; the run only holds the part with the seating push
         plan.start_state = goal_state(fixture)
-        w_seat, held = seat_push(fixture, G, u, s)
-        plan.seat_wrench, plan.seat_wrench_com = w_seat, _about_com(fixture, G, w_seat)
+        plan.seat_wrench, plan.seat_wrench_com, held = seat_push(fixture, G, u, s)
         plan.ok = held is None
         plan.reason = held or "already located at the start pose: every pin in its hole, every rest touching"
         plan.plan_s = time.perf_counter() - t0
@@ -212,14 +198,14 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     # a part already partly in (a shaft dropped tilted into the chamfer) is lifted straight out first:
     # the approach below rises along the axis before it turns and moves sideways
     h_top = plan.heights_m[groups[0][0].name]
-    staging = lifted(G, u, h_top + s.lead_m)
+    staging = G.translated((h_top + s.lead_m) * u)
     poses = [start]
     rise = float((staging.p_world - start.p_world) @ u)
     if rise > 0.0:  # lift first: the part never moves sideways lower than the staging height
-        poses.append(Pose(start.R_world_body, start.p_world + rise * u))
+        poses.append(start.translated(rise * u))
     guide = poses[:1]
     for a, b in zip([*poses], [*poses[1:], staging], strict=True):
-        guide += _interpolate(a, b, 4)[1:]
+        guide += [pose_between(a, b, k / 4) for k in range(1, 5)]
     ok, w, why, _, _, _ = _push(fixture, staging, [], u, s)
     plan.stages.append(Stage("", (), "free", guide, w, (), f"approach to the staging pose: {why}"))
     if not ok:
@@ -234,7 +220,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
         nxt = plan.heights_m[groups[k + 1][0].name] if k + 1 < len(groups) else 0.0
         past = max(i.capture_m - i.play_m for i in g) + s.engage_margin_m
         end_h = max(h - past, 0.5 * (h + nxt))
-        end = lifted(G, u, end_h)
+        end = G.translated(end_h * u)
         names = [*engaged, *(i.name for i in g if i.kind != "bore")]
         pin_names = [n for n in names if n in {p.name for p in fixture.pins}] + [i.name for i in g if i.kind == "bore"]
         ok, w, why, touching, wedge, margin = _push(fixture, end, pin_names, u, s)
@@ -258,7 +244,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     # the seating: down to the located pose, the rests (or the bore's bottom) closing together
     rests = [loc.name for loc in fixture.locators] + [f"{b.name}.bottom" for b in fixture.bores]
     pin_names = [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
-    just_above = lifted(G, u, min(s.engage_margin_m, 0.5 * float((prev.p_world - G.p_world) @ u)))
+    just_above = G.translated(min(s.engage_margin_m, 0.5 * float((prev.p_world - G.p_world) @ u)) * u)
     ok, w, why, touching, wedge, margin = _push(fixture, just_above, pin_names, u, s)
     seat = Stage(rests[0], tuple(rests[1:]), "seat", [prev, G], w, touching, f"seat on {', '.join(rests)}: {why}",
                  wedge, margin)  # fmt: skip
@@ -267,9 +253,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
         plan.reason = f"no push seats the part on {', '.join(rests)} without jamming: {why}"
         plan.plan_s = time.perf_counter() - t0
         return plan
-    w_seat, held = seat_push(fixture, G, u, s)
-    plan.seat_wrench = w_seat
-    plan.seat_wrench_com = _about_com(fixture, G, w_seat)
+    plan.seat_wrench, plan.seat_wrench_com, held = seat_push(fixture, G, u, s)
     if held is not None:
         plan.reason = held
         plan.plan_s = time.perf_counter() - t0
@@ -281,12 +265,10 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     return plan
 
 
-def _about_com(fixture: Fixture, pose: Pose, w: FloatArray) -> FloatArray:
-    return shift_wrench(w, pose.p_world, pose.point_world_from_body(fixture.workpiece.com_body))
-
-
-def seat_push(fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings) -> tuple[FloatArray, str | None]:
-    """The seating push at the located pose and why it does not hold the part there (None: it does).
+def seat_push(
+    fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings
+) -> tuple[FloatArray, FloatArray, str | None]:
+    """The seating push at the located pose, about the body origin and about the centre of mass, and why it does not hold the part there (None: it does).
 
     ``seat_press`` weights along ``−u`` through the centre of mass and ``seat_side`` weights toward
     the round pin's contact, along a line through that contact (no turn about the pin: the diamond
@@ -294,23 +276,20 @@ def seat_push(fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings)
     """
     from fixplan.jamming import classify
 
-    wp = fixture.workpiece
+    seat = seat_at(fixture, pose, u)
     weight = fixture.weight_N
-    side, at = seat_side_world(fixture, pose, u)
-    com = pose.point_world_from_body(wp.com_body)
-    F_side = s.seat_side * weight * side
+    com = pose.point_world_from_body(fixture.workpiece.com_body)
+    F_side = s.seat_side * weight * seat.side_world
     F = -s.seat_press * weight * u + F_side
-    w_com = np.concatenate([F, np.cross(at - com, F_side)])
+    w_com = np.concatenate([F, np.cross(seat.at_world - com, F_side)])
     w = shift_wrench(w_com, com, pose.p_world)
-    names = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
-    cs = contact_set(fixture, pose, names).touching(fixture.tolerances.touch_m)
-    touching = sorted({c.owner for c in cs.contacts})
+    touching = sorted({c.owner for c in seat.contacts.contacts})
     if not touching:
-        return w, "nothing touches the part at the located pose: no seat"
+        return w, w_com, "nothing touches the part at the located pose: no seat"
     res = classify(fixture, [w], touching, pose=pose, jobs=1)[0]
     if res.mode != "held":
-        return w, f"the seating push does not hold the part at the located pose: it {res.mode} ({res.reason})"
-    return w, None
+        return w, w_com, f"the seating push does not hold the part at the located pose: it {res.mode} ({res.reason})"
+    return w, w_com, None
 
 
 # -- the plan as the planner's result ---------------------------------------------------------------
@@ -425,8 +404,7 @@ class InsertionRun:
                 k += 1
             f = 0.0 if seg[k] <= 0.0 else min((dist - acc) / seg[k], 1.0)
             a, b = poses[k], poses[k + 1]
-            rel = log_so3(b.R_world_body @ a.R_world_body.T)
-            ref = Pose(exp_so3(f * rel) @ a.R_world_body, a.p_world + f * (b.p_world - a.p_world))
+            ref = pose_between(a, b, f)
             v = np.zeros(6)
             if dist < total and seg[k] > 0.0:
                 v[:3] = self.s.approach_speed_mps * (b.p_world - a.p_world) / seg[k]
@@ -437,7 +415,7 @@ class InsertionRun:
         if h > -self.s.lead_m:
             v[:3] = -self.s.insert_speed_mps * self.u
         h = max(h, -self.s.lead_m)
-        return lifted(self.plan.goal, self.u, h), v, True
+        return self.plan.goal.translated(h * self.u), v, True
 
     def command(self, t: float, pose: Pose, twist: FloatArray, pressed: tuple[str, ...]) -> FloatArray:
         """The push now (about the body origin, world axes)."""
