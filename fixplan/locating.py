@@ -12,6 +12,13 @@ each step solves ``G Δ = −g`` in the least-squares sense and retracts the pos
 pose from far starts — turned starts, a slide towards the locators, Gauss–Newton on the planes
 of the locators' faces, then on the exact gaps — and checks it, or says why there is none
 (docs/fixture-format.md).
+
+Pins and bores locate too. A ``[[pin]]`` enters a hole of the part, a ``[[bore]]`` takes the part
+(a shaft) as its pin: :func:`pin_and_hole` gives the pair at a pose, :func:`insert_contacts` their
+contacts, :func:`engagement` how far the tip has entered its hole, :func:`axis_offsets_m` the
+hole's axis from the pin's, :func:`bottom_gap_m` a shaft's end on its bore's bottom, and
+:func:`seat_at` / :func:`seated` what the part is seated on: what the insertion planner asks of a
+pose, each in one call.
 """
 
 from __future__ import annotations
@@ -310,12 +317,21 @@ def bottom_gap_m(fixture: Fixture, pose: Pose, bore: Bore) -> float:
     return bore.depth_m - (d_end + pin.radius_m * math.sqrt(max(1.0 - c * c, 0.0)))
 
 
+def seat_gaps_m(fixture: Fixture, pose: Pose) -> dict[str, float]:
+    """The gap [m] of every rest and of every bore's bottom (``"<bore>.bottom"``) at ``pose``: what closes as the part seats."""
+    locators = fixture.locators
+    gaps = dict(
+        zip([loc.name for loc in locators], map(float, locator_gaps(fixture.workpiece, pose, locators)), strict=True)
+    )
+    for b in fixture.bores:
+        gaps[f"{b.name}.bottom"] = bottom_gap_m(fixture, pose, b)
+    return gaps
+
+
 def seated(fixture: Fixture, pose: Pose) -> bool:
     """Every rest (and every bore's bottom) touching at ``pose``."""
     tol = fixture.tolerances.touch_m
-    gaps = [float(g) for g in locator_gaps(fixture.workpiece, pose, fixture.locators)]
-    gaps += [bottom_gap_m(fixture, pose, b) for b in fixture.bores]
-    return all(abs(g) <= tol for g in gaps)
+    return all(abs(g) <= tol for g in seat_gaps_m(fixture, pose).values())
 
 
 @dataclass(frozen=True)
@@ -1159,6 +1175,7 @@ __all__ = [
     "located_pose",
     "Seat",
     "seat_at",
+    "seat_gaps_m",
     "seated",
     "GoalResult",
     "GoalSearch",

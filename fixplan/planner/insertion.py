@@ -64,8 +64,8 @@ from fixplan.locating import (
     insertion_axis,
     inserts,
     located_pose,
-    locator_gaps,
     seat_at,
+    seat_gaps_m,
     seated,
 )
 from fixplan.model import Fixture
@@ -659,9 +659,7 @@ def verify_insertion(
     if run.log.outcome != "reached":
         reasons.append(run.log.reason)
         checks.append("executor")
-    gaps = dict(zip(run.rests, map(float, locator_gaps(wp, pose, world.locators)), strict=True))
-    for b in world.bores:
-        gaps[f"{b.name}.bottom"] = bottom_gap_m(world, pose, b)
+    gaps = seat_gaps_m(world, pose)
     final_gap_check(gaps, final_gap_m, checks, reasons)
     for i in run.inserts:
         mouth, tip = axis_offsets_m(world, pose, i)
