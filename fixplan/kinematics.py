@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -91,6 +91,15 @@ class Contact:
         return J
 
 
+def numbered(contacts: Sequence[Contact], owner: str) -> list[Contact]:
+    """The contacts of one owner (a pin, a bore) named ``owner``, ``owner#2`` ...; each carries its owner when there are several."""
+    several = len(contacts) > 1
+    return [
+        replace(c, name=owner if k == 0 else f"{owner}#{k + 1}", locator=owner if several else None)
+        for k, c in enumerate(contacts)
+    ]
+
+
 @dataclass(frozen=True)
 class ContactSet:
     """Contacts at one configuration of the workpiece, with its mass matrix.
@@ -140,6 +149,11 @@ class ContactSet:
             chosen = tuple(c for c in self.contacts if c.name in keep)
         else:
             chosen = tuple(self.contacts[i] for i in self.rows_of(owners))
+        return ContactSet(chosen, self.com_world, self.mass_matrix, self.body_origin_world)
+
+    def touching(self, gap_m: float) -> ContactSet:
+        """The contacts whose gap is at most ``gap_m``, same configuration and mass matrix."""
+        chosen = tuple(c for c in self.contacts if c.gap_m <= gap_m)
         return ContactSet(chosen, self.com_world, self.mass_matrix, self.body_origin_world)
 
     def nearest_of(self, owner: str) -> ContactSet:

@@ -12,11 +12,19 @@ each step solves ``G Δ = −g`` in the least-squares sense and retracts the pos
 pose from far starts — turned starts, a slide towards the locators, Gauss–Newton on the planes
 of the locators' faces, then on the exact gaps — and checks it, or says why there is none
 (docs/fixture-format.md).
+
+Pins and bores locate too. A ``[[pin]]`` enters a hole of the part, a ``[[bore]]`` takes the part
+(a shaft) as its pin: :func:`pin_and_hole` gives the pair at a pose, :func:`insert_contacts` their
+contacts, :func:`engagement` how far the tip has entered its hole, :func:`axis_offsets_m` the
+hole's axis from the pin's, :func:`bottom_gap_m` a shaft's end on its bore's bottom, and
+:func:`seat_at` / :func:`seated` what the part is seated on: what the insertion planner asks of a
+pose, each in one call.
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
@@ -25,8 +33,8 @@ from numpy.typing import NDArray
 
 from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.geometry import Box, Cylinder, Mesh, Polygon, Rectangle, Shape
-from fixplan.geometry.pins import HoleBody, PinBody, pin_hole_contacts
-from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix
+from fixplan.geometry.pins import HoleBody, PinBody, pin_hole_contacts, radial_play_m
+from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix, numbered
 from fixplan.model import (
     Bore,
     ExplicitContact,
@@ -105,37 +113,6 @@ def _hole_body(workpiece: Workpiece, pose: Pose, hole: Hole) -> HoleBody:
     )
 
 
-def _named(raw: Sequence[Contact], owner: str) -> list[Contact]:
-    """Contacts of one pin or bore named ``owner``, ``owner#2`` ... (each carries its owner when there are several)."""
-    several = len(raw) > 1
-    return [
-        replace(c, name=owner if k == 0 else f"{owner}#{k + 1}", locator=owner if several else None)
-        for k, c in enumerate(raw)
-    ]
-
-
-def pin_contacts(workpiece: Workpiece, pose: Pose, pin: Pin) -> list[Contact]:
-    """The contacts of a ``[[pin]]`` with its hole in the part at ``pose`` (:func:`~fixplan.geometry.pins.pin_hole_contacts`).
-
-    The workpiece's material point is the hole's; the normal pushes the part away from the pin.
-    Named ``"<pin>"``, ``"<pin>#2"`` ... (rim, mouth, exit, bottom, those the pose makes possible).
-    """
-    body = PinBody(
-        pin.p_world,
-        pin.axis_world,
-        0.5 * pin.diameter_m,
-        pin.length_m,
-        pin.chamfer_m,
-        pin.land_direction_world,
-        pin.land_width_m,
-    )
-    raw = pin_hole_contacts(body, _hole_body(workpiece, pose, workpiece.hole(pin.hole)))
-    return _named(
-        [Contact(pin.name, c.point_hole_world, c.normal_world, pin.friction, 0.0, c.gap_m, "pin") for c in raw],
-        pin.name,
-    )
-
-
 def peg_body(workpiece: Workpiece, pose: Pose, bore: Bore) -> PinBody:
     """The cylindrical part as a pin entering ``bore``: from its end farther out of the bore to the deeper one."""
     shape = workpiece.shape
@@ -149,30 +126,240 @@ def peg_body(workpiece: Workpiece, pose: Pose, bore: Bore) -> PinBody:
     return PinBody(base, (ends[lead] - base) / shape.length, shape.radius, shape.length)
 
 
-def bore_contacts(workpiece: Workpiece, pose: Pose, bore: Bore) -> list[Contact]:
-    """The contacts of a cylindrical part (a peg) at ``pose`` with a ``[[bore]]`` of the fixture.
-
-    The workpiece's material point is the peg's; the normal pushes the peg away from the bore's
-    wall, edge or bottom. Named ``"<bore>"``, ``"<bore>#2"`` ...
-    """
-    hole = HoleBody(bore.p_world, bore.axis_world, 0.5 * bore.diameter_m, bore.depth_m, bore.chamfer_m, blind=True)
-    raw = pin_hole_contacts(peg_body(workpiece, pose, bore), hole)
-    return _named(
-        [Contact(bore.name, c.point_pin_world, -c.normal_world, bore.friction, 0.0, c.gap_m, "bore") for c in raw],
-        bore.name,
+def pin_and_hole(workpiece: Workpiece, pose: Pose, owner: Pin | Bore) -> tuple[PinBody, HoleBody]:
+    """The pin and the hole of a ``[[pin]]`` (the hole is the part's) or of a ``[[bore]]`` (the part is the pin) at ``pose``."""
+    if isinstance(owner, Bore):
+        bore = HoleBody(owner.p_world, owner.axis_world, 0.5 * owner.diameter_m, owner.depth_m, owner.chamfer_m, True)
+        return peg_body(workpiece, pose, owner), bore
+    pin = PinBody(
+        owner.p_world,
+        owner.axis_world,
+        0.5 * owner.diameter_m,
+        owner.length_m,
+        owner.chamfer_m,
+        owner.land_direction_world,
+        owner.land_width_m,
     )
+    return pin, _hole_body(workpiece, pose, workpiece.hole(owner.hole))
+
+
+def insert_contacts(workpiece: Workpiece, pose: Pose, owner: Pin | Bore) -> list[Contact]:
+    """The contacts of a ``[[pin]]`` with its hole in the part, or of the part (a peg) with a ``[[bore]]``, at ``pose``.
+
+    One pin-in-hole geometry (:func:`~fixplan.geometry.pins.pin_hole_contacts`) on the pair of
+    :func:`pin_and_hole`. The workpiece's material point is the part's (the hole's, or the peg's);
+    the normal pushes the part away from the pin, or from the bore's wall, edge or bottom. Named
+    ``"<owner>"``, ``"<owner>#2"`` ... (rim, mouth, exit, bottom: those the pose makes possible).
+    """
+    pin, hole = pin_and_hole(workpiece, pose, owner)
+    raw = pin_hole_contacts(pin, hole)
+    if isinstance(owner, Bore):  # the part is the pin
+        found = [
+            Contact(owner.name, c.point_pin_world, -c.normal_world, owner.friction, 0.0, c.gap_m, "bore") for c in raw
+        ]
+    else:
+        found = [
+            Contact(owner.name, c.point_hole_world, c.normal_world, owner.friction, 0.0, c.gap_m, "pin") for c in raw
+        ]
+    return numbered(found, owner.name)
 
 
 def cylinder_contacts(fixture: Fixture, pose: Pose) -> list[Contact]:
     """Every contact of the fixture's pins and bores at ``pose`` (touching or not), pin by pin."""
-    wp = fixture.workpiece
-    out = [c for pin in fixture.pins for c in pin_contacts(wp, pose, pin)]
-    return out + [c for bore in fixture.bores for c in bore_contacts(wp, pose, bore)]
+    owners: list[Pin | Bore] = [*fixture.pins, *fixture.bores]
+    return [c for owner in owners for c in insert_contacts(fixture.workpiece, pose, owner)]
 
 
 def locator_gaps(workpiece: Workpiece, pose: Pose, locators: Sequence[Locator]) -> FloatArray:
     """Signed gaps [m] of the locators at ``pose`` (negative: penetration)."""
     return np.array([locator_contact(workpiece, pose, loc).gap_m for loc in locators])
+
+
+# -- pins and bores: how far each has entered ---------------------------------------------------------
+@dataclass(frozen=True)
+class Insert:
+    """One thing that enters a hole: a pin in the part's hole, or the part (a shaft) in a bore."""
+
+    name: str  # the pin's or the bore's name: the state element once engaged
+    hole: str  # the hole's name (a bore: its own)
+    kind: str  # "round", "diamond" or "bore"
+    play_m: float  # radial play (D − d)/2
+    capture_m: float  # play + both chamfers: the offset a chamfer still guides into the hole
+    land_direction_world: FloatArray | None = None  # a diamond pin: the one direction it locates along
+
+
+def inserts(fixture: Fixture) -> list[Insert]:
+    """The fixture's pins (round ones first) and bores as :class:`Insert`."""
+    wp = fixture.workpiece
+    out = []
+    for pin in sorted(fixture.pins, key=lambda p: (p.kind != "round", p.name)):
+        hole = wp.hole(pin.hole)
+        play = radial_play_m(hole.diameter_m, pin.diameter_m)
+        out.append(
+            Insert(pin.name, hole.name, pin.kind, play, play + hole.chamfer_m + pin.chamfer_m, pin.land_direction_world)
+        )
+    for bore in fixture.bores:
+        r = float(getattr(wp.shape, "radius", 0.0))
+        play = 0.5 * bore.diameter_m - r
+        out.append(Insert(bore.name, bore.name, "bore", play, play + bore.chamfer_m))
+    return out
+
+
+def _pair(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[PinBody, HoleBody]:
+    """The pin and the hole of ``ins`` at ``pose`` (a bore: the part as the pin)."""
+    owners: tuple[Pin | Bore, ...] = fixture.bores if ins.kind == "bore" else fixture.pins
+    return pin_and_hole(fixture.workpiece, pose, next(o for o in owners if o.name == ins.name))
+
+
+@dataclass(frozen=True)
+class Engagement:
+    """Where a pin's tip is with respect to its hole's mouth at a pose."""
+
+    depth_m: float  # the tip past the mouth, along the hole's axis into it (< 0: still outside)
+    offset_m: float  # the tip's centre from the hole's axis
+    capture_m: float
+
+    @property
+    def engaged(self) -> bool:
+        """The tip inside the mouth: past it, within the capture of the hole's axis."""
+        return self.depth_m > 0.0 and self.offset_m <= self.capture_m
+
+
+def engagement(fixture: Fixture, pose: Pose, ins: Insert) -> Engagement:
+    """The tip's depth in its hole and its offset from the hole's axis at ``pose``."""
+    pin, hole = _pair(fixture, pose, ins)
+    tip = pin.base_world + pin.length_m * pin.axis_world
+    r = tip - hole.mouth_world
+    along = float(r @ hole.axis_world)
+    return Engagement(-along, float(np.linalg.norm(r - along * hole.axis_world)), ins.capture_m)
+
+
+def axis_offsets_m(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[float, float]:
+    """The hole's axis from the pin's at the mouth and at the tip, in the directions the pin locates.
+
+    A round pin (or a bore) locates every direction normal to its axis, a diamond pin only along its
+    lands: its offset across them is free by design.
+    """
+    pin, hole = _pair(fixture, pose, ins)
+    a = pin.axis_world
+    out = []
+    # the pin's axis at the mouth's level and at its tip
+    s_mouth = float((hole.mouth_world - pin.base_world) @ a)
+    for s in (min(max(s_mouth, 0.0), pin.length_m), pin.length_m):
+        q = pin.base_world + s * a
+        r = q - hole.mouth_world
+        r = r - float(r @ hole.axis_world) * hole.axis_world
+        if ins.land_direction_world is not None:
+            out.append(abs(float(r @ ins.land_direction_world)))
+        else:
+            out.append(float(np.linalg.norm(r)))
+    return out[0], out[1]
+
+
+def insertion_axis(fixture: Fixture) -> FloatArray:
+    """The unit axis the part is inserted against (pins: their common axis; a bore: its axis).
+
+    :class:`InputError` (one line) when the pins' axes differ: no single straight insertion.
+    """
+    named = [(f"pin.{p.name}", p.axis_world) for p in fixture.pins] + [
+        (f"bore.{b.name}", b.axis_world) for b in fixture.bores
+    ]
+    u = np.asarray(named[0][1], dtype=float)
+    tol = DEFAULT.pins.axis_angle_rad
+    for key, axis in named:
+        if math.acos(min(1.0, float(axis @ u))) > tol:
+            raise InputError(
+                f"{fixture.source}: {key}.axis: the pins' axes differ by more than {tol:g} rad "
+                "(expected parallel pins: the part is inserted along one axis)"
+            )
+    return u
+
+
+def located_pose(fixture: Fixture) -> Pose:
+    """The located pose: the file's (pins), or a shaft's in its bore (coaxial, its leading end on the bottom).
+
+    A bore alone is no full fixture of locators, and the loader takes a goal only for those: the
+    shaft is turned the least from its start so that its axis lies along the bore's, its end that
+    leads into the bore on the bottom ``depth_m`` below the mouth.
+    """
+    if fixture.goal_pose is not None:
+        return fixture.goal_pose
+    if not fixture.bores or fixture.pins:
+        raise InputError(f"{fixture.source}: workpiece.goal: a fixture with pins needs its located pose")
+    bore = fixture.bores[0]
+    shape = fixture.workpiece.shape
+    u = np.asarray(bore.axis_world, dtype=float)
+    R0 = fixture.start.R_world_body
+    z = R0[:, 2]
+    lead = -1.0 if float(z @ u) >= 0.0 else 1.0  # the body end along lead·z goes in first (it points down the bore)
+    want = -lead * u  # where body z must point
+    axis = np.cross(z, want)
+    s_, c_ = float(np.linalg.norm(axis)), float(z @ want)
+    turn = np.zeros(3) if s_ == 0.0 else axis / s_ * math.atan2(s_, c_)
+    R = exp_so3(turn) @ R0
+    half = 0.5 * float(getattr(shape, "length", 0.0))
+    centre = bore.p_world - bore.depth_m * u + half * u
+    return Pose(R, centre)
+
+
+def bottom_gap_m(fixture: Fixture, pose: Pose, bore: Bore) -> float:
+    """The gap of the shaft's leading end face on the bore's (flat) bottom, in closed form.
+
+    The face's deepest point lies ``r sin φ`` beyond its centre along the bore's axis (``φ`` the
+    angle between the shaft's and the bore's axes): gap ``depth − (d_E + r sin φ)``, ``d_E`` the
+    centre's depth below the mouth.
+    """
+    pin = peg_body(fixture.workpiece, pose, bore)
+    u = np.asarray(bore.axis_world, dtype=float)
+    end = pin.base_world + pin.length_m * pin.axis_world
+    d_end = float((bore.p_world - end) @ u)
+    c = min(abs(float(pin.axis_world @ u)), 1.0)
+    return bore.depth_m - (d_end + pin.radius_m * math.sqrt(max(1.0 - c * c, 0.0)))
+
+
+def seat_gaps_m(fixture: Fixture, pose: Pose) -> dict[str, float]:
+    """The gap [m] of every rest and of every bore's bottom (``"<bore>.bottom"``) at ``pose``: what closes as the part seats."""
+    locators = fixture.locators
+    gaps = dict(
+        zip([loc.name for loc in locators], map(float, locator_gaps(fixture.workpiece, pose, locators)), strict=True)
+    )
+    for b in fixture.bores:
+        gaps[f"{b.name}.bottom"] = bottom_gap_m(fixture, pose, b)
+    return gaps
+
+
+def seated(fixture: Fixture, pose: Pose) -> bool:
+    """Every rest (and every bore's bottom) touching at ``pose``."""
+    tol = fixture.tolerances.touch_m
+    return all(abs(g) <= tol for g in seat_gaps_m(fixture, pose).values())
+
+
+@dataclass(frozen=True)
+class Seat:
+    """What the part sits on at a pose, and the side it is seated toward."""
+
+    contacts: ContactSet  # every rest, pin and bore touching
+    side_world: FloatArray  # unit, normal to the insertion axis, toward the round pin's contact; zero when none touches
+    at_world: FloatArray  # where it is pressed: the mean of those contacts' points (the centre of mass when none)
+
+
+def seat_at(fixture: Fixture, pose: Pose, u: FloatArray) -> Seat:
+    """The rests', pins' and bores' touching contacts at ``pose``, and the side the round pin (or bore) seats the part toward.
+
+    The side is the sum of the first round pin's touching contact normals across ``u`` (they push
+    the part away from the pin), reversed; it is pressed at the mean of those contacts' points.
+    """
+    round_first = [i.name for i in inserts(fixture) if i.kind != "diamond"]
+    names = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
+    cs = contact_set(fixture, pose, names).touching(fixture.tolerances.touch_m)
+    for owner in round_first:
+        side = [c for c in cs.contacts if c.owner == owner and abs(float(c.normal_world @ u)) < 0.5]
+        n = sum((c.normal_world for c in side), np.zeros(3))
+        n = n - float(n @ u) * u
+        norm = float(np.linalg.norm(n))
+        if norm > 0.0:
+            return Seat(cs, -n / norm, np.mean([c.point_world for c in side], axis=0))
+    return Seat(cs, np.zeros(3), pose.point_world_from_body(fixture.workpiece.com_body))
 
 
 def start_state(fixture: Fixture, kinds: Sequence[str] = ("locator",)) -> frozenset[str]:
@@ -238,10 +425,8 @@ def contact_set(
             for n in names:
                 if n in explicits:
                     chosen.append(explicit(explicits[n]))
-                elif n in pins:
-                    chosen += pin_contacts(wp, pose, pins[n])
-                elif n in bores:
-                    chosen += bore_contacts(wp, pose, bores[n])
+                elif n in pins or n in bores:
+                    chosen += insert_contacts(wp, pose, pins[n] if n in pins else bores[n])
                 else:
                     chosen += locator_contacts(wp, pose, locators[n])
         elif isinstance(wp.shape, Mesh):  # a named locator brings every one of its contacts
@@ -980,6 +1165,18 @@ def with_goal(fixture: Fixture) -> Fixture:
 
 
 __all__ = [
+    "Engagement",
+    "Insert",
+    "axis_offsets_m",
+    "bottom_gap_m",
+    "engagement",
+    "insertion_axis",
+    "inserts",
+    "located_pose",
+    "Seat",
+    "seat_at",
+    "seat_gaps_m",
+    "seated",
     "GoalResult",
     "GoalSearch",
     "contact_set",
@@ -990,8 +1187,8 @@ __all__ = [
     "locator_contacts",
     "locator_gaps",
     "peg_body",
-    "pin_contacts",
-    "bore_contacts",
+    "insert_contacts",
+    "pin_and_hole",
     "cylinder_contacts",
     "named_faces",
     "no_pose_proof",

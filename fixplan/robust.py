@@ -187,7 +187,8 @@ def draw_pin_world(
     guides the part to the nominal pins (a start touching them moves with them); each pin's, bore's and rest's μ times ``1 + u``, ``u``
     uniform in ``±mu_spread``; the operator's noise. The start stays.
     """
-    from fixplan.planner.insertion import insertion_axis, shifted_world
+    from fixplan.locating import insertion_axis
+    from fixplan.planner.insertion import shifted_world
 
     rng = np.random.default_rng([settings.seed, sample])
     u = insertion_axis(fixture)

@@ -254,6 +254,10 @@ class Pose:
     def point_body_from_world(self, p_world: ArrayLike) -> FloatArray:
         return self.R_world_body.T @ (np.asarray(p_world, dtype=float) - self.p_world)
 
+    def translated(self, d_world: ArrayLike) -> Pose:
+        """The same orientation, the body origin moved by ``d_world``."""
+        return Pose(self.R_world_body, self.p_world + np.asarray(d_world, dtype=float))
+
     def retract(self, twist: ArrayLike, com_body: ArrayLike) -> Pose:
         """Move by a world-axes twist ``(v, ω)`` of the centre of mass (displacement, not rate).
 
@@ -287,3 +291,9 @@ class Pose:
         else:
             ang = abs((other.angle_rad - self.angle_rad + np.pi) % (2 * np.pi) - np.pi)
         return dp, ang
+
+
+def pose_between(a: Pose, b: Pose, f: float) -> Pose:
+    """The pose a fraction ``f`` of the way from ``a`` to ``b`` (3D): the origin on the line, the turn about one axis."""
+    rel = log_so3(b.R_world_body @ a.R_world_body.T)
+    return Pose(exp_so3(f * rel) @ a.R_world_body, a.p_world + f * (b.p_world - a.p_world))

@@ -17,16 +17,8 @@ from conftest import PROBLEMS, run_cli
 
 import fixplan
 from fixplan.errors import InputError
-from fixplan.planner.insertion import (
-    axis_offsets_m,
-    engagement,
-    inserts,
-    lifted,
-    located_pose,
-    plan_insertion,
-    shifted_world,
-    verify_insertion,
-)
+from fixplan.locating import axis_offsets_m, engagement, inserts, located_pose
+from fixplan.planner.insertion import plan_insertion, shifted_world, verify_insertion
 from fixplan.planner.solve import solve
 
 HOUSING = PROBLEMS / "housing-2-pins.toml"
@@ -49,7 +41,7 @@ def test_engagement_depth_and_offset_in_closed_form() -> None:
     assert p1.play_m == pytest.approx(1e-4, abs=1e-15)  # (D − d)/2 = (10 − 9.8)/2 mm
     assert p1.capture_m == pytest.approx(1e-4 + 5e-4 + 1e-3, abs=1e-15)  # play + both chamfers
     for h in (0.0, 0.004, 0.0115, 0.013):
-        e1, e2 = engagement(fx, lifted(G, u, h), p1), engagement(fx, lifted(G, u, h), p2)
+        e1, e2 = engagement(fx, G.translated(h * u), p1), engagement(fx, G.translated(h * u), p2)
         assert e1.depth_m == pytest.approx(0.012 - h, abs=1e-12)
         assert e2.depth_m == pytest.approx(0.010 - h, abs=1e-12)
         assert e1.offset_m == pytest.approx(1e-4, abs=1e-12) and e2.offset_m == pytest.approx(0.0, abs=1e-12)

@@ -12,6 +12,7 @@ from fixplan.spatial import (
     log_so3,
     matrix_from_quaternion_wxyz,
     matrix_from_rpy,
+    pose_between,
     quaternion_wxyz_from_matrix,
     rpy_from_matrix,
     shift_twist,
@@ -152,3 +153,25 @@ def test_compiled_shifts_match_numpy(rng):
         w2, t2, r2 = rng.normal(size=3), rng.normal(size=3), rng.normal(size=2)
         assert kernels.shifted_moment2(*w2, *r2) == pytest.approx(shift_wrench_by(w2, r2)[2], abs=1e-14)
         assert np.allclose(kernels.shifted_velocity2(*t2, *r2), shift_twist_by(t2, r2)[:2], rtol=0, atol=1e-14)
+
+
+def test_pose_between_runs_the_line_and_turns_about_one_axis() -> None:
+    """From a to b: the ends are a and b; at f the origin is a + f (b − a) and the turn from a is f times a's turn to b."""
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        a = Pose(exp_so3(rng.normal(size=3)), rng.normal(size=3))
+        b = Pose(exp_so3(0.8 * rng.normal(size=3)) @ a.R_world_body, rng.normal(size=3))
+        turn = log_so3(b.R_world_body @ a.R_world_body.T)
+        for f in (0.0, 0.25, 0.5, 1.0):
+            q = pose_between(a, b, f)
+            np.testing.assert_allclose(q.p_world, a.p_world + f * (b.p_world - a.p_world), atol=1e-12)
+            np.testing.assert_allclose(log_so3(q.R_world_body @ a.R_world_body.T), f * turn, atol=1e-9)
+        np.testing.assert_allclose(pose_between(a, b, 1.0).R_world_body, b.R_world_body, atol=1e-12)
+
+
+def test_translated_keeps_the_orientation() -> None:
+    a = Pose(exp_so3([0.1, -0.2, 0.3]), [1.0, 2.0, 3.0])
+    d = np.array([0.0, 0.0, 0.004])
+    moved = a.translated(d)
+    np.testing.assert_array_equal(moved.R_world_body, a.R_world_body)
+    np.testing.assert_allclose(moved.p_world - a.p_world, d, atol=1e-15)

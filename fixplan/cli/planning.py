@@ -427,7 +427,7 @@ def _pose_sigma(given: str | None, fixture: Any) -> str:
     if given is not None:
         return given
     if fixture.has_pins:  # pins: three times the largest radial play (errors beyond the clearance), 0.1 degree
-        from fixplan.planner.insertion import inserts
+        from fixplan.locating import inserts
 
         return f"{3.0 * max(i.play_m for i in inserts(fixture))!r},0.1"
     robot = fixture.robot

@@ -3,7 +3,7 @@
 The contact-state graph of a pin fixture has two kinds of elements: a rest locator pressed (as
 for every fixture), and a pin *engaged*: its tip past its hole's mouth (along the hole's axis) with
 the tip's centre within the capture ``(D − d)/2 + c_hole + c_pin`` of the hole's axis, so that the
-pin can only go on into the hole (:func:`engagement`). A bore is the same with the part as the
+pin can only go on into the hole (:func:`~fixplan.locating.engagement`). A bore is the same with the part as the
 pin: the shaft's leading end past the bore's mouth, then its end face on the bore's bottom
 (``"<bore>.bottom"``).
 
@@ -48,7 +48,6 @@ and rests are displaced (pose errors larger than the play): the chamfers must ca
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -57,155 +56,26 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.contact_state import Debounce, State, format_state
-from fixplan.errors import InputError
-from fixplan.geometry.pins import HoleBody, PinBody, radial_play_m
-from fixplan.kinematics import ContactSet
-from fixplan.locating import _hole_body, contact_set, locator_gaps, peg_body
-from fixplan.model import Bore, Fixture
+from fixplan.locating import (
+    Insert,
+    axis_offsets_m,
+    bottom_gap_m,
+    contact_set,
+    engagement,
+    insertion_axis,
+    inserts,
+    located_pose,
+    seat_at,
+    seat_gaps_m,
+    seated,
+)
+from fixplan.model import Fixture
 from fixplan.planner.execute import ExecutionLog, ExecutionNoise
 from fixplan.planner.plan_types import Verification
 from fixplan.settings import DEFAULT, HAPTIC, InsertionSettings, Settings
-from fixplan.spatial import Pose, exp_so3, log_so3, shift_wrench
+from fixplan.spatial import Pose, exp_so3, log_so3, pose_between, shift_wrench
 
 FloatArray = NDArray[np.float64]
-
-
-# -- the geometry of engagement --------------------------------------------------------------------
-@dataclass(frozen=True)
-class Insert:
-    """One thing that enters a hole: a pin in the part's hole, or the part (a shaft) in a bore."""
-
-    name: str  # the pin's or the bore's name: the state element once engaged
-    hole: str  # the hole's name (a bore: its own)
-    kind: str  # "round", "diamond" or "bore"
-    play_m: float  # radial play (D − d)/2
-    capture_m: float  # play + both chamfers: the offset a chamfer still guides into the hole
-    land_direction_world: FloatArray | None = None  # a diamond pin: the one direction it locates along
-
-
-def inserts(fixture: Fixture) -> list[Insert]:
-    """The fixture's pins (round ones first) and bores as :class:`Insert`."""
-    wp = fixture.workpiece
-    out = []
-    for pin in sorted(fixture.pins, key=lambda p: (p.kind != "round", p.name)):
-        hole = wp.hole(pin.hole)
-        play = radial_play_m(hole.diameter_m, pin.diameter_m)
-        out.append(
-            Insert(pin.name, hole.name, pin.kind, play, play + hole.chamfer_m + pin.chamfer_m, pin.land_direction_world)
-        )
-    for bore in fixture.bores:
-        r = float(getattr(wp.shape, "radius", 0.0))
-        play = 0.5 * bore.diameter_m - r
-        out.append(Insert(bore.name, bore.name, "bore", play, play + bore.chamfer_m))
-    return out
-
-
-def _pair(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[PinBody, HoleBody]:
-    """The pin and the hole of ``ins`` at ``pose`` (a bore: the part as the pin)."""
-    wp = fixture.workpiece
-    if ins.kind == "bore":
-        bore = next(b for b in fixture.bores if b.name == ins.name)
-        hole = HoleBody(bore.p_world, bore.axis_world, 0.5 * bore.diameter_m, bore.depth_m, bore.chamfer_m, True)
-        return peg_body(wp, pose, bore), hole
-    pin = next(p for p in fixture.pins if p.name == ins.name)
-    body = PinBody(pin.p_world, pin.axis_world, 0.5 * pin.diameter_m, pin.length_m, pin.chamfer_m)
-    return body, _hole_body(wp, pose, wp.hole(pin.hole))
-
-
-@dataclass(frozen=True)
-class Engagement:
-    """Where a pin's tip is with respect to its hole's mouth at a pose."""
-
-    depth_m: float  # the tip past the mouth, along the hole's axis into it (< 0: still outside)
-    offset_m: float  # the tip's centre from the hole's axis
-    capture_m: float
-
-    @property
-    def engaged(self) -> bool:
-        """The tip inside the mouth: past it, within the capture of the hole's axis."""
-        return self.depth_m > 0.0 and self.offset_m <= self.capture_m
-
-
-def engagement(fixture: Fixture, pose: Pose, ins: Insert) -> Engagement:
-    """The tip's depth in its hole and its offset from the hole's axis at ``pose``."""
-    pin, hole = _pair(fixture, pose, ins)
-    tip = pin.base_world + pin.length_m * pin.axis_world
-    r = tip - hole.mouth_world
-    along = float(r @ hole.axis_world)
-    return Engagement(-along, float(np.linalg.norm(r - along * hole.axis_world)), ins.capture_m)
-
-
-def axis_offsets_m(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[float, float]:
-    """The hole's axis from the pin's at the mouth and at the tip, in the directions the pin locates.
-
-    A round pin (or a bore) locates every direction normal to its axis, a diamond pin only along its
-    lands: its offset across them is free by design.
-    """
-    pin, hole = _pair(fixture, pose, ins)
-    a = pin.axis_world
-    out = []
-    # the pin's axis at the mouth's level and at its tip
-    s_mouth = float((hole.mouth_world - pin.base_world) @ a)
-    for s in (min(max(s_mouth, 0.0), pin.length_m), pin.length_m):
-        q = pin.base_world + s * a
-        r = q - hole.mouth_world
-        r = r - float(r @ hole.axis_world) * hole.axis_world
-        if ins.land_direction_world is not None:
-            out.append(abs(float(r @ ins.land_direction_world)))
-        else:
-            out.append(float(np.linalg.norm(r)))
-    return out[0], out[1]
-
-
-def insertion_axis(fixture: Fixture) -> FloatArray:
-    """The unit axis the part is inserted against (pins: their common axis; a bore: its axis).
-
-    :class:`InputError` (one line) when the pins' axes differ: no single straight insertion.
-    """
-    named = [(f"pin.{p.name}", p.axis_world) for p in fixture.pins] + [
-        (f"bore.{b.name}", b.axis_world) for b in fixture.bores
-    ]
-    u = np.asarray(named[0][1], dtype=float)
-    tol = DEFAULT.pins.axis_angle_rad
-    for key, axis in named:
-        if math.acos(min(1.0, float(axis @ u))) > tol:
-            raise InputError(
-                f"{fixture.source}: {key}.axis: the pins' axes differ by more than {tol:g} rad "
-                "(expected parallel pins: the part is inserted along one axis)"
-            )
-    return u
-
-
-def located_pose(fixture: Fixture) -> Pose:
-    """The located pose: the file's (pins), or a shaft's in its bore (coaxial, its leading end on the bottom).
-
-    A bore alone is no full fixture of locators, and the loader takes a goal only for those: the
-    shaft is turned the least from its start so that its axis lies along the bore's, its end that
-    leads into the bore on the bottom ``depth_m`` below the mouth.
-    """
-    if fixture.goal_pose is not None:
-        return fixture.goal_pose
-    if not fixture.bores or fixture.pins:
-        raise InputError(f"{fixture.source}: workpiece.goal: a fixture with pins needs its located pose")
-    bore = fixture.bores[0]
-    shape = fixture.workpiece.shape
-    u = np.asarray(bore.axis_world, dtype=float)
-    R0 = fixture.start.R_world_body
-    z = R0[:, 2]
-    lead = -1.0 if float(z @ u) >= 0.0 else 1.0  # the body end along lead·z goes in first (it points down the bore)
-    want = -lead * u  # where body z must point
-    axis = np.cross(z, want)
-    s_, c_ = float(np.linalg.norm(axis)), float(z @ want)
-    turn = np.zeros(3) if s_ == 0.0 else axis / s_ * math.atan2(s_, c_)
-    R = exp_so3(turn) @ R0
-    half = 0.5 * float(getattr(shape, "length", 0.0))
-    centre = bore.p_world - bore.depth_m * u + half * u
-    return Pose(R, centre)
-
-
-def lifted(pose: Pose, u: FloatArray, h_m: float) -> Pose:
-    """``pose`` moved by ``h_m`` along ``u``."""
-    return Pose(pose.R_world_body, pose.p_world + h_m * u)
 
 
 # -- the plan --------------------------------------------------------------------------------------
@@ -260,11 +130,6 @@ def goal_state(fixture: Fixture) -> State:
     return frozenset(names)
 
 
-def _touching(cs: ContactSet, tol_m: float) -> ContactSet:
-    keep = tuple(c for c in cs.contacts if c.gap_m <= tol_m)
-    return ContactSet(keep, cs.com_world, cs.mass_matrix, cs.body_origin_world)
-
-
 def _push(fixture: Fixture, pose: Pose, names: list[str], u: FloatArray, s: InsertionSettings) -> tuple[
     bool, FloatArray, str, tuple[str, ...], float | None, float | None
 ]:  # fmt: skip
@@ -277,24 +142,16 @@ def _push(fixture: Fixture, pose: Pose, names: list[str], u: FloatArray, s: Inse
     from fixplan.jamming.wedge import wedge_force
     from fixplan.planner.segments import free_wrench
 
-    cs = _touching(contact_set(fixture, pose, names), fixture.tolerances.touch_m) if names else None
+    cs = contact_set(fixture, pose, names).touching(fixture.tolerances.touch_m)
     a = np.concatenate([-s.push_accel_mps2 * u, np.zeros(3)])
-    if cs is None or len(cs) == 0:
-        ok, w, why = free_wrench(fixture, pose, a, contact_set(fixture, pose, []).mass_matrix)
+    if len(cs) == 0:
+        ok, w, why = free_wrench(fixture, pose, a, cs.mass_matrix)
         return ok, w, why, (), None, None
     wedge = wedge_force(cs) if len(cs) >= 2 else None
     weight = fixture.weight_N
     r = search_wrench_in(cs, a, fixture, objective="effort", min_margin_N=s.seat_side * weight, confirm=True)
     w = r.wrench if r.wrench is not None else np.full(fixture.ndof, np.nan)
     return r.found, w, r.reason, tuple(c.name for c in cs.contacts), wedge, r.margin_N
-
-
-def _interpolate(a: Pose, b: Pose, n: int) -> list[Pose]:
-    """``n + 1`` poses from ``a`` to ``b``: the position on the line, the rotation about one axis."""
-    rel = log_so3(b.R_world_body @ a.R_world_body.T)
-    return [
-        Pose(exp_so3(k / n * rel) @ a.R_world_body, a.p_world + k / n * (b.p_world - a.p_world)) for k in range(n + 1)
-    ]
 
 
 def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionPlan:
@@ -330,11 +187,10 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     # the start: above every tip (nothing engaged), or the plan cannot begin with the approach
     start = fixture.start
     inside = [i for i in ins if engagement(fixture, start, i).engaged]
-    if inside and len(inside) == len(ins) and _seated(fixture, start, u):
+    if inside and len(inside) == len(ins) and seated(fixture, start):
         # already located: nothing to insert; the run only holds the part with the seating push
         plan.start_state = goal_state(fixture)
-        w_seat, held = seat_push(fixture, G, u, s)
-        plan.seat_wrench, plan.seat_wrench_com = w_seat, _about_com(fixture, G, w_seat)
+        plan.seat_wrench, plan.seat_wrench_com, held = seat_push(fixture, G, u, s)
         plan.ok = held is None
         plan.reason = held or "already located at the start pose: every pin in its hole, every rest touching"
         plan.plan_s = time.perf_counter() - t0
@@ -342,14 +198,14 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     # a part already partly in (a shaft dropped tilted into the chamfer) is lifted straight out first:
     # the approach below rises along the axis before it turns and moves sideways
     h_top = plan.heights_m[groups[0][0].name]
-    staging = lifted(G, u, h_top + s.lead_m)
+    staging = G.translated((h_top + s.lead_m) * u)
     poses = [start]
     rise = float((staging.p_world - start.p_world) @ u)
     if rise > 0.0:  # lift first: the part never moves sideways lower than the staging height
-        poses.append(Pose(start.R_world_body, start.p_world + rise * u))
+        poses.append(start.translated(rise * u))
     guide = poses[:1]
     for a, b in zip([*poses], [*poses[1:], staging], strict=True):
-        guide += _interpolate(a, b, 4)[1:]
+        guide += [pose_between(a, b, k / 4) for k in range(1, 5)]
     ok, w, why, _, _, _ = _push(fixture, staging, [], u, s)
     plan.stages.append(Stage("", (), "free", guide, w, (), f"approach to the staging pose: {why}"))
     if not ok:
@@ -364,7 +220,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
         nxt = plan.heights_m[groups[k + 1][0].name] if k + 1 < len(groups) else 0.0
         past = max(i.capture_m - i.play_m for i in g) + s.engage_margin_m
         end_h = max(h - past, 0.5 * (h + nxt))
-        end = lifted(G, u, end_h)
+        end = G.translated(end_h * u)
         names = [*engaged, *(i.name for i in g if i.kind != "bore")]
         pin_names = [n for n in names if n in {p.name for p in fixture.pins}] + [i.name for i in g if i.kind == "bore"]
         ok, w, why, touching, wedge, margin = _push(fixture, end, pin_names, u, s)
@@ -388,7 +244,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     # the seating: down to the located pose, the rests (or the bore's bottom) closing together
     rests = [loc.name for loc in fixture.locators] + [f"{b.name}.bottom" for b in fixture.bores]
     pin_names = [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
-    just_above = lifted(G, u, min(s.engage_margin_m, 0.5 * float((prev.p_world - G.p_world) @ u)))
+    just_above = G.translated(min(s.engage_margin_m, 0.5 * float((prev.p_world - G.p_world) @ u)) * u)
     ok, w, why, touching, wedge, margin = _push(fixture, just_above, pin_names, u, s)
     seat = Stage(rests[0], tuple(rests[1:]), "seat", [prev, G], w, touching, f"seat on {', '.join(rests)}: {why}",
                  wedge, margin)  # fmt: skip
@@ -397,9 +253,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
         plan.reason = f"no push seats the part on {', '.join(rests)} without jamming: {why}"
         plan.plan_s = time.perf_counter() - t0
         return plan
-    w_seat, held = seat_push(fixture, G, u, s)
-    plan.seat_wrench = w_seat
-    plan.seat_wrench_com = _about_com(fixture, G, w_seat)
+    plan.seat_wrench, plan.seat_wrench_com, held = seat_push(fixture, G, u, s)
     if held is not None:
         plan.reason = held
         plan.plan_s = time.perf_counter() - t0
@@ -411,47 +265,10 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     return plan
 
 
-def _about_com(fixture: Fixture, pose: Pose, w: FloatArray) -> FloatArray:
-    return shift_wrench(w, pose.p_world, pose.point_world_from_body(fixture.workpiece.com_body))
-
-
-def _seated(fixture: Fixture, pose: Pose, u: FloatArray) -> bool:
-    """Every rest (and every bore's bottom) touching at ``pose``."""
-    tol = fixture.tolerances.touch_m
-    gaps = [float(g) for g in locator_gaps(fixture.workpiece, pose, fixture.locators)]
-    gaps += [bottom_gap_m(fixture, pose, b) for b in fixture.bores]
-    return all(abs(g) <= tol for g in gaps)
-
-
-def seat_side_world(fixture: Fixture, pose: Pose, u: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """The unit direction normal to ``u`` the part is seated toward, and where it is pressed: the round pin's (or bore's) contact.
-
-    The sum of the first round pin's touching contact normals at ``pose`` (they push the part away
-    from the pin), reversed, and the mean of those contacts' points; zero direction when none touches.
-    """
-    from fixplan.locating import bore_contacts, pin_contacts
-
-    wp = fixture.workpiece
-    tol = fixture.tolerances.touch_m
-    for ins in inserts(fixture):
-        if ins.kind == "diamond":
-            continue
-        if ins.kind == "bore":
-            bore = next(b for b in fixture.bores if b.name == ins.name)
-            cs = bore_contacts(wp, pose, bore)
-        else:
-            cs = pin_contacts(wp, pose, next(p for p in fixture.pins if p.name == ins.name))
-        side = [c for c in cs if c.gap_m <= tol and abs(float(c.normal_world @ u)) < 0.5]
-        n = sum((c.normal_world for c in side), np.zeros(3))
-        n = n - float(n @ u) * u
-        norm = float(np.linalg.norm(n))
-        if norm > 0.0:
-            return -n / norm, np.mean([c.point_world for c in side], axis=0)
-    return np.zeros(3), pose.point_world_from_body(wp.com_body)
-
-
-def seat_push(fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings) -> tuple[FloatArray, str | None]:
-    """The seating push at the located pose and why it does not hold the part there (None: it does).
+def seat_push(
+    fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings
+) -> tuple[FloatArray, FloatArray, str | None]:
+    """The seating push at the located pose, about the body origin and about the centre of mass, and why it does not hold the part there (None: it does).
 
     ``seat_press`` weights along ``−u`` through the centre of mass and ``seat_side`` weights toward
     the round pin's contact, along a line through that contact (no turn about the pin: the diamond
@@ -459,23 +276,20 @@ def seat_push(fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings)
     """
     from fixplan.jamming import classify
 
-    wp = fixture.workpiece
+    seat = seat_at(fixture, pose, u)
     weight = fixture.weight_N
-    side, at = seat_side_world(fixture, pose, u)
-    com = pose.point_world_from_body(wp.com_body)
-    F_side = s.seat_side * weight * side
+    com = pose.point_world_from_body(fixture.workpiece.com_body)
+    F_side = s.seat_side * weight * seat.side_world
     F = -s.seat_press * weight * u + F_side
-    w_com = np.concatenate([F, np.cross(at - com, F_side)])
+    w_com = np.concatenate([F, np.cross(seat.at_world - com, F_side)])
     w = shift_wrench(w_com, com, pose.p_world)
-    names = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
-    cs = _touching(contact_set(fixture, pose, names), fixture.tolerances.touch_m)
-    touching = sorted({c.owner for c in cs.contacts})
+    touching = sorted({c.owner for c in seat.contacts.contacts})
     if not touching:
-        return w, "nothing touches the part at the located pose: no seat"
+        return w, w_com, "nothing touches the part at the located pose: no seat"
     res = classify(fixture, [w], touching, pose=pose, jobs=1)[0]
     if res.mode != "held":
-        return w, f"the seating push does not hold the part at the located pose: it {res.mode} ({res.reason})"
-    return w, None
+        return w, w_com, f"the seating push does not hold the part at the located pose: it {res.mode} ({res.reason})"
+    return w, w_com, None
 
 
 # -- the plan as the planner's result ---------------------------------------------------------------
@@ -588,8 +402,7 @@ class InsertionRun:
                 k += 1
             f = 0.0 if seg[k] <= 0.0 else min((dist - acc) / seg[k], 1.0)
             a, b = poses[k], poses[k + 1]
-            rel = log_so3(b.R_world_body @ a.R_world_body.T)
-            ref = Pose(exp_so3(f * rel) @ a.R_world_body, a.p_world + f * (b.p_world - a.p_world))
+            ref = pose_between(a, b, f)
             v = np.zeros(6)
             if dist < total and seg[k] > 0.0:
                 v[:3] = self.s.approach_speed_mps * (b.p_world - a.p_world) / seg[k]
@@ -600,7 +413,7 @@ class InsertionRun:
         if h > -self.s.lead_m:
             v[:3] = -self.s.insert_speed_mps * self.u
         h = max(h, -self.s.lead_m)
-        return lifted(self.plan.goal, self.u, h), v, True
+        return self.plan.goal.translated(h * self.u), v, True
 
     def command(self, t: float, pose: Pose, twist: FloatArray, pressed: tuple[str, ...]) -> FloatArray:
         """The push now (about the body origin, world axes)."""
@@ -748,21 +561,6 @@ class InsertionRun:
             self.log.event(t, "failed", reason)
 
 
-def bottom_gap_m(fixture: Fixture, pose: Pose, bore: Bore) -> float:
-    """The gap of the shaft's leading end face on the bore's (flat) bottom, in closed form.
-
-    The face's deepest point lies ``r sin φ`` beyond its centre along the bore's axis (``φ`` the
-    angle between the shaft's and the bore's axes): gap ``depth − (d_E + r sin φ)``, ``d_E`` the
-    centre's depth below the mouth.
-    """
-    pin = peg_body(fixture.workpiece, pose, bore)
-    u = np.asarray(bore.axis_world, dtype=float)
-    end = pin.base_world + pin.length_m * pin.axis_world
-    d_end = float((bore.p_world - end) @ u)
-    c = min(abs(float(pin.axis_world @ u)), 1.0)
-    return bore.depth_m - (d_end + pin.radius_m * math.sqrt(max(1.0 - c * c, 0.0)))
-
-
 def _up(fixture: Fixture) -> FloatArray:
     g = np.asarray(fixture.gravity, dtype=float)
     n = float(np.linalg.norm(g))
@@ -848,9 +646,7 @@ def verify_insertion(
     if run.log.outcome != "reached":
         reasons.append(run.log.reason)
         checks.append("executor")
-    gaps = dict(zip(run.rests, map(float, locator_gaps(wp, pose, world.locators)), strict=True))
-    for b in world.bores:
-        gaps[f"{b.name}.bottom"] = bottom_gap_m(world, pose, b)
+    gaps = seat_gaps_m(world, pose)
     final_gap_check(gaps, final_gap_m, checks, reasons)
     for i in run.inserts:
         mouth, tip = axis_offsets_m(world, pose, i)
@@ -915,16 +711,10 @@ def shifted_world(fixture: Fixture, offset_world: FloatArray, yaw_rad: float, wi
 
 
 __all__ = [
-    "Engagement",
-    "Insert",
     "InsertionPlan",
     "InsertionRun",
     "Stage",
-    "axis_offsets_m",
-    "engagement",
     "goal_state",
-    "insertion_axis",
-    "inserts",
     "plan_insertion",
     "seat_push",
     "shifted_world",

@@ -96,13 +96,14 @@ def contact_anchors(fixture: Fixture, pose: Pose) -> tuple[FloatArray, FloatArra
     A locator's tip (:func:`locator_tips`); a pin's or bore's nearest contact at ``pose`` (its point
     on the part, its normal into the part).
     """
-    from fixplan.locating import bore_contacts, pin_contacts
+    from fixplan.locating import insert_contacts
 
     tips, normals = locator_tips(fixture, pose)
     d = fixture.dimension
     extra_p, extra_n = [], []
     wp = fixture.workpiece
-    per_owner = [pin_contacts(wp, pose, p) for p in fixture.pins] + [bore_contacts(wp, pose, b) for b in fixture.bores]
+    per_owner = [insert_contacts(wp, pose, p) for p in fixture.pins]
+    per_owner += [insert_contacts(wp, pose, b) for b in fixture.bores]
     for found in per_owner:
         if found:
             c = min(found, key=lambda c: c.gap_m)
