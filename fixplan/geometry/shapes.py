@@ -298,16 +298,14 @@ class Polygon(Shape):
             d = plane[k_in]
             return Projection(d, np.array([px - d * nx, py - d * ny]), np.array([nx, ny]))
         # Outside: nearest point over the edge segments.
-        best: tuple[float, int, float, float, float] | None = None
-        for i, (vx, vy, ex, ey, _, _, ee) in enumerate(edges):
+        nearest = []  # per edge: (distance, segment parameter t, closest point)
+        for vx, vy, ex, ey, _, _, ee in edges:
             t = ((px - vx) * ex + (py - vy) * ey) / ee
             t = 0.0 if t < 0.0 else 1.0 if t > 1.0 else t
             cx, cy = vx + t * ex, vy + t * ey
-            d = math.hypot(px - cx, py - cy)
-            if best is None or d < best[0]:
-                best = (d, i, t, cx, cy)
-        assert best is not None
-        d, k, t, cx, cy = best
+            nearest.append((math.hypot(px - cx, py - cy), t, cx, cy))
+        k = min(range(len(nearest)), key=lambda i: nearest[i][0])  # the first of equals, as argmin
+        d, t, cx, cy = nearest[k]
         _, _, _, _, nx, ny, _ = edges[k]
         tiny = 1e-12 * self.bounding_radius
         if d > tiny and 0.0 < t < 1.0:
