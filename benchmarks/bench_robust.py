@@ -7,8 +7,9 @@ of the perturbed worlds load the part.
 
 The 10 free-start fixtures are the first five of each held-out set of ``bench_generated``
 (``box-321-free`` seed 9103 and ``plate-2d-free`` seed 9204), taken as they come: none is
-skipped, also one whose nominal simulated load fails (``robust`` verifies the nominal plan in
-each perturbed world, whatever the nominal world did). Held-out seeds are for judging only.
+skipped, also one whose nominal simulated load fails (``robust`` studies the plan ``solve`` delivers,
+verified in the nominal world with its fall-back to the next sequence, and when none loads there the
+best one all the same). Held-out seeds are for judging only.
 
 Each fixture: ``fixplan robust FILE --samples 100 --seed 0 --json`` as a whole process (its Dask
 workers are local processes). The rate comes with its 95 % Wilson interval, per fixture and
