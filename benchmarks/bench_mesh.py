@@ -41,6 +41,7 @@ from fixplan.geometry.mesh import Mesh, parse_mesh, stl_bytes
 TARGET_US = 20.0
 PASSES = 3  # each query timed this many times, its fastest kept
 STEPS = 2000  # engine steps timed per part
+RUNS = 3  # runs of STEPS engine steps per part; the fastest is kept
 
 
 def torus_triangles(
@@ -221,6 +222,7 @@ def engine_and_solve(rows: list[dict], quick: bool) -> list[str]:
     from fixplan.planner.solve import solve
 
     steps = STEPS // 4 if quick else STEPS
+    rate: dict[str, float] = {}
     out = [
         "The default fixture with its box as the split box (50 700 triangles) against the primitive box:",
         "",
@@ -232,16 +234,21 @@ def engine_and_solve(rows: list[dict], quick: bool) -> list[str]:
             "box": fixplan.load(fixplan.default_fixture_path()),
             "mesh": fixplan.load(_mesh_twin_of_default(Path(tmp))),
         }
-        rate, tick, held, total, status = {}, {}, {}, {}, {}
+        tick, held, total, status = {}, {}, {}, {}
         push = np.concatenate([5.0 * -np.ones(3) / np.sqrt(3.0), np.zeros(3)])
-        for name, fx in fixtures.items():
-            sim = Simulator(fx)
+        # the engine's rate: runs of `steps` steps, box and mesh in turn (so that a slow spell of the
+        # machine falls on both), the fastest run of each kept, as the queries above keep theirs
+        sims = {name: Simulator(fx) for name, fx in fixtures.items()}
+        for sim in sims.values():
             for _ in range(20):
                 sim.step(push)
-            t0 = time.perf_counter()
-            for _ in range(steps):
-                sim.step(push)
-            rate[name] = steps / (time.perf_counter() - t0)
+        for _ in range(RUNS):
+            for name, sim in sims.items():
+                t0 = time.perf_counter()
+                for _ in range(steps):
+                    sim.step(push)
+                rate[name] = max(rate.get(name, 0.0), steps / (time.perf_counter() - t0))
+        for name, fx in fixtures.items():
             held[name] = held_loop_tick_us(fx, push, steps)
             solve(fx)  # warm-up (kernels, imports)
             res = solve(fx)
@@ -258,14 +265,21 @@ def engine_and_solve(rows: list[dict], quick: bool) -> list[str]:
             "≥ 0.5× the primitive box's",
             rate["mesh"] >= 0.5 * rate["box"],
         ),
-        ("haptic tick, mean [µs]", tick, "{:.0f}", tick["mesh"] / tick["box"], "mean ≤ 200 µs", tick["mesh"] <= 200.0),
         (
-            "haptic tick without the executor (coupling and engine step), mean [µs]",
+            "haptic tick (the loop a person holds: coupling and engine step), mean [µs]",
             held,
             "{:.0f}",
             held["mesh"] / held["box"],
             "mean ≤ 200 µs",
             held["mesh"] <= 200.0,
+        ),
+        (
+            "verification tick (the same loop with the simulated operator's wrench solves), mean [µs]",
+            tick,
+            "{:.0f}",
+            tick["mesh"] / tick["box"],
+            "for the record",
+            None,
         ),
         (
             "`solve` with its verification [s]",
@@ -288,13 +302,16 @@ def engine_and_solve(rows: list[dict], quick: bool) -> list[str]:
             }
         )
         out.append(
-            f"| {figure} | {fmt.format(values['box'])} | {fmt.format(values['mesh'])} | {ratio:.2f} | {target} (**{'met' if met else 'not met'}**) |"
+            f"| {figure} | {fmt.format(values['box'])} | {fmt.format(values['mesh'])} | {ratio:.2f} | "
+            + (f"{target} |" if met is None else f"{target} (**{'met' if met else 'not met'}**) |")
         )
     out += [
         "",
-        f"- Status of each solve: primitive box `{status['box']}`, mesh part `{status['mesh']}`; {steps} engine steps each "
-        "after 20 warm-up steps; the haptic tick is the verification's mean tick: the executor's command, the engine "
-        "step and the coupling (the target, 200 µs, is for the loop a person holds: engine step and coupling, the "
-        f"next row: the verification's rig, the hand pushing the handle with the same 5 N, {steps} ticks).",
+        f"- Status of each solve: primitive box `{status['box']}`, mesh part `{status['mesh']}`. Engine: {RUNS} runs of "
+        f"{steps} steps each after 20 warm-up steps, box and mesh in turn, the fastest of each kept. The haptic tick "
+        "is the loop a person holds at the device (`fixplan haptic`): the virtual coupling and the engine step, "
+        f"measured in the verification's rig with the hand pushing the handle with the same 5 N, {steps} ticks. "
+        "The verification tick adds the simulated operator: the executor's wrench solves (cone programs, 200 "
+        "per simulated second), which a person at the device replaces; it is as slow with the primitive box.",
     ]
     return out
