@@ -793,7 +793,7 @@ def _status(verification: Verification | None, note: str) -> tuple[PlanStatus, s
     if verification is None:
         return (
             "unverified",
-            "verification skipped (--no-verify): the sequence was not run in the haptic loop",
+            "verification skipped (solve.run_verification=False): the sequence was not run in the haptic loop",
         )
     if verification.passed:
         ex = verification.execution
