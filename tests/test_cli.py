@@ -165,6 +165,65 @@ def test_library_errors_name_the_setting_and_the_cli_prints_the_flag(capsys):
         assert not any(name in err for name in FLAGS), err
 
 
+def test_result_reasons_name_the_argument_and_the_cli_prints_the_flag(capsys, tmp_path):
+    """A result's reason (not an exception) names the argument too: ``solve``'s unverified plan says
+    ``solve.run_verification=False``, the search's unreachable default margin ``search_wrench.min_margin_N``;
+    the command line prints ``--no-verify`` and ``--min-margin`` there, in its text and its JSON."""
+    import fixplan
+    from fixplan.jamming.search import search_wrench
+    from fixplan.planner.solve import solve
+
+    plate = PROBLEMS / "gen-plate-2d-s2026-000.toml"
+    unverified = solve(fixplan.load(plate), run_verification=False)
+    assert unverified.status == "unverified" and "(solve.run_verification=False)" in unverified.reason
+    assert main(["solve", str(plate), "--no-verify"]) == 1
+    out = capsys.readouterr().out
+    assert "verification skipped (--no-verify)" in out and "run_verification" not in out
+    # rect-3 (1 kg) with a 6 N hand: the default margin m g = 9.81 N is out of reach
+    weak = tmp_path / "weak.toml"
+    weak.write_text((PROBLEMS / "rect-3.toml").read_text() + "\n[manipulator]\nmax_force = 6.0\nmax_torque = 5.0\n")
+    res = search_wrench(fixplan.load(weak), [0.1, 0.0, 0.0], ["B1", "B2"], objective="effort")
+    assert res.found and "a smaller search_wrench.min_margin_N asks for a lighter push" in res.reason
+    args = ["search", str(weak), "--motion", "0.1,0,0", "--contacts", "B1,B2", "--objective", "effort"]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "a smaller --min-margin asks for a lighter push" in out and "min_margin_N" not in out
+    assert main([*args, "--json"]) == 0
+    assert "a smaller --min-margin asks" in json.loads(capsys.readouterr().out)["reason"]
+
+
+def test_no_planner_or_search_text_names_a_flag():
+    """The planner's and the search's texts (reasons, notes) name settings and arguments; a flag appears
+    only through the CLI (``cli/flags.py``). Every string literal that is not a docstring is read; a
+    quoted command line (``'fixplan solve --out'``, where a file comes from) is no flag asked for."""
+    import ast
+    import importlib
+    import re
+
+    root = Path(importlib.import_module("fixplan").__file__).parent
+    found = []
+    for folder in ("planner", "jamming"):
+        for path in sorted((root / folder).rglob("*.py")):
+            tree = ast.parse(path.read_text())
+            docs = {
+                id(node.body[0].value)
+                for node in ast.walk(tree)
+                if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef)
+                and node.body
+                and isinstance(node.body[0], ast.Expr)
+                and isinstance(node.body[0].value, ast.Constant)
+            }
+            found += [
+                f"{path.relative_to(root)}:{node.lineno}: {node.value!r}"
+                for node in ast.walk(tree)
+                if isinstance(node, ast.Constant)
+                and isinstance(node.value, str)
+                and id(node) not in docs
+                and re.search(r"(^|[\s(`'])--[a-z]", re.sub(r"'fixplan [a-z-]+ --[a-z-]+'", "", node.value))
+            ]
+    assert not found, "texts that name a command-line flag:\n" + "\n".join(found)
+
+
 def test_no_library_error_message_starts_with_a_flag():
     """Outside ``cli/`` an error names the argument or setting, never the command-line flag: every
     ``raise SomeError(...)`` whose message is a literal (or f-string) is read, and none begins with

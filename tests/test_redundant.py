@@ -169,6 +169,8 @@ def test_lattice_adds_a_group_in_one_transition():
     # with a fixed order the pair must be named one after the other
     bad = search(frozenset({"A"}), ["A", "B", "C", "D"], start, evaluate, order=["C", "B", "D"], group=group)
     assert not bad.found and "C, D close together" in bad.attempts[-1].reason
+    # the reason names the argument (solve.order); the command line prints its flag there
+    assert "solve.order must name them one after the other" in bad.attempts[-1].reason
     good = search(frozenset({"A"}), ["A", "B", "C", "D"], start, evaluate, order=["C", "D", "B"], group=group)
     assert good.found and good.sequence == [("A",), ("A", "C", "D"), ("A", "B", "C", "D")]
 

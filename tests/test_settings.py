@@ -249,3 +249,135 @@ def test_planner_settings_reach_the_clearances_and_the_friction_grid():
     none = settings.DEFAULT.with_(planner=replace(settings.DEFAULT.planner, clearances_m=()))
     with pytest.raises(SolverError, match="planner.clearances_m is empty"):
         Planner(fx, settings=none).plan_from(fx.start, start_state(fx))
+
+
+# -- the caller's profile reaches the run: the planner's, the executor's and the insertion's searches -----
+def _custom_profile():
+    """The haptic profile with a headroom of 0.7 (0.8 by default) and a wider contact gap: a profile no
+    module-level default equals, so a run that reads the default instead shows it."""
+    from dataclasses import replace
+
+    return settings.HAPTIC.with_(
+        name="custom",
+        search=replace(settings.HAPTIC.search, limit_fraction=0.7),
+        execution=replace(settings.HAPTIC.execution, contact_gap_m=3e-6),
+    )
+
+
+def _record_searches(monkeypatch):
+    """Every wrench search's ``settings`` (``search_wrench`` goes through ``search_wrench_in`` too)."""
+    import fixplan.jamming.search as search_module
+
+    seen = []
+    original = search_module.search_wrench_in
+
+    def recording(*args, **kwargs):
+        seen.append(kwargs.get("settings"))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(search_module, "search_wrench_in", recording)
+    return seen
+
+
+def test_solve_and_verify_search_with_the_callers_settings(monkeypatch):
+    """``solve(settings=custom)`` on a 2D plate: every push the planner prices and the executor commands is
+    searched with ``custom`` (before, they ran with the default profile's search settings), and the
+    executor's headroom is ``custom.search.limit_fraction`` (0.7, not the default 0.8)."""
+    from fixplan.planner.solve import solve
+
+    custom = _custom_profile()
+    seen = _record_searches(monkeypatch)
+    result = solve(fixplan.load(PROBLEMS / "gen-plate-2d-s2026-000.toml"), settings=custom)
+    assert result.status == "planned", result.reason
+    assert seen and all(s is custom for s in seen), {getattr(s, "name", s) for s in seen}
+    v = result.verification
+    assert v.limit_fraction == 0.7 and v.ticks_above_fraction is not None
+
+
+def test_the_executor_holds_its_profiles_numbers():
+    """An executor given a profile takes its execution settings, headroom and pseudo-inverse cut-off from it;
+    its own ``settings`` still override the execution group."""
+    from dataclasses import replace
+
+    from fixplan.planner.execute import ExecutionSettings, Executor
+
+    fx = fixplan.load(PROBLEMS / "rect-3.toml")
+    custom = _custom_profile().with_(numerics=replace(settings.HAPTIC.numerics, rcond=1e-9))
+    ex = Executor(fx, frozenset(), [], profile=custom)
+    assert ex.settings is custom.execution and ex.limit_fraction == 0.7 and ex.rcond == 1e-9
+    own = ExecutionSettings(speed_mps=0.02)
+    assert Executor(fx, frozenset(), [], own, profile=custom).settings is own
+    F_cap = 0.7 * ex.F_max  # the hold push keeps the profile's headroom
+    assert np.linalg.norm(ex.hold_wrench(fx.goal)[:2]) <= F_cap * (1 + 1e-9)
+
+
+def test_insertion_plans_and_runs_with_the_callers_settings(monkeypatch):
+    """``solve(settings=custom)`` on two pins: the insertion's pushes are searched with ``custom`` (before,
+    ``solve_insertion`` planned with the default profile), the run senses contacts and rest with its
+    execution settings, and its headroom is ``custom``'s."""
+    import fixplan.planner.insertion as insertion
+    from fixplan.planner.solve import solve
+
+    custom = _custom_profile()
+    seen = _record_searches(monkeypatch)
+    runs = []
+
+    class Recorded(insertion.InsertionRun):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            runs.append(self)
+
+    monkeypatch.setattr(insertion, "InsertionRun", Recorded)
+    result = solve(fixplan.load(PROBLEMS / "housing-2-pins-load.toml"), settings=custom)
+    assert result.status == "planned", result.reason
+    assert seen and all(s is custom for s in seen)
+    assert len(runs) == 1 and runs[0].execution is custom.execution
+    assert result.verification.limit_fraction == 0.7
+
+
+# The run-time modules of solve and verify read no threshold of the default profile: the caller's
+# settings are threaded down, and DEFAULT appears only as the default value of a parameter.
+RUN_TIME_GROUPS = {
+    "planner/execute.py": ("search", "execution", "planner", "policy"),
+    "planner/insertion.py": ("search", "execution", "insertion"),
+    "planner/verify.py": ("search", "execution", "verification"),
+    "planner/solve.py": ("search", "execution", "planner", "policy"),
+    "planner/segments.py": ("search", "planner"),
+    "planner/policy.py": ("search", "execution", "planner", "policy"),
+    "planner/fine.py": ("search", "execution"),
+}
+
+
+def _run_time_default_reads(source, groups):
+    """``DEFAULT.<group>`` attribute reads in ``source`` outside the default values of parameters."""
+    import ast
+
+    tree = ast.parse(source)
+    in_defaults = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda):
+            for default in [*node.args.defaults, *(d for d in node.args.kw_defaults if d is not None)]:
+                in_defaults.update(id(n) for n in ast.walk(default))
+    return [
+        f"{node.lineno}: DEFAULT.{node.attr}"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Attribute)
+        and isinstance(node.value, ast.Name)
+        and node.value.id == "DEFAULT"
+        and node.attr in groups
+        and id(node) not in in_defaults
+    ]
+
+
+def test_no_run_time_read_of_the_default_profile_on_the_solve_and_verify_path():
+    from pathlib import Path
+
+    root = Path(fixplan.__file__).parent
+    found = {rel: _run_time_default_reads((root / rel).read_text(), groups) for rel, groups in RUN_TIME_GROUPS.items()}
+    found = {rel: hits for rel, hits in found.items() if hits}
+    assert not found, f"thresholds read from the default profile at run time (thread settings down): {found}"
+    # the scan sees a read in a body, not one in a default value
+    probe = (
+        "def f(x=DEFAULT.search.limit_fraction, *, y=DEFAULT.execution):\n    return x * DEFAULT.search.binding_rel\n"
+    )
+    assert _run_time_default_reads(probe, ("search", "execution")) == ["2: DEFAULT.search"]

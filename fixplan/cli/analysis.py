@@ -31,6 +31,7 @@ from fixplan.cli._app import (
     _writable,
     app,
 )
+from fixplan.cli.flags import with_flags, with_flags_in
 from fixplan.errors import FixtureError, InputError, one_line, quote_number
 from fixplan.files import check_distinct, document_stream, write_output
 
@@ -326,7 +327,7 @@ def search(
         min_margin_N=min_margin,
     )
     if json_out:
-        _emit_json(result.to_json())
+        _emit_json(with_flags_in(result.to_json()))
     else:
         if result.found and result.wrench is not None:
             typer.echo(f"wrench: {','.join(f'{x:.6g}' for x in result.wrench)}")
@@ -341,7 +342,7 @@ def search(
                 typer.echo(
                     f"push: {result.force_fraction:.0%} of max_force, {result.torque_fraction:.0%} of max_torque ({where})"
                 )
-        typer.echo(result.reason)
+        typer.echo(with_flags(result.reason))
     if not result.found or result.margin_target_met is False:
         raise typer.Exit(1)
 

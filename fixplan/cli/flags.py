@@ -8,6 +8,8 @@ knows nothing of flags and the user reads the option they typed.
 
 from __future__ import annotations
 
+from typing import Any
+
 FLAGS: dict[str, str] = {
     "RobustSettings.samples": "--samples",
     "RobustSettings.seed": "--seed",
@@ -18,8 +20,10 @@ FLAGS: dict[str, str] = {
     "RobustSettings.force_noise": "--force-noise",
     "RobustSettings.latency_s [ms]": "--latency-ms",
     "search_wrench.motion": "--motion",
+    "search_wrench.min_margin_N": "--min-margin",
     "classify.at": "--at",
     "solve.order": "--order",
+    "solve.run_verification=False": "--no-verify",
     "analyse_clamping.order": "--order",
     "analyse_clamping.preload_N": "--preload",
     "fixture_files.directory": "--batch",
@@ -55,3 +59,18 @@ def with_flags(message: str) -> str:
         if name in message:
             message = message.replace(name, FLAGS[name])
     return message
+
+
+def with_flags_in(data: Any) -> Any:
+    """A JSON document (what a command prints or writes) with :func:`with_flags` applied to every string value in it.
+
+    A result's reasons name settings and arguments too (``solve.run_verification=False``,
+    ``solve.order``, ``search_wrench.min_margin_N``): the command shows its flags there as well.
+    """
+    if isinstance(data, str):
+        return with_flags(data)
+    if isinstance(data, list | tuple):
+        return [with_flags_in(x) for x in data]
+    if isinstance(data, dict):
+        return {k: with_flags_in(v) for k, v in data.items()}
+    return data

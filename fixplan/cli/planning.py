@@ -22,6 +22,7 @@ from fixplan.cli._app import (
     _writable,
     app,
 )
+from fixplan.cli.flags import with_flags, with_flags_in
 from fixplan.errors import FixplanError, InputError, one_line
 from fixplan.files import check_distinct, write_text
 from fixplan.settings import DEFAULT, Settings
@@ -231,9 +232,9 @@ def solve(
     if not json_out:
 
         def progress(a) -> None:  # type: ignore[no-untyped-def]
-            verdict = "ok" if a.success else f"fails: {a.reason}"
+            verdict = "ok" if a.success else f"fails: {with_flags(a.reason)}"
             if a.stage == "precheck":
-                verdict = f"cheap check fails, tried after the others: {a.reason}"
+                verdict = f"cheap check fails, tried after the others: {with_flags(a.reason)}"
             elif a.stage == "path":
                 verdict = "a path (its pushes are searched if its sequence is chosen)"
             added = "{" + ",".join(a.added) + "}" if a.together else a.target
@@ -265,7 +266,7 @@ def solve(
         else:  # the part at its located pose, where the plan ends
             clamped = analyse_clamping(fixture, verify=not no_verify)
             plan = plan.with_extras(clamping=clamped.to_json())
-    payload = plan.to_json()
+    payload = with_flags_in(plan.to_json())  # the reasons name the flags this command was given
     if target is not None:
         write_text(target, _json_text(payload) + "\n")
     written = [] if target is None else [target]
@@ -276,7 +277,7 @@ def solve(
             save_plan_figure(plan, fixture, figure)  # through files.write_output
             figures.append(figure.name)  # beside the report: a relative link
             written.append(figure)
-        write_text(report_path, report_markdown(plan, fixture, figures=figures))
+        write_text(report_path, with_flags(report_markdown(plan, fixture, figures=figures)))
         written.append(report_path)
     if json_out:
         _emit_json(payload)
@@ -330,7 +331,7 @@ def _print_plan(plan: Plan, fixture: Fixture, options: dict[str, float] | None =
             typer.echo(f"  {i}: {w}")
     if not plan.transitions and plan.status != "infeasible":
         typer.echo(f"{fixture.name}: the part starts located (every locator touches): there is nothing to plan")
-    typer.echo(f"status: {plan.status}" + (f" — {plan.reason}" if plan.reason else ""))
+    typer.echo(f"status: {plan.status}" + (f" — {with_flags(plan.reason)}" if plan.reason else ""))
     if plan.status == "infeasible" and "too weak" in plan.reason and options is not None:
         # the force named is the push the planner asked for, not the least that moves the part
         typer.echo(
@@ -388,7 +389,7 @@ def _solve_batch(directory: Path, verify: bool, accel: float, margin: float | No
     files = fixture_files(directory)
     options = {"run_verification": verify, "settings": _solve_settings(accel, margin, friction_margin)}
     with progress_bar("solving", len(files), enabled=not json_out) as progress:
-        rows = solve_batch(files, options, scheduler=scheduler, progress=progress)
+        rows = with_flags_in(solve_batch(files, options, scheduler=scheduler, progress=progress))
     if json_out:
         _emit_json({"fixtures": rows})
     else:

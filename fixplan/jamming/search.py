@@ -630,7 +630,7 @@ def search_wrench_in(
             within_text = f" within {frac:.0%} of the hand's limits" if within and frac < 1.0 else ""
             notes += (
                 f" (default margin m|g| = {wanted:.4g} N not reachable{within_text}: best {floor_sig(tau_best)} N used;"
-                " a smaller --min-margin asks for a lighter push)"
+                " a smaller search_wrench.min_margin_N asks for a lighter push)"
             )
     w_com = x[:n]
     s = float(x[meta["s"]])

@@ -195,7 +195,7 @@ def search(
                 # geometry closes these at the same instant: the order must name them together
                 why = (
                     f"{', '.join(together)} close together from {format_state(state, empty='{}')} "
-                    f"(a redundant layout): --order must name them one after the other"
+                    f"(a redundant layout): solve.order must name them one after the other"
                 )
                 _log(attempts, progress, Attempt(_key(state), t, False, float("inf"), why))
                 return []

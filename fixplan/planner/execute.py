@@ -53,7 +53,7 @@ from fixplan.contact_state import Debounce, State, format_state
 from fixplan.errors import InputError
 from fixplan.locating import contact_set, locator_contact
 from fixplan.planner.fine import twist_from_pose
-from fixplan.settings import DEFAULT, ExecutionNoise, ExecutionSettings
+from fixplan.settings import DEFAULT, ExecutionNoise, ExecutionSettings, Settings
 from fixplan.spatial import Pose, shift_twist, shift_wrench
 
 if TYPE_CHECKING:
@@ -177,11 +177,13 @@ def origin_motion(com_rate: FloatArray, com_world: FloatArray, origin_world: Flo
     return shift_twist(com_rate, com_world, origin_world)
 
 
-def project_keeping(nu: FloatArray, A: FloatArray | None, M_inv: FloatArray) -> FloatArray:
-    """The ``M``-orthogonal projection of ``nu`` onto ``{ν : A ν = 0}``."""
+def project_keeping(
+    nu: FloatArray, A: FloatArray | None, M_inv: FloatArray, rcond: float = DEFAULT.numerics.rcond
+) -> FloatArray:
+    """The ``M``-orthogonal projection of ``nu`` onto ``{ν : A ν = 0}`` (``rcond``: the pseudo-inverse's cut-off)."""
     if A is None or A.shape[0] == 0:
         return nu
-    return nu - M_inv @ A.T @ np.linalg.pinv(A @ M_inv @ A.T, rcond=DEFAULT.numerics.rcond) @ (A @ nu)
+    return nu - M_inv @ A.T @ np.linalg.pinv(A @ M_inv @ A.T, rcond=rcond) @ (A @ nu)
 
 
 @dataclass(frozen=True)
@@ -246,11 +248,22 @@ class Executor:
         tick_s: float = 1e-3,
         policy: Policy | None = None,
         avoid: Avoid | None = None,
+        profile: Settings = DEFAULT,
     ):
+        """The executor of ``steps`` from ``start_state`` on ``fixture``.
+
+        ``settings`` say how it pushes (default: ``profile.execution``); ``profile`` (default: the
+        ``default`` profile, :mod:`fixplan.settings`) gives the rest of what it uses at run time:
+        every wrench search runs with it (``search``, ``witness``, ``numerics``), its headroom is
+        ``profile.search.limit_fraction`` and its projections cut off at ``profile.numerics.rcond``.
+        :func:`fixplan.planner.verify.verify` passes its own ``settings`` here.
+        """
         self.fixture = fixture
         self.policy = policy
         self.avoid = avoid
-        self.settings = s = settings or ExecutionSettings()
+        self.profile = profile
+        self.rcond = profile.numerics.rcond
+        self.settings = s = profile.execution if settings is None else settings
         self.noise = noise or ExecutionNoise()
         self.rng = np.random.default_rng(self.noise.seed)
         self.replan = replan
@@ -296,7 +309,7 @@ class Executor:
 
         self.F_max, self.T_max, _ = fixture.hand_limits()
         # headroom: pushes are sought within this fraction of the limits first (the search's own)
-        self.limit_fraction = DEFAULT.search.limit_fraction
+        self.limit_fraction = profile.search.limit_fraction
         self.guard = DivergenceGuard.for_fixture(fixture, s)
         self.v_limit = self.guard.v_limit_mps
         self._far_m = self.guard.far_m
@@ -446,7 +459,7 @@ class Executor:
         """
         if self.policy is None or state in self._policy_failed:
             return False
-        chain = self.policy.chain_from(self.fixture, state, pose, self.goal_state)
+        chain = self.policy.chain_from(self.fixture, state, pose, self.goal_state, self.profile)
         if not chain:
             return False
         if any((frozenset(st.established), st.target) in self._looping for st in chain):
@@ -929,7 +942,7 @@ class Executor:
         A = cs.G[-1:] if est_cs_rows is None else np.vstack([est_cs_rows, cs.G[-1:]])
         b = np.zeros(A.shape[0])
         b[-1] = -max(gap, 1e-4)
-        direct = M_inv @ A.T @ np.linalg.pinv(A @ M_inv @ A.T, rcond=DEFAULT.numerics.rcond) @ b
+        direct = M_inv @ A.T @ np.linalg.pinv(A @ M_inv @ A.T, rcond=self.rcond) @ b
         left = gap
         nu = direct
         if not self._use_direct and len(step.path) >= 2:
@@ -968,7 +981,7 @@ class Executor:
                 if size > 1e-15:
                     return twists[ahead] / size, max(left_path, gap)
             if left_path > max(2.0 * gap, 1e-3) or ahead < len(step.path) - 1:
-                to = project_keeping(twists[ahead], est_cs_rows, M_inv)
+                to = project_keeping(twists[ahead], est_cs_rows, M_inv, self.rcond)
                 # blend in the gap-closing motion so the path leads onto the target
                 nu = to + 0.5 * direct * (mass_speed(to, M, wp.mass_kg) / max(mass_speed(direct, M, wp.mass_kg), 1e-15))
                 left = max(left_path, gap)
@@ -979,17 +992,19 @@ class Executor:
             # the gap greedily rolled a tilted box on one base locator further from the goal)
             keep_target = cs.G[-1:] if est_cs_rows is None else np.vstack([est_cs_rows, cs.G[-1:]])
             # (the located pose nearest this one: a part's free spin is not turned back)
-            toward = project_keeping(twist_from_pose(pose, fx.goal_near(pose), wp.com_body), keep_target, M_inv)
+            toward = project_keeping(
+                twist_from_pose(pose, fx.goal_near(pose), wp.com_body), keep_target, M_inv, self.rcond
+            )
             size_t, size_d = mass_speed(toward, M, wp.mass_kg), mass_speed(direct, M, wp.mass_kg)
             if size_t > 1e-15:
                 nu = direct + toward * min(1.0, size_d / size_t)
-        nu = project_keeping(nu, est_cs_rows, M_inv)
+        nu = project_keeping(nu, est_cs_rows, M_inv, self.rcond)
         if nu is not direct and float(cs.G[-1] @ nu) >= 0.0:
             # the guide leads away from the target (the part is off the path, e.g. a perturbed
             # world rolls it along another curve, and the knot ahead lies behind it on the
             # constraint surface): a transition's motion closes its target's gap, so go direct.
             # Following the guide here rocked a plate back and forth on one locator for 4.5 s
-            nu = project_keeping(direct, est_cs_rows, M_inv)
+            nu = project_keeping(direct, est_cs_rows, M_inv, self.rcond)
         size = mass_speed(nu, M, wp.mass_kg)
         if size <= 1e-15:
             return np.zeros(self.ndof), left
@@ -1142,7 +1157,7 @@ class Executor:
         # against the twist, on the motions that keep the established contacts (the twist's
         # normal part is numerical noise: left in, it reads as a push that lifts the part off)
         est = contact_set(self.fixture, pose, list(step.established))
-        back = project_keeping(-np.asarray(twist, dtype=float), est.G, est.M_inv)
+        back = project_keeping(-np.asarray(twist, dtype=float), est.G, est.M_inv, self.rcond)
         size = mass_speed(back, M, self.mass)
         return None if size <= 1e-15 else back * (a / size)
 
@@ -1211,13 +1226,15 @@ class Executor:
 
         boxes = self._arm_boxes(t, pose)
         if boxes and not self._box_binds:
-            res = search_wrench(self.fixture, motion, contacts, pose=pose, **options)
+            res = search_wrench(self.fixture, motion, contacts, pose=pose, settings=self.profile, **options)
             if res.found and res.wrench is not None:
                 ratio = float(np.max(boxes[0].ratios(res.wrench, pose.p_world)))
                 if ratio <= self.limit_fraction:
                     return res
             self._box_binds = True
-        res = search_wrench(self.fixture, motion, contacts, pose=pose, hand_sets=boxes, **options)
+        res = search_wrench(
+            self.fixture, motion, contacts, pose=pose, hand_sets=boxes, settings=self.profile, **options
+        )
         if boxes and res.found and res.arm_torque_ratio is not None:
             self._box_binds = res.arm_torque_ratio >= self.settings.box_binds_fraction * self.limit_fraction
         return res

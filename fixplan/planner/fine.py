@@ -103,7 +103,7 @@ from fixplan.kinematics import mass_matrix
 from fixplan.locating import contact_set, locator_contact, solve_goal
 from fixplan.planner.features import Feature, clearance_features, feature_at, smooth_max, surface_feature
 from fixplan.planner.segments import carry_factor, needed_scale, segment_wrenches
-from fixplan.settings import DEFAULT, PlannerSettings
+from fixplan.settings import DEFAULT, PlannerSettings, SearchSettings, Settings
 from fixplan.spatial import Pose, log_so3, tangent_seed
 
 if TYPE_CHECKING:
@@ -354,6 +354,7 @@ def plan_transition(
     diagnose: bool = True,
     together: Sequence[str] = (),
     wrenches: bool = True,
+    profile: Settings = DEFAULT,
 ) -> Transition:
     """Plan the path and wrenches that add ``target`` to the ``established`` contacts.
 
@@ -401,6 +402,9 @@ def plan_transition(
         False: stop at the path (``wrenches_checked`` False, ``success`` meaning a path exists);
         :func:`with_wrenches` later searches its segments' wrenches. A search over sequences
         prices many transitions it then leaves: only those of the chosen sequence need wrenches.
+    profile : Settings
+        The settings the segments' wrench searches run with (``search``, ``witness``,
+        ``numerics``; :func:`with_wrenches`); the path's thresholds are ``settings``.
 
     Returns
     -------
@@ -494,7 +498,7 @@ def plan_transition(
         return pending
     return with_wrenches(
         fixture, pending, acceleration_mps2=acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N,
-        plain=ladder[0].name,
+        plain=ladder[0].name, settings=profile,
     )  # fmt: skip
 
 
@@ -506,11 +510,14 @@ def with_wrenches(
     friction_margin: float = 0.0,
     margin_N: float | None = None,
     plain: str = "default",
+    settings: Settings = DEFAULT,
 ) -> Transition:
     """Complete a path (``plan_transition(..., wrenches=False)``) with each segment's wrench.
 
     The same search :func:`plan_transition` runs; a transition already checked (or without a
     path) is returned as it is. ``plain`` names the ladder's first rung (the reason names any other).
+    The searches run with ``settings`` (``search``, ``witness``, ``numerics``), whose
+    ``search.limit_fraction`` is also the headroom the reason reports pushes beyond.
     """
     tr = transition
     if tr.wrenches_checked or not tr.success:
@@ -519,7 +526,7 @@ def with_wrenches(
     needs: list[tuple[float | None, float | None]] = []
     wrenches, margins, found, reasons = segment_wrenches(
         fixture, tr.poses, est, tr.kind, acceleration_mps2, friction_margin=friction_margin, margin_N=margin_N,
-        needs=needs,
+        needs=needs, settings=settings,
     )  # fmt: skip
     bad = [k for k in range(K) if not found[k]]
     via = "" if tr.formulation == plain else f" (formulation: {tr.formulation})"
@@ -537,7 +544,7 @@ def with_wrenches(
     else:
         margin = f"least margin {float(np.min(margins)):.3g} N" if est else "free motion, no contact to press"
         reason = f"{tr.kind} on {_state(est)} to touch {_added(target, group)}: {K} segments, {margin}{via}"
-        reason += _beyond_headroom(fixture, wrenches)
+        reason += _beyond_headroom(fixture, wrenches, settings.search)
         success = True
     return replace(
         tr, wrenches=wrenches, margins_N=margins, success=success, reason=reason, found=found,
@@ -546,19 +553,19 @@ def with_wrenches(
     )  # fmt: skip
 
 
-def _beyond_headroom(fixture: Fixture, wrenches: FloatArray) -> str:
+def _beyond_headroom(fixture: Fixture, wrenches: FloatArray, search: SearchSettings) -> str:
     """``"; 2 of 10 segments need more than 80 % of the hand's limits ..."``, or ``""``.
 
-    The segments' searches keep within ``settings.search.limit_fraction`` of the limits wherever a
+    The segments' searches keep within ``search.limit_fraction`` of the limits wherever a
     non-jamming push exists inside; the pushes beyond it are those where none does.
     """
     F_max, T_max, _ = fixture.hand_limits()
-    frac = DEFAULT.search.limit_fraction
+    frac = search.limit_fraction
     d = fixture.dimension
     rows = wrenches[np.isfinite(wrenches).all(axis=1)]
     if not len(rows) or frac >= 1.0:
         return ""
-    cap = frac * (1.0 + DEFAULT.search.binding_rel)
+    cap = frac * (1.0 + search.binding_rel)
     over = (np.linalg.norm(rows[:, :d], axis=1) > cap * F_max) | (np.linalg.norm(rows[:, d:], axis=1) > cap * T_max)
     n = int(np.count_nonzero(over))
     if not n:
@@ -677,7 +684,16 @@ def _solve_formulation(
         xi_guess, note = _linearised_guess(prob, kind), "linearised step toward the target"
     else:
         xi_guess, note = _initial_guess(
-            prob.fixture, prob.start, prob.est, prob.target, prob.goal, warm, K, kind, prob.com_b
+            prob.fixture,
+            prob.start,
+            prob.est,
+            prob.target,
+            prob.goal,
+            warm,
+            K,
+            kind,
+            prob.com_b,
+            prob.settings.same_pose_m,
         )
     features = dict(prob.features)
     if form.kept == "surface":
@@ -757,7 +773,7 @@ def _checked(
     slip = _slip(fx, poses, prob.est) if kind == "roll" else 0.0
     dxi = np.diff(xi, axis=1)
     cost = float(sum(np.sqrt(max(float(v @ prob.M0 @ v), 0.0)) for v in dxi.T) / np.sqrt(fx.workpiece.mass_kg))
-    cost *= carry_factor(fx, prob.start, prob.est)  # the same price as the coarse guess's
+    cost *= carry_factor(fx, prob.start, prob.est, settings=prob.settings)  # the same price as the coarse guess's
     found = status in IPOPT_PATH_FOUND and violation <= fx.tolerances.touch_m
     return _Path(formulation, kind, poses, status, iterations, solve_time, violation, slip, cost, note, found)
 
@@ -1574,12 +1590,16 @@ def _initial_guess(
     K: int,
     kind: str,
     com_b: FloatArray,
+    same_pose_m: float,
 ) -> tuple[FloatArray, str]:
-    """Twists ξ_0..ξ_K (ndof × K+1) to start IPOPT from, and a note of where they came from."""
+    """Twists ξ_0..ξ_K (ndof × K+1) to start IPOPT from, and a note of where they came from.
+
+    A warm start is resampled when it starts within ``same_pose_m`` (and as many radians) of ``start``.
+    """
     wp = fixture.workpiece
     if warm is not None and len(warm.poses) >= 2:
         dp, ang = warm.poses[0].distance_to(start)
-        if dp <= DEFAULT.planner.same_pose_m and ang <= DEFAULT.planner.same_pose_m:
+        if dp <= same_pose_m and ang <= same_pose_m:
             xs = np.array([twist_from_pose(start, p, com_b) for p in warm.poses]).T
             s_old = np.linspace(0.0, 1.0, xs.shape[1])
             s_new = np.linspace(0.0, 1.0, K + 1)

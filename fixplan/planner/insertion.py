@@ -72,7 +72,7 @@ from fixplan.locating import (
 from fixplan.model import Fixture
 from fixplan.planner.execute import ExecutionLog, ExecutionNoise
 from fixplan.planner.plan_types import Verification
-from fixplan.settings import DEFAULT, HAPTIC, InsertionSettings, Settings
+from fixplan.settings import DEFAULT, HAPTIC, ExecutionSettings, InsertionSettings, Settings
 from fixplan.spatial import Pose, exp_so3, log_so3, pose_between, shift_wrench
 
 FloatArray = NDArray[np.float64]
@@ -130,18 +130,20 @@ def goal_state(fixture: Fixture) -> State:
     return frozenset(names)
 
 
-def _push(fixture: Fixture, pose: Pose, names: list[str], u: FloatArray, s: InsertionSettings) -> tuple[
+def _push(fixture: Fixture, pose: Pose, names: list[str], u: FloatArray, settings: Settings) -> tuple[
     bool, FloatArray, str, tuple[str, ...], float | None, float | None
 ]:  # fmt: skip
     """The non-jamming push moving the part along ``−u`` at ``pose`` on the touching contacts of ``names``.
 
     ``(found, wrench about the body origin, reason, contacts, wedging force, margin)``. No contact
-    touching: the free push ``M a − w_g``.
+    touching: the free push ``M a − w_g``. The search runs with ``settings`` (its ``insertion``
+    group sets the acceleration and the margin).
     """
     from fixplan.jamming.search import search_wrench_in
     from fixplan.jamming.wedge import wedge_force
     from fixplan.planner.segments import free_wrench
 
+    s = settings.insertion
     cs = contact_set(fixture, pose, names).touching(fixture.tolerances.touch_m)
     a = np.concatenate([-s.push_accel_mps2 * u, np.zeros(3)])
     if len(cs) == 0:
@@ -149,13 +151,19 @@ def _push(fixture: Fixture, pose: Pose, names: list[str], u: FloatArray, s: Inse
         return ok, w, why, (), None, None
     wedge = wedge_force(cs) if len(cs) >= 2 else None
     weight = fixture.weight_N
-    r = search_wrench_in(cs, a, fixture, objective="effort", min_margin_N=s.seat_side * weight, confirm=True)
+    r = search_wrench_in(
+        cs, a, fixture, objective="effort", min_margin_N=s.seat_side * weight, confirm=True, settings=settings
+    )
     w = r.wrench if r.wrench is not None else np.full(fixture.ndof, np.nan)
     return r.found, w, r.reason, tuple(c.name for c in cs.contacts), wedge, r.margin_N
 
 
 def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionPlan:
-    """The staged insertion of ``fixture``'s part (module text); ``ok`` false with the reason when there is none."""
+    """The staged insertion of ``fixture``'s part (module text); ``ok`` false with the reason when there is none.
+
+    ``settings`` give the insertion's numbers (``insertion``) and every push's wrench search (``search``,
+    ``witness``, ``numerics``).
+    """
     t0 = time.perf_counter()
     s = settings.insertion
     G = located_pose(fixture)
@@ -206,7 +214,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     guide = poses[:1]
     for a, b in zip([*poses], [*poses[1:], staging], strict=True):
         guide += [pose_between(a, b, k / 4) for k in range(1, 5)]
-    ok, w, why, _, _, _ = _push(fixture, staging, [], u, s)
+    ok, w, why, _, _, _ = _push(fixture, staging, [], u, settings)
     plan.stages.append(Stage("", (), "free", guide, w, (), f"approach to the staging pose: {why}"))
     if not ok:
         plan.reason = f"the approach to the staging pose is beyond the hand: {why}"
@@ -223,7 +231,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
         end = G.translated(end_h * u)
         names = [*engaged, *(i.name for i in g if i.kind != "bore")]
         pin_names = [n for n in names if n in {p.name for p in fixture.pins}] + [i.name for i in g if i.kind == "bore"]
-        ok, w, why, touching, wedge, margin = _push(fixture, end, pin_names, u, s)
+        ok, w, why, touching, wedge, margin = _push(fixture, end, pin_names, u, settings)
         label = ", ".join(i.name for i in g)
         st = Stage(g[0].name, tuple(i.name for i in g[1:]), "insert", [prev, end], w, touching,
                    f"insert {label} along the axis: {why}", wedge, margin)  # fmt: skip
@@ -245,7 +253,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     rests = [loc.name for loc in fixture.locators] + [f"{b.name}.bottom" for b in fixture.bores]
     pin_names = [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
     just_above = G.translated(min(s.engage_margin_m, 0.5 * float((prev.p_world - G.p_world) @ u)) * u)
-    ok, w, why, touching, wedge, margin = _push(fixture, just_above, pin_names, u, s)
+    ok, w, why, touching, wedge, margin = _push(fixture, just_above, pin_names, u, settings)
     seat = Stage(rests[0], tuple(rests[1:]), "seat", [prev, G], w, touching, f"seat on {', '.join(rests)}: {why}",
                  wedge, margin)  # fmt: skip
     plan.stages.append(seat)
@@ -330,10 +338,19 @@ class InsertionRun:
         settings: InsertionSettings,
         noise: ExecutionNoise | None = None,
         tick_s: float = 1e-3,
+        *,
+        execution: ExecutionSettings = DEFAULT.execution,
     ):
+        """The run of ``plan`` on ``world``.
+
+        ``settings`` are the insertion's; ``execution`` say when a contact counts (``contact_gap_m``)
+        and when the part is at rest (``stall_speed_mps``), as for the executor
+        (:func:`verify_insertion` passes its profile's).
+        """
         self.world = world
         self.plan = plan
         self.s = settings
+        self.execution = execution
         self.u = plan.axis_world
         self.noise = noise or ExecutionNoise()
         self.rng = np.random.default_rng(self.noise.seed)
@@ -385,7 +402,7 @@ class InsertionRun:
 
     def _bottom_touches(self, pose: Pose, bore: str) -> bool:
         b = next(x for x in self.world.bores if x.name == bore)
-        tol = self.world.tolerances.touch_m + DEFAULT.execution.contact_gap_m
+        tol = self.world.tolerances.touch_m + self.execution.contact_gap_m
         return bottom_gap_m(self.world, pose, b) <= tol
 
     def _reference(self, t: float) -> tuple[Pose, FloatArray, bool]:
@@ -541,7 +558,7 @@ class InsertionRun:
         )
 
     def _check_settled(self, t: float, state: State, twist: FloatArray) -> None:
-        if state >= self.goal and float(np.linalg.norm(twist[:3])) < DEFAULT.execution.stall_speed_mps * 10:
+        if state >= self.goal and float(np.linalg.norm(twist[:3])) < self.execution.stall_speed_mps * 10:
             if self._settled is None:
                 self._settled = t
             elif t - self._settled >= self.s.settle_s:
@@ -580,8 +597,9 @@ def verify_insertion(
 ) -> Verification:
     """Run ``plan`` (made on the nominal fixture) in the haptic loop on ``world`` and check the outcome (module text).
 
-    ``settings`` (default: the ``haptic`` profile) give the engine, the rig, the insertion's and the
-    verification's thresholds; ``final_gap_m``, ``max_penetration_m``, ``trace_every_s`` and
+    ``settings`` (default: the ``haptic`` profile) give the engine, the rig, the insertion's, the
+    verification's and the contact sensing's (``execution``) thresholds and the headroom
+    (``search``); ``final_gap_m``, ``max_penetration_m``, ``trace_every_s`` and
     ``max_sweeps`` override single ones.
     """
     from fixplan.engine.simulator import Simulator
@@ -598,7 +616,7 @@ def verify_insertion(
     sim = Simulator(world, max_iterations=max_sweeps, settings=settings.engine)
     R0 = world.start.R_world_body.copy()
     F_max, T_max, _ = world.hand_limits()
-    run = InsertionRun(world, plan, s, noise, sim.dt)
+    run = InsertionRun(world, plan, s, noise, sim.dt, execution=settings.execution)
     wp = world.workpiece
     x0 = coordinates_from_pose(world.start, R0)
     carry0 = shift_wrench(-world.gravity_wrench(), world.start.point_world_from_body(wp.com_body), world.start.p_world)
@@ -664,7 +682,7 @@ def verify_insertion(
         reason="; ".join(reasons) if reasons else "every check passed",
         failed_checks=checks,
         **measures,
-        **headroom(commands, 3, F_max, T_max, DEFAULT.search.limit_fraction),
+        **headroom(commands, 3, F_max, T_max, settings.search.limit_fraction, settings.search.binding_rel),
         observed_sequence=list(run.log.observed),
         final_gaps_m=gaps,
         execution=run.log,

@@ -50,7 +50,7 @@ from fixplan.contact_state import State
 from fixplan.errors import InputError
 from fixplan.locating import contact_set, locator_gaps, solve_goal
 from fixplan.planner.segments import carry_factor
-from fixplan.settings import DEFAULT, PolicySettings
+from fixplan.settings import DEFAULT, PlannerSettings, PolicySettings, Settings
 from fixplan.spatial import Pose
 
 if TYPE_CHECKING:
@@ -212,7 +212,9 @@ class Policy:
             s = frozenset(e.next_state)
         return steps
 
-    def chain_from(self, fixture: Fixture, state: State, pose: Pose, goal: State) -> list[Step] | None:
+    def chain_from(
+        self, fixture: Fixture, state: State, pose: Pose, goal: State, settings: Settings = DEFAULT
+    ) -> list[Step] | None:
         """The policy's steps from ``state`` with the part at ``pose``: the first chosen where it is.
 
         The value of the next states is the policy's cost-to-go; the first step's own cost is the
@@ -220,7 +222,8 @@ class Policy:
         the one with the least step from here plus cost-to-go from where it leads. A part that
         lost a base locator and tipped up closes that locator again rather than one the
         representative pose found nearer. The plan's own transition keeps its guide path when it
-        is the one chosen.
+        is the one chosen. The steps are priced with ``settings`` (``policy``, ``planner``: the executor's
+        profile).
         """
         from fixplan.planner.execute import Step
 
@@ -234,7 +237,7 @@ class Policy:
         }
         best: tuple[float, str, str] | None = None
         seen: set[str] = set()
-        for cost, t, kind, _, _ in ways_on(fixture, pose, s, later):
+        for cost, t, kind, _, _ in ways_on(fixture, pose, s, later, settings.policy, settings.planner):
             if t in seen:
                 continue  # the other kind only when the planner's own cannot close the gap
             seen.add(t)
@@ -287,11 +290,16 @@ class Policy:
 
 # -- building it -----------------------------------------------------------------------------------
 def representative_pose(
-    fixture: Fixture, goal: Pose, state: State, settings: PolicySettings = DEFAULT.policy
+    fixture: Fixture,
+    goal: Pose,
+    state: State,
+    settings: PolicySettings = DEFAULT.policy,
+    planner_settings: PlannerSettings = DEFAULT.planner,
 ) -> Pose | None:
     """A pose in ``state``'s pre-image near the goal: its locators touch, every other one is open.
 
-    None when no such pose is found (the state's locators cannot touch without another one).
+    None when no such pose is found (the state's locators cannot touch without another one). The
+    state's locators are made to touch within ``planner_settings.settle_tol_m``.
     """
     names = [loc.name for loc in fixture.locators]
     wp = fixture.workpiece
@@ -306,7 +314,7 @@ def representative_pose(
         return None
     pose = goal.retract(step, wp.com_body)
     if state:
-        settled = solve_goal(wp, [fixture.locator(n) for n in sorted(state)], pose, tol_m=DEFAULT.planner.settle_tol_m)
+        settled = solve_goal(wp, [fixture.locator(n) for n in sorted(state)], pose, tol_m=planner_settings.settle_tol_m)
         if not settled.converged:
             return None
         pose = settled.pose
@@ -319,13 +327,15 @@ def representative_pose(
     return pose
 
 
-def gap_closing_step(fixture: Fixture, pose: Pose, state: State, target: str, kind: str) -> tuple[float, Pose] | None:
+def gap_closing_step(
+    fixture: Fixture, pose: Pose, state: State, target: str, kind: str, settings: PlannerSettings = DEFAULT.planner
+) -> tuple[float, Pose] | None:
     """The least-``M``-norm step that closes ``target``'s gap keeping ``state`` (to first order).
 
     ``kind`` ``slide`` keeps the kept contacts' normal rows, ``roll`` every row (no slip), ``free``
     none. Returns (mass-weighted length [m] times the carry factor of :func:`~fixplan.planner.segments.carry_factor`, end pose), or None when that motion cannot close the
     gap (the target's row is not reachable with the kept rows, e.g. rolling on two contacts in 3D
-    leaves one rotation, which may not approach the target).
+    leaves one rotation, which may not approach the target). ``settings``: the planner's (its ``carry_cost``).
     """
     wp = fixture.workpiece
     est = sorted(state)
@@ -348,7 +358,7 @@ def gap_closing_step(fixture: Fixture, pose: Pose, state: State, target: str, ki
     if gap > 0 and abs(float(cs.G[-1] @ step) + gap) > 0.5 * gap:
         return None
     length = float(np.sqrt(max(float(step @ cs.mass_matrix @ step), 0.0) / wp.mass_kg))
-    length *= carry_factor(fixture, pose, est, cs)  # priced as the fine plan prices it
+    length *= carry_factor(fixture, pose, est, cs, settings)  # priced as the fine plan prices it
     return length, pose.retract(step, wp.com_body)
 
 
@@ -372,20 +382,21 @@ def ways_on(
     state: State,
     later: dict[str, float],
     settings: PolicySettings = DEFAULT.policy,
+    planner_settings: PlannerSettings = DEFAULT.planner,
 ) -> list[tuple[float, str, str, Pose, int]]:
     """The transitions out of ``state`` at ``pose``, priced: ``(cost, target, kind, end pose, rank)``.
 
     One per target of ``later`` (its cost-to-go [m] from the state it leads to) and kind of
     :func:`motion_kinds` whose first-order step closes the gap (:func:`gap_closing_step`); ``cost``
     is the step's length plus the cost-to-go, the other kind (``rank`` 1) dearer by the back-off.
-    In target order, the planner's own kind first.
+    In target order, the planner's own kind first. The steps are priced with ``planner_settings``.
     """
     out = []
     for t in sorted(later):
         if not math.isfinite(later[t]):
             continue
         for rank, kind in enumerate(motion_kinds(fixture.dimension, len(state))):
-            step = gap_closing_step(fixture, pose, state, t, kind)
+            step = gap_closing_step(fixture, pose, state, t, kind, planner_settings)
             if step is not None:
                 out.append((step[0] + later[t] + rank * settings.backoff_m, t, kind, step[1], rank))
     return out
@@ -397,18 +408,22 @@ def build_policy(
     start_state: State,
     transitions: Sequence[Transition] = (),
     *,
-    settings: PolicySettings = DEFAULT.policy,
+    settings: PolicySettings | None = None,
 ) -> Policy:
     """The policy of ``fixture`` (see the module docstring).
 
     ``planner`` is a :class:`~fixplan.planner.solve.Planner` (its ``estimate`` prices a transition,
-    its options set the push's acceleration, friction margin and least normal force);
+    its options set the push's acceleration, friction margin and least normal force, its
+    ``settings`` the planner's thresholds and the pushes' searches; ``settings``, the policy's
+    own, default to its ``settings.policy``);
     ``transitions`` the fine plans of the chosen sequence, whose states take the plan's transition.
     A planner with a ``policy_memo`` dictionary keeps there the representative poses and the
     checked pushes, which a rebuild for another plan of the same fixture (after a transition was
     set aside) reuses wherever the inputs are the same.
     """
     t0 = time.perf_counter()
+    profile: Settings = planner.settings
+    settings = profile.policy if settings is None else settings
     memo = getattr(planner, "policy_memo", None)
     memo = {} if not isinstance(memo, dict) else memo
     names = [loc.name for loc in fixture.locators]
@@ -433,7 +448,7 @@ def build_policy(
         if s not in poses:
             key = ("pose", s, _pose_bytes(goal), settings)
             if key not in memo:
-                memo[key] = representative_pose(fixture, goal, s, settings)
+                memo[key] = representative_pose(fixture, goal, s, settings, profile.planner)
             poses[s] = memo[key]
         return poses[s]
 
@@ -462,7 +477,10 @@ def build_policy(
             )  # fmt: skip
             continue
         to_go = {t: value[s | {t}] for t in goal_state - s if s | {t} in value}
-        options = [(cost, t, kind, end) for cost, t, kind, end, _ in ways_on(fixture, pose, s, to_go, settings)]
+        options = [
+            (cost, t, kind, end)
+            for cost, t, kind, end, _ in ways_on(fixture, pose, s, to_go, settings, profile.planner)
+        ]
         options.sort(key=lambda o: (o[0], o[1], o[2]))
         if not options:
             continue
@@ -533,12 +551,12 @@ def _checked_entry(
     best_cost = options[0][0]
     for cost, t, kind, end in options[: max(settings.checks_per_state, 1)]:
         if found_ones and (
-            len(found_ones) >= settings.margin_candidates or cost > DEFAULT.planner.cost_slack * best_cost
+            len(found_ones) >= settings.margin_candidates or cost > planner.settings.planner.cost_slack * best_cost
         ):
             break
         w, m, found, _ = segment_wrenches(
             fixture, [pose, end], tuple(sorted(s)), kind, planner.acceleration_mps2,
-            friction_margin=planner.friction_margin, margin_N=planner.margin_N,
+            friction_margin=planner.friction_margin, margin_N=planner.margin_N, settings=planner.settings,
         )  # fmt: skip
         if found[0]:
             found_ones.append(

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from fixplan.errors import InputError
 from fixplan.locating import contact_set
-from fixplan.settings import DEFAULT
+from fixplan.settings import DEFAULT, PlannerSettings, Settings
 from fixplan.spatial import Pose, log_so3, shift_twist, shift_wrench
 
 if TYPE_CHECKING:
@@ -49,8 +49,12 @@ def segment_wrenches(
     friction_margin: float = 0.0,
     margin_N: float | None = None,
     needs: list[tuple[float | None, float | None]] | None = None,
+    settings: Settings = DEFAULT,
 ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], list[str]]:
     """The non-jamming wrench search for every segment (see the module docstring).
+
+    Every search runs with ``settings`` (its ``search``, ``witness`` and ``numerics`` groups): the
+    caller's profile (:class:`~fixplan.planner.solve.Planner` passes its own).
 
     ``needs``, when given, is filled with one ``(force [N], torque [N·m])`` per segment: the least
     a push needs where the hand is too weak (:attr:`WrenchSearch.needed_force_N`, ``None`` where
@@ -84,7 +88,7 @@ def segment_wrenches(
         Minv = cs.M_inv
         if len(est):
             A = cs.J if kind == "roll" else cs.G
-            nu = nu - Minv @ A.T @ np.linalg.pinv(A @ Minv @ A.T, rcond=DEFAULT.numerics.rcond) @ (A @ nu)
+            nu = nu - Minv @ A.T @ np.linalg.pinv(A @ Minv @ A.T, rcond=settings.numerics.rcond) @ (A @ nu)
         size = float(np.sqrt(max(float(nu @ M @ nu), 0.0) / wp.mass_kg))
         if size <= 1e-15:
             reasons.append("the segment does not move")
@@ -110,6 +114,7 @@ def segment_wrenches(
                 min_margin_N=margin_N,
                 friction_margin=friction_margin,
                 hand_sets=boxes,
+                settings=settings,
             )
         except InputError as exc:
             reasons.append(str(exc))
@@ -203,9 +208,13 @@ def carried_fraction(
 
 
 def carry_factor(
-    fixture: Fixture, pose: Pose, names: tuple[str, ...] | list[str], cs: ContactSet | None = None
+    fixture: Fixture,
+    pose: Pose,
+    names: tuple[str, ...] | list[str],
+    cs: ContactSet | None = None,
+    settings: PlannerSettings = DEFAULT.planner,
 ) -> float:
-    """A transition's cost factor: ``1 + carry_cost × carried_fraction`` (settings.planner.carry_cost).
+    """A transition's cost factor: ``1 + carry_cost × carried_fraction`` (``settings.carry_cost``).
 
     A move with the weight on the locators asks the hand only for the push; a move in the air or
     along walls asks it to carry the part as well (or leans on friction to), leaving less of its
@@ -214,7 +223,7 @@ def carry_factor(
     are otherwise alike (a thin box hung on its end and side locators and slid down them lost
     its walls and fell).
     """
-    return 1.0 + DEFAULT.planner.carry_cost * carried_fraction(fixture, pose, names, cs)
+    return 1.0 + settings.carry_cost * carried_fraction(fixture, pose, names, cs)
 
 
 __all__ = ["carried_fraction", "carry_factor", "free_wrench", "needed_scale", "segment_wrenches"]

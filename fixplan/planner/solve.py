@@ -198,11 +198,12 @@ def friction_robustness(
     acceleration_mps2: float,
     margin_N: float | None,
     grid: Sequence[float] | None = None,
+    settings: Settings = DEFAULT,
 ) -> float:
     """The largest δ of ``grid`` for which the first segment's push survives friction ``μ(1 ± δ)``.
 
-    ``grid`` defaults to the ``default`` profile's ``planner.robust_grid`` (:func:`solve` passes
-    its settings' grid).
+    ``grid`` defaults to ``settings.planner.robust_grid``; the pushes are searched with ``settings``
+    (:func:`solve` passes its own).
 
     The push must move the part as planned within the hand's limits; 0 when only the nominal μ
     allows it, ``inf`` for a transition from no contact (nothing to slip).
@@ -210,10 +211,10 @@ def friction_robustness(
     if not tr.established or len(tr.poses) < 2:
         return float("inf")
     best = 0.0
-    for delta in DEFAULT.planner.robust_grid if grid is None else grid:
+    for delta in settings.planner.robust_grid if grid is None else grid:
         _, _, found, _ = segment_wrenches(
             fixture, tr.poses[:2], tuple(tr.established), tr.kind, acceleration_mps2,
-            friction_margin=delta, margin_N=margin_N,
+            friction_margin=delta, margin_N=margin_N, settings=settings,
         )  # fmt: skip
         if not found[0]:
             break
@@ -234,9 +235,10 @@ class Planner:
     ):
         """The planner of ``fixture``.
 
-        ``settings`` give its thresholds (``planner``) and the pushes' acceleration, normal-force
+        ``settings`` give its thresholds (``planner``, ``policy``), the pushes' acceleration, normal-force
         margin and friction margin (``execution``: ``accel_mps2``, ``margin_N``,
-        ``friction_margin``; the executor's own).
+        ``friction_margin``; the executor's own) and what the pushes' searches keep to (``search``,
+        ``witness``, ``numerics``).
         """
         self.fixture = fixture
         self.names = [loc.name for loc in fixture.locators]
@@ -382,7 +384,7 @@ class Planner:
                 self.fixture, pose, sorted(state), target, knots=self.knots,
                 acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
                 margin_N=self.margin_N, clearance_m=clearance, kind=kind, settings=self.settings.planner,
-                ladder=LADDER if full else LADDER[:1], diagnose=full,
+                profile=self.settings, ladder=LADDER if full else LADDER[:1], diagnose=full,
                 together=[n for n in self.group(state, target) if n != target],
                 wrenches=False,
             )  # fmt: skip
@@ -394,7 +396,7 @@ class Planner:
         """A priced transition with the pushes along its path searched."""
         return with_wrenches(
             self.fixture, tr, acceleration_mps2=self.acceleration_mps2, friction_margin=self.friction_margin,
-            margin_N=self.margin_N, plain=LADDER[0].name,
+            margin_N=self.margin_N, plain=LADDER[0].name, settings=self.settings,
         )  # fmt: skip
 
     def _spare_job(self, job: tuple[Any, ...]) -> Transition:
@@ -445,7 +447,7 @@ class Planner:
             return self._guesses[key]
         found: tuple[float, Pose, str] | None = None
         for kind in motion_kinds(self.fixture.dimension, len(state)):
-            step = gap_closing_step(self.fixture, pose, state, target, kind)
+            step = gap_closing_step(self.fixture, pose, state, target, kind, self.settings.planner)
             if step is not None:
                 found = (step[0], step[1], kind)
                 break
@@ -479,6 +481,7 @@ class Planner:
         _, _, found, reasons = segment_wrenches(
             self.fixture, [pose, guess[1]], est, guess[2],
             self.acceleration_mps2, friction_margin=self.friction_margin, margin_N=self.margin_N,
+            settings=self.settings,
         )  # fmt: skip
         why = None
         if not found[0]:
@@ -508,7 +511,7 @@ class Planner:
         if not state and fx.goal_pose is not None:
             from dataclasses import replace
 
-            approach = plan_approach(replace(fx, start=pose))
+            approach = plan_approach(replace(fx, start=pose), self.settings.policy)
             if approach is not None:
                 start = approach.staging
         try:
@@ -624,7 +627,7 @@ def solve(
         timings = {"plan_s": 0.0, "fine_s": 0.0, "total_s": time.perf_counter() - t0}
         status, reason = _status(verification, "already located at the start pose: every locator touches")
         return PlanResult(status, reason, [tuple(sorted(names))], [], [], verification, [], timings)
-    approach = plan_approach(fixture) if not start_state and fixture.goal_pose is not None else None
+    approach = plan_approach(fixture, settings.policy) if not start_state and fixture.goal_pose is not None else None
     begin = approach.staging if approach is not None else fixture.start
     coarse = planner.plan_from(begin, start_state, order)
     t_plan = time.perf_counter() - t0
@@ -641,7 +644,7 @@ def solve(
             transitions[0] = with_approach(fixture, transitions[0], approach)
         durations = [_duration(tr, acceleration_mps2) for tr in transitions]
         robustness = [
-            friction_robustness(fixture, tr, acceleration_mps2, margin_N, settings.planner.robust_grid)
+            friction_robustness(fixture, tr, acceleration_mps2, margin_N, settings.planner.robust_grid, settings)
             for tr in transitions
         ]
         # the policy is built on the second core while the simulated load runs (policy_job's text)
@@ -714,7 +717,7 @@ def solve_insertion(
     t0 = time.perf_counter()
     vopts = {k: v for k, v in (verify_options or {}).items() if k in ("noise", "max_sweeps", "final_gap_m",
                                                                       "max_penetration_m", "trace_every_s")}  # fmt: skip
-    plan = plan_insertion(fixture)
+    plan = plan_insertion(fixture, settings)
     timings = {"plan_s": plan.plan_s, "fine_s": 0.0}
     hand = _hand_limits(fixture)
     if not plan.ok:
@@ -788,7 +791,10 @@ def _hand_limits(fixture: Fixture) -> tuple[float, float]:
 def _status(verification: Verification | None, note: str) -> tuple[PlanStatus, str]:
     """``planned`` only when the loop confirmed the plan; else ``unverified`` with where and why."""
     if verification is None:
-        return "unverified", "verification skipped (--no-verify): the sequence was not run in the haptic loop"
+        return (
+            "unverified",
+            "verification skipped (solve.run_verification=False): the sequence was not run in the haptic loop",
+        )
     if verification.passed:
         ex = verification.execution
         replans = ex.counts["replans"] if ex is not None else 0

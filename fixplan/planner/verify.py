@@ -67,7 +67,7 @@ from fixplan.planner.execute import (
 from fixplan.planner.fine import twist_from_pose
 from fixplan.planner.plan_types import Timeline, Verification
 from fixplan.planner.policy import Policy
-from fixplan.settings import DEFAULT, HAPTIC, Settings, VerificationSettings
+from fixplan.settings import HAPTIC, Settings, VerificationSettings
 from fixplan.spatial import Pose
 
 FloatArray = NDArray[np.float64]
@@ -155,7 +155,8 @@ def verify(
     """Execute the plan (``steps`` from ``start_state``) in the haptic loop and check the outcome.
 
     ``settings`` (default: the ``haptic`` profile, :mod:`fixplan.settings`) give the engine, the
-    rig, the thresholds and how the executor pushes (``settings.execution``); ``final_gap_m``, ``max_penetration_m``, ``limit_slack``,
+    rig, the thresholds, how the executor pushes (``settings.execution``) and what its wrench
+    searches keep to (``search``, ``witness``, ``numerics``); ``final_gap_m``, ``max_penetration_m``, ``limit_slack``,
     ``trace_every_s`` and ``max_sweeps`` override single ones. ``policy`` (:mod:`.policy`) is
     what the executor consults when it observes a state the plan does not expect, before it
     re-plans.
@@ -185,6 +186,7 @@ def verify(
         tick_s=sim.dt,
         policy=policy,
         avoid=avoid,
+        profile=settings,
     )
     F_max, T_max = executor.F_max, executor.T_max
     rig = haptic_rig(fixture, sim, x0, F_max, T_max, settings.haptic)
@@ -240,7 +242,7 @@ def verify(
             execution=executor.log,
             saturated_ticks=loop.saturated_ticks,
             planner_wall_time_in_loop_s=planner_s[0],
-            **headroom(commands, d, F_max, T_max, executor.limit_fraction),
+            **headroom(commands, d, F_max, T_max, executor.limit_fraction, settings.search.binding_rel),
         )
     log = executor.log
     if log.outcome == "running":
@@ -282,7 +284,7 @@ def verify(
         reason="; ".join(reasons) if reasons else "every check passed",
         failed_checks=checks,
         **measures,
-        **headroom(commands, d, F_max, T_max, executor.limit_fraction),
+        **headroom(commands, d, F_max, T_max, executor.limit_fraction, settings.search.binding_rel),
         observed_sequence=list(log.observed),
         final_gaps_m=gaps,
         execution=log,
@@ -307,12 +309,15 @@ def link_clearance(fixture: Fixture, trace: Sequence[tuple[Any, ...]], every_s: 
     return along_trajectory(fixture, [(float(t), pose) for _, t, pose, *_ in trace], every_s)
 
 
-def headroom(commands: Sequence[FloatArray], d: int, F_max: float, T_max: float, fraction: float) -> dict[str, Any]:
+def headroom(
+    commands: Sequence[FloatArray], d: int, F_max: float, T_max: float, fraction: float, binding_rel: float
+) -> dict[str, Any]:
     """The :class:`Verification` fields of the hand's headroom, from the executor's push at every tick.
 
     ``peak_force_fraction`` = max ‖F‖ / ``F_max``, ``peak_torque_fraction`` = max ‖T‖ / ``T_max``
     (the moment about the body origin, as the limit bounds it), and ``ticks_above_fraction``: the
-    ticks where either exceeds ``fraction`` (beyond the search's binding tolerance).
+    ticks where either exceeds ``fraction`` by more than the search's binding tolerance
+    ``binding_rel`` (the caller's ``settings.search``).
     """
     if not commands:
         return {"limit_fraction": fraction, "peak_force_fraction": None, "peak_torque_fraction": None,
@@ -320,7 +325,7 @@ def headroom(commands: Sequence[FloatArray], d: int, F_max: float, T_max: float,
     W = np.asarray(commands, dtype=float)
     f = np.linalg.norm(W[:, :d], axis=1) / F_max
     t = np.linalg.norm(W[:, d:], axis=1) / T_max
-    above = fraction * (1.0 + DEFAULT.search.binding_rel)
+    above = fraction * (1.0 + binding_rel)
     return {
         "limit_fraction": fraction,
         "peak_force_fraction": float(f.max()),
