@@ -34,7 +34,7 @@ import importlib
 import json
 import os
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -218,18 +218,27 @@ class _JitKernel:
     def __call__(self, *args: Any) -> Any:
         return self.resolve()(*args)
 
+    def fixing(self, fixed: Mapping[int, Any]) -> Callable[..., Any]:
+        """Itself: numba's dispatcher types every argument anyway (:meth:`_AotKernel.fixing`)."""
+        return self
 
-def _checker(specs: Sequence[Any]) -> Callable[[Sequence[Any]], bool]:
+
+def _checker(specs: Sequence[Any], fixed: Mapping[int, Any] | None = None) -> Callable[[Sequence[Any]], bool]:
     """:func:`_accepts` for one variant's ``specs``, written out as one expression (the same tests).
 
     The generic loop spends most of its time on the loop itself (a 3D step has 35 arguments):
     one straight-line expression per variant checks them about twice as fast. The code is
     generated from the manifest's types only (indices, ranks and flags; the dtypes and scalar
-    type tuples are bound as names, never printed into the source).
+    type tuples are bound as names, never printed into the source). ``fixed``: positions whose
+    argument must be that very object (already checked against ``specs`` by the caller).
     """
     names: dict[str, Any] = {"ndarray": np.ndarray}
     terms = []
     for i, s in enumerate(specs):
+        if fixed is not None and i in fixed:
+            names[f"F{i}"] = fixed[i]
+            terms.append(f"a{i} is F{i}")
+            continue
         if type(s[0]) is type:
             names[f"S{i}"] = s
             terms.append(f"type(a{i}) in S{i}")
@@ -271,6 +280,23 @@ class _AotKernel:
                 return function(*args)
         fallbacks[self._key] = fallbacks.get(self._key, 0) + 1
         return self._jit(*args)
+
+    def fixing(self, fixed: Mapping[int, Any]) -> Callable[..., Any]:
+        """This kernel for a caller that passes the same objects at the positions of ``fixed`` every call.
+
+        Their types are checked here, once, against each variant; a call then checks that they are
+        those very objects (``is``: an array's dtype, rank and layout cannot change) and checks the
+        other arguments as :meth:`__call__` does. A mesh part's step passes 48 arguments, 17 of them
+        the part's own arrays: their checks were a fifth of the call. Any other object at a fixed
+        position fails the identity test and the call goes to the JIT, as an unmatched call does.
+        """
+        checks = []
+        for specs, function in self._variants:
+            if all(i < len(specs) and _accepts((value,), (specs[i],)) for i, value in fixed.items()):
+                checks.append((_checker(specs, fixed), function))
+        bound = _AotKernel.__new__(_AotKernel)
+        bound._key, bound._variants, bound._jit, bound._checks = self._key, self._variants, self._jit, checks
+        return bound
 
 
 @functools.cache

@@ -806,6 +806,13 @@ class MeshSettings:
     tree_leaf_triangles : int
         At most this many triangles in a leaf of the point queries' AABB tree (measured on a
         5·10⁴-triangle part: 8 about as fast as 4, 2 and 16 slower).
+    query_cache_radius_m : float
+        The engine's step remembers, at each locator's full query, the triangles near enough to
+        answer exactly for a tip within this distance of that point [m]; farther, it queries the
+        tree again (:func:`fixplan.geometry._mesh_kernels.contacts_near`). The answer does not
+        depend on it, only the speed: larger remembers more triangles and queries less often.
+    query_cache_triangles : int
+        At most this many triangles remembered per locator (more: no memory, a full query each step).
     """
 
     degenerate_rel: float = 1e-12
@@ -815,6 +822,8 @@ class MeshSettings:
     contact_band_m: float = 1e-6
     grid_cell_min_rel: float = 1e-6
     tree_leaf_triangles: int = 8
+    query_cache_radius_m: float = 1e-4
+    query_cache_triangles: int = 256
     step_tolerance_m: float = 1e-4
     step_angular_rad: float = 0.5
 

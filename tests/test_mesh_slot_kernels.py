@@ -36,15 +36,38 @@ def _locators(points: np.ndarray, radius_m: float = 0.003) -> tuple[Locator, ...
     return tuple(Locator(f"L{i}", np.asarray(p, dtype=float), radius_m, 0.4) for i, p in enumerate(points))
 
 
-def _compiled_slots(mesh: Mesh, locators: tuple[Locator, ...], R: np.ndarray, p: np.ndarray, band: float):
+def _empty_cache(mesh: Mesh, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """No triangles remembered (every query a full one until it fills them)."""
+    cache_q = np.zeros((k, 5))
+    cache_q[:, 3] = -1.0
+    return cache_q, np.zeros((k, mesh.settings.query_cache_triangles), dtype=np.int64)
+
+
+def _compiled_slots(
+    mesh: Mesh,
+    locators: tuple[Locator, ...],
+    R: np.ndarray,
+    p: np.ndarray,
+    band: float,
+    cache: tuple[np.ndarray, np.ndarray] | None = None,
+):
     loc = np.array([[*x.p_world, x.radius_m, x.friction, x.torsion_m] for x in locators])
-    return kernels.locator_slots(R, p, *mesh.query_arrays, mesh.same_point_m, loc, band)
+    cache_q, cache_ids = _empty_cache(mesh, len(locators)) if cache is None else cache
+    radius = mesh.settings.query_cache_radius_m
+    return kernels.locator_slots(R, p, *mesh.query_arrays, mesh.same_point_m, loc, band, radius, cache_q, cache_ids)
 
 
-def assert_same_slots(mesh: Mesh, locators: tuple[Locator, ...], R: np.ndarray, p: np.ndarray, band: float) -> int:
+def assert_same_slots(
+    mesh: Mesh,
+    locators: tuple[Locator, ...],
+    R: np.ndarray,
+    p: np.ndarray,
+    band: float,
+    cache: tuple[np.ndarray, np.ndarray] | None = None,
+) -> int:
     """The compiled slots equal :func:`mesh_slots`'s (locator, rank, gap, point, plane row); their count."""
     want = mesh_slots(mesh, locators, R, p, band)
-    n, owner, rank, x_body, obs, gap = _compiled_slots(mesh, locators, R, p, band)
+    n, owner, rank, x_body, obs, gap = _compiled_slots(mesh, locators, R, p, band, cache)
     assert n == len(want)
     assert np.array_equal(owner[:n], want.locator) and np.array_equal(rank[:n], want.rank)
     np.testing.assert_allclose(gap[:n], want.gap_m, rtol=0, atol=TOL)
@@ -69,6 +92,43 @@ def test_slots_on_a_box_mesh_match_the_python_path(rng: np.random.Generator) -> 
         for band in (0.0, 1e-4, 2e-3):
             counts.append(assert_same_slots(mesh, _locators(tips), R, p, band))
     assert min(counts) == len(tips)  # every locator has its nearest contact, however far
+
+
+def test_remembered_triangles_give_the_full_querys_slots_to_the_bit(rng: np.random.Generator) -> None:
+    """A tip that moves in small steps, with the bands the engine uses (its margin grows with speed):
+    each step's slots from the remembered triangles equal the Python path's (1e-12) and a fresh full
+    query's to the bit, on faces, edges and corners of a split box and in the L's concave corner;
+    most steps reuse the remembered triangles, and a move beyond the radius queries the tree again."""
+    radius = Mesh(*cell_surface(*box_cells((0.2, 0.1, 0.05), 4))).settings.query_cache_radius_m
+    cases = (
+        (
+            Mesh(*cell_surface(*box_cells((0.2, 0.1, 0.05), 40))),
+            np.array([[-0.06, -0.03, -0.028], [0.103, 0.0, 0.0], [0.102, 0.052, 0.027], [0.0, 0.0501, 0.0249]]),
+        ),
+        (Mesh(*cell_surface(*l_bracket_cells(0.1, 0.04, 0.06, 0.01))), np.array([CORNER_M, [0.05, 0.02, -0.003]])),
+    )
+    for mesh, tips in cases:
+        locators = _locators(tips)
+        cache = _empty_cache(mesh, len(locators))
+        R, p = np.eye(3), np.zeros(3)
+        reused = refilled = 0
+        for step in range(300):
+            # small steps, now and then a jump of several radii; bands from the margin to its fast-motion size
+            jump = step % 50 == 49
+            p = p + rng.normal(scale=(40.0 if jump else 0.15) * radius, size=3)
+            R = exp_so3(rng.normal(scale=2e-4, size=3)) @ R
+            band = float(rng.choice([1e-4, 1.2e-4, 2e-4]))
+            before = cache[0].copy()
+            got = _compiled_slots(mesh, locators, R, p, band, cache)
+            n = assert_same_slots(mesh, locators, R, p, band)  # a full query: the Python path's slots
+            fresh = _compiled_slots(mesh, locators, R, p, band)
+            assert got[0] == fresh[0] == n
+            for a, b in zip(got[1:], fresh[1:], strict=True):
+                assert np.array_equal(a[:n], b[:n])  # bit for bit
+            same_point = np.all(cache[0][:, :3] == before[:, :3], axis=1)
+            reused += int(np.sum(same_point & (before[:, 3] >= 0)))
+            refilled += int(np.sum(~same_point))
+        assert reused > 5 * refilled > 0, (reused, refilled)  # the memory is used, and renewed when the tip leaves it
 
 
 def test_slots_in_the_l_corner_match_the_python_path_with_two_contacts(rng: np.random.Generator) -> None:

@@ -4,7 +4,9 @@
 does in Python, with the same arithmetic (``tests/test_mesh_slot_kernels.py`` pins the two
 together, 1e-12, on a box and an L-bracket):
 
-1. every locator's contacts on the mesh (:func:`fixplan.geometry._mesh_kernels.contacts`, band =
+1. every locator's contacts on the mesh (:func:`fixplan.geometry._mesh_kernels.contacts_near`:
+   :func:`~fixplan.geometry._mesh_kernels.contacts`' answer to the bit, from the triangles
+   remembered near the tip's last full query while the tip stays within a radius of it; band =
    the step's margin; after the nearest, a face seen from behind is no contact), each made a
    plane slot as :func:`fixplan.engine.mesh_slots.mesh_slots` makes it (plane through the tip's
    point nearest the part, frame of :func:`fixplan.geometry.collision.plane_frame`), with the
@@ -27,7 +29,9 @@ The state a caller keeps between steps (:class:`fixplan.engine.mesh_slots.MeshSt
 - ``slot_state (C, 18)``: per slot ``[P (4), P_prev (4), u (4), n_world (3), gap, active, active_prev]``;
 - ``loc_slots (k_loc, 2)``: each locator's first slot and slot count (count 0: no warm start);
 - ``near (2 n_points + 1,)``: the count of collision points handed over in the last step (−1: none
-  yet, every row is reset at the next step), then their rows, then room for this step's.
+  yet, every row is reset at the next step), then their rows, then room for this step's;
+- ``cache_q (k_loc, 5)``, ``cache_ids (k_loc, C)``: each locator's last full query point (body
+  frame), count (−1: none) and reach, then the triangles remembered there, with ``radius``.
 
 Every function is ``numba.njit(cache=True)``; :data:`fixplan.aot.EXPORTS` lists
 :func:`mesh_step3`, the one called from Python.
@@ -41,7 +45,7 @@ import numpy as np
 from numba import njit
 
 from fixplan.engine.step import step3_ws, workspace3
-from fixplan.geometry._mesh_kernels import STACK, contacts
+from fixplan.geometry._mesh_kernels import STACK, contacts_near
 
 MESH = 4  # fixplan.engine.encode.MESH: the step never queries the part itself (every contact is a slot)
 STATE = 18  # columns of slot_state (module docstring)
@@ -176,8 +180,11 @@ def _grow_i(a, rows):
 
 @njit(cache=True)
 def locator_slots(R, p, tri, face_normals, edge_normals, vertex_normals, faces, around, boxes, nodes, order, same, loc,
-                  band):  # fmt: skip
+                  band, radius, cache_q, cache_ids):  # fmt: skip
     """Every locator's contacts within ``band`` of its nearest, as plane slots (:func:`fixplan.engine.mesh_slots.mesh_slots`).
+
+    ``radius``, ``cache_q (k_loc, 5)``, ``cache_ids (k_loc, C)``: each locator's remembered
+    triangles (:func:`fixplan.geometry._mesh_kernels.contacts_near`: the same answer as a full query).
 
     Returns ``(n, locator (≥n,), rank (≥n,), x_body (≥n, 3), obstacle rows (≥n, 16), gap (≥n,))``:
     the leading ``n`` rows, locator by locator, nearest first.
@@ -190,18 +197,22 @@ def locator_slots(R, p, tri, face_normals, edge_normals, vertex_normals, faces, 
     s_obs = np.empty((cap, 16))
     s_gap = np.empty(cap)
     out = np.empty((8, 7))
+    m = cache_ids.shape[1]
+    scratch_ids, scratch_dist, scratch_pts = np.empty(m, dtype=np.int64), np.empty(m), np.empty((m, 4))
     n = 0
     for i in range(k_loc):
         d0, d1, d2 = loc[i, 0] - p[0], loc[i, 1] - p[1], loc[i, 2] - p[2]
         b0 = R[0, 0] * d0 + R[1, 0] * d1 + R[2, 0] * d2
         b1 = R[0, 1] * d0 + R[1, 1] * d1 + R[2, 1] * d2
         b2 = R[0, 2] * d0 + R[1, 2] * d1 + R[2, 2] * d2
-        found = contacts(b0, b1, b2, band, same, tri, face_normals, edge_normals, vertex_normals, faces, around,
-                         boxes, nodes, order, out)  # fmt: skip
+        found = contacts_near(b0, b1, b2, band, same, tri, face_normals, edge_normals, vertex_normals, faces, around,
+                              boxes, nodes, order, out, radius, cache_q[i], cache_ids[i], scratch_ids, scratch_dist,
+                              scratch_pts)  # fmt: skip
         while found < 0:  # too few rows: again with room for all
             out = np.empty((2 * out.shape[0] - found, 7))
-            found = contacts(b0, b1, b2, band, same, tri, face_normals, edge_normals, vertex_normals, faces,
-                             around, boxes, nodes, order, out)  # fmt: skip
+            found = contacts_near(b0, b1, b2, band, same, tri, face_normals, edge_normals, vertex_normals, faces,
+                                  around, boxes, nodes, order, out, radius, cache_q[i], cache_ids[i], scratch_ids,
+                                  scratch_dist, scratch_pts)  # fmt: skip
         rank = 0
         for r in range(found):
             if r > 0 and not out[r, 0] > 0.0:  # a face seen from behind is no contact
@@ -234,7 +245,7 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
                loc, obs_fix, pts_fix, pt_boxes, pt_nodes, pt_order, rho_max,
                h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_after, polish_steps, bound,
                P_full, active_full, P_prev_full, active_prev_full, gap_full, u_full, n_full,
-               slot_state, loc_slots, near):  # fmt: skip
+               slot_state, loc_slots, near, radius, cache_q, cache_ids):  # fmt: skip
     """One 3D step of a mesh part (the module docstring's five parts); the state arrays updated in place.
 
     ``loc (k_loc, 6)``: each locator's ``[p_world (3), radius, μ, torsion arm]`` (a soft finger's
@@ -250,8 +261,9 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
     k_loc = loc.shape[0]
     # 1. every locator's contacts, as plane slots
     n, s_loc, s_rank, s_x, s_obs, s_gap = locator_slots(
-        R, p, tri, face_normals, edge_normals, vertex_normals, faces, around, boxes, nodes, order, same, loc, margin
-    )
+        R, p, tri, face_normals, edge_normals, vertex_normals, faces, around, boxes, nodes, order, same, loc, margin,
+        radius, cache_q, cache_ids,
+    )  # fmt: skip
     if n > slot_state.shape[0]:
         return 0.0, 0, 0, 0, 0.0, -n
     # 2. the fixture's collision points that may be within the margin

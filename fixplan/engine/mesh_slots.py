@@ -129,14 +129,24 @@ class MeshStepper:
         self.state = np.zeros((4 * k + 8, _STATE_COLUMNS))
         self.loc_slots = np.zeros((k, 2), dtype=np.int64)
         self.near = np.zeros(2 * m + 1, dtype=np.int64)
+        # each locator's remembered triangles (contacts_near): the last full query's point, count and reach; the ids
+        self.radius = float(mesh.settings.query_cache_radius_m)
+        self.cache_q = np.zeros((k, 5))
+        self.cache_ids = np.zeros((k, mesh.settings.query_cache_triangles), dtype=np.int64)
         # the arguments that never change, in the kernel's order
         self._part = (*mesh.query_arrays, mesh.same_point_m, self.loc, self.obs, self.points, *self.tree)
+        # the compiled step, its argument checks done once for the part's own arrays (they follow the
+        # simulator's eight: rotation, origin, velocities, mass, inertia and its inverse, centre of mass)
+        self._step3 = _mesh_step3.fixing(
+            {8 + j: a for j, a in enumerate(self._part) if isinstance(a, np.ndarray)}
+        ) if hasattr(_mesh_step3, "fixing") else _mesh_step3  # fmt: skip
         self.reset()
 
     def reset(self) -> None:
         """A new state: no warm start for the next step, every collision point's row reset by it."""
         self.loc_slots[:] = 0
         self.near[0] = -1
+        self.cache_q[:, 3] = -1.0  # geometry only, but a reset starts from full queries
 
     def step(
         self, sim: Any, f_ext: FloatArray, tau_ext: FloatArray, margin: float
@@ -146,11 +156,11 @@ class MeshStepper:
         Returns ``(error, iterations, status, failed local solves, penetration)``.
         """
         while True:
-            out = _mesh_step3(
+            out = self._step3(
                 sim._R, sim._p, sim._v, sim._w, sim._mass, sim._Ib, sim._Ib_inv, sim._com_b, *self._part, sim.dt,
                 f_ext, tau_ext, sim.restitution, margin, sim.tolerance, sim.max_iterations, sim.polish_after, sim.polish_steps,
                 sim._bound, sim._P, sim._active, sim._P_prev, sim._active_prev, sim._gap, sim._u, sim._nw,
-                self.state, self.loc_slots, self.near,
+                self.state, self.loc_slots, self.near, self.radius, self.cache_q, self.cache_ids,
             )  # fmt: skip
             err, iters, status, failures, pen, n = out
             if n >= 0:

@@ -171,21 +171,13 @@ def _feature_is_shared(px, py, pz, x, y, z, tri_id, region, same, tri, faces, ar
 
 
 @njit(cache=True)
-def contacts(
-    px, py, pz, band, same, tri, face_normals, edge_normals, vertex_normals, faces, around, boxes, nodes, order, out
-):
-    """Every local minimum of the distance from ``p`` within ``band`` of the nearest; the count written into ``out``.
+def _collect(px, py, pz, reach_extra, tri, boxes, nodes, order):
+    """One traversal, nearer child first: every triangle within ``nearest + reach_extra`` of ``p``.
 
-    ``out[k] = (signed distance, point xyz, normal xyz)``, nearest first; ``band == 0``: the
-    nearest only. ``around = (offsets (n+1), triangles)`` concatenated: the triangles at each
-    vertex. When ``out`` has too few rows, returns minus the number needed (nothing is lost:
-    call again with a larger ``out``).
+    Returns ``(n, ids, dist, pts)``: the leading ``n`` rows are triangles with their distance and
+    closest point (``x, y, z, region``); every triangle within the final ``nearest + reach_extra``
+    is among them (a few farther ones may be too: the reach shrinks as the nearest improves).
     """
-    n_vertices = vertex_normals.shape[0]
-    around_start = around[: n_vertices + 1]
-    around_list = around[n_vertices + 1 :]
-    # one traversal, nearer child first: every triangle within (nearest so far + band + same),
-    # with its closest point, into a buffer that grows; a box farther than that is skipped
     size = 16
     ids = np.empty(size, dtype=np.int64)
     dist = np.empty(size)
@@ -193,7 +185,7 @@ def contacts(
     n = 0
     best = np.inf
     reach = np.inf
-    slack2 = np.inf  # (reach + same)²: the box test with slack; the exact test follows
+    slack2 = np.inf  # reach²: the box test; the exact test follows
     stack = np.empty(STACK, dtype=np.int64)
     below = np.empty(STACK)  # each stacked node's box distance² (the test again when it is popped)
     stack[0], below[0] = 0, 0.0
@@ -230,8 +222,8 @@ def contacts(
             d = math.sqrt(dx * dx + dy * dy + dz * dz)
             if d < best:
                 best = d
-                reach = best + band + same
-                slack2 = (reach + same) * (reach + same)
+                reach = best + reach_extra
+                slack2 = reach * reach
             if d > reach:
                 continue
             if n == size:
@@ -242,6 +234,16 @@ def contacts(
             ids[n], dist[n] = i, d
             pts[n, 0], pts[n, 1], pts[n, 2], pts[n, 3] = x, y, z, region
             n += 1
+    return n, ids, dist, pts
+
+
+@njit(cache=True)
+def _emit(px, py, pz, band, same, tri, face_normals, edge_normals, vertex_normals, faces, around, n, ids, dist, pts,
+          out):  # fmt: skip
+    """:func:`contacts`' answer from candidate triangles that hold every one within ``nearest + band + same``."""
+    n_vertices = vertex_normals.shape[0]
+    around_start = around[: n_vertices + 1]
+    around_list = around[n_vertices + 1 :]
     nearest = np.inf
     for k in range(n):
         nearest = min(nearest, dist[k])
@@ -307,3 +309,66 @@ def contacts(
     if needed > 0:
         return -found
     return found
+
+
+@njit(cache=True)
+def contacts(
+    px, py, pz, band, same, tri, face_normals, edge_normals, vertex_normals, faces, around, boxes, nodes, order, out
+):
+    """Every local minimum of the distance from ``p`` within ``band`` of the nearest; the count written into ``out``.
+
+    ``out[k] = (signed distance, point xyz, normal xyz)``, nearest first; ``band == 0``: the
+    nearest only. ``around = (offsets (n+1), triangles)`` concatenated: the triangles at each
+    vertex. When ``out`` has too few rows, returns minus the number needed (nothing is lost:
+    call again with a larger ``out``).
+    """
+    # every triangle within (nearest + band + same), and the box test with another ``same`` of slack
+    n, ids, dist, pts = _collect(px, py, pz, band + 2.0 * same, tri, boxes, nodes, order)
+    return _emit(px, py, pz, band, same, tri, face_normals, edge_normals, vertex_normals, faces, around, n, ids, dist,
+                 pts, out)  # fmt: skip
+
+
+@njit(cache=True)
+def contacts_near(px, py, pz, band, same, tri, face_normals, edge_normals, vertex_normals, faces, around, boxes, nodes,
+                  order, out, radius, cache_q, cache_ids, scratch_ids, scratch_dist, scratch_pts):  # fmt: skip
+    """:func:`contacts` for a point that moves a little between calls: the same answer, to the bit.
+
+    ``cache_q = (x, y, z, count, reach)`` and ``cache_ids`` remember, from the last full query at
+    ``q₀`` (nearest distance ``d₀``), every triangle within ``d₀ + reach`` of ``q₀`` (``count < 0``:
+    nothing remembered); a full query remembers ``reach = band + 2·same + 2·radius``. For ``p`` at
+    ``δ = |p − q₀|`` the nearest distance is at most ``d₀ + δ``, and every triangle within
+    ``nearest + band + same`` of ``p`` is within ``d₀ + 2δ + band + same`` of ``q₀`` (the distance
+    to a triangle is 1-Lipschitz in the point). So while ``2δ + band + same ≤ reach`` the remembered
+    triangles hold every one :func:`contacts` would keep, and the same arithmetic on them (closest
+    points, the sort by distance and index, the local minima) gives its answer. Otherwise, or when
+    they were more than ``cache_ids`` holds, a full query remembers them anew. ``scratch_*``: room
+    for as many rows as ``cache_ids`` (the remembered triangles' distances and closest points).
+    """
+    count = int(cache_q[3])
+    ex, ey, ez = px - cache_q[0], py - cache_q[1], pz - cache_q[2]
+    if count >= 0 and 2.0 * math.sqrt(ex * ex + ey * ey + ez * ez) + band + same <= cache_q[4]:
+        ids, dist, pts = scratch_ids, scratch_dist, scratch_pts
+        for k in range(count):
+            i = cache_ids[k]
+            x, y, z, region = closest_point(px, py, pz, tri[i])
+            dx, dy, dz = px - x, py - y, pz - z
+            ids[k], dist[k] = i, math.sqrt(dx * dx + dy * dy + dz * dz)
+            pts[k, 0], pts[k, 1], pts[k, 2], pts[k, 3] = x, y, z, region
+        return _emit(px, py, pz, band, same, tri, face_normals, edge_normals, vertex_normals, faces, around, count,
+                     ids, dist, pts, out)  # fmt: skip
+    extra = band + 2.0 * same + 2.0 * radius
+    n, ids, dist, pts = _collect(px, py, pz, extra, tri, boxes, nodes, order)
+    nearest = np.inf
+    for k in range(n):
+        nearest = min(nearest, dist[k])
+    kept = 0
+    for k in range(n):
+        if dist[k] <= nearest + extra:
+            if kept < cache_ids.shape[0]:
+                cache_ids[kept] = ids[k]
+            kept += 1
+    cache_q[0], cache_q[1], cache_q[2] = px, py, pz
+    cache_q[3] = float(kept) if kept <= cache_ids.shape[0] else -1.0
+    cache_q[4] = extra
+    return _emit(px, py, pz, band, same, tri, face_normals, edge_normals, vertex_normals, faces, around, n, ids, dist,
+                 pts, out)  # fmt: skip
