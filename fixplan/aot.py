@@ -282,7 +282,7 @@ class _AotKernel:
         return self._jit(*args)
 
     def fixing(self, fixed: Mapping[int, Any]) -> Callable[..., Any]:
-        """This kernel for a caller that passes the same objects at the positions of ``fixed`` every call.
+        """The kernel for a caller that passes the same objects at the positions of ``fixed`` every call.
 
         Their types are checked here, once, against each variant; a call then checks that they are
         those very objects (``is``: an array's dtype, rank and layout cannot change) and checks the
