@@ -131,7 +131,7 @@ PIN_FAMILIES: dict[str, str] = {
     "plane-2-pins": (
         "3D boxes (edges 6-30 cm by 4-20 cm, 2-6 cm thick) on 3 rests under -z and two bored through holes "
         "(D 6-16 mm, mouth chamfers 0-2 mm) on a round pin and a diamond pin (radial play 0.02-0.2 mm, tip "
-        "chamfers 0-2 mm, lands across the line between the pins); goal written (seated toward the round pin's "
+        "chamfers 0-2 mm, each pin 0.4-0.9 x the thickness long, lands across the line between the pins); goal written (seated toward the round pin's "
         "contact); start above the pins, tilted up to 0.5 deg about each axis, each hole within 80 % of the capture "
         "(play + chamfers) of its pin"
     ),
@@ -1239,7 +1239,8 @@ def _draw_plane_2_pins(rng: np.random.Generator) -> _Draft | str:
     d = round(D - 2.0 * play, 7)
     hole_chamfer = _uniform(rng, *PIN_CHAMFER_M, 4)
     pin_chamfer = round(min(_uniform(rng, *PIN_CHAMFER_M, 4), 0.4 * d / 2), 4)
-    length = round(_uniform(rng, *PIN_LENGTH_FRACTION, 3) * c, 4)
+    # each pin's length on its own: the longer engages first (equal lengths: both in one transition)
+    lengths = tuple(round(_uniform(rng, *PIN_LENGTH_FRACTION, 3) * c, 4) for _ in range(2))
     land = round(_uniform(rng, *PIN_LAND_FRACTION, 3) * d, 5)
     mu, varied, mus = _frictions(rng, 5)
     # the holes along x, at least PIN_SPAN_FRACTION of a apart, their mouths (with the chamfer) 2 D in
@@ -1284,13 +1285,15 @@ def _draw_plane_2_pins(rng: np.random.Generator) -> _Draft | str:
          "depth": c, "chamfer": hole_chamfer}
         for n, (x, y) in (("H1", (x1, y1)), ("H2", (x2, y2)))
     )  # fmt: skip
-    common = {"axis": [0.0, 0.0, 1.0], "diameter": d, "length": length, "chamfer": pin_chamfer}
+    common = {"axis": [0.0, 0.0, 1.0], "diameter": d, "chamfer": pin_chamfer}
     pins = (
-        {"name": "P1", "kind": "round", "hole": "H1", "position": [p1[0], p1[1], 0.0], **common, "friction": mus[3]},
-        {"name": "P2", "kind": "diamond", "hole": "H2", "position": [x2, y2, 0.0], **common, "friction": mus[4],
+        {"name": "P1", "kind": "round", "hole": "H1", "position": [p1[0], p1[1], 0.0], **common,
+         "length": lengths[0], "friction": mus[3]},
+        {"name": "P2", "kind": "diamond", "hole": "H2", "position": [x2, y2, 0.0], **common,
+         "length": lengths[1], "friction": mus[4],
          "land_direction": [round(float(across[0]), 9), round(float(across[1]), 9), 0.0], "land_width": land},
     )  # fmt: skip
-    start_c = [a / 2 + float(off[0]), b / 2 + float(off[1]), c / 2 + length + rise]
+    start_c = [a / 2 + float(off[0]), b / 2 + float(off[1]), c / 2 + max(lengths) + rise]
     params = {
         "size_m": [a, b, c],
         "density_kg_m3": density,
@@ -1300,7 +1303,7 @@ def _draw_plane_2_pins(rng: np.random.Generator) -> _Draft | str:
         "radial_play_m": play,
         "hole_chamfer_m": hole_chamfer,
         "pin_chamfer_m": pin_chamfer,
-        "pin_length_m": length,
+        "pin_lengths_m": list(lengths),
         "land_width_m": land,
         "holes_xy_m": [[x1, y1], [x2, y2]],
         "seating_heading_deg": heading,
@@ -1316,7 +1319,7 @@ def _draw_plane_2_pins(rng: np.random.Generator) -> _Draft | str:
         f"Goal: the box fills [0, {a:g}] x [0, {b:g}] x [0, {c:g}] m on the rests B1, B2, B3; its through holes H1, H2",
         f"(D = {D * 1e3:g} mm) on the round pin P1 and the diamond pin P2 (d = {d * 1e3:g} mm, play {play * 1e6:g} um),",
         f"seated toward heading {heading:g} deg: P1 touches H1's wall, P2 is centred in H2.",
-        f"Start: the holes {rise * 1e3:g} mm above the pins' tips, off by ({off[0] * 1e3:.3f}, {off[1] * 1e3:.3f}) mm",
+        f"Start: the holes {rise * 1e3:g} mm above the longer pin's tip, off by ({off[0] * 1e3:.3f}, {off[1] * 1e3:.3f}) mm",
         f"(play + chamfers = {2 * capture * 1e3:.3f} mm), tilted (roll, pitch, yaw) = {tilt} deg; each hole within 80 %",
         "of that of its pin's axis (the chamfers capture it).",
     ]

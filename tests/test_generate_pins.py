@@ -28,8 +28,14 @@ def drawn() -> list[tuple[gen.GeneratedFixture, fixplan.Fixture]]:
 
 def test_ranges_in_the_loaded_files(drawn) -> None:
     chamfers = []
+    longer = []
     for _g, fx in drawn:
         (h1, h2), (p1, p2) = fx.workpiece.holes, fx.pins
+        thickness = 2.0 * fx.workpiece.shape.half[2]
+        for pin in (p1, p2):  # each pin's length drawn on its own
+            lo, hi = gen.PIN_LENGTH_FRACTION
+            assert lo * thickness - 1e-4 <= pin.length_m <= hi * thickness + 1e-4
+        longer.append(p1.length_m > p2.length_m)
         D, d = h1.diameter_m, p1.diameter_m
         assert gen.PIN_HOLE_D_M[0] <= D <= gen.PIN_HOLE_D_M[1] and h2.diameter_m == D
         play = 0.5 * (D - d)
@@ -45,6 +51,7 @@ def test_ranges_in_the_loaded_files(drawn) -> None:
         assert abs(float(np.dot(p2.land_direction_world, between))) <= play + 1e-9
         assert float(np.linalg.norm(between[:2])) >= gen.PIN_SPAN_FRACTION * fx.workpiece.shape.half[0] * 2 - play
     assert min(chamfers) < 0.5e-3 and max(chamfers) > 1.5e-3  # the range is used
+    assert 0 < sum(longer) < len(longer)  # either pin may be the longer: either engages first
 
 
 def test_located_pose_as_built_and_start_above_the_pins(drawn) -> None:
