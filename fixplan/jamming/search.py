@@ -64,7 +64,7 @@ from fixplan.jamming.programs import ConeProgram, force_layout, wrench_search_pr
 from fixplan.kinematics import ContactSet
 from fixplan.locating import contact_set
 from fixplan.settings import DEFAULT, SearchSettings, Settings
-from fixplan.spatial import shift_twist, shift_wrench
+from fixplan.spatial import shift_twist
 
 if TYPE_CHECKING:
     from fixplan.model import Fixture
@@ -636,7 +636,7 @@ def search_wrench_in(
     s = float(x[meta["s"]])
     lam = meta["expand"](x)
     forces = {c.name: lam[o : o + c.size] for c, o in zip(cs.contacts, cs.offsets, strict=True)}
-    w_user = _about_point(cs, w_com, about)  # the applied wrench about the user's point
+    w_user = cs.wrench_about(w_com, about)  # the applied wrench about the user's point
     binding = []
     if abs(float(np.linalg.norm(w_com[: cs.dimension])) - F_max) <= ss.binding_rel * F_max:
         binding.append("max_force")
@@ -727,7 +727,7 @@ def _arm_refuses(
     sol = ClarabelProgram(prog).solve(prog.b)
     if not sol.solved or -sol.value <= ss.found_rel * F_max:
         return None
-    w_user = _about_point(cs, sol.x[: cs.ndof], about)
+    w_user = cs.wrench_about(sol.x[: cs.ndof], about)
     ratio, joint, label = worst_joint(boxes, w_user, about)
     where = f" at {label}" if label else ""
     reason = (
@@ -878,7 +878,7 @@ def _too_weak(
         if not sol.solved:
             return None
         w_com = sol.x[: cs.ndof]
-        w_user = _about_point(cs, w_com, build["about"])
+        w_user = cs.wrench_about(w_com, build["about"])
         return float(np.linalg.norm(w_com[:d])), float(np.linalg.norm(w_user[d:]))
 
     by_force = least("force", big * F_max, T_max)
@@ -906,7 +906,7 @@ def _free_push(
     """Every contact opens: no contact force, the push is ``w = M â − w_g`` (checked, not optimised)."""
     d = cs.dimension
     w_com = cs.mass_matrix @ a_hat - w_g
-    w_user = _about_point(cs, w_com, about)
+    w_user = cs.wrench_about(w_com, about)
     F = float(np.linalg.norm(w_com[:d]))
     T = float(np.linalg.norm(w_user[d:]))
     limits = (F_max, T_max)
@@ -959,8 +959,3 @@ def _robust_friction(cs: ContactSet, roles: dict[str, str], delta: float) -> Con
         for c in cs.contacts
     )
     return ContactSet(contacts, cs.com_world, cs.mass_matrix, cs.body_origin_world)
-
-
-def _about_point(cs: ContactSet, w_com: FloatArray, point: FloatArray) -> FloatArray:
-    """Re-express a wrench about the centre of mass as one about ``point``."""
-    return shift_wrench(w_com, cs.com_world, point)
