@@ -21,6 +21,7 @@ from fixplan.jamming.hand_set import TorqueBox, worst_joint
 from fixplan.jamming.search import search_wrench_in, too_weak_reason
 from fixplan.jamming.wedge import wedge_force
 from fixplan.locating import contact_set
+from fixplan.settings import DEFAULT, Settings
 from fixplan.spatial import shift_wrench
 
 if TYPE_CHECKING:
@@ -43,16 +44,24 @@ class Push:
 
 
 def push_at(
-    fixture: Fixture, pose: Pose, names: Sequence[str], a_com: FloatArray, *, min_margin_N: float | None = None
+    fixture: Fixture,
+    pose: Pose,
+    names: Sequence[str],
+    a_com: FloatArray,
+    *,
+    min_margin_N: float | None = None,
+    settings: Settings = DEFAULT,
 ) -> Push:
     """The push giving the part the acceleration ``a_com`` (of its centre of mass) at ``pose``, on the contacts of ``names`` that touch there (module text).
 
-    ``min_margin_N``: the normal force the search presses the kept contacts by, where it can
-    (:func:`~fixplan.jamming.search.search_wrench_in`).
+    ``min_margin_N``: the normal force the search presses the kept contacts by, where it can;
+    ``settings``: the search's thresholds (:func:`~fixplan.jamming.search.search_wrench_in`).
     """
     cs = contact_set(fixture, pose, list(names)).touching(fixture.tolerances.touch_m)
     if len(cs):
-        r = search_wrench_in(cs, a_com, fixture, objective="effort", min_margin_N=min_margin_N, confirm=True)
+        r = search_wrench_in(
+            cs, a_com, fixture, objective="effort", min_margin_N=min_margin_N, confirm=True, settings=settings
+        )
         wrench = r.wrench if r.wrench is not None else np.full(fixture.ndof, np.nan)
         wedge = wedge_force(cs) if len(cs) >= 2 else None
         return Push(r.found, wrench, r.reason, tuple(cs.names), wedge, r.margin_N)
