@@ -240,6 +240,11 @@ class ContactSet:
         point = self.body_origin_world if about_world is None else about_world
         return shift_wrench(wrench, point, self.com_world)
 
+    def wrench_about(self, wrench_com: ArrayLike, about_world: ArrayLike | None = None) -> FloatArray:
+        """Re-express a wrench given about ``c`` about a world point (default: body origin): :meth:`wrench_about_com` undone."""
+        point = self.body_origin_world if about_world is None else about_world
+        return shift_wrench(wrench_com, self.com_world, point)
+
 
 def mass_matrix(mass_kg: float, inertia_body: ArrayLike, R_world_body: ArrayLike) -> FloatArray:
     """``M = diag(m I, R I_b Rᵀ)`` (3D) or ``diag(m, m, I_zz)`` (2D)."""

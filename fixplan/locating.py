@@ -37,7 +37,6 @@ from fixplan.geometry.pins import HoleBody, PinBody, pin_hole_contacts, radial_p
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix, numbered
 from fixplan.model import (
     Bore,
-    ExplicitContact,
     Fixture,
     Hole,
     Locator,
@@ -384,9 +383,10 @@ def contact_set(
         Configuration of the workpiece. Explicit ``[[contact]]`` entries are given at the start
         pose and are used as they are.
     names : sequence of str, optional
-        Contacts to use, by locator or contact name, in this order. A named locator that does
-        not touch is used all the same (a hypothetical contact state; its gap is reported).
-        Default: the locators touching at ``pose`` plus every explicit contact.
+        Contacts to use, by locator, pin, bore or contact name, in this order; each brings every
+        contact it makes at ``pose``. A named locator that does not touch is used all the same (a
+        hypothetical contact state; its gap is reported). Default: the locators, pins and bores
+        touching at ``pose`` plus every explicit contact.
     """
     if pose is None or pose == "start":
         pose = fixture.start
@@ -395,50 +395,34 @@ def contact_set(
     if not isinstance(pose, Pose):
         raise InputError(f"pose must be 'start', 'goal' or a Pose, got {pose!r}")
     wp = fixture.workpiece
-
-    def explicit(c: ExplicitContact) -> Contact:
-        return Contact(c.name, c.point_world, c.normal_world, c.friction, c.torsion_m, 0.0, "explicit")
-
+    locators = {loc.name: loc for loc in fixture.locators}
+    explicits = {c.name: c for c in fixture.contacts}
+    cylinders: list[Pin | Bore] = [*fixture.pins, *fixture.bores]
+    owners = {o.name: o for o in cylinders}
     if names is None:
-        tol = fixture.tolerances.touch_m
-        if isinstance(wp.shape, Mesh):  # every contact of each locator; those touching are kept
-            all_contacts = [c for loc in fixture.locators for c in locator_contacts(wp, pose, loc)]
-        else:
-            all_contacts = [locator_contact(wp, pose, loc) for loc in fixture.locators]
-        all_contacts += [explicit(c) for c in fixture.contacts]
-        all_contacts += cylinder_contacts(fixture, pose) if fixture.has_pins else []
-        chosen = [c for c in all_contacts if c.kind == "explicit" or c.gap_m <= tol]
+        wanted: Sequence[str] = [*locators, *explicits, *owners]
     else:
-        # only the named contacts are computed (an explicit contact wins over a locator of its name)
-        locators = {loc.name: loc for loc in fixture.locators}
-        explicits = {c.name: c for c in fixture.contacts}
-        pins = {p.name: p for p in fixture.pins}
-        bores = {b.name: b for b in fixture.bores}
-        known = dict.fromkeys([*locators, *explicits, *pins, *bores])
+        known = dict.fromkeys([*locators, *explicits, *owners])
         unknown = [n for n in names if n not in known]
         if unknown:
             raise InputError(f"unknown contact {unknown[0]!r} (known: {', '.join(known)})")
         if len(set(names)) != len(names):
             raise InputError(f"contact names repeat: {', '.join(names)}")
-        if fixture.has_pins:  # a named pin or bore brings every contact it can make at this pose
-            chosen = []
-            for n in names:
-                if n in explicits:
-                    chosen.append(explicit(explicits[n]))
-                elif n in pins or n in bores:
-                    chosen += insert_contacts(wp, pose, pins[n] if n in pins else bores[n])
-                else:
-                    chosen += locator_contacts(wp, pose, locators[n])
-        elif isinstance(wp.shape, Mesh):  # a named locator brings every one of its contacts
-            chosen = [
-                c
-                for n in names
-                for c in ([explicit(explicits[n])] if n in explicits else locator_contacts(wp, pose, locators[n]))
-            ]
+        wanted = names
+    # one path for both: every contact of each wanted name (a mesh's locator in a concave corner
+    # has several, a pin its rim and wall); an explicit contact wins over a locator of its name
+    chosen: list[Contact] = []
+    for n in wanted:
+        if n in explicits:
+            e = explicits[n]
+            chosen.append(Contact(e.name, e.point_world, e.normal_world, e.friction, e.torsion_m, 0.0, "explicit"))
+        elif n in locators:
+            chosen += locator_contacts(wp, pose, locators[n])
         else:
-            chosen = [
-                explicit(explicits[n]) if n in explicits else locator_contact(wp, pose, locators[n]) for n in names
-            ]
+            chosen += insert_contacts(wp, pose, owners[n])
+    if names is None:  # those touching, and every explicit contact
+        tol = fixture.tolerances.touch_m
+        chosen = [c for c in chosen if c.kind == "explicit" or c.gap_m <= tol]
     c = com_world(pose, wp.com_body)
     M = mass_matrix(wp.mass_kg, wp.inertia_body, pose.R_world_body)
     return ContactSet(tuple(chosen), c, M, pose.p_world.copy())

@@ -178,9 +178,7 @@ class Classifier:
         self._offsets = [int(o) for o in cs.offsets]
         self._loaded: dict[tuple[int, ...], Classifier] = {}  # the loaded contacts' classifiers (see _wedging)
 
-    def _wedging(
-        self, f_n: FloatArray, wrench_com: FloatArray, wrench_given: ArrayLike | None
-    ) -> tuple[list[str], Classification] | None:
+    def _wedging(self, f_n: FloatArray, wrench_com: FloatArray) -> tuple[list[str], Mode] | None:
         """The other reading of a jam that rests on forces nothing presses, or None.
 
         The contacts the push and gravity press are those the normal-force fit of step 1 loads
@@ -188,8 +186,9 @@ class Classifier:
         balance rests on internal (wedging) forces — a rigid body's indeterminacy: a 5 kg block
         pushed along its side locators by 10 N (μ m g = 9.81 N) "balanced" with 0.7 N and 1.2 N on
         the side locators. The same wrench is then classified on the loaded contacts alone; if
-        that does not jam, both readings are returned (the mode stays ``jammed``: the planner
-        avoids such pushes, a preloaded part may wedge).
+        that does not jam, both readings are returned: the contacts left unloaded and the mode of
+        the push without them (the mode stays ``jammed``: the planner avoids such pushes, a
+        preloaded part may wedge).
         """
         k = len(self.cs)
         if k < 2:
@@ -198,6 +197,13 @@ class Classifier:
         loaded = tuple(i for i in range(k) if f_n[i] > DEFAULT_SETTINGS.numerics.zero_rel * max(big, 1.0))
         if not loaded or len(loaded) == k:
             return None
+        other = self._loaded_classifier(loaded).classify(wrench_com).mode
+        if other in ("jammed", "held"):
+            return None
+        return [self._names[i] for i in range(k) if i not in loaded], other
+
+    def _loaded_classifier(self, loaded: tuple[int, ...]) -> Classifier:
+        """The classifier of the contacts ``loaded`` (indices into this set), built once."""
         sub = self._loaded.get(loaded)
         if sub is None:
             cs = self.cs
@@ -208,10 +214,7 @@ class Classifier:
                 sub_cs, self.gravity, tolerances=self.tol, backend=self.backend, witness=self._witness.settings
             )
             self._loaded[loaded] = sub
-        other = sub.classify(wrench_com, wrench_given)
-        if other.mode in ("jammed", "held"):
-            return None
-        return [self._names[i] for i in range(k) if i not in loaded], other
+        return sub
 
     # -- programs ------------------------------------------------------------------------------
     def _projector(self, kind: str) -> FloatArray:
@@ -332,7 +335,7 @@ class Classifier:
                 **residuals,
             )
         if margin <= tol.balance_rel:
-            wedged = self._wedging(f_n, w_applied, wrench_given)
+            wedged = self._wedging(f_n, w_applied)
             if wedged is not None:
                 unloaded, other = wedged
                 return result(
@@ -342,7 +345,7 @@ class Classifier:
                     "wedging",
                     f"balanced only with friction and with normal forces at {', '.join(unloaded)} that the push and "
                     f"gravity do not press (internal, wedging forces of a rigid body: indeterminate); with "
-                    f"{'it' if len(unloaded) == 1 else 'them'} unloaded the push {other.mode}",
+                    f"{'it' if len(unloaded) == 1 else 'them'} unloaded the push {other}",
                     **residuals,
                 )
             return result(

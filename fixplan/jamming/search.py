@@ -63,8 +63,8 @@ from fixplan.jamming.hand_set import TorqueBox, worst_joint
 from fixplan.jamming.programs import ConeProgram, force_layout, wrench_search_program
 from fixplan.kinematics import ContactSet
 from fixplan.locating import contact_set
-from fixplan.settings import DEFAULT, SearchSettings, Settings
-from fixplan.spatial import shift_twist, shift_wrench
+from fixplan.settings import DEFAULT, SearchSettings, Settings, Tolerances
+from fixplan.spatial import shift_twist
 
 if TYPE_CHECKING:
     from fixplan.model import Fixture
@@ -526,10 +526,10 @@ def search_wrench_in(
     if boxes and cs.dimension != 3:
         raise InputError("an arm's joint-torque boxes (hand_sets) are for 3D scenes (expected none in 2D)")
     if not kept:
-        clf_free = Classifier(cs, w_g, tolerances=fixture.tolerances, witness=settings.witness)
-        return _with_arm(
-            _free_push(cs, clf_free, a_hat, roles, about, w_g, F_max, T_max, notes, target, ss, frac), boxes, about, ss
-        )
+        return _free_push(
+            cs, a_hat, roles, about, w_g, (F_max, T_max), notes, target,
+            boxes=boxes, tolerances=fixture.tolerances, settings=settings, frac=frac,
+        )  # fmt: skip
 
     def not_found(
         reason: str, binding: list[str] | None = None, needs: tuple[float | None, float | None] = (None, None)
@@ -636,7 +636,7 @@ def search_wrench_in(
     s = float(x[meta["s"]])
     lam = meta["expand"](x)
     forces = {c.name: lam[o : o + c.size] for c, o in zip(cs.contacts, cs.offsets, strict=True)}
-    w_user = _about_point(cs, w_com, about)  # the applied wrench about the user's point
+    w_user = cs.wrench_about(w_com, about)  # the applied wrench about the user's point
     binding = []
     if abs(float(np.linalg.norm(w_com[: cs.dimension])) - F_max) <= ss.binding_rel * F_max:
         binding.append("max_force")
@@ -727,7 +727,7 @@ def _arm_refuses(
     sol = ClarabelProgram(prog).solve(prog.b)
     if not sol.solved or -sol.value <= ss.found_rel * F_max:
         return None
-    w_user = _about_point(cs, sol.x[: cs.ndof], about)
+    w_user = cs.wrench_about(sol.x[: cs.ndof], about)
     ratio, joint, label = worst_joint(boxes, w_user, about)
     where = f" at {label}" if label else ""
     reason = (
@@ -878,7 +878,7 @@ def _too_weak(
         if not sol.solved:
             return None
         w_com = sol.x[: cs.ndof]
-        w_user = _about_point(cs, w_com, build["about"])
+        w_user = cs.wrench_about(w_com, build["about"])
         return float(np.linalg.norm(w_com[:d])), float(np.linalg.norm(w_user[d:]))
 
     by_force = least("force", big * F_max, T_max)
@@ -891,25 +891,32 @@ def _too_weak(
 
 def _free_push(
     cs: ContactSet,
-    clf: Classifier,
     a_hat: FloatArray,
     roles: dict[str, str],
     about: FloatArray,
     w_g: FloatArray,
-    F_max: float,
-    T_max: float,
+    limits: tuple[float, float],
     notes: str,
     target: float | None,
-    ss: SearchSettings,
+    *,
+    boxes: tuple[TorqueBox, ...],
+    tolerances: Tolerances,
+    settings: Settings,
     frac: float = 1.0,
 ) -> WrenchSearch:
-    """Every contact opens: no contact force, the push is ``w = M â − w_g`` (checked, not optimised)."""
+    """Every contact opens: no contact force, the push is ``w = M â − w_g`` (checked, not optimised).
+
+    Checked against the hand's ``limits``, then by the classifier on the contacts (it must not be
+    balanced), then against the arm's ``boxes`` (:func:`_with_arm`).
+    """
+    ss = settings.search
+    F_max, T_max = limits
     d = cs.dimension
+    clf = Classifier(cs, w_g, tolerances=tolerances, witness=settings.witness)  # the contacts, with gravity
     w_com = cs.mass_matrix @ a_hat - w_g
-    w_user = _about_point(cs, w_com, about)
+    w_user = cs.wrench_about(w_com, about)
     F = float(np.linalg.norm(w_com[:d]))
     T = float(np.linalg.norm(w_user[d:]))
-    limits = (F_max, T_max)
     forces = {c.name: np.zeros(c.size) for c in cs.contacts}
     met = None if target is None else True  # no kept contact: the least normal force is vacuous
     if F > F_max * (1 + ss.limit_rel) or T > T_max * (1 + ss.limit_rel):
@@ -931,7 +938,7 @@ def _free_push(
         reason = f"every contact opens, but M a − w_g is statically balanced ({bal.mode}): it would not move the part"
     else:
         reason = f"every contact opens: free motion, the push is M a − w_g, ‖F‖ = {F:.4g} N, ‖T‖ = {T:.4g} N·m{notes}"
-    return WrenchSearch(
+    res = WrenchSearch(
         not bal.balanced,
         w_user,
         None,
@@ -950,6 +957,7 @@ def _free_push(
         limit_fraction=frac,
         within_fraction=within,
     )
+    return _with_arm(res, boxes, about, ss)
 
 
 def _robust_friction(cs: ContactSet, roles: dict[str, str], delta: float) -> ContactSet:
@@ -959,8 +967,3 @@ def _robust_friction(cs: ContactSet, roles: dict[str, str], delta: float) -> Con
         for c in cs.contacts
     )
     return ContactSet(contacts, cs.com_world, cs.mass_matrix, cs.body_origin_world)
-
-
-def _about_point(cs: ContactSet, w_com: FloatArray, point: FloatArray) -> FloatArray:
-    """Re-express a wrench about the centre of mass as one about ``point``."""
-    return shift_wrench(w_com, cs.com_world, point)

@@ -686,8 +686,8 @@ class Executor:
         keeping its orientation, until every locator is ``release_gap_m`` away; the re-plan then
         starts with the approach from free space (:meth:`Planner.replan` of an empty state).
         """
+        from fixplan.jamming.push import free_wrench
         from fixplan.locating import locator_gaps
-        from fixplan.planner.segments import free_wrench
 
         s = self.settings
         why, since = self._release  # type: ignore[misc]  # only called while releasing
@@ -758,7 +758,7 @@ class Executor:
 
     def carry_wrench(self, pose: Pose) -> FloatArray:
         """The push that holds the part still in free space at ``pose`` (gravity's opposite, about the body origin)."""
-        from fixplan.planner.segments import free_wrench
+        from fixplan.jamming.push import free_wrench
 
         return free_wrench(self.fixture, pose, np.zeros(self.ndof), self._mass_matrix(pose))[1]
 
@@ -1011,7 +1011,7 @@ class Executor:
         return nu / size, left
 
     def _solve(self, t: float, pose: Pose, twist: FloatArray, M: FloatArray) -> None:
-        from fixplan.planner.segments import free_wrench
+        from fixplan.jamming.push import free_wrench
 
         s = self.settings
         step = self.steps[self.index]

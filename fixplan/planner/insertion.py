@@ -139,23 +139,12 @@ def _push(fixture: Fixture, pose: Pose, names: list[str], u: FloatArray, setting
     touching: the free push ``M a − w_g``. The search runs with ``settings`` (its ``insertion``
     group sets the acceleration and the margin).
     """
-    from fixplan.jamming.search import search_wrench_in
-    from fixplan.jamming.wedge import wedge_force
-    from fixplan.planner.segments import free_wrench
+    from fixplan.jamming.push import push_at
 
     s = settings.insertion
-    cs = contact_set(fixture, pose, names).touching(fixture.tolerances.touch_m)
     a = np.concatenate([-s.push_accel_mps2 * u, np.zeros(3)])
-    if len(cs) == 0:
-        ok, w, why = free_wrench(fixture, pose, a, cs.mass_matrix)
-        return ok, w, why, (), None, None
-    wedge = wedge_force(cs) if len(cs) >= 2 else None
-    weight = fixture.weight_N
-    r = search_wrench_in(
-        cs, a, fixture, objective="effort", min_margin_N=s.seat_side * weight, confirm=True, settings=settings
-    )
-    w = r.wrench if r.wrench is not None else np.full(fixture.ndof, np.nan)
-    return r.found, w, r.reason, tuple(c.name for c in cs.contacts), wedge, r.margin_N
+    p = push_at(fixture, pose, names, a, min_margin_N=s.seat_side * fixture.weight_N, settings=settings)
+    return p.found, p.wrench, p.reason, p.contacts, p.wedge_force, p.margin_N
 
 
 def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionPlan:

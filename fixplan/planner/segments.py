@@ -27,12 +27,9 @@ from numpy.typing import NDArray
 from fixplan.errors import InputError
 from fixplan.locating import contact_set
 from fixplan.settings import DEFAULT, PlannerSettings, Settings
-from fixplan.spatial import Pose, log_so3, shift_twist, shift_wrench
+from fixplan.spatial import Pose, log_so3, shift_twist
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
-
-    from fixplan.jamming.hand_set import TorqueBox
     from fixplan.kinematics import ContactSet
     from fixplan.model import Fixture
 
@@ -60,6 +57,7 @@ def segment_wrenches(
     a push needs where the hand is too weak (:attr:`WrenchSearch.needed_force_N`, ``None`` where
     that limit does not bind or the segment has a push), for the planner's reasons.
     """
+    from fixplan.jamming.push import free_wrench
     from fixplan.jamming.search import search_wrench_in
 
     wp = fixture.workpiece
@@ -143,41 +141,6 @@ def needed_scale(need: tuple[float | None, float | None], F_max: float, T_max: f
     return min(ratios) if ratios else None
 
 
-def free_wrench(
-    fixture: Fixture, pose: Pose, a_com: FloatArray, M: FloatArray, boxes: Sequence[TorqueBox] = ()
-) -> tuple[bool, FloatArray, str]:
-    """Free flight: ``w = M a − w_g`` about the centre of mass, reported about the body origin.
-
-    ``boxes``: the arm's joint-torque boxes the push must also lie in (the most loaded joint is named).
-    """
-    d = fixture.dimension
-    w_c = M @ a_com - fixture.gravity_wrench()
-    w_o = shift_wrench(w_c, pose.point_world_from_body(fixture.workpiece.com_body), pose.p_world)
-    T = float(np.linalg.norm(w_o[3:])) if d == 3 else abs(float(w_o[2]))
-    F = float(np.linalg.norm(w_o[:d]))
-    F_max, T_max = fixture.manipulator.max_force_N, fixture.manipulator.max_torque_Nm
-    if F > F_max or T > T_max:
-        from fixplan.jamming.search import too_weak_reason
-
-        # the push is determined (no contact force): its force and torque are the least needed
-        reason, _ = too_weak_reason(F, F, T, T, F_max, T_max)
-        return False, w_o, reason + " (free motion: the push is M a − w_g)"
-    if boxes:
-        from fixplan.jamming.hand_set import worst_joint
-
-        ratio, joint, label = worst_joint(boxes, w_o, pose.p_world)
-        if ratio > 1.0:
-            return (
-                False,
-                w_o,
-                (
-                    f"the arm cannot exert the push M a − w_g: joint {joint} needs {ratio:.3g} times its effort limit at "
-                    f"{label} (free motion)"
-                ),
-            )
-    return True, w_o, f"free motion: ‖F‖ = {F:.3g} N, ‖T‖ = {T:.3g} N·m"
-
-
 def carried_fraction(
     fixture: Fixture, pose: Pose, names: tuple[str, ...] | list[str], cs: ContactSet | None = None
 ) -> float:
@@ -226,4 +189,4 @@ def carry_factor(
     return 1.0 + settings.carry_cost * carried_fraction(fixture, pose, names, cs)
 
 
-__all__ = ["carried_fraction", "carry_factor", "free_wrench", "needed_scale", "segment_wrenches"]
+__all__ = ["carried_fraction", "carry_factor", "needed_scale", "segment_wrenches"]

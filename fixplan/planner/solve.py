@@ -533,7 +533,7 @@ def with_approach(fixture: Fixture, tr: Transition, approach: Approach) -> Trans
     """
     from dataclasses import replace
 
-    from fixplan.planner.segments import free_wrench
+    from fixplan.jamming.push import free_wrench
 
     extra = len(approach.poses) - 1
     mid = approach.poses[len(approach.poses) // 2]
