@@ -265,7 +265,9 @@ def _custom_profile():
 
 
 def _record_searches(monkeypatch):
-    """Every wrench search's ``settings`` (``search_wrench`` goes through ``search_wrench_in`` too)."""
+    """Every wrench search's ``settings`` (``search_wrench`` goes through ``search_wrench_in`` too, and
+    ``jamming.push.push_at``, which imported it by name)."""
+    import fixplan.jamming.push as push_module
     import fixplan.jamming.search as search_module
 
     seen = []
@@ -276,6 +278,7 @@ def _record_searches(monkeypatch):
         return original(*args, **kwargs)
 
     monkeypatch.setattr(search_module, "search_wrench_in", recording)
+    monkeypatch.setattr(push_module, "search_wrench_in", recording)
     return seen
 
 
