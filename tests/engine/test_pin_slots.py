@@ -73,8 +73,10 @@ def test_compiled_contacts_are_the_reference() -> None:
 
     One exception, bounded: a tip contact's gap along its circle (the distance to the tip's profile,
     by its nearest feature) jumps where the nearest feature changes, and a golden section whose
-    bracket holds such a jump ends on either side by rounding alone. That happens far from contact
-    (more than 0.2 mm here, beyond the step's detection margin) in a few pairs; the rest agree.
+    bracket holds such a jump ends on either side by rounding alone (which side depends on the
+    compiler's rounding, so on the CPU: on one machine a pair 0.38 mm deep did it). That happens far
+    from the surface (more than 0.2 mm off it, outside or inside: beyond the step's detection margin
+    and far deeper than any penetration the step leaves) in a few pairs; the rest agree.
     """
     rng = np.random.default_rng(0)
     s = DEFAULT.pins
@@ -96,7 +98,7 @@ def test_compiled_contacts_are_the_reference() -> None:
             b = out[len(side) : k, 10].tolist()
             differing = [g for g in a if min((abs(g - x) for x in b), default=1.0) > 1e-12]
             differing += [g for g in b if min((abs(g - x) for x in a), default=1.0) > 1e-12]
-            assert min(differing) > 2e-4, differing
+            assert min(abs(g) for g in differing) > 2e-4, differing
         for row, c in zip(out[:k], ref if tips_agree else side, strict=False):
             seen.add(c.kind)
             assert row[10] == pytest.approx(c.gap_m, abs=1e-12)
