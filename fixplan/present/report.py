@@ -88,7 +88,7 @@ def report_markdown(result: Plan | PlanResult, fixture: Fixture, figures: Sequen
     if v is None and plan.status == "infeasible":
         lines.append("Not run: there is no plan to run in the loop.")
     elif v is None:
-        lines.append("Not run (`--no-verify`).")
+        lines.append("Not run (`solve.run_verification=False`).")
     else:
 
         def num(x: float | None, fmt: str) -> str:
