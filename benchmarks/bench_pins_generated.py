@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 from bench_generated import _exe, _failed, _git_state, _pct, _run_json, _short, _solve, wilson
+from bench_robust import _robust
 from run import Section
 
 from fixplan.generate import generate
@@ -37,29 +38,10 @@ ROOT = Path(__file__).resolve().parents[1]
 SETS = (("plane-2-pins", 2031), ("plane-2-pins held-out", 9301))
 COUNT, QUICK_COUNT = 40, 6
 ROBUST_PER_SET, ROBUST_SAMPLES, QUICK_ROBUST_SAMPLES = 5, 20, 4
-ROBUST_TIMEOUT_S = 1800.0
 HOUSING_RUNS = 5
 TARGET_VERIFIED = 0.95
 TARGET_ROBUST = 0.95
 TARGET_HOUSING_S = 5.0
-
-
-def _robust(path: Path, samples: int) -> dict[str, Any]:
-    cmd = [_exe(), "robust", str(path), "--samples", str(samples), "--seed", "0", "--json"]
-    wall, out, code, err = _run_json(cmd, ROBUST_TIMEOUT_S)
-    if out is None or code != 0:
-        return {"wall_s": wall, "samples": None, "succeeded": None, "error": err or f"exit {code}"}
-    causes: dict[str, int] = {}
-    for f in out.get("failures") or []:
-        causes[str(f.get("cause"))] = causes.get(str(f.get("cause")), 0) + 1
-    replay = [f"fixplan solve {path.name} --perturb-seed {f['seed']}" for f in (out.get("failures") or [])[:2]]
-    return {
-        "wall_s": wall,
-        "samples": int(out["samples"]),
-        "succeeded": int(out["succeeded"]),
-        "causes": ", ".join(f"{k} × {v}" for k, v in sorted(causes.items())),
-        "replay": "; ".join(replay),
-    }
 
 
 def run(quick: bool) -> Section:
