@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 from bench_generated import _exe, _failed, _git_state, _pct, _run_json, _short, _solve, wilson
-from bench_robust import _robust
+from bench_robust import _robust, robust_row
 from run import Section
 
 from fixplan.generate import generate
@@ -145,16 +145,9 @@ def _markdown(
     ]
     k = n_all = 0
     for r in robust_rows:
+        lines.append(robust_row(r))
         if r.get("samples") is None:
-            lines.append(
-                f"| {r['set']} | {r['name']} | – | – | {_short(r.get('error') or '', 80)} | {r['wall_s']:.0f} |"
-            )
             continue
-        lo, hi = wilson(r["succeeded"], r["samples"])
-        lines.append(
-            f"| {r['set']} | {r['name']} | {r['succeeded']}/{r['samples']} | {lo:.3f}–{hi:.3f} | "
-            f"{r['causes'] or '–'} | {r['wall_s']:.0f} |"
-        )
         k, n_all = k + r["succeeded"], n_all + r["samples"]
     if n_all:
         lo, hi = wilson(k, n_all)

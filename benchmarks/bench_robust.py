@@ -84,6 +84,17 @@ def run(quick: bool) -> Section:
     )
 
 
+def robust_row(r: dict[str, Any]) -> str:
+    """One fixture's row of a robust table: set, fixture, successes, Wilson interval, causes, wall time."""
+    if r.get("samples") is None:
+        return f"| {r['set']} | {r['name']} | – | – | {_short(r.get('error') or '', 80)} | {r['wall_s']:.0f} |"
+    lo, hi = wilson(r["succeeded"], r["samples"])
+    return (
+        f"| {r['set']} | {r['name']} | {r['succeeded']}/{r['samples']} | {lo:.3f}–{hi:.3f} |"
+        f" {r['causes'] or '–'} | {r['wall_s']:.0f} |"
+    )
+
+
 def _markdown(rows: list[dict[str, Any]], samples: int, total_s: float, code: str) -> str:
     lines = [
         __doc__.split("\n", 1)[1].strip(),
@@ -97,16 +108,9 @@ def _markdown(rows: list[dict[str, Any]], samples: int, total_s: float, code: st
     k = n = 0
     free_k = free_n = 0
     for r in rows:
+        lines.append(robust_row(r))
         if r.get("samples") is None:
-            lines.append(
-                f"| {r['set']} | {r['name']} | – | – | {_short(r.get('error') or '', 80)} | {r['wall_s']:.0f} |"
-            )
             continue
-        lo, hi = wilson(r["succeeded"], r["samples"])
-        lines.append(
-            f"| {r['set']} | {r['name']} | {r['succeeded']}/{r['samples']} | {lo:.3f}–{hi:.3f} |"
-            f" {r['causes'] or '–'} | {r['wall_s']:.0f} |"
-        )
         k, n = k + r["succeeded"], n + r["samples"]
         if r["set"] != "default":
             free_k, free_n = free_k + r["succeeded"], free_n + r["samples"]
