@@ -286,16 +286,18 @@ class _AotKernel:
 
         Their types are checked here, once, against each variant; a call then checks that they are
         those very objects (``is``: an array's dtype, rank and layout cannot change) and checks the
-        other arguments as :meth:`__call__` does. A mesh part's step passes 48 arguments, 17 of them
-        the part's own arrays: their checks were a fifth of the call. Any other object at a fixed
-        position fails the identity test and the call goes to the JIT, as an unmatched call does.
+        other arguments as :meth:`__call__` does. A mesh part's step passes 48 arguments, 38 of them
+        arrays that stay the same objects from step to step: their checks were most of the wrapper's
+        time. Another object at a fixed position fails the identity test, and the call is checked in
+        full as :meth:`__call__` checks it (then the JIT, as an unmatched call).
         """
         checks = []
         for specs, function in self._variants:
             if all(i < len(specs) and _accepts((value,), (specs[i],)) for i, value in fixed.items()):
                 checks.append((_checker(specs, fixed), function))
         bound = _AotKernel.__new__(_AotKernel)
-        bound._key, bound._variants, bound._jit, bound._checks = self._key, self._variants, self._jit, checks
+        bound._key, bound._variants, bound._jit = self._key, self._variants, self._jit
+        bound._checks = checks + self._checks
         return bound
 
 

@@ -96,6 +96,27 @@ def test_a_call_no_variant_accepts_goes_to_the_jit_and_is_counted(monkeypatch) -
     assert calls == ["aot", "jit", "jit"] and aot.fallbacks == {"m.f": 2}
 
 
+def test_a_fixed_argument_is_checked_by_identity_and_in_full_when_replaced(monkeypatch) -> None:
+    """``fixing``: the fixed array's type is checked once; a call with that very object skips its check, one
+    with another object is checked in full (a good one still runs compiled), a bad one goes to the JIT."""
+    calls: list[str] = []
+    jit = aot._JitKernel("m", "f")
+    jit._function = lambda *a: calls.append("jit") or "jit"  # type: ignore[assignment]
+    spec = (_spec(kind="array", dtype="float64", ndim=1, contiguous=True, mutable=True),) * 2
+    kernel = aot._AotKernel("m.f", [(spec, lambda *a: calls.append("aot") or "aot")], jit)
+    monkeypatch.setattr(aot, "fallbacks", {})
+    fixed = np.zeros(3)
+    bound = kernel.fixing({0: fixed})
+    assert bound(fixed, np.zeros(2)) == "aot"
+    assert bound(np.zeros(3), np.zeros(2)) == "aot"  # another object, checked in full
+    assert bound(np.zeros(3, dtype=np.float32), np.zeros(2)) == "jit"
+    assert bound(fixed, [0.0]) == "jit"  # the other arguments are still checked
+    assert calls == ["aot", "aot", "jit", "jit"] and aot.fallbacks == {"m.f": 2}
+    # a fixed value no variant accepts binds nothing: every call is checked in full
+    assert kernel.fixing({0: np.zeros(3, dtype=np.int64)})(fixed, np.zeros(2)) == "aot"
+    assert aot._JitKernel("m", "f").fixing({0: fixed}) is not None
+
+
 def test_without_a_usable_build_every_kernel_is_numbas_dispatcher(monkeypatch, tmp_path: Path) -> None:
     """Not built, built from other source, or FIXPLAN_KERNELS=jit: the JIT, and status says why."""
     cases = [

@@ -135,11 +135,9 @@ class MeshStepper:
         self.cache_ids = np.zeros((k, mesh.settings.query_cache_triangles), dtype=np.int64)
         # the arguments that never change, in the kernel's order
         self._part = (*mesh.query_arrays, mesh.same_point_m, self.loc, self.obs, self.points, *self.tree)
-        # the compiled step, its argument checks done once for the part's own arrays (they follow the
-        # simulator's eight: rotation, origin, velocities, mass, inertia and its inverse, centre of mass)
-        self._step3 = _mesh_step3.fixing(
-            {8 + j: a for j, a in enumerate(self._part) if isinstance(a, np.ndarray)}
-        ) if hasattr(_mesh_step3, "fixing") else _mesh_step3  # fmt: skip
+        # the compiled step, its arrays' checks done at the first step and then by identity (the
+        # simulator's and this stepper's arrays are updated in place; see aot._AotKernel.fixing)
+        self._step3: Any = None
         self.reset()
 
     def reset(self) -> None:
@@ -156,12 +154,21 @@ class MeshStepper:
         Returns ``(error, iterations, status, failed local solves, penetration)``.
         """
         while True:
-            out = self._step3(
+            args = (
                 sim._R, sim._p, sim._v, sim._w, sim._mass, sim._Ib, sim._Ib_inv, sim._com_b, *self._part, sim.dt,
                 f_ext, tau_ext, sim.restitution, margin, sim.tolerance, sim.max_iterations, sim.polish_after, sim.polish_steps,
                 sim._bound, sim._P, sim._active, sim._P_prev, sim._active_prev, sim._gap, sim._u, sim._nw,
                 self.state, self.loc_slots, self.near, self.radius, self.cache_q, self.cache_ids,
             )  # fmt: skip
+            if self._step3 is None:  # f_ext and tau_ext are new arrays each step: not fixed
+                fixing = getattr(_mesh_step3, "fixing", None)
+                fixed = {
+                    i: a
+                    for i, a in enumerate(args)
+                    if isinstance(a, np.ndarray) and a is not f_ext and a is not tau_ext
+                }
+                self._step3 = _mesh_step3 if fixing is None else fixing(fixed)
+            out = self._step3(*args)
             err, iters, status, failures, pen, n = out
             if n >= 0:
                 return float(err), int(iters), int(status), int(failures), float(pen)
