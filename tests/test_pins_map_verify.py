@@ -201,3 +201,19 @@ def test_map_on_a_shaft_in_its_bore_gives_classify_s_verdict_in_every_cell(capsy
     )
     assert contacts and all(c.startswith("B1") for c in contacts)
     assert mapped == classified and len(set(mapped)) >= 2
+
+
+def test_view_replays_a_pin_plan_s_trace(capsys, tmp_path):
+    """The trace has a column per locator, pin and bore; the scene draws the locators' (it failed on the pins')."""
+    fixture, plan, data = _solved(capsys, tmp_path, HOUSING)
+    assert data["verification"]["trace"]["names"] == ["B1", "B2", "B3", "P1", "P2"]
+    rc, out, err = _run(
+        capsys, "view", fixture, "--plan", plan, "--out", tmp_path / "scene.html", "--frames", 5, "--json"
+    )
+    assert rc == 0, err
+    doc = json.loads(out)
+    assert (
+        doc["source"] == "trace"
+        and doc["frames"] == 5
+        and doc["samples"] == len(data["verification"]["trace"]["time_s"])
+    )
