@@ -20,6 +20,8 @@ import fixplan
 from fixplan.cli import main
 from fixplan.errors import InputError
 from fixplan.interactive.record import verify_recording
+from fixplan.plan_schema import validate_plan_document
+from fixplan.planner.plan import plan_for_fixture
 
 HOUSING = PROBLEMS / "housing-2-pins.toml"  # starts located: the plan holds it with the seating push
 LOAD = PROBLEMS / "housing-2-pins-load.toml"  # from above: approach, P1, P2, seat
@@ -58,10 +60,13 @@ def test_verify_reruns_the_plan_and_ends_where_solve_did(capsys, tmp_path, sourc
     The housing is seated toward +x against P1: H1's axis ends the radial play (D − d)/2 = 0.1 mm
     from P1's; the rests (and the shaft's bore bottom) end closed.
     """
-    _, plan, data = _solved(capsys, tmp_path, source)
+    fixture, plan, data = _solved(capsys, tmp_path, source)
     solved = data["verification"]
     assert data["status"] == "planned" and solved["passed"]
     assert set(data["insertion"]) == {"axis", "goal", "stages", "seat_wrench"}
+    # the file follows the format and reads back as the same file (it did not: B1.bottom, P1.axis_offset)
+    assert validate_plan_document(data, 3) == []
+    assert plan_for_fixture(data, fixplan.load(fixture), "p.json").to_json() == data
     rc, out, err = _run(capsys, "verify", plan, "--json")
     assert rc == 0, err
     doc = json.loads(out)
