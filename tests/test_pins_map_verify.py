@@ -109,6 +109,10 @@ def _tamper(data: dict, key: str) -> dict:
         data["transitions"][0]["added"] = "P2"
     elif key == "a pin it lacks":
         data["sequence"][2] = ["P7"]
+    elif key == "no guide":
+        data["transitions"][0]["poses"] = data["transitions"][0]["poses"][:1]
+    elif key == "no push":
+        data["transitions"][2]["wrench"] = None
     return data
 
 
@@ -122,6 +126,8 @@ def _tamper(data: dict, key: str) -> dict:
         ("sequence", "sequence[4]: got {B1, B2, B3, P1} (expected every pin engaged and every rest pressed"),
         ("approach", "transitions[0]: the approach (insertion.stages[0]: free): got P2"),
         ("a pin it lacks", "it names locators P7 that"),
+        ("no guide", "transitions[0].poses: got 1 (expected the guide's poses, at least its start and end)"),
+        ("no push", "transitions[2].wrench: got null (expected the stage's planned push"),
     ],
 )  # fmt: skip
 def test_a_plan_the_fixture_rules_out_is_refused_before_the_run(capsys, tmp_path, key, words):

@@ -74,7 +74,9 @@ def check_insertion_claims(plan: Plan, fixture: Fixture, source: str, *, toleran
       transitions claims the part starts located, which the fixture must confirm) and ends with
       every pin engaged and every rest pressed (a bore: engaged and on its bottom); the approach
       (``added``: ``staging``) changes no state, every other transition closes its ``added``;
-    - the last knot pose is the located pose.
+    - every transition has its guide (at least two knot poses) and its planned push (its
+      ``wrench``: the largest caps the hand's push along the axis); the last knot pose is the
+      located pose.
 
     Poses agree within ``tolerance`` (metres, radians; :func:`~.plan.check_plan_claims` passes its
     start tolerances), axes within its angle. The pushes' limits and the knots' continuity are
@@ -136,6 +138,14 @@ def check_insertion_claims(plan: Plan, fixture: Fixture, source: str, *, toleran
         where = f"{source}: transitions[{i}]"
         if frozenset(tr.from_state) != seq[i]:
             raise InputError(f"{where}.from: got {_state(tr.from_state)} (expected sequence[{i}], {_state(seq[i])})")
+        if len(tr.poses) < 2:
+            raise InputError(
+                f"{where}.poses: got {len(tr.poses)} (expected the guide's poses, at least its start and end)"
+            )
+        if tr.wrench is None:
+            raise InputError(
+                f"{where}.wrench: got null (expected the stage's planned push; its largest caps the hand's)"
+            )
         if kind == "free":
             if tr.added_names != (APPROACH,) or seq[i + 1] != seq[i]:
                 raise InputError(
@@ -149,8 +159,6 @@ def check_insertion_claims(plan: Plan, fixture: Fixture, source: str, *, toleran
                 f"{where}: {_state(tr.from_state)} + {tr.added_label} → {_state(tr.to_state)} (expected "
                 f"sequence[{i + 1}], {_state(seq[i + 1])}, from 'from' plus 'added')"
             )
-        if not tr.poses:
-            raise InputError(f"{where}.poses: got [] (expected the guide's poses)")
     if n:
         end = plan.transitions[-1].poses[-1]
         dp, dr = end.distance_to(G)
@@ -172,7 +180,7 @@ def insertion_plan_of(plan: Plan, fixture: Fixture) -> InsertionPlan:
     stages = []
     for tr, kind in zip(plan.transitions, data["stages"], strict=True):
         free = kind == "free"
-        wrench = np.full(fixture.ndof, np.nan) if tr.wrench is None else np.asarray(tr.wrench, dtype=float)
+        wrench = np.asarray(tr.wrench, dtype=float)  # every stage has one (check_insertion_claims)
         stages.append(
             Stage(
                 "" if free else str(tr.added), () if free else tuple(tr.together), kind, list(tr.poses), wrench, (),
