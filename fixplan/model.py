@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from fixplan.errors import InfeasibleError, InputError, Issue
+from fixplan.errors import InfeasibleError, Issue
 from fixplan.geometry import Cylinder, Disk, Shape, Sphere
 from fixplan.settings import DEFAULT_TOLERANCES as DEFAULT
 from fixplan.settings import Tolerances
@@ -387,22 +387,6 @@ def nearest_symmetric_pose(shape: Shape, pose: Pose, near: Pose) -> Pose:
     return Pose(pose.R_world_body @ exp_so3(theta * axes[0]), pose.p_world)
 
 
-def refuse_pins(fixture: Fixture, command: str) -> Fixture:
-    """``fixture``, or :class:`~fixplan.errors.InputError` (one line, exit 2) when it has pins or bores.
-
-    Pins, holes and bores are read, checked, classified, searched, simulated, drawn and planned
-    (``solve``, ``robust``) and clamped (``clamp``); the other commands (``map``, ``verify``) do not model them yet and say so
-    instead of ignoring them.
-    """
-    if not fixture.has_pins:
-        return fixture
-    key = f"pin.{fixture.pins[0].name}" if fixture.pins else f"bore.{fixture.bores[0].name}"
-    raise InputError(
-        f"{fixture.source}: {key}: pins and bores are not supported by '{command}' yet "
-        "(expected a fixture of locators; 'validate', 'classify', 'search', 'simulate', 'view', 'haptic', 'clamp', 'solve' and 'robust' take pins)"
-    )
-
-
 def require_full(fixture: Fixture, what: str) -> None:
     """Raise a clear error when ``what`` needs a full fixture (6 locators in 3D, 3 in 2D, or fewer on a symmetric part).
 
@@ -435,7 +419,6 @@ __all__ = [
     "SimulationSettings",
     "Workpiece",
     "nearest_symmetric_pose",
-    "refuse_pins",
     "require_full",
     "symmetry_axes_body",
     "symmetry_motions_body",

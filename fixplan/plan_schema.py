@@ -182,6 +182,20 @@ class Str(PlainValue):
         return {"anyOf": [out, {"type": "null"}]} if self.nullable else out
 
 
+# the elements of a contact state besides names: a bore's bottom reached ("B1.bottom"); a
+# verification's final gaps also hold each pin's or bore's axis offset ("P1.axis_offset"). Names
+# have no dots (fixture_schema.NAME_RULE), so these never collide with a locator's.
+STATE_SUFFIXES = (".bottom",)
+GAP_SUFFIXES = (".bottom", ".axis_offset")
+
+
+def is_state_name(value: Any, suffixes: tuple[str, ...] = STATE_SUFFIXES) -> bool:
+    """A contact state's element: a locator's (pin's, bore's) name, or a name with one of ``suffixes``."""
+    if is_name(value):
+        return True
+    return isinstance(value, str) and any(value.endswith(s) and is_name(value[: -len(s)]) for s in suffixes)
+
+
 class Locator(PlainValue):
     """A locator's name (which fixture's is checked against the fixture, not here)."""
 
@@ -189,7 +203,7 @@ class Locator(PlainValue):
         return "a locator name"
 
     def check(self, value: Any, info: ValidationInfo) -> str:
-        if not is_name(value):
+        if not is_state_name(value):
             _fail(f"got {_kind(value)} (expected a locator name)")
         return str(value)
 
@@ -211,7 +225,7 @@ class Locators(PlainValue):
             return None
         if not isinstance(value, list):
             _fail(f"got {_kind(value)} (expected {self.expected(None)})")
-        bad = [(i, x) for i, x in enumerate(value) if not is_name(x)]
+        bad = [(i, x) for i, x in enumerate(value) if not is_state_name(x)]
         if bad:
             raise _errors("Locators", [((i,), f"got {_kind(x)} (expected a locator name)") for i, x in bad[:5]])
         if len(set(value)) != len(value):
@@ -233,7 +247,7 @@ class Added(PlainValue):
     def check(self, value: Any, info: ValidationInfo) -> str | tuple[str, ...]:
         if isinstance(value, list):
             return Locators(nonempty=True).check(value, info) or ()
-        if not is_name(value):
+        if not is_state_name(value):
             _fail(f"got {_kind(value)} (expected {self.expected(None)})")
         return str(value)
 
@@ -419,7 +433,7 @@ class Numbers(PlainValue):
             _fail(f"got {_kind(value)} (expected {self.expected(None)})")
         errors: list[tuple[tuple, str]] = []
         for key, x in value.items():
-            if self.locators and not is_name(key):
+            if self.locators and not is_state_name(key, GAP_SUFFIXES):
                 errors.append(((key,), "expected a locator name as the key"))
             elif x is None and self.nullable_values:
                 continue
@@ -756,6 +770,33 @@ class Verification(JsonObject):
     )
 
 
+INSERTION_STAGES = ("free", "insert", "seat")
+
+
+class Insertion(JsonObject):
+    """A plan for a fixture with pins or bores: what re-runs its staged insertion (``planner.insertion``)."""
+
+    what: ClassVar[str] = "the staged insertion {axis, goal, stages, seat_wrench}"
+    axis: Annotated[tuple[float, ...], Series(SIGNED)] = Field(
+        description="The insertion axis u, world (a unit vector): the part moves along −u onto its pins."
+    )
+    goal: Pose = Field(description="The located pose the insertion ends at (the guide's end).")
+    stages: tuple[Annotated[str, Str(INSERTION_STAGES)], ...] = Field(
+        description="Each transition's stage: free (the approach), insert (a pin or bore entered), seat."
+    )
+    seat_wrench: Annotated[tuple[float, ...], Wrench()] = Field(
+        description="The seating push at the located pose, about the body origin, world axes [N, N·m]."
+    )
+
+    @classmethod
+    def rules(cls, data: Mapping[str, Any], context: Mapping[str, Any]) -> list[tuple[tuple, str]]:
+        u = data["axis"]
+        norm = math.sqrt(sum(float(x) ** 2 for x in u)) if len(u) == 3 else 0.0
+        if len(u) != 3 or abs(norm - 1.0) > DEFAULT.plan_file.quaternion_norm_tol:
+            return [(("axis",), f"got {shorten(str(u))} (expected a unit vector of 3 numbers)")]
+        return []
+
+
 class PlanFile(JsonObject):
     """A plan file (``fixplan solve --out``): ``docs/plan-format.md``."""
 
@@ -783,6 +824,12 @@ class PlanFile(JsonObject):
     )
     clamping: Annotated[Any, AnyObject(nullable=True)] = Field(
         None, description="--clamp: the clamping stage after loading (fixplan clamp's JSON)."
+    )
+    clearance_pose_range: Annotated[Any, AnyObject(nullable=True)] = Field(
+        None, description="With [[pin]]: the located poses the pins' clearances allow (kept as written)."
+    )
+    insertion: Insertion | None = Field(
+        None, description="With [[pin]] or [[bore]], a plan found: its staged insertion (what verify re-runs)."
     )
 
 

@@ -190,7 +190,7 @@ def test_a_located_start_is_held() -> None:
     assert r.reason.startswith("already located") and r.transitions == []
 
 
-def test_cli_solve_takes_pins_and_map_still_refuses(tmp_path) -> None:
+def test_cli_solve_takes_pins_but_not_an_order(tmp_path) -> None:
     proc = run_cli("solve", LOAD, "--json", "--no-verify", check_rc=1)  # unverified: exit 1
     doc = json.loads(proc.stdout)
     assert doc["status"] == "unverified"

@@ -173,7 +173,8 @@ def test_pin_errors_name_the_key(old: str, new: str, key: str, words: str) -> No
     assert lines and words in lines[0], str(exc.value)
 
 
-def test_cli_refuses_pins_outside_validate_classify_search(tmp_path: Path) -> None:
+def test_cli_validate_names_a_bad_pin_key(tmp_path: Path) -> None:
+    """Every command takes pins (map and verify: tests/test_pins_map_verify.py); a bad pin key is one line, exit 2."""
     ok = run_cli("validate", HOUSING)
     assert ok.returncode == 0 and "warning" not in ok.stderr, ok.stderr
     bad = tmp_path / "bad.toml"
@@ -181,17 +182,9 @@ def test_cli_refuses_pins_outside_validate_classify_search(tmp_path: Path) -> No
     proc = run_cli("validate", bad)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert f"{bad}: pin.P2.hole: no hole 'H9'" in proc.stderr
-    for command in ("map",):  # solve and robust plan the insertion (tests/test_insertion.py)
-        proc = run_cli(command, HOUSING)
-        assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
-        assert (
-            proc.stderr.strip()
-            .splitlines()[-1]
-            .endswith(
-                f"pin.P1: pins and bores are not supported by '{command}' yet (expected a fixture of locators; "
-                "'validate', 'classify', 'search', 'simulate', 'view', 'haptic', 'clamp', 'solve' and 'robust' take pins)"
-            )
-        ), proc.stderr
+    proc = run_cli("map", bad, "--out", tmp_path / "m.png")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert f"{bad}: pin.P2.hole: no hole 'H9'" in proc.stderr and "not supported" not in proc.stderr
 
 
 def test_housing_contacts_at_the_located_pose() -> None:

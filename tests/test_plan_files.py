@@ -371,7 +371,7 @@ def test_the_docs_describe_every_key_of_the_format():
     models = [
         plan_schema.PlanFile, plan_schema.RecordingFile, plan_schema.Transition, plan_schema.Pose,
         plan_schema.Pushes, plan_schema.Tried, plan_schema.PolicyEntry, plan_schema.Verification,
-        plan_schema.Execution, plan_schema.Trace, plan_schema.Where,
+        plan_schema.Execution, plan_schema.Trace, plan_schema.Where, plan_schema.Insertion,
     ]  # fmt: skip
     missing = [
         f"{model.__name__}.{field.alias or name}"

@@ -99,16 +99,11 @@ def _root(
     """Plan how a workpiece is loaded into a fixture without jamming."""
 
 
-def _load(path: Path | None, command: str, pins: bool = False):
-    """The fixture at ``path`` (default: the bundled box); every command takes mesh parts.
-
-    A fixture with pins or bores is refused in one line unless the command takes them (``pins``).
-    """
+def _load(path: Path | None):
+    """The fixture at ``path`` (default: the bundled box); every command takes mesh parts, pins and bores."""
     from fixplan.fixture import default_fixture_path, load
-    from fixplan.model import refuse_pins
 
-    fixture = load(path if path is not None else default_fixture_path())
-    return fixture if pins else refuse_pins(fixture, command)
+    return load(path if path is not None else default_fixture_path())
 
 
 def _numbers(

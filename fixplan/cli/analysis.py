@@ -185,7 +185,7 @@ def classify(
     from fixplan.jamming import classify as run
     from fixplan.locating import contact_set
 
-    fixture = _load(file, "classify", pins=True)
+    fixture = _load(file)
     if (wrench is None) == (wrenches is None):
         raise InputError("give exactly one of --wrench or --wrenches")
     n = fixture.ndof
@@ -306,7 +306,7 @@ def search(
     """Find the non-jamming push for a desired motion (exit 1 when none exists or --min-margin is not met)."""
     from fixplan.jamming import search_wrench
 
-    fixture = _load(file, "search", pins=True)
+    fixture = _load(file)
     if not motion:
         raise InputError("--motion is required (the desired acceleration, e.g. 0.1,0,0,0,0,0)")
     m = _numbers(motion, "--motion", fixture.ndof, limits.ACCELERATION)
@@ -380,7 +380,7 @@ def map_(
     from fixplan.mapping import jamming_map
     from fixplan.present.maps import save_map, save_map_csv
 
-    fixture = _load(file, "map")
+    fixture = _load(file)
     names_all = AXES_3D if fixture.dimension == 3 else AXES_2D
     aliases = {"Mx": "Tx", "My": "Ty", "Mz": "Tz"} if fixture.dimension == 3 else {"Tz": "Mz"}
     if axes is None:
@@ -473,7 +473,7 @@ def simulate(
     from fixplan.engine.outcome import RunOutcome
     from fixplan.engine.simulator import Simulator
 
-    fixture = _load(file, "simulate", pins=True)
+    fixture = _load(file)
     if not limits.DURATION.contains(duration):
         raise InputError(f"--duration is {quote_number(duration)} (expected {limits.DURATION.expected()})")
     if dt is not None and not limits.TIMESTEP.contains(dt):

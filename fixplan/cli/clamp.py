@@ -35,7 +35,7 @@ def clamp(
     from fixplan.clamping import analyse_clamping
     from fixplan.limits import FORCE_MAX_N
 
-    fixture = _load(file, "clamp", pins=True)
+    fixture = _load(file)
     if preload is not None and not (math.isfinite(preload) and 0.0 <= preload <= FORCE_MAX_N):
         raise InputError(f"--preload is {quote_number(preload)} (expected a force [N] in [0, {FORCE_MAX_N:g}])")
     result = analyse_clamping(fixture, _names(order, "--order"), preload, verify=verify)

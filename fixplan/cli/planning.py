@@ -193,7 +193,7 @@ def solve(
     if perturb_seed is not None:
         if no_verify:
             raise InputError("--perturb-seed verifies the plan on a perturbed world: it cannot go with --no-verify")
-    fixture = _load(file, "solve", pins=True)
+    fixture = _load(file)
     if fixture.has_pins and order:
         raise InputError(
             f"{fixture.source}: --order is not supported with pins or bores yet "
@@ -462,7 +462,7 @@ def robust(
     from fixplan.cluster import progress_bar
     from fixplan.robust import robust as run
 
-    fixture = _load(file, "robust", pins=True)
+    fixture = _load(file)
     settings = _robust_settings(
         samples=samples, seed=seed, mu_spread=mu_spread, pose_sigma=_pose_sigma(pose_sigma, fixture),
         locator_sigma=locator_sigma, force_noise=force_noise, latency_ms=latency_ms,
@@ -559,7 +559,7 @@ def view(
     from fixplan.present.replay import read_plan, rest_replay
     from fixplan.present.scene import scene_figure, scene_info
 
-    fixture = _load(file, "view", pins=True)
+    fixture = _load(file)
     check_distinct([("FILE", file), ("--plan", plan), ("--out", out)])
     target = _writable(out, force)
     replay = rest_replay(fixture) if plan is None else read_plan(plan, fixture)

@@ -232,13 +232,12 @@ def run_verify(plan: Path, fixture_path: Path | None, json_out: bool) -> int:
     from fixplan.files import read_plan_json
     from fixplan.fixture import fixture_of_plan, load
     from fixplan.interactive.record import verify_plan_file
-    from fixplan.model import refuse_pins
 
     data = read_plan_json(plan, expected="a plan JSON ('fixplan solve --out' or 'fixplan haptic --record')")  # ≤ 1 MiB
     if not isinstance(data, dict):
         raise InputError(f"{plan}: not a fixplan plan (expected a JSON object)")
     path, note = fixture_of_plan(data, plan, fixture_path)  # the fixture the plan names (path, hash)
-    fixture = refuse_pins(load(path), "verify")
+    fixture = load(path)
     try:
         v = verify_plan_file(fixture, data, source=str(plan))
     except InputError as exc:

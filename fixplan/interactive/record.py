@@ -359,6 +359,12 @@ def verify_recording(
     from fixplan.planner.plan import Verification, plan_for_fixture
     from fixplan.planner.verify import loop_measures
 
+    if fixture.has_pins:  # the replay's goal is every locator pressed: it says nothing of pins (a bore has none)
+        raise InputError(
+            f"{source}: a recording on a fixture with pins or bores ({fixture.source}) is not re-run yet: its goal, "
+            "every locator pressed, says nothing of the pins (expected a plan from 'fixplan solve --out', whose "
+            "staged insertion verify re-runs)"
+        )
     plan_for_fixture(data, fixture, source)  # the format, the fixture's locators and start, pushes within limits
     transitions = data["transitions"]
     contradiction = push_disagreement(data, fixture)  # the trace is the evidence of what was pushed
@@ -473,7 +479,10 @@ def verify_recording(
 
 
 def verify_plan_file(fixture: Fixture, data: dict[str, Any], *, source: str = "plan") -> Any:
-    """``fixplan verify``: a session's recorded pushes, or a solved plan's transitions through the executor."""
+    """``fixplan verify``: a session's recorded pushes, or a solved plan's transitions through the executor.
+
+    A plan for a fixture with pins or bores re-runs its staged insertion (:mod:`fixplan.planner.insertion_file`).
+    """
     from fixplan.locating import start_state as locating_start_state
     from fixplan.planner.execute import Step, TransitionKind
     from fixplan.planner.plan import plan_for_fixture
@@ -485,6 +494,10 @@ def verify_plan_file(fixture: Fixture, data: dict[str, Any], *, source: str = "p
     plan = plan_for_fixture(data, fixture, source)
     if plan.status == "infeasible":
         raise InputError(f"{source}: the plan is infeasible (no transitions to run): {plan.reason}")
+    if fixture.has_pins:  # the staged insertion the file holds, in the loop as solve verified it
+        from fixplan.planner.insertion_file import verify_insertion_file
+
+        return verify_insertion_file(fixture, plan)
     steps = []
     for i, tr in enumerate(plan.transitions):
         if tr.added is None:

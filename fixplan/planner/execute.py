@@ -191,7 +191,7 @@ class DivergenceGuard:
     """Where a simulated load has left the fixture: the one definition the executor and the haptic session use.
 
     The part never needs to leave the fixture's neighbourhood: beyond ``far_m`` (``reach_factor`` ×
-    (the farthest locator from the start position + the part's bounding radius)) of where it
+    (the farthest locator, pin or bore from the start position + the part's bounding radius)) of where it
     started, or faster than ``v_limit_mps`` (``speed_limit_factor`` × the cruise speed, and at
     least 1 m/s: a speed no push of the plan causes), the load has diverged (the part fell off the
     locators, or the simulation blew up).
@@ -213,7 +213,11 @@ class DivergenceGuard:
         """
         s = settings or ExecutionSettings()
         home = np.array(fixture.start.p_world, dtype=float)
-        reach = float(np.max(np.linalg.norm([loc.p_world - home for loc in fixture.locators], axis=1), initial=0.0))
+        # the fixture's elements: its locators, pins and bores (a shaft's bore alone: no locator at all)
+        points = [loc.p_world for loc in fixture.locators] + [p.p_world for p in fixture.pins]
+        points += [b.p_world for b in fixture.bores]
+        offsets = np.asarray(points, dtype=float).reshape(len(points), home.shape[0]) - home
+        reach = float(np.max(np.linalg.norm(offsets, axis=1), initial=0.0))
         far_m = s.reach_factor * (reach + fixture.workpiece.shape.bounding_radius)
         v_limit = max(s.speed_limit_factor * s.speed_mps, 1.0)
         if accel_mps2 is not None:

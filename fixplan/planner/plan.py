@@ -50,11 +50,27 @@ START_TOLERANCE_M = 1e-3  # a plan must start within this of the fixture's start
 START_TOLERANCE_RAD = 1e-2  # ... and this rotation, else it is for another fixture
 
 
+def _known_names(fixture: Fixture) -> tuple[list[str], list[str]]:
+    """What a plan for ``fixture`` may name in its states, and the names of its verification's trace.
+
+    A fixture of locators: its locators, both. With pins or bores (:mod:`.insertion_file`): the
+    states also name the pins, the bores and each bore's bottom (``B1.bottom``), and the
+    approach's ``staging``; the trace has a column per locator, pin and bore (the engine's).
+    """
+    locators = [loc.name for loc in fixture.locators]
+    if not fixture.has_pins:
+        return locators, locators
+    from fixplan.planner.insertion_file import APPROACH, state_names
+
+    traced = locators + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
+    return [*state_names(fixture), APPROACH], traced
+
+
 def check_names(data: Any, fixture: Fixture, source: str) -> None:
     """Refuse a plan object that names locators the fixture lacks (before parsing its poses)."""
     if not isinstance(data, dict) or not isinstance(data.get("transitions"), list) or "status" not in data:
         raise InputError(f"{source}: {NOT_A_PLAN}")
-    known = [loc.name for loc in fixture.locators]
+    known, traced = _known_names(fixture)
     mentioned: list[str] = []
     for i, tr in enumerate(data["transitions"]):
         if not isinstance(tr, dict):
@@ -89,23 +105,25 @@ def check_names(data: Any, fixture: Fixture, source: str) -> None:
         for i, s in enumerate(verification.get("observed_sequence") or []):
             mentioned += _names(s, f"{source}: verification.observed_sequence[{i}]")
         if isinstance(verification.get("final_gaps"), dict):
-            mentioned += list(verification["final_gaps"])
+            # a pin's or bore's gap is its axis offset at the end ("P1.axis_offset"): its name counts
+            offsets = {f"{n}.axis_offset": n for n in traced if fixture.has_pins}
+            mentioned += [offsets.get(k, k) for k in verification["final_gaps"]]
     trace = verification.get("trace") if isinstance(verification, dict) else None
     if trace is not None:
         if not isinstance(trace, dict):
             raise InputError(f"{source}: verification.trace: expected an object, got {_short(trace)}")
         names = _names(trace.get("names"), f"{source}: verification.trace.names")
-        if names != known:
-            missing = [n for n in names if n not in known] or [n for n in known if n not in names]
+        if names != traced:
+            missing = [n for n in names if n not in traced] or [n for n in traced if n not in names]
             raise InputError(
                 f"{source}: the plan is for another fixture: its trace has locators {', '.join(names)}, "
-                f"{fixture.source} has {', '.join(known)} (differing: {', '.join(missing) or 'order'})"
+                f"{fixture.source} has {', '.join(traced)} (differing: {', '.join(missing) or 'order'})"
             )
     unknown = sorted(set(mentioned) - set(known))
     if unknown:
         raise InputError(
             f"{source}: the plan is for another fixture: it names locators {', '.join(unknown)} "
-            f"that {fixture.source} does not have (it has {', '.join(known)})"
+            f"that {fixture.source} does not have (it has {', '.join(traced)})"
         )
 
 
@@ -180,11 +198,13 @@ def check_plan_claims(plan: Plan, fixture: Fixture, source: str) -> None:
       locators touching at the start pose) and ends with every locator; its transitions are that
       sequence's steps, each closing its ``added`` locators; its knot poses start at the start
       pose, follow on from one transition to the next and stay in the fixture's neighbourhood
-      (the executor's divergence bound).
+      (the executor's divergence bound);
+    - a solved plan for a fixture with pins or bores: the staged insertion's states, stages, axis
+      and located pose (:func:`~.insertion_file.check_insertion_claims`), its seating push within
+      the hand's limits, and the same knots.
 
     Raises :class:`InputError` naming the key and what was expected.
     """
-    from fixplan.planner.execute import DivergenceGuard
     from fixplan.settings import DEFAULT
 
     F_max, T_max, _ = fixture.hand_limits()
@@ -210,12 +230,21 @@ def check_plan_claims(plan: Plan, fixture: Fixture, source: str) -> None:
     where = plan.extras.get("where")
     if isinstance(where, dict) and where.get("push") is not None:
         within_limits(np.asarray(where["push"], dtype=float), "where.push")
+    insertion = plan.extras.get("insertion")
+    if isinstance(insertion, dict) and insertion.get("seat_wrench") is not None:
+        within_limits(np.asarray(insertion["seat_wrench"], dtype=float), "insertion.seat_wrench")
     if plan.policy is not None:
         for i, entry in enumerate(plan.policy.to_json()):
             w = entry.get("wrench")
             within_limits(None if w is None else np.asarray(w, dtype=float), f"policy[{i}].wrench")
     if plan.extras.get("source") == "haptic session" or plan.status == "infeasible":
         return  # a recording claims what a person did: its replay judges it
+    if fixture.has_pins:  # the staged insertion's states and stages, then the knots as for any plan
+        from fixplan.planner.insertion_file import check_insertion_claims
+
+        check_insertion_claims(plan, fixture, source, tolerance=(START_TOLERANCE_M, START_TOLERANCE_RAD))
+        _check_knots(plan, fixture, source)
+        return
     names = frozenset(loc.name for loc in fixture.locators)
     from fixplan.locating import start_state
 
@@ -254,6 +283,13 @@ def check_plan_claims(plan: Plan, fixture: Fixture, source: str) -> None:
                 f"{where}: {state(tr.from_state)} + {tr.added_label} → {state(tr.to_state)} (expected sequence[{i + 1}], "
                 f"{state(seq[i + 1])}, from 'from' plus 'added')"
             )
+    _check_knots(plan, fixture, source)
+
+
+def _check_knots(plan: Plan, fixture: Fixture, source: str) -> None:
+    """Refuse knot poses beyond the fixture's neighbourhood, or a transition that does not start where the last ended."""
+    from fixplan.planner.execute import DivergenceGuard
+
     guard = DivergenceGuard.for_fixture(fixture)
     previous: Pose | None = None
     for i, tr in enumerate(plan.transitions):

@@ -72,6 +72,8 @@ class PlanResult:
     # with its defaults when the file has none); None: not known
     hand_limits: tuple[float, float] | None = None
     robot: Any = None  # fixplan.robot.RobotReport: the fixture's [robot] along the plan (None: no robot)
+    # pins or bores: the staged insertion (planner.insertion.InsertionPlan); its plan file's ``insertion`` key
+    insertion: Any = None
 
     @property
     def ok(self) -> bool:
@@ -149,8 +151,19 @@ class PlanResult:
             verification=self.verification,
             timings=dict(self.timings),
             policy=self.policy,
-            extras={} if self.robot is None else {"robot": self.robot.to_json()},
+            extras=self._extras(),
         )
+
+    def _extras(self) -> dict[str, Any]:
+        """The plan's keys beyond a plan of locators': ``robot``; with pins or bores, ``insertion`` (what verify re-runs)."""
+        extras: dict[str, Any] = {} if self.robot is None else {"robot": self.robot.to_json()}
+        if self.insertion is not None:
+            from fixplan.planner.insertion_file import insertion_json
+
+            written = insertion_json(self.insertion)
+            if written is not None:
+                extras["insertion"] = written
+        return extras
 
     def to_json(self) -> dict[str, Any]:
         return self.plan.to_json()
@@ -722,9 +735,7 @@ def solve_insertion(
     hand = _hand_limits(fixture)
     if not plan.ok:
         timings["total_s"] = time.perf_counter() - t0
-        result = PlanResult("infeasible", plan.reason, [], [], [], None, [], timings, hand_limits=hand)
-        result.insertion = plan  # type: ignore[attr-defined]
-        return result
+        return PlanResult("infeasible", plan.reason, [], [], [], None, [], timings, hand_limits=hand, insertion=plan)
     transitions = transitions_of(fixture, plan)
     durations = [_duration(tr, 1.0) for tr in transitions]  # the guide at the default 1 m/s² (the run servos it)
     verification = None
@@ -737,10 +748,8 @@ def solve_insertion(
         reason = plan.reason
     timings["total_s"] = time.perf_counter() - t0
     sequence = [tuple(sorted(s)) for s in plan.states]
-    result = PlanResult(status, reason, sequence, transitions, [], verification, durations, timings,
-                        [math.inf] * len(transitions), hand_limits=hand)  # fmt: skip
-    result.insertion = plan  # type: ignore[attr-defined]
-    return result
+    return PlanResult(status, reason, sequence, transitions, [], verification, durations, timings,
+                      [math.inf] * len(transitions), hand_limits=hand, insertion=plan)  # fmt: skip
 
 
 def _with_arm_limits(fixture: Fixture) -> tuple[Fixture, Any]:

@@ -130,7 +130,10 @@ def _plan_replay(plan: Plan, fixture: Fixture, source: str = "plan") -> Replay:
         verdict = "passed" if v.passed else f"FAILED: {v.reason}"
         what = "haptic session" if plan.extras.get("source") == "haptic session" else "simulated verification"
         note = f"{what} ({verdict}), {len(v.trace)} samples, {v.trace.time_s[-1]:.2f} s"
-        return Replay("trace", v.trace, note)
+        trace = _locator_columns(v.trace, fixture)
+        if trace is not v.trace:
+            note += "; the pins' and bores' forces are not drawn"
+        return Replay("trace", trace, note)
     if plan.transitions:
         knots = knot_timeline(plan, fixture, source)
         note = (
@@ -141,6 +144,29 @@ def _plan_replay(plan: Plan, fixture: Fixture, source: str = "plan") -> Replay:
     words = STATUS_WORDS.get(plan.status, f"plan {plan.status}")
     note = f"{words}{': ' + plan.reason if plan.reason else ''} (nothing to replay)"
     return Replay("plan", _at_rest(fixture), note)
+
+
+def _locator_columns(trace: Timeline, fixture: Fixture) -> Timeline:
+    """``trace`` with the locators' columns only (the scene draws a force at each locator's tip).
+
+    A trace of a fixture with pins or bores has a column per pin and bore too (their summed
+    contact forces, with no point to draw them at): those are left out. Unchanged otherwise.
+    """
+    names = tuple(loc.name for loc in fixture.locators)
+    if trace.names == names or not set(names) <= set(trace.names):
+        return trace
+    cols = [trace.names.index(n) for n in names]
+
+    def pick(a: FloatArray | None) -> FloatArray | None:
+        return None if a is None else a[:, cols]
+
+    return replace(
+        trace,
+        names=names,
+        gaps_m=pick(trace.gaps_m),
+        normal_forces_N=pick(trace.normal_forces_N),
+        forces_world_N=pick(trace.forces_world_N),
+    )
 
 
 def _at_rest(fixture: Fixture, forces_world_N: FloatArray | None = None) -> Timeline:

@@ -1,0 +1,218 @@
+"""A staged insertion in a plan file: what ``solve`` writes for pins and bores, and what ``verify`` re-runs.
+
+A plan for a fixture with pins or bores (:mod:`.insertion`) is written like any other
+(``sequence``, ``transitions`` with their knot poses and pushes) plus the ``insertion`` key
+(:func:`insertion_json`): the insertion axis, the located pose the guide ends at, each
+transition's stage (``free``: the approach to the staging pose, ``insert``, ``seat``) and the
+seating push. :func:`check_insertion_claims` checks those claims against the fixture (the plan
+must be the staged insertion of *this* fixture: its axis and located pose, its states from the
+start to every pin engaged and every rest pressed), and :func:`insertion_plan_of` reads the plan
+back as the :class:`~.insertion.InsertionPlan` that :func:`~.insertion.verify_insertion` runs in
+the haptic loop (``fixplan verify PLAN``): the guide and the pushes are the file's; the axis and
+the located pose, checked to agree with the file's, are the fixture's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fixplan.contact_state import format_state
+from fixplan.errors import InputError
+from fixplan.locating import engagement, insertion_axis, inserts, located_pose, seated
+from fixplan.planner.insertion import InsertionPlan, Stage, goal_state
+from fixplan.planner.plan_types import Plan, Verification, pose_from_json
+from fixplan.settings import HAPTIC, Settings
+from fixplan.spatial import shift_wrench
+
+if TYPE_CHECKING:
+    from fixplan.model import Fixture
+
+FloatArray = NDArray[np.float64]
+
+APPROACH = "staging"  # the approach's ``added`` in the file: a pose target, no contact closes
+
+
+def insertion_json(plan: InsertionPlan) -> dict[str, Any] | None:
+    """The plan file's ``insertion`` key; None when there is no plan to re-run (no seating push)."""
+    if not plan.ok or plan.seat_wrench is None:
+        return None
+    return {
+        "axis": [float(x) for x in plan.axis_world],
+        "goal": plan.goal.to_json(),
+        "stages": [st.kind for st in plan.stages],
+        "seat_wrench": [float(x) for x in plan.seat_wrench],
+    }
+
+
+def state_names(fixture: Fixture) -> list[str]:
+    """What a plan's states may name for ``fixture``: its locators, pins and bores, each bore's bottom."""
+    names = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
+    return names + [f"{b.name}.bottom" for b in fixture.bores]
+
+
+def _state(s: Iterable[str]) -> str:
+    return format_state(s, empty="{}")
+
+
+def _stages_expected(n: int) -> list[str]:
+    """The stages of a staged insertion of ``n`` transitions: the approach, the insertions, the seating."""
+    return ["free", *["insert"] * (n - 2), "seat"] if n else []
+
+
+def check_insertion_claims(plan: Plan, fixture: Fixture, source: str, *, tolerance: tuple[float, float]) -> None:
+    """Refuse a solved plan for ``fixture`` (with pins or bores) that is not its staged insertion.
+
+    - ``insertion`` is there, its ``axis`` the fixture's insertion axis and its ``goal`` the
+      located pose (else the plan is for another fixture), one ``stages`` entry per transition:
+      ``free``, then ``insert`` per engagement, then ``seat``;
+    - ``sequence`` starts in the state the part starts in (``{}``: nothing engaged; a plan without
+      transitions claims the part starts located, which the fixture must confirm) and ends with
+      every pin engaged and every rest pressed (a bore: engaged and on its bottom); the approach
+      (``added``: ``staging``) changes no state, every other transition closes its ``added``;
+    - every transition has its guide (at least two knot poses) and its planned push (its
+      ``wrench``: the largest caps the hand's push along the axis); the last knot pose is the
+      located pose.
+
+    Poses agree within ``tolerance`` (metres, radians; :func:`~.plan.check_plan_claims` passes its
+    start tolerances), axes within its angle. The pushes' limits and the knots' continuity are
+    :func:`~.plan.check_plan_claims`'. Raises :class:`InputError` naming the key and what was expected.
+    """
+    tol_m, tol_rad = tolerance
+    data = plan.extras.get("insertion")
+    if not isinstance(data, dict):
+        raise InputError(
+            f"{source}: insertion: missing (expected the staged insertion 'fixplan solve --out' writes for a "
+            f"fixture with pins or bores; solve {fixture.source} again)"
+        )
+    u = insertion_axis(fixture)
+    axis = np.asarray(data["axis"], dtype=float)
+    turn = math.acos(min(max(float(axis @ u) / float(np.linalg.norm(axis)), -1.0), 1.0))
+    if turn > tol_rad:
+        raise InputError(
+            f"{source}: the plan is for another fixture: its insertion axis ({', '.join(f'{x:.4g}' for x in axis)}) "
+            f"is {math.degrees(turn):.3g}° from {fixture.source}'s ({', '.join(f'{x:.4g}' for x in u)})"
+        )
+    G = located_pose(fixture)
+    goal = pose_from_json(data["goal"], fixture.dimension, f"{source}: insertion.goal")
+    dp, dr = goal.distance_to(G)
+    if dp > tol_m or dr > tol_rad:
+        raise InputError(
+            f"{source}: the plan is for another fixture: its located pose is {dp:.3g} m, {math.degrees(dr):.3g}° "
+            f"from {fixture.source}'s (expected ≤ {tol_m:g} m, {math.degrees(tol_rad):.2g}°)"
+        )
+    n = len(plan.transitions)
+    stages = list(data["stages"])
+    if stages != _stages_expected(n):
+        raise InputError(
+            f"{source}: insertion.stages: got {stages} (expected {_stages_expected(n)}: the approach, one insertion "
+            f"per engagement, the seating; one per transition)"
+        )
+    goal_set = goal_state(fixture)
+    start = frozenset() if n else goal_set
+    if not n:
+        S = fixture.start
+        located = all(engagement(fixture, S, i).engaged for i in inserts(fixture)) and seated(fixture, S)
+        if not located:
+            raise InputError(
+                f"{source}: transitions: got [] (expected the insertion: the part does not start located in "
+                f"{fixture.source}, every pin in its hole and every rest touching)"
+            )
+    seq = [frozenset(s) for s in plan.sequence]
+    if len(seq) != n + 1:
+        raise InputError(f"{source}: sequence: got {len(seq)} states (expected {n + 1}, one more than the transitions)")
+    if seq[0] != start:
+        raise InputError(
+            f"{source}: sequence[0]: got {_state(seq[0])} (expected the state the part starts in, {_state(start)})"
+        )
+    if seq[-1] != goal_set:
+        raise InputError(
+            f"{source}: sequence[{n}]: got {_state(seq[-1])} (expected every pin engaged and every rest pressed, "
+            f"{_state(goal_set)}: a plan loads the part)"
+        )
+    for i, (tr, kind) in enumerate(zip(plan.transitions, stages, strict=True)):
+        where = f"{source}: transitions[{i}]"
+        if frozenset(tr.from_state) != seq[i]:
+            raise InputError(f"{where}.from: got {_state(tr.from_state)} (expected sequence[{i}], {_state(seq[i])})")
+        if len(tr.poses) < 2:
+            raise InputError(
+                f"{where}.poses: got {len(tr.poses)} (expected the guide's poses, at least its start and end)"
+            )
+        if tr.wrench is None:
+            raise InputError(
+                f"{where}.wrench: got null (expected the stage's planned push; its largest caps the hand's)"
+            )
+        if kind == "free":
+            if tr.added_names != (APPROACH,) or seq[i + 1] != seq[i]:
+                raise InputError(
+                    f"{where}: the approach (insertion.stages[{i}]: free): got {tr.added_label} to "
+                    f"{_state(seq[i + 1])} (expected added '{APPROACH}', the state unchanged)"
+                )
+            continue
+        added = set(tr.added_names)
+        if not added or added & seq[i] or seq[i + 1] != seq[i] | added or frozenset(tr.to_state) != seq[i + 1]:
+            raise InputError(
+                f"{where}: {_state(tr.from_state)} + {tr.added_label} → {_state(tr.to_state)} (expected "
+                f"sequence[{i + 1}], {_state(seq[i + 1])}, from 'from' plus 'added')"
+            )
+    if n:
+        end = plan.transitions[-1].poses[-1]
+        dp, dr = end.distance_to(G)
+        if dp > tol_m or dr > tol_rad:
+            raise InputError(
+                f"{source}: transitions[{n - 1}].poses[-1]: {dp:.3g} m, {math.degrees(dr):.3g}° from the located pose "
+                f"(expected the seating to end there, within {tol_m:g} m)"
+            )
+
+
+def insertion_plan_of(plan: Plan, fixture: Fixture) -> InsertionPlan:
+    """The :class:`~.insertion.InsertionPlan` a plan file holds (its claims checked: :func:`check_insertion_claims`).
+
+    The stages are the file's transitions (their knot poses, their mean planned push), the seating
+    push is the file's; the axis and the located pose are the fixture's.
+    """
+    data = plan.extras["insertion"]
+    G = located_pose(fixture)
+    stages = []
+    for tr, kind in zip(plan.transitions, data["stages"], strict=True):
+        free = kind == "free"
+        wrench = np.asarray(tr.wrench, dtype=float)  # every stage has one (check_insertion_claims)
+        stages.append(
+            Stage(
+                "" if free else str(tr.added), () if free else tuple(tr.together), kind, list(tr.poses), wrench, (),
+                plan.reason,
+            )
+        )  # fmt: skip
+    seat = np.asarray(data["seat_wrench"], dtype=float)
+    com = G.point_world_from_body(fixture.workpiece.com_body)
+    return InsertionPlan(
+        ok=True,
+        reason=plan.reason,
+        axis_world=insertion_axis(fixture),
+        goal=G,
+        stages=stages,
+        seat_wrench=seat,
+        seat_wrench_com=shift_wrench(seat, G.p_world, com),
+        start_state=frozenset(plan.sequence[0]) if plan.sequence else frozenset(),
+    )
+
+
+def verify_insertion_file(fixture: Fixture, plan: Plan, settings: Settings = HAPTIC) -> Verification:
+    """``fixplan verify PLAN`` for a fixture with pins or bores: the file's insertion in the haptic loop, as ``solve`` ran it."""
+    from fixplan.planner.insertion import verify_insertion
+
+    return verify_insertion(fixture, insertion_plan_of(plan, fixture), settings=settings)
+
+
+__all__ = [
+    "APPROACH",
+    "check_insertion_claims",
+    "insertion_json",
+    "insertion_plan_of",
+    "state_names",
+    "verify_insertion_file",
+]
