@@ -122,6 +122,29 @@ def test_haptic_session_with_pins_reaches_the_goal() -> None:
     assert result.max_penetration_m < 1e-9
 
 
+def test_haptic_session_guides_the_part_onto_its_pins() -> None:
+    """With guidance, a housing that starts above its pins is carried, inserted and seated by the staged
+    insertion (the guide ran the locators' executor before and stopped at 0.1 s on the first pin's name):
+    the session reaches the goal, the rests within the final gap, each hole's axis within its pin's play,
+    the states in the insertion's order."""
+    from fixplan.interactive.session import HapticSession
+    from fixplan.locating import axis_offsets_m, inserts
+    from fixplan.settings import HAPTIC
+
+    fx = fixplan.load(PROBLEMS / "housing-2-pins-load.toml")
+    assert fx.start.distance_to(fx.goal)[0] > 0.01  # starts off the pins
+    result = HapticSession(fx, None, realtime=False, synchronous=True, until_goal=True, duration_s=8.0).run()
+    assert result.reached, result.reason
+    assert all(abs(result.final_gaps_m[n]) <= HAPTIC.verification.final_gap_m for n in ("B1", "B2", "B3"))
+    pose = result.trace.poses[-1]  # the last sample, at rest on the goal
+    for i in inserts(fx):
+        assert max(axis_offsets_m(fx, pose, i)) <= i.play_m * (1.0 + HAPTIC.insertion.axis_play_rel) + 1e-9
+    first = [set(s) for _t, s in result.states]
+    engaged = [k for k, s in enumerate(first) if {"P1", "P2"} & s]
+    rests = [k for k, s in enumerate(first) if {"B1", "B2", "B3"} <= s]
+    assert engaged and rests and engaged[0] < rests[0]  # on the pins before the rests
+
+
 def test_haptic_app_draws_pins_and_colours_the_pressed_one() -> None:
     """The live scene has a mesh per pin (world frame) beside the locators; P1, pressed at the goal, turns red."""
     from fixplan.interactive.app import LOCATOR, PRESSED, HapticApp

@@ -199,6 +199,46 @@ def capped_fixture(fixture: Fixture, F_max: float, T_max: float) -> Fixture:
     return replace(fixture, manipulator=Manipulator(max_force_N=F_max, max_torque_Nm=T_max))
 
 
+class InsertionGuide:
+    """A fixture with pins or bores: the staged insertion (:mod:`fixplan.planner.insertion`) as the guide's executor.
+
+    Planned from the pose the part is in (a part partly on its pins is lifted straight out first),
+    run by :class:`~fixplan.planner.insertion.InsertionRun` with the haptic profile: the same calls
+    the guide makes of the locators' executor (``command``, ``guidance``, ``done``, ``log``).
+    """
+
+    def __init__(self, fixture: Fixture, pose: Pose, tick_s: float):
+        from dataclasses import replace
+
+        from fixplan.planner.insertion import InsertionRun, plan_insertion
+        from fixplan.settings import HAPTIC
+
+        here = replace(fixture, start=pose)
+        self.plan = plan_insertion(here, settings=HAPTIC)
+        if not self.plan.ok:
+            raise InfeasibleError(self.plan.reason)
+        self.run = InsertionRun(here, self.plan, HAPTIC.insertion, tick_s=tick_s, execution=HAPTIC.execution)
+        self.log = self.run.log
+        self.steps: list[Any] = []  # no locator steps: the guide's policy note does not apply
+
+    @property
+    def done(self) -> bool:
+        return self.run.done
+
+    def command(self, t: float, pose: Pose, twist: FloatArray, pressed: frozenset[str]) -> FloatArray:
+        self.run.step_time(t, pose)
+        return self.run.command(t, pose, twist, tuple(sorted(pressed)))
+
+    def guidance(self) -> dict[str, Any]:
+        """The stage under way: what it adds and how the part moves (free approach, sliding on the pins, held)."""
+        stages = self.plan.stages
+        if self.run.index >= len(stages):
+            return {"transition": None, "target": None, "motion": "hold"}
+        st = stages[self.run.index]
+        motion = "free" if st.kind == "free" else "hold" if st.kind == "seat" else "slide"
+        return {"transition": self.run.index + 1, "target": st.target or None, "motion": motion}
+
+
 class Guide:
     """The planner's executor as guidance, and the jamming verdict of the current push."""
 
@@ -233,6 +273,11 @@ class Guide:
         from fixplan.planner.execute import Executor
         from fixplan.planner.solve import Planner, plan_steps
 
+        if self.fixture.has_pins:  # the staged insertion onto the pins (or into the bore)
+            self.plans += 1
+            self._executor = InsertionGuide(self.fixture, pose, self.tick_s)
+            self.note = "following the insertion"
+            return
         if self._planner is None:
             self._planner = Planner(self.fixture)
         self.plans += 1
