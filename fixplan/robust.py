@@ -3,8 +3,9 @@
 The plan is made once on the nominal fixture, as ``fixplan solve`` makes it: verified in the
 nominal world, and where the simulated load of the best sequence fails, the next sequence that
 loads (:func:`fixplan.planner.solve.solve`). The study measures the plan a user would be handed;
-when no sequence loads in the nominal world, the best one is studied all the same. Sample ``k`` is a perturbed world drawn from ``np.random.default_rng([seed, k])``
-— deterministic, whatever process or machine runs it (:func:`perturbed_fixture`):
+when no sequence loads in the nominal world, the best one is studied all the same. Sample ``k``
+is a perturbed world drawn from ``np.random.default_rng([seed, k])`` — deterministic, whatever
+process or machine runs it (:func:`perturbed_fixture`):
 
 1. friction: each locator's ``μ_i (1 + u_i)``, ``u_i`` uniform in ``±mu_spread``, clipped at 0;
 2. locator positions: each tip moved by normal noise of ``locator_sigma_m`` per axis, so the

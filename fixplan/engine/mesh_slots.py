@@ -135,9 +135,6 @@ class MeshStepper:
         self.cache_ids = np.zeros((k, mesh.settings.query_cache_triangles), dtype=np.int64)
         # the arguments that never change, in the kernel's order
         self._part = (*mesh.query_arrays, mesh.same_point_m, self.loc, self.obs, self.points, *self.tree)
-        # the compiled step, its arrays' checks done at the first step and then by identity (the
-        # simulator's and this stepper's arrays are updated in place; see aot._AotKernel.fixing)
-        self._step3: Any = None
         self.reset()
 
     def reset(self) -> None:
@@ -145,6 +142,9 @@ class MeshStepper:
         self.loc_slots[:] = 0
         self.near[0] = -1
         self.cache_q[:, 3] = -1.0  # geometry only, but a reset starts from full queries
+        # the compiled step, its arrays' checks done at the next step and then by identity (the
+        # simulator's and this stepper's arrays are updated in place; a new state brings new arrays)
+        self._step3: Any = None
 
     def step(
         self, sim: Any, f_ext: FloatArray, tau_ext: FloatArray, margin: float
@@ -173,6 +173,7 @@ class MeshStepper:
             if n >= 0:
                 return float(err), int(iters), int(status), int(failures), float(pen)
             self.state = np.zeros((2 * self.state.shape[0] - int(n), _STATE_COLUMNS))  # room for every slot
+            self._step3 = None  # a new array: checked and fixed anew
 
     def slots_of(self, i: int) -> FloatArray:
         """Locator ``i``'s slots in the last step: rows of ``[P (4), P_prev (4), u (4), n_world (3), gap, active, active_prev]``."""

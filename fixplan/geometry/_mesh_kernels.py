@@ -174,7 +174,7 @@ def _feature_is_shared(px, py, pz, x, y, z, tri_id, region, same, tri, faces, ar
 def _collect(px, py, pz, reach_extra, tri, boxes, nodes, order):
     """One traversal, nearer child first: every triangle within ``nearest + reach_extra`` of ``p``.
 
-    Returns ``(n, ids, dist, pts)``: the leading ``n`` rows are triangles with their distance and
+    Returns ``(n, ids, dist, pts, nearest)``: the leading ``n`` rows are triangles with their distance and
     closest point (``x, y, z, region``); every triangle within the final ``nearest + reach_extra``
     is among them (a few farther ones may be too: the reach shrinks as the nearest improves).
     """
@@ -234,7 +234,7 @@ def _collect(px, py, pz, reach_extra, tri, boxes, nodes, order):
             ids[n], dist[n] = i, d
             pts[n, 0], pts[n, 1], pts[n, 2], pts[n, 3] = x, y, z, region
             n += 1
-    return n, ids, dist, pts
+    return n, ids, dist, pts, best
 
 
 @njit(cache=True)
@@ -323,7 +323,7 @@ def contacts(
     call again with a larger ``out``).
     """
     # every triangle within (nearest + band + same), and the box test with another ``same`` of slack
-    n, ids, dist, pts = _collect(px, py, pz, band + 2.0 * same, tri, boxes, nodes, order)
+    n, ids, dist, pts, _ = _collect(px, py, pz, band + 2.0 * same, tri, boxes, nodes, order)
     return _emit(px, py, pz, band, same, tri, face_normals, edge_normals, vertex_normals, faces, around, n, ids, dist,
                  pts, out)  # fmt: skip
 
@@ -357,10 +357,7 @@ def contacts_near(px, py, pz, band, same, tri, face_normals, edge_normals, verte
         return _emit(px, py, pz, band, same, tri, face_normals, edge_normals, vertex_normals, faces, around, count,
                      ids, dist, pts, out)  # fmt: skip
     extra = band + 2.0 * same + 2.0 * radius
-    n, ids, dist, pts = _collect(px, py, pz, extra, tri, boxes, nodes, order)
-    nearest = np.inf
-    for k in range(n):
-        nearest = min(nearest, dist[k])
+    n, ids, dist, pts, nearest = _collect(px, py, pz, extra, tri, boxes, nodes, order)
     kept = 0
     for k in range(n):
         if dist[k] <= nearest + extra:

@@ -49,12 +49,6 @@ def insertion_json(plan: InsertionPlan) -> dict[str, Any] | None:
     }
 
 
-def state_names(fixture: Fixture) -> list[str]:
-    """What a plan's states may name for ``fixture``: its locators, pins and bores, each bore's bottom."""
-    names = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
-    return names + [f"{b.name}.bottom" for b in fixture.bores]
-
-
 def _state(s: Iterable[str]) -> str:
     return format_state(s, empty="{}")
 
@@ -213,6 +207,5 @@ __all__ = [
     "check_insertion_claims",
     "insertion_json",
     "insertion_plan_of",
-    "state_names",
     "verify_insertion_file",
 ]

@@ -60,10 +60,11 @@ def _known_names(fixture: Fixture) -> tuple[list[str], list[str]]:
     locators = [loc.name for loc in fixture.locators]
     if not fixture.has_pins:
         return locators, locators
-    from fixplan.planner.insertion_file import APPROACH, state_names
+    from fixplan.planner.insertion import goal_state
+    from fixplan.planner.insertion_file import APPROACH
 
     traced = locators + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
-    return [*state_names(fixture), APPROACH], traced
+    return [*goal_state(fixture), APPROACH], traced  # the goal state names every one a state may
 
 
 def check_names(data: Any, fixture: Fixture, source: str) -> None:
