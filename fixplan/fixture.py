@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from fixplan import fixture_schema, limits
 from fixplan.errors import FixtureError, Issue, shorten
 from fixplan.fixture_schema import validate_document
-from fixplan.geometry import Box, Cylinder, Disk, Polygon, Rectangle, Shape, Sphere
+from fixplan.geometry import Box, Cylinder, Disk, Mesh, Polygon, Rectangle, Shape, Sphere
 from fixplan.geometry.collision import BOX as OBSTACLE_BOX
 from fixplan.geometry.collision import PLANE as OBSTACLE_PLANE
 from fixplan.geometry.collision import collision_points, obstacle_gap, plane_frame, polytope_overlap_m
@@ -688,10 +688,17 @@ class _Builder:
         return Workpiece(shape, mass, inertia, shape.com_body, holes)
 
     def hole(self, e: fixture_schema.Hole, shape: Shape) -> Hole:
-        """A ``[[workpiece.hole]]``: through when its bottom lies on or outside the part's surface."""
+        """A ``[[workpiece.hole]]``: through when its bottom lies on or outside the part's surface.
+
+        A mesh may model the hole's bore: a blind one's bottom then lies on the bore's floor, on the
+        surface too. So for a mesh the point just past the bottom (``MeshSettings.hole_probe_m``)
+        decides: inside the part, the hole is blind.
+        """
         axis = _unit(e.axis)
         bottom = np.array(e.position) - e.depth * axis
         through = shape.dimension == 3 and shape.project(bottom).distance >= -self.tol.penetration_m
+        if through and isinstance(shape, Mesh):
+            through = shape.project(bottom - shape.settings.hole_probe_m * axis).distance > 0.0
         return Hole(e.name, np.array(e.position), axis, e.diameter, e.depth, e.chamfer, through)
 
     def check_inertia(self, inertia: FloatArray, shape: Shape, mass: float) -> bool:

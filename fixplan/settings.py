@@ -813,6 +813,11 @@ class MeshSettings:
         depend on it, only the speed: larger remembers more triangles and queries less often.
     query_cache_triangles : int
         At most this many triangles remembered per locator (more: no memory, a full query each step).
+    hole_probe_m : float
+        A ``[[workpiece.hole]]`` of a mesh part whose bottom lies on the surface is blind when the
+        point this far past its bottom (along its axis, deeper) is inside the part [m]: the mesh
+        models the hole's bore, and its bottom is the bore's floor. Outside, the hole is through
+        (a primitive part never models its holes: its rule is the bottom on or outside the surface).
     """
 
     degenerate_rel: float = 1e-12
@@ -824,6 +829,7 @@ class MeshSettings:
     tree_leaf_triangles: int = 8
     query_cache_radius_m: float = 1e-4
     query_cache_triangles: int = 256
+    hole_probe_m: float = 1e-5
     step_tolerance_m: float = 1e-4
     step_angular_rad: float = 0.5
 

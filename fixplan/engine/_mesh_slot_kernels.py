@@ -10,19 +10,25 @@ together, 1e-12, on a box and an L-bracket):
    the step's margin; after the nearest, a face seen from behind is no contact), each made a
    plane slot as :func:`fixplan.engine.mesh_slots.mesh_slots` makes it (plane through the tip's
    point nearest the part, frame of :func:`fixplan.geometry.collision.plane_frame`), with the
-   locator's μ and, for a soft finger, its torsion arm (a spin row);
+   locator's μ and, for a soft finger, its torsion arm (a spin row); then every pin's contacts
+   with its ``[[workpiece.hole]]`` within the margin, in closed form
+   (:func:`fixplan.engine._pin_slot_kernels.pin_slots`: the hole is analytic, the mesh's own
+   triangles are never tested against a pin), each a plane slot with the pin's μ;
 2. the fixture's collision points that may be within the margin of their obstacle
    (:meth:`Simulator._obstacle_points_near`'s lower bound, point by point), found through an
    AABB tree of the points (:func:`fixplan.geometry._mesh_kernels.build_tree` on degenerate
    triangles): a node is skipped when a lower bound of every gap in it, less ``slack``, is beyond
    the margin, so the same points are found as by testing each one;
-3. the warm start of each slot from the last step's slot of the same ``(locator, rank)``, of
-   each collision point from its own row;
+3. the warm start of each slot from the last step's slot of the same ``(locator, rank)`` (a
+   pin's: of the same ``(pin, kind, ordinal)``), of each collision point from its own row;
 4. the Moreau–Jean step (:func:`fixplan.engine.step.step3_ws`);
 5. the results written back: each slot's state (the next warm start and the reports), the
    collision points' rows (only those handed over in this step or the last are touched: a part
-   of 5·10⁴ triangles has 2.5·10⁴ of them per obstacle), and each locator's row (its contacts
-   together: the least gap, any active, the summed normal impulse, the nearest's normal).
+   of 5·10⁴ triangles has 2.5·10⁴ of them per obstacle), each locator's row (its contacts
+   together: the least gap, any active, the summed normal impulse, the nearest's normal) and each
+   pin's row (as :meth:`fixplan.engine.simulator.Simulator._step_pins` writes it for a primitive
+   part: its least gap over all its contacts, any active, the summed normal impulse, the normal of
+   the slot at that least gap).
 
 The state a caller keeps between steps (:class:`fixplan.engine.mesh_slots.MeshStepper` allocates it):
 
@@ -31,7 +37,14 @@ The state a caller keeps between steps (:class:`fixplan.engine.mesh_slots.MeshSt
 - ``near (2 n_points + 1,)``: the count of collision points handed over in the last step (−1: none
   yet, every row is reset at the next step), then their rows, then room for this step's;
 - ``cache_q (k_loc, 5)``, ``cache_ids (k_loc, C)``: each locator's last full query point (body
-  frame), count (−1: none) and reach, then the triangles remembered there, with ``radius``.
+  frame), count (−1: none) and reach, then the triangles remembered there, with ``radius``;
+- ``pin_state (C_pin, 21)``, ``pin_count (1,)``: per pin slot of the last step ``slot_state``'s 18
+  columns and its key ``(pin, kind, ordinal)``, and how many there were (``C_pin``: every contact
+  the closed forms can give, :data:`fixplan.engine.pin_slots.MAX_CONTACTS` a pin).
+
+The simulator's named rows are the locators' (``k_loc``), then the pins' (``k_pin``); the
+fixture's collision points follow them (row ``k_loc + k_pin + q``). Without pins the pins' arrays
+are empty and the step is the one without them, to the bit.
 
 Every function is ``numba.njit(cache=True)``; :data:`fixplan.aot.EXPORTS` lists
 :func:`mesh_step3`, the one called from Python.
@@ -44,11 +57,13 @@ import math
 import numpy as np
 from numba import njit
 
+from fixplan.engine._pin_slot_kernels import pin_slots
 from fixplan.engine.step import step3_ws, workspace3
 from fixplan.geometry._mesh_kernels import STACK, contacts_near
 
 MESH = 4  # fixplan.engine.encode.MESH: the step never queries the part itself (every contact is a slot)
 STATE = 18  # columns of slot_state (module docstring)
+PIN_STATE = STATE + 3  # columns of pin_state: slot_state's, then the key (pin, kind, ordinal)
 
 
 @njit(cache=True)
@@ -243,9 +258,11 @@ def locator_slots(R, p, tri, face_normals, edge_normals, vertex_normals, faces, 
 def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
                tri, face_normals, edge_normals, vertex_normals, faces, around, boxes, nodes, order, same,
                loc, obs_fix, pts_fix, pt_boxes, pt_nodes, pt_order, rho_max,
+               pins, holes_body, bores, peg, pin_mu, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points,
                h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_after, polish_steps, bound,
                P_full, active_full, P_prev_full, active_prev_full, gap_full, u_full, n_full,
-               slot_state, loc_slots, near, radius, cache_q, cache_ids):  # fmt: skip
+               slot_state, loc_slots, near, radius, cache_q, cache_ids,
+               pin_raw, pin_obs, pin_slot_rows, pin_meta, pin_normals, pin_least, pin_state, pin_count):  # fmt: skip
     """One 3D step of a mesh part (the module docstring's five parts); the state arrays updated in place.
 
     ``loc (k_loc, 6)``: each locator's ``[p_world (3), radius, μ, torsion arm]`` (a soft finger's
@@ -253,27 +270,37 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
     ``obs_fix``, ``pts_fix``: the
     fixture's collision-only bodies and collision points (``[x_body (3), radius, obstacle row, μ]``,
     with the AABB tree of :func:`points_near` and their largest radius ``rho_max``),
-    whose rows follow the locators' in ``P_full`` … ``n_full`` (the simulator's arrays).
+    whose rows follow the locators' and the pins' in ``P_full`` … ``n_full`` (the simulator's arrays).
+    ``pins`` … ``face_points``: the pins and their holes as :func:`fixplan.engine._pin_slot_kernels.pin_slots`
+    reads them (:class:`fixplan.engine.pin_slots.PinGeometry`; empty without pins), ``pin_mu`` each
+    pin's μ; ``pin_raw`` … ``pin_least``: that kernel's scratch and outputs.
     Returns ``(error, iterations, status, failed local solves, penetration, slots)``; when the
-    slots are more than ``slot_state`` holds, ``slots`` is minus their number and nothing was
-    changed (call again with room for them).
+    locators' slots are more than ``slot_state`` holds, ``slots`` is minus their number and nothing
+    was changed (call again with room for them).
     """
     k_loc = loc.shape[0]
-    # 1. every locator's contacts, as plane slots
+    k_pin = pin_least.shape[0]
+    k_named = k_loc + k_pin  # the collision points' rows follow the locators' and the pins'
+    # 1. every locator's contacts, as plane slots; every pin's, in closed form
     n, s_loc, s_rank, s_x, s_obs, s_gap = locator_slots(
         R, p, tri, face_normals, edge_normals, vertex_normals, faces, around, boxes, nodes, order, same, loc, margin,
         radius, cache_q, cache_ids,
     )  # fmt: skip
     if n > slot_state.shape[0]:
         return 0.0, 0, 0, 0, 0.0, -n
+    m = 0
+    if k_pin > 0:
+        m = pin_slots(pins, holes_body, bores, peg, R, p, rim_samples, newton_steps, golden_steps, coaxial_rel,
+                      face_points, margin, pin_raw, pin_obs, pin_slot_rows, pin_meta, pin_normals, pin_least)  # fmt: skip
+    nm = n + m
     # 2. the fixture's collision points that may be within the margin
     n_pts = pts_fix.shape[0]
     near_now = near[1 + n_pts :]  # scratch (a new array of 2.5·10⁴ rows would be mapped and unmapped each step)
     n_near = points_near(R, p, obs_fix, pts_fix, pt_boxes, pt_nodes, pt_order, rho_max, margin, same, near_now)
-    # 3. the step's arrays: the slots, then the collision points; warm starts
-    k = n + n_near
+    # 3. the step's arrays: the locators' slots, the pins', then the collision points; warm starts
+    k = nm + n_near
     n_obs = obs_fix.shape[0]
-    obs = np.empty((n + n_obs, 16))
+    obs = np.empty((nm + n_obs, 16))
     slots = np.empty((k, 5))
     mu = np.empty(k)
     tors = np.zeros(k)
@@ -296,15 +323,33 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
                 u[j, a] = slot_state[o, 8 + a]
             act[j] = slot_state[o, 16] != 0.0
             act_prev[j] = slot_state[o, 17] != 0.0
+    last = pin_count[0]
+    for jj in range(m):
+        j = n + jj
+        obs[j] = pin_obs[jj]
+        for a in range(4):
+            slots[j, a] = pin_slot_rows[jj, a]
+        slots[j, 4] = j
+        mu[j] = pin_mu[int(pin_meta[jj, 0])]
+        for o in range(last):  # the same (pin, kind, ordinal) in the last step: few, a search is enough
+            if (pin_state[o, STATE] == pin_meta[jj, 0] and pin_state[o, STATE + 1] == pin_meta[jj, 1]
+                    and pin_state[o, STATE + 2] == pin_meta[jj, 2]):  # fmt: skip
+                for a in range(4):
+                    P[j, a] = pin_state[o, a]
+                    P_prev[j, a] = pin_state[o, 4 + a]
+                    u[j, a] = pin_state[o, 8 + a]
+                act[j] = pin_state[o, 16] != 0.0
+                act_prev[j] = pin_state[o, 17] != 0.0
+                break
     for j in range(n_obs):
-        obs[n + j] = obs_fix[j]
+        obs[nm + j] = obs_fix[j]
     for jj in range(n_near):
         q = near_now[jj]
-        j = n + jj
-        row = k_loc + q
+        j = nm + jj
+        row = k_named + q
         for a in range(4):
             slots[j, a] = pts_fix[q, a]
-        slots[j, 4] = pts_fix[q, 4] + n  # the fixture's obstacles follow the slots' planes
+        slots[j, 4] = pts_fix[q, 4] + nm  # the fixture's obstacles follow the slots' planes
         mu[j] = pts_fix[q, 5]
         for a in range(4):
             P[j, a] = P_full[row, a]
@@ -320,27 +365,24 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
         np.zeros((0, 3)), np.zeros(0), mu, tors, obs, slots, h, f_ext, tau_ext, restitution, margin, tol, max_iter,
         polish_after, polish_steps, P, act, P_prev, act_prev, gap, u, n_w, bound, workspace3(k),
     )  # fmt: skip
-    # 5. written back: the slots' state, the collision points' rows, the locators' rows
+    # 5. written back: the slots' state, the pins' slots' state, the collision points' rows, the named rows
     for j in range(n):
-        for a in range(4):
-            slot_state[j, a] = P[j, a]
-            slot_state[j, 4 + a] = P_prev[j, a]
-            slot_state[j, 8 + a] = u[j, a]
+        _store(j, j, P, P_prev, u, n_w, gap, act, act_prev, slot_state)
+    for jj in range(m):
+        _store(n + jj, jj, P, P_prev, u, n_w, gap, act, act_prev, pin_state)
         for a in range(3):
-            slot_state[j, 12 + a] = n_w[j, a]
-        slot_state[j, 15] = gap[j]
-        slot_state[j, 16] = 1.0 if act[j] else 0.0
-        slot_state[j, 17] = 1.0 if act_prev[j] else 0.0
+            pin_state[jj, STATE + a] = pin_meta[jj, a]
+    pin_count[0] = m
     if near[0] < 0:  # the first step since the state was set: every row
         for q in range(n_pts):
-            _open_row(k_loc + q, P_full, active_full, P_prev_full, active_prev_full, gap_full, u_full)
+            _open_row(k_named + q, P_full, active_full, P_prev_full, active_prev_full, gap_full, u_full)
     else:
         for jj in range(near[0]):
-            _open_row(k_loc + near[1 + jj], P_full, active_full, P_prev_full, active_prev_full, gap_full, u_full)
+            _open_row(k_named + near[1 + jj], P_full, active_full, P_prev_full, active_prev_full, gap_full, u_full)
     for jj in range(n_near):
         q = near_now[jj]
-        j = n + jj
-        row = k_loc + q
+        j = nm + jj
+        row = k_named + q
         for a in range(4):
             P_full[row, a] = P[j, a]
             P_prev_full[row, a] = P_prev[j, a]
@@ -376,7 +418,39 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
             n_full[i, a] = n_w[first, a]
         for a in range(4):
             u_full[i, a] = u[first, a]
+    # each pin's row: its least gap over all its contacts (the closed forms'), any active, the summed
+    # normal impulse, the normal and velocity of its slot at that gap (Simulator._step_pins' rows)
+    for o in range(k_pin):
+        r = k_loc + o
+        _open_row(r, P_full, active_full, P_prev_full, active_prev_full, gap_full, u_full)
+        gap_full[r] = pin_least[o]
+    for jj in range(m):
+        j = n + jj
+        r = k_loc + int(pin_meta[jj, 0])
+        if act[j]:
+            active_full[r] = True
+            P_full[r, 0] += P[j, 0]
+        if gap[j] <= gap_full[r]:
+            gap_full[r] = gap[j]
+            for a in range(3):
+                n_full[r, a] = n_w[j, a]
+            for a in range(4):
+                u_full[r, a] = u[j, a]
     return err, iters, status, failures, pen, n
+
+
+@njit(cache=True)
+def _store(j, row, P, P_prev, u, n_w, gap, act, act_prev, state):
+    """Slot ``j``'s result into ``state[row]`` (``slot_state``'s 18 columns)."""
+    for a in range(4):
+        state[row, a] = P[j, a]
+        state[row, 4 + a] = P_prev[j, a]
+        state[row, 8 + a] = u[j, a]
+    for a in range(3):
+        state[row, 12 + a] = n_w[j, a]
+    state[row, 15] = gap[j]
+    state[row, 16] = 1.0 if act[j] else 0.0
+    state[row, 17] = 1.0 if act_prev[j] else 0.0
 
 
 @njit(cache=True)

@@ -17,12 +17,18 @@ contact one.
 Slots are ordered locator by locator, nearest contact first; a slot's identity from one step to
 the next (for the warm start) is ``(locator, rank)``.
 
+A mesh part with ``[[workpiece.hole]]``s on ``[[pin]]``s: the holes stay analytic (a hole is a
+cylinder in the body frame, whether or not the mesh models its bore). Each step also hands over
+every pin's contacts with its hole in closed form, as for a primitive part (:mod:`.pin_slots`),
+after the locators' slots; the pins are never tested against the mesh's triangles (and the
+locators never against the holes), so a mesh without a modelled bore is as good as one with.
+
 :func:`mesh_slots` is the reference, in Python (with
 :meth:`fixplan.engine.simulator.Simulator._step_mesh_reference`). The engine steps a mesh part
 through :class:`MeshStepper`: the arrays are set up here once per simulator, and each step is one
-compiled call (:func:`fixplan.engine._mesh_slot_kernels.mesh_step3`: detection, slots, the
-fixture's collision points near their obstacles, warm starts, the step and its write-back), with
-no Python object made per step.
+compiled call (:func:`fixplan.engine._mesh_slot_kernels.mesh_step3`: detection, the pins' closed
+forms, slots, the fixture's collision points near their obstacles, warm starts, the step and its
+write-back), with no Python object made per step.
 """
 
 from __future__ import annotations
@@ -34,14 +40,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.aot import kernel
+from fixplan.engine.pin_slots import MAX_CONTACTS, PinGeometry
 from fixplan.geometry.collision import PLANE, plane_frame
 from fixplan.geometry.mesh import Mesh
 from fixplan.model import Locator
+from fixplan.settings import DEFAULT
 
 FloatArray = NDArray[np.float64]
 _KERNELS = "fixplan.engine._mesh_slot_kernels"
 _mesh_step3 = kernel(_KERNELS, "mesh_step3")
 _STATE_COLUMNS = 18  # fixplan.engine._mesh_slot_kernels.STATE
+_PIN_STATE_COLUMNS = _STATE_COLUMNS + 3  # fixplan.engine._mesh_slot_kernels.PIN_STATE: then (pin, kind, ordinal)
 
 
 @dataclass(frozen=True)
@@ -98,6 +107,7 @@ class MeshStepper:
     """A simulator's mesh part as the compiled step reads it: arrays set up once, one call a step.
 
     Holds the part's query arrays, the locators as ``[p_world (3), radius, μ, torsion arm]`` rows,
+    the pins and their holes as the compiled closed forms read them (``pins``; none: empty arrays),
     the fixture's collision points with their μ and an AABB tree of them, and the state carried
     from step to step (:mod:`fixplan.engine._mesh_slot_kernels` says what each array holds).
     """
@@ -109,6 +119,7 @@ class MeshStepper:
         obs: FloatArray,
         slots: FloatArray,
         slot_mu: FloatArray,
+        pins: PinGeometry | None = None,
     ) -> None:
         self.mesh = mesh
         self.loc = np.ascontiguousarray(
@@ -133,13 +144,32 @@ class MeshStepper:
         self.radius = float(mesh.settings.query_cache_radius_m)
         self.cache_q = np.zeros((k, 5))
         self.cache_ids = np.zeros((k, mesh.settings.query_cache_triangles), dtype=np.int64)
+        # the pins' closed forms (kernel_inputs), their μ, the kernel's scratch and the pins' slots' state
+        if pins is None:
+            s = DEFAULT.pins
+            self.pin_inputs: tuple[Any, ...] = (
+                np.zeros((0, 14)), np.zeros((0, 10)), np.zeros((0, 10)), np.zeros(2), np.zeros(0),
+                s.rim_samples, s.newton_steps, s.golden_steps, s.coaxial_rel, s.face_points,
+            )  # fmt: skip
+            owners = 0
+        else:
+            arrays = pins.kernel_inputs
+            self.pin_inputs = (*arrays[:4], np.ascontiguousarray(pins.friction, dtype=float), *arrays[4:])
+            owners = len(pins.names)
+        rows = MAX_CONTACTS * owners
+        self.pin_scratch = (np.zeros((rows, 13)), np.zeros((rows, 16)), np.zeros((rows, 5)), np.zeros((rows, 4)),
+                            np.zeros((rows, 3)), np.zeros(owners))  # fmt: skip
+        self.pin_state = np.zeros((rows, _PIN_STATE_COLUMNS))
+        self.pin_count = np.zeros(1, dtype=np.int64)
         # the arguments that never change, in the kernel's order
-        self._part = (*mesh.query_arrays, mesh.same_point_m, self.loc, self.obs, self.points, *self.tree)
+        self._part = (*mesh.query_arrays, mesh.same_point_m, self.loc, self.obs, self.points, *self.tree,
+                      *self.pin_inputs)  # fmt: skip
         self.reset()
 
     def reset(self) -> None:
         """A new state: no warm start for the next step, every collision point's row reset by it."""
         self.loc_slots[:] = 0
+        self.pin_count[0] = 0
         self.near[0] = -1
         self.cache_q[:, 3] = -1.0  # geometry only, but a reset starts from full queries
         # the compiled step, its arrays' checks done at the next step and then by identity (the
@@ -158,7 +188,8 @@ class MeshStepper:
                 sim._R, sim._p, sim._v, sim._w, sim._mass, sim._Ib, sim._Ib_inv, sim._com_b, *self._part, sim.dt,
                 f_ext, tau_ext, sim.restitution, margin, sim.tolerance, sim.max_iterations, sim.polish_after, sim.polish_steps,
                 sim._bound, sim._P, sim._active, sim._P_prev, sim._active_prev, sim._gap, sim._u, sim._nw,
-                self.state, self.loc_slots, self.near, self.radius, self.cache_q, self.cache_ids,
+                self.state, self.loc_slots, self.near, self.radius, self.cache_q, self.cache_ids, *self.pin_scratch,
+                self.pin_state, self.pin_count,
             )  # fmt: skip
             if self._step3 is None:  # f_ext and tau_ext are new arrays each step: not fixed
                 fixing = getattr(_mesh_step3, "fixing", None)
@@ -179,6 +210,11 @@ class MeshStepper:
         """Locator ``i``'s slots in the last step: rows of ``[P (4), P_prev (4), u (4), n_world (3), gap, active, active_prev]``."""
         start, count = (int(x) for x in self.loc_slots[i])
         return self.state[start : start + count]
+
+    def pin_slots_of(self, i: int) -> FloatArray:
+        """Pin ``i``'s slots in the last step: rows of :meth:`slots_of`'s columns, then ``(pin, kind, ordinal)``."""
+        rows = self.pin_state[: int(self.pin_count[0])]
+        return rows[rows[:, _STATE_COLUMNS] == float(i)]
 
 
 __all__ = ["MeshSlots", "MeshStepper", "mesh_slots"]

@@ -88,6 +88,13 @@ class PinGeometry:
         self._out = np.zeros((MAX_CONTACTS * len(self.names), 13))
         self._scratch: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None = None
 
+    @property
+    def kernel_inputs(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, int, int, int, float, int]:
+        """The fixed arguments of the compiled contacts, in their order: the pins, the holes (body frame), the bores, the peg, then the settings' numbers."""
+        s = self.settings
+        return (self._pins, self._holes_body, self._bores, self._peg, s.rim_samples, s.newton_steps, s.golden_steps,
+                s.coaxial_rel, s.face_points)  # fmt: skip
+
     def _rows(self, R: FloatArray, p: FloatArray) -> FloatArray:
         """The compiled kernel's rows at the pose ``(R, p)`` (a view of the scratch array)."""
         s = self.settings

@@ -352,12 +352,9 @@ class Simulator:
         self._mesh_state: dict[tuple[int, int], FloatArray] = {}  # (locator, rank) -> its warm start
         locs = fixture.locators
         # pins and bores: their contacts are detected before each step by the compiled closed forms and
-        # handed to the step as slots (module pin_slots); one named row each after the locators'
+        # handed to the step as slots (module pin_slots); one named row each after the locators'. A mesh
+        # part's holes are analytic too: its step adds them to its locators' slots (module mesh_slots)
         self._pins = PinGeometry(fixture) if fixture.has_pins else None
-        if self._pins is not None and self._mesh is not None:
-            raise InputError(
-                f"{fixture.source}: pins on a mesh part are not simulated yet (expected a primitive shape with pins)"
-            )
         self._pin_last: PinSlots | None = None
         self._pin_state: dict[tuple[int, int, int], FloatArray] = {}  # (owner, kind, ordinal) -> its warm start
         pin_names = self._pins.names if self._pins is not None else []
@@ -373,9 +370,10 @@ class Simulator:
         self._k_loc = len(self.names)  # the named rows: locators, then pins and bores
         self._mu = np.concatenate([[loc.friction for loc in locs], pin_mu, slot_mu])
         self._tors = np.concatenate([[loc.torsion_m for loc in locs], np.zeros(len(pin_mu) + len(slot_mu))])
-        # (a mesh part has no pins: the simulator refuses them, so its named rows are its locators)
         self._mesh_stepper = (
-            MeshStepper(self._mesh, locs, self._obs, self._slots, slot_mu) if self._mesh is not None else None
+            MeshStepper(self._mesh, locs, self._obs, self._slots, slot_mu, self._pins)
+            if self._mesh is not None
+            else None
         )
         self._mass = wp.mass_kg
         self._Ib = np.ascontiguousarray(wp.inertia_body, dtype=float)
@@ -542,15 +540,20 @@ class Simulator:
     def _step_mesh_reference(self, f: FloatArray, tau: FloatArray, margin: float) -> tuple[float, int, int, int, float]:
         """:meth:`_step_mesh` in Python: contacts as slots (:func:`.mesh_slots.mesh_slots`), then the compiled step.
 
-        The slots of the locators come first, then the fixture's own collision-only bodies'
-        (as for a convex part). Each slot's warm start is carried by its ``(locator, rank)``.
-        Afterwards the locator rows of the simulator's arrays hold each locator's contacts
-        together: the least gap, any active, the summed normal impulse, the nearest's normal.
+        The slots of the locators come first, then the pins' (their closed forms, as
+        :meth:`_step_pins` hands them over for a primitive part), then the fixture's own
+        collision-only bodies' (as for a convex part). Each locator slot's warm start is carried by
+        its ``(locator, rank)``, each pin slot's by its ``(pin, kind, ordinal)``. Afterwards the
+        locator rows of the simulator's arrays hold each locator's contacts together: the least
+        gap, any active, the summed normal impulse, the nearest's normal; the pins' rows as
+        :meth:`_step_pins` writes them.
         """
         if self._mesh is None:  # pragma: no cover - step() calls it only for a mesh part
             raise SolverError("a mesh step was asked of a part that is not a mesh")
         ms = mesh_slots(self._mesh, self.fixture.locators, self._R, self._p, margin)
-        n, kl = len(ms), self._k_loc
+        ps = self._pins.slots(self._R, self._p, margin) if self._pins is not None else None
+        n, kl, nt = len(ms), self._k_loc, self._n_tips
+        m = len(ps) if ps is not None else 0
         # a mesh part's collision points are its vertices (5·10⁴ triangles: 2.5·10⁴ of them against
         # each obstacle, and the step's arrays grow with the square of the slots it is handed). Only
         # the points whose gap can be within the margin are handed over: the step treats the others
@@ -558,23 +561,28 @@ class Simulator:
         near = self._obstacle_points_near(margin)
         fix_mu = self._mu[kl:][near]
         shifted = self._slots[near].copy()
-        shifted[:, 4] += n  # the fixture's obstacles follow the mesh's planes
-        obs = np.ascontiguousarray(np.vstack([ms.obs, self._obs]).reshape(-1, 16))
-        slots = np.ascontiguousarray(np.vstack([ms.slots, shifted]).reshape(-1, 5))
-        mu = np.concatenate([[self.fixture.locators[i].friction for i in ms.locator], fix_mu])
+        shifted[:, 4] += n + m  # the fixture's obstacles follow the mesh's planes and the pins'
+        pin_obs, pin_slots = (ps.obs, ps.slots.copy()) if ps is not None else (np.zeros((0, 16)), np.zeros((0, 5)))
+        pin_slots[:, 4] += n
+        pin_mu = self._pins.friction[ps.owner] if self._pins is not None and ps is not None else np.zeros(0)
+        obs = np.ascontiguousarray(np.vstack([ms.obs, pin_obs, self._obs]).reshape(-1, 16))
+        slots = np.ascontiguousarray(np.vstack([ms.slots, pin_slots, shifted]).reshape(-1, 5))
+        mu = np.concatenate([[self.fixture.locators[i].friction for i in ms.locator], pin_mu, fix_mu])
         k = mu.shape[0]
-        tors = np.zeros(k)  # a soft finger's torsion arm on each of its slots
+        tors = np.zeros(k)  # a soft finger's torsion arm on each of its slots (a pin's contacts have none)
         tors[:n] = [self.fixture.locators[i].torsion_m for i in ms.locator]
         # warm start: per slot (P, active, P_prev, active_prev, u) from the slot of the same key
         P, P_prev, u = np.zeros((k, 4)), np.zeros((k, 4)), np.zeros((k, 4))
         act, act_prev = np.zeros(k, dtype=np.bool_), np.zeros(k, dtype=np.bool_)
-        for j, key in enumerate(ms.keys):
-            old = self._mesh_state.get(key)
+        keys: list[Any] = [*ms.keys, *(ps.keys if ps is not None else [])]
+        for j, key in enumerate(keys):
+            old = (self._mesh_state if j < n else self._pin_state).get(key)
             if old is not None:
                 P[j], P_prev[j], u[j] = old[0:4], old[4:8], old[8:12]
                 act[j], act_prev[j] = bool(old[12]), bool(old[13])
-        P[n:], P_prev[n:], u[n:] = self._P[kl:][near], self._P_prev[kl:][near], self._u[kl:][near]
-        act[n:], act_prev[n:] = self._active[kl:][near], self._active_prev[kl:][near]
+        nm = n + m
+        P[nm:], P_prev[nm:], u[nm:] = self._P[kl:][near], self._P_prev[kl:][near], self._u[kl:][near]
+        act[nm:], act_prev[nm:] = self._active[kl:][near], self._active_prev[kl:][near]
         gap, n_w = np.zeros(k), np.zeros((k, 3))
         err, iters, status, failures, pen = _step3_into(
             self._R, self._p, self._v, self._w, self._mass, self._Ib, self._Ib_inv, self._com_b, self._kind,
@@ -586,21 +594,22 @@ class Simulator:
         self._mesh_last = ms
         self._mesh_slot_P, self._mesh_slot_active, self._mesh_slot_u = P[:n].copy(), act[:n].copy(), u[:n].copy()
         self._mesh_slot_n, self._mesh_slot_gap = n_w[:n].copy(), gap[:n].copy()
-        self._mesh_state = {
+        state = {
             key: np.concatenate([P[j], P_prev[j], u[j], [float(act[j]), float(act_prev[j])]])
-            for j, key in enumerate(ms.keys)
+            for j, key in enumerate(keys)
         }
+        self._mesh_state = {key: state[key] for key in ms.keys}
         # the obstacles' rows: the points handed over, the others open (their gap: beyond the margin)
         rows = kl + near
         for arr in (self._P, self._P_prev, self._u):
             arr[kl:] = 0.0
         self._active[kl:], self._active_prev[kl:] = False, False
         self._gap[kl:] = np.inf
-        self._P[rows], self._P_prev[rows], self._u[rows] = P[n:], P_prev[n:], u[n:]
-        self._active[rows], self._active_prev[rows] = act[n:], act_prev[n:]
-        self._gap[rows], self._nw[rows] = gap[n:], n_w[n:]
+        self._P[rows], self._P_prev[rows], self._u[rows] = P[nm:], P_prev[nm:], u[nm:]
+        self._active[rows], self._active_prev[rows] = act[nm:], act_prev[nm:]
+        self._gap[rows], self._nw[rows] = gap[nm:], n_w[nm:]
         # the locator rows: each locator's contacts together
-        for i in range(kl):
+        for i in range(nt):
             rows = np.flatnonzero(ms.locator == i)
             if rows.size == 0:  # pragma: no cover - every locator has a nearest contact
                 continue
@@ -611,7 +620,37 @@ class Simulator:
             self._P[i, 0] = float(P[on, 0].sum()) if on.size else 0.0
             self._nw[i] = n_w[rows[0]]
             self._u[i] = u[rows[0]]
+        if ps is not None:
+            self._pin_rows(ps, slice(n, nm), P, act, u, n_w, gap)
+            self._pin_state = {key: state[key] for key in ps.keys}
         return err, iters, status, failures, pen
+
+    def _pin_rows(
+        self, ps: PinSlots, rows: slice, P: FloatArray, act: NDArray[np.bool_], u: FloatArray, n_w: FloatArray,
+        gap: FloatArray,
+    ) -> None:  # fmt: skip
+        """After a step with the pins' slots at ``rows`` of its arrays: the slots kept for the reports, each pin's named row.
+
+        A pin's row holds its contacts together: its least gap over all of them (the closed forms'),
+        any active, the summed normal impulse, the normal and velocity of its slot at that gap.
+        """
+        nt, kl = self._n_tips, self._k_loc
+        self._pin_last = ps
+        self._pin_slot_P, self._pin_slot_active, self._pin_slot_u = P[rows].copy(), act[rows].copy(), u[rows].copy()
+        self._pin_slot_n, self._pin_slot_gap = n_w[rows].copy(), gap[rows].copy()
+        named = slice(nt, kl)
+        self._active[named], self._gap[named] = False, ps.least_gap_m
+        self._P[named], self._P_prev[named], self._u[named] = 0.0, 0.0, 0.0
+        slot_gap, slot_P, slot_act = gap[rows], P[rows, 0], act[rows]
+        first = rows.start
+        for j, i in enumerate(ps.owner.tolist()):  # few contacts: a loop is cheaper than grouping
+            r = nt + i
+            if slot_act[j]:
+                self._active[r] = True
+                self._P[r, 0] += slot_P[j]
+            if slot_gap[j] <= self._gap[r]:
+                self._gap[r] = slot_gap[j]
+                self._nw[r], self._u[r] = n_w[first + j], u[first + j]
 
     def _pin_gaps(self) -> FloatArray:
         """Each pin's and bore's least gap at the current pose [m] (inf: none possible; empty without pins)."""
@@ -660,10 +699,6 @@ class Simulator:
             self.restitution, margin, self.tolerance, self.max_iterations, self.polish_after, self.polish_steps, P, act, P_prev,
             act_prev, gap, u, n_w, self._bound,
         )  # fmt: skip
-        rows = slice(nt, nt + n)
-        self._pin_last = ps
-        self._pin_slot_P, self._pin_slot_active, self._pin_slot_u = P[rows].copy(), act[rows].copy(), u[rows].copy()
-        self._pin_slot_n, self._pin_slot_gap = n_w[rows].copy(), gap[rows].copy()
         self._pin_state = {
             key: np.concatenate([P[nt + j], P_prev[nt + j], u[nt + j], [float(act[nt + j]), float(act_prev[nt + j])]])
             for j, key in enumerate(ps.keys)
@@ -672,23 +707,21 @@ class Simulator:
             self._P[theirs], self._P_prev[theirs], self._u[theirs] = P[mine], P_prev[mine], u[mine]
             self._active[theirs], self._active_prev[theirs] = act[mine], act_prev[mine]
             self._gap[theirs], self._nw[theirs] = gap[mine], n_w[mine]
-        # each pin's named row: its contacts together
-        named = slice(nt, kl)
-        self._active[named], self._gap[named] = False, ps.least_gap_m
-        self._P[named], self._P_prev[named], self._u[named] = 0.0, 0.0, 0.0
-        slot_gap, slot_P, slot_act = gap[rows], P[rows, 0], act[rows]
-        for j, i in enumerate(ps.owner.tolist()):  # few contacts: a loop is cheaper than grouping
-            r = nt + i
-            if slot_act[j]:
-                self._active[r] = True
-                self._P[r, 0] += slot_P[j]
-            if slot_gap[j] <= self._gap[r]:
-                self._gap[r] = slot_gap[j]
-                self._nw[r], self._u[r] = n_w[nt + j], u[nt + j]
+        self._pin_rows(ps, slice(nt, nt + n), P, act, u, n_w, gap)  # each pin's named row: its contacts together
         return err, iters, status, failures, pen
 
     def _pin_contacts(self, i: int) -> list[tuple[FloatArray, float, FloatArray, float, float, float]]:
-        """Pin or bore ``i``'s contacts in the last step: ``(force_world, normal force, normal, slip, gap)`` each."""
+        """Pin or bore ``i``'s contacts in the last step: ``(force_world, normal force, normal, slip, gap, spin moment)`` each."""
+        if self._mesh is not None and not self._mesh_reference and self._mesh_stepper is not None:
+            out = []
+            for row in self._mesh_stepper.pin_slots_of(i):  # the compiled mesh step's pin slots
+                P, n = row[0:4], row[12:15].copy()
+                on = bool(row[16]) and P[0] > 0.0
+                t1, t2 = tangent_basis(n)
+                force = (P[0] * n + P[1] * t1 + P[2] * t2) / self.dt if on else np.zeros(3)
+                slip = float(np.hypot(row[9], row[10]))
+                out.append((force, float(P[0]) / self.dt if on else 0.0, n, slip, float(row[15]), 0.0))
+            return out
         ps = self._pin_last
         if ps is None:
             return []
@@ -804,11 +837,11 @@ class Simulator:
             Pn = float(self._P[i, 0])
             n = self._nw[i]
             d = self.dimension
-            if self._mesh is not None:
-                reports.append(self._mesh_report(i, name, float(gaps[i]), omega))
-                continue
             if i >= self._n_tips:  # a pin or a bore
                 reports.append(self._mesh_report(i, name, float(gaps[i]), omega, self._pin_contacts(i - self._n_tips)))
+                continue
+            if self._mesh is not None:
+                reports.append(self._mesh_report(i, name, float(gaps[i]), omega))
                 continue
             if not self._active[i] or Pn <= 0.0:
                 reports.append(ContactReport(name, float(gaps[i]), 0.0, np.zeros(d), 0.0, "open"))

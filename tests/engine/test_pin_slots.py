@@ -321,16 +321,3 @@ def test_pins_and_collision_only_bodies_together() -> None:
     total = bore.force_world + floor.force_world
     np.testing.assert_allclose(total, [0.0, 0.0, 2.0 + 0.1 * 9.81], atol=1e-6)
     assert floor.force_world[2] > 0.0  # the floor carries its share
-
-
-def test_pins_on_a_mesh_part_are_refused_in_one_line() -> None:
-    from fixplan.errors import InputError
-    from fixplan.geometry.cells import box_cells, cell_surface
-    from fixplan.geometry.mesh import Mesh
-
-    fixture = fixplan.load(HOUSING)
-    V, F = cell_surface(*box_cells((0.12, 0.08, 0.03), 2))
-    mesh = Mesh(V, F)
-    part = dataclasses.replace(fixture, workpiece=dataclasses.replace(fixture.workpiece, shape=mesh))
-    with pytest.raises(InputError, match="pins on a mesh part are not simulated yet"):
-        Simulator(part)
