@@ -58,6 +58,16 @@ mesh-321
     B3. Checked as box-321 (the goal found again from the start), and each locator touches one
     face at the goal.
 
+plane-2-pins
+    A box on 3 rests B1, B2, B3 under -z, located by a round pin P1 and a diamond pin P2 in two
+    through holes of its bottom (``PIN_*``); goal written, seated toward P1's contact; start above
+    the pins, each hole within ``PIN_CAPTURE_CHECK`` of the capture of its pin.
+plane-2-pins-mesh
+    plane-2-pins' draws, seed for seed, with the box written as a mesh part (binary STL in mm,
+    body frame at the box's centre) whose bores are modelled: a square through channel around
+    each hole (half side: the chamfered mouth's radius, up to the next 0.1 mm). The holes stay
+    analytic ``[[workpiece.hole]]``s, so the pins' contacts are the closed forms', as for the box.
+
 The free families are checked on their goal known by construction (every gap 0 within
 ``EXACT_M``, rank-full ``G``), never by searching for it. ``rotate_world=True`` (``fixplan generate
 --rotate-world``) turns any family's fixture rigidly by :func:`fixplan.twins.random_rotation`.
@@ -135,8 +145,15 @@ PIN_FAMILIES: dict[str, str] = {
         "contact); start above the pins, tilted up to 0.5 deg about each axis, each hole within 80 % of the capture "
         "(play + chamfers) of its pin"
     ),
+    "plane-2-pins-mesh": (
+        "plane-2-pins' fixtures (the same draws, seed for seed) with the box written as a mesh part: a binary STL "
+        "in mm beside the fixture, each hole's bore modelled as a square through channel around it (side: the "
+        "chamfered mouth's diameter); the holes stay analytic [[workpiece.hole]]s"
+    ),
 }
 ALL_FAMILIES: dict[str, str] = {**FAMILIES, **MESH_FAMILIES, **PIN_FAMILIES}
+# The families whose fixtures come with a mesh file written beside them (GeneratedFixture.files).
+MESH_FILE_FAMILIES: tuple[str, ...] = (*MESH_FAMILIES, "plane-2-pins-mesh")
 
 # What the families draw from (the README lists them; tests/test_generate.py checks them).
 EDGE_M = (0.04, 0.40)  # box edges, plate width and height [m], log-uniform
@@ -1229,8 +1246,40 @@ def _check_mesh(fixture: Fixture) -> str | None:
 # -- plane-2-pins ----------------------------------------------------------------------------------
 
 
-def _draw_plane_2_pins(rng: np.random.Generator) -> _Draft | str:
-    """A box on 3 rests and a round and a diamond pin in two through holes of its bottom (module text)."""
+def _draw_plane_2_pins_mesh(rng: np.random.Generator) -> _Draft | str:
+    """:func:`_draw_plane_2_pins`'s draw (the same numbers from the same stream), the box written as a mesh (module text)."""
+    return _draw_plane_2_pins(rng, mesh=True)
+
+
+def _bored_box_mm(size_m: list[float], holes: tuple[dict[str, Any], ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The box of ``size_m`` centred on the origin with a square through channel along z around each hole, in mm.
+
+    Each channel's half side is the hole's mouth radius with its chamfer (``D/2 + chamfer``, up to
+    the next 0.1 mm): the analytic hole lies inside it, as in a CAD part whose bore is modelled.
+    """
+    a, b, c = size_m
+    channels = []
+    for hole in holes:
+        half = math.ceil((0.5 * hole["diameter"] + hole["chamfer"]) * 1e4) / 1e4
+        x, y = hole["position"][0], hole["position"][1]
+        channels.append((x - half, x + half, y - half, y + half))
+    xs = np.unique(np.round([-a / 2, a / 2, *(v for ch in channels for v in ch[:2])], 10))
+    ys = np.unique(np.round([-b / 2, b / 2, *(v for ch in channels for v in ch[2:])], 10))
+    zs = np.array([-c / 2, c / 2])
+    filled = np.ones((len(xs) - 1, len(ys) - 1, 1), dtype=bool)
+    for i in range(len(xs) - 1):
+        for j in range(len(ys) - 1):
+            mx, my = 0.5 * (xs[i] + xs[i + 1]), 0.5 * (ys[j] + ys[j + 1])
+            if any(x0 < mx < x1 and y0 < my < y1 for x0, x1, y0, y1 in channels):
+                filled[i, j, 0] = False
+    return cell_surface(1e3 * xs, 1e3 * ys, 1e3 * zs, filled)
+
+
+def _draw_plane_2_pins(rng: np.random.Generator, mesh: bool = False) -> _Draft | str:
+    """A box on 3 rests and a round and a diamond pin in two through holes of its bottom (module text).
+
+    ``mesh``: the box written as a mesh part (plane-2-pins-mesh), its bores modelled; the draw is the same.
+    """
     a, b, c = (_log_uniform(rng, lo, hi, 4) for lo, hi in PIN_PART_EDGE_M)
     density = round(_log_uniform(rng, *DENSITY_KG_M3, 0))
     mass = _sig(density * a * b * c, 4)
@@ -1323,9 +1372,19 @@ def _draw_plane_2_pins(rng: np.random.Generator) -> _Draft | str:
         f"(play + chamfers = {2 * capture * 1e3:.3f} mm), tilted (roll, pitch, yaw) = {tilt} deg; each hole within 80 %",
         "of that of its pin's axis (the chamfers capture it).",
     ]
+    shape: dict[str, Any] = {"shape": "box", "size": [a, b, c]}
+    files: tuple[tuple[str, bytes], ...] = ()
+    if mesh:
+        V_mm, F = _bored_box_mm([a, b, c], holes)
+        shape = {"shape": "mesh", "file": "", "units": "mm"}
+        files = ((".stl", stl_bytes(V_mm, F)),)
+        story.append(
+            f"The box is a mesh part (binary STL in mm, {len(F)} triangles, body frame at its centre) with each "
+            "hole's bore modelled as a square through channel; the holes are the analytic [[workpiece.hole]]s."
+        )
     return _Draft(
         dimension=3,
-        shape={"shape": "box", "size": [a, b, c]},
+        shape=shape,
         mass_kg=mass,
         start={"position": start_c, "rpy_deg": tilt},
         goal={"position": [a / 2, b / 2, c / 2], "rpy_deg": [0.0, 0.0, 0.0]},
@@ -1336,6 +1395,7 @@ def _draw_plane_2_pins(rng: np.random.Generator) -> _Draft | str:
         resting=(),
         story=story,
         check=lambda _fixture: None,
+        files=files,
         holes=holes,
         pins=pins,
     )
@@ -1348,6 +1408,7 @@ _DRAWS: dict[str, Callable[[np.random.Generator], _Draft | str]] = {
     "plate-2d-free": _draw_plate_free,
     "mesh-321": _draw_mesh,
     "plane-2-pins": _draw_plane_2_pins,
+    "plane-2-pins-mesh": _draw_plane_2_pins_mesh,
 }
 
 

@@ -199,7 +199,15 @@ def test_cli_list_and_bad_input():
     listed = fixplan("generate", "--list")
     assert listed.returncode == 0
     names = [line.split(":")[0] for line in listed.stdout.splitlines()]
-    assert names == ["box-321", "plate-2d", "box-321-free", "plate-2d-free", "mesh-321", "plane-2-pins"]
+    assert names == [
+        "box-321",
+        "plate-2d",
+        "box-321-free",
+        "plate-2d-free",
+        "mesh-321",
+        "plane-2-pins",
+        "plane-2-pins-mesh",
+    ]
     as_json = json.loads(fixplan("generate", "--list", "--json").stdout)
     assert as_json["families"] == gen.ALL_FAMILIES == {**gen.FAMILIES, **gen.MESH_FAMILIES, **gen.PIN_FAMILIES}
     unknown = fixplan("generate", "cube", "--out", "unused")

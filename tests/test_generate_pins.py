@@ -93,3 +93,62 @@ def test_cli_writes_files_that_validate(tmp_path) -> None:
 def test_rotate_world_is_refused_for_pins() -> None:
     with pytest.raises(fixplan.InputError, match="plane-2-pins"):
         gen.generate(FAMILY, 1, 0, rotate_world=True)
+
+
+# -- plane-2-pins-mesh: the same draws, the box written as a mesh part with its bores modelled --------
+MESH_FAMILY = "plane-2-pins-mesh"
+
+
+def _load_beside(g: gen.GeneratedFixture, folder) -> fixplan.Fixture:
+    for name, data in g.files:
+        (folder / name).write_bytes(data)
+    (folder / f"{g.name}.toml").write_text(g.toml_text)
+    return fixplan.load(folder / f"{g.name}.toml")
+
+
+def test_the_mesh_variant_is_the_box_variants_fixture_seed_for_seed(tmp_path) -> None:
+    """Same draw, rests, pins, holes, start, goal and mass; the mesh's box has the drawn size, its volume the box's
+    less the two square channels (half side D/2 + chamfer, up to 0.1 mm), each hole's axis inside its channel."""
+    for box_g, mesh_g in zip(gen.generate(FAMILY, 6, 2026), gen.generate(MESH_FAMILY, 6, 2026), strict=True):
+        assert mesh_g.draws == box_g.draws and mesh_g.params == box_g.params
+        assert [name for name, _data in mesh_g.files] == [f"{mesh_g.name}.stl"]
+        box, mesh = fixplan.loads(box_g.toml_text), _load_beside(mesh_g, tmp_path)
+        for a, b in ((box.locators, mesh.locators), (box.pins, mesh.pins), (box.workpiece.holes, mesh.workpiece.holes)):
+            assert [repr(x) for x in a] == [repr(x) for x in b]
+        assert box.start.distance_to(mesh.start) == (0.0, 0.0) and box.goal.distance_to(mesh.goal) == (0.0, 0.0)
+        assert mesh.workpiece.mass_kg == box.workpiece.mass_kg
+        a, b, c = (2.0 * h for h in box.workpiece.shape.half)
+        V = np.asarray(mesh.workpiece.shape.vertices)
+        np.testing.assert_allclose(
+            V.max(axis=0) - V.min(axis=0), [a, b, c], rtol=0, atol=2e-8
+        )  # float32 in mm: half an ulp at 150 mm is 7.6e-9 m a face
+        halves = [np.ceil((0.5 * h.diameter_m + h.chamfer_m) * 1e4) / 1e4 for h in box.workpiece.holes]
+        expected = a * b * c - sum((2.0 * s) ** 2 * c for s in halves)
+        assert mesh.workpiece.shape.volume_m3 == pytest.approx(expected, rel=1e-6)
+        for hole, half in zip(mesh.workpiece.holes, halves, strict=True):
+            assert hole.through  # the channel: nothing past the bottom
+            mid = hole.p_body - 0.5 * hole.depth_m * hole.axis_body  # on the axis, halfway down: in the channel
+            assert mesh.workpiece.shape.project(mid).distance == pytest.approx(half, abs=2e-8)
+
+
+def test_cli_writes_each_mesh_variant_beside_its_stl(tmp_path) -> None:
+    proc = run_cli("generate", MESH_FAMILY, "--count", "2", "--seed", "5", "--out", tmp_path, "--json", check_rc=0)
+    doc = json.loads(proc.stdout)["files"]
+    assert [f["files"] for f in doc] == [[str(tmp_path / f"{MESH_FAMILY}-s5-{i:03d}.stl")] for i in range(2)]
+    valid = run_cli("validate", *(f["path"] for f in doc))
+    assert valid.returncode == 0 and "warning" not in valid.stdout + valid.stderr, valid.stderr
+    with pytest.raises(fixplan.InputError, match=MESH_FAMILY):
+        gen.generate(MESH_FAMILY, 1, 0, rotate_world=True)
+
+
+@pytest.mark.slow
+def test_a_generated_mesh_fixture_is_planned_and_verified_as_its_box(tmp_path) -> None:
+    """The staged insertion of one fixture, as a box and as a mesh with modelled bores: planned, verified, the same stages."""
+    from fixplan.planner.solve import solve
+
+    box_g, mesh_g = gen.generate_one(FAMILY, 2031, 1), gen.generate_one(MESH_FAMILY, 2031, 1)
+    box, mesh = solve(fixplan.loads(box_g.toml_text)), solve(_load_beside(mesh_g, tmp_path))
+    assert box.status == mesh.status == "planned", mesh.reason
+    assert [t.added for t in mesh.transitions] == [t.added for t in box.transitions]
+    assert mesh.verification is not None and mesh.verification.passed
+    assert mesh.verification.observed_sequence == box.verification.observed_sequence  # type: ignore[union-attr]

@@ -118,9 +118,10 @@ def generate(
     plate-2d-free start in free space (the nearest locator 5-80 mm away, tilted up to 15 deg about
     every axis, mirrored layouts, the goal written in half the files); mesh-321 writes CAD-like mesh
     parts (L-brackets, slotted blocks, housings), each fixture beside its STL file, with a locator
-    inside the part's concave region. --list describes them.
+    inside the part's concave region; plane-2-pins loads a box onto a round and a diamond pin, and
+    plane-2-pins-mesh the same draws with the box written as a mesh part (STL beside it). --list describes them.
     """
-    from fixplan.generate import ALL_FAMILIES, MESH_FAMILIES, check_family, fixture_name
+    from fixplan.generate import ALL_FAMILIES, MESH_FILE_FAMILIES, check_family, fixture_name
     from fixplan.generate import generate as run
 
     if list_:
@@ -139,7 +140,7 @@ def generate(
         raise InputError(f"--out {out} is a file (expected a directory)")
     names = [fixture_name(family, seed, i, rotate_world=rotate_world) for i in range(count)]
     targets = [out / f"{name}.toml" for name in names]
-    meshes = [out / f"{name}.stl" for name in names] if family in MESH_FAMILIES else []
+    meshes = [out / f"{name}.stl" for name in names] if family in MESH_FILE_FAMILIES else []
     for target in targets + meshes:
         _writable(target, force)
     fixtures = run(family, count, seed, rotate_world=rotate_world, floor=floor)
