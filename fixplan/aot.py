@@ -50,8 +50,8 @@ ENV = "FIXPLAN_KERNELS"  # "jit" forces numba's dispatchers
 # and its compiled loop, the spatial step and the haptic loop's spatial coupling; a mesh part's
 # AABB tree and point queries). A 3D solve that reached any of the spatial kernels through numba
 # paid its start (about 0.8 s) in every process. A mesh part's engine step, detection included,
-# is one kernel too, and so are the pins' contacts and slots (a first simulation of a part on
-# pins compiled them for 40-50 s).
+# is one kernel too (its pins' closed forms included), and so are the pins' contacts and slots (a
+# first simulation of a part on pins compiled them for 40-50 s).
 EXPORTS: tuple[tuple[str, str], ...] = (
     ("fixplan.engine.step", "step2"),
     ("fixplan.engine.step", "run2"),

@@ -159,8 +159,8 @@ def _mesh_simulation(tmp: Path) -> None:
         sim.step(np.zeros(6))
 
 
-def _pin_simulation() -> None:
-    """Simulator.step of the library's housing on two pins (the pin kernels: contacts and slots).
+def _pin_simulation(tmp: Path) -> None:
+    """Simulator.step of the library's housing on two pins, as a box and as a mesh part (the pin kernels: contacts and slots).
 
     Skipped outside a checkout (an installed wheel has no ``problems/``): the kernels then compile
     on their first use.
@@ -169,13 +169,21 @@ def _pin_simulation() -> None:
 
     import fixplan
     from fixplan.engine.simulator import Simulator
+    from fixplan.geometry.cells import box_cells, cell_surface
+    from fixplan.geometry.mesh import stl_bytes
 
     path = Path(fixplan.__file__).resolve().parents[1] / "problems" / "housing-2-pins.toml"
     if not path.is_file():
         return
-    sim = Simulator(fixplan.load(path))
-    for _ in range(3):
-        sim.step(np.zeros(6))
+    stl = stl_bytes(*cell_surface(*box_cells((120.0, 80.0, 30.0), 1)))
+    write_output(tmp / "housing.stl", lambda out: out.write_bytes(stl))
+    box = 'shape = "box"\nsize = [0.12, 0.08, 0.03]'
+    text = path.read_text(encoding="utf-8")
+    write_text(tmp / "housing-mesh.toml", text.replace(box, 'shape = "mesh"\nfile = "housing.stl"\nunits = "mm"'))
+    for fixture in (fixplan.load(path), fixplan.load(tmp / "housing-mesh.toml")):
+        sim = Simulator(fixture)
+        for _ in range(3):
+            sim.step(np.zeros(6))
 
 
 def steps(tmp: Path) -> list[tuple[str, Callable[[], None]]]:
@@ -202,7 +210,7 @@ def steps(tmp: Path) -> list[tuple[str, Callable[[], None]]]:
         ("FCLib solvers", _fclib_problems),
         ("mesh queries", _mesh_queries),
         ("mesh part in the engine", lambda: _mesh_simulation(tmp)),
-        ("pins in the engine", _pin_simulation),
+        ("pins in the engine", lambda: _pin_simulation(tmp)),
     ]
 
 

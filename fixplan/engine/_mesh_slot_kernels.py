@@ -258,11 +258,10 @@ def locator_slots(R, p, tri, face_normals, edge_normals, vertex_normals, faces, 
 def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
                tri, face_normals, edge_normals, vertex_normals, faces, around, boxes, nodes, order, same,
                loc, obs_fix, pts_fix, pt_boxes, pt_nodes, pt_order, rho_max,
-               pins, holes_body, bores, peg, pin_mu, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points,
+               pins, holes_body, pin_mu, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points,
                h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_after, polish_steps, bound,
                P_full, active_full, P_prev_full, active_prev_full, gap_full, u_full, n_full,
-               slot_state, loc_slots, near, radius, cache_q, cache_ids,
-               pin_raw, pin_obs, pin_slot_rows, pin_meta, pin_normals, pin_least, pin_state, pin_count):  # fmt: skip
+               slot_state, loc_slots, near, radius, cache_q, cache_ids, pin_state, pin_count):  # fmt: skip
     """One 3D step of a mesh part (the module docstring's five parts); the state arrays updated in place.
 
     ``loc (k_loc, 6)``: each locator's ``[p_world (3), radius, μ, torsion arm]`` (a soft finger's
@@ -271,15 +270,18 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
     fixture's collision-only bodies and collision points (``[x_body (3), radius, obstacle row, μ]``,
     with the AABB tree of :func:`points_near` and their largest radius ``rho_max``),
     whose rows follow the locators' and the pins' in ``P_full`` … ``n_full`` (the simulator's arrays).
-    ``pins`` … ``face_points``: the pins and their holes as :func:`fixplan.engine._pin_slot_kernels.pin_slots`
-    reads them (:class:`fixplan.engine.pin_slots.PinGeometry`; empty without pins), ``pin_mu`` each
-    pin's μ; ``pin_raw`` … ``pin_least``: that kernel's scratch and outputs.
+    ``pins (k_pin, 14)``, ``holes_body (k_pin, 10)`` … ``face_points``: the pins and their holes as
+    :func:`fixplan.engine._pin_slot_kernels.pin_slots` reads them
+    (:attr:`fixplan.engine.pin_slots.PinGeometry.kernel_inputs`; a mesh part has no bore), ``pin_mu``
+    each pin's μ; ``pin_state``, ``pin_count``: the pins' slots' state (module docstring), as many
+    rows as the closed forms can give contacts. Without pins they are empty, the pins' scratch is
+    never allocated, and the step is the one without them.
     Returns ``(error, iterations, status, failed local solves, penetration, slots)``; when the
     locators' slots are more than ``slot_state`` holds, ``slots`` is minus their number and nothing
     was changed (call again with room for them).
     """
     k_loc = loc.shape[0]
-    k_pin = pin_least.shape[0]
+    k_pin = pins.shape[0]
     k_named = k_loc + k_pin  # the collision points' rows follow the locators' and the pins'
     # 1. every locator's contacts, as plane slots; every pin's, in closed form
     n, s_loc, s_rank, s_x, s_obs, s_gap = locator_slots(
@@ -289,9 +291,18 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
     if n > slot_state.shape[0]:
         return 0.0, 0, 0, 0, 0.0, -n
     m = 0
+    last = 0
+    # the pins' scratch: allocated only with pins (without: zero-row views of the step's own arrays, never read)
+    pin_obs, pin_slot_rows, pin_meta, pin_normals = obs_fix[:0], slot_state[:0], slot_state[:0], n_full[:0]
+    pin_least = gap_full[:0]
     if k_pin > 0:
-        m = pin_slots(pins, holes_body, bores, peg, R, p, rim_samples, newton_steps, golden_steps, coaxial_rel,
-                      face_points, margin, pin_raw, pin_obs, pin_slot_rows, pin_meta, pin_normals, pin_least)  # fmt: skip
+        rows = pin_state.shape[0]
+        pin_obs, pin_slot_rows, pin_meta = np.empty((rows, 16)), np.empty((rows, 5)), np.empty((rows, 4))
+        pin_normals, pin_least = np.empty((rows, 3)), np.empty(k_pin)
+        m = pin_slots(pins, holes_body, np.zeros((0, 10)), np.zeros(2), R, p, rim_samples, newton_steps, golden_steps,
+                      coaxial_rel, face_points, margin, np.empty((rows, 13)), pin_obs, pin_slot_rows, pin_meta,
+                      pin_normals, pin_least)  # fmt: skip
+        last = pin_count[0]
     nm = n + m
     # 2. the fixture's collision points that may be within the margin
     n_pts = pts_fix.shape[0]
@@ -323,7 +334,6 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
                 u[j, a] = slot_state[o, 8 + a]
             act[j] = slot_state[o, 16] != 0.0
             act_prev[j] = slot_state[o, 17] != 0.0
-    last = pin_count[0]
     for jj in range(m):
         j = n + jj
         obs[j] = pin_obs[jj]
@@ -372,7 +382,8 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
         _store(n + jj, jj, P, P_prev, u, n_w, gap, act, act_prev, pin_state)
         for a in range(3):
             pin_state[jj, STATE + a] = pin_meta[jj, a]
-    pin_count[0] = m
+    if k_pin > 0:
+        pin_count[0] = m
     if near[0] < 0:  # the first step since the state was set: every row
         for q in range(n_pts):
             _open_row(k_named + q, P_full, active_full, P_prev_full, active_prev_full, gap_full, u_full)

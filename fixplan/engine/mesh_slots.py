@@ -41,6 +41,7 @@ from numpy.typing import NDArray
 
 from fixplan.aot import kernel
 from fixplan.engine.pin_slots import MAX_CONTACTS, PinGeometry
+from fixplan.errors import InputError
 from fixplan.geometry.collision import PLANE, plane_frame
 from fixplan.geometry.mesh import Mesh
 from fixplan.model import Locator
@@ -144,22 +145,19 @@ class MeshStepper:
         self.radius = float(mesh.settings.query_cache_radius_m)
         self.cache_q = np.zeros((k, 5))
         self.cache_ids = np.zeros((k, mesh.settings.query_cache_triangles), dtype=np.int64)
-        # the pins' closed forms (kernel_inputs), their μ, the kernel's scratch and the pins' slots' state
-        if pins is None:
-            s = DEFAULT.pins
-            self.pin_inputs: tuple[Any, ...] = (
-                np.zeros((0, 14)), np.zeros((0, 10)), np.zeros((0, 10)), np.zeros(2), np.zeros(0),
-                s.rim_samples, s.newton_steps, s.golden_steps, s.coaxial_rel, s.face_points,
-            )  # fmt: skip
-            owners = 0
-        else:
-            arrays = pins.kernel_inputs
-            self.pin_inputs = (*arrays[:4], np.ascontiguousarray(pins.friction, dtype=float), *arrays[4:])
+        # the pins' closed forms (PinGeometry.kernel_inputs less the bores: a mesh part has none), their μ, and
+        # the state of their slots (without pins: empty)
+        s = DEFAULT.pins
+        self.pin_inputs: tuple[Any, ...] = (np.zeros((0, 14)), np.zeros((0, 10)), np.zeros(0), s.rim_samples,
+                                            s.newton_steps, s.golden_steps, s.coaxial_rel, s.face_points)  # fmt: skip
+        owners = 0
+        if pins is not None:
+            arrays, numbers = pins.kernel_inputs[:4], pins.kernel_inputs[4:]
+            if arrays[2].shape[0]:  # pragma: no cover - the loader refuses a bore for a part that is no cylinder
+                raise InputError(f"bore {pins.names[pins.n_pins]}: a bore takes a cylindrical part, not a mesh")
+            self.pin_inputs = (arrays[0], arrays[1], np.ascontiguousarray(pins.friction, dtype=float), *numbers)
             owners = len(pins.names)
-        rows = MAX_CONTACTS * owners
-        self.pin_scratch = (np.zeros((rows, 13)), np.zeros((rows, 16)), np.zeros((rows, 5)), np.zeros((rows, 4)),
-                            np.zeros((rows, 3)), np.zeros(owners))  # fmt: skip
-        self.pin_state = np.zeros((rows, _PIN_STATE_COLUMNS))
+        self.pin_state = np.zeros((MAX_CONTACTS * owners, _PIN_STATE_COLUMNS))
         self.pin_count = np.zeros(1, dtype=np.int64)
         # the arguments that never change, in the kernel's order
         self._part = (*mesh.query_arrays, mesh.same_point_m, self.loc, self.obs, self.points, *self.tree,
@@ -188,8 +186,8 @@ class MeshStepper:
                 sim._R, sim._p, sim._v, sim._w, sim._mass, sim._Ib, sim._Ib_inv, sim._com_b, *self._part, sim.dt,
                 f_ext, tau_ext, sim.restitution, margin, sim.tolerance, sim.max_iterations, sim.polish_after, sim.polish_steps,
                 sim._bound, sim._P, sim._active, sim._P_prev, sim._active_prev, sim._gap, sim._u, sim._nw,
-                self.state, self.loc_slots, self.near, self.radius, self.cache_q, self.cache_ids, *self.pin_scratch,
-                self.pin_state, self.pin_count,
+                self.state, self.loc_slots, self.near, self.radius, self.cache_q, self.cache_ids, self.pin_state,
+                self.pin_count,
             )  # fmt: skip
             if self._step3 is None:  # f_ext and tau_ext are new arrays each step: not fixed
                 fixing = getattr(_mesh_step3, "fixing", None)
