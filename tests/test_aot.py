@@ -319,6 +319,28 @@ def test_a_mesh_part_steps_identically(monkeypatch) -> None:
 
 
 @needs_build
+def test_a_mesh_part_on_pins_steps_identically(monkeypatch, tmp_path) -> None:
+    """Simulator.step of the housing as a mesh part on its two pins (the pins' closed forms in the mesh step), AOT vs JIT."""
+    from fixplan.engine import mesh_slots as mesh_slots_module
+    from fixplan.geometry.cells import box_cells, cell_surface
+    from fixplan.geometry.mesh import stl_bytes
+
+    (tmp_path / "housing.stl").write_bytes(stl_bytes(*cell_surface(*box_cells((120.0, 80.0, 30.0), 2))))
+    text = (PROBLEMS / "housing-2-pins.toml").read_text(encoding="utf-8")
+    box = 'shape = "box"\nsize = [0.12, 0.08, 0.03]'
+    assert box in text
+    (tmp_path / "mesh.toml").write_text(text.replace(box, 'shape = "mesh"\nfile = "housing.stl"\nunits = "mm"'))
+    fx = fixplan.load(tmp_path / "mesh.toml")
+    push = np.array([0.5, -0.3, -5.0, 0.01, -0.02, 0.0])
+    states_aot = _states(fx, push)
+    assert isinstance(mesh_slots_module._mesh_step3, aot._AotKernel)
+    monkeypatch.setattr(mesh_slots_module, "_mesh_step3", _jit("fixplan.engine._mesh_slot_kernels", "mesh_step3"))
+    states_jit = _states(fx, push)
+    assert all(np.array_equal(a, b) for a, b in zip(states_aot, states_jit, strict=True))
+    assert not any(key.startswith("fixplan.engine._mesh_slot_kernels") for key in aot.fallbacks)
+
+
+@needs_build
 def test_a_part_on_pins_steps_identically(monkeypatch) -> None:
     """Simulator.step of the housing on two pins (the pins' contacts and slots), AOT vs JIT."""
     from fixplan.engine import pin_slots as pin_slots_module

@@ -191,10 +191,11 @@ class MeshStepper:
             )  # fmt: skip
             if self._step3 is None:  # f_ext and tau_ext are new arrays each step: not fixed
                 fixing = getattr(_mesh_step3, "fixing", None)
+                part = range(8, 8 + len(self._part))  # the part's arguments, numbers included, never change
                 fixed = {
                     i: a
                     for i, a in enumerate(args)
-                    if isinstance(a, np.ndarray) and a is not f_ext and a is not tau_ext
+                    if (isinstance(a, np.ndarray) and a is not f_ext and a is not tau_ext) or i in part
                 }
                 self._step3 = _mesh_step3 if fixing is None else fixing(fixed)
             out = self._step3(*args)
