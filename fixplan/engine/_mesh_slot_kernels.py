@@ -377,11 +377,27 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
     )  # fmt: skip
     # 5. written back: the slots' state, the pins' slots' state, the collision points' rows, the named rows
     for j in range(n):
-        _store(j, j, P, P_prev, u, n_w, gap, act, act_prev, slot_state)
-    for jj in range(m):
-        _store(n + jj, jj, P, P_prev, u, n_w, gap, act, act_prev, pin_state)
+        for a in range(4):
+            slot_state[j, a] = P[j, a]
+            slot_state[j, 4 + a] = P_prev[j, a]
+            slot_state[j, 8 + a] = u[j, a]
         for a in range(3):
+            slot_state[j, 12 + a] = n_w[j, a]
+        slot_state[j, 15] = gap[j]
+        slot_state[j, 16] = 1.0 if act[j] else 0.0
+        slot_state[j, 17] = 1.0 if act_prev[j] else 0.0
+    for jj in range(m):  # the same columns, then the key
+        j = n + jj
+        for a in range(4):
+            pin_state[jj, a] = P[j, a]
+            pin_state[jj, 4 + a] = P_prev[j, a]
+            pin_state[jj, 8 + a] = u[j, a]
+        for a in range(3):
+            pin_state[jj, 12 + a] = n_w[j, a]
             pin_state[jj, STATE + a] = pin_meta[jj, a]
+        pin_state[jj, 15] = gap[j]
+        pin_state[jj, 16] = 1.0 if act[j] else 0.0
+        pin_state[jj, 17] = 1.0 if act_prev[j] else 0.0
     if k_pin > 0:
         pin_count[0] = m
     if near[0] < 0:  # the first step since the state was set: every row
@@ -448,20 +464,6 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
             for a in range(4):
                 u_full[r, a] = u[j, a]
     return err, iters, status, failures, pen, n
-
-
-@njit(cache=True)
-def _store(j, row, P, P_prev, u, n_w, gap, act, act_prev, state):
-    """Slot ``j``'s result into ``state[row]`` (``slot_state``'s 18 columns)."""
-    for a in range(4):
-        state[row, a] = P[j, a]
-        state[row, 4 + a] = P_prev[j, a]
-        state[row, 8 + a] = u[j, a]
-    for a in range(3):
-        state[row, 12 + a] = n_w[j, a]
-    state[row, 15] = gap[j]
-    state[row, 16] = 1.0 if act[j] else 0.0
-    state[row, 17] = 1.0 if act_prev[j] else 0.0
 
 
 @njit(cache=True)
