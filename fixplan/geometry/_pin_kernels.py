@@ -254,15 +254,20 @@ def _circle_coef(mode, pin, hole, c, rad, b1, b2):
 
 
 @njit(cache=True)
+def _circle_q(coef, cs, sn):
+    """The circle's point at ``(cos φ, sin φ)`` in the other body's half-plane: ``(t, ρ)``, from the coefficients."""
+    v0 = coef[0] + coef[3] * cs + coef[6] * sn
+    v1 = coef[1] + coef[4] * cs + coef[7] * sn
+    v2 = coef[2] + coef[5] * cs + coef[8] * sn
+    return coef[9] + coef[10] * cs + coef[11] * sn, math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+
+
+@njit(cache=True)
 def _circle_gap(mode, phi, pin, hole, arcs, coef):
     cs, sn = math.cos(phi), math.sin(phi)
     if mode == 2 and not _in_arcs(phi, arcs):
         return False, 0.0
-    v0 = coef[0] + coef[3] * cs + coef[6] * sn
-    v1 = coef[1] + coef[4] * cs + coef[7] * sn
-    v2 = coef[2] + coef[5] * cs + coef[8] * sn
-    rho = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
-    t = coef[9] + coef[10] * cs + coef[11] * sn
+    t, rho = _circle_q(coef, cs, sn)
     if mode == 2:
         found, gap, _n0, _n1 = _hole_chamfer_gap(hole, t, rho)
         return found, gap
@@ -374,6 +379,9 @@ def _hole_edges_on_tip(pin, hole, arcs, rim_samples, golden_steps, out, n):
         v = P @ (y - base)
         nv = np.linalg.norm(v)
         ok, gap, n0, n1 = _pin_tip_gap(pin, (y - base) @ u, nv)
+        if not ok:  # φ on the edge of the tip's domain, where the search's rounding and this differ: the search's
+            t, rho = _circle_q(_circle_coef(1, pin, hole, centre, radius, h1, h2), math.cos(phi), math.sin(phi))
+            ok, gap, n0, n1 = _pin_tip_gap(pin, t, rho)
         if not ok:
             continue
         if nv > 0.0:
@@ -403,6 +411,9 @@ def _tip_edges_on_chamfer(pin, hole, arcs, rim_samples, golden_steps, out, n):
         rho = P @ (x - m)
         nr = np.linalg.norm(rho)
         ok, gap, f0, f1 = _hole_chamfer_gap(hole, (m - x) @ a, nr)
+        if not ok:  # on the edge of the chamfer's face: the search's arithmetic, as for the hole's edges above
+            t, r = _circle_q(_circle_coef(2, pin, hole, centre, radius, e1, e2), math.cos(phi), math.sin(phi))
+            ok, gap, f0, f1 = _hole_chamfer_gap(hole, t, r)
         if not ok:
             continue
         radial = rho / nr if nr > 0.0 else e1

@@ -110,6 +110,26 @@ def test_compiled_contacts_are_the_reference() -> None:
     assert far_tips <= 8
 
 
+def test_a_tip_contact_on_the_edge_of_its_domain_is_kept() -> None:
+    """A diamond pin's tip chamfer under H2's mouth edge, where the least gap along the edge circle lies where the
+    tip's domain ends: the compiled search found it there and its own check, in other arithmetic, dropped it (the
+    housing of plane-2-pins-mesh s9301-013 then had no contact on P2 at one tick, its gap inf). Now the reference's."""
+    pin = PinBody(np.array([0.1295, 0.0952, 0.0]), np.array([0.0, 0.0, 1.0]), 0.0043021, 0.031, 0.0011,
+                  np.array([-0.46361460103831165, 0.8860369640732192, 0.0]), 0.00375)  # fmt: skip
+    hole = HoleBody(np.array([0.12942399799378765, 0.09516440298257789, 0.029204749167825818]),
+                    np.array([-1.3601855643118226e-03, -6.6528951036098113e-04, -9.9999885364188934e-01]),
+                    0.0044, 0.039, 0.0007, False)  # fmt: skip
+    (ref,) = pin_hole_contacts(pin, hole)
+    assert ref.kind == "tip" and 0.0 < ref.gap_m < 1e-4
+    s = DEFAULT.pins
+    out = np.zeros((MAX_CONTACTS, 11))
+    k = _contacts(*_arrays(pin, hole), s.rim_samples, s.newton_steps, s.golden_steps, s.coaxial_rel, out)
+    assert k == 1 and KINDS[int(out[0, 0])] == "tip"
+    assert out[0, 10] == pytest.approx(ref.gap_m, abs=1e-12)
+    np.testing.assert_allclose(out[0, 1:4], ref.point_pin_world, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(out[0, 7:10], ref.normal_world, rtol=0, atol=1e-9)
+
+
 @pytest.mark.parametrize("path", [HOUSING, SHAFT])
 def test_compiled_slots_are_the_reference(path) -> None:
     """The slots at seeded poses around the start or goal: planes, body points, keys and gaps as the NumPy assembly."""
