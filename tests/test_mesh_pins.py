@@ -277,3 +277,18 @@ def test_haptic_session_inserts_the_mesh_twin_as_the_primitive(tmp_path: Path) -
         assert mesh.final_gaps_m[name] == pytest.approx(gap, abs=POSE_TOL_M), name
     dp, dang = mesh.trace.poses[-1].distance_to(box.trace.poses[-1])
     assert dp <= POSE_TOL_M and dang <= POSE_TOL_M
+
+
+def test_a_bore_with_a_mesh_part_is_refused_in_one_line(tmp_path: Path) -> None:
+    """The one piece a mesh part cannot take: a [[bore]] needs a cylindrical part (the part is the bore's peg)."""
+    path = mesh_twin(HOUSING, tmp_path)
+    bore = (
+        '\n[[bore]]\nname = "K9"\nposition = [0.0, 0.0, -0.1]\naxis = [0.0, 0.0, 1.0]\ndiameter = 0.2\ndepth = 0.04\n'
+    )
+    path.write_text(path.read_text(encoding="utf-8") + bore + "friction = 0.3\n", encoding="utf-8")
+    for command in ("validate", "simulate"):
+        proc = run_cli(command, path, check_rc=2)
+        lines = (proc.stdout + proc.stderr).strip().splitlines()
+        assert lines == [
+            f"{path}: bore.K9: a bore takes a cylindrical part (expected workpiece.shape = 'cylinder', got 'mesh')"
+        ]
