@@ -486,6 +486,22 @@ def face_contacts(pin, hole, points, coaxial_rel, out, n):
     """
     if hole.shape[0] < FACE_COLUMNS or hole[10] == 0.0:
         return n
+    # the usual case first, in scalars: both edge circles wholly over the mouth (a pin in its hole, or
+    # over it within the capture), so no point of either is over the face: each point's distance from
+    # the hole's axis is at most its circle's centre's plus its radius
+    outer = hole[6] + hole[8]
+    over_mouth = True
+    for k in range(2):
+        s_k, rho_k = (pin[7], pin[6] - pin[8]) if k == 0 else (pin[7] - pin[8], pin[6])
+        w0 = pin[0] + s_k * pin[3] - hole[0]
+        w1 = pin[1] + s_k * pin[4] - hole[1]
+        w2 = pin[2] + s_k * pin[5] - hole[2]
+        along = w0 * hole[3] + w1 * hole[4] + w2 * hole[5]
+        r0, r1, r2 = w0 - along * hole[3], w1 - along * hole[4], w2 - along * hole[5]
+        if math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) + rho_k >= outer:
+            over_mouth = False
+    if over_mouth:
+        return n
     u, a, m, base = pin[3:6], hole[3:6], hole[0:3], pin[0:3]
     fc, fn, fe1 = hole[11:14], hole[14:17], hole[17:20]
     fe2 = np.cross(fn, fe1)
@@ -508,7 +524,6 @@ def face_contacts(pin, hole, points, coaxial_rel, out, n):
             d1, _e2 = _perp_basis(u, u, False)
     d2 = np.cross(u, d1)
     count = points if rho > 0.0 and points > 1 else 1
-    outer = hole[6] + hole[8]
     for j in range(count):
         if n >= out.shape[0]:
             break
