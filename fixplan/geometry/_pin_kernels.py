@@ -478,19 +478,13 @@ def _face_points(pin, hole, face_points, coaxial_rel, rows, k):
 
 
 @njit(cache=True)
-def face_contacts(pin, hole, points, coaxial_rel, out, n):
-    """The pin's tip on the face around the hole's mouth, ``points`` points from the deepest (kind :data:`FACE`).
+def _tip_over_mouth(pin, hole):
+    """Both of the tip's edge circles wholly over the hole's mouth (a pin in its hole, or over it within the capture).
 
-    :func:`fixplan.geometry.pins.tip_face_contacts` (its text derives it), rows appended after
-    row ``n − 1`` while ``out`` has room; returns the new count. None when ``hole`` has no face.
+    In scalars, the engine's usual case: then no point of either is over the face, as each point's
+    distance from the hole's axis is at most its circle's centre's plus its radius.
     """
-    if hole.shape[0] < FACE_COLUMNS or hole[10] == 0.0:
-        return n
-    # the usual case first, in scalars: both edge circles wholly over the mouth (a pin in its hole, or
-    # over it within the capture), so no point of either is over the face: each point's distance from
-    # the hole's axis is at most its circle's centre's plus its radius
     outer = hole[6] + hole[8]
-    over_mouth = True
     for k in range(2):
         s_k, rho_k = (pin[7], pin[6] - pin[8]) if k == 0 else (pin[7] - pin[8], pin[6])
         w0 = pin[0] + s_k * pin[3] - hole[0]
@@ -499,9 +493,20 @@ def face_contacts(pin, hole, points, coaxial_rel, out, n):
         along = w0 * hole[3] + w1 * hole[4] + w2 * hole[5]
         r0, r1, r2 = w0 - along * hole[3], w1 - along * hole[4], w2 - along * hole[5]
         if math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) + rho_k >= outer:
-            over_mouth = False
-    if over_mouth:
+            return False
+    return True
+
+
+@njit(cache=True)
+def face_contacts(pin, hole, points, coaxial_rel, out, n):
+    """The pin's tip on the face around the hole's mouth, ``points`` points from the deepest (kind :data:`FACE`).
+
+    :func:`fixplan.geometry.pins.tip_face_contacts` (its text derives it), rows appended after
+    row ``n − 1`` while ``out`` has room; returns the new count. None when ``hole`` has no face.
+    """
+    if hole.shape[0] < FACE_COLUMNS or hole[10] == 0.0 or _tip_over_mouth(pin, hole):
         return n
+    outer = hole[6] + hole[8]
     u, a, m, base = pin[3:6], hole[3:6], hole[0:3], pin[0:3]
     fc, fn, fe1 = hole[11:14], hole[14:17], hole[17:20]
     fe2 = np.cross(fn, fe1)
@@ -564,16 +569,15 @@ def pose_contacts(
         hole[:] = holes_body[i]
         hole[0:3] = p + R @ holes_body[i, 0:3]
         hole[3:6] = R @ holes_body[i, 3:6]
-        if faced:
-            hole[11:14] = p + R @ holes_body[i, 11:14]
-            hole[14:17] = R @ holes_body[i, 14:17]
-            hole[17:20] = R @ holes_body[i, 17:20]
         k = contacts(pins[i], hole, rim_samples, newton_steps, golden_steps, coaxial_rel, rows)
         for r in range(k):
             if rows[r, 0] == BOTTOM:
                 k = _face_points(pins[i], hole, face_points, coaxial_rel, rows, k)
                 break
-        if faced:
+        if faced and hole[10] != 0.0 and not _tip_over_mouth(pins[i], hole):  # the face, moved only when needed
+            hole[11:14] = p + R @ holes_body[i, 11:14]
+            hole[14:17] = R @ holes_body[i, 14:17]
+            hole[17:20] = R @ holes_body[i, 17:20]
             k = face_contacts(pins[i], hole, max(face_points, 1), coaxial_rel, rows, k)
         for r in range(k):
             out[n, 0], out[n, 1] = i, 0.0
