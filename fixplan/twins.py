@@ -1,7 +1,7 @@
 """Twins of a fixture: the same fixture in a rotated world, or its mirror image, as a document or text.
 
 A planner whose answer depends on where the world's axes point, or on which hand the fixture
-is built for, is wrong: a rigid motion or a reflection of the whole world (locators, start,
+is built for, is wrong: a rigid motion or a reflection of the whole world (locators, pins, bores, start,
 goal, gravity, explicit contacts) changes no gap, no normal force and no friction cone, so the
 twin has the same plan, in the twin's frame. These functions build such twins on the parsed
 TOML document (``tomllib``'s dict) so tests, benchmarks and ``fixplan generate --rotate-world``
@@ -19,6 +19,9 @@ share one definition:
   rectangles, cylinders, spheres and disks are symmetric under ``S`` (their files do not
   change, face hints on axis ``k`` swap sign); polygon vertices are flipped and their order
   reversed to stay counter-clockwise; principal inertias are unchanged.
+- :func:`rename_locators` ``(doc, mapping, order)``: new names and a new order of the
+  ``[[locator]]`` entries (a mirrored fixture is a different build: its locators may be listed
+  in another order under other names).
 
 Pins and bores are world data, holes body data: a ``[[pin]]``'s base is a point, its axis and a
 diamond pin's ``land_direction`` directions; a ``[[bore]]``'s mouth a point and its axis a
@@ -33,9 +36,6 @@ reflected land direction. Nothing of a pin fixture is chiral, so every one has a
 A ``[robot]``'s base is a world pose (rotated like the start; its grasp, in the body frame, is
 unchanged); a robot has no mirror twin (the mirror image of an arm is another arm, whose joints
 turn the other way: its URDF would have to be reflected), so :func:`mirror_world` refuses one.
-- :func:`rename_locators` ``(doc, mapping, order)``: new names and a new order of the
-  ``[[locator]]`` entries (a mirrored fixture is a different build: its locators may be listed
-  in another order under other names).
 
 The twin's gaps equal the original's at every pose mapped the same way (to rounding:
 :func:`fixture_toml` writes every number with ``repr``, so the written twin loads to the bit
