@@ -264,16 +264,7 @@ def generate(
     """
     check_family(family)
     _check_int(count, "count")
-    _check_pin_options(family, rotate_world)
     return [generate_one(family, seed, index, rotate_world=rotate_world, floor=floor) for index in range(count)]
-
-
-def _check_pin_options(family: str, rotate_world: bool) -> None:
-    """The pin families are not turned (the world rotation of pins and holes is not written yet)."""
-    if rotate_world and family in PIN_FAMILIES:
-        raise InputError(
-            f"generate.rotate_world does not take the {family} family yet (expected a family without pins)"
-        )
 
 
 def generate_one(
@@ -291,7 +282,6 @@ def generate_one(
     verdicts and plans are those without it unless a push drives the part onto it).
     """
     check_family(family)
-    _check_pin_options(family, rotate_world)
     _check_int(seed, "seed")
     _check_int(index, "index")
     name = fixture_name(family, seed, index, rotate_world=rotate_world)
@@ -1496,13 +1486,33 @@ def _check_free(fixture: Fixture, draft: _Draft) -> str | None:
 
 
 def _check_twin(fixture: Fixture, doc: dict[str, Any], name: str, folder: Path) -> str | None:
-    """Why the rotated document is not the same fixture (gaps at the start and the goal), or None."""
+    """Why the rotated document is not the same fixture (gaps at the start and the goal), or None.
+
+    The gaps: every locator's, and every pin's and bore's least gap to its hole (the pins, bores
+    and holes are turned too: :func:`fixplan.twins.rotate_world`).
+    """
+    from fixplan.locating import cylinder_contacts
+
     try:
         twin = loads(twins.fixture_toml(doc), source=name, base_dir=folder)
     except FixtureError as exc:
         return f"the loader refused the rotated fixture: {exc.issues[0].key}: {exc.issues[0].message}"
+
+    def least(f: Fixture, pose: Pose) -> np.ndarray:
+        """Each pin's and bore's least gap (inf: no contact possible at ``pose``)."""
+        out = dict.fromkeys([p.name for p in f.pins] + [b.name for b in f.bores], math.inf)
+        for c in cylinder_contacts(f, pose):
+            out[c.owner] = min(out[c.owner], c.gap_m)
+        return np.array(list(out.values()))
+
     for a, b in ((fixture.start, twin.start), (fixture.goal, twin.goal)):
         diff = locator_gaps(fixture.workpiece, a, fixture.locators) - locator_gaps(twin.workpiece, b, twin.locators)
+        if fixture.has_pins:
+            mine, theirs = least(fixture, a), least(twin, b)
+            if not np.array_equal(np.isinf(mine), np.isinf(theirs)):
+                return "the rotated fixture's pins touch where the fixture's cannot (or the other way round)"
+            finite = np.isfinite(mine)
+            diff = np.concatenate([diff, mine[finite] - theirs[finite]])
         if np.max(np.abs(diff)) > EXACT_M:
             return f"the rotated fixture's gaps differ by {np.max(np.abs(diff)):.3g} m"
     return None

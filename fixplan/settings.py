@@ -857,7 +857,9 @@ class PinSettings:
         The engine's points of a tip face on a blind hole's bottom (the face's rim at that many
         angles from its deepest point, :mod:`fixplan.engine.pin_slots`): a face resting flat is
         held by its disk, not by the deepest point alone (one point lets it wobble like a coin).
-        The closed forms (:mod:`fixplan.geometry.pins`, the cone programs) keep the deepest point.
+        The same for a pin's tip on the part's face around its hole (a pin that misses its hole:
+        :func:`fixplan.geometry.pins.tip_face_contacts`). The closed forms (:mod:`fixplan.geometry.pins`,
+        the cone programs) keep the deepest point.
     """
 
     rim_samples: int = 64

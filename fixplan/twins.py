@@ -1,7 +1,7 @@
 """Twins of a fixture: the same fixture in a rotated world, or its mirror image, as a document or text.
 
 A planner whose answer depends on where the world's axes point, or on which hand the fixture
-is built for, is wrong: a rigid motion or a reflection of the whole world (locators, start,
+is built for, is wrong: a rigid motion or a reflection of the whole world (locators, pins, bores, start,
 goal, gravity, explicit contacts) changes no gap, no normal force and no friction cone, so the
 twin has the same plan, in the twin's frame. These functions build such twins on the parsed
 TOML document (``tomllib``'s dict) so tests, benchmarks and ``fixplan generate --rotate-world``
@@ -23,16 +23,31 @@ share one definition:
   ``[[locator]]`` entries (a mirrored fixture is a different build: its locators may be listed
   in another order under other names).
 
+Pins and bores are world data, holes body data: a ``[[pin]]``'s base is a point, its axis and a
+diamond pin's ``land_direction`` directions; a ``[[bore]]``'s mouth a point and its axis a
+direction; a ``[[workpiece.hole]]`` (body frame) is unchanged by a rotation and flipped with the
+body by ``S`` in a mirror (its mouth ``S p``, its axis ``S a``). A mirror changes handedness, so
+only geometry with a mirror symmetry of its own survives it unchanged: holes, bores and round pins
+are surfaces of revolution (symmetric about every plane through their axis), and a diamond pin's
+two lands, arcs of equal width centred on ``±land_direction``, are symmetric about the plane of
+its axis and its land direction: the reflection of a diamond pin is the diamond pin with the
+reflected land direction. Nothing of a pin fixture is chiral, so every one has a mirror twin.
+
+A ``[robot]``'s base is a world pose (rotated like the start; its grasp, in the body frame, is
+unchanged); a robot has no mirror twin (the mirror image of an arm is another arm, whose joints
+turn the other way: its URDF would have to be reflected), so :func:`mirror_world` refuses one.
+
 The twin's gaps equal the original's at every pose mapped the same way (to rounding:
 :func:`fixture_toml` writes every number with ``repr``, so the written twin loads to the bit
-of the computed one). Mesh workpieces are refused (their file cannot be reflected here).
+of the computed one). Mesh workpieces are refused by the mirror (their file cannot be reflected
+here).
 """
 
 from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -86,6 +101,11 @@ def mirror_world(doc: Mapping[str, Any], normal: ArrayLike, offset_m: float = 0.
     n = np.asarray(normal, dtype=float)
     if n.shape != (dim,) or not np.all(np.isfinite(n)) or float(np.linalg.norm(n)) == 0.0:
         raise InputError(f"expected a nonzero {dim}-vector as the mirror plane's normal, got {normal!r}")
+    if doc.get("robot") is not None:
+        raise InputError(
+            "cannot mirror a fixture with a [robot] (the mirror image of an arm is another arm: its URDF "
+            "would have to be reflected; expected a fixture without [robot])"
+        )
     n = n / np.linalg.norm(n)
     M = np.eye(dim) - 2.0 * np.outer(n, n)
     R_start = _pose_matrix(((doc.get("workpiece") or {}).get("start")) or {}, dim)
@@ -149,17 +169,22 @@ def _map_world(doc: Mapping[str, Any], dim: int, A: FloatArray, t: FloatArray, f
         if key not in wp:
             continue
         pose = wp[key]
-        R_new = A @ _pose_matrix(pose, dim) @ S
-        mapped: dict[str, Any] = {"position": point(pose.get("position", [0.0] * dim))}
-        if dim == 3:
-            mapped["rpy_deg"] = [float(v) for v in np.degrees(rpy_from_matrix(R_new))]
-        else:
-            mapped["angle_deg"] = math.degrees(math.atan2(R_new[1, 0], R_new[0, 0]))
-        wp[key] = mapped
+        wp[key] = _mapped_pose(pose, A @ _pose_matrix(pose, dim) @ S, point, dim)
     for entry in out.get("locator") or []:
         entry["position"] = point(entry["position"])
         if flip_axis is not None and "face" in entry:
             entry["face"] = _flipped_face(entry["face"], flip_axis)
+    for entry in out.get("pin") or []:  # world frame: the base a point, the axis and the lands' direction directions
+        entry["position"] = point(entry["position"])
+        entry["axis"] = direction(entry["axis"])
+        if "land_direction" in entry:
+            entry["land_direction"] = direction(entry["land_direction"])
+    for entry in out.get("bore") or []:  # world frame: the mouth a point, the axis a direction
+        entry["position"] = point(entry["position"])
+        entry["axis"] = direction(entry["axis"])
+    robot = out.get("robot")
+    if isinstance(robot, dict) and isinstance(robot.get("base"), dict):  # a world pose (the grasp is body frame)
+        robot["base"] = _mapped_pose(robot["base"], A @ _pose_matrix(robot["base"], dim), point, dim)
     for entry in out.get("contact") or []:
         entry["point"] = point(entry["point"])
         entry["normal"] = direction(entry["normal"])
@@ -181,13 +206,20 @@ def _map_world(doc: Mapping[str, Any], dim: int, A: FloatArray, t: FloatArray, f
             R_box = A @ _pose_matrix(pose, dim)
             if np.linalg.det(R_box) < 0:  # a mirrored box is the same box: flip one of its (symmetric) axes
                 R_box = R_box @ np.diag([-1.0] + [1.0] * (dim - 1))
-            box: dict[str, Any] = {"position": point(pose.get("position", [0.0] * dim))}
-            if dim == 3:
-                box["rpy_deg"] = [float(v) for v in np.degrees(rpy_from_matrix(R_box))]
-            else:
-                box["angle_deg"] = math.degrees(math.atan2(R_box[1, 0], R_box[0, 0]))
-            entry["pose"] = box
+            entry["pose"] = _mapped_pose(pose, R_box, point, dim)
     return out
+
+
+def _mapped_pose(
+    pose: Mapping[str, Any], R_new: FloatArray, point: Callable[[Any], list[float]], dim: int
+) -> dict[str, Any]:
+    """A pose table with its position mapped by ``point`` and its rotation ``R_new`` (``rpy_deg``, 2D ``angle_deg``)."""
+    mapped: dict[str, Any] = {"position": point(pose.get("position", [0.0] * dim))}
+    if dim == 3:
+        mapped["rpy_deg"] = [float(v) for v in np.degrees(rpy_from_matrix(R_new))]
+    else:
+        mapped["angle_deg"] = math.degrees(math.atan2(R_new[1, 0], R_new[0, 0]))
+    return mapped
 
 
 def _flipped_face(face: str, axis: int) -> str:
@@ -199,6 +231,9 @@ def _flipped_face(face: str, axis: int) -> str:
 def _mirror_body(wp: dict[str, Any], dim: int, axis: int) -> None:
     """Reflect the workpiece's body geometry by flipping body ``axis`` (in place)."""
     shape = wp.get("shape")
+    for hole in wp.get("hole") or []:  # body frame: flipped with the body
+        hole["position"] = [float(-v) if i == axis else float(v) for i, v in enumerate(hole["position"])]
+        hole["axis"] = [float(-v) if i == axis else float(v) for i, v in enumerate(hole["axis"])]
     if shape == "polygon":
         flipped = [[float(-v[i]) if i == axis else float(v[i]) for i in range(dim)] for v in wp["vertices"]]
         wp["vertices"] = [flipped[0], *reversed(flipped[1:])]  # same first vertex, counter-clockwise again

@@ -3,7 +3,8 @@
 Measured in the loaded files (never taken from the generator's own numbers): the drawn ranges,
 the located pose as built (every rest touching, the round pin touching its hole's wall, the diamond
 pin centred with the radial play (D − d)/2 on each side), the start clear above the pins with each
-hole within the chamfers' capture of its pin, and the family's determinism.
+hole within the chamfers' capture of its pin, the family's determinism, and its rotated twins
+(``--rotate-world``: every gap the unrotated fixture's).
 """
 
 from __future__ import annotations
@@ -90,9 +91,32 @@ def test_cli_writes_files_that_validate(tmp_path) -> None:
     assert valid.returncode == 0 and "warning" not in valid.stdout + valid.stderr, valid.stderr
 
 
-def test_rotate_world_is_refused_for_pins() -> None:
-    with pytest.raises(fixplan.InputError, match="plane-2-pins"):
-        gen.generate(FAMILY, 1, 0, rotate_world=True)
+def test_rotate_world_turns_the_pins_and_keeps_every_gap(drawn) -> None:
+    """``--rotate-world``: the same draw turned by R, the pins' axes R (0, 0, 1); every gap at the start and goal the same."""
+    for (g, fx), turned in zip(drawn[:3], gen.generate(FAMILY, 3, 2026, rotate_world=True), strict=True):
+        assert turned.name == g.name + "-rotated" and turned.draws == g.draws
+        R = np.asarray(turned.params["world_rotation"])
+        tw = fixplan.loads(turned.toml_text)
+        for pin, twin_pin in zip(fx.pins, tw.pins, strict=True):
+            np.testing.assert_allclose(twin_pin.axis_world, R @ pin.axis_world, atol=1e-12)
+            np.testing.assert_allclose(twin_pin.p_world, R @ pin.p_world, atol=1e-12)
+        assert [h.p_body.tolist() for h in tw.workpiece.holes] == [h.p_body.tolist() for h in fx.workpiece.holes]
+        for a, b in ((fx.start, tw.start), (fx.goal, tw.goal)):
+            np.testing.assert_allclose(
+                locator_gaps(tw.workpiece, b, tw.locators), locator_gaps(fx.workpiece, a, fx.locators), atol=1e-12
+            )
+            for owner in ("P1", "P2"):
+                least = [min(c.gap_m for c in cylinder_contacts(f, pose) if c.owner == owner)
+                         for f, pose in ((fx, a), (tw, b))]  # fmt: skip
+                assert least[1] == pytest.approx(least[0], abs=1e-12)
+
+
+def test_cli_rotate_world_writes_pin_files_that_validate(tmp_path) -> None:
+    proc = run_cli("generate", FAMILY, "--count", "1", "--seed", "5", "--rotate-world", "--out", tmp_path, "--json",
+                   check_rc=0)  # fmt: skip
+    (entry,) = json.loads(proc.stdout)["files"]
+    assert entry["path"].endswith("plane-2-pins-s5-000-rotated.toml")
+    assert run_cli("validate", entry["path"]).returncode == 0
 
 
 # -- plane-2-pins-mesh: the same draws, the box written as a mesh part with its bores modelled --------
@@ -137,8 +161,21 @@ def test_cli_writes_each_mesh_variant_beside_its_stl(tmp_path) -> None:
     assert [f["files"] for f in doc] == [[str(tmp_path / f"{MESH_FAMILY}-s5-{i:03d}.stl")] for i in range(2)]
     valid = run_cli("validate", *(f["path"] for f in doc))
     assert valid.returncode == 0 and "warning" not in valid.stdout + valid.stderr, valid.stderr
-    with pytest.raises(fixplan.InputError, match=MESH_FAMILY):
-        gen.generate(MESH_FAMILY, 1, 0, rotate_world=True)
+
+
+def test_the_mesh_variant_turned_with_the_world_keeps_its_mesh_and_every_gap(tmp_path) -> None:
+    """``--rotate-world``: the mesh is the part's (its own frame), written as drawn; the pins turn with the world."""
+    (g,) = gen.generate(MESH_FAMILY, 1, 2026)
+    (turned,) = gen.generate(MESH_FAMILY, 1, 2026, rotate_world=True)
+    assert [name for name, _ in turned.files] == [f"{turned.name}.stl"] and turned.files[0][1] == g.files[0][1]
+    fx, tw = _load_beside(g, tmp_path), _load_beside(turned, tmp_path)
+    R = np.asarray(turned.params["world_rotation"])
+    for pin, twin_pin in zip(fx.pins, tw.pins, strict=True):
+        np.testing.assert_allclose(twin_pin.axis_world, R @ pin.axis_world, atol=1e-12)
+    for a, b in ((fx.start, tw.start), (fx.goal, tw.goal)):
+        np.testing.assert_allclose(
+            locator_gaps(tw.workpiece, b, tw.locators), locator_gaps(fx.workpiece, a, fx.locators), atol=1e-9
+        )
 
 
 @pytest.mark.slow

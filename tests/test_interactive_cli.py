@@ -164,3 +164,31 @@ def test_jammed_udp_session_is_recorded_as_jammed_and_fails_verify(tmp_path):
     assert v.returncode == 1
     out = strict_json(v.stdout)
     assert not out["passed"] and "jammed" in out["reason"]
+
+
+def test_udp_session_seats_a_shaft_in_its_bore():
+    """``fixplan haptic`` on a shaft located by its bore alone (refused before: no full fixture).
+
+    device-sim without reaction delay or force noise (the staged insertion's stiff axial servo, seen
+    50 ms late, drives a 0.5 kg shaft off: see CHANGELOG): the session ends seated, exit 0.
+    """
+    from conftest import PROBLEMS
+
+    port = free_udp_port()
+    haptic = subprocess.Popen(
+        [*CLI, "haptic", str(PROBLEMS / "shaft-into-bore.toml"), "--device", f"udp:{port}", "--port", "0",
+         "--no-browser", "--until", "goal", "--clock", "device", "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        sim = fixplan_cli("device-sim", "--port", str(port), "--lockstep", "--delay-ms", "0", "--noise", "0", "--json")
+        stdout, stderr = haptic.communicate(timeout=60)
+    finally:
+        if haptic.poll() is None:
+            haptic.kill()
+            haptic.communicate()
+    assert haptic.returncode == 0, stderr
+    summary = strict_json(stdout)
+    assert summary["status"] == "reached" and summary["reason"].startswith("seated in B1")
+    assert summary["sequence"][-1] == ["B1", "B1.bottom"]
+    assert sim.returncode == 0 and strict_json(sim.stdout)["goal"]

@@ -1,4 +1,4 @@
-"""Pins, holes and bores drawn (``view``, ``haptic``) and the haptic session with pins.
+"""Pins, holes and bores drawn (``view``, ``haptic``) and the haptic session with pins and bores.
 
 The meshes are checked against closed forms: a polygonal pin of n sides is a prism and a frustum
 whose volumes are exact (``A(ρ) = (n/2) ρ² sin(2π/n)``), a diamond pin's section is clipped to its
@@ -143,6 +143,53 @@ def test_haptic_session_guides_the_part_onto_its_pins() -> None:
     engaged = [k for k, s in enumerate(first) if {"P1", "P2"} & s]
     rests = [k for k, s in enumerate(first) if {"B1", "B2", "B3"} <= s]
     assert engaged and rests and engaged[0] < rests[0]  # on the pins before the rests
+
+
+def test_haptic_session_guides_a_shaft_into_its_bore() -> None:
+    """A shaft located by its bore alone (no locator: no full fixture) takes a session; guided, it is seated.
+
+    problems/shaft-into-bore.toml: the 0.5 kg shaft starts tilted 2° in the bore's 1 mm chamfer. The
+    goal is the insertion's last state, the bore and its bottom (``B1``, ``B1.bottom``), at rest with the
+    axis within the radial play (D − d)/2 = 2e-5 m. Located pose: upright, centre at z = −0.04 + 0.05 = 0.01 m.
+    """
+    from fixplan.interactive.session import HapticSession
+    from fixplan.locating import axis_offsets_m, bottom_gap_m, inserts
+    from fixplan.settings import HAPTIC
+
+    fx = fixplan.load(PROBLEMS / "shaft-into-bore.toml")
+    assert not fx.is_full and not fx.locators  # refused before: "a haptic session needs a full fixture"
+    s = HapticSession(fx, None, realtime=False, synchronous=True, until_goal=True, duration_s=8.0)
+    assert s.names == ("B1",) and s.goal_names == frozenset({"B1", "B1.bottom"})
+    result = s.run()
+    assert result.reached, result.reason
+    assert result.reason.startswith("seated in B1 (its bottom closed, the axis within the play), at rest")
+    states = [set(st) for _t, st in result.states]
+    assert states[-1] == {"B1", "B1.bottom"} and all("B1.bottom" not in st for st in states[:-1])
+    pose = result.trace.poses[-1]  # the last sample, at rest on the bottom
+    (bore,), (ins,) = fx.bores, inserts(fx)
+    play = 0.5 * (0.02004 - 0.02)
+    assert ins.play_m == pytest.approx(play, abs=1e-15)
+    tol = fx.tolerances.touch_m + HAPTIC.execution.contact_gap_m
+    assert abs(bottom_gap_m(fx, pose, bore)) <= tol  # the bottom closed
+    assert max(axis_offsets_m(fx, pose, ins)) <= play  # the axis within the play, at the mouth and the end
+    assert pose.p_world[2] == pytest.approx(0.01, abs=1e-6)
+    z = pose.R_world_body[:, 2]
+    assert math.degrees(math.acos(min(abs(float(z[2])), 1.0))) < 1e-4  # upright (the 2° start tilt gone)
+    assert result.max_penetration_m < 1e-5
+    assert result.final_gaps_m["B1"] == pytest.approx(0.0, abs=tol)
+
+
+def test_haptic_session_still_refuses_a_part_nothing_locates() -> None:
+    """Pins without rests enough (and no bore) locate nothing the session can aim for: refused in one line."""
+    import dataclasses
+
+    from fixplan.errors import InfeasibleError
+    from fixplan.interactive.session import HapticSession
+
+    fx = fixplan.load(HOUSING)
+    one_rest = dataclasses.replace(fx, locators=fx.locators[:1], goal_pose=None)
+    with pytest.raises(InfeasibleError, match="a haptic session needs a full fixture"):
+        HapticSession(one_rest, None, realtime=False, synchronous=True, guidance=False)
 
 
 def test_haptic_app_draws_pins_and_colours_the_pressed_one() -> None:

@@ -49,8 +49,9 @@ def haptic(
 ) -> None:
     """Drive the part yourself: a live web app (viser) around the 1 kHz haptic loop, with the planner's guidance.
 
-    Exit 0 when the session reached the goal (every locator pressed, at rest; with --clamp, and the
-    clamped part stayed put), 1 otherwise, 2 on bad input.
+    Exit 0 when the session reached the goal (every locator pressed, at rest; a shaft in a bore: seated
+    on its bottom, its axis within the play; with --clamp, and the clamped part stayed put), 1
+    otherwise, 2 on bad input.
     """
     from fixplan.interactive.commands import run_haptic
 

@@ -16,6 +16,11 @@ afresh).
 
 For a ``[[pin]]`` the part's point is on its hole and the fixture's on the pin; for a ``[[bore]]``
 the part is the peg (its end deeper in the bore leads) and the fixture's point is on the bore.
+A hole whose mouth lies in a planar face of the part (a box's face, a cylinder's end:
+:func:`fixplan.geometry.pins.mouth_face`) also brings the pin's tip on that face, at
+``face_points`` points of the tip's edge (:func:`fixplan.geometry.pins.tip_face_contacts`): a part
+lowered beside its pin, beyond the chamfers' capture, rests on the pin's tip instead of passing
+through it. A bore has no such face (the format does not give the fixture's surface around it).
 A slot's identity from one step to the next (the warm start) is ``(owner, kind, ordinal)``:
 owners are numbered pins first, then bores, as :attr:`PinGeometry.names`.
 """
@@ -30,14 +35,16 @@ from numpy.typing import NDArray
 from fixplan.aot import kernel
 from fixplan.errors import InputError
 from fixplan.geometry.collision import PLANE, plane_frame
+from fixplan.geometry.pins import mouth_face
 from fixplan.geometry.shapes import Cylinder
-from fixplan.model import Fixture
+from fixplan.model import Fixture, Hole, Workpiece
 from fixplan.settings import DEFAULT, PinSettings
 
 FloatArray = NDArray[np.float64]
 _pose_contacts = kernel("fixplan.geometry._pin_kernels", "pose_contacts")
 _pin_slots = kernel("fixplan.engine._pin_slot_kernels", "pin_slots")
 MAX_CONTACTS = 24  # rows of the kernel's output per pin (fixplan.geometry._pin_kernels.MAX_CONTACTS)
+FACE_COLUMNS = 22  # a hole's row with the face around its mouth (fixplan.geometry._pin_kernels.FACE_COLUMNS)
 
 
 @dataclass(frozen=True)
@@ -72,9 +79,9 @@ class PinGeometry:
                          pin.land_width_m, 1.0 if pin.kind == "diamond" else 0.0])  # fmt: skip
             hole = wp.hole(pin.hole)
             holes.append([*hole.p_body, *hole.axis_body, 0.5 * hole.diameter_m, hole.depth_m, hole.chamfer_m,
-                          0.0 if hole.through else 1.0])  # fmt: skip
+                          0.0 if hole.through else 1.0, *_face_row(wp, hole, fixture.tolerances.touch_m, settings)])  # fmt: skip
         self._pins = np.array(pins, dtype=float).reshape(-1, 14)
-        self._holes_body = np.array(holes, dtype=float).reshape(-1, 10)
+        self._holes_body = np.array(holes, dtype=float).reshape(-1, FACE_COLUMNS)
         self._bores = np.array(
             [[*b.p_world, *b.axis_world, 0.5 * b.diameter_m, b.depth_m, b.chamfer_m, 1.0] for b in fixture.bores],
             dtype=float,
@@ -160,6 +167,14 @@ class PinGeometry:
         slots[:, 4] = np.arange(m)
         return PinSlots(obs, slots, owner_all[keep], [keys_all[j] for j in keep.tolist()], rows[:, 12].copy(),
                         n_world, least)  # fmt: skip
+
+
+def _face_row(workpiece: Workpiece, hole: Hole, tol_m: float, settings: PinSettings) -> list[float]:
+    """The face around ``hole``'s mouth as the kernel's 12 columns (body frame; zeros: none)."""
+    face = mouth_face(workpiece.shape, hole.p_body, hole.axis_body, tol_m, settings.axis_angle_rad)
+    if face is None:
+        return [0.0] * (FACE_COLUMNS - 10)
+    return [2.0 if face.disk else 1.0, *face.centre, *face.normal, *face.e1, *face.half_m]
 
 
 __all__ = ["MAX_CONTACTS", "PinGeometry", "PinSlots"]

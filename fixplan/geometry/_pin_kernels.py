@@ -10,10 +10,14 @@ Arrays (world frame, metres):
 - ``pin`` (14,): base (3), unit axis base → tip (3), radius, length, tip chamfer, land direction
   (3), land width, 1.0 for a diamond pin (else 0.0);
 - ``hole`` (10,): mouth centre (3), unit axis out of its body (3), radius, depth, mouth chamfer,
-  1.0 for a blind hole;
+  1.0 for a blind hole; or (:data:`FACE_COLUMNS`,): those and the face around its mouth
+  (:class:`fixplan.geometry.pins.MouthFace`): a kind (0.0 none, 1.0 a rectangle, 2.0 a disk),
+  centre (3), unit outward normal (3), unit ``e1`` (3), half extents along ``e1`` and
+  ``normal × e1`` (a disk: its radius, 0);
 - ``out`` (:data:`MAX_CONTACTS`, 11): one row per contact, ``[kind, point on the pin (3), point on
   the hole's body (3), unit normal from the pin into the hole's body (3), gap]``, kinds coded as
-  :data:`KINDS`.
+  :data:`KINDS` (:func:`contacts`, the pin and its hole) and :data:`FACE` (:func:`face_contacts`,
+  the pin's tip on the face: :func:`fixplan.geometry.pins.tip_face_contacts`).
 """
 
 from __future__ import annotations
@@ -23,9 +27,14 @@ import math
 import numpy as np
 from numba import njit
 
-KINDS = ("rim", "mouth", "exit", "bottom", "tip")  # the kind codes of ``out[:, 0]``
+KINDS = ("rim", "mouth", "exit", "bottom", "tip")  # the kind codes of contacts()' rows (the pin and its hole)
 RIM, MOUTH, EXIT, BOTTOM, TIP = 0, 1, 2, 3, 4
-MAX_CONTACTS = 24  # 2 lands x (rim, mouth, exit) + bottom + 2 mouth edges + 2 pin circles = 11, + the face's rim
+FACE = 5  # the kind code of face_contacts()' rows (the pin's tip on the face around the hole)
+ALL_KINDS = (*KINDS, "face")  # the kind codes of pose_contacts()' rows
+FACE_COLUMNS = 22  # a hole's row with the face around its mouth (module text)
+# 2 lands x (rim, mouth, exit) + bottom + 2 mouth edges + 2 pin circles = 11, + the bottom face's rim
+# and the tip on the face (face_points each, 4 by default): 19
+MAX_CONTACTS = 24
 _TWO_PI = 2.0 * math.pi
 _SQRT_HALF = math.sqrt(0.5)
 _GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
@@ -480,12 +489,82 @@ def _face_points(pin, hole, face_points, coaxial_rel, rows, k):
 
 
 @njit(cache=True)
+def _tip_over_mouth(pin, hole):
+    """Both of the tip's edge circles wholly over the hole's mouth (a pin in its hole, or over it within the capture).
+
+    In scalars, the engine's usual case: then no point of either is over the face, as each point's
+    distance from the hole's axis is at most its circle's centre's plus its radius.
+    """
+    outer = hole[6] + hole[8]
+    for k in range(2):
+        s_k, rho_k = (pin[7], pin[6] - pin[8]) if k == 0 else (pin[7] - pin[8], pin[6])
+        w0 = pin[0] + s_k * pin[3] - hole[0]
+        w1 = pin[1] + s_k * pin[4] - hole[1]
+        w2 = pin[2] + s_k * pin[5] - hole[2]
+        along = w0 * hole[3] + w1 * hole[4] + w2 * hole[5]
+        r0, r1, r2 = w0 - along * hole[3], w1 - along * hole[4], w2 - along * hole[5]
+        if math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) + rho_k >= outer:
+            return False
+    return True
+
+
+@njit(cache=True)
+def face_contacts(pin, hole, points, coaxial_rel, out, n):
+    """The pin's tip on the face around the hole's mouth, ``points`` points from the deepest (kind :data:`FACE`).
+
+    :func:`fixplan.geometry.pins.tip_face_contacts` (its text derives it), rows appended after
+    row ``n − 1`` while ``out`` has room; returns the new count. None when ``hole`` has no face.
+    """
+    if hole.shape[0] < FACE_COLUMNS or hole[10] == 0.0 or _tip_over_mouth(pin, hole):
+        return n
+    outer = hole[6] + hole[8]
+    u, a, m, base = pin[3:6], hole[3:6], hole[0:3], pin[0:3]
+    fc, fn, fe1 = hole[11:14], hole[14:17], hole[17:20]
+    fe2 = np.cross(fn, fe1)
+    h1, h2, disk = hole[20], hole[21], hole[10] == 2.0
+    down = -(fn - (fn @ u) * u)
+    sin_tilt = np.linalg.norm(down)
+    c, rho = base + pin[7] * u, pin[6] - pin[8]
+    if pin[8] > 0.0:  # the chamfer's base circle is the nearer beyond 45° of tilt
+        c2 = base + (pin[7] - pin[8]) * u
+        if (c2 - fc) @ fn - pin[6] * sin_tilt < (c - fc) @ fn - rho * sin_tilt:
+            c, rho = c2, pin[6]
+    if sin_tilt > coaxial_rel:
+        d1 = down / sin_tilt
+    else:  # flat on the face: the point farthest from the hole's axis
+        w = (c - m) - ((c - m) @ u) * u
+        norm_w = np.linalg.norm(w)
+        if norm_w > coaxial_rel * hole[6]:
+            d1 = w / norm_w
+        else:
+            d1, _e2 = _perp_basis(u, u, False)
+    d2 = np.cross(u, d1)
+    count = points if rho > 0.0 and points > 1 else 1
+    for j in range(count):
+        if n >= out.shape[0]:
+            break
+        phi = _TWO_PI * j / count
+        x = c + rho * (math.cos(phi) * d1 + math.sin(phi) * d2)
+        gap = (x - fc) @ fn
+        v = x - m
+        beyond_mouth = np.linalg.norm(v - (v @ a) * a) - outer
+        q1, q2 = (x - fc) @ fe1, (x - fc) @ fe2
+        inside = h1 - math.hypot(q1, q2) if disk else min(h1 - abs(q1), h2 - abs(q2))
+        if beyond_mouth < 0.0 or inside < 0.0 or (gap < 0.0 and -gap > min(beyond_mouth, inside)):
+            continue  # over the hole, off the part, or nearer the mouth's edge or the part's side
+        n = _put(out, n, FACE, x, x - gap * fn, -fn, gap)
+    return n
+
+
+@njit(cache=True)
 def pose_contacts(
     pins, holes_body, bores, peg, R, p, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points, out
 ):
     """Every contact of every pin (in its hole of the part at the pose ``(R, p)``) and bore (with the part as its peg).
 
-    ``pins`` (k, 14) and ``holes_body`` (k, 10): each pin and its hole in body coordinates;
+    ``pins`` (k, 14) and ``holes_body`` (k, 10) or (k, :data:`FACE_COLUMNS`): each pin and its hole
+    in body coordinates (with the face around its mouth: the pin's tip on it, :func:`face_contacts`,
+    ``face_points`` points of it, at least the deepest);
     ``bores`` (j, 10) in world coordinates, ``peg`` = (radius, length) of the cylindrical part (its
     end deeper in the bore leads). ``out`` ((k + j)·:data:`MAX_CONTACTS`, 13): one row per contact,
     ``[owner (pins then bores), is a bore, kind, point on the pin or peg (3), point on the hole's or
@@ -494,7 +573,8 @@ def pose_contacts(
     of them; 0 or 1: the deepest point only, as :func:`contacts`).
     """
     rows = np.zeros((MAX_CONTACTS, 11))
-    hole = np.zeros(10)
+    hole = np.zeros(holes_body.shape[1])
+    faced = holes_body.shape[1] >= FACE_COLUMNS
     n = 0
     for i in range(pins.shape[0]):
         hole[:] = holes_body[i]
@@ -505,6 +585,11 @@ def pose_contacts(
             if rows[r, 0] == BOTTOM:
                 k = _face_points(pins[i], hole, face_points, coaxial_rel, rows, k)
                 break
+        if faced and hole[10] != 0.0 and not _tip_over_mouth(pins[i], hole):  # the face, moved only when needed
+            hole[11:14] = p + R @ holes_body[i, 11:14]
+            hole[14:17] = R @ holes_body[i, 14:17]
+            hole[17:20] = R @ holes_body[i, 17:20]
+            k = face_contacts(pins[i], hole, max(face_points, 1), coaxial_rel, rows, k)
         for r in range(k):
             out[n, 0], out[n, 1] = i, 0.0
             out[n, 2:13] = rows[r]

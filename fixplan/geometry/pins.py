@@ -34,7 +34,25 @@ ends, the rim and the mouth (or exit): a tilted pin's line contact resolves to t
 Each extreme is found on its circle ``x(φ) = c + ρ (cos φ e1 + sin φ e2)``: the squared distance
 ``|w + A cos φ + B sin φ|²`` from the other axis is a trigonometric quadratic; it is sampled
 (``PinSettings.rim_samples``) and its stationary point refined by Newton to machine precision.
-Not computed here: the pin's tip on the part's face around the hole (a pin that misses its hole).
+
+The pin's tip on the face around the hole (:func:`tip_face_contacts`, kind ``"face"``): a pin that
+misses its hole by more than the chamfers capture lands on the part's face. A hole whose mouth
+lies in a planar face of a primitive part (:func:`mouth_face`: a box's face, a cylinder's end; the
+face's extent from the shape, in closed form) carries that face (:class:`MouthFace`: the plane
+through the mouth with the face's outward normal ``n``, its rectangle or disk). The tip is convex,
+so its point nearest a plane lies on one of its two edge circles, the tip face's (radius
+``r − c_p`` at ``L``) and the chamfer's base (radius ``r`` at ``L − c_p``): on the nearer one, at
+the angle of ``d = −(n − (n·u) u)``, the way down to the face within the circle's plane (``|d|``
+is the sine of the tilt). Gap: that point's height ``(x − o)·n`` above the face; normal ``−n``, from
+the pin into the part. A tip flat on the face (``|d|`` below ``coaxial_rel``) takes the point
+farthest from the hole's axis. The point counts where it lies over the face's material: outside
+the mouth's outer edge (``R + c_h`` from the hole's axis) and within the face's extent; below the
+face only while the face is its nearest surface (deeper than its distance to the mouth's edge or
+to the extent's, it is the hole's or the part's side's business, as for the tip's other contacts).
+Not modelled: other holes' mouths in the same face (a pin over another hole's mouth is held by
+that face), the face around a bore's mouth (the format does not give the fixture's surface there:
+a shaft that misses its bore passes through it), faces of a mesh part, and curved faces (a hole
+in a cylinder's side: no face).
 """
 
 from __future__ import annotations
@@ -46,6 +64,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.geometry.shapes import Box, Cylinder, Shape
 from fixplan.settings import DEFAULT as _DEFAULT
 from fixplan.settings import PinSettings
 
@@ -78,8 +97,40 @@ class PinBody:
 
 
 @dataclass(frozen=True)
+class MouthFace:
+    """The planar face a hole's mouth lies in, limited to the part's extent (body or world frame, as its holder).
+
+    ``centre`` on the face, ``normal`` its unit outward normal, ``e1`` a unit direction in it;
+    a rectangle of half extents ``half_m`` along ``e1`` and ``e2 = normal × e1``, or (``disk``) a
+    disk of radius ``half_m[0]``.
+    """
+
+    centre: FloatArray
+    normal: FloatArray
+    e1: FloatArray
+    half_m: tuple[float, float]
+    disk: bool = False
+
+    def moved(self, R: FloatArray, p: FloatArray) -> MouthFace:
+        """The face carried by the rigid motion ``x → R x + p`` (body to world)."""
+        return MouthFace(p + R @ self.centre, R @ self.normal, R @ self.e1, self.half_m, self.disk)
+
+    def inside_m(self, x: FloatArray) -> float:
+        """How far within the face's extent the projection of ``x`` lies (negative: outside it) [m]."""
+        q = x - self.centre
+        q1, q2 = float(q @ self.e1), float(q @ np.cross(self.normal, self.e1))
+        if self.disk:
+            return self.half_m[0] - math.hypot(q1, q2)
+        return min(self.half_m[0] - abs(q1), self.half_m[1] - abs(q2))
+
+
+@dataclass(frozen=True)
 class HoleBody:
-    """A hole (or a bore) in world coordinates: mouth centre, unit axis out of its body through the mouth."""
+    """A hole (or a bore) in world coordinates: mouth centre, unit axis out of its body through the mouth.
+
+    ``face``: the planar face around the mouth (world frame) where the pin's tip can land; None: none
+    modelled (a bore, a curved or a mesh part's face).
+    """
 
     mouth_world: FloatArray
     axis_world: FloatArray
@@ -87,13 +138,49 @@ class HoleBody:
     depth_m: float
     chamfer_m: float = 0.0
     blind: bool = True
+    face: MouthFace | None = None
+
+
+def mouth_face(
+    shape: Shape, p_body: FloatArray, axis_body: FloatArray, tol_m: float, angle_rad: float
+) -> MouthFace | None:
+    """The face of a primitive ``shape`` a hole's mouth lies in (body frame), in closed form; None when there is none.
+
+    A box: the face whose plane holds the mouth (within ``tol_m``) and whose outward normal is the
+    hole's axis (within ``angle_rad``), its rectangle the box's other two half extents. A cylinder:
+    an end face (its disk). Other shapes (a cylinder's side, a sphere, a mesh) have none here.
+    """
+    p, a = np.asarray(p_body, dtype=float), np.asarray(axis_body, dtype=float)
+    cos_min = math.cos(angle_rad)
+    if isinstance(shape, Box):
+        half = shape.half
+        for k in range(3):
+            for sign in (1.0, -1.0):
+                normal = np.zeros(3)
+                normal[k] = sign
+                if abs(float(p[k]) - sign * half[k]) > tol_m or float(a @ normal) < cos_min:
+                    continue
+                k1, k2 = (k + 1) % 3, (k + 2) % 3
+                e1 = np.zeros(3)
+                e1[k1] = 1.0
+                face = MouthFace(half[k] * normal, normal, e1, (float(half[k1]), float(half[k2])))
+                return face if face.inside_m(p) >= 0.0 else None
+        return None
+    if isinstance(shape, Cylinder):
+        for sign in (1.0, -1.0):
+            normal = np.array([0.0, 0.0, sign])
+            if abs(float(p[2]) - sign * 0.5 * shape.length) > tol_m or float(a @ normal) < cos_min:
+                continue
+            face = MouthFace(0.5 * shape.length * normal, normal, np.array([1.0, 0.0, 0.0]), (shape.radius, 0.0), True)
+            return face if face.inside_m(p) >= 0.0 else None
+    return None
 
 
 @dataclass(frozen=True)
 class PinContact:
     """One contact of a pin and its hole: the point on each, the normal from the pin into the hole's body, the gap."""
 
-    kind: str  # "rim", "mouth", "exit" or "bottom"
+    kind: str  # "rim", "mouth", "exit", "bottom", "tip" or "face"
     point_pin_world: FloatArray
     point_hole_world: FloatArray
     normal_world: FloatArray  # unit, from the pin into the hole's body
@@ -431,6 +518,49 @@ def _tip_edges_on_chamfer(pin: PinBody, hole: HoleBody, settings: PinSettings) -
     return out
 
 
+def tip_face_contacts(
+    pin: PinBody, hole: HoleBody, points: int = 1, settings: PinSettings = _DEFAULT.pins
+) -> list[PinContact]:
+    """The pin's tip on the face around the hole's mouth (kind ``"face"``; the module text), deepest point first.
+
+    ``points`` points of the tip's nearer edge circle at equal angles from its deepest point (the
+    engine's support of a tip lying flat, ``PinSettings.face_points``; 1: the deepest point only),
+    each where it lies over the face's material. None without a face (``hole.face``).
+    """
+    face = hole.face
+    if face is None:
+        return []
+    u, a, m, n = pin.axis_world, hole.axis_world, hole.mouth_world, face.normal
+    down = -(n - float(n @ u) * u)
+    sin_tilt = float(np.linalg.norm(down))
+    c, rho = pin.base_world + pin.length_m * u, pin.radius_m - pin.chamfer_m
+    if pin.chamfer_m > 0.0:  # the chamfer's base circle is the nearer beyond 45° of tilt
+        c2 = pin.base_world + pin.side_end_m * u
+        if float((c2 - face.centre) @ n) - pin.radius_m * sin_tilt < float((c - face.centre) @ n) - rho * sin_tilt:
+            c, rho = c2, pin.radius_m
+    if sin_tilt > settings.coaxial_rel:
+        d1 = down / sin_tilt
+    else:  # flat on the face: the point farthest from the hole's axis
+        w = (c - m) - float((c - m) @ u) * u
+        norm_w = float(np.linalg.norm(w))
+        d1 = w / norm_w if norm_w > settings.coaxial_rel * hole.radius_m else _perp_basis(u)[0]
+    d2 = np.cross(u, d1)
+    count = points if rho > 0.0 and points > 1 else 1
+    outer = hole.radius_m + hole.chamfer_m
+    out = []
+    for j in range(count):
+        phi = 2.0 * math.pi * j / count
+        x = c + rho * (math.cos(phi) * d1 + math.sin(phi) * d2)
+        gap = float((x - face.centre) @ n)
+        v = x - m
+        beyond_mouth = float(np.linalg.norm(v - float(v @ a) * a)) - outer
+        inside = face.inside_m(x)
+        if beyond_mouth < 0.0 or inside < 0.0 or (gap < 0.0 and -gap > min(beyond_mouth, inside)):
+            continue  # over the hole, off the part, or nearer the mouth's edge or the part's side
+        out.append(PinContact("face", x, x - gap * n, -n, gap))
+    return out
+
+
 def pin_hole_contacts(pin: PinBody, hole: HoleBody, settings: PinSettings = _DEFAULT.pins) -> list[PinContact]:
     """Every contact of ``pin`` with ``hole`` that their relative pose makes possible, with its gap.
 
@@ -456,4 +586,13 @@ def pin_hole_contacts(pin: PinBody, hole: HoleBody, settings: PinSettings = _DEF
     return out + _hole_edges_on_tip(pin, hole, settings) + _tip_edges_on_chamfer(pin, hole, settings)
 
 
-__all__ = ["HoleBody", "PinBody", "PinContact", "pin_hole_contacts", "radial_play_m"]
+__all__ = [
+    "HoleBody",
+    "MouthFace",
+    "PinBody",
+    "PinContact",
+    "mouth_face",
+    "pin_hole_contacts",
+    "radial_play_m",
+    "tip_face_contacts",
+]

@@ -206,7 +206,10 @@ class HapticApp:
         self.part = sc.add_mesh_simple(
             "/part", V, F, color=PART, opacity=0.85, position=_xyz(start.p_world), wxyz=_wxyz(start)
         )
-        sc.add_mesh_simple("/goal", V, F, color=GOAL, opacity=0.25, position=_xyz(fx.goal.p_world), wxyz=_wxyz(fx.goal))
+        from fixplan.locating import located_pose
+
+        goal = located_pose(fx)  # the file's, or a shaft's seated in its bore
+        sc.add_mesh_simple("/goal", V, F, color=GOAL, opacity=0.25, position=_xyz(goal.p_world), wxyz=_wxyz(goal))
         self.proxy = sc.add_mesh_simple(
             "/proxy", V, F, color=PROXY, opacity=0.25, position=_xyz(start.p_world), wxyz=_wxyz(start)
         )
@@ -420,7 +423,7 @@ class HapticApp:
             hand = "the hand holds the part" if s.clamp_phase.endswith("ramps") else "the hand has let go"
             verdict = f"<span style='color:#1f77b4'>**CLAMPING**</span>: {s.clamp_phase} ({hand})"
         elif snap.at_goal:
-            verdict = "<span style='color:#2ca02c'>**GOAL**</span>: every locator pressed, at rest"
+            verdict = f"<span style='color:#2ca02c'>**GOAL**</span>: {s.goal_words()}, at rest"
         elif snap.jammed:
             verdict = "<span style='color:#d62728'>**JAMMED**</span>: friction holds the part against this push — push another way"
         elif g.verdict is None:

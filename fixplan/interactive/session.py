@@ -350,7 +350,8 @@ class Guide:
     def _classify(self, snap: Snapshot, push_now: FloatArray) -> None:
         from fixplan.jamming import classify
 
-        names = sorted(snap.pressed)
+        known = set(self.fixture.names)
+        names = sorted(n for n in snap.pressed if n in known)  # a bore's "<bore>.bottom" is its own contact's
         self.verdict_push = push_now.copy()
         self.verdict_time_s = snap.time_s
         if not names:
@@ -493,11 +494,12 @@ class HapticSession:
         profile: Settings = HAPTIC,
         clamp: bool = False,
     ):
-        from fixplan.locating import contact_set, start_state
+        from fixplan.locating import contact_set, inserts, start_state
         from fixplan.model import require_full
         from fixplan.planner.execute import DivergenceGuard, ExecutionSettings
 
-        require_full(fixture, "a haptic session")
+        if not (fixture.bores and not fixture.pins):  # a shaft in a bore: located by the bore alone
+            require_full(fixture, "a haptic session")
         if clock not in ("wall", "device"):
             raise InputError(f"HapticSession.clock must be 'wall' or 'device', got {clock!r}")
         if clock == "device" and not isinstance(handle, UdpHandle):
@@ -564,6 +566,11 @@ class HapticSession:
             seated = {x.owner for x in contact_set(fixture, "goal").contacts}
             tips = self.names[: self.sim.n_tips]
             self.goal_names = frozenset(tips) | frozenset(n for n in self.names[self.sim.n_tips :] if n in seated)
+        # a bore: its bottom closed (``"<bore>.bottom"``, as the insertion's states name it) and the shaft's
+        # axis within the bore's radial play (:meth:`_bores_seated`), as the insertion's verification asks
+        self._bore_inserts = [i for i in inserts(fixture) if i.kind == "bore"]
+        self._axis_play_rel = profile.insertion.axis_play_rel
+        self.goal_names |= frozenset(f"{b.name}.bottom" for b in fixture.bores)
         self._guidance_on = guidance
         self.guide: Guide | RemoteGuide | None = None
         if guidance and synchronous:
@@ -909,19 +916,52 @@ class HapticSession:
         w = float(np.linalg.norm(tw[d:]))
         return math.hypot(v, w * self._r_gyr)
 
+    def _bottoms(self, pressed: frozenset[str]) -> frozenset[str]:
+        """``"<bore>.bottom"`` for each pressed bore whose bottom the shaft's end touches (the insertion's observation)."""
+        from fixplan.locating import bottom_gap_m
+
+        tol = self.fixture.tolerances.touch_m + self.contact_gap_m
+        pose = self.sim.pose
+        return frozenset(
+            f"{b.name}.bottom"
+            for b in self.fixture.bores
+            if b.name in pressed and bottom_gap_m(self.fixture, pose, b) <= tol
+        )
+
+    def _bores_seated(self) -> bool:
+        """Every bore's shaft with its axis within the bore's radial play (at the mouth and the end), as the verification checks."""
+        from fixplan.locating import axis_offsets_m
+
+        pose = self.sim.pose
+        return all(
+            max(axis_offsets_m(self.fixture, pose, i)) <= i.play_m * (1.0 + self._axis_play_rel)
+            for i in self._bore_inserts
+        )
+
+    def goal_words(self) -> str:
+        """What reaching the goal means for this fixture, for the end's reason."""
+        words = "every locator pressed" if self.fixture.locators or self.fixture.pins else ""
+        if self.fixture.bores:
+            seated = ", ".join(b.name for b in self.fixture.bores)
+            words += (" and " if words else "") + f"seated in {seated} (its bottom closed, the axis within the play)"
+        return words
+
     def _observe(self, t: float) -> None:
         pressed = frozenset(self.sim.in_contact(self.threshold_N, self.contact_gap_m))
+        if self._bore_inserts:
+            pressed |= self._bottoms(pressed)
         if self._debounced.observe(t, pressed):
             self.states.append((t, tuple(sorted(pressed))))
         at_rest = self._speed() < self.rest_speed_mps
-        if self._observed == self.goal_names and at_rest:
+        at_goal = self._observed == self.goal_names and (not self._bore_inserts or self._bores_seated())
+        if at_goal and at_rest:
             if self._settled_since is None:
                 self._settled_since = t
             elif t - self._settled_since >= self.settle_s and self.goal_reached_at is None:
                 self.goal_reached_at = t
         else:
             self._settled_since = None
-            if self._observed != self.goal_names:
+            if not at_goal:
                 self.goal_reached_at = None
         g = self.guidance
         if (
@@ -1107,10 +1147,10 @@ class HapticSession:
             self.status, self.reason = status, why
         elif self.located_at is not None:  # located, then clamped (the stage may unload a locator: still located)
             self.status = "reached"
-            self.reason = f"every locator pressed, at rest at t = {self.located_at:.3f} s; then the clamping stage"
+            self.reason = f"{self.goal_words()}, at rest at t = {self.located_at:.3f} s; then the clamping stage"
         elif self.goal_reached_at is not None:
             self.status = "reached"
-            self.reason = f"every locator pressed, at rest at t = {self.goal_reached_at:.3f} s"
+            self.reason = f"{self.goal_words()}, at rest at t = {self.goal_reached_at:.3f} s"
         elif self.jammed_where is not None and self._jammed_flag():
             j = self.jammed_where
             self.status = "jammed"
