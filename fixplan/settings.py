@@ -504,11 +504,14 @@ class ExecutionSettings:
     friction_margin: float = 0.1  # δ: pushes robust to friction μ(1 ± δ)
     margin_N: float | None = None  # least normal force on kept contacts (default: the part's weight)
     press_fraction: float = 0.02  # force-sensor threshold as a fraction of the weight
-    # a locator this close counts as in contact even when friction leaves it unloaded: a fifth of the
-    # located tolerance (VerificationSettings.final_gap_m). At 2 µm a tall slab on point tips, its
-    # every gap within 2 µm of the goal and held there by friction, was judged to have lost a
-    # contact and sent off by the recovery's pushes: 7/16 of its perturbed worlds loaded, 13/16 at 20 µm
-    contact_gap_m: float = 2e-5
+    contact_gap_m: float = 2e-6  # a locator this close counts as in contact even when friction leaves it unloaded
+    # a locator seen in contact stays in contact until its gap exceeds this (a fifth of the located
+    # tolerance, VerificationSettings.final_gap_m): at the goal a tall slab on point tips was held
+    # by friction 2 µm off B1 and S2, the executor called B1 lost, and its recovery pushes rocked
+    # the part off three more locators. 20 µm for finding contacts too found a locator a plate
+    # only passed near on its way in (an unplanned contact): hence the hysteresis, on the
+    # debounced state only (a graze shorter than the dwell is not held)
+    contact_hold_gap_m: float = 2e-5
     dwell_s: float = 0.01  # a pressed set counts once held this long
     stall_speed_mps: float = 1e-4
     stall_s: float = 0.12
