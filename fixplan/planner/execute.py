@@ -371,8 +371,11 @@ class Executor:
 
     @property
     def observed_state(self) -> State:
-        """The debounced contact state (empty until one is accepted): the contacts a sensor holds
-        within ``contact_hold_gap_m`` (a graze shorter than the dwell is never held)."""
+        """The debounced contact state (empty until one is accepted).
+
+        Its contacts are the ones the sensing holds within ``contact_hold_gap_m`` (a graze shorter
+        than the dwell is never held).
+        """
         return self._debounced.observed or frozenset()
 
     def _observe(self, t: float, pressed: State) -> bool:
