@@ -15,7 +15,7 @@ from __future__ import annotations
 import csv
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, NamedTuple
@@ -797,18 +797,23 @@ class Simulator:
         f = self._P[:kl, 0] / self.dt
         return tuple(n for n, a, fn in zip(self.names, self._active[:kl], f, strict=True) if a and fn > min_force_N)
 
-    def in_contact(self, min_force_N: float, max_gap_m: float) -> tuple[str, ...]:
+    def in_contact(
+        self, min_force_N: float, max_gap_m: float, held: Collection[str] = (), hold_gap_m: float = 0.0
+    ) -> tuple[str, ...]:
         """Locators in contact after the last step.
 
         In contact: pressing (normal force > ``min_force_N``) or touching (gap at the start of the
-        step ≤ ``max_gap_m``, e.g. a contact that friction leaves unloaded).
+        step ≤ ``max_gap_m``, e.g. a contact that friction leaves unloaded). A locator in ``held``
+        (the last observation's) stays in contact until its gap exceeds ``hold_gap_m``: a
+        hysteresis, so that a contact friction holds a few micrometres open is not lost and found
+        again, while a locator the part only passes near is not found.
         """
         kl = self._k_loc
         f = self._P[:kl, 0] / self.dt
         return tuple(
             n
             for n, a, fn, g in zip(self.names, self._active[:kl], f, self._gap[:kl], strict=True)
-            if a and (fn > min_force_N or g <= max_gap_m)
+            if a and (fn > min_force_N or g <= max_gap_m or (n in held and g <= hold_gap_m))
         )
 
     def gaps_m(self) -> FloatArray:

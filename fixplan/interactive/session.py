@@ -548,7 +548,7 @@ class HapticSession:
         # the executor's guard of the fixture's neighbourhood; a person's push may be the whole cap
         self.guard = DivergenceGuard.for_fixture(fixture, settings, accel_mps2=self.F_max / wp.mass_kg + g)
         self.threshold_N = max(settings.press_fraction * self.weight_N, 1e-6)
-        self.contact_gap_m = settings.contact_gap_m
+        self.contact_gap_m, self.contact_hold_gap_m = settings.contact_gap_m, settings.contact_hold_gap_m
         self.dwell_s = settings.dwell_s
         self.rest_speed_mps = settings.stall_speed_mps * 10
         self.settle_s = settle_s
@@ -947,7 +947,8 @@ class HapticSession:
         return words
 
     def _observe(self, t: float) -> None:
-        pressed = frozenset(self.sim.in_contact(self.threshold_N, self.contact_gap_m))
+        held = self._debounced.observed or frozenset()  # the accepted state's contacts stay within the hold gap
+        pressed = frozenset(self.sim.in_contact(self.threshold_N, self.contact_gap_m, held, self.contact_hold_gap_m))
         if self._bore_inserts:
             pressed |= self._bottoms(pressed)
         if self._debounced.observe(t, pressed):

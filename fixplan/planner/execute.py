@@ -369,6 +369,15 @@ class Executor:
         """The debounced contact state (None: nothing seen yet)."""
         return self._debounced.observed
 
+    @property
+    def observed_state(self) -> State:
+        """The debounced contact state (empty until one is accepted).
+
+        Its contacts are the ones the sensing holds within ``contact_hold_gap_m`` (a graze shorter
+        than the dwell is never held).
+        """
+        return self._debounced.observed or frozenset()
+
     def _observe(self, t: float, pressed: State) -> bool:
         """Debounce the pressed set; True when a new state has just been accepted."""
         if not self._debounced.observe(t, pressed):

@@ -206,12 +206,12 @@ def verify(
     loop = rig.loop
     d = fixture.dimension
     threshold = executor.threshold_N
-    contact_gap_m = executor.settings.contact_gap_m
+    contact_gap_m, hold_gap_m = executor.settings.contact_gap_m, executor.settings.contact_hold_gap_m
 
     commands: list[FloatArray] = []  # the executor's push, every tick (what the hand is asked for)
 
     def operator(tt: float, device: SimulatedDevice) -> FloatArray:
-        pressed = frozenset(sim.in_contact(threshold, contact_gap_m))
+        pressed = frozenset(sim.in_contact(threshold, contact_gap_m, executor.observed_state, hold_gap_m))
         w = executor.command(tt, sim.pose, sim.twist, pressed)
         commands.append(np.array(w, dtype=float))
         return rig.operator_wrench(w, device)
