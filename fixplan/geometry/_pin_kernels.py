@@ -25,7 +25,7 @@ from numba import njit
 
 KINDS = ("rim", "mouth", "exit", "bottom", "tip")  # the kind codes of ``out[:, 0]``
 RIM, MOUTH, EXIT, BOTTOM, TIP = 0, 1, 2, 3, 4
-MAX_CONTACTS = 24  # 2 lands x (rim, mouth, exit) + bottom + 2 mouth edges + 2 pin circles = 11, + the face's rim
+MAX_CONTACTS = 24  # 2 lands x (rim, mouth, exit, 2 mouth edges, 2 pin circles) + bottom = 15, + the face's rim
 _TWO_PI = 2.0 * math.pi
 _SQRT_HALF = math.sqrt(0.5)
 _GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
@@ -488,8 +488,11 @@ def contacts(pin, hole, rim_samples, newton_steps, golden_steps, coaxial_rel, ou
             n = _edge(pin, hole, hole[7], EXIT, land, rim_samples, newton_steps, golden_steps, out, n)
     if blind:
         n = _bottom(pin, hole, coaxial_rel, out, n)
-    n = _hole_edges_on_tip(pin, hole, arcs, rim_samples, golden_steps, out, n)
-    return _tip_edges_on_chamfer(pin, hole, arcs, rim_samples, golden_steps, out, n)
+    for i in range(arcs.shape[0]):  # a diamond's tip, like its side: each land on its own
+        land = arcs if arcs.shape[0] == 1 else arcs[i : i + 1]
+        n = _hole_edges_on_tip(pin, hole, land, rim_samples, golden_steps, out, n)
+        n = _tip_edges_on_chamfer(pin, hole, land, rim_samples, golden_steps, out, n)
+    return n
 
 
 @njit(cache=True)

@@ -24,9 +24,11 @@ Contacts (each an edge on a surface, exact):
   circles) on the pin's tip chamfer or face, and the pin's rim and tip circles on the hole's
   chamfer. A point's distance to a surface of revolution is its distance in the half-plane
   ``(t, ρ)`` of that axis to the surface's profile (a segment, or a corner); the least over the
-  edge circle is sampled and refined by golden section. A diamond pin's tip, like its side, is its
+  edge circle is sampled and refined by golden section (a land's ends are candidates too: a land
+  ends abruptly, and the least may be at its end). A diamond pin's tip, like its side, is its
   lands only: the relief across them runs through the tip, so a hole's edge meets the tip's
-  chamfer or face only where its direction from the pin's axis is within a land.
+  chamfer or face only where its direction from the pin's axis is within a land; and each land has
+  its own tip contacts (a diamond pin in a hole's chamfer rests on both lands at once).
 
 Why these suffice for the side: along a generator line of one cylinder the distance from the other's
 axis is convex, so the overlap of two straight cylinders over the engaged length is extreme at its
@@ -397,17 +399,20 @@ def _land_end_angles(
     return out
 
 
-def _hole_edges_on_tip(pin: PinBody, hole: HoleBody, settings: PinSettings) -> list[PinContact]:
+def _hole_edges_on_tip(
+    pin: PinBody, hole: HoleBody, arcs: list[tuple[float, float]], settings: PinSettings
+) -> list[PinContact]:
     """The hole's mouth edges (the chamfer's top and bottom circles) on the pin's tip chamfer or face.
 
     A diamond pin's tip is its lands' (the relief that narrows its side across them runs through
     its tip): an edge point counts where its direction from the pin's axis is within a land, as
-    for the side (:func:`_edge`) and the pin's circles on the chamfer (:func:`_tip_edges_on_chamfer`).
+    for the side (:func:`_edge`) and the pin's circles on the chamfer (:func:`_tip_edges_on_chamfer`);
+    ``arcs`` is one land's (:func:`pin_hole_contacts` asks for each land's least: a diamond in a
+    chamfer rests on both).
     """
     u, a = pin.axis_world, hole.axis_world
     h1, h2 = _perp_basis(a)
     P = np.eye(3) - np.outer(u, u)
-    arcs = _land_arcs(pin)
     e1, e2 = _perp_basis(u, pin.land_direction_world)
     edges = [(0.0, hole.radius_m + hole.chamfer_m)] + ([(hole.chamfer_m, hole.radius_m)] if hole.chamfer_m > 0 else [])
     out = []
@@ -448,14 +453,15 @@ def _hole_edges_on_tip(pin: PinBody, hole: HoleBody, settings: PinSettings) -> l
     return out
 
 
-def _tip_edges_on_chamfer(pin: PinBody, hole: HoleBody, settings: PinSettings) -> list[PinContact]:
-    """The pin's rim and tip circles on the hole's mouth chamfer."""
+def _tip_edges_on_chamfer(
+    pin: PinBody, hole: HoleBody, arcs: list[tuple[float, float]], settings: PinSettings
+) -> list[PinContact]:
+    """The pin's rim and tip circles on the hole's mouth chamfer, within ``arcs`` (a diamond: one land's)."""
     if hole.chamfer_m <= 0.0:
         return []
     u, a, m = pin.axis_world, hole.axis_world, hole.mouth_world
     e1, e2 = _perp_basis(u, pin.land_direction_world)
     P = np.eye(3) - np.outer(a, a)
-    arcs = _land_arcs(pin)
     circles = [(pin.side_end_m, pin.radius_m)] + (
         [(pin.length_m, pin.radius_m - pin.chamfer_m)] if pin.chamfer_m > 0 else []
     )
@@ -511,7 +517,9 @@ def pin_hole_contacts(pin: PinBody, hole: HoleBody, settings: PinSettings = _DEF
     bottom = _bottom(pin, hole, settings) if hole.blind else None
     if bottom is not None:
         out.append(bottom)
-    return out + _hole_edges_on_tip(pin, hole, settings) + _tip_edges_on_chamfer(pin, hole, settings)
+    for land in [arcs] if len(arcs) == 1 else [[arc] for arc in arcs]:  # the tip too: each land on its own
+        out += _hole_edges_on_tip(pin, hole, land, settings) + _tip_edges_on_chamfer(pin, hole, land, settings)
+    return out
 
 
 __all__ = ["HoleBody", "PinBody", "PinContact", "pin_hole_contacts", "radial_play_m"]

@@ -187,7 +187,7 @@ def test_a_diamond_pin_s_tip_is_its_lands() -> None:
     touches nothing: where its lands end, its rim is ``ρ² = r² + 2 e r sin α + e²`` from the hole's
     axis, ``(R + c − ρ)/√2`` off the hole's chamfer, and the bore's edge is
     ``ρ_e = −e sin α + √(R² − e² cos² α)`` from the pin's axis, ``(c + ρ_e − r)/√2`` above the tip's
-    chamfer (a round pin's face would be under it); both are found at the lands' ends.
+    chamfer (a round pin's face would be under it); both are found at the lands' ends, each land's.
     """
     pin, hole = np.array(_TILTED_PIN), np.array(_TILTED_HOLE)
     assert not [c for c in pin_hole_contacts(*_bodies(pin, hole)) if c.kind == "tip"]
@@ -197,14 +197,14 @@ def test_a_diamond_pin_s_tip_is_its_lands() -> None:
     sin_a = w / (2.0 * r)
     rim = (R + c - math.sqrt(r * r + 2.0 * e * r * sin_a + e * e)) / math.sqrt(2.0)
     edge = (c - e * sin_a + math.sqrt(R * R - e * e * (1.0 - sin_a * sin_a)) - r) / math.sqrt(2.0)
-    for kind, expected in (("round", [(R + c - r - e) / math.sqrt(2.0)]), ("diamond", sorted([rim, edge]))):
+    for kind, expected in (("round", [(R + c - r - e) / math.sqrt(2.0)]), ("diamond", sorted([rim, edge] * 2))):
         land = [1.0, 0.0, 0.0, w, 1.0] if kind == "diamond" else [0.0] * 5
         pin = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 1.0, r, L, c, *land])
         ref = sorted(t.gap_m for t in pin_hole_contacts(*_bodies(pin, hole)) if t.kind == "tip")
         tips = sorted(t[1] for t in _kernel_contacts(pin, hole) if t[0] == "tip")
         assert ref[: len(expected)] == pytest.approx(expected, abs=1e-12), kind
         assert tips == pytest.approx(ref, abs=1e-12), kind
-    assert len(tips) == 2 and min(tips) > 0.0  # the diamond: nothing touches, no face under the hole's edge
+    assert len(tips) == 4 and min(tips) > 0.0  # the diamond, each land: nothing touches, no face under the edge
 
 
 def test_the_least_on_a_land_is_found_at_its_end() -> None:
@@ -241,6 +241,26 @@ def test_the_least_on_a_land_is_found_at_its_end() -> None:
     tips = [g for kind, g, _ in _kernel_contacts(pin, hole) if kind == "tip"]
     assert min(ref) == pytest.approx(least, abs=1e-10) and min(tips) == pytest.approx(least, abs=1e-10)
     np.testing.assert_allclose(tips, ref, atol=1e-12)
+
+
+def test_a_diamond_pin_in_a_chamfer_rests_on_both_lands() -> None:
+    """A diamond pin's two lands on its hole's chamfer, both within 1 µm: each land brings its own tip contacts.
+
+    The hole 0.32 mm off the pin across its lands (seed 2031 fixture 0, robust sample 10, t = 0.979 s,
+    the pin and its hole of that pose): one land's end 0.1 µm into the chamfer, the other's 0.7 µm
+    off it. One least per circle over both lands handed the step the first only; within the step the
+    other went 8.2 µm into the chamfer. The side has had its contacts per land all along.
+    """
+    pin = np.array([0.09902438839777619, 0.1408246111037461, 0.0, 0.0, 0.0, 1.0, 0.0034208, 0.0388, 0.0003,
+                    -0.729906772373013, 0.6835467091896578, 0.0, 0.00241, 1.0])  # fmt: skip
+    hole = np.array([0.09925072542734392, 0.1410592944904261, 0.03725323537206166, 0.0013650474662508004,
+                     0.004192413012333229, -0.9999902801120365, 0.0035, 0.0519, 0.0013, 0.0])  # fmt: skip
+    tips = [(g, n) for kind, g, n in _kernel_contacts(pin, hole) if kind == "tip"]
+    ref = [c for c in pin_hole_contacts(*_bodies(pin, hole)) if c.kind == "tip"]
+    assert [g for g, _ in tips] == pytest.approx([c.gap_m for c in ref], abs=1e-12)
+    land = pin[9:12]
+    sides = {int(np.sign(n @ land)) for g, n in tips if abs(g) < 1e-6}  # which land each near contact pushes
+    assert sides == {-1, 1}
 
 
 def test_a_tilted_face_on_the_bottom_brings_its_rim() -> None:
