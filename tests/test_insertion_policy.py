@@ -56,6 +56,35 @@ def test_the_housing_s_policy_in_closed_form() -> None:
     assert InsertionPolicy.from_json(json.loads(json.dumps(policy.to_json()))) == policy
 
 
+def test_the_guide_re_centred_on_both_holes_is_the_world_s_located_pose() -> None:
+    """Pins 0.4 mm and 0.3 mm off and turned 0.2°: the holes seen past their chamfers at the world's located pose give it back.
+
+    The round pin's hole moves the guide by the shift; the diamond's offset along its lands, less
+    that, over its lever about the round pin turns it: the guide is the world's located pose to
+    within the play times the turn (0.1 mm × 3.5 mrad), far below a micrometre.
+    """
+    import math
+
+    import numpy as np
+
+    from fixplan.locating import engagement
+    from fixplan.planner.insertion import shifted_world
+    from fixplan.planner.insertion_policy import Recentring
+
+    fixture = fixplan.load(LOAD)
+    plan = plan_insertion(fixture)
+    world = shifted_world(fixture, np.array([0.0004, -0.0003, 0.0]), math.radians(0.2))
+    here = world.goal
+    rc = Recentring(world, plan.goal, plan.axis_world, inserts(world))
+    assert rc.guide()[1] == "no pin seen past its chamfers: the guide stays"
+    for i in inserts(world):
+        rc.observe(here, i, engagement(world, here, i).depth_m)
+    guide, what = rc.guide()
+    dp, dr = guide.distance_to(here)
+    assert dp < 1e-6 and dr < 1e-6, (dp, dr)
+    assert what == "re-centred: the guide moved 0.5 mm by P1's hole, turned 0.2° about P1"
+
+
 @pytest.fixture(scope="module")
 def levered():
     """plane-2-pins seed 2031 fixture 0 in robust's world 10: pins 0.31 mm and 0.13° off the plan's.
@@ -81,7 +110,8 @@ def test_a_wedged_run_backs_off_recentres_and_seats(levered) -> None:
     assert ex is not None and ex.counts["retries"] == 1 and ex.counts["stalls"] == 1
     (retry,) = [m for _, kind, m in ex.events if kind == "retry"]
     assert "stuck in transition 4 (the seating)" in retry and "P1 wedged in H1" in retry
-    assert "back off to 36.7 mm above the located pose" in retry and "re-centred" in retry and "P2's hole" in retry
+    assert "back off to 36.7 mm above the located pose" in retry and "re-centred: the guide turned 0.18" in retry
+    assert "° about P1" in retry  # P2 (the diamond) seen past its chamfers: its offset along its lands turns the guide
     assert v.max_penetration_m <= 1e-5
     assert ex.observed[-1] == ("B1", "B2", "B3", "P1", "P2")
 

@@ -380,7 +380,7 @@ class InsertionRun:
         # where the engaged holes were seen, the retries spent, the back-off under way
         self.policy = plan.policy
         self._goal = plan.goal
-        self._recentring = Recentring()
+        self._recentring = Recentring(world, plan.goal, self.u, self.inserts)
         self._retries = 0
         self._recovery_t0: float | None = None
         self._backoff: tuple[float, float, float] | None = None  # (target height, since, height then)
@@ -567,7 +567,7 @@ class InsertionRun:
         for i in self.inserts:
             e = engagement(self.world, pose, i)
             if e.engaged:
-                self._recentring.observe(self.world, self.plan.goal, self.u, pose, i, e.depth_m)
+                self._recentring.observe(pose, i, e.depth_m)
 
     def _budget_left(self, t: float) -> bool:
         """Whether the policy allows one more retry now; else :attr:`_spent` says why not."""
@@ -594,7 +594,7 @@ class InsertionRun:
             return False
         h = self.height_m(pose)
         target = self.policy.backoff_height(h, self._retries - 1)
-        self._goal, how = self._recentring.guide(self.plan.goal, self.u, self.inserts)
+        self._goal, how = self._recentring.guide()
         self._backoff = (target, t, h)
         self._progress = None
         self._seating = False
@@ -624,8 +624,13 @@ class InsertionRun:
             self._progress = (h, t)
         elif t - self._progress[1] >= self.s.stall_s:
             self.log.counts["stalls"] += 1
-            self._fail(t, f"could not back off: the part stays {h * 1e3:.3g} mm above the located pose, "
-                          f"{(target - h) * 1e3:.3g} mm short of the back-off's height", "stall")  # fmt: skip
+            wedged = self._wedged(pose)
+            why = (
+                f"could not back off in transition {self.index + 1} ({self._stage_label(self.index)}): the part "
+                f"stays {h * 1e3:.3g} mm above the located pose, {(target - h) * 1e3:.3g} mm short of the back-off's "
+                f"height (retry {self._retries})"
+            )
+            self._fail(t, why + (f"; {wedged}" if wedged else ""), "stall")
 
     def _reenter(self, t: float, pose: Pose, state: State, what: str) -> bool:
         """A pin the run had engaged is lost: go on with the policy's entry of the state seen (False: none, or no budget)."""
@@ -638,7 +643,7 @@ class InsertionRun:
         self.index = entry.transition
         self._seating = False
         self._progress = None
-        self._goal, how = self._recentring.guide(self.plan.goal, self.u, self.inserts)
+        self._goal, how = self._recentring.guide()
         self.log.counts["policy_switches"] += 1
         self.log.event(
             t, "retry", f"{what}: the policy's {entry.action} from {format_state(state)} on to "
@@ -669,7 +674,11 @@ class InsertionRun:
             f"{', '.join(missing) or 'the seat'} not reached, the part {self.height_m(pose) * 1e3:.3g} mm above "
             "the located pose and not moving down"
         )
-        # every pin in: the one whose hole is off its axis by the most beyond its play holds the part up
+        wedged = self._wedged(pose)
+        return out + (f"; {wedged}" if wedged else "")
+
+    def _wedged(self, pose: Pose) -> str:
+        """The engaged pin whose hole is off its axis by the most beyond its play (what holds the part), or ""."""
         worst, name = 0.0, ""
         for i in self.inserts:
             e = engagement(self.world, pose, i)
@@ -677,10 +686,10 @@ class InsertionRun:
             if e.engaged and off - i.play_m > worst:
                 worst = off - i.play_m
                 name = (
-                    f"; {i.name} wedged in {i.hole}: the hole's axis {off * 1e3:.3g} mm off the pin's (play "
+                    f"{i.name} wedged in {i.hole}: the hole's axis {off * 1e3:.3g} mm off the pin's (play "
                     f"{i.play_m * 1e3:.3g} mm), its tip {e.depth_m * 1e3:.3g} mm in"
                 )
-        return out + name
+        return name
 
     def _check_settled(self, t: float, state: State, twist: FloatArray) -> None:
         if state >= self.goal and float(np.linalg.norm(twist[:3])) < self.execution.stall_speed_mps * 10:

@@ -231,49 +231,65 @@ def _bore_start_body(fixture: Fixture, pose: Pose, ins: Insert, depth_m: float) 
     return pose.R_world_body.T @ (x - pose.p_world)
 
 
-@dataclass
 class Recentring:
-    """Where the engaged holes were seen, past both chamfers: the offsets the guide is re-centred on."""
+    """Where the engaged holes were seen, past both chamfers: the offsets the guide is re-centred on (module text).
 
-    offsets_m: dict[str, FloatArray] = field(default_factory=dict)  # insert -> lateral offset from the plan's place
-    places_m: dict[str, FloatArray] = field(default_factory=dict)  # insert -> the plan's place at the located pose
+    ``world``'s pins and bores (their chamfers, which lead) with the plan's located pose ``goal``
+    and axis ``u``: each insert's place is its hole's axis where the bore begins, at ``goal``
+    (a bore: the part's axis there), normal to ``u``.
+    """
 
-    def observe(self, world: Fixture, goal: Pose, u: FloatArray, pose: Pose, ins: Insert, depth_m: float) -> None:
-        """Record ``ins``'s hole at ``pose`` if its tip is ``depth_m`` past the mouth, past both chamfers.
+    def __init__(self, world: Fixture, goal: Pose, u: FloatArray, inserts: list[Insert]):
+        self.world, self.goal, self.u, self.inserts = world, goal, u, inserts
+        self.offsets_m: dict[str, FloatArray] = {}  # insert -> its hole's lateral offset from its place
+        self.places_m: dict[str, FloatArray] = {}
+        for i in inserts:
+            b = _bore_start_body(world, goal, i, _goal_depth(world, goal, i))
+            self.places_m[i.name] = self._lateral(goal.point_world_from_body(b))
 
-        Its offset (normal to the axis ``u``) from where the plan's located pose ``goal`` puts it.
-        """
-        if depth_m < deep_m(world, ins):
+    def _lateral(self, x: FloatArray) -> FloatArray:
+        return x - float(x @ self.u) * self.u
+
+    def observe(self, pose: Pose, ins: Insert, depth_m: float) -> None:
+        """Record ``ins``'s hole at ``pose`` if its tip is ``depth_m`` past the mouth, past both chamfers."""
+        if depth_m < deep_m(self.world, ins):
             return
-        b = _bore_start_body(world, pose, ins, depth_m)
-        here, there = pose.point_world_from_body(b), goal.point_world_from_body(b)
-        d = here - there
-        self.offsets_m[ins.name] = d - float(d @ u) * u
-        self.places_m[ins.name] = there - float(there @ u) * u
+        b = _bore_start_body(self.world, pose, ins, depth_m)
+        self.offsets_m[ins.name] = self._lateral(pose.point_world_from_body(b) - self.goal.point_world_from_body(b))
 
-    def guide(self, goal: Pose, u: FloatArray, inserts: list[Insert]) -> tuple[Pose, str]:
-        """The located pose re-centred on the offsets seen, and what it did (one line)."""
-        seen = [i for i in inserts if i.name in self.offsets_m]
+    def guide(self) -> tuple[Pose, str]:
+        """The plan's located pose re-centred on the offsets seen, and what it did (one line).
+
+        The round pin (or bore) fixes where the part is, the diamond pin along its lands how it is
+        turned about the round one: the guide moves by the round pin's offset when it was seen, and
+        turns about its place by the diamond's offset along its lands, less that move.
+        """
+        seen = [i for i in self.inserts if i.name in self.offsets_m]
         if not seen:
-            return goal, "no pin seen past its chamfers: the guide stays"
-        locating = [i for i in seen if i.land_direction_world is None]
-        base = locating[0] if locating else seen[0]
-        t = self.offsets_m[base.name]
-        theta = 0.0
+            return self.goal, "no pin seen past its chamfers: the guide stays"
+        rounds = [i for i in self.inserts if i.land_direction_world is None]
+        base = rounds[0] if rounds else seen[0]
+        t = self.offsets_m.get(base.name, np.zeros(3))
         pivot = self.places_m[base.name]
+        theta = 0.0
         for i in seen:
             if i is base or i.land_direction_world is None:
                 continue
-            lever = np.cross(u, self.places_m[i.name] - pivot)
-            along = float(lever @ i.land_direction_world)
-            if abs(along) > 0.0:
+            along = float(np.cross(self.u, self.places_m[i.name] - pivot) @ i.land_direction_world)
+            if along != 0.0:
                 theta = float((self.offsets_m[i.name] - t) @ i.land_direction_world) / along
-        R = exp_so3(theta * u)
-        p = pivot + R @ (goal.p_world - pivot) + t
-        what = f"re-centred {np.linalg.norm(t) * 1e3:.3g} mm on {base.name}'s hole" + (
-            f", turned {np.degrees(theta):.3g}° about it" if theta else ""
-        )
-        return Pose(R @ goal.R_world_body, p), what
+        R = exp_so3(theta * self.u)
+        G = self.goal
+        moved = f"moved {np.linalg.norm(t) * 1e3:.3g} mm by {base.name}'s hole" if base.name in self.offsets_m else ""
+        turned = f"turned {np.degrees(theta):.3g}° about {base.name}" if theta else ""
+        what = "the guide " + ", ".join(x for x in (moved, turned) if x) if moved or turned else "the guide stays"
+        return Pose(R @ G.R_world_body, pivot + R @ (G.p_world - pivot) + t), "re-centred: " + what
+
+
+def _goal_depth(world: Fixture, goal: Pose, ins: Insert) -> float:
+    from fixplan.locating import engagement
+
+    return engagement(world, goal, ins).depth_m
 
 
 __all__ = ["ACTIONS", "InsertionPolicy", "PinPolicyEntry", "Recentring", "deep_m", "insertion_policy"]
