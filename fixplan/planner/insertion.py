@@ -39,8 +39,13 @@ the state every tick (engaged pins from the pose, pressed rests from the engine'
 passes when the goal state is reached and held at rest, the rests within ``final_gap_m``, every
 hole's axis within the radial play of its pin's (for a diamond pin: along its lands), penetration
 and the solver's residual within the profile's bounds, the push within the hand's limits. An
-insertion that does not move along the axis for ``stall_s`` fails, naming the pin that did not
-enter and by how much it missed.
+insertion that does not move along the axis for ``stall_s``, or loses a pin it had engaged,
+consults the plan's policy (:mod:`.insertion_policy`, built with the plan): it backs off along
+the axis to the end of an earlier stage, re-centres the guide on where the holes of the pins past
+their chamfers were seen and goes on from the state it sees there, within the policy's budget
+(retries, time); then it fails, naming the pin that did not enter (or is wedged), the stage, by
+how much it missed and the retries it spent. A plan without a policy (a file written before it)
+fails at the first such stage.
 
 The plan is nominal: the guide lies on the nominal pins. ``robust`` runs it in worlds whose pins
 and rests are displaced (pose errors larger than the play): the chamfers must capture the part.
