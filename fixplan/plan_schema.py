@@ -771,12 +771,47 @@ class Verification(JsonObject):
 
 
 INSERTION_STAGES = ("free", "insert", "seat")
+INSERTION_ACTIONS = ("insert", "seat", "hold")
+_HEIGHTS = Range("a height above the located pose", "m", 0.0, limits.COORDINATE_MAX_M)
+
+
+class InsertionPolicyEntry(JsonObject):
+    """What a pin insertion's run does in one observable state (``planner.insertion_policy``)."""
+
+    what: ClassVar[str] = "a policy entry {engaged, seated, transition, action, next}"
+    engaged: Annotated[tuple[str, ...], Locators()] = Field(description="The pins and bores engaged.")
+    seated: Annotated[bool, Flag()] = Field(description="Every pin engaged and every rest pressed: hold.")
+    transition: Annotated[int | None, Count(nullable=True)] = Field(
+        description="The transition (stage) to run from here, an index into transitions; null: hold."
+    )
+    action: Annotated[str, Str(INSERTION_ACTIONS)] = Field(description="insert, seat or hold.")
+    next: Annotated[tuple[str, ...], Locators()] = Field(description="The planned state it leads to.")
+
+
+class InsertionPolicy(JsonObject):
+    """A pin insertion's recovery: an entry per observable state, the back-off heights, the budget."""
+
+    what: ClassVar[str] = "the insertion's policy {retries, time_s, backoff_min_m, backoff_heights_m, entries}"
+    retries: Annotated[int, Count()] = Field(description="Back-offs and re-entries at most.")
+    time_s: Annotated[float, Real(limits.DURATION)] = Field(description="Seconds of recovery at most [s].")
+    backoff_min_m: Annotated[float, Real(_HEIGHTS)] = Field(description="A back-off rises at least this far [m].")
+    backoff_heights_m: Annotated[tuple[float, ...], Series(_HEIGHTS)] = Field(
+        description="The stages' ends a back-off rises to, above the located pose, ascending [m]."
+    )
+    entries: tuple[InsertionPolicyEntry, ...] = Field(description="One per observable state.")
+
+    @classmethod
+    def rules(cls, data: Mapping[str, Any], context: Mapping[str, Any]) -> list[tuple[tuple, str]]:
+        h = [float(x) for x in data["backoff_heights_m"]]
+        if any(b <= a for a, b in zip(h, h[1:], strict=False)):
+            return [(("backoff_heights_m",), f"got {shorten(str(h))} (expected heights strictly ascending)")]
+        return []
 
 
 class Insertion(JsonObject):
     """A plan for a fixture with pins or bores: what re-runs its staged insertion (``planner.insertion``)."""
 
-    what: ClassVar[str] = "the staged insertion {axis, goal, stages, seat_wrench}"
+    what: ClassVar[str] = "the staged insertion {axis, goal, stages, seat_wrench, policy}"
     axis: Annotated[tuple[float, ...], Series(SIGNED)] = Field(
         description="The insertion axis u, world (a unit vector): the part moves along −u onto its pins."
     )
@@ -786,6 +821,9 @@ class Insertion(JsonObject):
     )
     seat_wrench: Annotated[tuple[float, ...], Wrench()] = Field(
         description="The seating push at the located pose, about the body origin, world axes [N, N·m]."
+    )
+    policy: InsertionPolicy | None = Field(
+        None, description="What the run does from every observable state and how it recovers (absent: no recovery)."
     )
 
     @classmethod

@@ -918,6 +918,15 @@ class InsertionSettings:
     axis_play_rel : float
         Slack on the radial play in the final check (relative): the hole's axis within
         ``(D − d)/2 · (1 + axis_play_rel)`` of the pin's, at the mouth and at the pin's tip.
+    retries : int
+        The recovery's budget (:mod:`fixplan.planner.insertion_policy`): a run that stalls, or
+        loses a pin it had engaged, backs off and tries again at most this many times, then fails.
+    recovery_time_s : float
+        The recovery's time budget: the run's time limit grows by at most this much, and a
+        recovery that has spent it fails.
+    backoff_min_m : float
+        A back-off rises at least this far along the axis: to the end of the latest stage at least
+        this far above the part (the staging pose when none is).
     """
 
     lead_m: float = 0.002
@@ -939,6 +948,9 @@ class InsertionSettings:
     axis_play_rel: float = 0.05
     align_tol_m: float = 0.0001
     align_tol_rad: float = 0.001
+    retries: int = 3
+    recovery_time_s: float = 6.0
+    backoff_min_m: float = 0.001
 
 
 @dataclass(frozen=True)

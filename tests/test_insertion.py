@@ -223,3 +223,22 @@ def test_cli_solve_reports_the_clearance_pose_range_and_clamps_on_pins() -> None
     clamping = doc["clamping"]
     assert clamping["holds"] is True and clamping["order"] == ["K1", "K2"]
     assert clamping["verification"]["passed"] is True
+
+
+@pytest.mark.slow
+def test_a_part_levered_on_its_diamond_pin_stays_out_of_it() -> None:
+    """plane-2-pins seed 2031 fixture 0, robust's world 9: the part levers about P2 as it enters.
+
+    P2's tip contact dropped out of the step and the part went 1.86e-5 m into the pin, beyond the
+    1e-5 m bound (tests/engine/test_pin_slots.py has the pose, and the other holes of the same
+    detection). Now within it, and the part seats.
+    """
+    from fixplan.generate import generate_one
+    from fixplan.robust import RobustSettings, draw_pin_world
+
+    fixture = fixplan.loads(generate_one("plane-2-pins", 2031, 0).toml_text)
+    play = max(i.play_m for i in inserts(fixture))
+    world, noise, _ = draw_pin_world(fixture, 9, RobustSettings(pose_sigma_m=3.0 * play, pose_sigma_deg=0.1))
+    v = verify_insertion(world, plan_insertion(fixture), noise=noise)
+    assert v.passed, v.reason
+    assert v.max_penetration_m <= 1e-5

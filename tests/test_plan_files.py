@@ -372,6 +372,7 @@ def test_the_docs_describe_every_key_of_the_format():
         plan_schema.PlanFile, plan_schema.RecordingFile, plan_schema.Transition, plan_schema.Pose,
         plan_schema.Pushes, plan_schema.Tried, plan_schema.PolicyEntry, plan_schema.Verification,
         plan_schema.Execution, plan_schema.Trace, plan_schema.Where, plan_schema.Insertion,
+        plan_schema.InsertionPolicy, plan_schema.InsertionPolicyEntry,
     ]  # fmt: skip
     missing = [
         f"{model.__name__}.{field.alias or name}"

@@ -32,8 +32,8 @@ RIM, MOUTH, EXIT, BOTTOM, TIP = 0, 1, 2, 3, 4
 FACE = 5  # the kind code of face_contacts()' rows (the pin's tip on the face around the hole)
 ALL_KINDS = (*KINDS, "face")  # the kind codes of pose_contacts()' rows
 FACE_COLUMNS = 22  # a hole's row with the face around its mouth (module text)
-# 2 lands x (rim, mouth, exit) + bottom + 2 mouth edges + 2 pin circles = 11, + the bottom face's rim
-# and the tip on the face (face_points each, 4 by default): 19
+# 2 lands x (rim, mouth, exit, 2 mouth edges, 2 pin circles) + bottom = 15, + the bottom face's rim
+# and the tip on the face (face_points each, 4 by default): 23
 MAX_CONTACTS = 24
 _TWO_PI = 2.0 * math.pi
 _SQRT_HALF = math.sqrt(0.5)
@@ -236,8 +236,8 @@ def _hole_chamfer_gap(hole, q0, q1):
 
 
 # -- a gap along a circle, by mode (numba has no closures to hand around) -----------------------------------
-# mode 0: the hole's edge circle on a diamond pin's land; 1: a hole edge circle on the pin's tip;
-# 2: a pin circle on the hole's mouth chamfer. The circle is ``x(φ) = c + rad (cos φ b1 + sin φ b2)``;
+# mode 0: the hole's edge circle on a diamond pin's land; 1: a hole edge circle on the pin's tip (a
+# diamond's: on its lands); 2: a pin circle on the hole's mouth chamfer (a diamond's: on its lands). The circle is ``x(φ) = c + rad (cos φ b1 + sin φ b2)``;
 # the other body's axial coordinate of ``x`` is ``t0 + t1 cos φ + t2 sin φ`` and its radial vector
 # ``w + A cos φ + B sin φ`` (coefficients computed once per circle, then only scalars per angle).
 @njit(cache=True)
@@ -254,7 +254,7 @@ def _circle_coef(mode, pin, hole, c, rad, b1, b2):
     P = _proj(u)
     out[0:3], out[3:6], out[6:9] = P @ (c - base), rad * (P @ b1), rad * (P @ b2)
     out[9], out[10], out[11] = (c - base) @ u, rad * (b1 @ u), rad * (b2 @ u)
-    if mode == 0:
+    if mode == 0 or pin[13] != 0.0:  # a diamond's side and tip: the direction from its axis, to keep its lands
         e1, e2 = _perp_basis(u, pin[9:12], True)
         for k in range(3):
             out[12 + k] = out[3 * k : 3 * k + 3] @ e1
@@ -280,11 +280,12 @@ def _circle_gap(mode, phi, pin, hole, arcs, coef):
     if mode == 2:
         found, gap, _n0, _n1 = _hole_chamfer_gap(hole, t, rho)
         return found, gap
-    if mode == 0:
+    if mode == 0 or pin[13] != 0.0:  # a diamond's side and tip are its lands only
         along = coef[12] + coef[13] * cs + coef[14] * sn
         across = coef[15] + coef[16] * cs + coef[17] * sn
         if not _in_arcs(math.atan2(across, along), arcs):
             return False, 0.0
+    if mode == 0:
         return True, rho - pin[6]
     found, gap, _n0, _n1 = _pin_tip_gap(pin, t, rho)
     return found, gap
@@ -297,8 +298,34 @@ def _value(mode, phi, pin, hole, arcs, coef):
 
 
 @njit(cache=True)
+def _land_end(mode, phi_end, pin, hole, arcs, coef, step, best, phi):
+    """The gap just inside a land's end ``phi_end``, if it is below ``best``: ``(best, φ)``.
+
+    Measured 2⁻⁴⁰ of the sample spacing to either side (the end itself falls on either side
+    by rounding); the side within the land counts.
+    """
+    nudge = step * 2.0**-40
+    for x in (phi_end + nudge, phi_end - nudge):
+        found, gap = _circle_gap(mode, x, pin, hole, arcs, coef)
+        if found and gap < best:
+            best, phi = gap, x
+    return best, phi
+
+
+@njit(cache=True)
 def _least_on_circle(mode, pin, hole, arcs, c, rad, b1, b2, rim_samples, golden_steps):
-    """``(found, φ)``: the angle where the mode's gap is least on the circle (sampled, then golden section)."""
+    """``(found, φ, t, ρ)``: the angle where the mode's gap is least on the circle (sampled, then golden section).
+
+    A diamond's lands end abruptly: the least may be at a land's end, between two samples, where
+    the gap falls until the land stops. Each end is therefore a candidate too: the angle itself for
+    the pin's circles (mode 2), the circle's angles whose direction from the pin's axis is the
+    land's end for the hole's (modes 0 and 1: ``a₀ + a₁ cos φ + a₂ sin φ = 0``).
+
+    ``(t, ρ)`` is the point at ``φ`` as the search measured it (:func:`_circle_q`): the least may lie
+    where the gap stops being the mode's (its nearest feature changes), and the search converges
+    onto that edge from the side where it is; the same point re-measured from the circle's world
+    point may fall past it by rounding. The callers judge it by these numbers then, not drop it.
+    """
     coef = _circle_coef(mode, pin, hole, c, rad, b1, b2)
     step = _TWO_PI / rim_samples
     best, phi, any_found = math.inf, 0.0, False
@@ -307,24 +334,47 @@ def _least_on_circle(mode, pin, hole, arcs, c, rad, b1, b2, rim_samples, golden_
         found, gap = _circle_gap(mode, t, pin, hole, arcs, coef)
         if found and (not any_found or gap < best):
             best, phi, any_found = gap, t, True
-    if not any_found:
-        return False, 0.0
-    lo, hi = phi - step, phi + step
-    g = _GOLDEN
-    x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
-    f1 = _value(mode, x1, pin, hole, arcs, coef)
-    f2 = _value(mode, x2, pin, hole, arcs, coef)
-    for _ in range(golden_steps):
-        if f1 <= f2:
-            hi, x2, f2 = x2, x1, f1
-            x1 = hi - g * (hi - lo)
-            f1 = _value(mode, x1, pin, hole, arcs, coef)
-        else:
-            lo, x1, f1 = x1, x2, f2
-            x2 = lo + g * (hi - lo)
-            f2 = _value(mode, x2, pin, hole, arcs, coef)
-    x = 0.5 * (lo + hi)
-    return True, (x if _value(mode, x, pin, hole, arcs, coef) <= best else phi)
+    if any_found:
+        lo, hi = phi - step, phi + step
+        g = _GOLDEN
+        x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
+        f1 = _value(mode, x1, pin, hole, arcs, coef)
+        f2 = _value(mode, x2, pin, hole, arcs, coef)
+        for _ in range(golden_steps):
+            if f1 <= f2:
+                hi, x2, f2 = x2, x1, f1
+                x1 = hi - g * (hi - lo)
+                f1 = _value(mode, x1, pin, hole, arcs, coef)
+            else:
+                lo, x1, f1 = x1, x2, f2
+                x2 = lo + g * (hi - lo)
+                f2 = _value(mode, x2, pin, hole, arcs, coef)
+        x = 0.5 * (lo + hi)
+        fx = _value(mode, x, pin, hole, arcs, coef)
+        if fx <= best:
+            phi, best = x, fx
+    if pin[13] != 0.0:  # a diamond: its lands' ends
+        for k in range(arcs.shape[0]):
+            for j in range(2):
+                beta = arcs[k, j]
+                if mode == 2:
+                    best, phi = _land_end(mode, beta, pin, hole, arcs, coef, step, best, phi)
+                    continue
+                # the direction from the pin's axis at angle β: across cos β − along sin β = 0
+                cb, sb = math.cos(beta), math.sin(beta)
+                a0 = coef[15] * cb - coef[12] * sb
+                a1 = coef[16] * cb - coef[13] * sb
+                a2 = coef[17] * cb - coef[14] * sb
+                rr = math.hypot(a1, a2)
+                if rr == 0.0 or abs(a0) > rr:
+                    continue
+                mid, half = math.atan2(a2, a1), math.acos(-a0 / rr)
+                best, phi = _land_end(mode, mid + half, pin, hole, arcs, coef, step, best, phi)
+                best, phi = _land_end(mode, mid - half, pin, hole, arcs, coef, step, best, phi)
+    if best == math.inf:
+        return False, 0.0, 0.0, 0.0
+    t, rho = _circle_q(coef, math.cos(phi), math.sin(phi))
+    return True, phi, t, rho
 
 
 @njit(cache=True)
@@ -340,7 +390,7 @@ def _edge(pin, hole, depth_m, kind, arcs, rim_samples, newton_steps, golden_step
         full[0, 0], full[0, 1] = 0.0, _TWO_PI
         phi = _circle_extreme(w, A, B, False, full, rim_samples, newton_steps)
     else:
-        found, phi = _least_on_circle(0, pin, hole, arcs, centre, R, h1, h2, rim_samples, golden_steps)
+        found, phi, _t, _rho = _least_on_circle(0, pin, hole, arcs, centre, R, h1, h2, rim_samples, golden_steps)
         if not found:
             return n
     y = centre + R * (math.cos(phi) * h1 + math.sin(phi) * h2)
@@ -381,15 +431,14 @@ def _hole_edges_on_tip(pin, hole, arcs, rim_samples, golden_steps, out, n):
     for k in range(n_edges):
         depth, radius = (0.0, hole[6] + ch) if k == 0 else (ch, hole[6])
         centre = hole[0:3] - depth * a
-        found, phi = _least_on_circle(1, pin, hole, arcs, centre, radius, h1, h2, rim_samples, golden_steps)
+        found, phi, t, rho = _least_on_circle(1, pin, hole, arcs, centre, radius, h1, h2, rim_samples, golden_steps)
         if not found:
             continue
         y = centre + radius * (math.cos(phi) * h1 + math.sin(phi) * h2)
         v = P @ (y - base)
         nv = np.linalg.norm(v)
         ok, gap, n0, n1 = _pin_tip_gap(pin, (y - base) @ u, nv)
-        if not ok:  # φ on the edge of the tip's domain, where the search's rounding and this differ: the search's
-            t, rho = _circle_q(_circle_coef(1, pin, hole, centre, radius, h1, h2), math.cos(phi), math.sin(phi))
+        if not ok:  # on the edge of the tip's region, past it by rounding: the search's own measure
             ok, gap, n0, n1 = _pin_tip_gap(pin, t, rho)
         if not ok:
             continue
@@ -413,16 +462,15 @@ def _tip_edges_on_chamfer(pin, hole, arcs, rim_samples, golden_steps, out, n):
     for k in range(n_circles):
         s, radius = (pin[7] - pin[8], pin[6]) if k == 0 else (pin[7], pin[6] - pin[8])
         centre = pin[0:3] + s * u
-        found, phi = _least_on_circle(2, pin, hole, arcs, centre, radius, e1, e2, rim_samples, golden_steps)
+        found, phi, t, rho_c = _least_on_circle(2, pin, hole, arcs, centre, radius, e1, e2, rim_samples, golden_steps)
         if not found:
             continue
         x = centre + radius * (math.cos(phi) * e1 + math.sin(phi) * e2)
         rho = P @ (x - m)
         nr = np.linalg.norm(rho)
         ok, gap, f0, f1 = _hole_chamfer_gap(hole, (m - x) @ a, nr)
-        if not ok:  # on the edge of the chamfer's face: the search's arithmetic, as for the hole's edges above
-            t, r = _circle_q(_circle_coef(2, pin, hole, centre, radius, e1, e2), math.cos(phi), math.sin(phi))
-            ok, gap, f0, f1 = _hole_chamfer_gap(hole, t, r)
+        if not ok:  # on the edge of the chamfer's region, past it by rounding: the search's own measure
+            ok, gap, f0, f1 = _hole_chamfer_gap(hole, t, rho_c)
         if not ok:
             continue
         radial = rho / nr if nr > 0.0 else e1
@@ -448,8 +496,11 @@ def contacts(pin, hole, rim_samples, newton_steps, golden_steps, coaxial_rel, ou
             n = _edge(pin, hole, hole[7], EXIT, land, rim_samples, newton_steps, golden_steps, out, n)
     if blind:
         n = _bottom(pin, hole, coaxial_rel, out, n)
-    n = _hole_edges_on_tip(pin, hole, arcs, rim_samples, golden_steps, out, n)
-    return _tip_edges_on_chamfer(pin, hole, arcs, rim_samples, golden_steps, out, n)
+    for i in range(arcs.shape[0]):  # a diamond's tip, like its side: each land on its own
+        land = arcs if arcs.shape[0] == 1 else arcs[i : i + 1]
+        n = _hole_edges_on_tip(pin, hole, land, rim_samples, golden_steps, out, n)
+        n = _tip_edges_on_chamfer(pin, hole, land, rim_samples, golden_steps, out, n)
+    return n
 
 
 @njit(cache=True)

@@ -24,7 +24,11 @@ Contacts (each an edge on a surface, exact):
   circles) on the pin's tip chamfer or face, and the pin's rim and tip circles on the hole's
   chamfer. A point's distance to a surface of revolution is its distance in the half-plane
   ``(t, ρ)`` of that axis to the surface's profile (a segment, or a corner); the least over the
-  edge circle is sampled and refined by golden section.
+  edge circle is sampled and refined by golden section (a land's ends are candidates too: a land
+  ends abruptly, and the least may be at its end). A diamond pin's tip, like its side, is its
+  lands only: the relief across them runs through the tip, so a hole's edge meets the tip's
+  chamfer or face only where its direction from the pin's axis is within a land; and each land has
+  its own tip contacts (a diamond pin in a hole's chamfer rests on both lands at once).
 
 Why these suffice for the side: along a generator line of one cylinder the distance from the other's
 axis is convex, so the overlap of two straight cylinders over the engaged length is extreme at its
@@ -58,7 +62,7 @@ in a cylinder's side: no face).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -310,7 +314,8 @@ def _edge(
                 return None
             return float(np.linalg.norm(v)) - pin.radius_m
 
-        phi = _least_on_circle(gap_of, settings)
+        ends = _land_end_angles(P @ (centre - pin.base_world), R * (P @ h1), R * (P @ h2), e1, e2, arcs)
+        phi = _least_on_circle(gap_of, settings, ends)
     if phi is None:
         return None
     y = point(phi)
@@ -413,42 +418,89 @@ def _hole_chamfer_gap(hole: HoleBody, q: FloatArray) -> tuple[float, FloatArray]
     return gap, n
 
 
-def _least_on_circle(gap_of: Callable[[float], float | None], settings: PinSettings) -> float | None:
-    """The angle where ``gap_of`` is least on a circle: sampled, then golden-section between the neighbours."""
+def _least_on_circle(
+    gap_of: Callable[[float], float | None], settings: PinSettings, ends: Sequence[float] = ()
+) -> float | None:
+    """The angle where ``gap_of`` is least on a circle: sampled, then golden-section between the neighbours.
+
+    ``ends``: a diamond's lands' ends on this circle (:func:`_land_end_angles`), candidates too: a
+    land ends abruptly, and the least may be at its end, between two samples.
+    """
     phis = np.linspace(0.0, 2.0 * math.pi, settings.rim_samples, endpoint=False)
     vals = [gap_of(float(p)) for p in phis]
     ok = [(v, float(p)) for v, p in zip(vals, phis, strict=True) if v is not None]
-    if not ok:
-        return None
-    best, phi = min(ok)
     step = 2.0 * math.pi / settings.rim_samples
-    lo, hi = phi - step, phi + step
-    g = 0.5 * (math.sqrt(5.0) - 1.0)
 
     def value(x: float) -> float:
         v = gap_of(x)
         return math.inf if v is None else v
 
-    x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
-    f1, f2 = value(x1), value(x2)
-    for _ in range(settings.golden_steps):
-        if f1 <= f2:
-            hi, x2, f2 = x2, x1, f1
-            x1 = hi - g * (hi - lo)
-            f1 = value(x1)
-        else:
-            lo, x1, f1 = x1, x2, f2
-            x2 = lo + g * (hi - lo)
-            f2 = value(x2)
-    x = 0.5 * (lo + hi)
-    return x if value(x) <= best else phi
+    best, phi = math.inf, 0.0
+    if ok:
+        best, phi = min(ok)
+        lo, hi = phi - step, phi + step
+        g = 0.5 * (math.sqrt(5.0) - 1.0)
+        x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
+        f1, f2 = value(x1), value(x2)
+        for _ in range(settings.golden_steps):
+            if f1 <= f2:
+                hi, x2, f2 = x2, x1, f1
+                x1 = hi - g * (hi - lo)
+                f1 = value(x1)
+            else:
+                lo, x1, f1 = x1, x2, f2
+                x2 = lo + g * (hi - lo)
+                f2 = value(x2)
+        x = 0.5 * (lo + hi)
+        fx = value(x)
+        if fx <= best:
+            phi, best = x, fx
+    nudge = step * 2.0**-40  # just inside each end: the end itself falls on either side by rounding
+    for end in ends:
+        for x in (end + nudge, end - nudge):
+            v = gap_of(x)
+            if v is not None and v < best:
+                best, phi = v, x
+    return None if best == math.inf else phi
 
 
-def _hole_edges_on_tip(pin: PinBody, hole: HoleBody, settings: PinSettings) -> list[PinContact]:
-    """The hole's mouth edges (the chamfer's top and bottom circles) on the pin's tip chamfer or face."""
+def _land_end_angles(
+    w: FloatArray, A: FloatArray, B: FloatArray, e1: FloatArray, e2: FloatArray, arcs: list[tuple[float, float]]
+) -> list[float]:
+    """The angles φ of a circle ``w + A cos φ + B sin φ`` (from a pin's axis) whose direction is a land's end.
+
+    The direction at angle ``β`` from ``e1``: ``across cos β − along sin β = 0``, a trigonometric
+    equation ``a₀ + a₁ cos φ + a₂ sin φ = 0`` with up to two roots per end.
+    """
+    out = []
+    for beta in [b for arc in arcs for b in arc]:
+        cb, sb = math.cos(beta), math.sin(beta)
+        a0 = float(w @ e2) * cb - float(w @ e1) * sb
+        a1 = float(A @ e2) * cb - float(A @ e1) * sb
+        a2 = float(B @ e2) * cb - float(B @ e1) * sb
+        rr = math.hypot(a1, a2)
+        if rr == 0.0 or abs(a0) > rr:
+            continue
+        mid, half = math.atan2(a2, a1), math.acos(-a0 / rr)
+        out += [mid + half, mid - half]
+    return out
+
+
+def _hole_edges_on_tip(
+    pin: PinBody, hole: HoleBody, arcs: list[tuple[float, float]], settings: PinSettings
+) -> list[PinContact]:
+    """The hole's mouth edges (the chamfer's top and bottom circles) on the pin's tip chamfer or face.
+
+    A diamond pin's tip is its lands' (the relief that narrows its side across them runs through
+    its tip): an edge point counts where its direction from the pin's axis is within a land, as
+    for the side (:func:`_edge`) and the pin's circles on the chamfer (:func:`_tip_edges_on_chamfer`);
+    ``arcs`` is one land's (:func:`pin_hole_contacts` asks for each land's least: a diamond in a
+    chamfer rests on both).
+    """
     u, a = pin.axis_world, hole.axis_world
     h1, h2 = _perp_basis(a)
     P = np.eye(3) - np.outer(u, u)
+    e1, e2 = _perp_basis(u, pin.land_direction_world)
     edges = [(0.0, hole.radius_m + hole.chamfer_m)] + ([(hole.chamfer_m, hole.radius_m)] if hole.chamfer_m > 0 else [])
     out = []
     for depth, radius in edges:
@@ -460,10 +512,20 @@ def _hole_edges_on_tip(pin: PinBody, hole: HoleBody, settings: PinSettings) -> l
             return y, np.array([float((y - pin.base_world) @ u), float(np.linalg.norm(v))])
 
         def gap_of(phi: float, at: Callable[[float], tuple[FloatArray, FloatArray]] = at) -> float | None:
-            found = _pin_tip_gap(pin, at(phi)[1])
+            y, q = at(phi)
+            if pin.land_direction_world is not None:
+                v = P @ (y - pin.base_world)
+                if not _in_arcs(math.atan2(float(v @ e2), float(v @ e1)), arcs):
+                    return None
+            found = _pin_tip_gap(pin, q)
             return None if found is None else found[0]
 
-        phi = _least_on_circle(gap_of, settings)
+        ends = (
+            []
+            if pin.land_direction_world is None
+            else _land_end_angles(P @ (centre - pin.base_world), radius * (P @ h1), radius * (P @ h2), e1, e2, arcs)
+        )
+        phi = _least_on_circle(gap_of, settings, ends)
         if phi is None:
             continue
         y, q = at(phi)
@@ -478,14 +540,15 @@ def _hole_edges_on_tip(pin: PinBody, hole: HoleBody, settings: PinSettings) -> l
     return out
 
 
-def _tip_edges_on_chamfer(pin: PinBody, hole: HoleBody, settings: PinSettings) -> list[PinContact]:
-    """The pin's rim and tip circles on the hole's mouth chamfer."""
+def _tip_edges_on_chamfer(
+    pin: PinBody, hole: HoleBody, arcs: list[tuple[float, float]], settings: PinSettings
+) -> list[PinContact]:
+    """The pin's rim and tip circles on the hole's mouth chamfer, within ``arcs`` (a diamond: one land's)."""
     if hole.chamfer_m <= 0.0:
         return []
     u, a, m = pin.axis_world, hole.axis_world, hole.mouth_world
     e1, e2 = _perp_basis(u, pin.land_direction_world)
     P = np.eye(3) - np.outer(a, a)
-    arcs = _land_arcs(pin)
     circles = [(pin.side_end_m, pin.radius_m)] + (
         [(pin.length_m, pin.radius_m - pin.chamfer_m)] if pin.chamfer_m > 0 else []
     )
@@ -503,7 +566,8 @@ def _tip_edges_on_chamfer(pin: PinBody, hole: HoleBody, settings: PinSettings) -
             found = _hole_chamfer_gap(hole, at(phi)[1])
             return None if found is None else found[0]
 
-        phi = _least_on_circle(gap_of, settings)
+        ends = [] if pin.land_direction_world is None else [b for arc in arcs for b in arc]
+        phi = _least_on_circle(gap_of, settings, ends)
         if phi is None:
             continue
         x, q = at(phi)
@@ -583,7 +647,9 @@ def pin_hole_contacts(pin: PinBody, hole: HoleBody, settings: PinSettings = _DEF
     bottom = _bottom(pin, hole, settings) if hole.blind else None
     if bottom is not None:
         out.append(bottom)
-    return out + _hole_edges_on_tip(pin, hole, settings) + _tip_edges_on_chamfer(pin, hole, settings)
+    for land in [arcs] if len(arcs) == 1 else [[arc] for arc in arcs]:  # the tip too: each land on its own
+        out += _hole_edges_on_tip(pin, hole, land, settings) + _tip_edges_on_chamfer(pin, hole, land, settings)
+    return out
 
 
 __all__ = [

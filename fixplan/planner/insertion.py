@@ -39,8 +39,13 @@ the state every tick (engaged pins from the pose, pressed rests from the engine'
 passes when the goal state is reached and held at rest, the rests within ``final_gap_m``, every
 hole's axis within the radial play of its pin's (for a diamond pin: along its lands), penetration
 and the solver's residual within the profile's bounds, the push within the hand's limits. An
-insertion that does not move along the axis for ``stall_s`` fails, naming the pin that did not
-enter and by how much it missed.
+insertion that does not move along the axis for ``stall_s``, or loses a pin it had engaged,
+consults the plan's policy (:mod:`.insertion_policy`, built with the plan): it backs off along
+the axis to the end of an earlier stage, re-centres the guide on where the holes of the pins past
+their chamfers were seen and goes on from the state it sees there, within the policy's budget
+(retries, time); then it fails, naming the pin that did not enter (or is wedged), the stage, by
+how much it missed and the retries it spent. A plan without a policy (a file written before it)
+fails at the first such stage.
 
 The plan is nominal: the guide lies on the nominal pins. ``robust`` runs it in worlds whose pins
 and rests are displaced (pose errors larger than the play): the chamfers must capture the part.
@@ -71,6 +76,7 @@ from fixplan.locating import (
 )
 from fixplan.model import Fixture
 from fixplan.planner.execute import ExecutionLog, ExecutionNoise
+from fixplan.planner.insertion_policy import InsertionPolicy, Recentring, insertion_policy
 from fixplan.planner.plan_types import Verification
 from fixplan.settings import DEFAULT, HAPTIC, ExecutionSettings, InsertionSettings, Settings
 from fixplan.spatial import Pose, exp_so3, log_so3, pose_between, shift_wrench
@@ -113,6 +119,8 @@ class InsertionPlan:
     seat_wrench_com: FloatArray | None = None  # the same about the centre of mass (what the hand adds to carrying)
     start_state: State = frozenset()  # the goal state when the part starts located
     plan_s: float = 0.0
+    # what the run does from every observable state, and how it recovers (None: a failed stage is the end)
+    policy: InsertionPolicy | None = None
 
     @property
     def states(self) -> list[State]:
@@ -258,6 +266,8 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     plan.ok = True
     seq = " → ".join(",".join(g) for g in plan.order)
     plan.reason = f"approach, insert {seq} along the axis, seat on {', '.join(rests)}"
+    ends = [float((st.poses[-1].p_world - G.p_world) @ u) for st in plan.stages[:-1]]
+    plan.policy = insertion_policy(fixture, plan.states, [st.kind for st in plan.stages], ends, s)
     plan.plan_s = time.perf_counter() - t0
     return plan
 
@@ -371,6 +381,15 @@ class InsertionRun:
         # the guide after the approach runs straight down the axis at the insertion speed
         self._h_stage_start = 0.0
         self._ref_h0 = 0.0
+        # the recovery (module insertion_policy): the guide's located pose (re-centred at a back-off),
+        # where the engaged holes were seen, the retries spent, the back-off under way
+        self.policy = plan.policy
+        self._goal = plan.goal
+        self._recentring = Recentring(world, plan.goal, self.u, self.inserts)
+        self._retries = 0
+        self._recovery_t0: float | None = None
+        self._backoff: tuple[float, float, float] | None = None  # (target height, since, height then)
+        self._spent = ""  # why the recovery could not go on (the budget), for the failure's reason
 
     @property
     def done(self) -> bool:
@@ -413,17 +432,26 @@ class InsertionRun:
             if dist < total and seg[k] > 0.0:
                 v[:3] = self.s.approach_speed_mps * (b.p_world - a.p_world) / seg[k]
             return ref, v, False
-        # down the axis from where the insertion began, on the located pose's line
+        if self._backoff is not None:  # a back-off: up the axis to its height, on the re-centred line
+            target, since, h0 = self._backoff
+            h = h0 + self.s.insert_speed_mps * (t - since)
+            v = np.zeros(6)
+            if h < target:
+                v[:3] = self.s.insert_speed_mps * self.u
+            return self._goal.translated(min(h, target) * self.u), v, True
+        # down the axis from where the insertion began, on the located pose's line (re-centred by a back-off)
         h = self._ref_h0 - self.s.insert_speed_mps * (t - self._t_stage)
         v = np.zeros(6)
         if h > -self.s.lead_m:
             v[:3] = -self.s.insert_speed_mps * self.u
         h = max(h, -self.s.lead_m)
-        return self.plan.goal.translated(h * self.u), v, True
+        return self._goal.translated(h * self.u), v, True
 
     def command(self, t: float, pose: Pose, twist: FloatArray, pressed: tuple[str, ...]) -> FloatArray:
         """The push now (about the body origin, world axes)."""
         state = self.observe(pose, pressed)
+        if self.policy is not None:
+            self._see_holes(pose)
         self._debounce(t, state, pose)
         if self.done:
             return np.zeros(6)
@@ -452,7 +480,9 @@ class InsertionRun:
         wr = self.s.rot_omega_radps
         T = self.I_max * (wr * wr * log_so3(ref.R_world_body @ pose.R_world_body.T) - 2.0 * wr * w_ang)
         w_com = carry + np.concatenate([F, T])
-        if axial:
+        if self._backoff is not None:
+            self._check_backoff(t, pose)
+        elif axial:
             self._check_progress(t, pose)
         return self._noisy(shift_wrench(w_com, com, pose.p_world))
 
@@ -474,6 +504,8 @@ class InsertionRun:
             self.log.observed.append(key)
         if self.index < len(self.plan.stages) and self.plan.stages[self.index].kind == "free":
             return  # the approach is a pose target: it ends at the staging pose (step_time), whatever touches
+        if self._backoff is not None:
+            return  # backing off: pins come out on purpose; the state at the top says where to go on from
         later = [j for j in range(self.index + 1, len(self.states)) if self.states[j] <= state]
         if later:
             j = later[-1]
@@ -491,7 +523,9 @@ class InsertionRun:
         elif self.index > 0 and not (self.states[self.index] <= state):
             lost = sorted(self.states[self.index] - state)
             self.log.counts["lost_contact"] += 1
-            self._fail(t, f"lost {', '.join(lost)} in transition {self.index + 1}", "lost contact")
+            what = f"lost {', '.join(lost)} in transition {self.index + 1} ({self._stage_label(self.index)})"
+            if not self._reenter(t, pose, state, what):
+                self._fail(t, what + self._spent, "lost contact")
 
     def _begin_insertion(self, t: float, pose: Pose) -> None:
         self._t_stage = t
@@ -522,7 +556,106 @@ class InsertionRun:
         if t - self._progress[1] < self.s.stall_s:
             return
         self.log.counts["stalls"] += 1
-        self._fail(t, self.why_stuck(pose), "stall")
+        why = self.why_stuck(pose)
+        if not self._recover(t, pose, why):
+            self._fail(t, why + self._spent, "stall")
+
+    # -- the recovery (module insertion_policy) ----------------------------------------------------
+    def _stage_label(self, index: int) -> str:
+        if index >= len(self.plan.stages):
+            return "holding"
+        st = self.plan.stages[index]
+        return {"free": "the approach", "seat": "the seating"}.get(st.kind, f"inserting {', '.join(st.added)}")
+
+    def _see_holes(self, pose: Pose) -> None:
+        """Where the holes of the pins past both chamfers are (what a back-off re-centres the guide on)."""
+        for i in self.inserts:
+            e = engagement(self.world, pose, i)
+            if e.engaged:
+                self._recentring.observe(pose, i, e.depth_m)
+
+    def _budget_left(self, t: float) -> bool:
+        """Whether the policy allows one more retry now; else :attr:`_spent` says why not."""
+        if self.policy is None:
+            return False
+        if self._retries >= self.policy.retries:
+            self._spent = f"; {self._retries} retries spent (the policy's budget)"
+            return False
+        if self._recovery_t0 is not None and t - self._recovery_t0 > self.policy.time_s:
+            self._spent = (
+                f"; the recovery's {self.policy.time_s:g} s spent after {self._retries} "
+                f"retr{'ies' if self._retries != 1 else 'y'}"
+            )
+            return False
+        self._retries += 1
+        self.log.counts["retries"] += 1
+        if self._recovery_t0 is None:
+            self._recovery_t0 = t
+        return True
+
+    def _recover(self, t: float, pose: Pose, why: str) -> bool:
+        """A stalled stage: back off along the axis and re-centre the guide (False: no policy, or its budget is spent)."""
+        if self.policy is None or not self._budget_left(t):
+            return False
+        h = self.height_m(pose)
+        target = self.policy.backoff_height(h, self._retries - 1)
+        self._goal, how = self._recentring.guide()
+        self._backoff = (target, t, h)
+        self._progress = None
+        self._seating = False
+        self.log.event(
+            t, "retry", f"{why}: back off to {target * 1e3:.3g} mm above the located pose, {how} "
+            f"(retry {self._retries} of {self.policy.retries})",
+        )  # fmt: skip
+        return True
+
+    def _check_backoff(self, t: float, pose: Pose) -> None:
+        """Up the axis to the back-off's height; there, go on with the policy's entry of the state seen."""
+        if self._backoff is None:  # pragma: no cover - called only while backing off
+            return
+        target = self._backoff[0]
+        h = self.height_m(pose)
+        if h >= target - self.s.stall_progress_m:
+            self._backoff = None
+            self._progress = None
+            state = self.observe(pose, ())  # the rests are open up here: the engaged pins say the state
+            self.index = max((j for j in range(1, len(self.states) - 1) if self.states[j] <= state), default=1)
+            self._debounced.reset(state)
+            self.log.event(t, "state", f"backed off to {h * 1e3:.3g} mm: {format_state(state)}, "
+                                       f"{self._stage_label(self.index)} again")  # fmt: skip
+            self._begin_insertion(t, pose)
+            return
+        if self._progress is None or h - self._progress[0] >= self.s.stall_progress_m:
+            self._progress = (h, t)
+        elif t - self._progress[1] >= self.s.stall_s:
+            self.log.counts["stalls"] += 1
+            wedged = self._wedged(pose)
+            why = (
+                f"could not back off in transition {self.index + 1} ({self._stage_label(self.index)}): the part "
+                f"stays {h * 1e3:.3g} mm above the located pose, {(target - h) * 1e3:.3g} mm short of the back-off's "
+                f"height (retry {self._retries})"
+            )
+            self._fail(t, why + (f"; {wedged}" if wedged else ""), "stall")
+
+    def _reenter(self, t: float, pose: Pose, state: State, what: str) -> bool:
+        """A pin the run had engaged is lost: go on with the policy's entry of the state seen (False: none, or no budget)."""
+        if self.policy is None:
+            return False
+        engaged = frozenset(i.name for i in self.inserts) & state
+        entry = self.policy.entry(engaged, False)
+        if entry is None or entry.transition is None or not self._budget_left(t):
+            return False
+        self.index = entry.transition
+        self._seating = False
+        self._progress = None
+        self._goal, how = self._recentring.guide()
+        self.log.counts["policy_switches"] += 1
+        self.log.event(
+            t, "retry", f"{what}: the policy's {entry.action} from {format_state(state)} on to "
+            f"{format_state(entry.next)}, {how} (retry {self._retries} of {self.policy.retries})",
+        )  # fmt: skip
+        self._begin_insertion(t, pose)
+        return True
 
     def why_stuck(self, pose: Pose) -> str:
         """One line: the first pin the plan expects next that is not in its hole, and by how much it missed."""
@@ -539,12 +672,29 @@ class InsertionRun:
                 else f"{i.hole}'s axis {e.offset_m * 1e3:.3g} mm from its tip, beyond the capture "
                 f"{i.capture_m * 1e3:.3g} mm (play + chamfers), {max(-e.depth_m, 0.0) * 1e3:.3g} mm above"
             )
-            return f"{i.name} did not enter {i.hole} (transition {self.index + 1}): {miss}"
+            return f"{i.name} did not enter {i.hole} (transition {self.index + 1}, {self._stage_label(self.index)}): {miss}"
         missing = sorted(expect - self._observed)
-        return (
-            f"stuck in transition {self.index + 1}: {', '.join(missing) or 'the seat'} not reached, "
-            f"the part {self.height_m(pose) * 1e3:.3g} mm above the located pose and not moving down"
+        out = (
+            f"stuck in transition {self.index + 1} ({self._stage_label(self.index)}): "
+            f"{', '.join(missing) or 'the seat'} not reached, the part {self.height_m(pose) * 1e3:.3g} mm above "
+            "the located pose and not moving down"
         )
+        wedged = self._wedged(pose)
+        return out + (f"; {wedged}" if wedged else "")
+
+    def _wedged(self, pose: Pose) -> str:
+        """The engaged pin whose hole is off its axis by the most beyond its play (what holds the part), or ""."""
+        worst, name = 0.0, ""
+        for i in self.inserts:
+            e = engagement(self.world, pose, i)
+            off = max(axis_offsets_m(self.world, pose, i))
+            if e.engaged and off - i.play_m > worst:
+                worst = off - i.play_m
+                name = (
+                    f"{i.name} wedged in {i.hole}: the hole's axis {off * 1e3:.3g} mm off the pin's (play "
+                    f"{i.play_m * 1e3:.3g} mm), its tip {e.depth_m * 1e3:.3g} mm in"
+                )
+        return name
 
     def _check_settled(self, t: float, state: State, twist: FloatArray) -> None:
         if state >= self.goal and float(np.linalg.norm(twist[:3])) < self.execution.stall_speed_mps * 10:
@@ -630,6 +780,8 @@ def verify_insertion(
         for a, b in zip(st.poses[:-1], st.poses[1:], strict=True)
     )
     time_limit = s.time_factor * guide / s.insert_speed_mps + s.time_base_s
+    if plan.policy is not None:  # the recovery's budget: a run that backs off may take this much longer
+        time_limit += plan.policy.time_s
     trace_every = max(int(round(trace_every_s / sim.dt)), 1) if trace_every_s > 0 else 0
     try:
         rec = loop.run(time_limit, operator, trace_every=trace_every, until=lambda: run.done)

@@ -3,8 +3,10 @@
 A plan for a fixture with pins or bores (:mod:`.insertion`) is written like any other
 (``sequence``, ``transitions`` with their knot poses and pushes) plus the ``insertion`` key
 (:func:`insertion_json`): the insertion axis, the located pose the guide ends at, each
-transition's stage (``free``: the approach to the staging pose, ``insert``, ``seat``) and the
-seating push. :func:`check_insertion_claims` checks those claims against the fixture (the plan
+transition's stage (``free``: the approach to the staging pose, ``insert``, ``seat``), the
+seating push and the policy (:mod:`.insertion_policy`: what the run does from every observable
+state and how it recovers; a file written before it has none, and re-runs without recovery, as
+``solve`` verified it then). :func:`check_insertion_claims` checks those claims against the fixture (the plan
 must be the staged insertion of *this* fixture: its axis and located pose, its states from the
 start to every pin engaged and every rest pressed), and :func:`insertion_plan_of` reads the plan
 back as the :class:`~.insertion.InsertionPlan` that :func:`~.insertion.verify_insertion` runs in
@@ -25,6 +27,7 @@ from fixplan.contact_state import format_state
 from fixplan.errors import InputError
 from fixplan.locating import engagement, insertion_axis, inserts, located_pose, seated
 from fixplan.planner.insertion import InsertionPlan, Stage, goal_state
+from fixplan.planner.insertion_policy import InsertionPolicy
 from fixplan.planner.plan_types import Plan, Verification, pose_from_json
 from fixplan.settings import HAPTIC, Settings
 from fixplan.spatial import shift_wrench
@@ -41,12 +44,15 @@ def insertion_json(plan: InsertionPlan) -> dict[str, Any] | None:
     """The plan file's ``insertion`` key; None when there is no plan to re-run (no seating push)."""
     if not plan.ok or plan.seat_wrench is None:
         return None
-    return {
+    out: dict[str, Any] = {
         "axis": [float(x) for x in plan.axis_world],
         "goal": plan.goal.to_json(),
         "stages": [st.kind for st in plan.stages],
         "seat_wrench": [float(x) for x in plan.seat_wrench],
     }
+    if plan.policy is not None:
+        out["policy"] = plan.policy.to_json()
+    return out
 
 
 def _state(s: Iterable[str]) -> str:
@@ -161,6 +167,50 @@ def check_insertion_claims(plan: Plan, fixture: Fixture, source: str, *, toleran
                 f"{source}: transitions[{n - 1}].poses[-1]: {dp:.3g} m, {math.degrees(dr):.3g}° from the located pose "
                 f"(expected the seating to end there, within {tol_m:g} m)"
             )
+    if data.get("policy") is not None:
+        check_policy_claims(data["policy"], fixture, seq, stages, source)
+
+
+def check_policy_claims(data: dict[str, Any], fixture: Fixture, seq: list[frozenset[str]], stages: list[str],
+                        source: str) -> None:  # fmt: skip
+    """Refuse an ``insertion.policy`` that is not one of this plan (:mod:`.insertion_policy`).
+
+    Each entry's ``engaged`` names the fixture's pins and bores, once per (``engaged``,
+    ``seated``); ``seated`` (``hold``, no ``transition``) only with all of them; any other entry
+    runs a transition after the approach whose stage is its ``action`` (``insert`` or ``seat``),
+    from a planned state it holds, and leads to a planned state holding it (``next``).
+    """
+    names = {i.name for i in inserts(fixture)}
+    seen: set[tuple[tuple[str, ...], bool]] = set()
+    for k, e in enumerate(data["entries"]):
+        where = f"{source}: insertion.policy.entries[{k}]"
+        engaged = frozenset(e["engaged"])
+        if not engaged <= names:
+            raise InputError(
+                f"{where}.engaged: got {_state(engaged)} (expected pins and bores of {fixture.source}: {_state(names)})"
+            )
+        key = (tuple(sorted(engaged)), bool(e["seated"]))
+        if key in seen:
+            raise InputError(f"{where}: {_state(engaged)} twice (expected one entry per observable state)")
+        seen.add(key)
+        t, action, nxt = e["transition"], e["action"], frozenset(e["next"])
+        if e["seated"] or action == "hold":
+            if not (e["seated"] and action == "hold" and t is None and engaged == names and nxt == seq[-1]):
+                raise InputError(
+                    f"{where}: got seated {e['seated']}, action {action}, transition {t} (expected the goal's "
+                    f"entry: every pin and bore engaged, seated true, action hold, transition null, next {_state(seq[-1])})"
+                )
+            continue
+        if t is None or not 0 < t < len(stages) or stages[t] != action or not seq[t] <= engaged:
+            raise InputError(
+                f"{where}.transition: got {t} with action {action} (expected a transition after the approach whose "
+                f"stage is the action, from a planned state {_state(engaged)} holds)"
+            )
+        if nxt not in seq[t + 1 :] or not engaged <= nxt:
+            raise InputError(
+                f"{where}.next: got {_state(nxt)} (expected a planned state after transition {t} that holds "
+                f"{_state(engaged)})"
+            )
 
 
 def insertion_plan_of(plan: Plan, fixture: Fixture) -> InsertionPlan:
@@ -183,6 +233,7 @@ def insertion_plan_of(plan: Plan, fixture: Fixture) -> InsertionPlan:
         )  # fmt: skip
     seat = np.asarray(data["seat_wrench"], dtype=float)
     com = G.point_world_from_body(fixture.workpiece.com_body)
+    policy = data.get("policy")
     return InsertionPlan(
         ok=True,
         reason=plan.reason,
@@ -192,6 +243,7 @@ def insertion_plan_of(plan: Plan, fixture: Fixture) -> InsertionPlan:
         seat_wrench=seat,
         seat_wrench_com=shift_wrench(seat, G.p_world, com),
         start_state=frozenset(plan.sequence[0]) if plan.sequence else frozenset(),
+        policy=None if policy is None else InsertionPolicy.from_json(policy),
     )
 
 
@@ -205,6 +257,7 @@ def verify_insertion_file(fixture: Fixture, plan: Plan, settings: Settings = HAP
 __all__ = [
     "APPROACH",
     "check_insertion_claims",
+    "check_policy_claims",
     "insertion_json",
     "insertion_plan_of",
     "verify_insertion_file",

@@ -746,6 +746,10 @@ def solve_insertion(
     status, reason = _status(verification, plan.reason)
     if status == "planned":
         reason = plan.reason
+        ex = verification.execution if verification is not None else None
+        retries = ex.counts["retries"] if ex is not None else 0
+        if retries:  # the run stalled and recovered by its policy (planner/insertion_policy.py)
+            reason += f"; verified after {retries} retr{'ies' if retries != 1 else 'y'} by the insertion's policy"
     timings["total_s"] = time.perf_counter() - t0
     sequence = [tuple(sorted(s)) for s in plan.states]
     return PlanResult(status, reason, sequence, transitions, [], verification, durations, timings,
