@@ -252,7 +252,9 @@ def test_a_part_lowered_beside_its_pins_rests_on_their_tips() -> None:
     assert reports["P1"].force_world[2] == pytest.approx(total * 0.028 / 0.0801, rel=0.01)  # measured: 0.2 %
     assert all(reports[n].normal_force_N == 0.0 for n in ("B1", "B2", "B3"))  # the rests 12 mm below
     before = _lowered(np.array([0.012, 0.0]), without_face=True)
-    assert before.pose.p_world[2] < goal_z + 0.012 - 0.005  # through the tips (5.3 mm; 7.5 before the diamond's tip was its lands only): what the face stops
+    assert (
+        before.pose.p_world[2] < goal_z + 0.012 - 0.005
+    )  # through the tips (5.3 mm; 7.5 before the diamond's tip was its lands only): what the face stops
 
 
 def test_a_part_beyond_the_capture_with_the_mouth_over_the_tip_rests_on_it() -> None:
