@@ -303,13 +303,10 @@ def _states(fx: fixplan.Fixture, push: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-@needs_build
-def test_a_mesh_part_steps_identically(monkeypatch) -> None:
-    """Simulator.step of a mesh part (detection, slots and step in one kernel), AOT vs JIT."""
+def _mesh_step_aot_equals_jit(fx, push, monkeypatch) -> None:
+    """The mesh step's states under ``push``: the ahead-of-time kernel's equal the JIT's, with no fallback."""
     from fixplan.engine import mesh_slots as mesh_slots_module
 
-    fx = fixplan.load(PROBLEMS / "meshes" / "l-bracket.toml")
-    push = np.array([-1.0, 0.5, -2.0, 0.01, 0.0, 0.02])
     states_aot = _states(fx, push)
     assert isinstance(mesh_slots_module._mesh_step3, aot._AotKernel)
     monkeypatch.setattr(mesh_slots_module, "_mesh_step3", _jit("fixplan.engine._mesh_slot_kernels", "mesh_step3"))
@@ -319,9 +316,16 @@ def test_a_mesh_part_steps_identically(monkeypatch) -> None:
 
 
 @needs_build
+def test_a_mesh_part_steps_identically(monkeypatch) -> None:
+    """Simulator.step of a mesh part (detection, slots and step in one kernel), AOT vs JIT."""
+    fx = fixplan.load(PROBLEMS / "meshes" / "l-bracket.toml")
+    push = np.array([-1.0, 0.5, -2.0, 0.01, 0.0, 0.02])
+    _mesh_step_aot_equals_jit(fx, push, monkeypatch)
+
+
+@needs_build
 def test_a_mesh_part_on_pins_steps_identically(monkeypatch, tmp_path) -> None:
     """Simulator.step of the housing as a mesh part on its two pins (the pins' closed forms in the mesh step), AOT vs JIT."""
-    from fixplan.engine import mesh_slots as mesh_slots_module
     from fixplan.geometry.cells import box_cells, cell_surface
     from fixplan.geometry.mesh import stl_bytes
 
@@ -332,12 +336,7 @@ def test_a_mesh_part_on_pins_steps_identically(monkeypatch, tmp_path) -> None:
     (tmp_path / "mesh.toml").write_text(text.replace(box, 'shape = "mesh"\nfile = "housing.stl"\nunits = "mm"'))
     fx = fixplan.load(tmp_path / "mesh.toml")
     push = np.array([0.5, -0.3, -5.0, 0.01, -0.02, 0.0])
-    states_aot = _states(fx, push)
-    assert isinstance(mesh_slots_module._mesh_step3, aot._AotKernel)
-    monkeypatch.setattr(mesh_slots_module, "_mesh_step3", _jit("fixplan.engine._mesh_slot_kernels", "mesh_step3"))
-    states_jit = _states(fx, push)
-    assert all(np.array_equal(a, b) for a, b in zip(states_aot, states_jit, strict=True))
-    assert not any(key.startswith("fixplan.engine._mesh_slot_kernels") for key in aot.fallbacks)
+    _mesh_step_aot_equals_jit(fx, push, monkeypatch)
 
 
 @needs_build

@@ -105,25 +105,14 @@ def test_the_simulated_haptic_loop_plays_the_stage_and_the_part_stays_put(path) 
 
 def test_cli_haptic_clamp_over_the_udp_bridge() -> None:
     """``fixplan haptic --clamp --clock device`` driven by ``device-sim --lockstep``: exit 0, strict JSON."""
-    import subprocess
+    from test_interactive_cli import fixplan_cli, strict_json, udp_haptic
 
-    from conftest import CLI
-    from test_interactive_cli import fixplan_cli, free_udp_port, strict_json
-
-    port = free_udp_port()
-    haptic = subprocess.Popen(
-        [*CLI, "haptic", str(BOX_CLAMPED), "--device", f"udp:{port}", "--port", "0", "--no-browser",
-         "--until", "goal", "--clock", "device", "--clamp", "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    try:
-        fixplan_cli("device-sim", "--port", str(port), "--lockstep", "--seed", "3", "--json", timeout=180)
-        stdout, stderr = haptic.communicate(timeout=60)
-    finally:
-        if haptic.poll() is None:
-            haptic.kill()
-            haptic.communicate()
-    assert haptic.returncode == 0, stderr
+    code, stdout, stderr, _ = udp_haptic(
+        [str(BOX_CLAMPED), "--until", "goal", "--clock", "device", "--clamp", "--json"],
+        ["--lockstep", "--seed", "3", "--json"],
+        device_timeout=180,
+    )
+    assert code == 0, stderr
     out = strict_json(stdout)
     c = out["clamping"]
     assert out["status"] == "reached" and c["played"] and c["passed"], c

@@ -35,25 +35,46 @@ def free_udp_port() -> int:
         return int(s.getsockname()[1])
 
 
-@pytest.fixture(scope="module")
-def udp_session(tmp_path_factory):
-    """fixplan haptic --device udp:P --no-browser --record R --until goal, driven by fixplan device-sim."""
-    out = tmp_path_factory.mktemp("haptic")
-    record = out / "session.json"
+def udp_haptic(haptic_args: list[str], device_args: list[str], device_timeout: float = 120):
+    """``fixplan haptic --device udp:P --port 0 --no-browser ARGS`` driven by ``fixplan device-sim --port P ARGS``.
+
+    Returns the haptic process's exit status, stdout and stderr, and the device-sim's completed process.
+    """
     port = free_udp_port()
     haptic = subprocess.Popen(
-        [*CLI, "haptic", str(fixplan.default_fixture_path()), "--device", f"udp:{port}", "--port", "0",
-         "--no-browser", "--record", str(record), "--until", "goal", "--clock", "device", "--json"],
+        [*CLI, "haptic", *haptic_args, "--device", f"udp:{port}", "--port", "0", "--no-browser"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
-        sim = fixplan_cli("device-sim", "--port", str(port), "--lockstep", "--seed", "3", "--json", timeout=180)
+        sim = fixplan_cli("device-sim", "--port", str(port), *device_args, timeout=device_timeout)
         stdout, stderr = haptic.communicate(timeout=60)
     finally:
         if haptic.poll() is None:
             haptic.kill()
             haptic.communicate()
-    return haptic.returncode, stdout, stderr, sim, record
+    return haptic.returncode, stdout, stderr, sim
+
+
+@pytest.fixture(scope="module")
+def udp_session(tmp_path_factory):
+    """fixplan haptic --device udp:P --no-browser --record R --until goal, driven by fixplan device-sim."""
+    out = tmp_path_factory.mktemp("haptic")
+    record = out / "session.json"
+    code, stdout, stderr, sim = udp_haptic(
+        [
+            str(fixplan.default_fixture_path()),
+            "--record",
+            str(record),
+            "--until",
+            "goal",
+            "--clock",
+            "device",
+            "--json",
+        ],
+        ["--lockstep", "--seed", "3", "--json"],
+        device_timeout=180,
+    )
+    return code, stdout, stderr, sim, record
 
 
 def test_udp_session_reaches_the_goal_and_records_it(udp_session):
@@ -141,20 +162,11 @@ def test_verify_runs_a_solved_plan_through_the_executor(tmp_path):
 def test_jammed_udp_session_is_recorded_as_jammed_and_fails_verify(tmp_path):
     """device-sim --push: a hand that pushes down 30 N and sideways 3 N; friction holds the part."""
     record = tmp_path / "jam.json"
-    port = free_udp_port()
-    haptic = subprocess.Popen(
-        [*CLI, "haptic", "--device", f"udp:{port}", "--port", "0", "--no-browser", "--record", str(record),
-         "--until", "1", "--clock", "device", "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    try:
-        sim = fixplan_cli("device-sim", "--port", str(port), "--lockstep", "--push", "0,-3,-30,0,0,0", "--json")
-        stdout, stderr = haptic.communicate(timeout=60)
-    finally:
-        if haptic.poll() is None:
-            haptic.kill()
-            haptic.communicate()
-    assert haptic.returncode == 1, stderr  # not at the goal
+    code, stdout, stderr, sim = udp_haptic(
+        ["--record", str(record), "--until", "1", "--clock", "device", "--json"],
+        ["--lockstep", "--push", "0,-3,-30,0,0,0", "--json"],
+    )
+    assert code == 1, stderr  # not at the goal
     summary = strict_json(stdout)
     assert summary["status"] == "jammed" and "held by friction" in summary["reason"]
     assert sim.returncode == 1 and strict_json(sim.stdout)["ended"]
@@ -174,20 +186,11 @@ def test_udp_session_seats_a_shaft_in_its_bore():
     """
     from conftest import PROBLEMS
 
-    port = free_udp_port()
-    haptic = subprocess.Popen(
-        [*CLI, "haptic", str(PROBLEMS / "shaft-into-bore.toml"), "--device", f"udp:{port}", "--port", "0",
-         "--no-browser", "--until", "goal", "--clock", "device", "--json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    try:
-        sim = fixplan_cli("device-sim", "--port", str(port), "--lockstep", "--delay-ms", "0", "--noise", "0", "--json")
-        stdout, stderr = haptic.communicate(timeout=60)
-    finally:
-        if haptic.poll() is None:
-            haptic.kill()
-            haptic.communicate()
-    assert haptic.returncode == 0, stderr
+    code, stdout, stderr, sim = udp_haptic(
+        [str(PROBLEMS / "shaft-into-bore.toml"), "--until", "goal", "--clock", "device", "--json"],
+        ["--lockstep", "--delay-ms", "0", "--noise", "0", "--json"],
+    )
+    assert code == 0, stderr
     summary = strict_json(stdout)
     assert summary["status"] == "reached" and summary["reason"].startswith("seated in B1")
     assert summary["sequence"][-1] == ["B1", "B1.bottom"]

@@ -167,17 +167,11 @@ def test_a_mesh_that_models_a_blind_bore_gives_a_blind_hole(tmp_path: Path) -> N
 
 def _sync(a: Simulator, b: Simulator) -> None:
     """``a`` (compiled) takes ``b``'s (the Python reference's) state and warm starts, the pins' too (as tests/test_mesh_slot_kernels.py)."""
-    for name in ("_R", "_p", "_v", "_w", "_P", "_P_prev", "_u", "_gap", "_nw", "_active", "_active_prev"):
-        getattr(a, name)[...] = getattr(b, name)
-    stepper, last, pins = a._mesh_stepper, b._mesh_last, b._pin_last
-    assert stepper is not None and last is not None and pins is not None
-    stepper.loc_slots[:] = 0
-    for j, (i, rank) in enumerate(last.keys):
-        old = b._mesh_state[(i, rank)]
-        stepper.state[j, :12], stepper.state[j, 16:18] = old[:12], old[12:14]
-        if rank == 0:
-            stepper.loc_slots[i, 0] = j
-        stepper.loc_slots[i, 1] += 1
+    from test_mesh_slot_kernels import sync
+
+    sync(a, b)
+    stepper, pins = a._mesh_stepper, b._pin_last
+    assert stepper is not None and pins is not None
     for j, key in enumerate(pins.keys):
         old = b._pin_state[key]
         stepper.pin_state[j, :12], stepper.pin_state[j, 16:18], stepper.pin_state[j, 18:21] = old[:12], old[12:14], key
