@@ -832,6 +832,26 @@ def _face_mismatches(
     return tuple(out)
 
 
+def _beyond_faces(
+    shape: Shape, locators: Sequence[Locator], faces: Sequence[str], pose: Pose
+) -> list[tuple[str, str, float]]:
+    """Locators whose touch point on their face's plane lies outside the face at ``pose``: (name, face, by [m]).
+
+    Box and rectangle faces only (a cylinder's ends and side: none); the largest overshoot first.
+    """
+    if not isinstance(shape, Box | Rectangle):
+        return []
+    half = np.asarray(shape.half, dtype=float)
+    out = []
+    for loc, face in zip(locators, faces, strict=True):
+        k = "xyz".index(face[1])
+        q = pose.point_body_from_world(loc.p_world)
+        excess = max(float(abs(q[j]) - half[j]) for j in range(half.shape[0]) if j != k)
+        if excess > DEFAULT.goal.touch_gap_m:
+            out.append((loc.name, face, excess))
+    return sorted(out, key=lambda item: -item[2])
+
+
 def _faces_touched(shape: Shape, locators: Sequence[Locator], pose: Pose) -> list[str | None]:
     """The face of the part nearest each locator at ``pose`` (None on a shape without named faces)."""
     return [shape.face_of(shape.project(pose.point_body_from_world(loc.p_world)).point_body) for loc in locators]
@@ -875,6 +895,9 @@ def find_goal(
     full_rank = min(len(locators), 6 if start.dimension == 3 else 3)
     found: list[tuple[Key, GoalResult]] = []
     touching: list[tuple[Key, GoalResult, tuple[tuple[str, str], ...]]] = []
+    # where every locator touches the plane of its face but some lie beyond the face's edges
+    # (the least overshoot first): why the exact gaps cannot all close there
+    off_faces: list[tuple[str, str, float]] = []
     best: list[GoalResult] = []
 
     def consider(result: GoalResult, order: int) -> None:
@@ -922,7 +945,12 @@ def find_goal(
                         assignments.append(at_start)
             for named in assignments:
                 planes = _face_model(workpiece, locators, named)
-                pose = _gauss_newton(planes, workpiece, slid, **iterations).pose  # type: ignore[arg-type]
+                on_planes = _gauss_newton(planes, workpiece, slid, **iterations)  # type: ignore[arg-type]
+                pose = on_planes.pose
+                if on_planes.converged:
+                    beyond = _beyond_faces(shape, locators, named, pose)
+                    if beyond and (not off_faces or beyond[0][2] < off_faces[0][2]):
+                        off_faces[:] = beyond
                 consider(_gauss_newton(exact, workpiece, pose, **iterations), tried)  # type: ignore[arg-type]
             if not faces:
                 consider(_gauss_newton(exact, workpiece, slid, **iterations), tried)  # type: ignore[arg-type]
@@ -933,6 +961,15 @@ def find_goal(
     if touching:
         _, result, mismatched = min(touching, key=lambda item: item[0])
         return GoalSearch(False, result.pose, result.max_gap_m, result.rank, tried, face_mismatches=mismatched)
+    if off_faces:
+        where = ", ".join(
+            f"{name} lies {out * 1e3:.3g} mm beyond the edge of face {face!r}" for name, face, out in off_faces
+        )
+        reason = (
+            f"no pose touches every locator on its face: where each touches its face's plane, {where} "
+            f"(of {tried} starts, the least overshoot); move the locator inward or name another face"
+        )
+        return GoalSearch(False, None, best[0].max_gap_m, best[0].rank, tried, reason, proven=False)
     reason = (
         f"goal finding did not converge from {tried} starts (largest gap {best[0].max_gap_m:.3g} m at the best); "
         "give workpiece.goal (the located pose)"
