@@ -333,7 +333,7 @@ def run_sample(
         cause = "no located pose" if isinstance(exc, InfeasibleError) else "error"
         return {
             "seed": sample, "passed": False, "transition": None, "cause": cause, "reason": str(exc),
-            "replans": 0, "sim_time_s": None, "wall_time_s": time.perf_counter() - t0,
+            "replans": 0, "retries": 0, "sim_time_s": None, "wall_time_s": time.perf_counter() - t0,
         }  # fmt: skip
     ex = v.execution
     return {
@@ -343,6 +343,8 @@ def run_sample(
         "cause": failure_cause(v),
         "reason": v.reason,
         "replans": int(ex.counts["replans"]) if ex is not None else 0,
+        # the pin insertion's policy: back-offs and re-entries after a stall or a lost pin
+        "retries": int(ex.counts.get("retries", 0)) if ex is not None else 0,
         "sim_time_s": None if v.duration_s is None else float(v.duration_s),
         "wall_time_s": time.perf_counter() - t0,
     }
@@ -383,7 +385,7 @@ class RobustResult:
             "plan_reason": self.plan_reason,
             "sequence": [list(s) for s in self.sequence],
             "outcomes": [
-                {k: o[k] for k in ("seed", "passed", "transition", "cause", "replans", "sim_time_s")}
+                {k: o[k] for k in ("seed", "passed", "transition", "cause", "replans", "retries", "sim_time_s")}
                 for o in self.outcomes
             ],
             "settings": {"samples": self.samples, **self.settings.to_json()},
