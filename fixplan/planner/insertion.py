@@ -13,7 +13,9 @@ axis, or the bore's; the part moves along ``−u``), from the located pose ``G``
 
 1. **approach** (a pose target, not a contact target): from the start to the staging pose
    ``G + u (h₁ + lead_m)``, lifting first when the start is lower, so that every hole's axis lies
-   on its pin's axis ``lead_m`` above the first tip;
+   on its pin's axis ``lead_m`` above the first tip; where the straight move would bring the
+   part's lowest point below the pins' tips or the stops' tops (a tilted start), it moves sideways
+   at a height that clears them and comes down along the axis (:func:`_over_staging`);
 2. **one insertion per pin**, in the order the tips meet their mouths on the way down (the pin
    whose engagement height ``h_i`` — its tip's depth in its hole at ``G`` — is largest first; pins
    engaging at the same height are one transition, round before diamond): down to
@@ -233,6 +235,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     rise = float((staging.p_world - start.p_world) @ u)
     if rise > 0.0:  # lift first: the part never moves sideways lower than the staging height
         poses.append(start.translated(rise * u))
+    poses += _over_staging(fixture, poses.pop(), staging, u, settings)
     guide = poses[:1]
     for a, b in zip([*poses], [*poses[1:], staging], strict=True):
         guide += [pose_between(a, b, k / 4) for k in range(1, 5)]
@@ -317,6 +320,51 @@ class SeatTurn:
     max_torque_Nm: float  # the stops' part of the seating push about the pin's axis: the turn's push at most
     speed_radps: float  # the turn's speed toward the stops (``seat_turn_speed_mps`` at the farthest stop)
     reason: str
+
+
+def _over_staging(fixture: Fixture, top: Pose, staging: Pose, u: FloatArray, settings: Settings) -> list[Pose]:
+    """The approach's waypoints from ``top`` (the start, lifted to the staging height when lower) before the staging pose: ``[top]``, or the sideways move at a clear height.
+
+    The straight move from ``top`` to ``staging`` turns and moves the part sideways as it comes
+    down: a part tilted at the start, or a staging pose below a stop's top, brings its lowest
+    point onto a pin's tip or against a stop before it is over its pins. Where the straight move's
+    lowest point (the part's collision points, sampled along it) comes below the clear level, every
+    pin's tip and every stop's top ``lead_m`` down, the part instead rises (if need be), moves
+    sideways and turns at a height where it clears them all the way, and comes down to the staging
+    pose along the axis: ``[top, top raised, staging raised]``.
+    """
+    from fixplan.geometry.collision import collision_points
+
+    tops = [float((p.p_world + p.length_m * p.axis_world) @ u) for p in fixture.pins]
+    seat = seat_at(fixture, located_pose(fixture), u)
+    radius = {loc.name: loc.radius_m for loc in fixture.locators}
+    tops += [float(c.point_world @ u) + radius[c.owner] for c in seat.stops]
+    if not tops:
+        return [top]
+    clear = max(tops) + settings.insertion.lead_m
+    pts, radii = collision_points(fixture.workpiece.shape, settings.engine.rim_points)
+
+    def lowest(pose: Pose) -> float:
+        return float(np.min((pts @ pose.R_world_body.T + pose.p_world) @ u - radii))
+
+    def deficit(a: Pose, b: Pose) -> float:
+        """How far the part's lowest point comes below the clear level on the way from ``a`` to ``b`` (``b`` excluded).
+
+        The hand's turn lags the guide's: the part is taken as turned as the guide or still as at ``top``.
+        """
+        poses = [pose_between(a, b, k / 8) for k in range(8)]
+        return clear - min(min(lowest(p), lowest(Pose(top.R_world_body, p.p_world))) for p in poses)
+
+    if deficit(top, staging) <= 0.0:
+        return [top]
+    h = max(float((staging.p_world - top.p_world) @ u), 0.0)
+    for _ in range(8):  # raise the sideways move until it clears (each time by what it lacked)
+        a, b = top.translated(h * u), staging.translated(float((top.p_world - staging.p_world) @ u + h) * u)
+        lack = max(deficit(a, b), clear - lowest(b))
+        if lack <= 0.0:
+            break
+        h += lack
+    return [top, a, b] if h > 0.0 else [top, b]
 
 
 def seat_turn(fixture: Fixture, G: Pose, u: FloatArray, s: InsertionSettings) -> SeatTurn | None:
