@@ -913,6 +913,9 @@ class InsertionSettings:
     seat_turn_speed_mps : float
         The turn into the stops runs at this speed at the farthest stop (a velocity loop up to the
         stops' part of the seating push): a stop met faster knocks the part's hole around its pin.
+    seat_turn_gain : float
+        That loop's gain at most this × the part's inertia about the pin's axis per control tick
+        (higher gains on the part's speed ring through the haptic coupling).
     dwell_s : float
         A state (engaged pins, pressed rests) counts once held this long.
     stall_s, stall_progress_m : float
@@ -952,6 +955,7 @@ class InsertionSettings:
     stop_clearance_m: float = 0.001
     stop_turn_max_rad: float = 0.1
     seat_turn_speed_mps: float = 0.01
+    seat_turn_gain: float = 0.25
     dwell_s: float = 0.01
     stall_s: float = 0.6
     stall_progress_m: float = 0.0002

@@ -565,6 +565,7 @@ class InsertionRun:
         self._across = False  # latched until a back-off
         self._turn_integral = 0.0  # [rad] the turn's speed error, integrated
         self._turned = 0.0  # [rad] the turn toward the stops so far (its progress)
+        self._stops_pressed = False  # every stop pressed in the seating stage: the press along the axis too
 
     @property
     def done(self) -> bool:
@@ -656,7 +657,7 @@ class InsertionRun:
         T = self.I_max * (wr * wr * log_so3(ref.R_world_body @ pose.R_world_body.T) - 2.0 * wr * w_ang)
         w_com = carry + np.concatenate([F, T])
         if self._press_across(state):
-            w_com = self._across_push(carry, f_ax, v, w_ang)
+            w_com = self._across_push(carry, f_ax, v, w_ang, pressed)
         if self._backoff is not None:
             self._check_backoff(t, pose)
         elif axial:
@@ -672,15 +673,21 @@ class InsertionRun:
             self._across = True
         return self._across
 
-    def _across_push(self, carry: FloatArray, f_ax: float, v: FloatArray, w_ang: FloatArray) -> FloatArray:
+    def _across_push(
+        self, carry: FloatArray, f_ax: float, v: FloatArray, w_ang: FloatArray, pressed: tuple[str, ...]
+    ) -> FloatArray:
         """The seating stage's push (about the centre of mass) once the rests are pressed: into the stops.
 
         Carrying the part and the axial servo's push keep the rests lightly loaded; damping across
         the axis and in turn; the seating push's part toward the round pin's seated side (through
         its contact: no turn about the pin). With a turn (:class:`SeatTurn`) a velocity loop turns
-        the part about the pin's axis toward the stops at the turn's speed, its push the turn's unit
-        push (no force on the pin) times a torque up to the stops' part of the seating push; without
-        one, that part itself (each stop's push through its contact).
+        the part about the pin's axis toward the stops at the turn's speed (its gain the stops'
+        torque at rest, at most ``seat_turn_gain`` × the inertia about the pin per tick, and an
+        integral at ``rot_omega_radps``), its push the turn's unit push (no force on the pin) times
+        a torque up to the stops' part of the seating push; without one, that part itself (each
+        stop's push through its contact). Once every stop is pressed the seating push's press along
+        the axis is added (latched): a stop's friction would hold the lightly pressed part off its
+        rests.
         """
         p = self.plan
         u, wl, wr = self.u, self.s.lateral_omega_radps, self.s.rot_omega_radps
@@ -688,13 +695,17 @@ class InsertionRun:
         spin = w_ang if turn is None else w_ang - float(w_ang @ turn.axis_world) * turn.axis_world
         F = f_ax * u - self.m * 2.0 * wl * (v - float(v @ u) * u)
         w = carry + np.concatenate([F, -self.I_max * 2.0 * wr * spin]) + np.asarray(p.seat_side_com)
+        if self._stops_pressed or set(p.stops) <= set(pressed):
+            self._stops_pressed = True
+            w[:3] -= self.s.seat_press * self.weight_N * u
         if turn is None:
             return w + np.asarray(p.seat_stops_com)
         rate = float(w_ang @ turn.axis_world)
         self._turned += rate * self.tick_s
-        top = turn.max_torque_Nm / (turn.inertia_kgm2 * wr * wr)  # the integral's bound: no wind-up past the push
+        gain = min(turn.max_torque_Nm / turn.speed_radps, self.s.seat_turn_gain * turn.inertia_kgm2 / self.tick_s)
+        top = turn.max_torque_Nm / (gain * wr)  # the integral's bound: no wind-up past the stops' push
         self._turn_integral = min(max(self._turn_integral + (turn.speed_radps - rate) * self.tick_s, -top), top)
-        torque = turn.inertia_kgm2 * (2.0 * wr * (turn.speed_radps - rate) + wr * wr * self._turn_integral)
+        torque = gain * (turn.speed_radps - rate + wr * self._turn_integral)
         torque = min(max(torque, -turn.max_torque_Nm), turn.max_torque_Nm)
         return w + torque * turn.unit_com
 
@@ -821,6 +832,7 @@ class InsertionRun:
         self._seating = False
         self._across = False
         self._turn_integral = 0.0
+        self._stops_pressed = False
         self.log.event(
             t, "retry", f"{why}: back off to {target * 1e3:.3g} mm above the located pose, {how} "
             f"(retry {self._retries} of {self.policy.retries})",
