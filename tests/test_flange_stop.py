@@ -169,3 +169,30 @@ def test_verify_reruns_the_flange_plan_file_as_solve_did(capsys, tmp_path: Path)
     assert doc["passed"] is True
     for name, gap in data["verification"]["final_gaps"].items():
         assert doc["final_gaps"][name] == pytest.approx(gap, abs=1e-9), name
+
+
+def test_the_approach_moves_sideways_clear_of_the_pin_and_the_stop_then_comes_down() -> None:
+    """From the tilted start the straight move would bring the tilted bottom within reach of P1's tip.
+
+    The clear level: P1's tip (0.012 m) and S1's top (0.01 m), max 0.012 m, plus lead_m (0.002 m).
+    Every knot before the staging pose keeps the part's lowest corner above it, turned as the guide or
+    still as at the start; the last leg is straight down the axis, turned as the staging pose.
+    """
+    from fixplan.planner.insertion import plan_insertion
+
+    fx = fixplan.load(FLANGE)
+    plan = plan_insertion(fx, HAPTIC)
+    guide = plan.stages[0].poses
+    staging = guide[-1]
+    clear = 0.012 + HAPTIC.insertion.lead_m
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * fx.workpiece.shape.half
+
+    def lowest(R: np.ndarray, p: np.ndarray) -> float:
+        return float(np.min((corners @ R.T + p)[:, 2]))
+
+    assert lowest(staging.R_world_body, staging.p_world) == pytest.approx(clear, abs=1e-12)
+    above = guide[-5]  # the knot over the staging pose: the last leg's four steps down
+    np.testing.assert_allclose(above.p_world[:2], staging.p_world[:2], atol=1e-12)
+    np.testing.assert_allclose(above.R_world_body, staging.R_world_body, atol=1e-12)
+    for pose in guide[:-4]:
+        assert min(lowest(pose.R_world_body, pose.p_world), lowest(fx.start.R_world_body, pose.p_world)) >= clear - 1e-9
