@@ -333,32 +333,48 @@ def seated(fixture: Fixture, pose: Pose) -> bool:
     return all(abs(g) <= tol for g in seat_gaps_m(fixture, pose).values())
 
 
+# a contact whose normal is at most this cosine from the insertion axis faces across it (a pin's side,
+# a stop), not along it (a rest): the descent along the axis does not close it
+_ACROSS_COS = 0.5
+
+
 @dataclass(frozen=True)
 class Seat:
-    """What the part sits on at a pose, and the side it is seated toward."""
+    """What the part sits on at a pose, the side it is seated toward, and the stops it is pressed into."""
 
     contacts: ContactSet  # every rest, pin and bore touching
     side_world: FloatArray  # unit, normal to the insertion axis, toward the round pin's contact; zero when none touches
     at_world: FloatArray  # where it is pressed: the mean of those contacts' points (the centre of mass when none)
+    # the touching locators whose normal lies across the axis (a stop taking the turn about a round pin):
+    # the descent does not close them, a push across the axis does
+    stops: tuple[Contact, ...] = ()
+
+    @property
+    def stop_names(self) -> tuple[str, ...]:
+        """The stops' locators, each once, in the file's order."""
+        return tuple(dict.fromkeys(c.owner for c in self.stops))
 
 
 def seat_at(fixture: Fixture, pose: Pose, u: FloatArray) -> Seat:
-    """The rests', pins' and bores' touching contacts at ``pose``, and the side the round pin (or bore) seats the part toward.
+    """The rests', pins' and bores' touching contacts at ``pose``, the side the round pin (or bore) seats the part toward, and the stops.
 
     The side is the sum of the first round pin's touching contact normals across ``u`` (they push
-    the part away from the pin), reversed; it is pressed at the mean of those contacts' points.
+    the part away from the pin), reversed; it is pressed at the mean of those contacts' points. A
+    stop is a touching locator whose normal lies across ``u`` (``|n·u| < 0.5``): moving along the
+    axis does not close it.
     """
     round_first = [i.name for i in inserts(fixture) if i.kind != "diamond"]
     names = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
     cs = contact_set(fixture, pose, names).touching(fixture.tolerances.touch_m)
+    stops = tuple(c for c in cs.contacts if c.kind == "locator" and abs(float(c.normal_world @ u)) < _ACROSS_COS)
     for owner in round_first:
-        side = [c for c in cs.contacts if c.owner == owner and abs(float(c.normal_world @ u)) < 0.5]
+        side = [c for c in cs.contacts if c.owner == owner and abs(float(c.normal_world @ u)) < _ACROSS_COS]
         n = sum((c.normal_world for c in side), np.zeros(3))
         n = n - float(n @ u) * u
         norm = float(np.linalg.norm(n))
         if norm > 0.0:
-            return Seat(cs, -n / norm, np.mean([c.point_world for c in side], axis=0))
-    return Seat(cs, np.zeros(3), pose.point_world_from_body(fixture.workpiece.com_body))
+            return Seat(cs, -n / norm, np.mean([c.point_world for c in side], axis=0), stops)
+    return Seat(cs, np.zeros(3), pose.point_world_from_body(fixture.workpiece.com_body), stops)
 
 
 def start_state(fixture: Fixture, kinds: Sequence[str] = ("locator",)) -> frozenset[str]:

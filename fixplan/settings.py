@@ -910,7 +910,20 @@ class InsertionSettings:
     seat_press : float
         The seating push along the axis, in the part's weights (beyond carrying it).
     seat_side : float
-        The seating push toward the round pin's (or bore's) contact, in the part's weights.
+        The seating push toward the round pin's (or bore's) contact, in the part's weights; as much
+        into each stop (a locator facing across the axis).
+    stop_clearance_m : float
+        With stops and one round pin, the part goes down turned about the pin's axis away from them
+        by the least turn that opens every stop's gap this much (a face sliding down along a stop
+        catches its tip on the face's edge), then turns into them on the rests.
+    stop_turn_max_rad : float
+        That turn at most.
+    seat_turn_speed_mps : float
+        The turn into the stops runs at this speed at the farthest stop (a velocity loop up to the
+        stops' part of the seating push): a stop met faster knocks the part's hole around its pin.
+    seat_turn_gain : float
+        That loop's gain at most this × the part's inertia about the pin's axis per control tick
+        (higher gains on the part's speed ring through the haptic coupling).
     dwell_s : float
         A state (engaged pins, pressed rests) counts once held this long.
     stall_s, stall_progress_m : float
@@ -947,6 +960,10 @@ class InsertionSettings:
     push_accel_mps2: float = 0.2
     seat_press: float = 1.0
     seat_side: float = 0.3
+    stop_clearance_m: float = 0.001
+    stop_turn_max_rad: float = 0.1
+    seat_turn_speed_mps: float = 0.01
+    seat_turn_gain: float = 0.25
     dwell_s: float = 0.01
     stall_s: float = 0.6
     stall_progress_m: float = 0.0002
