@@ -26,13 +26,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan import fixture_schema, limits
-from fixplan.errors import FixtureError, Issue, shorten
+from fixplan.errors import FixtureError, InputError, Issue, shorten
 from fixplan.fixture_schema import validate_document
 from fixplan.geometry import Box, Cylinder, Disk, Mesh, Polygon, Rectangle, Shape, Sphere
 from fixplan.geometry.collision import BOX as OBSTACLE_BOX
 from fixplan.geometry.collision import PLANE as OBSTACLE_PLANE
 from fixplan.geometry.collision import collision_points, obstacle_gap, plane_frame, polytope_overlap_m
-from fixplan.locating import find_goal, locator_contact, settle_free_motions, with_free_motions
+from fixplan.locating import find_goal, find_pin_goal, locator_contact, settle_free_motions, with_free_motions
 from fixplan.model import (
     Bore,
     Clamp,
@@ -798,13 +798,17 @@ class _Builder:
                 )
         if fixture.has_pins and not r.issues and fixture.is_full:
             if fixture.goal_given is None:
-                r.error(
-                    "workpiece.goal",
-                    "missing (a fixture with pins needs its located pose given: finding it with pins is not "
-                    "supported yet)",
-                )
-                return None
-            goal = fixture.goal_given
+                try:
+                    search = find_pin_goal(fixture)
+                except InputError as exc:  # the pins' axes differ: no one insertion to locate along
+                    r.error("workpiece.goal", f"missing, and no located pose to find: {exc}")
+                    return None
+                if not search.found or search.pose is None:
+                    r.error("workpiece.goal", f"missing, and {search.message}")
+                    return None
+                goal = search.pose
+            else:
+                goal = fixture.goal_given
             self.check_goal_gaps(fixture, goal)
             self.check_pin_goal(fixture, goal)
             return goal

@@ -301,6 +301,119 @@ def located_pose(fixture: Fixture) -> Pose:
     return Pose(R, centre)
 
 
+def seating_side_at_start(fixture: Fixture, u: FloatArray) -> FloatArray:
+    """The side a part on pins is seated toward when its file gives no located pose (unit, normal to ``u``).
+
+    The side its first round pin's hole lies on at the start, seen from the pin's axis (the part
+    stays on the side it comes from); the pin's side toward the centre of mass when the start
+    has the hole on the axis; the first body axis normal to ``u`` when both are.
+    """
+    wp, start = fixture.workpiece, fixture.start
+    pin = next((p for p in fixture.pins if p.kind == "round"), fixture.pins[0])
+    hole = wp.hole(pin.hole)
+
+    def across(point: FloatArray) -> FloatArray:
+        r = point - pin.p_world
+        return r - float(r @ u) * u
+
+    tiny = DEFAULT.goal.touch_gap_m
+    for r in (across(start.point_world_from_body(hole.p_body)), across(start.point_world_from_body(wp.com_body))):
+        n = float(np.linalg.norm(r))
+        if n > tiny:
+            return r / n
+    e = np.eye(3)[int(np.argmin(np.abs(u)))]
+    e = e - float(e @ u) * u
+    return e / float(np.linalg.norm(e))
+
+
+def find_pin_goal(fixture: Fixture, settings: GoalSettings = DEFAULT.goal) -> GoalSearch:
+    """The located pose of a part on pins, from its geometry (the file gives none).
+
+    Located: every locator touches; every round pin's hole axis lies its radial play ``(D − d)/2``
+    from the pin's axis toward the seating side (:func:`seating_side_at_start`), so that the pin
+    touches the hole's wall; a diamond pin's hole is centred along the lands. Gauss–Newton (finite
+    differences, a least-squares step) from the start turned the least so that the first hole
+    faces its pin, its mouth on the pin's axis. Every residual within ``touch_gap_m`` or the
+    search says how far it got.
+    """
+    wp = fixture.workpiece
+    u = insertion_axis(fixture)
+    side = seating_side_at_start(fixture, u)
+    pins = list(fixture.pins)
+    holes = [wp.hole(p.hole) for p in pins]
+    plays = [radial_play_m(h.diameter_m, p.diameter_m) for p, h in zip(pins, holes, strict=True)]
+
+    def residual(pose: Pose) -> FloatArray:
+        rows = [float(g) for g in locator_gaps(wp, pose, fixture.locators)]
+        for pin, hole, play in zip(pins, holes, plays, strict=True):
+            m = pose.point_world_from_body(hole.p_body)
+            r = m - pin.p_world
+            off = r - float(r @ u) * u  # the hole's axis from the pin's, at the mouth
+            if pin.land_direction_world is not None:
+                rows.append(float(off @ pin.land_direction_world))
+            else:
+                rows.extend(off - play * side)
+        return np.array(rows)
+
+    # the first start: turned the least so that the first hole's axis points against the pin's,
+    # its mouth on the pin's axis play toward the side, the pin's length in; then that start turned
+    # about the pin's axis by each of ``settings.turns_deg`` (a stop the start's turn puts beyond
+    # its face's edge pulls the first one astray)
+    start = fixture.start
+    a = start.R_world_body @ holes[0].axis_body
+    want = -u
+    axis = np.cross(a, want)
+    s_, c_ = float(np.linalg.norm(axis)), float(a @ want)
+    R0 = (exp_so3(axis / s_ * math.atan2(s_, c_)) if s_ > 0.0 else np.eye(3)) @ start.R_world_body
+    mouth = pins[0].p_world + 0.5 * pins[0].length_m * u + plays[0] * side
+
+    def solve_from(R: FloatArray) -> tuple[Pose, FloatArray, int]:
+        pose = Pose(R, mouth - R @ holes[0].p_body)
+        h = DEFAULT.numerics.fd_step
+        f = residual(pose)
+        it = 0
+        for it in range(1, settings.max_iterations + 1):  # noqa: B007 - used after the loop
+            if float(np.max(np.abs(f))) <= settings.stop_gap_m:
+                break
+            J = np.empty((f.shape[0], 6))
+            for j in range(6):
+                e = np.zeros(6)
+                e[j] = h
+                J[:, j] = (residual(pose.retract(e, wp.com_body)) - f) / h
+            step = -np.linalg.lstsq(J, f, rcond=DEFAULT.numerics.rcond)[0]
+            alpha, f0 = 1.0, float(f @ f)
+            while True:
+                trial = pose.retract(alpha * step, wp.com_body)
+                f_trial = residual(trial)
+                if float(f_trial @ f_trial) < f0 or alpha < DEFAULT.numerics.line_search_min_step:
+                    break
+                alpha /= 2.0
+            if not float(f_trial @ f_trial) < f0:
+                break
+            pose, f = trial, f_trial
+        return pose, f, it
+
+    turns = [0.0, *(t for deg in settings.turns_deg for t in (deg, -deg))]
+    best: tuple[float, Pose, int] | None = None
+    tried = 0
+    for deg in turns:
+        tried += 1
+        pose, f, it = solve_from(exp_so3(u * math.radians(deg)) @ R0)
+        worst = float(np.max(np.abs(f)))
+        if best is None or worst < best[0]:
+            best = (worst, pose, it)
+        if worst <= settings.touch_gap_m:
+            return GoalSearch(True, pose, worst, 6, tried)
+    assert best is not None
+    worst = best[0]
+    reason = (
+        f"no located pose found with the pins (every locator touching, each round pin against its hole's wall "
+        f"toward the side the part starts on): largest residual {worst:.3g} m at the best of {tried} starts; "
+        "give workpiece.goal (the located pose)"
+    )
+    return GoalSearch(False, None, worst, 0, tried, reason)
+
+
 def bottom_gap_m(fixture: Fixture, pose: Pose, bore: Bore) -> float:
     """The gap of the shaft's leading end face on the bore's (flat) bottom, in closed form.
 
@@ -1210,6 +1323,8 @@ __all__ = [
     "insertion_axis",
     "inserts",
     "located_pose",
+    "find_pin_goal",
+    "seating_side_at_start",
     "Seat",
     "seat_at",
     "seat_gaps_m",
