@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.geometry import Box, Cylinder, Mesh, Polygon, Rectangle, Shape
-from fixplan.geometry.pins import HoleBody, PinBody, pin_hole_contacts, radial_play_m
+from fixplan.geometry.pins import HoleBody, PinBody, bore_face, pin_hole_contacts, radial_play_m
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix, numbered
 from fixplan.model import (
     Bore,
@@ -128,7 +128,8 @@ def peg_body(workpiece: Workpiece, pose: Pose, bore: Bore) -> PinBody:
 def pin_and_hole(workpiece: Workpiece, pose: Pose, owner: Pin | Bore) -> tuple[PinBody, HoleBody]:
     """The pin and the hole of a ``[[pin]]`` (the hole is the part's) or of a ``[[bore]]`` (the part is the pin) at ``pose``."""
     if isinstance(owner, Bore):
-        bore = HoleBody(owner.p_world, owner.axis_world, 0.5 * owner.diameter_m, owner.depth_m, owner.chamfer_m, True)
+        bore = HoleBody(owner.p_world, owner.axis_world, 0.5 * owner.diameter_m, owner.depth_m, owner.chamfer_m, True,
+                        bore_face(owner.p_world, owner.axis_world))  # fmt: skip
         return peg_body(workpiece, pose, owner), bore
     pin = PinBody(
         owner.p_world,

@@ -867,6 +867,10 @@ class PinSettings:
         The same for a pin's tip on the part's face around its hole (a pin that misses its hole:
         :func:`fixplan.geometry.pins.tip_face_contacts`). The closed forms (:mod:`fixplan.geometry.pins`,
         the cone programs) keep the deepest point.
+    face_arc_inset : float
+        A tip partly over the mouth rests on the face along a crescent: its edge's arc over the
+        face adds a point this fraction of the arc in from each of its ends (with ``face_points``
+        above 1), so the tip cannot tip about one point of it.
     """
 
     rim_samples: int = 64
@@ -875,6 +879,7 @@ class PinSettings:
     coaxial_rel: float = 1e-9
     axis_angle_rad: float = 0.01
     face_points: int = 4
+    face_arc_inset: float = 0.1
 
 
 @dataclass(frozen=True)
