@@ -226,12 +226,23 @@ class Engagement:
 
 
 def engagement(fixture: Fixture, pose: Pose, ins: Insert) -> Engagement:
-    """The tip's depth in its hole and its offset from the hole's axis at ``pose``."""
+    """The tip's depth in its hole and its offset from the hole's axis at ``pose``.
+
+    The capture is the insert's (play and chamfers) widened by what a tilt ``θ`` of the pin from the
+    hole's axis brings: the tip's face (radius ``r − c_p``) then reaches ``(r − c_p) cos θ`` across
+    the axis, so its centre may lie ``(r − c_p)(1 − cos θ)`` farther out with its edge still within
+    the mouth (a shaft cocked in its bore, Whitney's two-point contact, has its tip's centre
+    ``R − r cos θ`` off the axis), and by rounding (``numerics.zero_rel`` of the hole's radius), so a
+    tip touching the wall counts as in.
+    """
     pin, hole = _pair(fixture, pose, ins)
     tip = pin.base_world + pin.length_m * pin.axis_world
     r = tip - hole.mouth_world
     along = float(r @ hole.axis_world)
-    return Engagement(-along, float(np.linalg.norm(r - along * hole.axis_world)), ins.capture_m)
+    cos_tilt = min(abs(float(pin.axis_world @ hole.axis_world)), 1.0)
+    capture = ins.capture_m + (pin.radius_m - pin.chamfer_m) * (1.0 - cos_tilt)
+    capture += DEFAULT.numerics.zero_rel * hole.radius_m
+    return Engagement(-along, float(np.linalg.norm(r - along * hole.axis_world)), capture)
 
 
 def axis_offsets_m(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[float, float]:

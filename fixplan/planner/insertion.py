@@ -76,7 +76,7 @@ from fixplan.locating import (
 )
 from fixplan.model import Fixture
 from fixplan.planner.execute import ExecutionLog, ExecutionNoise
-from fixplan.planner.insertion_policy import InsertionPolicy, Recentring, insertion_policy
+from fixplan.planner.insertion_policy import InsertionPolicy, Recentring, deep_m, insertion_policy
 from fixplan.planner.plan_types import Verification
 from fixplan.settings import DEFAULT, HAPTIC, ExecutionSettings, InsertionSettings, Settings
 from fixplan.spatial import Pose, exp_so3, log_so3, pose_between, shift_wrench
@@ -200,26 +200,35 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
         plan.reason = held or "already located at the start pose: every pin in its hole, every rest touching"
         plan.plan_s = time.perf_counter() - t0
         return plan
-    # a part already partly in (a shaft dropped tilted into the chamfer) is lifted straight out first:
-    # the approach below rises along the axis before it turns and moves sideways
-    h_top = plan.heights_m[groups[0][0].name]
-    staging = G.translated((h_top + s.lead_m) * u)
-    poses = [start]
-    rise = float((staging.p_world - start.p_world) @ u)
-    if rise > 0.0:  # lift first: the part never moves sideways lower than the staging height
-        poses.append(start.translated(rise * u))
-    guide = poses[:1]
-    for a, b in zip([*poses], [*poses[1:], staging], strict=True):
-        guide += [pose_between(a, b, k / 4) for k in range(1, 5)]
-    ok, w, why, _, _, _ = _push(fixture, staging, [], u, settings)
-    plan.stages.append(Stage("", (), "free", guide, w, (), f"approach to the staging pose: {why}"))
-    if not ok:
-        plan.reason = f"the approach to the staging pose is beyond the hand: {why}"
-        plan.plan_s = time.perf_counter() - t0
-        return plan
+    # a part whose every pin (or the shaft) is already in past the chamfers (a shaft cocked in its
+    # bore) stays in: its holes are where the pose says, and lifting it out would lose them. It is
+    # seated from where it is, upright, on the line the run re-centres on them (InsertionRun).
+    in_bore = started_in(fixture)
+    if in_bore:
+        plan.start_state = frozenset(i.name for i in ins)
+        groups = []
+        prev = start
+    else:
+        # a part partly in (a shaft dropped tilted into the chamfer) is lifted straight out first:
+        # the approach below rises along the axis before it turns and moves sideways
+        h_top = plan.heights_m[groups[0][0].name]
+        staging = G.translated((h_top + s.lead_m) * u)
+        poses = [start]
+        rise = float((staging.p_world - start.p_world) @ u)
+        if rise > 0.0:  # lift first: the part never moves sideways lower than the staging height
+            poses.append(start.translated(rise * u))
+        guide = poses[:1]
+        for a, b in zip([*poses], [*poses[1:], staging], strict=True):
+            guide += [pose_between(a, b, k / 4) for k in range(1, 5)]
+        ok, w, why, _, _, _ = _push(fixture, staging, [], u, settings)
+        plan.stages.append(Stage("", (), "free", guide, w, (), f"approach to the staging pose: {why}"))
+        if not ok:
+            plan.reason = f"the approach to the staging pose is beyond the hand: {why}"
+            plan.plan_s = time.perf_counter() - t0
+            return plan
+        prev = staging
     # the insertions, down the axis
     engaged: list[str] = []
-    prev = staging
     for k, g in enumerate(groups):
         h = plan.heights_m[g[0].name]
         nxt = plan.heights_m[groups[k + 1][0].name] if k + 1 < len(groups) else 0.0
@@ -267,9 +276,29 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     seq = " → ".join(",".join(g) for g in plan.order)
     plan.reason = f"approach, insert {seq} along the axis, seat on {', '.join(rests)}"
     ends = [float((st.poses[-1].p_world - G.p_world) @ u) for st in plan.stages[:-1]]
+    if in_bore:
+        plan.reason = f"already in past the chamfers: seat on {', '.join(rests)} from the start, upright"
+        ends = [float((start.p_world - G.p_world) @ u)]  # a back-off rises to where the part started
     plan.policy = insertion_policy(fixture, plan.states, [st.kind for st in plan.stages], ends, s)
     plan.plan_s = time.perf_counter() - t0
     return plan
+
+
+def started_in(fixture: Fixture) -> bool:
+    """Whether every pin (or the shaft) starts in its hole past both chamfers, without the part located.
+
+    Then the plan seats the part from its start (:func:`plan_insertion`): the pins are in their
+    holes' bores, each hole's place known to within the play from the pose.
+    """
+    start = fixture.start
+    ins = inserts(fixture)
+    if not ins or seated(fixture, start):
+        return False
+    for i in ins:
+        e = engagement(fixture, start, i)
+        if not e.engaged or e.depth_m < deep_m(fixture, i):
+            return False
+    return True
 
 
 def seat_push(
@@ -390,6 +419,8 @@ class InsertionRun:
         self._recovery_t0: float | None = None
         self._backoff: tuple[float, float, float] | None = None  # (target height, since, height then)
         self._spent = ""  # why the recovery could not go on (the budget), for the failure's reason
+        if plan.stages and plan.stages[0].kind != "free":  # started in its holes: down from where it is,
+            self._in_from_start(world.start)  # on the line through the holes seen there
 
     @property
     def done(self) -> bool:
@@ -529,7 +560,22 @@ class InsertionRun:
 
     def _begin_insertion(self, t: float, pose: Pose) -> None:
         self._t_stage = t
-        self._ref_h0 = min(self.height_m(pose), self.height_m(self.plan.stages[0].poses[-1]))
+        first = self.plan.stages[0]
+        top = first.poses[-1] if first.kind == "free" else first.poses[0]  # the staging pose, or the start
+        self._ref_h0 = min(self.height_m(pose), self.height_m(top))
+
+    def _in_from_start(self, pose: Pose) -> None:
+        """A part that starts with its pins in their holes (:func:`started_in`): the guide on the holes it sees there.
+
+        Each hole's place is the pin's within the play (:class:`~.insertion_policy.Recentring`);
+        the guide then runs down the axis from the start's height, upright.
+        """
+        for i in self.inserts:
+            e = engagement(self.world, pose, i)
+            self._recentring.observe(pose, i, e.depth_m)
+        self._goal, how = self._recentring.guide()
+        self.log.event(0.0, "state", f"started in: {how}")
+        self._begin_insertion(0.0, pose)
 
     def step_time(self, t: float, pose: Pose) -> None:
         """Called every tick before :meth:`command`: the approach ends when its guide does (a pose target)."""
@@ -877,6 +923,7 @@ __all__ = [
     "plan_insertion",
     "seat_push",
     "shifted_world",
+    "started_in",
     "transitions_of",
     "verify_insertion",
 ]
