@@ -232,16 +232,15 @@ def engagement(fixture: Fixture, pose: Pose, ins: Insert) -> Engagement:
     hole's axis brings: the tip's face (radius ``r − c_p``) then reaches ``(r − c_p) cos θ`` across
     the axis, so its centre may lie ``(r − c_p)(1 − cos θ)`` farther out with its edge still within
     the mouth (a shaft cocked in its bore, Whitney's two-point contact, has its tip's centre
-    ``R − r cos θ`` off the axis), and by rounding (``numerics.zero_rel`` of the hole's radius), so a
-    tip touching the wall counts as in.
+    ``R − r cos θ`` off the axis), and by the contact tolerance ``touch_m``: a tip touching the wall
+    (within what the engine leaves, less than a micrometre) counts as in.
     """
     pin, hole = _pair(fixture, pose, ins)
     tip = pin.base_world + pin.length_m * pin.axis_world
     r = tip - hole.mouth_world
     along = float(r @ hole.axis_world)
     cos_tilt = min(abs(float(pin.axis_world @ hole.axis_world)), 1.0)
-    capture = ins.capture_m + (pin.radius_m - pin.chamfer_m) * (1.0 - cos_tilt)
-    capture += DEFAULT.numerics.zero_rel * hole.radius_m
+    capture = ins.capture_m + (pin.radius_m - pin.chamfer_m) * (1.0 - cos_tilt) + fixture.tolerances.touch_m
     return Engagement(-along, float(np.linalg.norm(r - along * hole.axis_world)), capture)
 
 

@@ -920,6 +920,12 @@ class InsertionSettings:
     align_tol_m, align_tol_rad : float
         The approach ends (and the insertion begins) once the part is this close to the staging
         pose, in position and in angle: a part still turning as it meets its pins tilts in them.
+    align_capture_share : float
+        ... and every pin's hole (a shaft's leading end) is within this share of its capture
+        (play + chamfers) of where the staging pose puts it, across the axis: the tip is aimed
+        into the mouth, which a sharp bore's capture (its play alone, 10 µm) makes the binding
+        condition (the part's origin may be far from its tip, and a turn within ``align_tol_rad``
+        moves the tip by its lever).
     axis_play_rel : float
         Slack on the radial play in the final check (relative): the hole's axis within
         ``(D − d)/2 · (1 + axis_play_rel)`` of the pin's, at the mouth and at the pin's tip.
@@ -953,6 +959,7 @@ class InsertionSettings:
     axis_play_rel: float = 0.05
     align_tol_m: float = 0.0001
     align_tol_rad: float = 0.001
+    align_capture_share: float = 0.25
     retries: int = 3
     recovery_time_s: float = 6.0
     backoff_min_m: float = 0.001

@@ -70,6 +70,7 @@ from fixplan.locating import (
     insertion_axis,
     inserts,
     located_pose,
+    peg_body,
     seat_at,
     seat_gaps_m,
     seated,
@@ -585,7 +586,7 @@ class InsertionRun:
         end = st.poses[-1]
         turn = float(np.linalg.norm(log_so3(end.R_world_body @ pose.R_world_body.T)))
         off = float(np.linalg.norm(pose.p_world - end.p_world))
-        close = off <= self.s.align_tol_m and turn <= self.s.align_tol_rad
+        close = off <= self.s.align_tol_m and turn <= self.s.align_tol_rad and self._aimed(pose, end)
         total = sum(
             float(np.linalg.norm(b.p_world - a.p_world)) for a, b in zip(st.poses[:-1], st.poses[1:], strict=True)
         )
@@ -593,6 +594,15 @@ class InsertionRun:
             self.index += 1
             self.log.event(t, "state", "at the staging pose: every hole over its pin")
             self._begin_insertion(t, pose)
+
+    def _aimed(self, pose: Pose, staging: Pose) -> bool:
+        """Every hole's mouth (a shaft's leading end) within ``align_capture_share`` of its capture of where ``staging`` puts it, across the axis."""
+        for i in self.inserts:
+            d = _entry_world(self.world, pose, i) - _entry_world(self.world, staging, i)
+            d = d - float(d @ self.u) * self.u
+            if float(np.linalg.norm(d)) > self.s.align_capture_share * i.capture_m:
+                return False
+        return True
 
     def _check_progress(self, t: float, pose: Pose) -> None:
         h = self.height_m(pose)
@@ -761,6 +771,14 @@ class InsertionRun:
             self.log.failure_kind = kind
             self.log.transition_at_end = self.index + 1
             self.log.event(t, "failed", reason)
+
+
+def _entry_world(fixture: Fixture, pose: Pose, ins: Insert) -> FloatArray:
+    """Where ``ins`` enters at ``pose`` (world): its hole's mouth in the part, or a shaft's leading end's centre."""
+    if ins.kind == "bore":
+        peg = peg_body(fixture.workpiece, pose, next(b for b in fixture.bores if b.name == ins.name))
+        return peg.base_world + peg.length_m * peg.axis_world
+    return pose.point_world_from_body(fixture.workpiece.hole(ins.hole).p_body)
 
 
 def _up(fixture: Fixture) -> FloatArray:
