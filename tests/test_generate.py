@@ -207,6 +207,7 @@ def test_cli_list_and_bad_input():
         "mesh-321",
         "plane-2-pins",
         "plane-2-pins-mesh",
+        "shaft-bore",
     ]
     as_json = json.loads(fixplan("generate", "--list", "--json").stdout)
     assert as_json["families"] == gen.ALL_FAMILIES == {**gen.FAMILIES, **gen.MESH_FAMILIES, **gen.PIN_FAMILIES}
