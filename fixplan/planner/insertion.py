@@ -369,12 +369,22 @@ class InsertionRun:
         tick_s: float = 1e-3,
         *,
         execution: ExecutionSettings = DEFAULT.execution,
+        delay_s: float = 0.0,
     ):
         """The run of ``plan`` on ``world``.
 
         ``settings`` are the insertion's; ``execution`` say when a contact counts (``contact_gap_m``)
         and when the part is at rest (``stall_speed_mps``), as for the executor
         (:func:`verify_insertion` passes its profile's).
+
+        ``delay_s``: how late the push this run asks for reaches the part (an operator who follows
+        it in a haptic session: their reaction, and the guidance's update period). The hand's servo
+        is a critically damped PD on the part's pose: without delay its phase margin is 76°, and a
+        delay ``τ`` costs ``2.06 ω τ`` rad of it at crossover, all of it at ``ω τ ≈ 0.64`` (12 rad/s
+        and 55 ms: a session whose operator reacts 50 ms late diverged). With a delay each
+        frequency is held to ``delay_bandwidth / τ`` and the turn's gains act per principal axis
+        (the inertia tensor, not the largest moment: about a slender shaft's own axis the largest
+        moment made the servo 4× faster, 50 rad/s). 0 (the verification): the gains as set.
         """
         self.world = world
         self.plan = plan
@@ -386,6 +396,11 @@ class InsertionRun:
         wp = world.workpiece
         self.m = wp.mass_kg
         self.I_max = float(np.max(np.linalg.eigvalsh(np.atleast_2d(wp.inertia_body))))
+        self.delay_s = delay_s
+        cap = settings.delay_bandwidth / delay_s if delay_s > 0.0 else np.inf
+        self.axial_omega = min(settings.axial_omega_radps, cap)  # the servo's frequencies [rad/s]
+        self.lateral_omega = min(settings.lateral_omega_radps, cap)
+        self.rot_omega = min(settings.rot_omega_radps, cap)
         self.weight_N = world.weight_N
         self.inserts = inserts(world)
         self.rests = tuple(loc.name for loc in world.locators)
@@ -426,6 +441,17 @@ class InsertionRun:
     @property
     def done(self) -> bool:
         return self.log.outcome != "running"
+
+    def _turn(self, pose: Pose, rates: FloatArray) -> FloatArray:
+        """The moment that gives the part the angular acceleration ``rates`` [rad/s²]: ``I rates``.
+
+        With a delay the inertia tensor in world axes; without, the largest principal moment for
+        every axis, as the verification has always done (stiffer about the lighter axes).
+        """
+        if self.delay_s <= 0.0:
+            return self.I_max * rates
+        R = pose.R_world_body
+        return (R @ np.atleast_2d(self.world.workpiece.inertia_body) @ R.T) @ rates
 
     def height_m(self, pose: Pose) -> float:
         """The part's height above the nominal located pose along the axis."""
@@ -471,12 +497,14 @@ class InsertionRun:
             if h < target:
                 v[:3] = self.s.insert_speed_mps * self.u
             return self._goal.translated(min(h, target) * self.u), v, True
-        # down the axis from where the insertion began, on the located pose's line (re-centred by a back-off)
+        # down the axis from where the insertion began, on the located pose's line (re-centred by a back-off),
+        # to lead_m below it: the servo's push at a stall (held to a delay: as deep as its gain is less)
         h = self._ref_h0 - self.s.insert_speed_mps * (t - self._t_stage)
         v = np.zeros(6)
-        if h > -self.s.lead_m:
+        floor = self.s.lead_m * (self.s.axial_omega_radps / self.axial_omega) ** 2
+        if h > -floor:
             v[:3] = -self.s.insert_speed_mps * self.u
-        h = max(h, -self.s.lead_m)
+        h = max(h, -floor)
         return self._goal.translated(h * self.u), v, True
 
     def command(self, t: float, pose: Pose, twist: FloatArray, pressed: tuple[str, ...]) -> FloatArray:
@@ -494,8 +522,11 @@ class InsertionRun:
         if self._seating:
             seat = self.plan.seat_wrench_com if self.plan.seat_wrench_com is not None else np.zeros(6)
             w_com = carry + seat
-            w_com[3:] += -self.I_max * 2.0 * self.s.rot_omega_radps * w_ang
-            w_com[:3] += -self.m * 2.0 * self.s.lateral_omega_radps * (v - float(v @ self.u) * self.u)
+            if self.delay_s > 0.0:
+                w_com[3:] += self._turn(pose, -2.0 * self.rot_omega * w_ang)
+            else:  # the verification's arithmetic, as it always was
+                w_com[3:] += -self.I_max * 2.0 * self.rot_omega * w_ang
+            w_com[:3] += -self.m * 2.0 * self.lateral_omega * (v - float(v @ self.u) * self.u)
             self._check_settled(t, state, twist)
             return self._noisy(shift_wrench(w_com, com, pose.p_world))
         ref, v_ref, axial = self._reference(t)
@@ -503,14 +534,14 @@ class InsertionRun:
         ev = v_ref[:3] - v
         e_ax, ev_ax = float(e @ self.u), float(ev @ self.u)
         e_lat, ev_lat = e - e_ax * self.u, ev - ev_ax * self.u
-        wa = self.s.axial_omega_radps
-        wl = self.s.lateral_omega_radps if axial else self.s.axial_omega_radps
+        wa = self.axial_omega
+        wl = self.lateral_omega if axial else self.axial_omega
         f_ax = self.m * (wa * wa * e_ax + 2.0 * wa * ev_ax)
         if axial:
             f_ax = min(max(f_ax, -self.cap_N), self.cap_N)
         F = f_ax * self.u + self.m * (wl * wl * e_lat + 2.0 * wl * ev_lat)
-        wr = self.s.rot_omega_radps
-        T = self.I_max * (wr * wr * log_so3(ref.R_world_body @ pose.R_world_body.T) - 2.0 * wr * w_ang)
+        wr = self.rot_omega
+        T = self._turn(pose, wr * wr * log_so3(ref.R_world_body @ pose.R_world_body.T) - 2.0 * wr * w_ang)
         w_com = carry + np.concatenate([F, T])
         if self._backoff is not None:
             self._check_backoff(t, pose)
