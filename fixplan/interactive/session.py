@@ -202,7 +202,8 @@ def capped_fixture(fixture: Fixture, F_max: float, T_max: float) -> Fixture:
 class InsertionGuide:
     """A fixture with pins or bores: the staged insertion (:mod:`fixplan.planner.insertion`) as the guide's executor.
 
-    Planned from the pose the part is in (a part partly on its pins is lifted straight out first),
+    Planned from the pose the part is in (a part partly on its pins is lifted straight out first; one
+    in past the chamfers is seated from there),
     run by :class:`~fixplan.planner.insertion.InsertionRun` with the haptic profile: the same calls
     the guide makes of the locators' executor (``command``, ``guidance``, ``done``, ``log``).
     ``delay_s``: how late the operator's push follows the guidance (the run's servo is held to it).

@@ -13,7 +13,11 @@ axis, or the bore's; the part moves along ``−u``), from the located pose ``G``
 
 1. **approach** (a pose target, not a contact target): from the start to the staging pose
    ``G + u (h₁ + lead_m)``, lifting first when the start is lower, so that every hole's axis lies
-   on its pin's axis ``lead_m`` above the first tip;
+   on its pin's axis ``lead_m`` above the first tip; it ends once every hole's mouth (a shaft's
+   leading end) is within ``align_capture_share`` of its capture of where the staging pose puts it.
+   A part whose every pin (or the shaft) starts in past the chamfers (:func:`started_in`: a shaft
+   cocked in its bore) has no approach and no insertion: its holes are where its pose says, and
+   the plan is the seating from the start, on the line re-centred on them;
 2. **one insertion per pin**, in the order the tips meet their mouths on the way down (the pin
    whose engagement height ``h_i`` — its tip's depth in its hole at ``G`` — is largest first; pins
    engaging at the same height are one transition, round before diamond): down to
