@@ -67,6 +67,13 @@ plane-2-pins-mesh
     body frame at the box's centre) whose bores are modelled: a square through channel around
     each hole (half side: the chamfered mouth's radius, up to the next 0.1 mm). The holes stay
     analytic ``[[workpiece.hole]]``s, so the pins' contacts are the closed forms', as for the box.
+plane-pin-stop
+    A plate on 3 rests under -z (mirrored in x in half), located by one round pin P1 in a through
+    hole drawn anywhere and a stop S1 on a drawn side face that takes the turn about the pin
+    (``STOP_*``; a point or a spherical tip); goal written, seated toward P1's contact. Start above
+    the pin's tip and the stop's top (``PIN_STOP_RISE_M``), off by up to ``PIN_STOP_OFFSET_M`` and
+    tilted by roll, pitch, yaw each uniform in ±``PIN_STOP_TILT_DEG``: the approach must bring
+    the hole over the pin and the seating must press the stop.
 shaft-bore
     A shaft (``shape = "cylinder"``, radius log-uniform in ``SHAFT_RADIUS_M``, length
     ``SHAFT_LENGTH_PER_DIAMETER`` × its diameter, of a solid's density) loaded into a blind
@@ -160,13 +167,20 @@ PIN_FAMILIES: dict[str, str] = {
         "in mm beside the fixture, each hole's bore modelled as a square through channel around it (side: the "
         "chamfered mouth's diameter); the holes stay analytic [[workpiece.hole]]s"
     ),
+    "plane-pin-stop": (
+        "3D plates (edges 6-30 cm by 4-20 cm, 2-6 cm thick) on 3 rests under -z (mirrored in x in half), one bored "
+        "through hole (D 6-16 mm, mouth chamfer 0-2 mm) anywhere on a round pin (radial play 0.02-0.2 mm, tip "
+        "chamfer 0-2 mm, 0.4-0.9 x the thickness long) and a stop on a drawn side face taking the turn about the "
+        "pin (a point or a 0.5-4 mm tip, 25-75 % up the face); goal written (seated along a drawn heading against "
+        "the pin); start above the pin's tip and the stop, off by up to 5 mm and tilted up to 10 deg about every axis"
+    ),
+    "shaft-bore": (
+        "3D shafts (diameter 8-50 mm, 1.5-6 diameters long) into a blind bore (radial play 0.01-0.1 mm, mouth chamfer "
+        "0-2 mm, sharp in a quarter of them, 0.3-0.7 of the shaft deep); no goal in the file (the loader derives it: "
+        "coaxial, on the bottom); start above the bore, tilted up to 10 deg about each horizontal axis, its leading "
+        "end within 5 mm of the bore's axis, its lowest point 2-20 mm above the mouth"
+    ),
 }
-PIN_FAMILIES["shaft-bore"] = (
-    "3D shafts (diameter 8-50 mm, 1.5-6 diameters long) into a blind bore (radial play 0.01-0.1 mm, mouth chamfer "
-    "0-2 mm, sharp in a quarter of them, 0.3-0.7 of the shaft deep); no goal in the file (the loader derives it: "
-    "coaxial, on the bottom); start above the bore, tilted up to 10 deg about each horizontal axis, its leading end "
-    "within 5 mm of the bore's axis, its lowest point 2-20 mm above the mouth"
-)
 ALL_FAMILIES: dict[str, str] = {**FAMILIES, **MESH_FAMILIES, **PIN_FAMILIES}
 # The families whose fixtures come with a mesh file written beside them (GeneratedFixture.files).
 MESH_FILE_FAMILIES: tuple[str, ...] = (*MESH_FAMILIES, "plane-2-pins-mesh")
@@ -226,6 +240,16 @@ BORE_DEPTH_FRACTION = (0.3, 0.7)  # shaft-bore: the bore's depth / the shaft's l
 SHAFT_START_TILT_DEG = 10.0  # shaft-bore: start roll and pitch each uniform in ±this (yaw: any)
 SHAFT_START_OFFSET_M = 0.005  # shaft-bore: the leading end's centre within this of the bore's axis at the start
 SHAFT_START_RISE_M = (0.002, 0.020)  # shaft-bore: the shaft's lowest point this far above the mouth's plane
+STOP_HEIGHT_FRACTION = (0.25, 0.75)  # plane-pin-stop: the stop's contact height / the part's thickness
+STOP_LEVER_FRACTION = 0.25  # plane-pin-stop: the stop at least this share of its face's length from the pin along it
+STOP_EDGE_FRACTION = 0.08  # plane-pin-stop: the stop at least this share of its face's length in from its ends
+STOP_TIP_RADIUS_M = (0.0005, 0.004)  # plane-pin-stop: a spherical stop tip (half the fixtures; the others a point)
+PIN_STOP_TILT_DEG = 10.0  # plane-pin-stop: start roll, pitch, yaw each uniform in ±this (about the part's centre)
+PIN_STOP_OFFSET_M = 0.005  # plane-pin-stop: start offset along x and y each uniform in ±this
+PIN_STOP_RISE_M = (
+    0.002,
+    0.030,
+)  # plane-pin-stop: the part's lowest point this far above the pin's tip and the stop's top
 
 # Checks every generated file passes.
 EXACT_M = 1e-9  # resting locators touch within this at the start; nothing penetrates more
@@ -351,7 +375,7 @@ def _first_valid(
             reason = f"the loader refused it: {exc.issues[0].key}: {exc.issues[0].message}"
             continue
         if draft.pins:
-            problem = _check_pins(fixture, draft)
+            problem = _check_pins(fixture, draft) if len(draft.pins) > 1 else _check_pin_stop(fixture)
         elif draft.bores:
             problem = _check_bore(fixture, draft)
         else:
@@ -369,7 +393,7 @@ def _first_valid(
             return GeneratedFixture(name, family, seed, index, params, text, draw, goal, files)
         R = twins.random_rotation(np.random.default_rng([seed, index, WORLD_STREAM]), draft.dimension)
         doc = twins.rotate_world(parse_toml(body, name), R)
-        problem = _check_twin(fixture, doc, name, here)
+        problem = _check_twin(fixture, doc, name, here, far_pins=draft.far_pins)
         if problem is not None:
             reason = problem
             continue
@@ -427,6 +451,9 @@ class _Draft:
     holes: tuple[dict[str, Any], ...] = ()  # [[workpiece.hole]] entries (plane-2-pins)
     pins: tuple[dict[str, Any], ...] = ()  # [[pin]] entries (plane-2-pins)
     bores: tuple[dict[str, Any], ...] = ()  # [[bore]] entries (shaft-bore: no goal in the file)
+    # the pins start far from their holes and tilted (plane-pin-stop): the closed forms' rim distance there
+    # is one of several extremes, picked by the frame, so a rotated twin's is checked clear, not equal
+    far_pins: bool = False
 
 
 def _uniform(rng: np.random.Generator, lo: float, hi: float, decimals: int) -> float:
@@ -1502,6 +1529,129 @@ def _draw_shaft_bore(rng: np.random.Generator) -> _Draft | str:
     )
 
 
+def _draw_plane_pin_stop(rng: np.random.Generator) -> _Draft | str:
+    """A plate on 3 rests, one round pin in a through hole of its bottom and a stop on a side face (module text)."""
+    a, b, c = (_log_uniform(rng, lo, hi, 4) for lo, hi in PIN_PART_EDGE_M)
+    density = round(_log_uniform(rng, *DENSITY_KG_M3, 0))
+    mass = _sig(density * a * b * c, 4)
+    D = _uniform(rng, *PIN_HOLE_D_M, 4)
+    play = _sig(_log_uniform(rng, *PIN_PLAY_M, 7), 3)
+    d = round(D - 2.0 * play, 7)
+    hole_chamfer = _uniform(rng, *PIN_CHAMFER_M, 4)
+    pin_chamfer = round(min(_uniform(rng, *PIN_CHAMFER_M, 4), 0.4 * d / 2), 4)
+    length = round(_uniform(rng, *PIN_LENGTH_FRACTION, 3) * c, 4)
+    mu, varied, mus = _frictions(rng, 5)
+    # the hole anywhere, its chamfered mouth 2 D in from the edges; P1 stands `play` off its axis
+    # against the seating heading s, so the part seated along s touches it
+    edge = 2.0 * D + hole_chamfer
+    if a < 2 * edge or b < 2 * edge:
+        return "the part is too small for a hole of this diameter"
+    hx, hy = _uniform(rng, edge, a - edge, 4), _uniform(rng, edge, b - edge, 4)
+    heading = _uniform(rng, 0.0, 360.0, 1)
+    s = np.array([math.cos(math.radians(heading)), math.sin(math.radians(heading))])
+    p1 = (round(hx - play * float(s[0]), 10), round(hy - play * float(s[1]), 10))
+    # the stop on one of the four side faces (its outward normal drawn), along the face at least
+    # STOP_LEVER_FRACTION of the face's length from the pin (it takes the turn about it), in from the ends
+    face = int(rng.integers(4))  # 0: -x, 1: +x, 2: -y, 3: +y
+    along_len = b if face < 2 else a
+    t = _uniform(rng, STOP_EDGE_FRACTION * along_len, (1.0 - STOP_EDGE_FRACTION) * along_len, 4)
+    pin_along = hy if face < 2 else hx
+    if abs(t - pin_along) < STOP_LEVER_FRACTION * along_len:
+        return "the stop is too near the pin's axis along its face to take the turn"
+    z_stop = _uniform(rng, STOP_HEIGHT_FRACTION[0] * c, STOP_HEIGHT_FRACTION[1] * c, 4)
+    tip = 0.0 if rng.random() < 0.5 else _uniform(rng, *STOP_TIP_RADIUS_M, 4)
+    out = [(-1.0, 0.0), (1.0, 0.0), (0.0, -1.0), (0.0, 1.0)][face]  # the face's outward normal
+    on_face = (0.0 if face == 0 else a, t) if face < 2 else (t, 0.0 if face == 2 else b)
+    stop = (round(on_face[0] + tip * out[0], 6), round(on_face[1] + tip * out[1], 6), z_stop)
+    # rests: B1, B2 near one end of x, B3 near the other (mirrored per fixture), clear of the hole by
+    # 2 D; their triangle holds the centre of mass with a margin
+    mirrored = bool(rng.random() < 0.5)
+    b1 = (_uniform(rng, 0.08 * a, 0.3 * a, 4), _uniform(rng, 0.08 * b, 0.3 * b, 4))
+    b2 = (_uniform(rng, 0.08 * a, 0.3 * a, 4), _uniform(rng, 0.7 * b, 0.92 * b, 4))
+    b3 = (_uniform(rng, 0.7 * a, 0.92 * a, 4), _uniform(rng, 0.35 * b, 0.65 * b, 4))
+    if mirrored:
+        b1, b2, b3 = ((round(a - x, 4), y) for x, y in (b1, b2, b3))
+    for rest in (b1, b2, b3):
+        if math.hypot(rest[0] - hx, rest[1] - hy) < 2.0 * D + hole_chamfer:
+            return "a rest under the hole"
+    if _triangle_margin(np.array([a / 2, b / 2]), np.array([b1, b2, b3])) < 0.05 * min(a, b):
+        return "the rests' triangle does not hold the centre of mass with a margin"
+    # the start: above the pin's tip and the stop, tilted about every axis, off to the side
+    tilt = [_uniform(rng, -PIN_STOP_TILT_DEG, PIN_STOP_TILT_DEG, 3) for _ in range(3)]
+    off = [_uniform(rng, -PIN_STOP_OFFSET_M, PIN_STOP_OFFSET_M, 4) for _ in range(2)]
+    rise = _uniform(rng, *PIN_STOP_RISE_M, 4)
+    R = matrix_from_rpy(np.radians(tilt))
+    below = float(np.abs(R[2, :]) @ np.array([a, b, c])) / 2  # the centre above the part's lowest point
+    clear = max(length, z_stop + tip)
+    start_c = [a / 2 + off[0], b / 2 + off[1], round(clear + rise + below, 6)]
+    weight = mass * GRAVITY_M_S2
+    kf, kt, max_force, max_torque = _hand(rng, weight, 0.5 * math.sqrt(a * a + b * b + c * c))
+    locators: list[dict[str, Any]] = [
+        {"name": n, "position": [x, y, 0.0], "friction": m}
+        for n, (x, y), m in zip(("B1", "B2", "B3"), (b1, b2, b3), mus[:3], strict=True)
+    ]
+    locators.append({"name": "S1", "position": list(stop), **({"radius": tip} if tip else {}), "friction": mus[3]})
+    holes = (
+        {"name": "H1", "position": [hx - a / 2, hy - b / 2, -c / 2], "axis": [0.0, 0.0, -1.0], "diameter": D,
+         "depth": c, "chamfer": hole_chamfer},
+    )  # fmt: skip
+    pins = (
+        {"name": "P1", "kind": "round", "hole": "H1", "position": [p1[0], p1[1], 0.0], "axis": [0.0, 0.0, 1.0],
+         "diameter": d, "length": length, "friction": mus[4], "chamfer": pin_chamfer},
+    )  # fmt: skip
+    face_name = ("-x", "+x", "-y", "+y")[face]
+    params = {
+        "size_m": [a, b, c],
+        "density_kg_m3": density,
+        "mass_kg": mass,
+        "hole_diameter_m": D,
+        "pin_diameter_m": d,
+        "radial_play_m": play,
+        "hole_chamfer_m": hole_chamfer,
+        "pin_chamfer_m": pin_chamfer,
+        "pin_length_m": length,
+        "hole_xy_m": [hx, hy],
+        "seating_heading_deg": heading,
+        "stop_face": face_name,
+        "stop_along_m": t,
+        "stop_height_m": z_stop,
+        "stop_tip_radius_m": tip,
+        "rests_mirrored": mirrored,
+        "friction": mu,
+        "friction_per_locator": varied,
+        "start_rise_m": rise,
+        "start_offset_m": off,
+        "start_tilt_deg": tilt,
+        "force_per_weight": kf,
+        "torque_per_weight_lever": kt,
+    }
+    story = [
+        f"Goal: the plate fills [0, {a:g}] x [0, {b:g}] x [0, {c:g}] m on the rests B1, B2, B3; its through hole H1",
+        f"(D = {D * 1e3:g} mm) at ({hx:g}, {hy:g}) on the round pin P1 (d = {d * 1e3:g} mm, play {play * 1e6:g} um),",
+        f"seated toward heading {heading:g} deg: P1 touches H1's wall; the stop S1 on the {face_name} face at",
+        f"{t:g} m along it and {z_stop:g} m up (tip radius {tip * 1e3:g} mm) takes the turn about P1's axis.",
+        f"Start: the part's lowest point {rise * 1e3:g} mm above the pin's tip and the stop's top, off by ({off[0] * 1e3:g},",
+        f"{off[1] * 1e3:g}) mm, tilted (roll, pitch, yaw) = {tilt} deg about its centre: nothing touches.",
+    ]
+    return _Draft(
+        dimension=3,
+        shape={"shape": "box", "size": [a, b, c]},
+        mass_kg=mass,
+        start={"position": start_c, "rpy_deg": tilt},
+        goal={"position": [a / 2, b / 2, c / 2], "rpy_deg": [0.0, 0.0, 0.0]},
+        locators=locators,
+        max_force_N=max_force,
+        max_torque_Nm=max_torque,
+        params=params,
+        resting=(),
+        story=story,
+        check=lambda _fixture: None,
+        holes=holes,
+        pins=pins,
+        far_pins=True,
+    )
+
+
 _DRAWS: dict[str, Callable[[np.random.Generator], _Draft | str]] = {
     "box-321": _draw_box,
     "plate-2d": _draw_plate,
@@ -1511,6 +1661,7 @@ _DRAWS: dict[str, Callable[[np.random.Generator], _Draft | str]] = {
     "plane-2-pins": _draw_plane_2_pins,
     "plane-2-pins-mesh": _draw_plane_2_pins_mesh,
     "shaft-bore": _draw_shaft_bore,
+    "plane-pin-stop": _draw_plane_pin_stop,
 }
 
 
@@ -1574,6 +1725,30 @@ def _check_bore(fixture: Fixture, draft: _Draft) -> str | None:
     return None
 
 
+def _check_pin_stop(fixture: Fixture) -> str | None:
+    """Why a plane-pin-stop draft is not valid, or None: the located pose as built (S1 a stop), the start clear of everything."""
+    from fixplan.locating import cylinder_contacts, insertion_axis, seat_at
+
+    if not fixture.is_full:
+        return "the rests, the pin and the stop do not make 6 constraints"
+    wp = fixture.workpiece
+    goal_gaps = locator_gaps(wp, fixture.goal, fixture.locators)
+    if np.max(np.abs(goal_gaps)) > EXACT_M:
+        return f"a locator does not touch at the goal (gaps {goal_gaps})"
+    seated = min((c.gap_m for c in cylinder_contacts(fixture, fixture.goal)), default=math.inf)
+    if abs(seated) > EXACT_M:
+        return f"the round pin does not touch its hole at the goal (gap {seated})"
+    if seat_at(fixture, fixture.goal, insertion_axis(fixture)).stop_names != ("S1",):
+        return "S1 does not face across the pin's axis at the goal"
+    start_gaps = locator_gaps(wp, fixture.start, fixture.locators)
+    if np.min(start_gaps) < CLEARANCE_M:
+        return f"a locator is within {np.min(start_gaps):.3g} m of the part at the start"
+    for c in cylinder_contacts(fixture, fixture.start):
+        if c.gap_m < CLEARANCE_M:
+            return f"{c.name} touches at the start (gap {c.gap_m:.3g} m)"
+    return None  # the rank of the rests', the pin's and the stop's constraints: the loader's own check
+
+
 def _check(fixture: Fixture, draft: _Draft) -> str | None:
     """Why the loaded draft is not a valid generated fixture, or None."""
     if not fixture.is_full:
@@ -1620,11 +1795,14 @@ def _check_free(fixture: Fixture, draft: _Draft) -> str | None:
     return draft.check(fixture)
 
 
-def _check_twin(fixture: Fixture, doc: dict[str, Any], name: str, folder: Path) -> str | None:
+def _check_twin(
+    fixture: Fixture, doc: dict[str, Any], name: str, folder: Path, *, far_pins: bool = False
+) -> str | None:
     """Why the rotated document is not the same fixture (gaps at the start and the goal), or None.
 
     The gaps: every locator's, and every pin's and bore's least gap to its hole (the pins, bores
-    and holes are turned too: :func:`fixplan.twins.rotate_world`).
+    and holes are turned too: :func:`fixplan.twins.rotate_world`). ``far_pins``: at the start the
+    pins' gaps are only checked clear (beyond :data:`CLEARANCE_M`) in both.
     """
     from fixplan.locating import cylinder_contacts, located_pose
 
@@ -1643,7 +1821,10 @@ def _check_twin(fixture: Fixture, doc: dict[str, Any], name: str, folder: Path) 
     goals = (located_pose(fixture), located_pose(twin)) if fixture.has_pins else (fixture.goal, twin.goal)
     for a, b in ((fixture.start, twin.start), goals):
         diff = locator_gaps(fixture.workpiece, a, fixture.locators) - locator_gaps(twin.workpiece, b, twin.locators)
-        if fixture.has_pins:
+        if fixture.has_pins and far_pins and a is fixture.start:
+            if min(np.min(least(fixture, a)), np.min(least(twin, b))) < CLEARANCE_M:
+                return "a pin touches at the rotated fixture's start"
+        elif fixture.has_pins:
             mine, theirs = least(fixture, a), least(twin, b)
             if not np.array_equal(np.isinf(mine), np.isinf(theirs)):
                 return "the rotated fixture's pins touch where the fixture's cannot (or the other way round)"

@@ -344,32 +344,48 @@ def seated(fixture: Fixture, pose: Pose) -> bool:
     return all(abs(g) <= tol for g in seat_gaps_m(fixture, pose).values())
 
 
+# a contact whose normal is at most this cosine from the insertion axis faces across it (a pin's side,
+# a stop), not along it (a rest): the descent along the axis does not close it
+_ACROSS_COS = 0.5
+
+
 @dataclass(frozen=True)
 class Seat:
-    """What the part sits on at a pose, and the side it is seated toward."""
+    """What the part sits on at a pose, the side it is seated toward, and the stops it is pressed into."""
 
     contacts: ContactSet  # every rest, pin and bore touching
     side_world: FloatArray  # unit, normal to the insertion axis, toward the round pin's contact; zero when none touches
     at_world: FloatArray  # where it is pressed: the mean of those contacts' points (the centre of mass when none)
+    # the touching locators whose normal lies across the axis (a stop taking the turn about a round pin):
+    # the descent does not close them, a push across the axis does
+    stops: tuple[Contact, ...] = ()
+
+    @property
+    def stop_names(self) -> tuple[str, ...]:
+        """The stops' locators, each once, in the file's order."""
+        return tuple(dict.fromkeys(c.owner for c in self.stops))
 
 
 def seat_at(fixture: Fixture, pose: Pose, u: FloatArray) -> Seat:
-    """The rests', pins' and bores' touching contacts at ``pose``, and the side the round pin (or bore) seats the part toward.
+    """The rests', pins' and bores' touching contacts at ``pose``, the side the round pin (or bore) seats the part toward, and the stops.
 
     The side is the sum of the first round pin's touching contact normals across ``u`` (they push
-    the part away from the pin), reversed; it is pressed at the mean of those contacts' points.
+    the part away from the pin), reversed; it is pressed at the mean of those contacts' points. A
+    stop is a touching locator whose normal lies across ``u`` (``|n·u| < 0.5``): moving along the
+    axis does not close it.
     """
     round_first = [i.name for i in inserts(fixture) if i.kind != "diamond"]
     names = [loc.name for loc in fixture.locators] + [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
     cs = contact_set(fixture, pose, names).touching(fixture.tolerances.touch_m)
+    stops = tuple(c for c in cs.contacts if c.kind == "locator" and abs(float(c.normal_world @ u)) < _ACROSS_COS)
     for owner in round_first:
-        side = [c for c in cs.contacts if c.owner == owner and abs(float(c.normal_world @ u)) < 0.5]
+        side = [c for c in cs.contacts if c.owner == owner and abs(float(c.normal_world @ u)) < _ACROSS_COS]
         n = sum((c.normal_world for c in side), np.zeros(3))
         n = n - float(n @ u) * u
         norm = float(np.linalg.norm(n))
         if norm > 0.0:
-            return Seat(cs, -n / norm, np.mean([c.point_world for c in side], axis=0))
-    return Seat(cs, np.zeros(3), pose.point_world_from_body(fixture.workpiece.com_body))
+            return Seat(cs, -n / norm, np.mean([c.point_world for c in side], axis=0), stops)
+    return Seat(cs, np.zeros(3), pose.point_world_from_body(fixture.workpiece.com_body), stops)
 
 
 def start_state(fixture: Fixture, kinds: Sequence[str] = ("locator",)) -> frozenset[str]:
@@ -843,6 +859,26 @@ def _face_mismatches(
     return tuple(out)
 
 
+def _beyond_faces(
+    shape: Shape, locators: Sequence[Locator], faces: Sequence[str], pose: Pose
+) -> list[tuple[str, str, float]]:
+    """Locators whose touch point on their face's plane lies outside the face at ``pose``: (name, face, by [m]).
+
+    Box and rectangle faces only (a cylinder's ends and side: none); the largest overshoot first.
+    """
+    if not isinstance(shape, Box | Rectangle):
+        return []
+    half = np.asarray(shape.half, dtype=float)
+    out = []
+    for loc, face in zip(locators, faces, strict=True):
+        k = "xyz".index(face[1])
+        q = pose.point_body_from_world(loc.p_world)
+        excess = max(float(abs(q[j]) - half[j]) for j in range(half.shape[0]) if j != k)
+        if excess > DEFAULT.goal.touch_gap_m:
+            out.append((loc.name, face, excess))
+    return sorted(out, key=lambda item: -item[2])
+
+
 def _faces_touched(shape: Shape, locators: Sequence[Locator], pose: Pose) -> list[str | None]:
     """The face of the part nearest each locator at ``pose`` (None on a shape without named faces)."""
     return [shape.face_of(shape.project(pose.point_body_from_world(loc.p_world)).point_body) for loc in locators]
@@ -886,6 +922,9 @@ def find_goal(
     full_rank = min(len(locators), 6 if start.dimension == 3 else 3)
     found: list[tuple[Key, GoalResult]] = []
     touching: list[tuple[Key, GoalResult, tuple[tuple[str, str], ...]]] = []
+    # where every locator touches the plane of its face but some lie beyond the face's edges
+    # (the least overshoot first): why the exact gaps cannot all close there
+    off_faces: list[tuple[str, str, float]] = []
     best: list[GoalResult] = []
 
     def consider(result: GoalResult, order: int) -> None:
@@ -933,7 +972,12 @@ def find_goal(
                         assignments.append(at_start)
             for named in assignments:
                 planes = _face_model(workpiece, locators, named)
-                pose = _gauss_newton(planes, workpiece, slid, **iterations).pose  # type: ignore[arg-type]
+                on_planes = _gauss_newton(planes, workpiece, slid, **iterations)  # type: ignore[arg-type]
+                pose = on_planes.pose
+                if on_planes.converged:
+                    beyond = _beyond_faces(shape, locators, named, pose)
+                    if beyond and (not off_faces or beyond[0][2] < off_faces[0][2]):
+                        off_faces[:] = beyond
                 consider(_gauss_newton(exact, workpiece, pose, **iterations), tried)  # type: ignore[arg-type]
             if not faces:
                 consider(_gauss_newton(exact, workpiece, slid, **iterations), tried)  # type: ignore[arg-type]
@@ -944,6 +988,15 @@ def find_goal(
     if touching:
         _, result, mismatched = min(touching, key=lambda item: item[0])
         return GoalSearch(False, result.pose, result.max_gap_m, result.rank, tried, face_mismatches=mismatched)
+    if off_faces:
+        where = ", ".join(
+            f"{name} lies {out * 1e3:.3g} mm beyond the edge of face {face!r}" for name, face, out in off_faces
+        )
+        reason = (
+            f"no pose touches every locator on its face: where each touches its face's plane, {where} "
+            f"(of {tried} starts, the least overshoot); move the locator inward or name another face"
+        )
+        return GoalSearch(False, None, best[0].max_gap_m, best[0].rank, tried, reason, proven=False)
     reason = (
         f"goal finding did not converge from {tried} starts (largest gap {best[0].max_gap_m:.3g} m at the best); "
         "give workpiece.goal (the located pose)"

@@ -167,7 +167,13 @@ def draw_world(fixture: Fixture, sample: int, settings: RobustSettings) -> tuple
         res = solve_goal(wp, locators, goal_given)
         goal_given = res.pose if res.converged else None
     # located again: raises InfeasibleError if no pose touches every locator
-    perturbed = with_goal(dataclasses.replace(fixture, locators=locators, start=start, goal_given=goal_given))
+    try:
+        perturbed = with_goal(dataclasses.replace(fixture, locators=locators, start=start, goal_given=goal_given))
+    except InfeasibleError as exc:
+        moved = max(float(np.linalg.norm(off)) for off in offsets) if len(offsets) else 0.0
+        raise InfeasibleError(
+            f"world {sample} has no located pose: with its locators moved by up to {moved * 1e3:.3g} mm, {exc}"
+        ) from exc
     what = Perturbation(
         sample,
         {loc.name: loc.friction for loc in locators},
@@ -323,9 +329,11 @@ def run_sample(
     try:
         v = verify_sample(fixture, start_state, steps, sample, settings, policy)
     except (FixplanError, np.linalg.LinAlgError) as exc:
+        # a world whose locators admit no located pose fails the fixture's design, not the plan
+        cause = "no located pose" if isinstance(exc, InfeasibleError) else "error"
         return {
-            "seed": sample, "passed": False, "transition": None, "cause": "error", "reason": str(exc),
-            "replans": 0, "sim_time_s": None, "wall_time_s": time.perf_counter() - t0,
+            "seed": sample, "passed": False, "transition": None, "cause": cause, "reason": str(exc),
+            "replans": 0, "retries": 0, "sim_time_s": None, "wall_time_s": time.perf_counter() - t0,
         }  # fmt: skip
     ex = v.execution
     return {
@@ -335,6 +343,8 @@ def run_sample(
         "cause": failure_cause(v),
         "reason": v.reason,
         "replans": int(ex.counts["replans"]) if ex is not None else 0,
+        # the pin insertion's policy: back-offs and re-entries after a stall or a lost pin
+        "retries": int(ex.counts.get("retries", 0)) if ex is not None else 0,
         "sim_time_s": None if v.duration_s is None else float(v.duration_s),
         "wall_time_s": time.perf_counter() - t0,
     }
@@ -375,7 +385,7 @@ class RobustResult:
             "plan_reason": self.plan_reason,
             "sequence": [list(s) for s in self.sequence],
             "outcomes": [
-                {k: o[k] for k in ("seed", "passed", "transition", "cause", "replans", "sim_time_s")}
+                {k: o[k] for k in ("seed", "passed", "transition", "cause", "replans", "retries", "sim_time_s")}
                 for o in self.outcomes
             ],
             "settings": {"samples": self.samples, **self.settings.to_json()},

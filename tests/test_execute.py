@@ -616,3 +616,35 @@ def test_a_locator_friction_leaves_a_few_micrometres_off_stays_in_contact():
     held = sim.in_contact(threshold, ex.contact_gap_m, ("E1", "B1"), ex.contact_hold_gap_m)
     assert "E1" in held and {"B1", "B2", "B3"} <= set(held)  # kept
     assert ex.contact_gap_m < ex.contact_hold_gap_m <= DEFAULT.verification.final_gap_m / 5
+
+
+def test_every_new_plan_gets_time_of_its_own_in_the_verification():
+    """A load that had to re-plan is given ``time_per_replan_s`` more than its first plan's limit.
+
+    The plate rests on B1 but the plan given says it is free: the first observed state is not in
+    the plan and the executor re-plans from it. Its first plan's time limit (0.3 s here) is then
+    too short for the new plan; with the allowance the same load reaches the goal, without it it
+    times out at the old limit.
+    """
+    import dataclasses
+
+    from fixplan.planner.solve import Planner
+    from fixplan.planner.verify import verify
+    from fixplan.settings import HAPTIC
+
+    fx = fixplan.load(PROBLEMS / "gen-plate-2d-s2026-000.toml")
+    assert fixplan.locating.start_state(fx) == {"B1"}
+    planner = Planner(fx, settings=HAPTIC)
+    steps = [Step((), "S", "free", (fx.start, fx.start))]  # a plan from free space: stale at once
+    outcomes = {}
+    for per in (HAPTIC.verification.time_per_replan_s, 0.0):
+        profile = HAPTIC.with_(verification=dataclasses.replace(HAPTIC.verification, time_per_replan_s=per))
+        v = verify(fx, frozenset(), steps, settings=profile, replan=planner.replan, time_limit_s=0.3)
+        outcomes[per] = v
+        assert v.execution.counts["replans"] == 1
+    with_time, without = outcomes[HAPTIC.verification.time_per_replan_s], outcomes[0.0]
+    assert with_time.passed, with_time.reason
+    assert 0.3 < with_time.duration_s < 0.3 + HAPTIC.verification.time_per_replan_s
+    assert max(with_time.final_gaps_m.values()) <= HAPTIC.verification.final_gap_m
+    assert not without.passed and without.execution.failure_kind == "timeout"
+    assert without.duration_s == pytest.approx(0.3, abs=2e-3)

@@ -207,6 +207,7 @@ def test_cli_list_and_bad_input():
         "mesh-321",
         "plane-2-pins",
         "plane-2-pins-mesh",
+        "plane-pin-stop",
         "shaft-bore",
     ]
     as_json = json.loads(fixplan("generate", "--list", "--json").stdout)

@@ -368,3 +368,22 @@ def test_named_faces_locate_the_box_from_any_turn(position: list[float], rpy_deg
     fx = loads(text)
     assert_located(fx, CORNER)
     assert fx.goal_starts == (49 if 180.0 in rpy_deg else 2)
+
+
+def test_a_locator_beyond_its_face_is_named_with_its_overshoot() -> None:
+    """B2 moved to x = 0.206 m, beyond the 0.2 m box's +x end: the three planes -z, -y, -x fix the
+    pose (the goal's, unrotated: E1 sets x, S1 and S2 set y and the yaw, the three rests z and
+    the tilts), and there B2's tip centre lies 0.106 - 0.1 = 6 mm beyond the edge of face -z.
+    No pose touches every locator on its face; the message says which and by how much."""
+    text = DEFAULT_TEXT.replace("position = [0.165, 0.015, -0.005]", "position = [0.206, 0.015, -0.005]")
+    assert text != DEFAULT_TEXT
+    with pytest.raises(FixtureError) as info:
+        loads(text, source="f.toml")
+    (line,) = str(info.value).splitlines()
+    assert "no pose touches every locator on its face" in line, line
+    assert "B2 lies 6 mm beyond the edge of face '-z'" in line, line
+    fx = loads(DEFAULT_TEXT)
+    moved = dataclasses.replace(fx.locator("B2"), p_world=np.array([0.206, 0.015, -0.005]))
+    locators = [moved if loc.name == "B2" else loc for loc in fx.locators]
+    search = find_goal(fx.workpiece, locators, fx.start)
+    assert not search.found and not search.proven and "B2 lies 6 mm" in search.message

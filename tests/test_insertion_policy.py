@@ -201,3 +201,14 @@ def test_the_policy_s_format_is_checked_with_its_key_path(capsys, tmp_path) -> N
     rc, _, err = _run(capsys, "verify", bad)
     assert rc == 2
     assert "insertion.policy.retries: got the number -1 (expected a non-negative integer)" in err
+
+
+def test_robust_counts_the_insertion_policy_retries_per_world(levered) -> None:
+    """``fixplan robust``'s outcome of that world says it took one retry (its JSON lists them)."""
+    from fixplan.robust import run_sample
+
+    fixture, _, _ = levered
+    play = max(i.play_m for i in inserts(fixture))
+    settings = RobustSettings(samples=20, seed=0, pose_sigma_m=3.0 * play, pose_sigma_deg=0.1)
+    outcome = run_sample(10, fixture, frozenset(), [], settings)
+    assert outcome["passed"] and outcome["retries"] == 1 and outcome["replans"] == 0

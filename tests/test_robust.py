@@ -173,7 +173,7 @@ def test_robust_json_contract(local_run):
     for f in out["failures"]:
         assert set(f) >= {"seed", "transition", "cause", "reason"}
         assert f["cause"] in {"lost contact", "unplanned contact", "stall", "timeout", "diverged", "limits",
-                              "final gap", "penetration", "replan failed", "executor", "error", "other"}  # fmt: skip
+                              "final gap", "penetration", "replan failed", "executor", "error", "no located pose", "other"}  # fmt: skip
 
 
 def test_perturb_seed_replays_a_sample(local_run):

@@ -13,18 +13,25 @@ axis, or the bore's; the part moves along ``−u``), from the located pose ``G``
 
 1. **approach** (a pose target, not a contact target): from the start to the staging pose
    ``G + u (h₁ + lead_m)``, lifting first when the start is lower, so that every hole's axis lies
-   on its pin's axis ``lead_m`` above the first tip; it ends once every hole's mouth (a shaft's
-   leading end) is within ``align_capture_share`` of its capture of where the staging pose puts it.
-   A part whose every pin (or the shaft) starts in past the chamfers (:func:`started_in`: a shaft
-   cocked in its bore) has no approach and no insertion: its holes are where its pose says, and
-   the plan is the seating from the start, on the line re-centred on them;
+   on its pin's axis ``lead_m`` above the first tip; where the straight move would bring the
+   part's lowest point below the pins' tips or the stops' tops (a tilted start), it moves sideways
+   at a height that clears them and comes down along the axis (:func:`_over_staging`); it ends
+   once every hole's mouth (a shaft's leading end) is within ``align_capture_share`` of its
+   capture of where the staging pose puts it. A part whose every pin (or the shaft) starts in past
+   the chamfers (:func:`started_in`: a shaft cocked in its bore) has no approach and no insertion:
+   its holes are where its pose says, and the plan is the seating from the start, on the line
+   re-centred on them;
 2. **one insertion per pin**, in the order the tips meet their mouths on the way down (the pin
    whose engagement height ``h_i`` — its tip's depth in its hole at ``G`` — is largest first; pins
    engaging at the same height are one transition, round before diamond): down to
    ``h_i − (c_hole + c_pin + engage_margin_m)``, past both chamfers;
 3. **seating**: down to ``G``, where the rests (or the bore's bottom) close together, then the
-   seating push: ``seat_press`` weights along ``−u`` and ``seat_side`` weights toward the round
-   pin's contact at ``G`` (the side the part is located against).
+   seating push: ``seat_press`` weights along ``−u``, ``seat_side`` weights toward the round
+   pin's contact at ``G`` (the side the part is located against) and as much into every *stop*
+   (a locator facing across ``u``, which the descent does not close: the flange's rotational
+   stop), each part balanced by the contacts it presses. With stops and one round pin the part
+   goes down turned away from them about the pin's axis (:func:`seat_turn`: a face sliding down
+   along a stop catches the stop's tip on its lower edge), and once on its rests turns into them.
 
 Each step's push is searched on the contacts its motion slides on (the pins touching their walls
 along the planned path, e.g. the round pin on the seated side) with the jamming search
@@ -38,7 +45,12 @@ The verification (:func:`verify_insertion`) runs the plan in the simulated hapti
 :mod:`.verify` (the same rig, engine with the pins' closed-form contacts, and checks): the hand
 servos the part along the plan's guide — stiff along the axis (its push capped at the step's
 planned push), soft across it as a remote-centre compliance, so that a chamfer's push moves the
-part sideways onto its pin — and, at the goal state, switches to the seating push. It observes
+part sideways onto its pin — and, at the goal state, switches to the seating push. With stops,
+once the descent has closed what it closes (the rests, the pins) the hand, still carrying the
+part so that the rests are lightly loaded, presses the round pin's seated side and turns the part
+about the pin's axis into the stops at a set speed (a velocity loop, up to the stops' part of the
+seating push; a stop met fast knocks the hole around its pin), or presses the stops when there
+is no turn; the stops close and the seating push holds the part. It observes
 the state every tick (engaged pins from the pose, pressed rests from the engine's forces), and
 passes when the goal state is reached and held at rest, the rests within ``final_gap_m``, every
 hole's axis within the radial play of its pin's (for a diamond pin: along its lands), penetration
@@ -74,6 +86,7 @@ from fixplan.locating import (
     insertion_axis,
     inserts,
     located_pose,
+    locator_gaps,
     peg_body,
     seat_at,
     seat_gaps_m,
@@ -123,9 +136,22 @@ class InsertionPlan:
     seat_wrench: FloatArray | None = None  # the seating push (about the body origin at the goal, world axes)
     seat_wrench_com: FloatArray | None = None  # the same about the centre of mass (what the hand adds to carrying)
     start_state: State = frozenset()  # the goal state when the part starts located
+    # the stops (locators facing across the axis, seat_at) and the seating's turn into them (None: the
+    # part goes down to the located pose); with_seating fills them and the two parts below
+    stops: tuple[str, ...] = ()
+    turn: SeatTurn | None = None
+    # the seating push's parts across the axis, about the centre of mass: toward the round pin's
+    # seated side and into the stops (seat_parts); what the seating stage presses once the rests are
+    seat_side_com: FloatArray | None = None
+    seat_stops_com: FloatArray | None = None
     plan_s: float = 0.0
     # what the run does from every observable state, and how it recovers (None: a failed stage is the end)
     policy: InsertionPolicy | None = None
+
+    @property
+    def descent_pose(self) -> Pose:
+        """Where the insertion goes down to before the seating pushes it to the located pose."""
+        return self.goal if self.turn is None else self.turn.descent
 
     @property
     def states(self) -> list[State]:
@@ -171,6 +197,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     G = located_pose(fixture)
     u = insertion_axis(fixture)
     plan = InsertionPlan(False, "", u, G)
+    with_seating(plan, fixture, s)
     ins = inserts(fixture)
     # every hole over its pin at the located pose: the capture, and the heights the tips meet the mouths
     for i in ins:
@@ -208,6 +235,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     # a part whose every pin (or the shaft) is already in past the chamfers (a shaft cocked in its
     # bore) stays in: its holes are where the pose says, and lifting it out would lose them. It is
     # seated from where it is, upright, on the line the run re-centres on them (InsertionRun).
+    D = plan.descent_pose
     in_bore = started_in(fixture)
     if in_bore:
         plan.start_state = frozenset(i.name for i in ins)
@@ -217,11 +245,12 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
         # a part partly in (a shaft dropped tilted into the chamfer) is lifted straight out first:
         # the approach below rises along the axis before it turns and moves sideways
         h_top = plan.heights_m[groups[0][0].name]
-        staging = G.translated((h_top + s.lead_m) * u)
+        staging = D.translated((h_top + s.lead_m) * u)
         poses = [start]
         rise = float((staging.p_world - start.p_world) @ u)
         if rise > 0.0:  # lift first: the part never moves sideways lower than the staging height
             poses.append(start.translated(rise * u))
+        poses += _over_staging(fixture, poses.pop(), staging, u, settings)
         guide = poses[:1]
         for a, b in zip([*poses], [*poses[1:], staging], strict=True):
             guide += [pose_between(a, b, k / 4) for k in range(1, 5)]
@@ -239,7 +268,7 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
         nxt = plan.heights_m[groups[k + 1][0].name] if k + 1 < len(groups) else 0.0
         past = max(i.capture_m - i.play_m for i in g) + s.engage_margin_m
         end_h = max(h - past, 0.5 * (h + nxt))
-        end = G.translated(end_h * u)
+        end = D.translated(end_h * u)
         names = [*engaged, *(i.name for i in g if i.kind != "bore")]
         pin_names = [n for n in names if n in {p.name for p in fixture.pins}] + [i.name for i in g if i.kind == "bore"]
         ok, w, why, touching, wedge, margin = _push(fixture, end, pin_names, u, settings)
@@ -260,13 +289,17 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
             return plan
         engaged += [i.name for i in g]
         prev = end
-    # the seating: down to the located pose, the rests (or the bore's bottom) closing together
+    # the seating: down to the located pose (or turned away from its stops), the rests (or the bore's
+    # bottom) closing together, then into the stops; the push slides down the pins, and the stops
+    # where they touch on the way down (no turn opens them)
     rests = [loc.name for loc in fixture.locators] + [f"{b.name}.bottom" for b in fixture.bores]
-    pin_names = [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
-    just_above = G.translated(min(s.engage_margin_m, 0.5 * float((prev.p_world - G.p_world) @ u)) * u)
-    ok, w, why, touching, wedge, margin = _push(fixture, just_above, pin_names, u, settings)
-    seat = Stage(rests[0], tuple(rests[1:]), "seat", [prev, G], w, touching, f"seat on {', '.join(rests)}: {why}",
-                 wedge, margin)  # fmt: skip
+    slide_on = [p.name for p in fixture.pins] + [b.name for b in fixture.bores]
+    slide_on += list(seat_at(fixture, G, u).stop_names)
+    just_above = D.translated(min(s.engage_margin_m, 0.5 * float((prev.p_world - G.p_world) @ u)) * u)
+    ok, w, why, touching, wedge, margin = _push(fixture, just_above, slide_on, u, settings)
+    why = why if plan.turn is None else f"{plan.turn.reason}; {why}"
+    seat = Stage(rests[0], tuple(rests[1:]), "seat", [prev, G] if plan.turn is None else [prev, D, G], w, touching,
+                 f"seat on {', '.join(rests)}: {why}", wedge, margin)  # fmt: skip
     plan.stages.append(seat)
     if not ok:
         plan.reason = f"no push seats the part on {', '.join(rests)} without jamming: {why}"
@@ -306,23 +339,159 @@ def started_in(fixture: Fixture) -> bool:
     return True
 
 
+@dataclass(frozen=True)
+class SeatTurn:
+    """The seating's turn into the stops about the round pin's axis (:func:`seat_turn`)."""
+
+    pin: str
+    descent: Pose  # the located pose turned away from the stops: where the insertion goes down to
+    angle_rad: float  # that turn
+    axis_world: FloatArray  # unit, ±u: the turn toward the stops (right-handed)
+    point_world: FloatArray  # on the pin's axis
+    # the push about the centre of mass (at the located pose) that turns the part about the pin's axis
+    # by 1 N·m there with no force on the pin: ``[m (a × r), I_a a] / (I_a + m |a × r|²)``, r from the axis
+    unit_com: FloatArray
+    inertia_kgm2: float  # about the pin's axis
+    max_torque_Nm: float  # the stops' part of the seating push about the pin's axis: the turn's push at most
+    speed_radps: float  # the turn's speed toward the stops (``seat_turn_speed_mps`` at the farthest stop)
+    reason: str
+
+
+def _over_staging(fixture: Fixture, top: Pose, staging: Pose, u: FloatArray, settings: Settings) -> list[Pose]:
+    """The approach's waypoints from ``top`` (the start, lifted to the staging height when lower) before the staging pose: ``[top]``, or the sideways move at a clear height.
+
+    The straight move from ``top`` to ``staging`` turns and moves the part sideways as it comes
+    down: a part tilted at the start, or a staging pose below a stop's top, brings its lowest
+    point onto a pin's tip or against a stop before it is over its pins. Where the straight move's
+    lowest point (the part's collision points, sampled along it) comes below the clear level, every
+    pin's tip and every stop's top ``lead_m`` down, the part instead rises (if need be), moves
+    sideways and turns at a height where it clears them all the way, and comes down to the staging
+    pose along the axis: ``[top, top raised, staging raised]``.
+    """
+    from fixplan.geometry.collision import collision_points
+
+    tops = [float((p.p_world + p.length_m * p.axis_world) @ u) for p in fixture.pins]
+    seat = seat_at(fixture, located_pose(fixture), u)
+    radius = {loc.name: loc.radius_m for loc in fixture.locators}
+    tops += [float(c.point_world @ u) + radius[c.owner] for c in seat.stops]
+    if not tops:
+        return [top]
+    clear = max(tops) + settings.insertion.lead_m
+    pts, radii = collision_points(fixture.workpiece.shape, settings.engine.rim_points)
+
+    def lowest(pose: Pose) -> float:
+        return float(np.min((pts @ pose.R_world_body.T + pose.p_world) @ u - radii))
+
+    def deficit(a: Pose, b: Pose) -> float:
+        """How far the part's lowest point comes below the clear level on the way from ``a`` to ``b`` (``b`` excluded).
+
+        The hand's turn lags the guide's: the part is taken as turned as the guide or still as at ``top``.
+        """
+        poses = [pose_between(a, b, k / 8) for k in range(8)]
+        return clear - min(min(lowest(p), lowest(Pose(top.R_world_body, p.p_world))) for p in poses)
+
+    if deficit(top, staging) <= 0.0:
+        return [top]
+    h = max(float((staging.p_world - top.p_world) @ u), 0.0)
+    for _ in range(8):  # raise the sideways move until it clears (each time by what it lacked)
+        a, b = top.translated(h * u), staging.translated(float((top.p_world - staging.p_world) @ u + h) * u)
+        lack = max(deficit(a, b), clear - lowest(b))
+        if lack <= 0.0:
+            break
+        h += lack
+    return [top, a, b] if h > 0.0 else [top, b]
+
+
+def seat_turn(fixture: Fixture, G: Pose, u: FloatArray, s: InsertionSettings) -> SeatTurn | None:
+    """The turn into the stops: the part goes down turned away from them about its round pin's axis, then turns into them on the rests; None when there is no such turn.
+
+    A face sliding down along a stop that touches it at ``G`` meets the stop's tip with the face's
+    lower edge wherever the pin's play puts it on the stop's side, and catches there. With one
+    round pin (no other pin or bore: those fix the turn about it) the part is free to turn about
+    the pin's axis: the descent is ``G`` turned by the least angle that opens every stop's gap by
+    ``stop_clearance_m`` (at most ``stop_turn_max_rad``), when one direction opens them all (a
+    stop's gap opens at ``n·(a × (p − c))`` per radian about ``a``, ``n`` its normal into the part,
+    ``p`` its contact, ``c`` on the pin's axis) and the rests still touch there.
+    """
+    seat = seat_at(fixture, G, u)
+    ins = inserts(fixture)
+    if not seat.stops or s.stop_clearance_m <= 0.0 or len(ins) != 1 or ins[0].kind != "round":
+        return None
+    pin = next(p for p in fixture.pins if p.name == ins[0].name)
+    c = pin.p_world
+    rates = np.array([float(k.normal_world @ np.cross(u, k.point_world - c)) for k in seat.stops])
+    if not (np.all(rates > 0.0) or np.all(rates < 0.0)):
+        return None  # no turn about the pin opens them all
+    a = -u if rates[0] > 0.0 else u  # the turn toward the stops closes their gaps
+    angle = min(s.stop_clearance_m / float(np.min(np.abs(rates))), s.stop_turn_max_rad)
+    R = exp_so3(-angle * a)
+    D = Pose(R @ G.R_world_body, c + R @ (G.p_world - c))
+    closing = [loc for loc in fixture.locators if loc.name not in seat.stop_names]
+    if np.any(np.abs(locator_gaps(fixture.workpiece, D, closing)) > fixture.tolerances.touch_m):
+        return None  # turned, the part would leave a rest
+    wp = fixture.workpiece
+    com = G.point_world_from_body(wp.com_body)
+    lever = np.cross(a, com - c)
+    I_a = float(a @ (G.R_world_body @ wp.inertia_body @ G.R_world_body.T) @ a)
+    I_pin = I_a + wp.mass_kg * float(lever @ lever)
+    unit = np.concatenate([wp.mass_kg * lever, I_a * a]) / I_pin
+    _, _, stops = seat_parts(fixture, G, u, s)
+    torque = float(a @ (stops[3:] + np.cross(com - c, stops[:3])))
+    reach = max(float(np.linalg.norm(np.cross(u, k.point_world - c))) for k in seat.stops)
+    names = ", ".join(seat.stop_names)
+    why = f"down turned {np.degrees(angle):.3g}° about {pin.name} away from {names}, then into {names} on the rests"
+    return SeatTurn(pin.name, D, angle, a, c.copy(), unit, I_pin, torque, s.seat_turn_speed_mps / reach, why)
+
+
+def with_seating(plan: InsertionPlan, fixture: Fixture, s: InsertionSettings) -> None:
+    """Fill ``plan``'s seating across the axis from ``fixture`` at its located pose: the stops, the turn into them, the seating push's side and stops parts."""
+    G, u = plan.goal, plan.axis_world
+    plan.stops = seat_at(fixture, G, u).stop_names
+    plan.turn = seat_turn(fixture, G, u, s)
+    _, plan.seat_side_com, plan.seat_stops_com = seat_parts(fixture, G, u, s)
+
+
+def seat_parts(
+    fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The seating push's three parts about the centre of mass at ``pose``: the press along ``−u``, the round pin's seated side, the stops (:func:`seat_push`)."""
+    seat = seat_at(fixture, pose, u)
+    weight = fixture.weight_N
+    com = pose.point_world_from_body(fixture.workpiece.com_body)
+    press = np.concatenate([-s.seat_press * weight * u, np.zeros(3)])
+    F_side = s.seat_side * weight * seat.side_world
+    side = np.concatenate([F_side, np.cross(seat.at_world - com, F_side)])
+    stops = np.zeros(6)
+    for name in seat.stop_names:
+        cs = [c for c in seat.stops if c.owner == name]
+        n = sum((c.normal_world for c in cs), np.zeros(3))
+        n = n - float(n @ u) * u  # across the axis: the rests take the press along it
+        norm = float(np.linalg.norm(n))
+        if norm == 0.0:
+            continue
+        F_stop = -s.seat_side * weight * n / norm
+        stops += np.concatenate([F_stop, np.cross(np.mean([c.point_world for c in cs], axis=0) - com, F_stop)])
+    return press, side, stops
+
+
 def seat_push(
     fixture: Fixture, pose: Pose, u: FloatArray, s: InsertionSettings
 ) -> tuple[FloatArray, FloatArray, str | None]:
     """The seating push at the located pose, about the body origin and about the centre of mass, and why it does not hold the part there (None: it does).
 
-    ``seat_press`` weights along ``−u`` through the centre of mass and ``seat_side`` weights toward
+    ``seat_press`` weights along ``−u`` through the centre of mass, ``seat_side`` weights toward
     the round pin's contact, along a line through that contact (no turn about the pin: the diamond
-    pin, centred in its play, takes none), classified on the rests and the pins at ``pose``: ``held``.
+    pin, centred in its play, takes none), and ``seat_side`` weights into every stop (a locator
+    facing across ``u``, :func:`~fixplan.locating.seat_at`), across ``u`` through its contact: each
+    part of the push is balanced by the contacts it presses alone (the rests, the pin's seated
+    side, the stop), so every contact of the located pose is loaded. Classified on the rests, the
+    pins and the stops at ``pose``: ``held``.
     """
     from fixplan.jamming import classify
 
     seat = seat_at(fixture, pose, u)
-    weight = fixture.weight_N
     com = pose.point_world_from_body(fixture.workpiece.com_body)
-    F_side = s.seat_side * weight * seat.side_world
-    F = -s.seat_press * weight * u + F_side
-    w_com = np.concatenate([F, np.cross(seat.at_world - com, F_side)])
+    w_com = sum(seat_parts(fixture, pose, u, s), np.zeros(6))
     w = shift_wrench(w_com, com, pose.p_world)
     touching = sorted({c.owner for c in seat.contacts.contacts})
     if not touching:
@@ -433,12 +602,20 @@ class InsertionRun:
         # the recovery (module insertion_policy): the guide's located pose (re-centred at a back-off),
         # where the engaged holes were seen, the retries spent, the back-off under way
         self.policy = plan.policy
-        self._goal = plan.goal
-        self._recentring = Recentring(world, plan.goal, self.u, self.inserts)
+        self._goal = plan.descent_pose
+        self._recentring = Recentring(world, plan.descent_pose, self.u, self.inserts)
         self._retries = 0
         self._recovery_t0: float | None = None
         self._backoff: tuple[float, float, float] | None = None  # (target height, since, height then)
         self._spent = ""  # why the recovery could not go on (the budget), for the failure's reason
+        # the seating stage once what the descent closes is pressed (module text): the stops are not
+        # closed by the descent; the hand presses the round pin's seated side and turns the part into
+        # them (or presses them) while it still carries the part, on lightly loaded rests
+        self._closed_by_descent = self.goal - set(plan.stops)
+        self._across = False  # latched until a back-off
+        self._turn_integral = 0.0  # [rad] the turn's speed error, integrated
+        self._turned = 0.0  # [rad] the turn toward the stops so far (its progress)
+        self._stops_pressed = False  # every stop pressed in the seating stage: the press along the axis too
         if plan.stages and plan.stages[0].kind != "free":  # started in its holes: down from where it is,
             self._in_from_start(world.start)  # on the line through the holes seen there
 
@@ -547,11 +724,58 @@ class InsertionRun:
         wr = self.rot_omega
         T = self._turn(pose, wr * wr * log_so3(ref.R_world_body @ pose.R_world_body.T) - 2.0 * wr * w_ang)
         w_com = carry + np.concatenate([F, T])
+        if self._press_across(state):
+            w_com = self._across_push(carry, f_ax, v, w_ang, pressed)
         if self._backoff is not None:
             self._check_backoff(t, pose)
         elif axial:
             self._check_progress(t, pose)
         return self._noisy(shift_wrench(w_com, com, pose.p_world))
+
+    def _press_across(self, state: State) -> bool:
+        """Whether the seating stage presses across the axis now: once what the descent closes is pressed (latched until a back-off); never without stops."""
+        p = self.plan
+        if not p.stops or p.seat_side_com is None or self._backoff is not None or self.index >= len(p.stages):
+            return False
+        if p.stages[self.index].kind == "seat" and self._closed_by_descent <= state:
+            self._across = True
+        return self._across
+
+    def _across_push(
+        self, carry: FloatArray, f_ax: float, v: FloatArray, w_ang: FloatArray, pressed: tuple[str, ...]
+    ) -> FloatArray:
+        """The seating stage's push (about the centre of mass) once the rests are pressed: into the stops.
+
+        Carrying the part and the axial servo's push keep the rests lightly loaded; damping across
+        the axis and in turn; the seating push's part toward the round pin's seated side (through
+        its contact: no turn about the pin). With a turn (:class:`SeatTurn`) a velocity loop turns
+        the part about the pin's axis toward the stops at the turn's speed (its gain the stops'
+        torque at rest, at most ``seat_turn_gain`` × the inertia about the pin per tick, and an
+        integral at ``rot_omega_radps``), its push the turn's unit push (no force on the pin) times
+        a torque up to the stops' part of the seating push; without one, that part itself (each
+        stop's push through its contact). Once every stop is pressed the seating push's press along
+        the axis is added (latched): a stop's friction would hold the lightly pressed part off its
+        rests.
+        """
+        p = self.plan
+        u, wl, wr = self.u, self.s.lateral_omega_radps, self.s.rot_omega_radps
+        turn = p.turn
+        spin = w_ang if turn is None else w_ang - float(w_ang @ turn.axis_world) * turn.axis_world
+        F = f_ax * u - self.m * 2.0 * wl * (v - float(v @ u) * u)
+        w = carry + np.concatenate([F, -self.I_max * 2.0 * wr * spin]) + np.asarray(p.seat_side_com)
+        if self._stops_pressed or set(p.stops) <= set(pressed):
+            self._stops_pressed = True
+            w[:3] -= self.s.seat_press * self.weight_N * u
+        if turn is None:
+            return w + np.asarray(p.seat_stops_com)
+        rate = float(w_ang @ turn.axis_world)
+        self._turned += rate * self.tick_s
+        gain = min(turn.max_torque_Nm / turn.speed_radps, self.s.seat_turn_gain * turn.inertia_kgm2 / self.tick_s)
+        top = turn.max_torque_Nm / (gain * wr)  # the integral's bound: no wind-up past the stops' push
+        self._turn_integral = min(max(self._turn_integral + (turn.speed_radps - rate) * self.tick_s, -top), top)
+        torque = gain * (turn.speed_radps - rate + wr * self._turn_integral)
+        torque = min(max(torque, -turn.max_torque_Nm), turn.max_torque_Nm)
+        return w + torque * turn.unit_com
 
     def _noisy(self, w: FloatArray) -> FloatArray:
         if self.noise.force_noise <= 0.0:
@@ -640,7 +864,11 @@ class InsertionRun:
         return True
 
     def _check_progress(self, t: float, pose: Pose) -> None:
+        # down the axis, or (the seating's turn into the stops) along the farthest stop's path
+        turn = self.plan.turn
         h = self.height_m(pose)
+        if turn is not None:
+            h -= self._turned * self.s.seat_turn_speed_mps / turn.speed_radps
         if self._progress is None or self._progress[0] - h >= self.s.stall_progress_m:
             self._progress = (h, t)
             return
@@ -694,6 +922,9 @@ class InsertionRun:
         self._backoff = (target, t, h)
         self._progress = None
         self._seating = False
+        self._across = False
+        self._turn_integral = 0.0
+        self._stops_pressed = False
         self.log.event(
             t, "retry", f"{why}: back off to {target * 1e3:.3g} mm above the located pose, {how} "
             f"(retry {self._retries} of {self.policy.retries})",

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from fixplan.contact_state import format_state
 from fixplan.errors import InputError
 from fixplan.locating import engagement, insertion_axis, inserts, located_pose, seated
-from fixplan.planner.insertion import InsertionPlan, Stage, goal_state, started_in
+from fixplan.planner.insertion import InsertionPlan, Stage, goal_state, started_in, with_seating
 from fixplan.planner.insertion_policy import InsertionPolicy
 from fixplan.planner.plan_types import Plan, Verification, pose_from_json
 from fixplan.settings import HAPTIC, Settings
@@ -223,11 +223,13 @@ def check_policy_claims(data: dict[str, Any], fixture: Fixture, seq: list[frozen
             )
 
 
-def insertion_plan_of(plan: Plan, fixture: Fixture) -> InsertionPlan:
+def insertion_plan_of(plan: Plan, fixture: Fixture, settings: Settings = HAPTIC) -> InsertionPlan:
     """The :class:`~.insertion.InsertionPlan` a plan file holds (its claims checked: :func:`check_insertion_claims`).
 
     The stages are the file's transitions (their knot poses, their mean planned push), the seating
-    push is the file's; the axis and the located pose are the fixture's.
+    push is the file's; the axis and the located pose are the fixture's, and so are the stops, the
+    turn into them and the seating push's parts across the axis (:func:`~.insertion.with_seating`,
+    with ``settings``' insertion numbers, as ``solve`` found them).
     """
     data = plan.extras["insertion"]
     G = located_pose(fixture)
@@ -244,7 +246,7 @@ def insertion_plan_of(plan: Plan, fixture: Fixture) -> InsertionPlan:
     seat = np.asarray(data["seat_wrench"], dtype=float)
     com = G.point_world_from_body(fixture.workpiece.com_body)
     policy = data.get("policy")
-    return InsertionPlan(
+    out = InsertionPlan(
         ok=True,
         reason=plan.reason,
         axis_world=insertion_axis(fixture),
@@ -255,13 +257,15 @@ def insertion_plan_of(plan: Plan, fixture: Fixture) -> InsertionPlan:
         start_state=frozenset(plan.sequence[0]) if plan.sequence else frozenset(),
         policy=None if policy is None else InsertionPolicy.from_json(policy),
     )
+    with_seating(out, fixture, settings.insertion)
+    return out
 
 
 def verify_insertion_file(fixture: Fixture, plan: Plan, settings: Settings = HAPTIC) -> Verification:
     """``fixplan verify PLAN`` for a fixture with pins or bores: the file's insertion in the haptic loop, as ``solve`` ran it."""
     from fixplan.planner.insertion import verify_insertion
 
-    return verify_insertion(fixture, insertion_plan_of(plan, fixture), settings=settings)
+    return verify_insertion(fixture, insertion_plan_of(plan, fixture, settings), settings=settings)
 
 
 __all__ = [

@@ -221,8 +221,19 @@ def verify(
         nominal = sum(_path_length(fixture, st) for st in steps) / executor.settings.speed_mps
         time_limit_s = min(vs.time_factor * nominal + vs.time_base_s + vs.time_per_step_s * len(steps), vs.time_max_s)
     trace_every = max(int(round(trace_every_s / sim.dt)), 1) if trace_every_s > 0 else 0
+    base_limit_s = time_limit_s
+    counts = executor.log.counts
+
+    def finished() -> bool:
+        # every new plan taken on the way gets time of its own (within the profile's ceiling)
+        if executor.done:
+            return True
+        new_plans = counts["replans"] + counts["policy_switches"] + counts["dead_ends"]
+        return sim.time_s >= min(base_limit_s + vs.time_per_replan_s * new_plans, ceiling_s)
+
+    ceiling_s = max(base_limit_s, vs.time_max_s)
     try:
-        rec = loop.run(time_limit_s, operator, trace_every=trace_every, until=lambda: executor.done)
+        rec = loop.run(ceiling_s, operator, trace_every=trace_every, until=finished)
     except SolverError as exc:
         why = f"the simulated load diverged at t = {sim.time_s:.3f} s (transition {executor.index + 1}): {exc}"
         executor._fail(sim.time_s, why, "diverged")
