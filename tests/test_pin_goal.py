@@ -106,4 +106,6 @@ def test_pins_that_are_not_parallel_without_a_goal_are_refused_in_one_line() -> 
     with pytest.raises(FixtureError) as info:
         loads(tilted, source="f.toml")
     (line,) = str(info.value).splitlines()
-    assert line.startswith("f.toml: workpiece.goal: missing, and no located pose to find: pin.P2.axis: the pins' axes differ")
+    assert line.startswith(
+        "f.toml: workpiece.goal: missing, and no located pose to find: pin.P2.axis: the pins' axes differ"
+    )
