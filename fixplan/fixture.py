@@ -797,6 +797,13 @@ class _Builder:
                     f"tip is inside the workpiece by {-gap:.3g} m at the start pose (expected gap ≥ -{tol.penetration_m:g} m)",
                 )
         if fixture.has_pins and not r.issues and fixture.is_full:
+            if fixture.goal_given is None and not fixture.pins:
+                r.error(
+                    "workpiece.goal",
+                    "missing (a bore with locators needs its located pose given: it is found only for a bore alone "
+                    "and for pins)",
+                )
+                return None
             if fixture.goal_given is None:
                 try:
                     search = find_pin_goal(fixture)

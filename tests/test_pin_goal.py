@@ -109,3 +109,15 @@ def test_pins_that_are_not_parallel_without_a_goal_are_refused_in_one_line() -> 
     assert line.startswith(
         "f.toml: workpiece.goal: missing, and no located pose to find: pin.P2.axis: the pins' axes differ"
     )
+
+
+def test_a_bore_with_locators_without_a_goal_is_refused_in_one_line() -> None:
+    """The shaft in its bore plus six locators beside it: no pin to seat against, the goal must be given."""
+    text = (PROBLEMS / "shaft-in-bore.toml").read_text()
+    text += "".join(
+        f'\n[[locator]]\nname = "L{i}"\nposition = [{0.1 + 0.01 * i}, 0.1, 0.0]\nfriction = 0.2\n' for i in range(6)
+    )
+    with pytest.raises(FixtureError) as info:
+        loads(text, source="f.toml")
+    (line,) = str(info.value).splitlines()
+    assert line.startswith("f.toml: workpiece.goal: missing (a bore with locators needs its located pose given")
