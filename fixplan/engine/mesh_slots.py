@@ -20,8 +20,10 @@ the next (for the warm start) is ``(locator, rank)``.
 A mesh part with ``[[workpiece.hole]]``s on ``[[pin]]``s: the holes stay analytic (a hole is a
 cylinder in the body frame, whether or not the mesh models its bore). Each step also hands over
 every pin's contacts with its hole in closed form, as for a primitive part (:mod:`.pin_slots`),
-after the locators' slots; the pins are never tested against the mesh's triangles (and the
-locators never against the holes), so a mesh without a modelled bore is as good as one with.
+after the locators' slots, the pin's tip on the face around its hole's mouth included (the
+mesh's coplanar triangles there, as a rectangle found once, in :class:`.pin_slots.PinGeometry`:
+:func:`fixplan.geometry.pins.mouth_face`); the pins are never tested against the mesh's triangles
+(and the locators never against the holes), so a mesh without a modelled bore is as good as one with.
 
 :func:`mesh_slots` is the reference, in Python (with
 :meth:`fixplan.engine.simulator.Simulator._step_mesh_reference`). The engine steps a mesh part

@@ -16,8 +16,8 @@ afresh).
 
 For a ``[[pin]]`` the part's point is on its hole and the fixture's on the pin; for a ``[[bore]]``
 the part is the peg (its end deeper in the bore leads) and the fixture's point is on the bore.
-A hole whose mouth lies in a planar face of the part (a box's face, a cylinder's end:
-:func:`fixplan.geometry.pins.mouth_face`) also brings the pin's tip on that face, at
+A hole whose mouth lies in a planar face of the part (a box's face, a cylinder's end, a mesh
+part's rectangular face: :func:`fixplan.geometry.pins.mouth_face`) also brings the pin's tip on that face, at
 ``face_points`` points of the tip's edge (:func:`fixplan.geometry.pins.tip_face_contacts`): a part
 lowered beside its pin, beyond the chamfers' capture, rests on the pin's tip instead of passing
 through it. A bore has no such face (the format does not give the fixture's surface around it).
