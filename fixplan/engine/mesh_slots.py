@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.aot import kernel
-from fixplan.engine.pin_slots import FACE_COLUMNS, MAX_CONTACTS, PinGeometry
+from fixplan.engine.pin_slots import HOLE_COLUMNS, MAX_CONTACTS, PinGeometry
 from fixplan.errors import InputError
 from fixplan.geometry.collision import PLANE, plane_frame
 from fixplan.geometry.mesh import Mesh
@@ -150,7 +150,7 @@ class MeshStepper:
         # the pins' closed forms (PinGeometry.kernel_inputs less the bores: a mesh part has none), their μ, and
         # the state of their slots (without pins: empty)
         s = DEFAULT.pins
-        self.pin_inputs: tuple[Any, ...] = (np.zeros((0, 14)), np.zeros((0, FACE_COLUMNS)), np.zeros(0), s.rim_samples,
+        self.pin_inputs: tuple[Any, ...] = (np.zeros((0, 14)), np.zeros((0, HOLE_COLUMNS)), np.zeros(0), s.rim_samples,
                                             s.newton_steps, s.golden_steps, s.coaxial_rel, s.face_points)  # fmt: skip
         owners = 0
         if pins is not None:

@@ -54,8 +54,13 @@ farthest from the hole's axis. The point counts where it lies over the face's ma
 the mouth's outer edge (``R + c_h`` from the hole's axis) and within the face's extent; below the
 face only while the face is its nearest surface (deeper than its distance to the mouth's edge or
 to the extent's, it is the hole's or the part's side's business, as for the tip's other contacts).
-Not modelled: other holes' mouths in the same face (a pin over another hole's mouth is held by
-that face), the face around a bore's mouth (the format does not give the fixture's surface there:
+Other holes' mouths in the same face are no material either: the engine's rows
+(:mod:`fixplan.geometry._pin_kernels`) carry them with the face, so a point over one is not the
+face's, and a pin within reach of another hole's mouth has its contacts with that hole too (a pin
+landing on its neighbour's rim, or in it); a pin's contacts with any hole are taken only while its
+tip's centre is within ``R + c_h + r`` of that hole's axis (farther, the side's closed forms,
+which assume the pin at the hole, gave walls as deep as the distance). Not modelled: the face
+around a bore's mouth (the format does not give the fixture's surface there:
 a shaft that misses its bore passes through it), a mesh part's face whose outline is not a
 rectangle (an L, a notch, a disk: no face), and curved faces (a hole in a cylinder's side: no face).
 """
