@@ -801,7 +801,8 @@ class _Builder:
                 try:
                     search = find_pin_goal(fixture)
                 except InputError as exc:  # the pins' axes differ: no one insertion to locate along
-                    r.error("workpiece.goal", f"missing, and no located pose to find: {exc}")
+                    why = str(exc).removeprefix(f"{fixture.source}: ")
+                    r.error("workpiece.goal", f"missing, and no located pose to find: {why}")
                     return None
                 if not search.found or search.pose is None:
                     r.error("workpiece.goal", f"missing, and {search.message}")

@@ -74,6 +74,16 @@ plane-pin-stop
     the pin's tip and the stop's top (``PIN_STOP_RISE_M``), off by up to ``PIN_STOP_OFFSET_M`` and
     tilted by roll, pitch, yaw each uniform in ±``PIN_STOP_TILT_DEG``: the approach must bring
     the hole over the pin and the seating must press the stop.
+shaft-bore
+    A shaft (``shape = "cylinder"``, radius log-uniform in ``SHAFT_RADIUS_M``, length
+    ``SHAFT_LENGTH_PER_DIAMETER`` × its diameter, of a solid's density) loaded into a blind
+    ``[[bore]]`` B1 at the origin, its axis +z (radial play ``BORE_PLAY_M``, log-uniform; a 45°
+    mouth chamfer in ``BORE_CHAMFER_M``, none in ``BORE_SHARP_SHARE`` of them; depth
+    ``BORE_DEPTH_FRACTION`` of the shaft's length). No goal in the file: the loader derives the
+    located pose (coaxial, the leading end on the bottom). Start above the bore: tilted by roll and
+    pitch each uniform in ±``SHAFT_START_TILT_DEG``, any yaw, its leading end's centre within
+    ``SHAFT_START_OFFSET_M`` of the bore's axis and its lowest point ``SHAFT_START_RISE_M`` above
+    the mouth's plane; nothing touches. ``--rotate-world`` tilts the bore's axis with the world.
 
 The free families are checked on their goal known by construction (every gap 0 within
 ``EXACT_M``, rank-full ``G``), never by searching for it. ``rotate_world=True`` (``fixplan generate
@@ -95,7 +105,7 @@ from fixplan import twins
 from fixplan.errors import FixtureError, InfeasibleError, InputError
 from fixplan.files import write_output
 from fixplan.fixture import loads, parse_toml
-from fixplan.geometry import Box, Polygon, Rectangle
+from fixplan.geometry import Box, Cylinder, Polygon, Rectangle
 from fixplan.geometry.cells import (
     cell_mass_properties,
     cell_surface,
@@ -108,7 +118,7 @@ from fixplan.geometry.mesh import stl_bytes
 from fixplan.locating import contact_set, locator_gaps, solve_goal
 from fixplan.model import Fixture, Locator, Workpiece
 from fixplan.settings import DEFAULT
-from fixplan.spatial import Pose, cross2, matrix_from_rpy, rot2
+from fixplan.spatial import Pose, cross2, matrix_from_rpy, rot2, rpy_from_matrix
 
 FAMILIES: dict[str, str] = {
     "box-321": (
@@ -164,6 +174,12 @@ PIN_FAMILIES: dict[str, str] = {
         "pin (a point or a 0.5-4 mm tip, 25-75 % up the face); goal written (seated along a drawn heading against "
         "the pin); start above the pin's tip and the stop, off by up to 5 mm and tilted up to 10 deg about every axis"
     ),
+    "shaft-bore": (
+        "3D shafts (diameter 8-50 mm, 1.5-6 diameters long) into a blind bore (radial play 0.01-0.1 mm, mouth chamfer "
+        "0-2 mm, sharp in a quarter of them, 0.3-0.7 of the shaft deep); no goal in the file (the loader derives it: "
+        "coaxial, on the bottom); start above the bore, tilted up to 10 deg about each horizontal axis, its leading "
+        "end within 5 mm of the bore's axis, its lowest point 2-20 mm above the mouth"
+    ),
 }
 ALL_FAMILIES: dict[str, str] = {**FAMILIES, **MESH_FAMILIES, **PIN_FAMILIES}
 # The families whose fixtures come with a mesh file written beside them (GeneratedFixture.files).
@@ -215,6 +231,15 @@ PIN_START_RISE_M = (0.002, 0.020)  # plane-2-pins: the holes' mouths this far ab
 PIN_START_TILT_DEG = 0.5  # plane-2-pins: start roll, pitch, yaw each uniform in ±this
 PIN_CAPTURE_SHARE = 0.5  # plane-2-pins: start offset at most this share of the capture (play + both chamfers)
 PIN_CAPTURE_CHECK = 0.8  # plane-2-pins: each hole's axis within this share of the capture of its pin's at the start
+SHAFT_RADIUS_M = (0.004, 0.025)  # shaft-bore: the shaft's radius [m], log-uniform
+SHAFT_LENGTH_PER_DIAMETER = (1.5, 6.0)  # shaft-bore: its length / its diameter, log-uniform
+BORE_PLAY_M = (1e-5, 1e-4)  # shaft-bore: radial play (D - d) / 2 [m], log-uniform
+BORE_CHAMFER_M = (0.0, 0.002)  # shaft-bore: the mouth's 45° chamfer [m], uniform
+BORE_SHARP_SHARE = 0.25  # shaft-bore: share of bores without a chamfer (the play alone captures)
+BORE_DEPTH_FRACTION = (0.3, 0.7)  # shaft-bore: the bore's depth / the shaft's length
+SHAFT_START_TILT_DEG = 10.0  # shaft-bore: start roll and pitch each uniform in ±this (yaw: any)
+SHAFT_START_OFFSET_M = 0.005  # shaft-bore: the leading end's centre within this of the bore's axis at the start
+SHAFT_START_RISE_M = (0.002, 0.020)  # shaft-bore: the shaft's lowest point this far above the mouth's plane
 STOP_HEIGHT_FRACTION = (0.25, 0.75)  # plane-pin-stop: the stop's contact height / the part's thickness
 STOP_LEVER_FRACTION = 0.25  # plane-pin-stop: the stop at least this share of its face's length from the pin along it
 STOP_EDGE_FRACTION = 0.08  # plane-pin-stop: the stop at least this share of its face's length in from its ends
@@ -343,7 +368,7 @@ def _first_valid(
                 path.write_bytes(data)
 
             write_output(here / file_name, write_file)
-        body = _render(name, draft)
+        body = _render(name, draft, goal=not draft.bores)  # a bore's located pose is the loader's
         try:
             fixture = loads(body, source=name, base_dir=here)
         except FixtureError as exc:
@@ -351,13 +376,15 @@ def _first_valid(
             continue
         if draft.pins:
             problem = _check_pins(fixture, draft) if len(draft.pins) > 1 else _check_pin_stop(fixture)
+        elif draft.bores:
+            problem = _check_bore(fixture, draft)
         else:
             problem = _check_free(fixture, draft) if draft.free else _check(fixture, draft)
         if problem is not None:
             reason = problem
             continue
         params = dict(draft.params)
-        goal = dict(draft.goal)
+        goal = _derived_goal(fixture) if draft.bores else dict(draft.goal)
         head = _header(name, family, seed, index, draw, draft, fixture, rotate_world)
         extra = _floor_block(fixture) if floor else ""
         body += extra
@@ -370,8 +397,11 @@ def _first_valid(
         if problem is not None:
             reason = problem
             continue
-        goal = doc["workpiece"]["goal"]
-        if not draft.goal_written:
+        if draft.bores:
+            goal = _derived_goal(loads(twins.fixture_toml(doc), source=name, base_dir=here))
+        else:
+            goal = doc["workpiece"]["goal"]
+        if not draft.goal_written and "goal" in doc["workpiece"]:
             del doc["workpiece"]["goal"]
         params["world_rotation"] = [[float(v) for v in row] for row in R]
         rows = "; ".join(", ".join(f"{v:.12g}" for v in row) for row in R)
@@ -382,6 +412,15 @@ def _first_valid(
         text = twins.twin_text(head, doc, note)
         return GeneratedFixture(name, family, seed, index, params, text, draw, goal, files)
     raise InfeasibleError(f"{name}: no draw passed the checks in {MAX_DRAWS} draws (last: {reason})")
+
+
+def _derived_goal(fixture: Fixture) -> dict[str, Any]:
+    """The located pose the loader derives for a shaft in its bore, in the file's form."""
+    from fixplan.locating import located_pose
+
+    G = located_pose(fixture)
+    rpy = np.degrees(rpy_from_matrix(G.R_world_body))
+    return {"position": [float(x) for x in G.p_world], "rpy_deg": [float(x) for x in rpy]}
 
 
 def _check_int(value: Any, what: str) -> None:
@@ -411,6 +450,7 @@ class _Draft:
     files: tuple[tuple[str, bytes], ...] = ()  # (suffix, bytes) of files the fixture names (a mesh)
     holes: tuple[dict[str, Any], ...] = ()  # [[workpiece.hole]] entries (plane-2-pins)
     pins: tuple[dict[str, Any], ...] = ()  # [[pin]] entries (plane-2-pins)
+    bores: tuple[dict[str, Any], ...] = ()  # [[bore]] entries (shaft-bore: no goal in the file)
     # the pins start far from their holes and tilted (plane-pin-stop): the closed forms' rim distance there
     # is one of several extremes, picked by the frame, so a rotated twin's is checked clear, not equal
     far_pins: bool = False
@@ -1418,6 +1458,77 @@ def _draw_plane_2_pins(rng: np.random.Generator, mesh: bool = False) -> _Draft |
     )
 
 
+# -- shaft-bore ------------------------------------------------------------------------------------
+
+
+def _draw_shaft_bore(rng: np.random.Generator) -> _Draft | str:
+    """A shaft above a blind bore at the origin (axis +z), tilted, to be loaded to the bottom (module text)."""
+    r = _log_uniform(rng, *SHAFT_RADIUS_M, 4)
+    length = round(_log_uniform(rng, *SHAFT_LENGTH_PER_DIAMETER, 3) * 2.0 * r, 4)
+    density = round(_log_uniform(rng, *DENSITY_KG_M3, 0))
+    mass = _sig(density * math.pi * r * r * length, 4)
+    play = _sig(_log_uniform(rng, *BORE_PLAY_M, 8), 3)
+    D = round(2.0 * (r + play), 8)
+    sharp = bool(rng.random() < BORE_SHARP_SHARE)
+    chamfer = 0.0 if sharp else _uniform(rng, *BORE_CHAMFER_M, 4)
+    depth = round(_uniform(rng, *BORE_DEPTH_FRACTION, 3) * length, 4)
+    mu = _uniform(rng, *FRICTION, 3)
+    roll, pitch = (_uniform(rng, -SHAFT_START_TILT_DEG, SHAFT_START_TILT_DEG, 2) for _ in range(2))
+    yaw = _uniform(rng, 0.0, 360.0, 1)
+    rho, phi = SHAFT_START_OFFSET_M * math.sqrt(float(rng.random())), 2.0 * math.pi * float(rng.random())
+    off = (round(rho * math.cos(phi), 6), round(rho * math.sin(phi), 6))
+    rise = _uniform(rng, *SHAFT_START_RISE_M, 4)
+    weight = mass * GRAVITY_M_S2
+    kf, kt, max_force, max_torque = _hand(rng, weight, 0.5 * length)
+    # the start: the leading (lower) end's centre over (off) the bore's axis, the lowest point of its edge `rise` up
+    z_b = matrix_from_rpy(np.radians([roll, pitch, yaw]))[:, 2]
+    sin_tilt = math.sqrt(max(0.0, 1.0 - float(z_b[2]) ** 2))
+    centre = np.array([off[0], off[1], rise + r * sin_tilt]) + 0.5 * length * z_b
+    bore = {"name": "B1", "position": [0.0, 0.0, 0.0], "axis": [0.0, 0.0, 1.0], "diameter": D, "depth": depth,
+            "friction": mu, **({} if sharp else {"chamfer": chamfer})}  # fmt: skip
+    params = {
+        "radius_m": r,
+        "length_m": length,
+        "density_kg_m3": density,
+        "mass_kg": mass,
+        "bore_diameter_m": D,
+        "radial_play_m": play,
+        "bore_chamfer_m": chamfer,
+        "bore_depth_m": depth,
+        "friction": mu,
+        "start_rpy_deg": [roll, pitch, yaw],
+        "start_offset_m": list(off),
+        "start_rise_m": rise,
+        "force_per_weight": kf,
+        "torque_per_weight_lever": kt,
+    }
+    capture = play + chamfer
+    story = [
+        f"Goal: derived by the loader: the shaft (r = {r * 1e3:g} mm, {length * 1e3:g} mm long) coaxial in the bore B1",
+        f"(D = {D * 1e3:.5g} mm, play {play * 1e6:.3g} um, chamfer {chamfer * 1e3:g} mm, {depth * 1e3:g} mm deep), its "
+        "leading end on the bottom.",
+        f"Start: above the bore, tilted (roll, pitch, yaw) = ({roll:g}, {pitch:g}, {yaw:g}) deg, its leading end's centre",
+        f"({off[0] * 1e3:.3f}, {off[1] * 1e3:.3f}) mm off the axis (capture: play + chamfer = {capture * 1e3:.3g} mm),",
+        f"its lowest point {rise * 1e3:g} mm above the mouth; nothing touches.",
+    ]
+    return _Draft(
+        dimension=3,
+        shape={"shape": "cylinder", "radius": r, "length": length},
+        mass_kg=mass,
+        start={"position": [float(x) for x in centre], "rpy_deg": [roll, pitch, yaw]},
+        goal={},
+        locators=[],
+        max_force_N=max_force,
+        max_torque_Nm=max_torque,
+        params=params,
+        resting=(),
+        story=story,
+        check=lambda _fixture: None,
+        goal_written=False,
+        bores=(bore,),
+    )
+
+
 def _draw_plane_pin_stop(rng: np.random.Generator) -> _Draft | str:
     """A plate on 3 rests, one round pin in a through hole of its bottom and a stop on a side face (module text)."""
     a, b, c = (_log_uniform(rng, lo, hi, 4) for lo, hi in PIN_PART_EDGE_M)
@@ -1549,6 +1660,7 @@ _DRAWS: dict[str, Callable[[np.random.Generator], _Draft | str]] = {
     "mesh-321": _draw_mesh,
     "plane-2-pins": _draw_plane_2_pins,
     "plane-2-pins-mesh": _draw_plane_2_pins_mesh,
+    "shaft-bore": _draw_shaft_bore,
     "plane-pin-stop": _draw_plane_pin_stop,
 }
 
@@ -1588,6 +1700,29 @@ def _check_pins(fixture: Fixture, draft: _Draft) -> str | None:
         if lateral > PIN_CAPTURE_CHECK * capture:
             return f"{pin.hole} is {lateral:.3g} m off {pin.name} at the start (capture {capture:.3g} m)"
     return None  # the rank of the rests' and pins' constraints: the loader's own check
+
+
+def _check_bore(fixture: Fixture, draft: _Draft) -> str | None:
+    """Why a shaft-bore draft is not valid, or None: the derived located pose on the bottom, the start clear above the bore."""
+    from fixplan.locating import bottom_gap_m, cylinder_contacts, located_pose
+
+    (bore,) = fixture.bores
+    goal = located_pose(fixture)
+    if abs(bottom_gap_m(fixture, goal, bore)) > EXACT_M:
+        return f"the located shaft is {bottom_gap_m(fixture, goal, bore):.3g} m off the bore's bottom"
+    for c in cylinder_contacts(fixture, fixture.start):
+        if c.gap_m < CLEARANCE_M:
+            return f"{c.name} touches at the start (gap {c.gap_m:.3g} m)"
+    shape = fixture.workpiece.shape
+    if not isinstance(shape, Cylinder):  # pragma: no cover - the loader refuses a bore for any other part
+        return "a bore takes a cylindrical part"
+    z = fixture.start.R_world_body[:, 2]
+    sin_tilt = math.sqrt(max(0.0, 1.0 - float(z @ bore.axis_world) ** 2))
+    ends = [fixture.start.p_world + s * 0.5 * shape.length * z for s in (1.0, -1.0)]
+    lowest = min(float((e - bore.p_world) @ bore.axis_world) for e in ends) - shape.radius * sin_tilt
+    if lowest < SHAFT_START_RISE_M[0] - EXACT_M:
+        return f"the shaft's lowest point is {lowest:.3g} m above the mouth at the start"
+    return None
 
 
 def _check_pin_stop(fixture: Fixture) -> str | None:
@@ -1669,7 +1804,7 @@ def _check_twin(
     and holes are turned too: :func:`fixplan.twins.rotate_world`). ``far_pins``: at the start the
     pins' gaps are only checked clear (beyond :data:`CLEARANCE_M`) in both.
     """
-    from fixplan.locating import cylinder_contacts
+    from fixplan.locating import cylinder_contacts, located_pose
 
     try:
         twin = loads(twins.fixture_toml(doc), source=name, base_dir=folder)
@@ -1683,7 +1818,8 @@ def _check_twin(
             out[c.owner] = min(out[c.owner], c.gap_m)
         return np.array(list(out.values()))
 
-    for a, b in ((fixture.start, twin.start), (fixture.goal, twin.goal)):
+    goals = (located_pose(fixture), located_pose(twin)) if fixture.has_pins else (fixture.goal, twin.goal)
+    for a, b in ((fixture.start, twin.start), goals):
         diff = locator_gaps(fixture.workpiece, a, fixture.locators) - locator_gaps(twin.workpiece, b, twin.locators)
         if fixture.has_pins and far_pins and a is fixture.start:
             if min(np.min(least(fixture, a)), np.min(least(twin, b))) < CLEARANCE_M:
@@ -1702,10 +1838,13 @@ def _check_twin(
 def _floor_block(fixture: Fixture) -> str:
     """An ``[[obstacle]]`` floor normal to gravity, :data:`FLOOR_BELOW_M` below the part at its start and goal."""
     d = fixture.dimension
+    from fixplan.locating import located_pose
+
     pts, radii = collision_points(fixture.workpiece.shape, DEFAULT.engine.rim_points)
+    goal = located_pose(fixture) if fixture.bores else fixture.goal  # a bore's located pose is derived
     low = min(
         float(pose.point_world_from_body(b)[d - 1] - r)
-        for pose in (fixture.start, fixture.goal)
+        for pose in (fixture.start, goal)
         for b, r in zip(pts, radii, strict=True)
     )
     level = math.floor((low - FLOOR_BELOW_M) * 1e4) / 1e4  # 0.1 mm steps, rounded down (further away)
@@ -1743,6 +1882,8 @@ def _render(name: str, draft: _Draft, goal: bool = True) -> str:
         lines += ["", "[[locator]]", *(f"{k} = {_value(v)}" for k, v in loc.items())]
     for pin in draft.pins:
         lines += ["", "[[pin]]", *(f"{k} = {_value(v)}" for k, v in pin.items())]
+    for bore in draft.bores:
+        lines += ["", "[[bore]]", *(f"{k} = {_value(v)}" for k, v in bore.items())]
     lines += [
         "",
         "[manipulator]",
@@ -1765,7 +1906,7 @@ def _header(
         f"Drawn from numpy.random.default_rng([{seed}, {index}]), draw {draw} "
         f"({draw - 1} earlier draws failed a check and were replaced).",
         *draft.story,
-        f"Start gaps [mm]: {gap_text}.",
+        *([f"Start gaps [mm]: {gap_text}."] if fixture.locators else []),
         f"Weight m g = {weight:.4g} N; hand limits {draft.max_force_N:.4g} N, {draft.max_torque_Nm:.4g} N m.",
         "Drawn parameters:",
         *(f"  {k} = {_value(v)}" for k, v in draft.params.items()),

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from fixplan.errors import FixplanError, InfeasibleError, InputError
 from fixplan.geometry import Box, Cylinder, Mesh, Polygon, Rectangle, Shape
-from fixplan.geometry.pins import HoleBody, PinBody, pin_hole_contacts, radial_play_m
+from fixplan.geometry.pins import HoleBody, PinBody, bore_face, pin_hole_contacts, radial_play_m
 from fixplan.kinematics import Contact, ContactSet, com_world, mass_matrix, numbered
 from fixplan.model import (
     Bore,
@@ -128,7 +128,8 @@ def peg_body(workpiece: Workpiece, pose: Pose, bore: Bore) -> PinBody:
 def pin_and_hole(workpiece: Workpiece, pose: Pose, owner: Pin | Bore) -> tuple[PinBody, HoleBody]:
     """The pin and the hole of a ``[[pin]]`` (the hole is the part's) or of a ``[[bore]]`` (the part is the pin) at ``pose``."""
     if isinstance(owner, Bore):
-        bore = HoleBody(owner.p_world, owner.axis_world, 0.5 * owner.diameter_m, owner.depth_m, owner.chamfer_m, True)
+        bore = HoleBody(owner.p_world, owner.axis_world, 0.5 * owner.diameter_m, owner.depth_m, owner.chamfer_m, True,
+                        bore_face(owner.p_world, owner.axis_world))  # fmt: skip
         return peg_body(workpiece, pose, owner), bore
     pin = PinBody(
         owner.p_world,
@@ -225,12 +226,22 @@ class Engagement:
 
 
 def engagement(fixture: Fixture, pose: Pose, ins: Insert) -> Engagement:
-    """The tip's depth in its hole and its offset from the hole's axis at ``pose``."""
+    """The tip's depth in its hole and its offset from the hole's axis at ``pose``.
+
+    The capture is the insert's (play and chamfers) widened by what a tilt ``θ`` of the pin from the
+    hole's axis brings: the tip's face (radius ``r − c_p``) then reaches ``(r − c_p) cos θ`` across
+    the axis, so its centre may lie ``(r − c_p)(1 − cos θ)`` farther out with its edge still within
+    the mouth (a shaft cocked in its bore, Whitney's two-point contact, has its tip's centre
+    ``R − r cos θ`` off the axis), and by the contact tolerance ``touch_m``: a tip touching the wall
+    (within what the engine leaves, less than a micrometre) counts as in.
+    """
     pin, hole = _pair(fixture, pose, ins)
     tip = pin.base_world + pin.length_m * pin.axis_world
     r = tip - hole.mouth_world
     along = float(r @ hole.axis_world)
-    return Engagement(-along, float(np.linalg.norm(r - along * hole.axis_world)), ins.capture_m)
+    cos_tilt = min(abs(float(pin.axis_world @ hole.axis_world)), 1.0)
+    capture = ins.capture_m + (pin.radius_m - pin.chamfer_m) * (1.0 - cos_tilt) + fixture.tolerances.touch_m
+    return Engagement(-along, float(np.linalg.norm(r - along * hole.axis_world)), capture)
 
 
 def axis_offsets_m(fixture: Fixture, pose: Pose, ins: Insert) -> tuple[float, float]:

@@ -192,6 +192,10 @@ class HapticRigSettings:
         Natural frequency of the operator's PD hand [rad/s] (about 20 Hz, a robot force loop).
     operator_damping_ratio : float
         Its damping ratio.
+    operator_reaction_s : float
+        How late a device's operator follows the guidance in a haptic session [s] (``fixplan
+        device-sim``'s default reaction; a person is slower): the guidance's servo is held to it
+        (``InsertionSettings.delay_bandwidth``). A session without a device (its simulated hand) has none.
     switch_interval_s : float
         Real-time session: the interpreter's thread switch interval at most this [s] (the display
         thread gives the GIL back quickly).
@@ -233,6 +237,7 @@ class HapticRigSettings:
     workspace_radius_m: float = 0.5
     operator_omega_radps: float = 120.0
     operator_damping_ratio: float = 0.9
+    operator_reaction_s: float = 0.05
     switch_interval_s: float = 2e-4
     spin_s: float = 2e-4
     wake_early_s: float = 1.5e-4
@@ -878,6 +883,10 @@ class PinSettings:
         The same for a pin's tip on the part's face around its hole (a pin that misses its hole:
         :func:`fixplan.geometry.pins.tip_face_contacts`). The closed forms (:mod:`fixplan.geometry.pins`,
         the cone programs) keep the deepest point.
+    face_arc_inset : float
+        A tip partly over the mouth rests on the face along a crescent: its edge's arc over the
+        face adds a point this fraction of the arc in from each of its ends (with ``face_points``
+        above 1), so the tip cannot tip about one point of it.
     """
 
     rim_samples: int = 64
@@ -886,6 +895,7 @@ class PinSettings:
     coaxial_rel: float = 1e-9
     axis_angle_rad: float = 0.01
     face_points: int = 4
+    face_arc_inset: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -939,6 +949,17 @@ class InsertionSettings:
     align_tol_m, align_tol_rad : float
         The approach ends (and the insertion begins) once the part is this close to the staging
         pose, in position and in angle: a part still turning as it meets its pins tilts in them.
+    delay_bandwidth : float
+        In a haptic session whose operator follows the guidance late (``HapticRigSettings.
+        operator_reaction_s``, plus the guidance's own update period, ``τ`` in all), each servo
+        frequency is held to this over ``τ`` [rad]: ``ω τ = 0.3`` keeps about 40° of the
+        critically damped servo's 76° phase margin (:class:`fixplan.planner.insertion.InsertionRun`).
+    align_capture_share : float
+        ... and every pin's hole (a shaft's leading end) is within this share of its capture
+        (play + chamfers) of where the staging pose puts it, across the axis: the tip is aimed
+        into the mouth, which a sharp bore's capture (its play alone, 10 µm) makes the binding
+        condition (the part's origin may be far from its tip, and a turn within ``align_tol_rad``
+        moves the tip by its lever).
     axis_play_rel : float
         Slack on the radial play in the final check (relative): the hole's axis within
         ``(D − d)/2 · (1 + axis_play_rel)`` of the pin's, at the mouth and at the pin's tip.
@@ -976,6 +997,8 @@ class InsertionSettings:
     axis_play_rel: float = 0.05
     align_tol_m: float = 0.0001
     align_tol_rad: float = 0.001
+    align_capture_share: float = 0.25
+    delay_bandwidth: float = 0.3
     retries: int = 3
     recovery_time_s: float = 6.0
     backoff_min_m: float = 0.001

@@ -32,6 +32,39 @@ def goal_rank(fixture: Fixture) -> int:
     return int(np.linalg.matrix_rank(cs.G, tol=DEFAULT.numerics.rank_tol))
 
 
+def locating_sensitivity(fixture: Fixture, error_m: float) -> tuple[str, float, float, float]:
+    """How far one locator's error moves the located pose: the worst locator, by the part's farthest point.
+
+    A locator tip ``error_m`` off along its contact normal changes the located pose by the twist
+    ``δξ`` with ``G_nᵀ δξ = error_m e_i`` (``G_n``: the locators' normal rows ``[n; r × n]`` at the
+    goal, about the centre of mass; least squares beyond 6). Returns ``(locator, centre-of-mass
+    shift [m], turn [rad], largest shift of a point of the part [m])`` for the locator whose error
+    moves a point of the part (within its bounding radius) the most.
+    """
+    from fixplan.locating import locator_contact
+
+    wp, goal = fixture.workpiece, fixture.goal
+    d = fixture.dimension
+    c = goal.point_world_from_body(wp.com_body)
+    rows = []
+    for loc in fixture.locators:
+        ct = locator_contact(wp, goal, loc)
+        n, r = np.asarray(ct.normal_world), np.asarray(ct.point_world) - c
+        moment = np.cross(r, n) if d == 3 else np.array([r[0] * n[1] - r[1] * n[0]])
+        rows.append(np.concatenate([n, moment]))
+    A = np.array(rows)
+    R = wp.shape.bounding_radius
+    worst = ("", 0.0, 0.0, -1.0)
+    for i, loc in enumerate(fixture.locators):
+        e = np.zeros(len(rows))
+        e[i] = error_m
+        xi = np.linalg.lstsq(A, e, rcond=DEFAULT.numerics.rcond)[0]
+        v, w = float(np.linalg.norm(xi[:d])), float(np.linalg.norm(xi[d:]))
+        if v + w * R > worst[3]:
+            worst = (loc.name, v, w, v + w * R)
+    return worst
+
+
 @dataclass(frozen=True)
 class FixtureSummary:
     """What :func:`summarize` found.
@@ -155,6 +188,13 @@ def summarize(fixture: Fixture) -> FixtureSummary:
                 else "the locators do NOT determine the pose"
             )
         )
+        if determined and not fixture.has_pins and not free:
+            err = DEFAULT.verification.final_gap_m  # the located tolerance: a locator worn or set that far off
+            name, v, w, _ = locating_sensitivity(fixture, err)
+            details.append(
+                f"locating error: {name} {err * 1e3:g} mm off along its normal moves the located pose "
+                f"{v * 1e3:.3g} mm (centre of mass) and turns it {np.degrees(w):.3g}° (the worst locator)"
+            )
         if not determined:
             warnings.append(
                 Issue(

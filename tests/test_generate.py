@@ -208,6 +208,7 @@ def test_cli_list_and_bad_input():
         "plane-2-pins",
         "plane-2-pins-mesh",
         "plane-pin-stop",
+        "shaft-bore",
     ]
     as_json = json.loads(fixplan("generate", "--list", "--json").stdout)
     assert as_json["families"] == gen.ALL_FAMILIES == {**gen.FAMILIES, **gen.MESH_FAMILIES, **gen.PIN_FAMILIES}

@@ -387,3 +387,23 @@ def test_a_locator_beyond_its_face_is_named_with_its_overshoot() -> None:
     locators = [moved if loc.name == "B2" else loc for loc in fx.locators]
     search = find_goal(fx.workpiece, locators, fx.start)
     assert not search.found and not search.proven and "B2 lies 6 mm" in search.message
+
+
+def test_the_locating_error_of_the_default_box_by_its_closed_form() -> None:
+    """B3 (0.10, 0.085) raised 0.1 mm under the default box: the box turns about the B1-B2 line
+    (y = 0.015, z = 0, 0.07 m from B3) by θ = 1e-4 / 0.07 and slides in y to keep S1, S2 on its
+    -y face; its centre of mass (y = 0.05, z = 0.025) rises 0.035 θ. B3 is the worst locator (the
+    side ones' levers are 0.12 m apart, E1 moves the box without turning it)."""
+    from fixplan.summary import locating_sensitivity, summarize
+
+    fx = loads(DEFAULT_TEXT)
+    name, shift, turn, _ = locating_sensitivity(fx, 1e-4)
+    theta = 1e-4 / 0.07
+    assert name == "B3"
+    assert turn == pytest.approx(theta, rel=1e-9)
+    assert shift == pytest.approx(0.035 * theta, rel=1e-9)
+    (line,) = [d for d in summarize(fx).details if d.startswith("locating error")]
+    assert line == (
+        "locating error: B3 0.1 mm off along its normal moves the located pose 0.05 mm (centre of mass) "
+        f"and turns it {np.degrees(theta):.3g}° (the worst locator)"
+    )

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 
 import numpy as np
 import pytest
@@ -181,6 +182,105 @@ def test_the_shaft_enters_its_bore_from_a_tilted_start() -> None:
     assert v.observed_sequence == [("B1",), ("B1", "B1.bottom")]
     assert abs(v.final_gaps_m["B1.bottom"]) <= 1e-4
     assert v.final_gaps_m["B1.axis_offset"] <= 2e-5 * 1.05
+
+
+COCKED = PROBLEMS / "shaft-in-bore.toml"
+
+
+def test_a_shaft_cocked_in_its_bore_is_engaged() -> None:
+    """Whitney's two-point contact 10 mm down (shaft-in-bore): the tip's centre is R − r cos θ off the axis, past the
+    10 µm play by r (1 − cos θ) = 20 nm, and in; upright, 2 µm past the play (beyond the 1 µm contact tolerance),
+    it is not (no chamfer to capture it)."""
+    fx = fixplan.load(COCKED)
+    (b,) = inserts(fx)
+    assert b.capture_m == pytest.approx(1e-5, abs=1e-15)  # play, no chamfers
+    theta = math.radians(0.11459140600859763)
+    e = engagement(fx, fx.start, b)
+    assert e.offset_m == pytest.approx(0.01001 - 0.01 * math.cos(theta), abs=1e-12)
+    assert e.offset_m > b.capture_m and e.depth_m == pytest.approx(0.01, abs=1e-9)
+    assert e.engaged
+    G = located_pose(fx)
+    side = dataclasses.replace(G, p_world=G.p_world + np.array([b.capture_m + 2e-6, 0.0, 0.0]))
+    assert not engagement(fx, side, b).engaged
+
+
+def test_a_shaft_cocked_in_its_bore_is_seated_from_where_it_is() -> None:
+    """In past the chamfers at the start: no lift out of the bore (its place would be lost), the seating from there.
+
+    On a world whose bore (with the shaft in it) is 30 µm off the plan's, three times the 10 µm play
+    (what ``robust`` draws), the guide is re-centred on the bore seen at the start, and the shaft
+    straightens and seats: its axis within the play, the bottom reached, the penetration within
+    1e-5 m. Before, the plan lifted it out and aimed at the nominal bore: its end landed on the
+    sharp mouth 20 µm beyond the play, and the side's overlap counted as the gap (2e-5 m and more).
+    """
+    fx = fixplan.load(COCKED)
+    plan = plan_insertion(fx)
+    assert plan.ok, plan.reason
+    assert [st.kind for st in plan.stages] == ["seat"] and plan.start_state == {"B1"}
+    # a back-off rises to the start: its centre (L/2) cos θ above the tip 10 mm down, the located centre 10 mm up
+    theta = math.radians(0.11459140600859763)
+    assert plan.policy is not None
+    assert plan.policy.backoff_heights_m == pytest.approx([0.05 * math.cos(theta) - 0.02], abs=1e-9)
+    world = shifted_world(fx, np.array([3e-5, -1e-5, 0.0]), 0.001, with_start=True)
+    v = verify_insertion(world, plan)
+    assert v.passed, v.reason
+    assert v.final_gaps_m["B1.axis_offset"] <= 1e-5 * 1.05
+    assert abs(v.final_gaps_m["B1.bottom"]) <= 1e-4
+    assert v.max_penetration_m <= 1e-5
+    assert "re-centred: the guide moved" in v.execution.events[0][2]
+
+
+def test_cli_verify_re_runs_the_seating_of_a_cocked_shaft(tmp_path) -> None:
+    """solve --out writes the one-stage plan ([seat] from {B1}); verify PLAN accepts it and re-runs it."""
+    out = tmp_path / "plan.json"
+    run_cli("solve", COCKED, "--out", out, "--json", check_rc=0)
+    doc = json.loads(out.read_text())
+    assert doc["insertion"]["stages"] == ["seat"] and doc["sequence"][0] == ["B1"]
+    proc = run_cli("verify", out, "--json", check_rc=0)
+    doc = json.loads(proc.stdout)
+    assert doc["passed"] is True and doc["observed_sequence"] == [["B1"], ["B1", "B1.bottom"]]
+
+
+SHARP = """
+format = 1
+[scene]
+name = "sharp-bore"
+[workpiece]
+shape = "cylinder"
+radius = 0.01
+length = 0.08
+mass = 0.3
+start = { position = [0.003, -0.002, 0.05], rpy_deg = [6.0, -7.0, 30.0] }
+[[bore]]
+name = "B1"
+position = [0.0, 0.0, 0.0]
+axis = [0.0, 0.0, 1.0]
+diameter = 0.02002
+depth = 0.03
+friction = 0.3
+"""
+
+
+def test_the_approach_ends_with_the_leading_end_aimed_into_a_sharp_mouth() -> None:
+    """A sharp bore captures only its play (10 µm). Turned 0.9 mrad about its centre at the staging pose (within the
+    old 1 mrad and 0.1 mm), the shaft's leading end is θ L/2 = 36 µm off: the insertion does not begin; turned
+    about the leading end itself (the end on the axis), it does. Before, both began, the end landing beside the
+    mouth when the servo had not caught up."""
+    from fixplan.planner.insertion import InsertionRun
+    from fixplan.settings import HAPTIC
+    from fixplan.spatial import Pose, exp_so3
+
+    fx = fixplan.loads(SHARP)
+    plan = plan_insertion(fx)
+    staging = plan.stages[0].poses[-1]
+    R = exp_so3(np.array([0.9e-3, 0.0, 0.0]))
+    end = staging.p_world - 0.04 * staging.R_world_body[:, 2]  # the leading end's centre
+    about_centre = Pose(R @ staging.R_world_body, staging.p_world.copy())
+    about_end = Pose(R @ staging.R_world_body, end + R @ (staging.p_world - end))
+    for pose, begins in ((about_centre, False), (about_end, True)):
+        run = InsertionRun(fx, plan, HAPTIC.insertion)
+        run.step_time(10.0, pose)
+        assert (run.index == 1) is begins
 
 
 def test_a_located_start_is_held() -> None:

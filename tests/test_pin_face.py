@@ -202,7 +202,9 @@ def test_compiled_face_contacts_are_the_reference() -> None:
         pin = PinBody(tip - length * u, u, r, length, float(rng.uniform(0.0, 0.4)) * r)
         for points in (1, 4):
             ref = tip_face_contacts(pin, hole, points=points)
-            n = _face_contacts(*_arrays(pin, hole), points, DEFAULT.pins.coaxial_rel, out, 0)
+            s = DEFAULT.pins
+            n = _face_contacts(*_arrays(pin, hole), points, s.coaxial_rel, s.rim_samples, s.golden_steps,
+                               s.face_arc_inset, out, 0)  # fmt: skip
             assert n == len(ref)
             for row, c in zip(out[:n], ref, strict=True):
                 assert row[0] == FACE
@@ -274,13 +276,6 @@ def test_a_part_beyond_the_capture_with_the_mouth_over_the_tip_rests_on_it() -> 
     assert np.linalg.norm(sim.twist) < 1e-7
     reports = {r.name: r for r in sim.contacts()}
     assert reports["P1"].force_world[2] + reports["P2"].force_world[2] == pytest.approx(2.0 * 9.81 + 20.0, rel=1e-6)
-
-
-def test_a_bore_brings_no_face() -> None:
-    """The format gives no surface around a bore's mouth: a shaft has the bore's contacts only."""
-    fixture = fixplan.load(PROBLEMS / "shaft-into-bore.toml")
-    sim = Simulator(fixture)
-    assert sim._pins._bores.shape[1] == 10  # the bore's row: no face columns
 
 
 # -- another hole's mouth in the face --------------------------------------------------------------

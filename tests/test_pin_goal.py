@@ -96,3 +96,16 @@ def test_no_located_pose_with_the_pins_is_said_in_one_line() -> None:
     (line,) = str(info.value).splitlines()
     assert line.startswith("f.toml: workpiece.goal: missing, and no located pose found with the pins")
     assert line.endswith("give workpiece.goal (the located pose)")
+
+
+def test_pins_that_are_not_parallel_without_a_goal_are_refused_in_one_line() -> None:
+    text = _without_goal((PROBLEMS / "housing-2-pins.toml").read_text())
+    head, tail = text.split('name = "P2"', 1)
+    tilted = head + 'name = "P2"' + tail.replace("axis = [0.0, 0.0, 1.0]", "axis = [0.3, 0.0, 0.954]", 1)
+    assert tilted != text
+    with pytest.raises(FixtureError) as info:
+        loads(tilted, source="f.toml")
+    (line,) = str(info.value).splitlines()
+    assert line.startswith(
+        "f.toml: workpiece.goal: missing, and no located pose to find: pin.P2.axis: the pins' axes differ"
+    )

@@ -121,7 +121,8 @@ def generate(
     inside the part's concave region; plane-2-pins loads a box onto a round and a diamond pin, and
     plane-2-pins-mesh the same draws with the box written as a mesh part (STL beside it);
     plane-pin-stop loads a plate onto one round pin against a stop that takes the turn about it,
-    from starts tilted up to 10 deg about every axis. --list describes them.
+    from starts tilted up to 10 deg about every axis; shaft-bore loads a shaft, tilted above it,
+    into a blind bore (chamfered or sharp). --list describes them.
     """
     from fixplan.generate import ALL_FAMILIES, MESH_FILE_FAMILIES, check_family, fixture_name
     from fixplan.generate import generate as run

@@ -258,7 +258,7 @@ def locator_slots(R, p, tri, face_normals, edge_normals, vertex_normals, faces, 
 def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
                tri, face_normals, edge_normals, vertex_normals, faces, around, boxes, nodes, order, same,
                loc, obs_fix, pts_fix, pt_boxes, pt_nodes, pt_order, rho_max,
-               pins, holes_body, pin_mu, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points,
+               pins, holes_body, pin_mu, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points, arc_inset,
                h, f_ext, tau_ext, restitution, margin, tol, max_iter, polish_after, polish_steps, bound,
                P_full, active_full, P_prev_full, active_prev_full, gap_full, u_full, n_full,
                slot_state, loc_slots, near, radius, cache_q, cache_ids, pin_state, pin_count):  # fmt: skip
@@ -270,7 +270,7 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
     fixture's collision-only bodies and collision points (``[x_body (3), radius, obstacle row, μ]``,
     with the AABB tree of :func:`points_near` and their largest radius ``rho_max``),
     whose rows follow the locators' and the pins' in ``P_full`` … ``n_full`` (the simulator's arrays).
-    ``pins (k_pin, 14)``, ``holes_body (k_pin, 10, 22 or 53)`` … ``face_points``: the pins and their holes as
+    ``pins (k_pin, 14)``, ``holes_body (k_pin, 10, 22 or 53)`` … ``arc_inset``: the pins and their holes as
     :func:`fixplan.engine._pin_slot_kernels.pin_slots` reads them
     (:attr:`fixplan.engine.pin_slots.PinGeometry.kernel_inputs`; a mesh part has no bore), ``pin_mu``
     each pin's μ; ``pin_state``, ``pin_count``: the pins' slots' state (module docstring), as many
@@ -300,7 +300,7 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
         pin_obs, pin_slot_rows, pin_meta = np.empty((rows, 16)), np.empty((rows, 5)), np.empty((rows, 4))
         pin_normals, pin_least = np.empty((rows, 3)), np.empty(k_pin)
         m = pin_slots(pins, holes_body, np.zeros((0, 10)), np.zeros(2), R, p, rim_samples, newton_steps, golden_steps,
-                      coaxial_rel, face_points, margin, np.empty((rows, 13)), pin_obs, pin_slot_rows, pin_meta,
+                      coaxial_rel, face_points, arc_inset, margin, np.empty((rows, 13)), pin_obs, pin_slot_rows, pin_meta,
                       pin_normals, pin_least)  # fmt: skip
         last = pin_count[0]
     nm = n + m

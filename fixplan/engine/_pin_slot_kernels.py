@@ -20,7 +20,8 @@ _PLANE = 0.0  # fixplan.geometry.collision.PLANE
 
 @njit(cache=True)
 def pin_slots(
-    pins, holes_body, bores, peg, R, p, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points, band_m,
+    pins, holes_body, bores, peg, R, p, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points, arc_inset,
+    band_m,
     raw, obs, slots, meta, normals, least,
 ):  # fmt: skip
     """The contacts within ``band_m`` as slots; returns how many (``m``).
@@ -32,8 +33,9 @@ def pin_slots(
     ``normals`` (m, 3); ``least`` (owners,): each owner's least gap over all its contacts.
     """
     n = pose_contacts(
-        pins, holes_body, bores, peg, R, p, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points, raw
-    )
+        pins, holes_body, bores, peg, R, p, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points, arc_inset,
+        raw,
+    )  # fmt: skip
     for i in range(least.shape[0]):
         least[i] = math.inf
     m = 0

@@ -151,7 +151,8 @@ class MeshStepper:
         # the state of their slots (without pins: empty)
         s = DEFAULT.pins
         self.pin_inputs: tuple[Any, ...] = (np.zeros((0, 14)), np.zeros((0, HOLE_COLUMNS)), np.zeros(0), s.rim_samples,
-                                            s.newton_steps, s.golden_steps, s.coaxial_rel, s.face_points)  # fmt: skip
+                                            s.newton_steps, s.golden_steps, s.coaxial_rel, s.face_points,
+                                            s.face_arc_inset)  # fmt: skip
         owners = 0
         if pins is not None:
             arrays, numbers = pins.kernel_inputs[:4], pins.kernel_inputs[4:]

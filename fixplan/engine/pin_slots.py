@@ -20,7 +20,8 @@ A hole whose mouth lies in a planar face of the part (a box's face, a cylinder's
 part's rectangular face: :func:`fixplan.geometry.pins.mouth_face`) also brings the pin's tip on that face, at
 ``face_points`` points of the tip's edge (:func:`fixplan.geometry.pins.tip_face_contacts`): a part
 lowered beside its pin, beyond the chamfers' capture, rests on the pin's tip instead of passing
-through it. A bore has no such face (the format does not give the fixture's surface around it).
+through it. A bore brings the fixture's face around its mouth likewise
+(:func:`fixplan.geometry.pins.bore_face`, world frame): a shaft that misses its bore rests on it.
 A slot's identity from one step to the next (the warm start) is ``(owner, kind, ordinal)``:
 owners are numbered pins first, then bores, as :attr:`PinGeometry.names`.
 """
@@ -36,15 +37,15 @@ from numpy.typing import NDArray
 from fixplan.aot import kernel
 from fixplan.errors import InputError
 from fixplan.geometry.collision import PLANE, plane_frame
-from fixplan.geometry.pins import mouth_face
+from fixplan.geometry.pins import bore_face, mouth_face
 from fixplan.geometry.shapes import Cylinder
-from fixplan.model import Fixture, Hole, Workpiece
+from fixplan.model import Bore, Fixture, Hole, Workpiece
 from fixplan.settings import DEFAULT, PinSettings
 
 FloatArray = NDArray[np.float64]
 _pose_contacts = kernel("fixplan.geometry._pin_kernels", "pose_contacts")
 _pin_slots = kernel("fixplan.engine._pin_slot_kernels", "pin_slots")
-MAX_CONTACTS = 24  # rows of the kernel's output per pin (fixplan.geometry._pin_kernels.MAX_CONTACTS)
+MAX_CONTACTS = 28  # rows of the kernel's output per pin (fixplan.geometry._pin_kernels.MAX_CONTACTS)
 FACE_COLUMNS = 22  # a hole's row with the face around its mouth (fixplan.geometry._pin_kernels.FACE_COLUMNS)
 OTHER_HOLES = 3  # other holes' mouths in that face a row carries (fixplan.geometry._pin_kernels.OTHER_HOLES)
 HOLE_COLUMNS = FACE_COLUMNS + 1 + 10 * OTHER_HOLES  # fixplan.geometry._pin_kernels.HOLE_COLUMNS
@@ -86,9 +87,10 @@ class PinGeometry:
         self._pins = np.array(pins, dtype=float).reshape(-1, 14)
         self._holes_body = np.array(holes, dtype=float).reshape(-1, HOLE_COLUMNS)
         self._bores = np.array(
-            [[*b.p_world, *b.axis_world, 0.5 * b.diameter_m, b.depth_m, b.chamfer_m, 1.0] for b in fixture.bores],
+            [[*b.p_world, *b.axis_world, 0.5 * b.diameter_m, b.depth_m, b.chamfer_m, 1.0, *_bore_face_row(b)]
+             for b in fixture.bores],
             dtype=float,
-        ).reshape(-1, 10)
+        ).reshape(-1, FACE_COLUMNS)  # fmt: skip
         self._peg = np.zeros(2)
         if fixture.bores:
             shape = wp.shape
@@ -99,11 +101,11 @@ class PinGeometry:
         self._scratch: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None = None
 
     @property
-    def kernel_inputs(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, int, int, int, float, int]:
+    def kernel_inputs(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, int, int, int, float, int, float]:
         """The fixed arguments of the compiled contacts, in their order: the pins, the holes (body frame), the bores, the peg, then the settings' numbers."""
         s = self.settings
         return (self._pins, self._holes_body, self._bores, self._peg, s.rim_samples, s.newton_steps, s.golden_steps,
-                s.coaxial_rel, s.face_points)  # fmt: skip
+                s.coaxial_rel, s.face_points, s.face_arc_inset)  # fmt: skip
 
     def _rows(self, R: FloatArray, p: FloatArray) -> FloatArray:
         """The compiled kernel's rows at the pose ``(R, p)`` (a view of the scratch array)."""
@@ -111,7 +113,7 @@ class PinGeometry:
         n = _pose_contacts(
             self._pins, self._holes_body, self._bores, self._peg, np.ascontiguousarray(R, dtype=float),
             np.ascontiguousarray(p, dtype=float), s.rim_samples, s.newton_steps, s.golden_steps, s.coaxial_rel,
-            s.face_points, self._out,
+            s.face_points, s.face_arc_inset, self._out,
         )  # fmt: skip
         return self._out[:n]
 
@@ -133,7 +135,7 @@ class PinGeometry:
         m = _pin_slots(
             self._pins, self._holes_body, self._bores, self._peg, np.ascontiguousarray(R, dtype=float),
             np.ascontiguousarray(p, dtype=float), s.rim_samples, s.newton_steps, s.golden_steps, s.coaxial_rel,
-            s.face_points, float(band_m), self._out, obs, slots, meta, normals, least,
+            s.face_points, s.face_arc_inset, float(band_m), self._out, obs, slots, meta, normals, least,
         )  # fmt: skip
         keys = [(int(a), int(b), int(c)) for a, b, c in meta[:m, :3].tolist()]
         return PinSlots(obs[:m].copy(), slots[:m].copy(), meta[:m, 0].astype(np.int64), keys, meta[:m, 3].copy(),
@@ -170,6 +172,12 @@ class PinGeometry:
         slots[:, 4] = np.arange(m)
         return PinSlots(obs, slots, owner_all[keep], [keys_all[j] for j in keep.tolist()], rows[:, 12].copy(),
                         n_world, least)  # fmt: skip
+
+
+def _bore_face_row(bore: Bore) -> list[float]:
+    """The fixture's face around ``bore``'s mouth as the kernel's 12 columns (world frame): a disk about its axis."""
+    face = bore_face(bore.p_world, bore.axis_world)
+    return [2.0, *face.centre, *face.normal, *face.e1, *face.half_m]
 
 
 def _face_row(workpiece: Workpiece, hole: Hole, tol_m: float, settings: PinSettings) -> list[float]:

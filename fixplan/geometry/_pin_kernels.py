@@ -38,8 +38,10 @@ FACE_COLUMNS = 22  # a hole's row with the face around its mouth (module text)
 OTHER_HOLES = 3  # the other holes' mouths in the same face a hole's row carries (module text)
 HOLE_COLUMNS = FACE_COLUMNS + 1 + 10 * OTHER_HOLES  # a hole's row with its face and the other mouths in it
 # 2 lands x (rim, mouth, exit, 2 mouth edges, 2 pin circles) + bottom = 15, + the bottom face's rim
-# and the tip on the face (face_points each, 4 by default): 23
-MAX_CONTACTS = 24
+# and the tip on the face (face_points each, 4 by default): 23, + the ends of the tip's arcs over the
+# face (2 per arc, 2 arcs at most): 27
+MAX_CONTACTS = 28
+_MAX_ARCS = 2  # arcs of a tip's edge over the face around a mouth (module face_contacts)
 _TWO_PI = 2.0 * math.pi
 _SQRT_HALF = math.sqrt(0.5)
 _GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
@@ -167,6 +169,8 @@ def _rim(pin, hole, arcs, rim_samples, newton_steps, out, n):
     rho_m = np.linalg.norm(rho)
     nn = rho / rho_m if rho_m > 0.0 else e1
     gap = hole[6] - rho_m
+    if gap < 0.0 and -gap > _mouth_distance(hole, depth, rho_m):
+        return n  # in the body, nearer the mouth's face or chamfer than the wall: not the wall's
     return _put(out, n, RIM, x, x + gap * nn, nn, gap)
 
 
@@ -178,6 +182,29 @@ def _seg(q0, q1, a0, a1, b0, b1):
     dd = d0 * d0 + d1 * d1
     t = 0.0 if dd == 0.0 else min(max(((q0 - a0) * d0 + (q1 - a1) * d1) / dd, 0.0), 1.0)
     return a0 + t * d0, a1 + t * d1, t
+
+
+@njit(cache=True)
+def _mouth_distance(hole, q0, q1):
+    """:func:`fixplan.geometry.pins._mouth_distance`: ``(depth, ρ)`` from the mouth's chamfer and the face around it."""
+    c, R = hole[8], hole[6]
+    face = abs(q0) if q1 >= R + c else math.hypot(q0, q1 - R - c)
+    if c <= 0.0:
+        return face
+    p0, p1, _t = _seg(q0, q1, 0.0, R + c, c, R)
+    return min(face, math.hypot(q0 - p0, q1 - p1))
+
+
+@njit(cache=True)
+def _tip_distance(pin, q0, q1):
+    """:func:`fixplan.geometry.pins._tip_distance`: ``(t, ρ)`` from the pin's tip chamfer and face."""
+    L, r, c = pin[7], pin[6], pin[8]
+    p0, p1, _t = _seg(q0, q1, L, r - c, L, 0.0)
+    d = math.hypot(q0 - p0, q1 - p1)
+    if c > 0.0:
+        p0, p1, _t = _seg(q0, q1, L - c, r, L, r - c)
+        d = min(d, math.hypot(q0 - p0, q1 - p1))
+    return d
 
 
 @njit(cache=True)
@@ -408,7 +435,10 @@ def _edge(pin, hole, depth_m, kind, arcs, rim_samples, newton_steps, golden_step
         return n
     nn = v / d
     x = base + s * u + pin[6] * nn
-    return _put(out, n, kind, x, y, nn, d - pin[6])
+    gap = d - pin[6]
+    if kind == MOUTH and gap < 0.0 and -gap > _tip_distance(pin, s, d):
+        return n  # in the pin, nearer its tip's face or chamfer than its side: the tip's contact
+    return _put(out, n, kind, x, y, nn, gap)
 
 
 @njit(cache=True)
@@ -589,11 +619,56 @@ def _others(hole):
 
 
 @njit(cache=True)
-def face_contacts(pin, hole, points, coaxial_rel, out, n):
+def _arc_f(w, A, B, phi, outer):
+    return math.sqrt(_sq(w, A, B, phi, 1.0)) - outer
+
+
+@njit(cache=True)
+def _arc_ends_over_face(c, rho, d1, d2, m, a, outer, rim_samples, golden_steps, inset, angles, k):
+    """:func:`fixplan.geometry.pins._arc_ends_over_face`: appended to ``angles`` after entry ``k − 1``; the new count.
+
+    At most :data:`_MAX_ARCS` arcs (a circle's projection, an ellipse, crosses a circle at most 4
+    times: 2 arcs).
+    """
+    P = _proj(a)
+    w, A, B = P @ (c - m), rho * (P @ d1), rho * (P @ d2)
+    step = _TWO_PI / rim_samples
+    cross = np.empty(2 * _MAX_ARCS)
+    entering = np.zeros(2 * _MAX_ARCS, dtype=np.bool_)
+    nc = 0
+    for i in range(rim_samples):
+        f0 = _arc_f(w, A, B, i * step, outer)
+        f1 = _arc_f(w, A, B, (i + 1) * step, outer)
+        if (f0 >= 0.0) == (f1 >= 0.0) or nc >= 2 * _MAX_ARCS:
+            continue
+        lo, hi = i * step, (i + 1) * step
+        for _ in range(golden_steps):
+            mid = 0.5 * (lo + hi)
+            if (_arc_f(w, A, B, mid, outer) >= 0.0) == (f0 >= 0.0):
+                lo = mid
+            else:
+                hi = mid
+        cross[nc] = 0.5 * (lo + hi)
+        entering[nc] = f1 >= 0.0
+        nc += 1
+    for i in range(nc):
+        if not entering[i]:
+            continue
+        start = cross[i]
+        span = (cross[(i + 1) % nc] - start) % _TWO_PI
+        angles[k] = start + inset * span
+        angles[k + 1] = start + (1.0 - inset) * span
+        k += 2
+    return k
+
+
+@njit(cache=True)
+def face_contacts(pin, hole, points, coaxial_rel, rim_samples, golden_steps, arc_inset, out, n):
     """The pin's tip on the face around the hole's mouth, ``points`` points from the deepest (kind :data:`FACE`).
 
     :func:`fixplan.geometry.pins.tip_face_contacts` (its text derives it), rows appended after
     row ``n − 1`` while ``out`` has room; returns the new count. None when ``hole`` has no face.
+    With ``points`` above 1, the ends of the edge's arcs over the face (:func:`_arc_ends_over_face`).
     """
     if hole.shape[0] < FACE_COLUMNS or hole[10] == 0.0 or _tip_over_mouth(pin, hole):
         return n
@@ -620,18 +695,24 @@ def face_contacts(pin, hole, points, coaxial_rel, out, n):
             d1, _e2 = _perp_basis(u, u, False)
     d2 = np.cross(u, d1)
     count = points if rho > 0.0 and points > 1 else 1
+    angles = np.empty(count + 2 * _MAX_ARCS)
     for j in range(count):
+        angles[j] = _TWO_PI * j / count
+    k = count
+    if points > 1 and rho > 0.0:  # where the edge leaves the face for the mouth: each such arc's ends
+        k = _arc_ends_over_face(c, rho, d1, d2, m, a, outer, rim_samples, golden_steps, arc_inset, angles, k)
+    for j in range(k):
         if n >= out.shape[0]:
             break
-        phi = _TWO_PI * j / count
+        phi = angles[j]
         x = c + rho * (math.cos(phi) * d1 + math.sin(phi) * d2)
         gap = (x - fc) @ fn
         v = x - m
         beyond_mouth = np.linalg.norm(v - (v @ a) * a) - outer
         q1, q2 = (x - fc) @ fe1, (x - fc) @ fe2
         inside = h1 - math.hypot(q1, q2) if disk else min(h1 - abs(q1), h2 - abs(q2))
-        for j in range(_others(hole)):  # the other holes' mouths in the face: no material there either
-            o = FACE_COLUMNS + 1 + 10 * j
+        for jo in range(_others(hole)):  # the other holes' mouths in the face: no material there either
+            o = FACE_COLUMNS + 1 + 10 * jo
             w = x - hole[o : o + 3]
             aj = hole[o + 3 : o + 6]
             beyond_mouth = min(beyond_mouth, np.linalg.norm(w - (w @ aj) * aj) - (hole[o + 6] + hole[o + 8]))
@@ -643,15 +724,18 @@ def face_contacts(pin, hole, points, coaxial_rel, out, n):
 
 @njit(cache=True)
 def pose_contacts(
-    pins, holes_body, bores, peg, R, p, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points, out
-):
+    pins, holes_body, bores, peg, R, p, rim_samples, newton_steps, golden_steps, coaxial_rel, face_points, arc_inset,
+    out,
+):  # fmt: skip
     """Every contact of every pin (in its hole of the part at the pose ``(R, p)``) and bore (with the part as its peg).
 
     ``pins`` (k, 14) and ``holes_body`` (k, 10) or (k, :data:`FACE_COLUMNS`): each pin and its hole
     in body coordinates (with the face around its mouth: the pin's tip on it, :func:`face_contacts`,
     ``face_points`` points of it, at least the deepest);
-    ``bores`` (j, 10) in world coordinates, ``peg`` = (radius, length) of the cylindrical part (its
-    end deeper in the bore leads). ``out`` ((k + j)·:data:`MAX_CONTACTS`, 13): one row per contact,
+    ``bores`` (j, 10) or (j, :data:`FACE_COLUMNS`) in world coordinates (with the fixture's face
+    around the mouth: the part's leading end on it, :func:`face_contacts`), ``peg`` = (radius,
+    length) of the cylindrical part (its end deeper in the bore leads). ``arc_inset``: the face's
+    arc ends (:func:`_arc_ends_over_face`). ``out`` ((k + j)·:data:`MAX_CONTACTS`, 13): one row per contact,
     ``[owner (pins then bores), is a bore, kind, point on the pin or peg (3), point on the hole's or
     bore's body (3), normal from the pin into the hole's body (3), gap]``. Returns the number of rows.
     A tip face on a blind hole's bottom adds its rim's points (:func:`_face_points`, ``face_points``
@@ -682,7 +766,8 @@ def pose_contacts(
             hole[11:14] = p + R @ holes_body[i, 11:14]
             hole[14:17] = R @ holes_body[i, 14:17]
             hole[17:20] = R @ holes_body[i, 17:20]
-            k = face_contacts(pins[i], hole, max(face_points, 1), coaxial_rel, rows, k)
+            k = face_contacts(pins[i], hole, max(face_points, 1), coaxial_rel, rim_samples, golden_steps, arc_inset,
+                              rows, k)  # fmt: skip
         for j in range(_others(hole)):  # the pin on (or in) another hole of the face: its contacts with it
             o = FACE_COLUMNS + 1 + 10 * j
             other[:] = hole[o : o + 10]
@@ -720,6 +805,9 @@ def pose_contacts(
             if rows[r, 0] == BOTTOM:
                 k = _face_points(pg, bores[j], face_points, coaxial_rel, rows, k)
                 break
+        if bores.shape[1] >= FACE_COLUMNS:  # the fixture's face around the mouth (world frame already)
+            k = face_contacts(pg, bores[j], max(face_points, 1), coaxial_rel, rim_samples, golden_steps, arc_inset,
+                              rows, k)  # fmt: skip
         for r in range(k):
             out[n, 0], out[n, 1] = pins.shape[0] + j, 1.0
             out[n, 2:13] = rows[r]

@@ -17,6 +17,15 @@ Contacts (each an edge on a surface, exact):
   the hole's axis; gap ``R − ρ_max``; normal the wall's, radially outward.
 - ``"mouth"``: the circle where the hole's wall begins on the pin's side: the circle's point nearest
   the pin's axis; gap ``d_min − r``; normal the pin side's, radially outward from the pin's axis.
+
+  Each counts only where the side and the wall are the nearest surfaces: a rim point inside the
+  hole's body nearer the mouth's chamfer or the face around it than the wall (its overlap ``−gap``
+  more than its distance to the mouth's profile, :func:`_mouth_distance`), or a mouth point inside
+  the pin nearer its tip's chamfer or face than its side (:func:`_tip_distance`), is the tip's and
+  the face's business. A tip just past a sharp mouth with its axis beyond the play (a shaft landing
+  beside the bore) overlaps the wall by the offset less the play, but lies a hair under the mouth's
+  plane: its contact is the mouth's edge on its face, gap that hair; counting the overlap threw the
+  part sideways into the hole.
 - ``"exit"``: a through hole's far edge on the pin's side, once the rim has passed it.
 - ``"bottom"``: the pin's tip face on a blind hole's bottom: the face's deepest point; gap
   ``depth − z``; normal ``−a``.
@@ -54,15 +63,19 @@ farthest from the hole's axis. The point counts where it lies over the face's ma
 the mouth's outer edge (``R + c_h`` from the hole's axis) and within the face's extent; below the
 face only while the face is its nearest surface (deeper than its distance to the mouth's edge or
 to the extent's, it is the hole's or the part's side's business, as for the tip's other contacts).
+A bore (``[[bore]]``) has the fixture's face around its mouth (:func:`bore_face`: the plane of the
+mouth normal to its axis, unbounded), where a shaft's leading end lands when it misses the mouth.
+A tip partly over the mouth rests on the face along a crescent: the engine's points of it add the
+ends of each arc of the tip's edge over the face (a tenth of the arc in, :func:`_arc_ends_over_face`;
+the deepest point and the points at fixed angles may all but one lie over the mouth).
 Other holes' mouths in the same face are no material either: the engine's rows
 (:mod:`fixplan.geometry._pin_kernels`) carry them with the face, so a point over one is not the
 face's, and a pin within reach of another hole's mouth has its contacts with that hole too (a pin
 landing on its neighbour's rim, or in it); a pin's contacts with any hole are taken only while its
 tip's centre is within ``R + c_h + r`` of that hole's axis (farther, the side's closed forms,
-which assume the pin at the hole, gave walls as deep as the distance). Not modelled: the face
-around a bore's mouth (the format does not give the fixture's surface there:
-a shaft that misses its bore passes through it), a mesh part's face whose outline is not a
-rectangle (an L, a notch, a disk: no face), and curved faces (a hole in a cylinder's side: no face).
+which assume the pin at the hole, gave walls as deep as the distance). Not modelled: a mesh part's face
+whose outline is not a rectangle (an L, a notch, a disk: no face),
+and curved faces (a hole in a cylinder's side: no face).
 """
 
 from __future__ import annotations
@@ -274,6 +287,17 @@ def _mesh_mouth_face(mesh: Mesh, p: FloatArray, a: FloatArray, tol_m: float, cos
     return face if face.inside_m(p) >= 0.0 else None
 
 
+def bore_face(mouth: FloatArray, axis: FloatArray, radius_m: float = math.inf) -> MouthFace:
+    """The fixture's face around a bore's mouth (world frame): the plane through the mouth normal to its axis.
+
+    A disk of ``radius_m`` about the axis (unbounded by default: the fixture's surface is wider than
+    the part); the shaft's leading end rests on it where it misses the mouth.
+    """
+    m, a = np.asarray(mouth, dtype=float), np.asarray(axis, dtype=float)
+    e1, _ = _perp_basis(a)
+    return MouthFace(m.copy(), a.copy(), e1, (float(radius_m), 0.0), True)
+
+
 @dataclass(frozen=True)
 class PinContact:
     """One contact of a pin and its hole: the point on each, the normal from the pin into the hole's body, the gap."""
@@ -375,6 +399,8 @@ def _rim(pin: PinBody, hole: HoleBody, arcs: list[tuple[float, float]], settings
     rho_m = float(np.linalg.norm(rho))
     n = rho / rho_m if rho_m > 0.0 else e1
     gap = hole.radius_m - rho_m
+    if gap < 0.0 and -gap > _mouth_distance(hole, np.array([depth, rho_m])):
+        return None  # in the body, nearer the mouth's face or chamfer than the wall: not the wall's
     return PinContact("rim", x, x + gap * n, n, gap)
 
 
@@ -422,7 +448,10 @@ def _edge(
         return None
     n = v / d
     x = pin.base_world + s * u + pin.radius_m * n
-    return PinContact(kind, x, y, n, d - pin.radius_m)
+    gap = d - pin.radius_m
+    if kind == "mouth" and gap < 0.0 and -gap > _tip_distance(pin, np.array([s, d])):
+        return None  # in the pin, nearer its tip's face or chamfer than its side: the tip's contact
+    return PinContact(kind, x, y, n, gap)
 
 
 def _bottom(pin: PinBody, hole: HoleBody, settings: PinSettings) -> PinContact | None:
@@ -452,6 +481,29 @@ def _nearest_on_segment(q: FloatArray, a: FloatArray, b: FloatArray) -> tuple[Fl
     dd = float(d @ d)
     t = 0.0 if dd == 0.0 else min(max(float((q - a) @ d) / dd, 0.0), 1.0)
     return a + t * d, t
+
+
+def _mouth_distance(hole: HoleBody, q: FloatArray) -> float:
+    """Distance of ``q = (depth, ρ)`` (hole frame) from the mouth's profile: its chamfer and the face around it."""
+    c, R = hole.chamfer_m, hole.radius_m
+    top = np.array([0.0, R + c])
+    face = abs(float(q[0])) if q[1] >= R + c else float(np.linalg.norm(q - top))
+    if c <= 0.0:
+        return face
+    p, _ = _nearest_on_segment(q, top, np.array([c, R]))
+    return min(face, float(np.linalg.norm(q - p)))
+
+
+def _tip_distance(pin: PinBody, q: FloatArray) -> float:
+    """Distance of ``q = (t, ρ)`` (pin frame) from the pin's tip: its chamfer and its face."""
+    L, r, c = pin.length_m, pin.radius_m, pin.chamfer_m
+    corner = np.array([L, r - c])
+    p, _ = _nearest_on_segment(q, corner, np.array([L, 0.0]))
+    d = float(np.linalg.norm(q - p))
+    if c > 0.0:
+        p, _ = _nearest_on_segment(q, np.array([L - c, r]), corner)
+        d = min(d, float(np.linalg.norm(q - p)))
+    return d
 
 
 def _in_cone(v: FloatArray, n1: FloatArray, n2: FloatArray) -> bool:
@@ -705,9 +757,11 @@ def tip_face_contacts(
     d2 = np.cross(u, d1)
     count = points if rho > 0.0 and points > 1 else 1
     outer = hole.radius_m + hole.chamfer_m
+    angles = [2.0 * math.pi * j / count for j in range(count)]
+    if points > 1 and rho > 0.0:  # where the edge leaves the face for the mouth: each such arc's ends
+        angles += _arc_ends_over_face(c, rho, d1, d2, m, a, outer, settings)
     out = []
-    for j in range(count):
-        phi = 2.0 * math.pi * j / count
+    for phi in angles:
         x = c + rho * (math.cos(phi) * d1 + math.sin(phi) * d2)
         gap = float((x - face.centre) @ n)
         v = x - m
@@ -716,6 +770,57 @@ def tip_face_contacts(
         if beyond_mouth < 0.0 or inside < 0.0 or (gap < 0.0 and -gap > min(beyond_mouth, inside)):
             continue  # over the hole, off the part, or nearer the mouth's edge or the part's side
         out.append(PinContact("face", x, x - gap * n, -n, gap))
+    return out
+
+
+def _arc_ends_over_face(
+    c: FloatArray,
+    rho: float,
+    d1: FloatArray,
+    d2: FloatArray,
+    m: FloatArray,
+    a: FloatArray,
+    outer: float,
+    settings: PinSettings,
+) -> list[float]:
+    """The angles near the ends of each arc of the circle ``c + ρ (cos φ d1 + sin φ d2)`` outside the mouth's outer edge.
+
+    A tip partly over the mouth rests on the face along a crescent, bounded by its edge's arc over
+    the face: the deepest point alone (or points at fixed angles, most of them over the mouth) lets it
+    tip about that point. Each arc where the circle's distance from the hole's axis exceeds
+    ``outer`` (the crossings sampled at ``rim_samples`` angles, refined by ``golden_steps``
+    bisections) adds two points ``face_arc_inset`` of the arc in from its ends, so strictly over
+    the material. None when the whole circle is on one side.
+    """
+    P = np.eye(3) - np.outer(a, a)
+    w, A, B = P @ (c - m), rho * (P @ d1), rho * (P @ d2)
+
+    def f(phi: float) -> float:
+        return float(np.linalg.norm(w + A * math.cos(phi) + B * math.sin(phi))) - outer
+
+    n = settings.rim_samples
+    step = 2.0 * math.pi / n
+    vals = [f(k * step) for k in range(n)]
+    crossings: list[tuple[float, bool]] = []  # (angle, entering the face going up in φ)
+    for k in range(n):
+        f0, f1 = vals[k], vals[(k + 1) % n]
+        if (f0 >= 0.0) == (f1 >= 0.0):
+            continue
+        lo, hi = k * step, (k + 1) * step
+        for _ in range(settings.golden_steps):
+            mid = 0.5 * (lo + hi)
+            if (f(mid) >= 0.0) == (f0 >= 0.0):
+                lo = mid
+            else:
+                hi = mid
+        crossings.append((0.5 * (lo + hi), f1 >= 0.0))
+    out: list[float] = []
+    for i, (start, entering) in enumerate(crossings):
+        if not entering:
+            continue
+        end = crossings[(i + 1) % len(crossings)][0]
+        span = (end - start) % (2.0 * math.pi)
+        out += [start + settings.face_arc_inset * span, start + (1.0 - settings.face_arc_inset) * span]
     return out
 
 
@@ -751,6 +856,7 @@ __all__ = [
     "MouthFace",
     "PinBody",
     "PinContact",
+    "bore_face",
     "mouth_face",
     "pin_hole_contacts",
     "radial_play_m",

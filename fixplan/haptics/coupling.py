@@ -27,6 +27,20 @@ def passivity_margin(K: float, B: float, T: float, b: float) -> float:
     return b - (K * T / 2.0 + abs(B))
 
 
+def compensable_damping(b: ArrayLike, kp: ArrayLike, T: float, safety: float) -> FloatArray:
+    """How much of the handle's own damping ``b`` a hand may cancel: what exceeds ``safety · kp T``.
+
+    A hand that holds the handle on the part with a PD of stiffness ``kp`` (sampled at ``T``) and
+    cancels the handle's damping ``b`` with the part's speed makes the part and the handle, moving
+    together, an active pair: their common motion grows at a rate about ``α b / (inertia)`` once
+    the damping left, ``(1 − α) b``, falls below ``kp T`` (the sampled loop's eigenvalues, for
+    every part and coordinate: e.g. a slender shaft's spin about its own axis doubled every 50 ms
+    with ``α = 1``). Keeping ``safety · kp T`` of it keeps the pair passive.
+    """
+    b_arr, kp_arr = np.asarray(b, dtype=float), np.asarray(kp, dtype=float)
+    return np.maximum(b_arr - safety * kp_arr * T, 0.0)
+
+
 def check_passivity(K: float, B: float, T: float, b: float) -> float:
     """Return the margin, or raise :class:`InputError` when ``b > K T/2 + |B|`` fails."""
     for name, value in (("stiffness K", K), ("sample time T", T), ("device damping b", b)):

@@ -7,7 +7,12 @@ with the suggested wrench ``w`` (seen ``delay`` late, with relative force noise 
 10 ms) and holds the handle ``w / K`` ahead of the part with the arm's impedance (PD gains from
 CONFIG, those of :func:`~fixplan.haptics.rig.haptic_rig`):
 
-    f_hand = w + b ẋ_part + kp (x_part + w/K − x_handle) + kd (ẋ_part − ẋ_handle).
+    f_hand = w + b_c ẋ_part + kp (x_part + w/K − x_handle) + kd (ẋ_part − ẋ_handle),
+
+cancelling the handle's damping ``b`` only down to what keeps its sampled PD passive
+(``b_c = b − 1.5 kp T``, :func:`~fixplan.haptics.coupling.compensable_damping`): cancelling all of
+it made the part and the handle, moving together, gain speed by themselves (a slender shaft's spin
+about its own axis doubled every 50 ms, and only guidance without delay held it).
 
 ``push`` replaces the guidance by a constant wrench (a person insisting on a push: a jam demo).
 Each POSE carries the device's clock; each answer echoes it, so the round trip is measured here.
@@ -29,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.errors import InputError
+from fixplan.haptics.coupling import compensable_damping
 from fixplan.interactive import protocol
 from fixplan.interactive.handles import Handle
 from fixplan.settings import HAPTIC
@@ -90,6 +96,8 @@ class OperatorDevice:
         self.kp = np.asarray(config["operator_kp"], dtype=float)
         self.kd = np.asarray(config["operator_kd"], dtype=float)
         self.x0 = np.asarray(config["x0"], dtype=float)
+        # the part of the handle's damping the hand cancels (module text)
+        self.b_hand = compensable_damping(self.b, self.kp, self.T, HAPTIC.haptic.passivity_safety)
         self.x = self.x0.copy()
         self.v = np.zeros(n)
         self.noise = noise
@@ -116,7 +124,7 @@ class OperatorDevice:
         w = self.push.copy() if self.push is not None else self._guidance * (1.0 + self._noisy)
         if part is not None:
             x_w, v_w = part
-            hand = w + self.b * v_w + self.kp * (x_w + w / self.K - self.x) + self.kd * (v_w - self.v)
+            hand = w + self.b_hand * v_w + self.kp * (x_w + w / self.K - self.x) + self.kd * (v_w - self.v)
         else:  # the part is not known yet: hold the handle where it started
             hand = self.kp * (self.x0 - self.x) - self.kd * self.v
         T, M = self.T, self.M

@@ -202,12 +202,14 @@ def capped_fixture(fixture: Fixture, F_max: float, T_max: float) -> Fixture:
 class InsertionGuide:
     """A fixture with pins or bores: the staged insertion (:mod:`fixplan.planner.insertion`) as the guide's executor.
 
-    Planned from the pose the part is in (a part partly on its pins is lifted straight out first),
+    Planned from the pose the part is in (a part partly on its pins is lifted straight out first; one
+    in past the chamfers is seated from there),
     run by :class:`~fixplan.planner.insertion.InsertionRun` with the haptic profile: the same calls
     the guide makes of the locators' executor (``command``, ``guidance``, ``done``, ``log``).
+    ``delay_s``: how late the operator's push follows the guidance (the run's servo is held to it).
     """
 
-    def __init__(self, fixture: Fixture, pose: Pose, tick_s: float):
+    def __init__(self, fixture: Fixture, pose: Pose, tick_s: float, delay_s: float = 0.0):
         from dataclasses import replace
 
         from fixplan.planner.insertion import InsertionRun, plan_insertion
@@ -217,7 +219,8 @@ class InsertionGuide:
         self.plan = plan_insertion(here, settings=HAPTIC)
         if not self.plan.ok:
             raise InfeasibleError(self.plan.reason)
-        self.run = InsertionRun(here, self.plan, HAPTIC.insertion, tick_s=tick_s, execution=HAPTIC.execution)
+        self.run = InsertionRun(here, self.plan, HAPTIC.insertion, tick_s=tick_s, execution=HAPTIC.execution,
+                                delay_s=delay_s)  # fmt: skip
         self.log = self.run.log
         self.steps: list[Any] = []  # no locator steps: the guide's policy note does not apply
 
@@ -250,10 +253,14 @@ class Guide:
         tick_s: float,
         verdict_every_s: float = 0.0,
         role: str = "both",
+        reaction_s: float = 0.0,
     ):
         self.role = role  # "both" | "plan" (the executor only) | "verdict" (classify only)
         self.fixture = fixture
         self.tick_s = tick_s
+        # the operator follows the advice this late (their reaction, and this guide's own update period)
+        self.reaction_s = reaction_s
+        self.delay_s = reaction_s + tick_s if reaction_s > 0.0 else 0.0
         self.verdict_every_s = verdict_every_s
         self.start_state = start_state
         self._planner: Any = None
@@ -275,7 +282,7 @@ class Guide:
 
         if self.fixture.has_pins:  # the staged insertion onto the pins (or into the bore)
             self.plans += 1
-            self._executor = InsertionGuide(self.fixture, pose, self.tick_s)
+            self._executor = InsertionGuide(self.fixture, pose, self.tick_s, self.delay_s)
             self.note = "following the insertion"
             return
         if self._planner is None:
@@ -368,7 +375,9 @@ class Guide:
         )
 
 
-def _guide_worker(conn: Any, fixture: Fixture, start_state: frozenset[str], tick_s: float, role: str) -> None:
+def _guide_worker(
+    conn: Any, fixture: Fixture, start_state: frozenset[str], tick_s: float, role: str, reaction_s: float = 0.0
+) -> None:
     """A guidance process: answers each snapshot with a :class:`Guidance` (see :class:`RemoteGuide`)."""
     import os
 
@@ -384,7 +393,7 @@ def _guide_worker(conn: Any, fixture: Fixture, start_state: frozenset[str], tick
             os.nice(HAPTIC.haptic.guide_nice)
         except OSError:
             pass
-    guide = Guide(fixture, start_state, tick_s=tick_s, role=role)
+    guide = Guide(fixture, start_state, tick_s=tick_s, role=role, reaction_s=reaction_s)
     if role == "plan":  # import what the planner needs before the clock starts
         import fixplan.planner.execute
         import fixplan.planner.policy
@@ -411,16 +420,26 @@ class RemoteGuide:
     answer (the waiting thread releases the GIL).
     """
 
-    def __init__(self, fixture: Fixture, start_state: frozenset[str], *, tick_s: float, role: str = "plan"):
+    def __init__(
+        self,
+        fixture: Fixture,
+        start_state: frozenset[str],
+        *,
+        tick_s: float,
+        role: str = "plan",
+        reaction_s: float = 0.0,
+    ):
         import multiprocessing as mp
 
         ctx = mp.get_context("spawn")
         self.tick_s = tick_s
         self.role = role
+        self.reaction_s = reaction_s
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(
-            target=_guide_worker, args=(child, fixture, start_state, tick_s, role), name=f"fixplan-{role}", daemon=True
-        )
+            target=_guide_worker, args=(child, fixture, start_state, tick_s, role, reaction_s), name=f"fixplan-{role}",
+            daemon=True,
+        )  # fmt: skip
         self._proc.start()
         child.close()
         self.note = "planning"
@@ -493,6 +512,7 @@ class HapticSession:
         max_sweeps: int | None = None,
         profile: Settings = HAPTIC,
         clamp: bool = False,
+        reaction_s: float | None = None,
     ):
         from fixplan.locating import contact_set, inserts, start_state
         from fixplan.model import require_full
@@ -517,6 +537,13 @@ class HapticSession:
         self.fixture = fixture
         self.handle = handle
         self.rig_settings = profile.haptic
+        # how late the operator follows the guidance (its servo is held to it): a device's person or
+        # robot (``operator_reaction_s``); the simulated hand of a session without a device reacts at once
+        if reaction_s is None:
+            reaction_s = profile.haptic.operator_reaction_s if handle is not None else 0.0
+        if not (reaction_s >= 0.0 and math.isfinite(reaction_s)):
+            raise InputError(f"HapticSession.reaction_s must be a finite number of seconds ≥ 0, got {reaction_s}")
+        self.reaction_s = float(reaction_s)
         self.sim = Simulator(fixture, max_iterations=max_sweeps, settings=profile.engine)
         self.names = tuple(self.sim.names)  # the locators, then the pins and bores
         self.period_s = self.sim.dt
@@ -574,7 +601,8 @@ class HapticSession:
         self._guidance_on = guidance
         self.guide: Guide | RemoteGuide | None = None
         if guidance and synchronous:
-            self.guide = Guide(self.guide_fixture, self.start_state, tick_s=self.trace_every * self.period_s)
+            self.guide = Guide(self.guide_fixture, self.start_state, tick_s=self.trace_every * self.period_s,
+                               reaction_s=self.reaction_s)  # fmt: skip
         self._auto = bool(auto) or handle is None
         self._auto_dev = self._auto_device(self.x0, np.zeros(self.ndof))
         self._x_d = self.x0.copy()
@@ -716,7 +744,9 @@ class HapticSession:
         self._stage_k, self.stage_record, self.located_at, self.clamp_phase = None, None, None, ""
         self.sim.tolerance = self._loop_tolerance
         if isinstance(self.guide, Guide):
-            self.guide = Guide(self.guide_fixture, self.start_state, tick_s=self.guide.tick_s)
+            self.guide = Guide(
+                self.guide_fixture, self.start_state, tick_s=self.guide.tick_s, reaction_s=self.reaction_s
+            )
         elif isinstance(self.guide, RemoteGuide):
             self._restart_guide = True
         # the recording starts afresh from the start pose (what came before is not a way to load the part)
@@ -1256,7 +1286,8 @@ class HapticSession:
             if not verdict and self._restart_guide and isinstance(self.guide, RemoteGuide):
                 self._restart_guide = False
                 self.guide.close()
-                self.guide = RemoteGuide(self.guide_fixture, self.start_state, tick_s=self.guide.tick_s)
+                self.guide = RemoteGuide(self.guide_fixture, self.start_state, tick_s=self.guide.tick_s,
+                                         reaction_s=self.reaction_s)  # fmt: skip
             snap = self.snapshot
             if snap is None or snap is last:
                 time.sleep(0.002)
@@ -1277,7 +1308,8 @@ class HapticSession:
         if self._guidance_on and not self.synchronous and self.guide is None:
             # both processes start now and make their first answer (imports, the first plan and the
             # policy: seconds) before the clock starts: the guidance is never late on the wall clock
-            self.guide = RemoteGuide(self.guide_fixture, self.start_state, tick_s=GUIDE_PERIOD_S, role="plan")
+            self.guide = RemoteGuide(self.guide_fixture, self.start_state, tick_s=GUIDE_PERIOD_S, role="plan",
+                                     reaction_s=self.reaction_s)  # fmt: skip
             self.verdict_guide = RemoteGuide(
                 self.guide_fixture, self.start_state, tick_s=GUIDE_PERIOD_S, role="verdict"
             )

@@ -15,7 +15,12 @@ axis, or the bore's; the part moves along ``−u``), from the located pose ``G``
    ``G + u (h₁ + lead_m)``, lifting first when the start is lower, so that every hole's axis lies
    on its pin's axis ``lead_m`` above the first tip; where the straight move would bring the
    part's lowest point below the pins' tips or the stops' tops (a tilted start), it moves sideways
-   at a height that clears them and comes down along the axis (:func:`_over_staging`);
+   at a height that clears them and comes down along the axis (:func:`_over_staging`); it ends
+   once every hole's mouth (a shaft's leading end) is within ``align_capture_share`` of its
+   capture of where the staging pose puts it. A part whose every pin (or the shaft) starts in past
+   the chamfers (:func:`started_in`: a shaft cocked in its bore) has no approach and no insertion:
+   its holes are where its pose says, and the plan is the seating from the start, on the line
+   re-centred on them;
 2. **one insertion per pin**, in the order the tips meet their mouths on the way down (the pin
    whose engagement height ``h_i`` — its tip's depth in its hole at ``G`` — is largest first; pins
    engaging at the same height are one transition, round before diamond): down to
@@ -82,13 +87,14 @@ from fixplan.locating import (
     inserts,
     located_pose,
     locator_gaps,
+    peg_body,
     seat_at,
     seat_gaps_m,
     seated,
 )
 from fixplan.model import Fixture
 from fixplan.planner.execute import ExecutionLog, ExecutionNoise
-from fixplan.planner.insertion_policy import InsertionPolicy, Recentring, insertion_policy
+from fixplan.planner.insertion_policy import InsertionPolicy, Recentring, deep_m, insertion_policy
 from fixplan.planner.plan_types import Verification
 from fixplan.settings import DEFAULT, HAPTIC, ExecutionSettings, InsertionSettings, Settings
 from fixplan.spatial import Pose, exp_so3, log_so3, pose_between, shift_wrench
@@ -226,28 +232,37 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
         plan.reason = held or "already located at the start pose: every pin in its hole, every rest touching"
         plan.plan_s = time.perf_counter() - t0
         return plan
-    # a part already partly in (a shaft dropped tilted into the chamfer) is lifted straight out first:
-    # the approach below rises along the axis before it turns and moves sideways
-    h_top = plan.heights_m[groups[0][0].name]
+    # a part whose every pin (or the shaft) is already in past the chamfers (a shaft cocked in its
+    # bore) stays in: its holes are where the pose says, and lifting it out would lose them. It is
+    # seated from where it is, upright, on the line the run re-centres on them (InsertionRun).
     D = plan.descent_pose
-    staging = D.translated((h_top + s.lead_m) * u)
-    poses = [start]
-    rise = float((staging.p_world - start.p_world) @ u)
-    if rise > 0.0:  # lift first: the part never moves sideways lower than the staging height
-        poses.append(start.translated(rise * u))
-    poses += _over_staging(fixture, poses.pop(), staging, u, settings)
-    guide = poses[:1]
-    for a, b in zip([*poses], [*poses[1:], staging], strict=True):
-        guide += [pose_between(a, b, k / 4) for k in range(1, 5)]
-    ok, w, why, _, _, _ = _push(fixture, staging, [], u, settings)
-    plan.stages.append(Stage("", (), "free", guide, w, (), f"approach to the staging pose: {why}"))
-    if not ok:
-        plan.reason = f"the approach to the staging pose is beyond the hand: {why}"
-        plan.plan_s = time.perf_counter() - t0
-        return plan
+    in_bore = started_in(fixture)
+    if in_bore:
+        plan.start_state = frozenset(i.name for i in ins)
+        groups = []
+        prev = start
+    else:
+        # a part partly in (a shaft dropped tilted into the chamfer) is lifted straight out first:
+        # the approach below rises along the axis before it turns and moves sideways
+        h_top = plan.heights_m[groups[0][0].name]
+        staging = D.translated((h_top + s.lead_m) * u)
+        poses = [start]
+        rise = float((staging.p_world - start.p_world) @ u)
+        if rise > 0.0:  # lift first: the part never moves sideways lower than the staging height
+            poses.append(start.translated(rise * u))
+        poses += _over_staging(fixture, poses.pop(), staging, u, settings)
+        guide = poses[:1]
+        for a, b in zip([*poses], [*poses[1:], staging], strict=True):
+            guide += [pose_between(a, b, k / 4) for k in range(1, 5)]
+        ok, w, why, _, _, _ = _push(fixture, staging, [], u, settings)
+        plan.stages.append(Stage("", (), "free", guide, w, (), f"approach to the staging pose: {why}"))
+        if not ok:
+            plan.reason = f"the approach to the staging pose is beyond the hand: {why}"
+            plan.plan_s = time.perf_counter() - t0
+            return plan
+        prev = staging
     # the insertions, down the axis
     engaged: list[str] = []
-    prev = staging
     for k, g in enumerate(groups):
         h = plan.heights_m[g[0].name]
         nxt = plan.heights_m[groups[k + 1][0].name] if k + 1 < len(groups) else 0.0
@@ -299,9 +314,29 @@ def plan_insertion(fixture: Fixture, settings: Settings = DEFAULT) -> InsertionP
     seq = " → ".join(",".join(g) for g in plan.order)
     plan.reason = f"approach, insert {seq} along the axis, seat on {', '.join(rests)}"
     ends = [float((st.poses[-1].p_world - G.p_world) @ u) for st in plan.stages[:-1]]
+    if in_bore:
+        plan.reason = f"already in past the chamfers: seat on {', '.join(rests)} from the start, upright"
+        ends = [float((start.p_world - G.p_world) @ u)]  # a back-off rises to where the part started
     plan.policy = insertion_policy(fixture, plan.states, [st.kind for st in plan.stages], ends, s)
     plan.plan_s = time.perf_counter() - t0
     return plan
+
+
+def started_in(fixture: Fixture) -> bool:
+    """Whether every pin (or the shaft) starts in its hole past both chamfers, without the part located.
+
+    Then the plan seats the part from its start (:func:`plan_insertion`): the pins are in their
+    holes' bores, each hole's place known to within the play from the pose.
+    """
+    start = fixture.start
+    ins = inserts(fixture)
+    if not ins or seated(fixture, start):
+        return False
+    for i in ins:
+        e = engagement(fixture, start, i)
+        if not e.engaged or e.depth_m < deep_m(fixture, i):
+            return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -507,12 +542,22 @@ class InsertionRun:
         tick_s: float = 1e-3,
         *,
         execution: ExecutionSettings = DEFAULT.execution,
+        delay_s: float = 0.0,
     ):
         """The run of ``plan`` on ``world``.
 
         ``settings`` are the insertion's; ``execution`` say when a contact counts (``contact_gap_m``)
         and when the part is at rest (``stall_speed_mps``), as for the executor
         (:func:`verify_insertion` passes its profile's).
+
+        ``delay_s``: how late the push this run asks for reaches the part (an operator who follows
+        it in a haptic session: their reaction, and the guidance's update period). The hand's servo
+        is a critically damped PD on the part's pose: without delay its phase margin is 76°, and a
+        delay ``τ`` costs ``2.06 ω τ`` rad of it at crossover, all of it at ``ω τ ≈ 0.64`` (12 rad/s
+        and 55 ms: a session whose operator reacts 50 ms late diverged). With a delay each
+        frequency is held to ``delay_bandwidth / τ`` and the turn's gains act per principal axis
+        (the inertia tensor, not the largest moment: about a slender shaft's own axis the largest
+        moment made the servo 4× faster, 50 rad/s). 0 (the verification): the gains as set.
         """
         self.world = world
         self.plan = plan
@@ -524,6 +569,11 @@ class InsertionRun:
         wp = world.workpiece
         self.m = wp.mass_kg
         self.I_max = float(np.max(np.linalg.eigvalsh(np.atleast_2d(wp.inertia_body))))
+        self.delay_s = delay_s
+        cap = settings.delay_bandwidth / delay_s if delay_s > 0.0 else np.inf
+        self.axial_omega = min(settings.axial_omega_radps, cap)  # the servo's frequencies [rad/s]
+        self.lateral_omega = min(settings.lateral_omega_radps, cap)
+        self.rot_omega = min(settings.rot_omega_radps, cap)
         self.weight_N = world.weight_N
         self.inserts = inserts(world)
         self.rests = tuple(loc.name for loc in world.locators)
@@ -566,10 +616,23 @@ class InsertionRun:
         self._turn_integral = 0.0  # [rad] the turn's speed error, integrated
         self._turned = 0.0  # [rad] the turn toward the stops so far (its progress)
         self._stops_pressed = False  # every stop pressed in the seating stage: the press along the axis too
+        if plan.stages and plan.stages[0].kind != "free":  # started in its holes: down from where it is,
+            self._in_from_start(world.start)  # on the line through the holes seen there
 
     @property
     def done(self) -> bool:
         return self.log.outcome != "running"
+
+    def _turn(self, pose: Pose, rates: FloatArray) -> FloatArray:
+        """The moment that gives the part the angular acceleration ``rates`` [rad/s²]: ``I rates``.
+
+        With a delay the inertia tensor in world axes; without, the largest principal moment for
+        every axis, as the verification has always done (stiffer about the lighter axes).
+        """
+        if self.delay_s <= 0.0:
+            return self.I_max * rates
+        R = pose.R_world_body
+        return (R @ np.atleast_2d(self.world.workpiece.inertia_body) @ R.T) @ rates
 
     def height_m(self, pose: Pose) -> float:
         """The part's height above the nominal located pose along the axis."""
@@ -615,12 +678,14 @@ class InsertionRun:
             if h < target:
                 v[:3] = self.s.insert_speed_mps * self.u
             return self._goal.translated(min(h, target) * self.u), v, True
-        # down the axis from where the insertion began, on the located pose's line (re-centred by a back-off)
+        # down the axis from where the insertion began, on the located pose's line (re-centred by a back-off),
+        # to lead_m below it: the servo's push at a stall (held to a delay: as deep as its gain is less)
         h = self._ref_h0 - self.s.insert_speed_mps * (t - self._t_stage)
         v = np.zeros(6)
-        if h > -self.s.lead_m:
+        floor = self.s.lead_m * (self.s.axial_omega_radps / self.axial_omega) ** 2
+        if h > -floor:
             v[:3] = -self.s.insert_speed_mps * self.u
-        h = max(h, -self.s.lead_m)
+        h = max(h, -floor)
         return self._goal.translated(h * self.u), v, True
 
     def command(self, t: float, pose: Pose, twist: FloatArray, pressed: tuple[str, ...]) -> FloatArray:
@@ -638,8 +703,11 @@ class InsertionRun:
         if self._seating:
             seat = self.plan.seat_wrench_com if self.plan.seat_wrench_com is not None else np.zeros(6)
             w_com = carry + seat
-            w_com[3:] += -self.I_max * 2.0 * self.s.rot_omega_radps * w_ang
-            w_com[:3] += -self.m * 2.0 * self.s.lateral_omega_radps * (v - float(v @ self.u) * self.u)
+            if self.delay_s > 0.0:
+                w_com[3:] += self._turn(pose, -2.0 * self.rot_omega * w_ang)
+            else:  # the verification's arithmetic, as it always was
+                w_com[3:] += -self.I_max * 2.0 * self.rot_omega * w_ang
+            w_com[:3] += -self.m * 2.0 * self.lateral_omega * (v - float(v @ self.u) * self.u)
             self._check_settled(t, state, twist)
             return self._noisy(shift_wrench(w_com, com, pose.p_world))
         ref, v_ref, axial = self._reference(t)
@@ -647,14 +715,14 @@ class InsertionRun:
         ev = v_ref[:3] - v
         e_ax, ev_ax = float(e @ self.u), float(ev @ self.u)
         e_lat, ev_lat = e - e_ax * self.u, ev - ev_ax * self.u
-        wa = self.s.axial_omega_radps
-        wl = self.s.lateral_omega_radps if axial else self.s.axial_omega_radps
+        wa = self.axial_omega
+        wl = self.lateral_omega if axial else self.axial_omega
         f_ax = self.m * (wa * wa * e_ax + 2.0 * wa * ev_ax)
         if axial:
             f_ax = min(max(f_ax, -self.cap_N), self.cap_N)
         F = f_ax * self.u + self.m * (wl * wl * e_lat + 2.0 * wl * ev_lat)
-        wr = self.s.rot_omega_radps
-        T = self.I_max * (wr * wr * log_so3(ref.R_world_body @ pose.R_world_body.T) - 2.0 * wr * w_ang)
+        wr = self.rot_omega
+        T = self._turn(pose, wr * wr * log_so3(ref.R_world_body @ pose.R_world_body.T) - 2.0 * wr * w_ang)
         w_com = carry + np.concatenate([F, T])
         if self._press_across(state):
             w_com = self._across_push(carry, f_ax, v, w_ang, pressed)
@@ -752,7 +820,22 @@ class InsertionRun:
 
     def _begin_insertion(self, t: float, pose: Pose) -> None:
         self._t_stage = t
-        self._ref_h0 = min(self.height_m(pose), self.height_m(self.plan.stages[0].poses[-1]))
+        first = self.plan.stages[0]
+        top = first.poses[-1] if first.kind == "free" else first.poses[0]  # the staging pose, or the start
+        self._ref_h0 = min(self.height_m(pose), self.height_m(top))
+
+    def _in_from_start(self, pose: Pose) -> None:
+        """A part that starts with its pins in their holes (:func:`started_in`): the guide on the holes it sees there.
+
+        Each hole's place is the pin's within the play (:class:`~.insertion_policy.Recentring`);
+        the guide then runs down the axis from the start's height, upright.
+        """
+        for i in self.inserts:
+            e = engagement(self.world, pose, i)
+            self._recentring.observe(pose, i, e.depth_m)
+        self._goal, how = self._recentring.guide()
+        self.log.event(0.0, "state", f"started in: {how}")
+        self._begin_insertion(0.0, pose)
 
     def step_time(self, t: float, pose: Pose) -> None:
         """Called every tick before :meth:`command`: the approach ends when its guide does (a pose target)."""
@@ -762,7 +845,7 @@ class InsertionRun:
         end = st.poses[-1]
         turn = float(np.linalg.norm(log_so3(end.R_world_body @ pose.R_world_body.T)))
         off = float(np.linalg.norm(pose.p_world - end.p_world))
-        close = off <= self.s.align_tol_m and turn <= self.s.align_tol_rad
+        close = off <= self.s.align_tol_m and turn <= self.s.align_tol_rad and self._aimed(pose, end)
         total = sum(
             float(np.linalg.norm(b.p_world - a.p_world)) for a, b in zip(st.poses[:-1], st.poses[1:], strict=True)
         )
@@ -770,6 +853,15 @@ class InsertionRun:
             self.index += 1
             self.log.event(t, "state", "at the staging pose: every hole over its pin")
             self._begin_insertion(t, pose)
+
+    def _aimed(self, pose: Pose, staging: Pose) -> bool:
+        """Every hole's mouth (a shaft's leading end) within ``align_capture_share`` of its capture of where ``staging`` puts it, across the axis."""
+        for i in self.inserts:
+            d = _entry_world(self.world, pose, i) - _entry_world(self.world, staging, i)
+            d = d - float(d @ self.u) * self.u
+            if float(np.linalg.norm(d)) > self.s.align_capture_share * i.capture_m:
+                return False
+        return True
 
     def _check_progress(self, t: float, pose: Pose) -> None:
         # down the axis, or (the seating's turn into the stops) along the farthest stop's path
@@ -947,6 +1039,14 @@ class InsertionRun:
             self.log.event(t, "failed", reason)
 
 
+def _entry_world(fixture: Fixture, pose: Pose, ins: Insert) -> FloatArray:
+    """Where ``ins`` enters at ``pose`` (world): its hole's mouth in the part, or a shaft's leading end's centre."""
+    if ins.kind == "bore":
+        peg = peg_body(fixture.workpiece, pose, next(b for b in fixture.bores if b.name == ins.name))
+        return peg.base_world + peg.length_m * peg.axis_world
+    return pose.point_world_from_body(fixture.workpiece.hole(ins.hole).p_body)
+
+
 def _up(fixture: Fixture) -> FloatArray:
     g = np.asarray(fixture.gravity, dtype=float)
     n = float(np.linalg.norm(g))
@@ -1107,6 +1207,7 @@ __all__ = [
     "plan_insertion",
     "seat_push",
     "shifted_world",
+    "started_in",
     "transitions_of",
     "verify_insertion",
 ]

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from fixplan.contact_state import format_state
 from fixplan.errors import InputError
 from fixplan.locating import engagement, insertion_axis, inserts, located_pose, seated
-from fixplan.planner.insertion import InsertionPlan, Stage, goal_state, with_seating
+from fixplan.planner.insertion import InsertionPlan, Stage, goal_state, started_in, with_seating
 from fixplan.planner.insertion_policy import InsertionPolicy
 from fixplan.planner.plan_types import Plan, Verification, pose_from_json
 from fixplan.settings import HAPTIC, Settings
@@ -59,9 +59,15 @@ def _state(s: Iterable[str]) -> str:
     return format_state(s, empty="{}")
 
 
-def _stages_expected(n: int) -> list[str]:
-    """The stages of a staged insertion of ``n`` transitions: the approach, the insertions, the seating."""
-    return ["free", *["insert"] * (n - 2), "seat"] if n else []
+def _stages_expected(n: int, started_in: bool = False) -> list[str]:
+    """The stages of a staged insertion of ``n`` transitions: the approach, the insertions, the seating.
+
+    ``started_in``: the part starts with its pins in their holes (:func:`~.insertion.started_in`):
+    no approach.
+    """
+    if not n:
+        return []
+    return [*([] if started_in else ["free"]), *["insert"] * (n - (1 if started_in else 2)), "seat"]
 
 
 def check_insertion_claims(plan: Plan, fixture: Fixture, source: str, *, tolerance: tuple[float, float]) -> None:
@@ -69,8 +75,10 @@ def check_insertion_claims(plan: Plan, fixture: Fixture, source: str, *, toleran
 
     - ``insertion`` is there, its ``axis`` the fixture's insertion axis and its ``goal`` the
       located pose (else the plan is for another fixture), one ``stages`` entry per transition:
-      ``free``, then ``insert`` per engagement, then ``seat``;
-    - ``sequence`` starts in the state the part starts in (``{}``: nothing engaged; a plan without
+      ``free``, then ``insert`` per engagement, then ``seat`` (no ``free`` for a part that starts
+      with its pins in past the chamfers);
+    - ``sequence`` starts in the state the part starts in (``{}``: nothing engaged; every pin
+      engaged for a part that starts in; a plan without
       transitions claims the part starts located, which the fixture must confirm) and ends with
       every pin engaged and every rest pressed (a bore: engaged and on its bottom); the approach
       (``added``: ``staging``) changes no state, every other transition closes its ``added``;
@@ -107,13 +115,14 @@ def check_insertion_claims(plan: Plan, fixture: Fixture, source: str, *, toleran
         )
     n = len(plan.transitions)
     stages = list(data["stages"])
-    if stages != _stages_expected(n):
+    inside = started_in(fixture)
+    if stages != _stages_expected(n, inside):
         raise InputError(
-            f"{source}: insertion.stages: got {stages} (expected {_stages_expected(n)}: the approach, one insertion "
-            f"per engagement, the seating; one per transition)"
+            f"{source}: insertion.stages: got {stages} (expected {_stages_expected(n, inside)}: the approach, one "
+            f"insertion per engagement, the seating; one per transition)"
         )
     goal_set = goal_state(fixture)
-    start = frozenset() if n else goal_set
+    start = (frozenset(i.name for i in inserts(fixture)) if inside else frozenset()) if n else goal_set
     if not n:
         S = fixture.start
         located = all(engagement(fixture, S, i).engaged for i in inserts(fixture)) and seated(fixture, S)
@@ -201,7 +210,8 @@ def check_policy_claims(data: dict[str, Any], fixture: Fixture, seq: list[frozen
                     f"entry: every pin and bore engaged, seated true, action hold, transition null, next {_state(seq[-1])})"
                 )
             continue
-        if t is None or not 0 < t < len(stages) or stages[t] != action or not seq[t] <= engaged:
+        first = 1 if stages and stages[0] == "free" else 0  # the transitions after the approach
+        if t is None or not first <= t < len(stages) or stages[t] != action or not seq[t] <= engaged:
             raise InputError(
                 f"{where}.transition: got {t} with action {action} (expected a transition after the approach whose "
                 f"stage is the action, from a planned state {_state(engaged)} holds)"

@@ -298,7 +298,7 @@ def test_a_tilted_face_on_the_bottom_brings_its_rim() -> None:
     # a pin in a hole of a part at the identity pose (body = world)
     k = pose_contacts(
         p[None, :], h[None, :], np.zeros((0, 10)), np.zeros(2), np.eye(3), np.zeros(3),
-        s.rim_samples, s.newton_steps, s.golden_steps, s.coaxial_rel, 4, geometry_out,
+        s.rim_samples, s.newton_steps, s.golden_steps, s.coaxial_rel, 4, s.face_arc_inset, geometry_out,
     )  # fmt: skip
     bottom = geometry_out[:k][geometry_out[:k, 2] == KINDS.index("bottom")]
     assert bottom.shape[0] == 4
