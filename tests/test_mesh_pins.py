@@ -286,3 +286,92 @@ def test_a_bore_with_a_mesh_part_is_refused_in_one_line(tmp_path: Path) -> None:
         assert lines == [
             f"{path}: bore.K9: a bore takes a cylindrical part (expected workpiece.shape = 'cylinder', got 'mesh')"
         ]
+
+
+# -- a pin's tip on the face around its hole -------------------------------------------------------
+def test_the_face_around_a_mesh_parts_hole_is_the_boxs(tmp_path: Path) -> None:
+    """The coplanar triangles around each mouth make the box's bottom face, to the bit, with the bores modelled or not;
+    a face whose outline is no rectangle (an L) gives none, as a curved one."""
+    from fixplan.geometry import Box
+    from fixplan.geometry.pins import mouth_face
+
+    def faces(path: Path) -> list[tuple[list[float], list[float], list[float], tuple[float, float]] | None]:
+        fx = fixplan.load(path)
+        out = []
+        for hole in fx.workpiece.holes:
+            f = mouth_face(fx.workpiece.shape, hole.p_body, hole.axis_body, fx.tolerances.touch_m, 0.01)
+            out.append(None if f is None else (f.centre.tolist(), f.normal.tolist(), f.e1.tolist(), f.half_m))
+        return out
+
+    box = faces(HOUSING)
+    assert box[0] == ([0.0, 0.0, -0.015], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], (0.06, 0.04))
+    assert faces(mesh_twin(HOUSING, tmp_path)) == box
+    assert faces(bored_twin(tmp_path)) == box  # the channel's and the pocket's openings inside the rectangle
+    # an L-shaped bottom face: the corner x > 0.034, y > 0.006 cut away through the whole height
+    xs, ys, zs = np.array([-0.06, 0.034, 0.06]), np.array([-0.04, 0.006, 0.04]), np.array([-0.015, 0.015])
+    filled = np.ones((2, 2, 1), dtype=bool)
+    filled[1, 1, 0] = False
+    from fixplan.geometry.mesh import Mesh
+
+    L = Mesh(*cell_surface(xs, ys, zs, filled))
+    mouth, down = np.array([-0.04, 0.0, -0.015]), np.array([0.0, 0.0, -1.0])
+    assert mouth_face(L, mouth, down, 1e-9, 0.01) is None
+    assert mouth_face(Box((0.12, 0.08, 0.03)), mouth, down, 1e-9, 0.01) is not None
+
+
+def _lowered_beside(path: Path) -> Simulator:
+    """The housing 1 mm above its pins' tips, 12 mm across them along x (beyond the 1.6 mm capture), at rest."""
+    fixture = fixplan.load(path)
+    sim = Simulator(fixture)
+    goal = fixture.goal
+    sim.set_state(Pose(goal.R_world_body, goal.p_world + np.array([0.012, 0.0, 0.013])))
+    return sim
+
+
+def test_a_mesh_part_lowered_beside_its_pins_rests_on_their_tips_as_the_box(tmp_path: Path) -> None:
+    """Pushed down 20 N for 0.5 s: the twin's tips on its face are the box's, step for step, and it comes to rest on
+    them at the tips' height (12 mm above the located pose) with no penetration.
+
+    Each step: the same contacts with the same gaps and normals (1e-9), the same net force of the pins on
+    the part (1e-9 N) and the same pose and twist after it. (Not each contact's force: a tip lying flat
+    on the face touches at 4 coplanar points, statically indeterminate, and the two engines' NSGS
+    split the same net wrench differently among them, by up to 8e-3 N.) Before the mesh part had its
+    face, the tips passed its surface: the twin fell 5.3 mm through them (the engine's penetration 12 mm).
+    """
+    sb, sm = _lowered_beside(HOUSING), _lowered_beside(mesh_twin(HOUSING, tmp_path))
+    push = np.array([0.0, 0.0, -20.0, 0.0, 0.0, 0.0])
+    loaded = 0.0
+    for _ in range(500):
+        sb.step(push)
+        sm.step(push)
+        net_b, net_m = np.zeros(3), np.zeros(3)
+        for name in ("P1", "P2"):
+            b = next(r for r in sb.contacts() if r.name == name)
+            m = next(r for r in sm.contacts() if r.name == name)
+            assert len(b.contacts) == len(m.contacts)
+            for s, t in zip(b.contacts, m.contacts, strict=True):
+                assert abs(s.gap_m - t.gap_m) <= POSE_TOL_M
+                np.testing.assert_allclose(t.normal_world, s.normal_world, rtol=0, atol=POSE_TOL_M)
+            net_b, net_m = net_b + b.force_world, net_m + m.force_world
+        np.testing.assert_allclose(net_m, net_b, rtol=0, atol=POSE_TOL_M)
+        np.testing.assert_allclose(sm.pose.p_world, sb.pose.p_world, rtol=0, atol=POSE_TOL_M)
+        np.testing.assert_allclose(sm.twist, sb.twist, rtol=0, atol=POSE_TOL_M)
+        loaded = max(loaded, float(net_m[2]))
+    assert loaded > 10.0  # the tips carry the part: the comparison is not of zeros
+    goal_z = fixplan.load(HOUSING).goal.p_world[2]
+    for sim in (sb, sm):
+        assert sim.pose.p_world[2] == pytest.approx(goal_z + 0.012, abs=1e-9)
+        np.testing.assert_allclose(sim.pose.p_world[:2], [0.012, 0.0], atol=1e-9)
+        assert sim.max_penetration_m < 1e-9
+    np.testing.assert_allclose(sm.pose.R_world_body, sb.pose.R_world_body, rtol=0, atol=POSE_TOL_M)
+    reports = {r.name: r for r in sm.contacts()}
+    assert reports["P1"].force_world[2] + reports["P2"].force_world[2] == pytest.approx(2.0 * 9.81 + 20.0, rel=1e-6)
+
+
+def test_a_bored_mesh_part_beside_its_pins_is_held_by_its_face(tmp_path: Path) -> None:
+    """The mesh with its bores modelled (its own mass properties): held on the tips too, the penetration within 1e-9 m."""
+    sim = _lowered_beside(bored_twin(tmp_path))
+    sim.run(0.5, np.array([0.0, 0.0, -20.0, 0.0, 0.0, 0.0]))
+    assert sim.pose.p_world[2] == pytest.approx(0.015 + 0.012, abs=1e-9)
+    assert sim.max_penetration_m < 1e-9
+    assert np.linalg.norm(sim.twist) < 1e-7

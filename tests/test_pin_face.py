@@ -276,3 +276,47 @@ def test_a_part_beyond_the_capture_with_the_mouth_over_the_tip_rests_on_it() -> 
     assert np.linalg.norm(sim.twist) < 1e-7
     reports = {r.name: r for r in sim.contacts()}
     assert reports["P1"].force_world[2] + reports["P2"].force_world[2] == pytest.approx(2.0 * 9.81 + 20.0, rel=1e-6)
+
+
+# -- another hole's mouth in the face --------------------------------------------------------------
+def _slots_at(offset: np.ndarray) -> list[tuple[str, str, float, np.ndarray]]:
+    """The housing's pin contacts within 1 mm at the located pose moved by ``offset``: (pin, kind, gap, normal)."""
+    from fixplan.engine.pin_slots import PinGeometry
+    from fixplan.geometry._pin_kernels import ALL_KINDS
+
+    fixture = fixplan.load(HOUSING)
+    geometry = PinGeometry(fixture)
+    pose = fixture.goal.translated(offset)
+    s = geometry.slots(pose.R_world_body, pose.p_world, 1e-3)
+    return [
+        (geometry.names[o], ALL_KINDS[k], float(g), n)
+        for (o, k, _), g, n in zip(s.keys, s.gap_m, s.normal_world, strict=True)
+    ]
+
+
+def test_a_pin_under_its_neighbours_mouth_is_not_held_by_the_face_and_enters_it() -> None:
+    """P1 (x = −40.1 mm) under H2 (body x = +40 mm): the housing moved 80.1 mm along −x.
+
+    Coaxial, its tip 0.1 mm into H2: no contact (the face held it there, 0.1 mm deep at 4 points,
+    over the hole's mouth where there is no material). 5 mm in and 0.05 mm off H2's axis: H2's wall
+    at the rim and the mouth, gap (D − d)/2 − e = 0.05 mm, normals radial; no row of P1's own hole
+    (80 mm away: its side's closed forms gave walls 80 mm deep) nor of P2's, off the part.
+    On H2's rim (6 mm off): the face under the tip's points over the material, H2's mouth edge on the tip.
+    """
+    assert _slots_at(np.array([-0.0801, 0.0, 0.012 - 1e-4])) == []
+    rows = _slots_at(np.array([-0.0801 + 5e-5, 0.0, 0.012 - 0.005]))
+    assert [(p, k) for p, k, _g, _n in rows] == [("P1", "rim"), ("P1", "mouth")]
+    for _p, _k, gap, normal in rows:
+        assert gap == pytest.approx(0.5 * (0.010 - 0.0098) - 5e-5, abs=1e-12)
+        np.testing.assert_allclose(np.abs(normal), [1.0, 0.0, 0.0], atol=1e-12)
+    rim = _slots_at(np.array([-0.0801 + 0.006, 0.0, 0.012 - 1e-4]))
+    kinds = [k for p, k, _g, _n in rim if p == "P1"]
+    assert kinds.count("face") == 3 and "tip" in kinds  # the 4th point lies over H2's mouth
+    assert all(g == pytest.approx(-1e-4, abs=1e-12) for _p, k, g, _n in rim if k == "face")
+
+
+def test_at_the_located_pose_the_pins_have_their_own_holes_contacts_only() -> None:
+    """The other holes' rows add nothing where the pins are in their own holes (P1 touching, P2 centred in its play)."""
+    rows = _slots_at(np.zeros(3))
+    assert [(p, k) for p, k, _g, _n in rows] == [("P1", "rim"), ("P1", "mouth")] + [("P2", "rim"), ("P2", "mouth")] * 2
+    assert min(g for _p, _k, g, _n in rows) >= -1e-15

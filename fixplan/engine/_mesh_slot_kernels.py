@@ -270,7 +270,7 @@ def mesh_step3(R, p, v, w, mass, Ib, Ib_inv, com_b,
     fixture's collision-only bodies and collision points (``[x_body (3), radius, obstacle row, μ]``,
     with the AABB tree of :func:`points_near` and their largest radius ``rho_max``),
     whose rows follow the locators' and the pins' in ``P_full`` … ``n_full`` (the simulator's arrays).
-    ``pins (k_pin, 14)``, ``holes_body (k_pin, 10 or 22)`` … ``arc_inset``: the pins and their holes as
+    ``pins (k_pin, 14)``, ``holes_body (k_pin, 10, 22 or 53)`` … ``arc_inset``: the pins and their holes as
     :func:`fixplan.engine._pin_slot_kernels.pin_slots` reads them
     (:attr:`fixplan.engine.pin_slots.PinGeometry.kernel_inputs`; a mesh part has no bore), ``pin_mu``
     each pin's μ; ``pin_state``, ``pin_count``: the pins' slots' state (module docstring), as many

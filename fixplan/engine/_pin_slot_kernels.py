@@ -3,6 +3,8 @@
 The Python assembly of the slots (a dozen NumPy calls per step) cost more than the contacts
 themselves; this is the same arithmetic compiled, pinned to the NumPy reference
 (:meth:`fixplan.engine.pin_slots.PinGeometry.slots_reference`) by ``tests/engine/test_pin_slots.py``.
+(A change of :func:`fixplan.geometry._pin_kernels.pose_contacts` must touch this file too: numba's
+on-disk cache of a kernel is keyed by its own file only, not by the kernels it calls.)
 """
 
 from __future__ import annotations

@@ -20,8 +20,10 @@ the next (for the warm start) is ``(locator, rank)``.
 A mesh part with ``[[workpiece.hole]]``s on ``[[pin]]``s: the holes stay analytic (a hole is a
 cylinder in the body frame, whether or not the mesh models its bore). Each step also hands over
 every pin's contacts with its hole in closed form, as for a primitive part (:mod:`.pin_slots`),
-after the locators' slots; the pins are never tested against the mesh's triangles (and the
-locators never against the holes), so a mesh without a modelled bore is as good as one with.
+after the locators' slots, the pin's tip on the face around its hole's mouth included (the
+mesh's coplanar triangles there, as a rectangle found once, in :class:`.pin_slots.PinGeometry`:
+:func:`fixplan.geometry.pins.mouth_face`); the pins are never tested against the mesh's triangles
+(and the locators never against the holes), so a mesh without a modelled bore is as good as one with.
 
 :func:`mesh_slots` is the reference, in Python (with
 :meth:`fixplan.engine.simulator.Simulator._step_mesh_reference`). The engine steps a mesh part
@@ -40,7 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fixplan.aot import kernel
-from fixplan.engine.pin_slots import FACE_COLUMNS, MAX_CONTACTS, PinGeometry
+from fixplan.engine.pin_slots import HOLE_COLUMNS, MAX_CONTACTS, PinGeometry
 from fixplan.errors import InputError
 from fixplan.geometry.collision import PLANE, plane_frame
 from fixplan.geometry.mesh import Mesh
@@ -148,7 +150,7 @@ class MeshStepper:
         # the pins' closed forms (PinGeometry.kernel_inputs less the bores: a mesh part has none), their μ, and
         # the state of their slots (without pins: empty)
         s = DEFAULT.pins
-        self.pin_inputs: tuple[Any, ...] = (np.zeros((0, 14)), np.zeros((0, FACE_COLUMNS)), np.zeros(0), s.rim_samples,
+        self.pin_inputs: tuple[Any, ...] = (np.zeros((0, 14)), np.zeros((0, HOLE_COLUMNS)), np.zeros(0), s.rim_samples,
                                             s.newton_steps, s.golden_steps, s.coaxial_rel, s.face_points,
                                             s.face_arc_inset)  # fmt: skip
         owners = 0

@@ -16,8 +16,8 @@ afresh).
 
 For a ``[[pin]]`` the part's point is on its hole and the fixture's on the pin; for a ``[[bore]]``
 the part is the peg (its end deeper in the bore leads) and the fixture's point is on the bore.
-A hole whose mouth lies in a planar face of the part (a box's face, a cylinder's end:
-:func:`fixplan.geometry.pins.mouth_face`) also brings the pin's tip on that face, at
+A hole whose mouth lies in a planar face of the part (a box's face, a cylinder's end, a mesh
+part's rectangular face: :func:`fixplan.geometry.pins.mouth_face`) also brings the pin's tip on that face, at
 ``face_points`` points of the tip's edge (:func:`fixplan.geometry.pins.tip_face_contacts`): a part
 lowered beside its pin, beyond the chamfers' capture, rests on the pin's tip instead of passing
 through it. A bore brings the fixture's face around its mouth likewise
@@ -28,6 +28,7 @@ owners are numbered pins first, then bores, as :attr:`PinGeometry.names`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,6 +47,8 @@ _pose_contacts = kernel("fixplan.geometry._pin_kernels", "pose_contacts")
 _pin_slots = kernel("fixplan.engine._pin_slot_kernels", "pin_slots")
 MAX_CONTACTS = 28  # rows of the kernel's output per pin (fixplan.geometry._pin_kernels.MAX_CONTACTS)
 FACE_COLUMNS = 22  # a hole's row with the face around its mouth (fixplan.geometry._pin_kernels.FACE_COLUMNS)
+OTHER_HOLES = 3  # other holes' mouths in that face a row carries (fixplan.geometry._pin_kernels.OTHER_HOLES)
+HOLE_COLUMNS = FACE_COLUMNS + 1 + 10 * OTHER_HOLES  # fixplan.geometry._pin_kernels.HOLE_COLUMNS
 
 
 @dataclass(frozen=True)
@@ -82,7 +85,7 @@ class PinGeometry:
             holes.append([*hole.p_body, *hole.axis_body, 0.5 * hole.diameter_m, hole.depth_m, hole.chamfer_m,
                           0.0 if hole.through else 1.0, *_face_row(wp, hole, fixture.tolerances.touch_m, settings)])  # fmt: skip
         self._pins = np.array(pins, dtype=float).reshape(-1, 14)
-        self._holes_body = np.array(holes, dtype=float).reshape(-1, FACE_COLUMNS)
+        self._holes_body = np.array(holes, dtype=float).reshape(-1, HOLE_COLUMNS)
         self._bores = np.array(
             [[*b.p_world, *b.axis_world, 0.5 * b.diameter_m, b.depth_m, b.chamfer_m, 1.0, *_bore_face_row(b)]
              for b in fixture.bores],
@@ -178,11 +181,26 @@ def _bore_face_row(bore: Bore) -> list[float]:
 
 
 def _face_row(workpiece: Workpiece, hole: Hole, tol_m: float, settings: PinSettings) -> list[float]:
-    """The face around ``hole``'s mouth as the kernel's 12 columns (body frame; zeros: none)."""
+    """The face around ``hole``'s mouth and the other holes' mouths in it, as the kernel's columns past the hole's 10.
+
+    Body frame; zeros: no face. The other holes: those whose mouth lies in the face (its plane within
+    ``tol_m``, its axis the face's normal within ``settings.axis_angle_rad``, within the face's extent),
+    the nearest :data:`OTHER_HOLES` of them.
+    """
     face = mouth_face(workpiece.shape, hole.p_body, hole.axis_body, tol_m, settings.axis_angle_rad)
     if face is None:
-        return [0.0] * (FACE_COLUMNS - 10)
-    return [2.0 if face.disk else 1.0, *face.centre, *face.normal, *face.e1, *face.half_m]
+        return [0.0] * (HOLE_COLUMNS - 10)
+    cos_min = math.cos(settings.axis_angle_rad)
+    others = sorted(
+        (h for h in workpiece.holes
+         if h.name != hole.name and abs(float((h.p_body - face.centre) @ face.normal)) <= tol_m
+         and float(h.axis_body @ face.normal) >= cos_min and face.inside_m(h.p_body) >= 0.0),
+        key=lambda h: float(np.linalg.norm(h.p_body - hole.p_body)),
+    )[:OTHER_HOLES]  # fmt: skip
+    row = [2.0 if face.disk else 1.0, *face.centre, *face.normal, *face.e1, *face.half_m, float(len(others))]
+    for h in others:
+        row += [*h.p_body, *h.axis_body, 0.5 * h.diameter_m, h.depth_m, h.chamfer_m, 0.0 if h.through else 1.0]
+    return row + [0.0] * (HOLE_COLUMNS - 10 - len(row))
 
 
 __all__ = ["MAX_CONTACTS", "PinGeometry", "PinSlots"]

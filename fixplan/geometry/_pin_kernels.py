@@ -13,7 +13,10 @@ Arrays (world frame, metres):
   1.0 for a blind hole; or (:data:`FACE_COLUMNS`,): those and the face around its mouth
   (:class:`fixplan.geometry.pins.MouthFace`): a kind (0.0 none, 1.0 a rectangle, 2.0 a disk),
   centre (3), unit outward normal (3), unit ``e1`` (3), half extents along ``e1`` and
-  ``normal × e1`` (a disk: its radius, 0);
+  ``normal × e1`` (a disk: its radius, 0); or (:data:`HOLE_COLUMNS`,): those, then how many other
+  holes of the part have their mouths in that face (at most :data:`OTHER_HOLES`) and each one's 10
+  columns as above: the face is not the pin's support over their mouths, and the pin has its
+  contacts with them too (a pin landing on, or in, its neighbour's hole);
 - ``out`` (:data:`MAX_CONTACTS`, 11): one row per contact, ``[kind, point on the pin (3), point on
   the hole's body (3), unit normal from the pin into the hole's body (3), gap]``, kinds coded as
   :data:`KINDS` (:func:`contacts`, the pin and its hole) and :data:`FACE` (:func:`face_contacts`,
@@ -32,6 +35,8 @@ RIM, MOUTH, EXIT, BOTTOM, TIP = 0, 1, 2, 3, 4
 FACE = 5  # the kind code of face_contacts()' rows (the pin's tip on the face around the hole)
 ALL_KINDS = (*KINDS, "face")  # the kind codes of pose_contacts()' rows
 FACE_COLUMNS = 22  # a hole's row with the face around its mouth (module text)
+OTHER_HOLES = 3  # the other holes' mouths in the same face a hole's row carries (module text)
+HOLE_COLUMNS = FACE_COLUMNS + 1 + 10 * OTHER_HOLES  # a hole's row with its face and the other mouths in it
 # 2 lands x (rim, mouth, exit, 2 mouth edges, 2 pin circles) + bottom = 15, + the bottom face's rim
 # and the tip on the face (face_points each, 4 by default): 23, + the ends of the tip's arcs over the
 # face (2 per arc, 2 arcs at most): 27
@@ -590,6 +595,30 @@ def _tip_over_mouth(pin, hole):
 
 
 @njit(cache=True)
+def _over_mouth(pin, hole):
+    """The pin's tip within reach of the hole's mouth: its centre at most ``R + c_h + r`` from the hole's axis.
+
+    Beyond, the tip's disk lies wholly outside the mouth's outer edge and the pin cannot touch the hole
+    (its side's closed forms assume the pin at the hole: far from it they give a wall "contact" as
+    deep as the distance); the face around the mouth holds it there.
+    """
+    w0 = pin[0] + pin[7] * pin[3] - hole[0]
+    w1 = pin[1] + pin[7] * pin[4] - hole[1]
+    w2 = pin[2] + pin[7] * pin[5] - hole[2]
+    along = w0 * hole[3] + w1 * hole[4] + w2 * hole[5]
+    r0, r1, r2 = w0 - along * hole[3], w1 - along * hole[4], w2 - along * hole[5]
+    return math.sqrt(r0 * r0 + r1 * r1 + r2 * r2) <= hole[6] + hole[8] + pin[6]
+
+
+@njit(cache=True)
+def _others(hole):
+    """How many other holes' mouths lie in the face of ``hole``'s row (0: a row without them)."""
+    if hole.shape[0] < HOLE_COLUMNS:
+        return 0
+    return int(hole[FACE_COLUMNS])
+
+
+@njit(cache=True)
 def _arc_f(w, A, B, phi, outer):
     return math.sqrt(_sq(w, A, B, phi, 1.0)) - outer
 
@@ -682,8 +711,13 @@ def face_contacts(pin, hole, points, coaxial_rel, rim_samples, golden_steps, arc
         beyond_mouth = np.linalg.norm(v - (v @ a) * a) - outer
         q1, q2 = (x - fc) @ fe1, (x - fc) @ fe2
         inside = h1 - math.hypot(q1, q2) if disk else min(h1 - abs(q1), h2 - abs(q2))
+        for jo in range(_others(hole)):  # the other holes' mouths in the face: no material there either
+            o = FACE_COLUMNS + 1 + 10 * jo
+            w = x - hole[o : o + 3]
+            aj = hole[o + 3 : o + 6]
+            beyond_mouth = min(beyond_mouth, np.linalg.norm(w - (w @ aj) * aj) - (hole[o + 6] + hole[o + 8]))
         if beyond_mouth < 0.0 or inside < 0.0 or (gap < 0.0 and -gap > min(beyond_mouth, inside)):
-            continue  # over the hole, off the part, or nearer the mouth's edge or the part's side
+            continue  # over a hole, off the part, or nearer a mouth's edge or the part's side
         n = _put(out, n, FACE, x, x - gap * fn, -fn, gap)
     return n
 
@@ -708,14 +742,22 @@ def pose_contacts(
     of them; 0 or 1: the deepest point only, as :func:`contacts`).
     """
     rows = np.zeros((MAX_CONTACTS, 11))
+    more = np.zeros((MAX_CONTACTS, 11))
     hole = np.zeros(holes_body.shape[1])
+    other = np.zeros(10)
     faced = holes_body.shape[1] >= FACE_COLUMNS
     n = 0
     for i in range(pins.shape[0]):
         hole[:] = holes_body[i]
         hole[0:3] = p + R @ holes_body[i, 0:3]
         hole[3:6] = R @ holes_body[i, 3:6]
-        k = contacts(pins[i], hole, rim_samples, newton_steps, golden_steps, coaxial_rel, rows)
+        for j in range(_others(hole)):  # the other holes' mouths in the face, moved
+            o = FACE_COLUMNS + 1 + 10 * j
+            hole[o : o + 3] = p + R @ holes_body[i, o : o + 3]
+            hole[o + 3 : o + 6] = R @ holes_body[i, o + 3 : o + 6]
+        k = 0
+        if _over_mouth(pins[i], hole):  # far from its hole (on the face, or in another hole) it touches none of it
+            k = contacts(pins[i], hole, rim_samples, newton_steps, golden_steps, coaxial_rel, rows)
         for r in range(k):
             if rows[r, 0] == BOTTOM:
                 k = _face_points(pins[i], hole, face_points, coaxial_rel, rows, k)
@@ -726,6 +768,20 @@ def pose_contacts(
             hole[17:20] = R @ holes_body[i, 17:20]
             k = face_contacts(pins[i], hole, max(face_points, 1), coaxial_rel, rim_samples, golden_steps, arc_inset,
                               rows, k)  # fmt: skip
+        for j in range(_others(hole)):  # the pin on (or in) another hole of the face: its contacts with it
+            o = FACE_COLUMNS + 1 + 10 * j
+            other[:] = hole[o : o + 10]
+            if not _over_mouth(pins[i], other):
+                continue
+            m = contacts(pins[i], other, rim_samples, newton_steps, golden_steps, coaxial_rel, more)
+            for r in range(m):
+                if more[r, 0] == BOTTOM:
+                    m = _face_points(pins[i], other, face_points, coaxial_rel, more, m)
+                    break
+            for r in range(m):
+                if k < MAX_CONTACTS:
+                    rows[k] = more[r]
+                    k += 1
         for r in range(k):
             out[n, 0], out[n, 1] = i, 0.0
             out[n, 2:13] = rows[r]

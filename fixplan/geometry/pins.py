@@ -50,8 +50,9 @@ Each extreme is found on its circle ``x(φ) = c + ρ (cos φ e1 + sin φ e2)``: 
 
 The pin's tip on the face around the hole (:func:`tip_face_contacts`, kind ``"face"``): a pin that
 misses its hole by more than the chamfers capture lands on the part's face. A hole whose mouth
-lies in a planar face of a primitive part (:func:`mouth_face`: a box's face, a cylinder's end; the
-face's extent from the shape, in closed form) carries that face (:class:`MouthFace`: the plane
+lies in a planar face of the part (:func:`mouth_face`: a box's face, a cylinder's end, the face's
+extent from the shape in closed form; a mesh part's rectangular face of coplanar triangles around
+the mouth, found once when the engine sets up the pins) carries that face (:class:`MouthFace`: the plane
 through the mouth with the face's outward normal ``n``, its rectangle or disk). The tip is convex,
 so its point nearest a plane lies on one of its two edge circles, the tip face's (radius
 ``r − c_p`` at ``L``) and the chamfer's base (radius ``r`` at ``L − c_p``): on the nearer one, at
@@ -67,8 +68,14 @@ mouth normal to its axis, unbounded), where a shaft's leading end lands when it 
 A tip partly over the mouth rests on the face along a crescent: the engine's points of it add the
 ends of each arc of the tip's edge over the face (a tenth of the arc in, :func:`_arc_ends_over_face`;
 the deepest point and the points at fixed angles may all but one lie over the mouth).
-Not modelled: other holes' mouths in the same face (a pin over another hole's mouth is held by
-that face), faces of a mesh part, and curved faces (a hole in a cylinder's side: no face).
+Other holes' mouths in the same face are no material either: the engine's rows
+(:mod:`fixplan.geometry._pin_kernels`) carry them with the face, so a point over one is not the
+face's, and a pin within reach of another hole's mouth has its contacts with that hole too (a pin
+landing on its neighbour's rim, or in it); a pin's contacts with any hole are taken only while its
+tip's centre is within ``R + c_h + r`` of that hole's axis (farther, the side's closed forms,
+which assume the pin at the hole, gave walls as deep as the distance). Not modelled: a mesh part's face
+whose outline is not a rectangle (an L, a notch, a disk: no face),
+and curved faces (a hole in a cylinder's side: no face).
 """
 
 from __future__ import annotations
@@ -80,6 +87,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from fixplan.geometry.mesh import Mesh, closest_on_triangles
 from fixplan.geometry.shapes import Box, Cylinder, Shape
 from fixplan.settings import DEFAULT as _DEFAULT
 from fixplan.settings import PinSettings
@@ -145,7 +153,7 @@ class HoleBody:
     """A hole (or a bore) in world coordinates: mouth centre, unit axis out of its body through the mouth.
 
     ``face``: the planar face around the mouth (world frame) where the pin's tip can land; None: none
-    modelled (a bore, a curved or a mesh part's face).
+    modelled (a bore, a curved face, a mesh part's face that is no rectangle).
     """
 
     mouth_world: FloatArray
@@ -160,11 +168,13 @@ class HoleBody:
 def mouth_face(
     shape: Shape, p_body: FloatArray, axis_body: FloatArray, tol_m: float, angle_rad: float
 ) -> MouthFace | None:
-    """The face of a primitive ``shape`` a hole's mouth lies in (body frame), in closed form; None when there is none.
+    """The face of ``shape`` a hole's mouth lies in (body frame); None when there is none.
 
     A box: the face whose plane holds the mouth (within ``tol_m``) and whose outward normal is the
     hole's axis (within ``angle_rad``), its rectangle the box's other two half extents. A cylinder:
-    an end face (its disk). Other shapes (a cylinder's side, a sphere, a mesh) have none here.
+    an end face (its disk). A mesh: its coplanar triangles around the mouth, when their outline is a
+    rectangle (:func:`_mesh_mouth_face`; the mesh twin of a box gets the box's face to the bit).
+    Other shapes (a cylinder's side, a sphere) have none.
     """
     p, a = np.asarray(p_body, dtype=float), np.asarray(axis_body, dtype=float)
     cos_min = math.cos(angle_rad)
@@ -189,7 +199,92 @@ def mouth_face(
                 continue
             face = MouthFace(0.5 * shape.length * normal, normal, np.array([1.0, 0.0, 0.0]), (shape.radius, 0.0), True)
             return face if face.inside_m(p) >= 0.0 else None
+    if isinstance(shape, Mesh):
+        return _mesh_mouth_face(shape, p, a, tol_m, cos_min)
     return None
+
+
+def _mesh_mouth_face(mesh: Mesh, p: FloatArray, a: FloatArray, tol_m: float, cos_min: float) -> MouthFace | None:
+    """The rectangular planar face of ``mesh`` around the mouth ``p`` (outward normal within ``cos_min`` of ``a``); None: none.
+
+    The face's triangles: those whose three vertices lie within ``tol_m`` of the mouth's plane (normal
+    ``a``) and whose outward normal is ``a``'s within the angle, connected by shared edges to the one
+    nearest the mouth (a modelled bore leaves an opening there; the mouth may lie in it). Its plane: their
+    area-weighted normal, through their vertices' median height. Its extent: the least-area rectangle
+    whose sides run along one of its boundary edges (edges in one of its triangles) and that holds its
+    vertices, taken only when the boundary covers the rectangle's whole perimeter (within ``tol_m`` of
+    its sides): the face is that rectangle less its inner openings (other holes' mouths, as a box's
+    face). Any other outline (an L, a notch, a disk) gives None, as a curved face: not modelled.
+    """
+    F = mesh.faces
+    tri = mesh.vertices[F]  # (m, 3, 3)
+    height = (tri - p) @ a
+    flat = np.flatnonzero((mesh.face_normals @ a >= cos_min) & (np.abs(height).max(axis=1) <= tol_m))
+    if flat.size == 0:
+        return None
+    # the flat triangles' components over shared edges (union-find), and the one nearest the mouth
+    parent = list(range(flat.size))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    owner: dict[tuple[int, int], int] = {}
+    for j, t in enumerate(F[flat].tolist()):
+        for u, v in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+            key = (min(u, v), max(u, v))
+            if key in owner:
+                parent[root(j)] = root(owner[key])
+            else:
+                owner[key] = j
+    points, _ = closest_on_triangles(p, tri[flat, 0], tri[flat, 1], tri[flat, 2])
+    nearest = int(np.argmin(np.linalg.norm(points - p, axis=1)))
+    ids = flat[[j for j in range(flat.size) if root(j) == root(nearest)]]
+    cross = np.cross(tri[ids, 1] - tri[ids, 0], tri[ids, 2] - tri[ids, 0])
+    normal = cross.sum(axis=0)
+    normal = normal / np.linalg.norm(normal)
+    verts = mesh.vertices[np.unique(F[ids])]
+    level = float(np.median(verts @ normal))
+    count: dict[tuple[int, int], int] = {}
+    for t in F[ids].tolist():
+        for u, v in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+            key = (min(u, v), max(u, v))
+            count[key] = count.get(key, 0) + 1
+    boundary = np.array([key for key, c in count.items() if c == 1], dtype=np.int64).reshape(-1, 2)
+    if boundary.shape[0] == 0:
+        return None
+    ends = mesh.vertices[boundary]  # (b, 2, 3)
+    best: tuple[float, FloatArray, FloatArray, FloatArray] | None = None
+    for d in ends[:, 1] - ends[:, 0]:
+        e1 = d - float(d @ normal) * normal
+        if float(np.linalg.norm(e1)) <= tol_m:
+            continue
+        e1 = e1 / np.linalg.norm(e1)
+        e2 = np.cross(normal, e1)
+        q = verts @ np.column_stack([e1, e2])
+        lo, hi = q.min(axis=0), q.max(axis=0)
+        area = float(np.prod(hi - lo))
+        if best is None or area < best[0]:
+            best = (area, e1, lo, hi)
+    if best is None:
+        return None
+    _, e1, lo, hi = best
+    e2 = np.cross(normal, e1)
+    # the boundary's length along the rectangle's sides: the whole perimeter, or the outline is another
+    q = ends @ np.column_stack([e1, e2])  # (b, 2, 2)
+    on_side = np.zeros(boundary.shape[0], dtype=bool)
+    for k in range(2):
+        for bound in (lo[k], hi[k]):
+            on_side |= np.all(np.abs(q[:, :, k] - bound) <= tol_m, axis=1)
+    covered = float(np.linalg.norm(ends[on_side, 1] - ends[on_side, 0], axis=1).sum())
+    if covered < 2.0 * float(np.sum(hi - lo)) - 4.0 * tol_m:
+        return None
+    mid = 0.5 * (lo + hi)
+    centre = mid[0] * e1 + mid[1] * e2 + level * normal
+    face = MouthFace(centre, normal, e1, (float(0.5 * (hi[0] - lo[0])), float(0.5 * (hi[1] - lo[1]))))
+    return face if face.inside_m(p) >= 0.0 else None
 
 
 def bore_face(mouth: FloatArray, axis: FloatArray, radius_m: float = math.inf) -> MouthFace:
