@@ -342,8 +342,8 @@ def find_pin_goal(fixture: Fixture, settings: GoalSettings = DEFAULT.goal) -> Go
 
     Located: every locator touches; every round pin's hole axis lies its radial play ``(D − d)/2``
     from the pin's axis toward the seating side (:func:`seating_side_at_start`), so that the pin
-    touches the hole's wall; a diamond pin's hole is centred along the lands. Gauss–Newton (finite
-    differences, a least-squares step) from the start turned the least so that the first hole
+    touches the hole's wall; a diamond pin's hole is centred along the lands. :func:`_gauss_newton` (the
+    pins' offsets as point rows of its model) from the start turned the least so that the first hole
     faces its pin, its mouth on the pin's axis. Every residual within ``touch_gap_m`` or the
     search says how far it got.
     """
@@ -354,17 +354,28 @@ def find_pin_goal(fixture: Fixture, settings: GoalSettings = DEFAULT.goal) -> Go
     holes = [wp.hole(p.hole) for p in pins]
     plays = [radial_play_m(h.diameter_m, p.diameter_m) for p, h in zip(pins, holes, strict=True)]
 
-    def residual(pose: Pose) -> FloatArray:
-        rows = [float(g) for g in locator_gaps(wp, pose, fixture.locators)]
-        for pin, hole, play in zip(pins, holes, plays, strict=True):
-            m = pose.point_world_from_body(hole.p_body)
-            r = m - pin.p_world
-            off = r - float(r @ u) * u  # the hole's axis from the pin's, at the mouth
-            if pin.land_direction_world is not None:
-                rows.append(float(off @ pin.land_direction_world))
-            else:
-                rows.extend(off - play * side)
-        return np.array(rows)
+    exact = _exact_model(wp, fixture.locators)
+    # each pin's rows as contacts of :func:`_gauss_newton`'s model: the offset of the hole's mouth
+    # from the pin's axis along a direction e across it moves with the part as a point gap of
+    # normal e at the mouth (row [e, (m - c) × e])
+    across: list[tuple[int, FloatArray, float]] = []  # (pin index, direction, target offset [m])
+    for i, (pin, play) in enumerate(zip(pins, plays, strict=True)):
+        if pin.land_direction_world is not None:
+            across.append((i, np.asarray(pin.land_direction_world, dtype=float), 0.0))
+        else:
+            e1 = side - float(side @ u) * u
+            for e in (e1, np.cross(u, e1)):
+                across.append((i, e, play * float(side @ e)))
+
+    def model(pose: Pose) -> tuple[FloatArray, FloatArray, FloatArray]:
+        gaps, points, normals = exact(pose)
+        rows_g, rows_p, rows_n = [gaps], [points], [normals]
+        for i, e, target in across:
+            m = pose.point_world_from_body(holes[i].p_body)
+            rows_g.append(np.array([float((m - pins[i].p_world) @ e) - target]))
+            rows_p.append(m[None, :])
+            rows_n.append(e[None, :])
+        return np.concatenate(rows_g), np.vstack(rows_p), np.vstack(rows_n)
 
     # the first start: turned the least so that the first hole's axis points against the pin's,
     # its mouth on the pin's axis play toward the side, the pin's length in; then that start turned
@@ -378,45 +389,21 @@ def find_pin_goal(fixture: Fixture, settings: GoalSettings = DEFAULT.goal) -> Go
     R0 = (exp_so3(axis / s_ * math.atan2(s_, c_)) if s_ > 0.0 else np.eye(3)) @ start.R_world_body
     mouth = pins[0].p_world + 0.5 * pins[0].length_m * u + plays[0] * side
 
-    def solve_from(R: FloatArray) -> tuple[Pose, FloatArray, int]:
-        pose = Pose(R, mouth - R @ holes[0].p_body)
-        h = DEFAULT.numerics.fd_step
-        f = residual(pose)
-        it = 0
-        for it in range(1, settings.max_iterations + 1):  # noqa: B007 - used after the loop
-            if float(np.max(np.abs(f))) <= settings.stop_gap_m:
-                break
-            J = np.empty((f.shape[0], 6))
-            for j in range(6):
-                e = np.zeros(6)
-                e[j] = h
-                J[:, j] = (residual(pose.retract(e, wp.com_body)) - f) / h
-            step = -np.linalg.lstsq(J, f, rcond=DEFAULT.numerics.rcond)[0]
-            alpha, f0 = 1.0, float(f @ f)
-            while True:
-                trial = pose.retract(alpha * step, wp.com_body)
-                f_trial = residual(trial)
-                if float(f_trial @ f_trial) < f0 or alpha < DEFAULT.numerics.line_search_min_step:
-                    break
-                alpha /= 2.0
-            if not float(f_trial @ f_trial) < f0:
-                break
-            pose, f = trial, f_trial
-        return pose, f, it
-
     turns = [0.0, *(t for deg in settings.turns_deg for t in (deg, -deg))]
-    best: tuple[float, Pose, int] | None = None
+    least = math.inf  # the largest residual at the best start so far
     tried = 0
     for deg in turns:
         tried += 1
-        pose, f, it = solve_from(exp_so3(u * math.radians(deg)) @ R0)
-        worst = float(np.max(np.abs(f)))
-        if best is None or worst < best[0]:
-            best = (worst, pose, it)
-        if worst <= settings.touch_gap_m:
-            return GoalSearch(True, pose, worst, 6, tried)
-    assert best is not None
-    worst = best[0]
+        R = exp_so3(u * math.radians(deg)) @ R0
+        result = _gauss_newton(
+            model, wp, Pose(R, mouth - R @ holes[0].p_body), tol_m=settings.stop_gap_m,
+            max_iterations=settings.max_iterations, settings=settings,
+        )  # fmt: skip
+        worst = result.max_gap_m
+        if result.converged:
+            return GoalSearch(True, result.pose, worst, result.rank, tried)
+        least = min(least, worst)
+    worst = least
     reason = (
         f"no located pose found with the pins (every locator touching, each round pin against its hole's wall "
         f"toward the side the part starts on): largest residual {worst:.3g} m at the best of {tried} starts; "

@@ -672,8 +672,6 @@ class Numerics:
         Two instants within this are the same [s].
     line_search_min_step : float
         A backtracking line search gives up below this step.
-    fd_step : float
-        Step of forward differences in twist coordinates [m, rad] (a Jacobian without closed form).
     stall_rel : float
         Gauss–Newton stalls when an iteration decreases its objective by less than this fraction.
     taylor_switch_rad2 : float
@@ -690,7 +688,6 @@ class Numerics:
     zero_rel: float = 1e-9
     same_time_s: float = 1e-9
     line_search_min_step: float = 1e-6
-    fd_step: float = 1e-7
     stall_rel: float = 1e-6
     taylor_switch_rad2: float = 1e-10
     format_nudge_rel: float = 1e-7
