@@ -728,6 +728,13 @@ class PolicySettings:
     approach_waypoint_scales : tuple of float
         The approach's detour waypoint lies this many back-offs out from the goal, tried in turn
         (:mod:`fixplan.planner.approach`).
+    approach_clearance_m, approach_clearance_deg : float
+        Far from the staging pose the approach keeps every locator at least
+        ``approach_clearance_m + bounding radius × approach_clearance_deg`` away (at most half the
+        start's least gap): the start's pose error and the tracking error are of this order. Nearer,
+        the clearance asked shrinks with half the way the part's farthest point has left to go.
+    approach_lift_steps : int
+        Detours lifted against gravity first, by that clearance × 1, 2, 4, ... (this many heights).
     """
 
     backoff_m: float = 2e-3
@@ -738,6 +745,9 @@ class PolicySettings:
     max_verifications: int = 3
     approach_samples: int = 40
     approach_waypoint_scales: tuple[float, ...] = (3.0, 6.0, 12.0, 25.0, 50.0, 100.0)
+    approach_clearance_m: float = 2e-3
+    approach_clearance_deg: float = 1.0
+    approach_lift_steps: int = 6
 
 
 @dataclass(frozen=True)
