@@ -731,8 +731,11 @@ class PolicySettings:
     approach_clearance_m, approach_clearance_deg : float
         Far from the staging pose the approach keeps every locator at least
         ``approach_clearance_m + bounding radius × approach_clearance_deg`` away (at most half the
-        start's least gap): the start's pose error and the tracking error are of this order. Nearer,
-        the clearance asked shrinks with half the way the part's farthest point has left to go.
+        start's least gap): the start's pose error and the tracking error are of this order.
+    approach_funnel_share : float
+        ... except in this last share of the way (of the part's farthest point), where the clearance
+        asked shrinks linearly to half the staging pose's gap: the part closes in on the locators
+        only as it comes to the staging pose.
     approach_lift_steps : int
         Detours lifted against gravity first, by that clearance × 1, 2, 4, ... (this many heights).
     """
@@ -747,6 +750,7 @@ class PolicySettings:
     approach_waypoint_scales: tuple[float, ...] = (3.0, 6.0, 12.0, 25.0, 50.0, 100.0)
     approach_clearance_m: float = 2e-3
     approach_clearance_deg: float = 1.0
+    approach_funnel_share: float = 0.5
     approach_lift_steps: int = 6
 
 

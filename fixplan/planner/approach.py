@@ -18,9 +18,9 @@ else the same detours lifted against gravity first.
 
 *Clear* is a funnel: far from the staging pose every locator stays ``approach_clearance_m +
 R × approach_clearance_deg`` away (``R`` the part's bounding radius; at most half the start's
-least gap), the order of the start's pose error and of the tracking error; nearer, the clearance
-asked shrinks with half the way the part's farthest point has left to go, down to half the
-staging pose's gap. A tall slab started 1° off its nominal start swept its edge past a locator the
+least gap), the order of the start's pose error and of the tracking error; only in the last
+``approach_funnel_share`` of the way (of the part's farthest point) does the clearance asked shrink,
+linearly, to half the staging pose's gap. A tall slab started 1° off its nominal start swept its edge past a locator the
 straight line kept 2.3 mm from and met it on the wrong face. Where no candidate holds the funnel
 (a start too close to a locator), the first one clear by half the least gaps is taken. Every
 pose of the path is checked with the exact gaps, and against the collision-only bodies
@@ -132,15 +132,23 @@ def plan_approach(fixture: Fixture, settings: PolicySettings = DEFAULT.policy) -
         0.5 * float(np.min(start_gaps)),
     )
 
+    share = settings.approach_funnel_share
+
     def funnel(poses: list[Pose]) -> bool:
-        """Every pose keeps its least gap ≥ min(far, clear + half the way its farthest point has left to go)."""
+        """Every pose keeps ``far``, but in the last ``share`` of the way, where it shrinks linearly to ``clear``.
+
+        The way is that of the part's farthest point (the centre of mass's travel plus the bounding
+        radius times the turn).
+        """
         left = [0.0]
         for a, b in zip(poses[:0:-1], poses[-2::-1], strict=True):
             turn = math.acos(float(np.clip((np.trace(a.R_world_body @ b.R_world_body.T) - 1.0) / 2.0, -1.0, 1.0)))
             move = float(np.linalg.norm(a.point_world_from_body(wp.com_body) - b.point_world_from_body(wp.com_body)))
             left.append(left[-1] + move + wp.shape.bounding_radius * turn)
+        total = left[-1] if left[-1] > 0.0 else 1.0
         return all(
-            float(np.min(locator_gaps(wp, p, fixture.locators))) >= min(far, clear + 0.5 * rest)
+            float(np.min(locator_gaps(wp, p, fixture.locators)))
+            >= min(far, clear + (far - clear) * (rest / total) / share)
             for p, rest in zip(poses, left[::-1], strict=True)
         )
 
