@@ -516,13 +516,15 @@ class ExecutionSettings:
     margin_N: float | None = None  # least normal force on kept contacts (default: the part's weight)
     press_fraction: float = 0.02  # force-sensor threshold as a fraction of the weight
     contact_gap_m: float = 2e-6  # a locator this close counts as in contact even when friction leaves it unloaded
-    # a locator seen in contact stays in contact until its gap exceeds this (a fifth of the located
-    # tolerance, VerificationSettings.final_gap_m): at the goal a tall slab on point tips was held
-    # by friction 2 µm off B1 and S2, the executor called B1 lost, and its recovery pushes rocked
-    # the part off three more locators. 20 µm for finding contacts too found a locator a plate
+    # a locator seen in contact stays in contact until its gap exceeds this: the located tolerance
+    # (VerificationSettings.final_gap_m). A part is located to within it, so a contact that opens
+    # by less is not lost. A tall slab on point tips rocks between its side locators by 10-90 µm
+    # whenever one of them closes; at 20 µm every rock was a lost contact, the recoveries and
+    # re-plans rocked it further, and 9 of 100 perturbed worlds gave up after 16 re-plans (5 of
+    # 100 at 100 µm; mean re-plans per world 5.3 → 3.3). 20 µm for finding contacts too found a locator a plate
     # only passed near on its way in (an unplanned contact): hence the hysteresis, on the
     # debounced state only (a graze shorter than the dwell is not held)
-    contact_hold_gap_m: float = 2e-5
+    contact_hold_gap_m: float = 1e-4
     dwell_s: float = 0.01  # a pressed set counts once held this long
     stall_speed_mps: float = 1e-4
     stall_s: float = 0.12
@@ -726,6 +728,16 @@ class PolicySettings:
     approach_waypoint_scales : tuple of float
         The approach's detour waypoint lies this many back-offs out from the goal, tried in turn
         (:mod:`fixplan.planner.approach`).
+    approach_clearance_m, approach_clearance_deg : float
+        Far from the staging pose the approach keeps every locator at least
+        ``approach_clearance_m + bounding radius × approach_clearance_deg`` away (at most half the
+        start's least gap): the start's pose error and the tracking error are of this order.
+    approach_funnel_share : float
+        ... except in this last share of the way (of the part's farthest point), where the clearance
+        asked shrinks linearly to half the staging pose's gap: the part closes in on the locators
+        only as it comes to the staging pose.
+    approach_lift_steps : int
+        Detours lifted against gravity first, by that clearance × 1, 2, 4, ... (this many heights).
     """
 
     backoff_m: float = 2e-3
@@ -736,6 +748,10 @@ class PolicySettings:
     max_verifications: int = 3
     approach_samples: int = 40
     approach_waypoint_scales: tuple[float, ...] = (3.0, 6.0, 12.0, 25.0, 50.0, 100.0)
+    approach_clearance_m: float = 2e-3
+    approach_clearance_deg: float = 1.0
+    approach_funnel_share: float = 0.5
+    approach_lift_steps: int = 6
 
 
 @dataclass(frozen=True)

@@ -590,20 +590,22 @@ def test_free_flight_brakes_harder_then_touches_as_gently():
 
 
 # -- what counts as in contact ---------------------------------------------------------------------
-def test_a_locator_friction_leaves_a_few_micrometres_off_stays_in_contact():
+@pytest.mark.parametrize(("off_m", "held_after"), [(8e-6, True), (6e-5, True), (1.5e-4, False)])
+def test_a_locator_friction_leaves_a_few_micrometres_off_stays_in_contact(off_m, held_after):
     """A part resting at its located pose but 8 µm off E1 (friction on the base holds it there,
     E1 carries nothing) is located for the verification (every gap within ``final_gap_m``): a
     locator seen in contact stays in contact there (``contact_hold_gap_m``), while one the part
     only comes that near is not found (``contact_gap_m``). Measured on a tall slab on point tips:
     held by friction 2 µm off B1 and S2 at the goal, the executor judged B1 lost and its recovery
     pushes rocked the part off three other locators; with 20 µm for finding contacts too, a plate
-    passing near S on its way in met an unplanned contact."""
+    passing near S on its way in met an unplanned contact. Held up to the located tolerance (0.1 mm):
+    the same slab rocks between its side locators by 10-90 µm whenever one closes, and at 20 µm each
+    rock was a lost contact that the recoveries and re-plans made worse. Beyond it: lost."""
     from fixplan.engine.simulator import Simulator
     from fixplan.settings import DEFAULT
 
     fx = fixplan.load(fixplan.default_fixture_path())
     e1 = fixplan.contact_set(fx, fx.goal, ["E1"]).contacts[0]
-    off_m = 8e-6
     pose = Pose(fx.goal.R_world_body, fx.goal.p_world + e1.normal_world * off_m)  # the normal points into the part
     sim = Simulator(fx)
     sim.set_state(pose, np.zeros(6))
@@ -614,8 +616,9 @@ def test_a_locator_friction_leaves_a_few_micrometres_off_stays_in_contact():
     threshold = ex.press_fraction * fx.workpiece.mass_kg * G
     assert "E1" not in sim.in_contact(threshold, ex.contact_gap_m)  # not found from afar
     held = sim.in_contact(threshold, ex.contact_gap_m, ("E1", "B1"), ex.contact_hold_gap_m)
-    assert "E1" in held and {"B1", "B2", "B3"} <= set(held)  # kept
-    assert ex.contact_gap_m < ex.contact_hold_gap_m <= DEFAULT.verification.final_gap_m / 5
+    assert ("E1" in held) == held_after and {"B1", "B2", "B3"} <= set(held)  # kept within the tolerance
+    # held no farther than the tolerance a located part is verified to
+    assert ex.contact_gap_m < ex.contact_hold_gap_m <= DEFAULT.verification.final_gap_m
 
 
 def test_every_new_plan_gets_time_of_its_own_in_the_verification():

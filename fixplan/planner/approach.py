@@ -11,16 +11,27 @@ every locator by the same small gap, with the goal's orientation. From there the
 are the near-nominal ones the coarse plan and the policy are built for.
 
 The path there is free motion (no contact to keep): the straight line in ``(c, R)`` from the
-start to the staging pose when every locator stays clear along it, else a detour through a
+start to the staging pose when it keeps clear of every locator, else a detour through a
 *waypoint* on the staging pose's back-off line, far enough out that every locator is at least as
-far as at the start (the part is taken back, turned, and brought in along the back-off motion).
-Every pose of the path is checked with the exact gaps, and against the collision-only bodies
-(``[[obstacle]]``: no collision point of the part deeper than at the start); None when neither
-path is clear.
+far as at the start (the part is taken back, turned, and brought in along the back-off motion),
+else the same detours lifted against gravity first.
+
+*Clear* is a funnel: far from the staging pose every locator stays ``approach_clearance_m +
+R × approach_clearance_deg`` away (``R`` the part's bounding radius; at most half the start's
+least gap), the order of the start's pose error and of the tracking error; only in the last
+``approach_funnel_share`` of the way (of the part's farthest point) does the clearance asked shrink,
+linearly, to half the staging pose's gap. A tall slab started 1° off its nominal start swept its edge past a locator the
+straight line kept 2.3 mm from and met it on the wrong face. Where no candidate holds the funnel
+(a start too close to a locator), the first one clear by half the least gaps is taken. Every
+pose of the path is checked with the exact gaps, and against the collision-only bodies
+(``[[obstacle]]``: no collision point of the part deeper than at the start); None when no path
+is clear.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -113,24 +124,81 @@ def plan_approach(fixture: Fixture, settings: PolicySettings = DEFAULT.policy) -
             return -np.inf
         return float(min(np.min(locator_gaps(wp, p, fixture.locators)) for p in poses))
 
-    direct = _line(start, staging, wp.com_body, n)
-    g = least(direct)
-    if g >= clear:
-        return Approach(tuple(direct), g, _length(fixture, direct), False)
-    # a detour through a waypoint on the staging pose's back-off line
+    # far from the staging pose every locator stays this far: the start's pose error and the
+    # tracking error are of this order (a tall slab started 1° off swept its bottom edge 1 mm past
+    # B2 and met it on the wrong face); never more than half the start's least gap
+    far = min(
+        settings.approach_clearance_m + wp.shape.bounding_radius * math.radians(settings.approach_clearance_deg),
+        0.5 * float(np.min(start_gaps)),
+    )
+
+    share = settings.approach_funnel_share
+
+    def funnel(poses: list[Pose]) -> bool:
+        """Every pose keeps ``far``, but in the last ``share`` of the way, where it shrinks linearly to ``clear``.
+
+        The way is that of the part's farthest point (the centre of mass's travel plus the bounding
+        radius times the turn).
+        """
+        left = [0.0]
+        for a, b in zip(poses[:0:-1], poses[-2::-1], strict=True):
+            turn = math.acos(float(np.clip((np.trace(a.R_world_body @ b.R_world_body.T) - 1.0) / 2.0, -1.0, 1.0)))
+            move = float(np.linalg.norm(a.point_world_from_body(wp.com_body) - b.point_world_from_body(wp.com_body)))
+            left.append(left[-1] + move + wp.shape.bounding_radius * turn)
+        total = left[-1] if left[-1] > 0.0 else 1.0
+        return all(
+            float(np.min(locator_gaps(wp, p, fixture.locators)))
+            >= min(far, clear + (far - clear) * (rest / total) / share)
+            for p, rest in zip(poses, left[::-1], strict=True)
+        )
+
     from fixplan.planner.fine import pose_from_twist, twist_from_pose
 
     back = twist_from_pose(goal, staging, wp.com_body)
     need = float(np.min(start_gaps))
-    for scale in settings.approach_waypoint_scales:
-        way = pose_from_twist(goal, scale * back, wp.com_body)
-        if float(np.min(locator_gaps(wp, way, fixture.locators))) < need:
+    ways = [
+        way
+        for way in (pose_from_twist(goal, scale * back, wp.com_body) for scale in settings.approach_waypoint_scales)
+        if float(np.min(locator_gaps(wp, way, fixture.locators))) >= need
+    ]
+
+    def candidates() -> Iterator[tuple[list[Pose], bool]]:
+        """The candidate paths, roughly shortest first.
+
+        The straight line, detours through a waypoint on the staging pose's back-off line, and the
+        same detours lifted against gravity first (the part never sweeps sideways past a locator
+        at the height it started at).
+        """
+        yield _line(start, staging, wp.com_body, n), False
+        for way in ways:
+            yield _line(start, way, wp.com_body, n) + _line(way, staging, wp.com_body, n)[1:], True
+        g_vec = np.asarray(fixture.gravity, dtype=float)
+        if not np.any(g_vec):
+            return
+        up = -g_vec / float(np.linalg.norm(g_vec))
+        for k in range(settings.approach_lift_steps):
+            lifted = start.translated(far * 2.0**k * up)
+            if float(np.min(locator_gaps(wp, lifted, fixture.locators))) < need:
+                continue
+            for way in ways:
+                legs = _line(start, lifted, wp.com_body, n) + _line(lifted, way, wp.com_body, n)[1:]
+                yield legs + _line(way, staging, wp.com_body, n)[1:], True
+
+    # the first clear within the funnel; where none is, the first clear by half the least gaps
+    # (a start close to a locator may leave no room for the funnel)
+    fallback: tuple[list[Pose], bool, float] | None = None
+    for poses, via in candidates():
+        g = least(poses)
+        if g < clear:
             continue
-        legs = _line(start, way, wp.com_body, n) + _line(way, staging, wp.com_body, n)[1:]
-        g = least(legs)
-        if g >= clear:
-            return Approach(tuple(legs), g, _length(fixture, legs), True)
-    return None
+        if funnel(poses):
+            return Approach(tuple(poses), g, _length(fixture, poses), via)
+        if fallback is None:
+            fallback = (poses, via, g)
+    if fallback is None:
+        return None
+    poses, via, g = fallback
+    return Approach(tuple(poses), g, _length(fixture, poses), via)
 
 
 __all__ = ["Approach", "plan_approach"]
