@@ -521,9 +521,9 @@ class ExecutionSettings:
     # by less is not lost. A tall slab on point tips rocks between its side locators by 10-90 µm
     # whenever one of them closes; at 20 µm every rock was a lost contact, the recoveries and
     # re-plans rocked it further, and 9 of 100 perturbed worlds gave up after 16 re-plans (5 of
-    # 100 at 100 µm; mean re-plans per world 5.3 → 3.3). 20 µm for finding contacts too found a locator a plate
-    # only passed near on its way in (an unplanned contact): hence the hysteresis, on the
-    # debounced state only (a graze shorter than the dwell is not held)
+    # 100 at 100 µm; mean re-plans per world 5.3 → 3.3). 20 µm for finding contacts too found a
+    # locator a plate only passed near on its way in (an unplanned contact): hence the
+    # hysteresis, on the debounced state only (a graze shorter than the dwell is not held)
     contact_hold_gap_m: float = 1e-4
     dwell_s: float = 0.01  # a pressed set counts once held this long
     stall_speed_mps: float = 1e-4

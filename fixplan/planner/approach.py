@@ -19,9 +19,9 @@ else the same detours lifted against gravity first.
 *Clear* is a funnel: far from the staging pose every locator stays ``approach_clearance_m +
 R × approach_clearance_deg`` away (``R`` the part's bounding radius; at most half the start's
 least gap), the order of the start's pose error and of the tracking error; only in the last
-``approach_funnel_share`` of the way (of the part's farthest point) does the clearance asked shrink,
-linearly, to half the staging pose's gap. A tall slab started 1° off its nominal start swept its edge past a locator the
-straight line kept 2.3 mm from and met it on the wrong face. Where no candidate holds the funnel
+``approach_funnel_share`` of the way (of the part's farthest point) does the clearance asked
+shrink, linearly, to half the staging pose's gap. A tall slab started 1° off its nominal start
+swept its edge past a locator the straight line kept 2.3 mm from and met it on the wrong face. Where no candidate holds the funnel
 (a start too close to a locator), the first one clear by half the least gaps is taken. Every
 pose of the path is checked with the exact gaps, and against the collision-only bodies
 (``[[obstacle]]``: no collision point of the part deeper than at the start); None when no path
@@ -36,10 +36,13 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fixplan.locating import contact_set, locator_gaps
 from fixplan.settings import DEFAULT, PolicySettings
 from fixplan.spatial import Pose
+
+FloatArray = NDArray[np.float64]
 
 if TYPE_CHECKING:
     from fixplan.model import Fixture
@@ -118,11 +121,12 @@ def plan_approach(fixture: Fixture, settings: PolicySettings = DEFAULT.policy) -
 
     floor = np.minimum(_obstacle_gaps(fixture, start), 0.0) - fixture.tolerances.penetration_m
 
-    def least(poses: list[Pose]) -> float:
-        """The least locator gap along ``poses``; −inf where one goes into an obstacle."""
-        if fixture.obstacles and any(np.any(_obstacle_gaps(fixture, p) < floor) for p in poses):
-            return -np.inf
-        return float(min(np.min(locator_gaps(wp, p, fixture.locators)) for p in poses))
+    def least_gaps(poses: list[Pose]) -> FloatArray:
+        """Each pose's least locator gap; −inf where the part goes into an obstacle."""
+        gaps = np.array([float(np.min(locator_gaps(wp, p, fixture.locators))) for p in poses])
+        if fixture.obstacles:
+            gaps[[bool(np.any(_obstacle_gaps(fixture, p) < floor)) for p in poses]] = -np.inf
+        return gaps
 
     # far from the staging pose every locator stays this far: the start's pose error and the
     # tracking error are of this order (a tall slab started 1° off swept its bottom edge 1 mm past
@@ -134,23 +138,20 @@ def plan_approach(fixture: Fixture, settings: PolicySettings = DEFAULT.policy) -
 
     share = settings.approach_funnel_share
 
-    def funnel(poses: list[Pose]) -> bool:
+    def funnel(poses: list[Pose], gaps: FloatArray) -> bool:
         """Every pose keeps ``far``, but in the last ``share`` of the way, where it shrinks linearly to ``clear``.
 
         The way is that of the part's farthest point (the centre of mass's travel plus the bounding
-        radius times the turn).
+        radius times the turn); ``gaps`` are the poses' least gaps (:func:`least_gaps`).
         """
-        left = [0.0]
-        for a, b in zip(poses[:0:-1], poses[-2::-1], strict=True):
-            turn = math.acos(float(np.clip((np.trace(a.R_world_body @ b.R_world_body.T) - 1.0) / 2.0, -1.0, 1.0)))
-            move = float(np.linalg.norm(a.point_world_from_body(wp.com_body) - b.point_world_from_body(wp.com_body)))
-            left.append(left[-1] + move + wp.shape.bounding_radius * turn)
-        total = left[-1] if left[-1] > 0.0 else 1.0
-        return all(
-            float(np.min(locator_gaps(wp, p, fixture.locators)))
-            >= min(far, clear + (far - clear) * (rest / total) / share)
-            for p, rest in zip(poses, left[::-1], strict=True)
-        )
+        com = [p.point_world_from_body(wp.com_body) for p in poses]
+        steps = [
+            float(np.linalg.norm(c1 - c0)) + wp.shape.bounding_radius * a.distance_to(b)[1]
+            for a, b, c0, c1 in zip(poses[:-1], poses[1:], com[:-1], com[1:], strict=True)
+        ]
+        left = np.concatenate([np.cumsum(steps[::-1])[::-1], [0.0]])
+        total = float(left[0]) if left[0] > 0.0 else 1.0
+        return bool(np.all(gaps >= np.minimum(far, clear + (far - clear) * (left / total) / share)))
 
     from fixplan.planner.fine import pose_from_twist, twist_from_pose
 
@@ -188,10 +189,11 @@ def plan_approach(fixture: Fixture, settings: PolicySettings = DEFAULT.policy) -
     # (a start close to a locator may leave no room for the funnel)
     fallback: tuple[list[Pose], bool, float] | None = None
     for poses, via in candidates():
-        g = least(poses)
+        gaps = least_gaps(poses)
+        g = float(np.min(gaps))
         if g < clear:
             continue
-        if funnel(poses):
+        if funnel(poses, gaps):
             return Approach(tuple(poses), g, _length(fixture, poses), via)
         if fallback is None:
             fallback = (poses, via, g)
